@@ -1,0 +1,1 @@
+"""Sub-commands of the ``graphnav`` CLI, one module each (discovered by :mod:`graphnav.cli`)."""

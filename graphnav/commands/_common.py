@@ -1,0 +1,58 @@
+"""Helpers shared by the sub-commands: the one-JSON-object output contract, option parsing."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from typing import Any
+
+import numpy as np
+
+
+def add_json_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+
+
+def add_log_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("log", help="log: marina directory, .jsonl[.gz], .npz, .nmea, or a ROS bag")
+    p.add_argument("--lenient", action="store_true", help="skip malformed records (and count them)")
+
+
+def jsonable(obj: Any) -> Any:
+    """Numpy scalars/arrays to Python; NaN/inf to null (JSON has neither)."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return jsonable(obj.item())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def emit(args: argparse.Namespace, obj: dict[str, Any], human: str | None = None) -> None:
+    """With ``--json``: the object on stdout, alone. Otherwise a readable text (or the JSON, indented)."""
+    if getattr(args, "json", False):
+        sys.stdout.write(json.dumps(jsonable(obj), allow_nan=False) + "\n")
+    else:
+        sys.stdout.write((human if human is not None else json.dumps(jsonable(obj), indent=2)) + "\n")
+    sys.stdout.flush()
+
+
+def parse_options(pairs: list[str] | None) -> dict[str, Any]:
+    """``["lag=10", "robust=\\"huber\\"", "keyframe_dt=0.5"]`` -> dict (values parsed as JSON when possible)."""
+    out: dict[str, Any] = {}
+    for item in pairs or []:
+        if "=" not in item:
+            raise ValueError(f"option {item!r} is not KEY=VALUE")
+        k, v = item.split("=", 1)
+        try:
+            out[k.strip().replace("-", "_")] = json.loads(v)
+        except json.JSONDecodeError:
+            out[k.strip().replace("-", "_")] = v
+    return out

@@ -1,0 +1,86 @@
+"""Angles and SE(2) poses: the project's conventions in code.
+
+Conventions (stated once, see docs/conventions.md): SI units, angles in radians,
+yaw counter-clockwise from +x (east) of a local metric frame (x east, y north).
+Nautical headings (degrees clockwise from north) exist only at the edges.
+A pose is ``(x, y, yaw)``; arrays of poses have shape ``(N, 3)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+TWO_PI = 2.0 * np.pi
+
+
+def wrap_angle(a: ArrayLike) -> NDArray[np.float64] | float:
+    """Wrap angles to [-pi, pi)."""
+    w = (np.asarray(a, dtype=float) + np.pi) % TWO_PI - np.pi
+    return float(w) if np.ndim(w) == 0 else w
+
+
+def yaw_to_heading_deg(yaw: ArrayLike) -> NDArray[np.float64] | float:
+    """Yaw (rad, CCW from east) -> nautical heading (deg, clockwise from north, [0, 360))."""
+    h = np.mod(90.0 - np.degrees(np.asarray(yaw, dtype=float)), 360.0)
+    return float(h) if np.ndim(h) == 0 else h
+
+
+def heading_deg_to_yaw(heading_deg: ArrayLike) -> NDArray[np.float64] | float:
+    """Nautical heading (deg, clockwise from north) -> yaw (rad, CCW from east, wrapped)."""
+    return wrap_angle(np.radians(90.0 - np.asarray(heading_deg, dtype=float)))
+
+
+def rot2(theta: float) -> NDArray[np.float64]:
+    """2x2 rotation matrix."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def se2_compose(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
+    """a ⊕ b for poses (x, y, yaw); broadcasts over leading dimensions."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+
+
+def se2_inverse(a: ArrayLike) -> NDArray[np.float64]:
+    """⊖a for poses (x, y, yaw)."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = -c * a[..., 0] - s * a[..., 1]
+    y = s * a[..., 0] - c * a[..., 1]
+    return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
+
+
+def se2_between(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
+    """⊖a ⊕ b: pose of b expressed in the frame of a."""
+    return se2_compose(se2_inverse(a), b)
+
+
+def se2_matrix(p: ArrayLike) -> NDArray[np.float64]:
+    """Homogeneous 3x3 matrix of a pose."""
+    x, y, th = np.asarray(p, dtype=float)
+    c, s = np.cos(th), np.sin(th)
+    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
+
+
+def se2_from_matrix(m: ArrayLike) -> NDArray[np.float64]:
+    """Pose (x, y, yaw) of a homogeneous 3x3 (or the x-y block of a 4x4) matrix."""
+    m = np.asarray(m, dtype=float)
+    if m.shape == (4, 4):
+        return np.array([m[0, 3], m[1, 3], np.arctan2(m[1, 0], m[0, 0])])
+    return np.array([m[0, 2], m[1, 2], np.arctan2(m[1, 0], m[0, 0])])
+
+
+def accumulate(increments: ArrayLike, start: ArrayLike = (0.0, 0.0, 0.0)) -> NDArray[np.float64]:
+    """Chain relative poses: returns (N+1, 3) absolute poses starting at ``start``."""
+    inc = np.asarray(increments, dtype=float).reshape(-1, 3)
+    out = np.empty((len(inc) + 1, 3))
+    out[0] = start
+    for i, d in enumerate(inc):
+        out[i + 1] = se2_compose(out[i], d)
+    return out

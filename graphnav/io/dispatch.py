@@ -1,0 +1,66 @@
+"""Pick a reader or writer from a path: directory (marina), .jsonl[.gz], .npz, .nmea/.txt/.log."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import LogError
+from ..log import NavLog
+
+NMEA_SUFFIXES = (".nmea", ".nmea.gz", ".txt", ".log")
+JSONL_SUFFIXES = (".jsonl", ".jsonl.gz", ".ndjson")
+BAG_SUFFIXES = (".bag", ".db3", ".mcap")
+
+
+def load_log(path: str | Path, *, lenient: bool = False, **options) -> NavLog:
+    """Read any supported log. ``lenient`` skips (and counts) malformed records where the
+    format has records to skip; other ``options`` go to the chosen reader."""
+    p = Path(path)
+    name = p.name.lower()
+    if not p.exists():
+        raise LogError("no such file or directory", file=str(p))
+    if p.is_dir():
+        from .marina import is_marina_dir, read_marina
+
+        if is_marina_dir(p):
+            return read_marina(p, **options)
+        if (p / "metadata.yaml").exists():
+            from .rosbag import read_bag
+
+            return read_bag(p, **options)
+        raise LogError("directory is neither a marina dataset (ranges.mat, angles.mat, gps.mat) "
+                       "nor a ROS 2 bag (metadata.yaml)", file=str(p))
+    if name.endswith(JSONL_SUFFIXES):
+        from .jsonl import read_jsonl
+
+        return read_jsonl(p, lenient=lenient)
+    if name.endswith(".npz"):
+        from .npz import read_npz
+
+        return read_npz(p)
+    if name.endswith(NMEA_SUFFIXES):
+        from .nmea import read_nmea
+
+        return read_nmea(p, lenient=lenient, **options)
+    if name.endswith(BAG_SUFFIXES):
+        from .rosbag import read_bag
+
+        return read_bag(p, **options)
+    raise LogError("unknown log type (expected a marina directory, .jsonl[.gz], .npz, .nmea, or a ROS bag)",
+                   file=str(p))
+
+
+def save_log(log: NavLog, path: str | Path) -> None:
+    """Write a log as JSON Lines (``.jsonl``/``.jsonl.gz``) or binary (``.npz``)."""
+    p = Path(path)
+    name = p.name.lower()
+    if name.endswith(".npz"):
+        from .npz import write_npz
+
+        write_npz(log, p)
+    elif name.endswith(JSONL_SUFFIXES):
+        from .jsonl import write_jsonl
+
+        write_jsonl(log, p)
+    else:
+        raise LogError("can write .jsonl, .jsonl.gz or .npz", file=str(p))

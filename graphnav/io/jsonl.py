@@ -1,0 +1,234 @@
+"""The JSON Lines navigation-log format (spec: docs/log-format.md), optionally gzipped."""
+
+from __future__ import annotations
+
+import gzip
+import io
+import json
+import math
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from ..errors import LogError
+from ..geodesy import LocalFrame
+from ..log import RECORD_TYPES, BeaconObs, Gnss, KnownBeacon, NavLog, Record, Scan, check_record
+
+REQUIRED: dict[str, tuple[str, ...]] = {
+    "scan": ("t",),
+    "gnss": ("t", "sigma"),
+    "heading": ("t", "yaw", "sigma"),
+    "odometry": ("t", "v", "w"),
+    "imu": ("t", "ax", "ay", "wz"),
+    "beacon": ("t", "id", "range", "bearing"),
+    "truth": ("t", "x", "y", "yaw"),
+    "pose_prior": ("t", "x", "y", "yaw", "sigma_xy", "sigma_yaw"),
+    "beacon_known": ("id", "x", "y", "sigma"),
+}
+OPTIONAL: dict[str, tuple[str, ...]] = {
+    "odometry": ("sigma_v", "sigma_w"),
+    "beacon": ("sigma_range", "sigma_bearing"),
+}
+
+
+def _open_text(path: Path, mode: str) -> TextIO:
+    if path.suffix == ".gz":  # mtime=0: the same log gives the same bytes
+        raw = gzip.GzipFile(filename=str(path), mode=mode + "b", mtime=0) if mode == "w" else gzip.open(path, "rb")
+        return io.TextIOWrapper(raw, encoding="utf-8")
+    return open(path, mode, encoding="utf-8")
+
+
+def _num(obj: dict, name: str) -> float:
+    v = obj[name]
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise LogError(f"expected a number, got {json.dumps(v)[:40]}", field=name)
+    return float(v)
+
+
+def _array(obj: dict, name: str) -> np.ndarray:
+    v = obj.get(name)
+    if not isinstance(v, list):
+        raise LogError("expected a list of numbers", field=name)
+    out = np.empty(len(v))
+    for i, x in enumerate(v):
+        if x is None:
+            out[i] = math.nan
+        elif isinstance(x, bool) or not isinstance(x, int | float):
+            raise LogError(f"element {i} is not a number", field=name)
+        else:
+            out[i] = float(x)
+    return out
+
+
+def parse_record(obj: Any, frame: LocalFrame | None = None) -> Record | KnownBeacon | dict:
+    """Turn one decoded JSON object into a record (a ``meta`` object is returned as a dict).
+
+    Raises :class:`LogError` naming the field on any problem.
+    """
+    if not isinstance(obj, dict):
+        raise LogError("each line must be a JSON object")
+    kind = obj.get("type")
+    if kind == "meta":
+        return {k: v for k, v in obj.items() if k != "type"}
+    if kind not in REQUIRED:
+        raise LogError(f"unknown record type {json.dumps(kind)[:40]}", field="type")
+    for name in REQUIRED[kind]:
+        if name not in obj:
+            raise LogError(f"missing in a '{kind}' record", field=name)
+    if kind == "scan":
+        ranges = _array(obj, "ranges")
+        if "angles" in obj:
+            angles = _array(obj, "angles")
+        elif "angle_min" in obj and "angle_increment" in obj:
+            angles = _num(obj, "angle_min") + _num(obj, "angle_increment") * np.arange(ranges.size)
+        else:
+            raise LogError("a scan needs 'angles' (or 'angle_min' and 'angle_increment')", field="angles")
+        rec: Record | KnownBeacon = Scan(_num(obj, "t"), ranges, angles)
+    elif kind == "gnss":
+        if "x" in obj and "y" in obj:
+            x, y = _num(obj, "x"), _num(obj, "y")
+        elif "lat" in obj and "lon" in obj:
+            if frame is None:
+                raise LogError("lat/lon fix but no local frame", field="lat")
+            lat, lon = _num(obj, "lat"), _num(obj, "lon")
+            if not (-90.0 <= lat <= 90.0):
+                raise LogError("latitude out of [-90, 90]", field="lat")
+            if not (-180.0 <= lon <= 180.0):
+                raise LogError("longitude out of [-180, 180]", field="lon")
+            x, y = frame.to_local(lat, lon)
+        else:
+            raise LogError("a gnss record needs 'x' and 'y' or 'lat' and 'lon'", field="x")
+        rec = Gnss(_num(obj, "t"), float(x), float(y), _num(obj, "sigma"))
+    elif kind in ("beacon", "beacon_known"):
+        bid = obj["id"]
+        if isinstance(bid, bool) or not isinstance(bid, str | int) or bid == "":
+            raise LogError("beacon id must be a non-empty string or an integer", field="id")
+        nums = {n: _num(obj, n) for n in REQUIRED[kind] + OPTIONAL.get(kind, ()) if n != "id" and n in obj}
+        cls = BeaconObs if kind == "beacon" else KnownBeacon
+        rec = cls(id=str(bid), **nums)
+    else:
+        names = REQUIRED[kind] + OPTIONAL.get(kind, ())
+        rec = RECORD_TYPES[kind](**{n: _num(obj, n) for n in names if n in obj})
+    check_record(rec)
+    return rec
+
+
+def read_jsonl(path: str | Path, *, lenient: bool = False) -> NavLog:
+    """Read a ``.jsonl`` / ``.jsonl.gz`` log.
+
+    Strict by default: the first bad line raises :class:`LogError` with file, line and field.
+    With ``lenient`` bad lines are skipped and counted in ``log.meta["skipped"]`` (their first
+    messages in ``log.meta["skipped_errors"]``). Blank lines and lines starting with ``#`` are
+    comments.
+    """
+    path = Path(path)
+    records: list[Record] = []
+    known: list[KnownBeacon] = []
+    meta: dict[str, Any] = {"source": str(path)}
+    frame: LocalFrame | None = None
+    skipped: list[str] = []
+    last_t = -math.inf
+    try:
+        fh = _open_text(path, "r")
+        lines = fh.read().splitlines()
+        fh.close()
+    except (OSError, UnicodeDecodeError, EOFError) as exc:
+        raise LogError(f"cannot read: {exc}", file=str(path)) from exc
+    for lineno, line in enumerate(lines, start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        try:
+            try:
+                obj = json.loads(s)
+            except (json.JSONDecodeError, RecursionError) as exc:
+                raise LogError(f"not valid JSON ({exc.__class__.__name__}: {str(exc)[:60]})") from None
+            if isinstance(obj, dict) and obj.get("type") == "gnss" and "lat" in obj and frame is None:
+                frame = _frame_from(meta, obj)
+            rec = parse_record(obj, frame)
+            if isinstance(rec, dict):
+                meta.update(rec)
+                if "origin" in rec:
+                    frame = _frame_from(meta, None)
+                continue
+            if isinstance(rec, KnownBeacon):
+                known.append(rec)
+                continue
+            if rec.t < last_t:
+                raise LogError(f"time goes backwards ({rec.t!r} after {last_t!r})", field="t")
+            last_t = rec.t
+            records.append(rec)
+        except LogError as err:
+            err = err.located(file=str(path), line=lineno)
+            if not lenient:
+                raise err from None
+            skipped.append(str(err))
+    if frame is not None:
+        meta["origin"] = {"lat": frame.lat0, "lon": frame.lon0, "h": frame.h0}
+    if lenient:
+        meta["skipped"] = len(skipped)
+        meta["skipped_errors"] = skipped[:20]
+    return NavLog(records, known, meta)
+
+
+def _frame_from(meta: dict, first_fix: dict | None) -> LocalFrame:
+    o = meta.get("origin")
+    if isinstance(o, dict) and "lat" in o and "lon" in o:
+        try:
+            return LocalFrame(float(o["lat"]), float(o["lon"]), float(o.get("h", 0.0)))
+        except (TypeError, ValueError):
+            raise LogError("meta origin must hold numbers lat, lon (and h)", field="origin") from None
+    assert first_fix is not None
+    return LocalFrame(_num(first_fix, "lat"), _num(first_fix, "lon"), 0.0)
+
+
+def _clean(v: float) -> float | None:
+    return None if not math.isfinite(v) else float(v)
+
+
+def record_to_obj(rec: Record | KnownBeacon) -> dict[str, Any]:
+    """The JSON object of one record (missing scan returns become ``null``)."""
+    obj: dict[str, Any] = {}
+    if not isinstance(rec, KnownBeacon):
+        obj["t"] = rec.t
+    obj["type"] = rec.kind
+    if isinstance(rec, Scan):
+        obj["ranges"] = [_clean(r) for r in rec.ranges.tolist()]
+        obj["angles"] = [_clean(a) for a in rec.angles.tolist()]
+        return obj
+    for name in REQUIRED[rec.kind] + OPTIONAL.get(rec.kind, ()):
+        if name == "t":
+            continue
+        v = getattr(rec, name)
+        if isinstance(v, float) and math.isnan(v) and name in OPTIONAL.get(rec.kind, ()):
+            continue
+        obj[name] = v
+    if isinstance(rec, Gnss):
+        obj["x"], obj["y"] = rec.x, rec.y
+    return obj
+
+
+def write_jsonl(log: NavLog, path: str | Path, *, scan_decimals: int = 4) -> None:
+    """Write a log as JSON Lines (gzipped when the name ends in ``.gz``).
+
+    A ``meta`` line comes first, then charted beacons, then the records in time order.
+    Scan ranges/angles are rounded to ``scan_decimals`` (0.1 mm / 0.1 mrad by default).
+    """
+    path = Path(path)
+    with _open_text(path, "w") as fh:
+        _write(log, fh, scan_decimals)
+
+
+def _write(log: NavLog, fh: TextIO, scan_decimals: int) -> None:
+    meta = {k: v for k, v in log.meta.items() if k not in ("source", "skipped", "skipped_errors")}
+    if meta:
+        fh.write(json.dumps({"type": "meta", **meta}, allow_nan=False) + "\n")
+    for b in log.beacons_known:
+        fh.write(json.dumps(record_to_obj(b), allow_nan=False) + "\n")
+    for rec in log.records:
+        obj = record_to_obj(rec)
+        if isinstance(rec, Scan):
+            obj["ranges"] = [None if r is None else round(r, scan_decimals) for r in obj["ranges"]]
+            obj["angles"] = [None if a is None else round(a, scan_decimals) for a in obj["angles"]]
+        fh.write(json.dumps(obj, allow_nan=False, separators=(",", ":")) + "\n")

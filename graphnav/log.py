@@ -1,0 +1,272 @@
+"""The navigation log: one typed, time-ordered list of measurement records.
+
+Every estimator reads a :class:`NavLog` and returns a :class:`graphnav.trajectory.Trajectory`.
+Units are SI; angles are radians; yaw and bearings are counter-clockwise (yaw from +x = east,
+bearings from the bow). See docs/log-format.md for the text form of every record.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import LogError
+
+
+@dataclass(frozen=True, slots=True)
+class Scan:
+    """A 2D LiDAR scan in polar form (sensor frame = body frame, x forward, CCW angles).
+
+    ``ranges`` [m] and ``angles`` [rad] have equal length; NaN, inf or ``<= 0`` ranges are
+    missing returns (kept, so the beam layout survives a round trip).
+    """
+
+    t: float
+    ranges: NDArray[np.float64]
+    angles: NDArray[np.float64]
+    kind: ClassVar[str] = "scan"
+
+    def valid(self) -> NDArray[np.bool_]:
+        """Mask of real returns (finite and > 0)."""
+        r = self.ranges
+        return np.isfinite(r) & (r > 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class Gnss:
+    """A GNSS position fix in the local frame [m], ``sigma`` the 1-sigma error per axis [m]."""
+
+    t: float
+    x: float
+    y: float
+    sigma: float
+    kind: ClassVar[str] = "gnss"
+
+
+@dataclass(frozen=True, slots=True)
+class Heading:
+    """Compass/gyrocompass yaw [rad, CCW from east] with 1-sigma [rad]."""
+
+    t: float
+    yaw: float
+    sigma: float
+    kind: ClassVar[str] = "heading"
+
+
+@dataclass(frozen=True, slots=True)
+class Odometry:
+    """Speed over ground ``v`` [m/s] and yaw rate ``w`` [rad/s] (ship's log + rate-of-turn sensor).
+
+    ``sigma_v``/``sigma_w`` are optional 1-sigma values (NaN when the log does not give them).
+    """
+
+    t: float
+    v: float
+    w: float
+    sigma_v: float = math.nan
+    sigma_w: float = math.nan
+    kind: ClassVar[str] = "odometry"
+
+
+@dataclass(frozen=True, slots=True)
+class Imu:
+    """Body-frame accelerations ``ax`` (forward), ``ay`` (left) [m/s^2] and yaw rate ``wz`` [rad/s]."""
+
+    t: float
+    ax: float
+    ay: float
+    wz: float
+    kind: ClassVar[str] = "imu"
+
+
+@dataclass(frozen=True, slots=True)
+class BeaconObs:
+    """Range [m] and bearing [rad, CCW from the bow] to an aid to navigation.
+
+    ``sigma_range``/``sigma_bearing`` are optional (NaN when not given).
+    """
+
+    t: float
+    id: str
+    range: float
+    bearing: float
+    sigma_range: float = math.nan
+    sigma_bearing: float = math.nan
+    kind: ClassVar[str] = "beacon"
+
+
+@dataclass(frozen=True, slots=True)
+class Truth:
+    """Reference pose (x, y [m], yaw [rad]) from an exact simulator or an RTK reference."""
+
+    t: float
+    x: float
+    y: float
+    yaw: float
+    kind: ClassVar[str] = "truth"
+
+
+@dataclass(frozen=True, slots=True)
+class PosePrior:
+    """Initial pose with 1-sigma position [m] (per axis) and yaw [rad]."""
+
+    t: float
+    x: float
+    y: float
+    yaw: float
+    sigma_xy: float
+    sigma_yaw: float
+    kind: ClassVar[str] = "pose_prior"
+
+
+@dataclass(frozen=True, slots=True)
+class KnownBeacon:
+    """A charted aid to navigation: id, position [m] and 1-sigma per axis [m]. Not time-stamped."""
+
+    id: str
+    x: float
+    y: float
+    sigma: float
+    kind: ClassVar[str] = "beacon_known"
+
+
+Record = Scan | Gnss | Heading | Odometry | Imu | BeaconObs | Truth | PosePrior
+RECORD_TYPES: dict[str, type] = {
+    c.kind: c for c in (Scan, Gnss, Heading, Odometry, Imu, BeaconObs, Truth, PosePrior)
+}
+SCALAR_FIELDS: dict[str, tuple[str, ...]] = {
+    k: tuple(f.name for f in fields(c) if f.name not in ("ranges", "angles"))
+    for k, c in RECORD_TYPES.items()
+}
+
+
+def check_record(rec: Record | KnownBeacon) -> None:
+    """Raise :class:`LogError` (with the offending field) if a record is not well formed."""
+    for f in fields(rec):
+        v = getattr(rec, f.name)
+        if f.name == "id":
+            if not isinstance(v, str) or not v:
+                raise LogError("beacon id must be a non-empty string", field="id")
+        elif f.name in ("ranges", "angles"):
+            continue
+        elif not isinstance(v, float):
+            raise LogError(f"expected a number, got {type(v).__name__}", field=f.name)
+        elif f.name == "t" and not math.isfinite(v):
+            raise LogError("timestamp must be finite", field="t")
+        elif f.name.startswith("sigma"):
+            optional = isinstance(f.default, float) and math.isnan(f.default)
+            if not ((optional and math.isnan(v)) or (math.isfinite(v) and v > 0.0)):
+                raise LogError("sigma must be finite and > 0", field=f.name)
+        elif not math.isfinite(v):
+            raise LogError("value must be finite", field=f.name)
+    if isinstance(rec, Scan):
+        if rec.ranges.ndim != 1 or rec.angles.ndim != 1:
+            raise LogError("ranges and angles must be 1-D arrays", field="ranges")
+        if rec.ranges.shape != rec.angles.shape:
+            raise LogError(
+                f"ranges has {rec.ranges.size} values but angles has {rec.angles.size}", field="angles"
+            )
+        if not np.all(np.isfinite(rec.angles[rec.valid()])):
+            raise LogError("every beam with a return needs a finite angle", field="angles")
+
+
+@dataclass
+class NavLog:
+    """A time-ordered navigation log.
+
+    ``records`` are sorted by time (non-decreasing; ties keep their order), ``beacons_known``
+    are charted beacons, ``meta`` holds free-form provenance: ``name``, ``source``, the local
+    frame's geodetic ``origin`` (lat, lon in degrees) when GNSS came as lat/lon, and ``events``
+    (e.g. ``{"kind": "gnss_outage", "t0": .., "t1": ..}``) that reports shade.
+    """
+
+    records: list[Record]
+    beacons_known: list[KnownBeacon] = field(default_factory=list)
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for i in range(1, len(self.records)):
+            if self.records[i].t < self.records[i - 1].t:
+                raise LogError(
+                    f"time goes backwards: {self.records[i].t!r} after {self.records[i - 1].t!r}",
+                    field="t",
+                )
+
+    @classmethod
+    def from_unsorted(
+        cls, records: Iterable[Record], beacons_known: Iterable[KnownBeacon] = (), meta: dict | None = None
+    ) -> NavLog:
+        """Build a log from records in any order (stable sort by time)."""
+        recs = sorted(records, key=lambda r: r.t)
+        return cls(recs, list(beacons_known), dict(meta or {}))
+
+    def __len__(self) -> int:
+        return len(self.records)
+
+    def __iter__(self) -> Iterator[Record]:
+        return iter(self.records)
+
+    def of(self, kind: str | type) -> list[Record]:
+        """Records of one type (``"gnss"`` or ``Gnss``), in time order."""
+        k = kind if isinstance(kind, str) else kind.kind
+        return [r for r in self.records if r.kind == k]
+
+    def counts(self) -> dict[str, int]:
+        """Number of records per type (``beacon_known`` included when present)."""
+        c = Counter(r.kind for r in self.records)
+        out = {k: c.get(k, 0) for k in RECORD_TYPES if c.get(k, 0)}
+        if self.beacons_known:
+            out["beacon_known"] = len(self.beacons_known)
+        return out
+
+    @property
+    def t0(self) -> float | None:
+        return self.records[0].t if self.records else None
+
+    @property
+    def t1(self) -> float | None:
+        return self.records[-1].t if self.records else None
+
+    @property
+    def has_truth(self) -> bool:
+        return any(r.kind == "truth" for r in self.records)
+
+    def columns(self, kind: str) -> dict[str, NDArray]:
+        """Scalar fields of one record type as arrays, e.g. ``log.columns("gnss")["x"]``."""
+        recs = self.of(kind)
+        names = SCALAR_FIELDS[kind]
+        out: dict[str, NDArray] = {}
+        for n in names:
+            vals = [getattr(r, n) for r in recs]
+            out[n] = np.array(vals, dtype=object if n == "id" else float)
+        return out
+
+    def truth(self):  # -> Trajectory (import kept local: trajectory imports nothing from here)
+        """The reference trajectory from the ``truth`` records (empty if there are none)."""
+        from .trajectory import Trajectory
+
+        c = self.columns("truth")
+        return Trajectory(c["t"], np.column_stack([c["x"], c["y"], c["yaw"]]), name="truth")
+
+    def pose_prior(self) -> PosePrior | None:
+        """The first ``pose_prior`` record, if any."""
+        for r in self.records:
+            if isinstance(r, PosePrior):
+                return r
+        return None
+
+    def sliced(self, t0: float | None = None, t1: float | None = None) -> NavLog:
+        """The records with ``t0 <= t <= t1`` (charted beacons and meta kept)."""
+        lo = -math.inf if t0 is None else t0
+        hi = math.inf if t1 is None else t1
+        return NavLog([r for r in self.records if lo <= r.t <= hi], list(self.beacons_known), dict(self.meta))
+
+    def without(self, predicate) -> NavLog:
+        """A copy without the records for which ``predicate(record)`` is true."""
+        return NavLog([r for r in self.records if not predicate(r)], list(self.beacons_known), dict(self.meta))

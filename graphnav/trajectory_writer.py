@@ -1,0 +1,43 @@
+"""Append estimates to a TUM file as they are computed (flushed), so an interrupted run keeps them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+class TrajectoryWriter:
+    """``write(t, pose, cov)`` appends one TUM line and flushes; usable as an ``on_estimate`` callback.
+
+    A sidecar ``<name>.cov`` holds ``t`` and the 9 covariance entries when covariances are given.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._fh = open(self.path, "w", buffering=1)
+        self._fh.write("# timestamp tx ty tz qx qy qz qw\n")
+        self._cov = None
+        self.count = 0
+
+    def write(self, t: float, pose: np.ndarray, cov: np.ndarray | None = None) -> None:
+        x, y, yaw = (float(v) for v in pose)
+        self._fh.write(f"{t:.9f} {x:.9f} {y:.9f} 0 0 0 {np.sin(yaw / 2):.9f} {np.cos(yaw / 2):.9f}\n")
+        self._fh.flush()
+        if cov is not None:
+            if self._cov is None:
+                self._cov = open(self.path.with_suffix(".cov"), "w", buffering=1)
+            self._cov.write(f"{t:.9f} " + " ".join(f"{v:.9g}" for v in np.asarray(cov).ravel()) + "\n")
+            self._cov.flush()
+        self.count += 1
+
+    def close(self) -> None:
+        self._fh.close()
+        if self._cov is not None:
+            self._cov.close()
+
+    def __enter__(self) -> TrajectoryWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
