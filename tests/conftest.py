@@ -1,0 +1,39 @@
+"""Shared fixtures. The marina dataset is not part of the project: it is looked up at
+``$GRAPHNAV_MARINA``, then ``../shared/data/icp_data_marina`` beside the repository (and one
+level further up, for git worktrees), and tests that need it skip with the reason when absent."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def find_marina() -> Path | None:
+    cands = []
+    if os.environ.get("GRAPHNAV_MARINA"):
+        cands.append(Path(os.environ["GRAPHNAV_MARINA"]))
+    cands += [REPO.parent / "shared" / "data" / "icp_data_marina",
+              REPO.parent.parent / "shared" / "data" / "icp_data_marina"]
+    for c in cands:
+        if (c / "ranges.mat").exists() and (c / "gps.mat").exists() and (c / "angles.mat").exists():
+            return c
+    return None
+
+
+@pytest.fixture(scope="session")
+def marina_dir() -> Path:
+    d = find_marina()
+    if d is None:
+        pytest.skip("marina dataset not found (set GRAPHNAV_MARINA or place it at ../shared/data/icp_data_marina)")
+    return d
+
+
+@pytest.fixture(scope="session")
+def marina_log(marina_dir):
+    from graphnav.io.marina import read_marina
+
+    return read_marina(marina_dir)
