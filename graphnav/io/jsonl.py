@@ -32,9 +32,22 @@ OPTIONAL: dict[str, tuple[str, ...]] = {
 }
 
 
+class _OwnedGzip(gzip.GzipFile):
+    """A GzipFile that closes the file object it was given (no name or time in the header)."""
+
+    def close(self) -> None:
+        fo = self.fileobj
+        super().close()
+        if fo is not None:
+            fo.close()
+
+
 def _open_text(path: Path, mode: str) -> TextIO:
     if path.suffix == ".gz":  # mtime=0: the same log gives the same bytes
-        raw = gzip.GzipFile(filename=str(path), mode=mode + "b", mtime=0) if mode == "w" else gzip.open(path, "rb")
+        if mode == "w":
+            raw = _OwnedGzip(filename="", mode="wb", fileobj=open(path, "wb"), mtime=0)
+        else:
+            raw = gzip.open(path, "rb")
         return io.TextIOWrapper(raw, encoding="utf-8")
     return open(path, mode, encoding="utf-8")
 
@@ -151,6 +164,7 @@ def read_jsonl(path: str | Path, *, lenient: bool = False) -> NavLog:
                 meta.update(rec)
                 if "origin" in rec:
                     frame = _frame_from(meta, None)
+                    meta["origin"] = {"lat": frame.lat0, "lon": frame.lon0, "h": frame.h0}
                 continue
             if isinstance(rec, KnownBeacon):
                 known.append(rec)
@@ -173,14 +187,24 @@ def read_jsonl(path: str | Path, *, lenient: bool = False) -> NavLog:
 
 
 def _frame_from(meta: dict, first_fix: dict | None) -> LocalFrame:
-    o = meta.get("origin")
-    if isinstance(o, dict) and "lat" in o and "lon" in o:
+    """The local frame: the meta line's ``origin`` when given, else the first lat/lon fix."""
+    if "origin" in meta:
+        o = meta["origin"]
+        if not isinstance(o, dict):
+            raise LogError("meta origin must be an object {lat, lon, h}", field="origin")
         try:
-            return LocalFrame(float(o["lat"]), float(o["lon"]), float(o.get("h", 0.0)))
-        except (TypeError, ValueError):
+            lat, lon, h = _num(o, "lat"), _num(o, "lon"), _num(o, "h") if "h" in o else 0.0
+        except (LogError, KeyError):
             raise LogError("meta origin must hold numbers lat, lon (and h)", field="origin") from None
-    assert first_fix is not None
-    return LocalFrame(_num(first_fix, "lat"), _num(first_fix, "lon"), 0.0)
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and math.isfinite(h)):
+            raise LogError("meta origin out of range", field="origin")
+        return LocalFrame(lat, lon, h)
+    if first_fix is None:
+        raise LogError("no origin for lat/lon fixes", field="origin")
+    lat, lon = _num(first_fix, "lat"), _num(first_fix, "lon")
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        raise LogError("first fix out of range", field="lat")
+    return LocalFrame(lat, lon, 0.0)
 
 
 def _clean(v: float) -> float | None:

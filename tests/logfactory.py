@@ -1,0 +1,46 @@
+"""A small synthetic log with every record type (used by several tests)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from graphnav.log import BeaconObs, Gnss, Heading, Imu, KnownBeacon, NavLog, Odometry, PosePrior, Scan, Truth
+
+
+def every_record_log(n: int = 20, seed: int = 0) -> NavLog:
+    rng = np.random.default_rng(seed)
+    recs = [PosePrior(0.0, 1.0, 2.0, 0.3, 0.5, 0.05)]
+    for k in range(n):
+        t = 0.5 * k
+        ranges = rng.uniform(1.0, 40.0, 36)
+        ranges[rng.random(36) < 0.2] = np.nan
+        ranges[3] = 0.0
+        angles = np.linspace(-np.pi, np.pi, 36, endpoint=False)
+        recs += [
+            Scan(t, ranges, angles),
+            Gnss(t, float(rng.normal()), float(rng.normal()), 3.0),
+            Heading(t, float(rng.uniform(-np.pi, np.pi)), 0.035),
+            Odometry(t, 1.5, 0.01, 0.1, 0.002) if k % 2 else Odometry(t, 1.4, -0.02),
+            Imu(t, 0.1, -0.05, 0.01),
+            BeaconObs(t, "B1", 120.5, -0.7, 0.5, 0.0087),
+            Truth(t, float(k), 0.5 * k, 0.1),
+        ]
+    known = [KnownBeacon("B1", 100.0, 50.0, 0.5), KnownBeacon("7", -20.0, 30.0, 1.0)]
+    return NavLog(recs, known, {"name": "every-record", "events": [{"kind": "gnss_outage", "t0": 2.0, "t1": 4.0}]})
+
+
+def logs_equal(a: NavLog, b: NavLog, *, scan_atol: float = 0.0) -> None:
+    assert len(a.records) == len(b.records)
+    for ra, rb in zip(a.records, b.records, strict=True):
+        assert type(ra) is type(rb)
+        if isinstance(ra, Scan):
+            assert ra.t == rb.t
+            assert np.array_equal(ra.valid(), rb.valid())
+            v = ra.valid()
+            assert np.allclose(ra.ranges[v], rb.ranges[v], atol=scan_atol, rtol=0)
+            assert np.allclose(ra.angles, rb.angles, atol=scan_atol, rtol=0)
+        else:
+            for f in ra.__dataclass_fields__:
+                va, vb = getattr(ra, f), getattr(rb, f)
+                assert va == vb or (isinstance(va, float) and np.isnan(va) and np.isnan(vb)), (ra, rb, f)
+    assert a.beacons_known == b.beacons_known

@@ -1,0 +1,48 @@
+import json
+import subprocess
+import sys
+
+from logfactory import every_record_log
+
+from graphnav.io import save_log
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "graphnav", *args], capture_output=True, text=True)
+
+
+def test_info_json_is_one_object(tmp_path):
+    save_log(every_record_log(), tmp_path / "l.jsonl")
+    r = _cli("info", str(tmp_path / "l.jsonl"), "--json")
+    assert r.returncode == 0, r.stderr
+    obj = json.loads(r.stdout)
+    assert obj["records"] == {"scan": 20, "gnss": 20, "heading": 20, "odometry": 20, "imu": 20, "beacon": 20,
+                              "truth": 20, "pose_prior": 1, "beacon_known": 2}
+    assert obj["t0"] == 0.0 and obj["t1"] == 9.5 and obj["has_truth"] is True
+
+
+def test_bad_input_exit_code_and_message(tmp_path):
+    p = tmp_path / "bad.jsonl"
+    p.write_text('{"t": 0, "type": "gnss", "x": 1, "y": "north", "sigma": 1}\n')
+    r = _cli("info", str(p), "--json")
+    assert r.returncode == 2 and r.stdout == ""
+    assert f"{p}:1: field 'y'" in r.stderr
+
+
+def test_run_dead_reckoning_writes_outputs(tmp_path):
+    save_log(every_record_log(), tmp_path / "l.npz")
+    r = _cli("run", str(tmp_path / "l.npz"), "--estimator", "dead-reckoning", "--out", str(tmp_path / "o"), "--json")
+    assert r.returncode == 0, r.stderr
+    obj = json.loads(r.stdout)
+    for k in ("estimator", "steps", "ate_rmse_m", "ate_aligned_rmse_m", "rpe_rmse_m", "runtime_s", "step_ms_median"):
+        assert k in obj
+    assert obj["steps"] == 20 and obj["anchor"] == "pose_prior"
+    online = (tmp_path / "o" / "online.tum").read_text().splitlines()
+    assert len([ln for ln in online if not ln.startswith("#")]) == 20
+    assert (tmp_path / "o" / "trajectory.tum").exists() and (tmp_path / "o" / "trajectory.csv").exists()
+
+
+def test_unknown_estimator_is_a_clear_error(tmp_path):
+    save_log(every_record_log(), tmp_path / "l.jsonl")
+    r = _cli("run", str(tmp_path / "l.jsonl"), "--estimator", "nope", "--json")
+    assert r.returncode == 2 and "unknown estimator" in r.stderr and r.stdout == ""
