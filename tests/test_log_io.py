@@ -187,3 +187,25 @@ def test_garbage_bytes_in_gzip(tmp_path, payload):
         read_jsonl(p)
     except LogError:
         pass
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.binary(max_size=300), st.booleans())
+def test_garbage_npz_is_a_log_error(tmp_path, payload, zip_header):
+    p = tmp_path / "g.npz"
+    p.write_bytes((b"PK\x03\x04" if zip_header else b"") + payload)
+    with pytest.raises(LogError):
+        load_log(p)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.dictionaries(st.sampled_from(["order", "meta", "gnss/t", "gnss/x", "gnss/y", "gnss/sigma", "scan/t",
+                                        "scan/offsets", "scan/ranges", "scan/angles"]),
+                       st.lists(st.floats(-5, 5), max_size=5), min_size=1))
+def test_random_npz_arrays_never_crash(tmp_path, arrays):
+    p = tmp_path / "r.npz"
+    np.savez(p, **{k: np.array(v) for k, v in arrays.items()})
+    try:
+        load_log(p)
+    except LogError:
+        pass

@@ -54,3 +54,26 @@ def test_broken_marina_dir(tmp_path):
     with pytest.raises(LogError) as ei:
         read_marina(tmp_path)
     assert "ranges.mat" in str(ei.value)
+
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from scipy.io import savemat  # noqa: E402
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.integers(0, 6), st.integers(0, 6), st.integers(0, 6), st.integers(1, 4),
+       st.sampled_from([np.nan, 0.0, 1e300, -1.0]))
+def test_random_marina_shapes_never_crash(tmp_path, nb, ns, nr, nc, fill):
+    rng = np.random.default_rng(nb * 100 + ns * 10 + nr)
+    savemat(tmp_path / "ranges.mat", {"ranges_baza": rng.uniform(0, 40, (nb, ns))})
+    savemat(tmp_path / "angles.mat", {"angles_baza": rng.uniform(0, 6.3, (nb, ns))})
+    pose = rng.normal(size=(nr, nc))
+    if pose.size:
+        pose.flat[0] = fill
+    savemat(tmp_path / "gps.mat", {"slam_pose": pose})
+    try:
+        log = read_marina(tmp_path)
+    except LogError:
+        return
+    assert log.counts().get("scan", 0) == ns

@@ -8,7 +8,6 @@ round-trip exactly, ``beacon_known/<field>``, and ``meta`` (a JSON string).
 from __future__ import annotations
 
 import json
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -47,42 +46,54 @@ def write_npz(log: NavLog, path: str | Path) -> None:
         np.savez_compressed(fh, **arrays)
 
 
+def _get(data: dict, key: str, path: Path, *, numeric: bool = True, integer: bool = False,
+         length: int | None = None) -> np.ndarray:
+    """A 1-D array from the archive, checked for kind and length; LogError naming it otherwise."""
+    arr = data.get(key)
+    if arr is None:
+        raise LogError("missing array", file=str(path), field=key)
+    ok_kind = (np.issubdtype(arr.dtype, np.integer) if integer else
+               np.issubdtype(arr.dtype, np.number) and not np.issubdtype(arr.dtype, np.complexfloating)
+               if numeric else arr.dtype.kind == "U")
+    if arr.ndim != 1 or not ok_kind:
+        raise LogError(f"expected a 1-D {'integer' if integer else 'numeric' if numeric else 'string'} array, "
+                       f"got {arr.dtype} with shape {arr.shape}", file=str(path), field=key)
+    if length is not None and arr.shape[0] != length:
+        raise LogError(f"expected {length} values, got {arr.shape[0]}", file=str(path), field=key)
+    return arr
+
+
 def read_npz(path: str | Path) -> NavLog:
     """Read a log written by :func:`write_npz`. Errors name the file and the array."""
     path = Path(path)
     try:
         z = np.load(path, allow_pickle=False)
         data = {k: z[k] for k in z.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise LogError(f"not a graphnav npz log: {exc}", file=str(path)) from None
-    if "order" not in data:
-        raise LogError("missing array", file=str(path), field="order")
+    except Exception as exc:  # numpy/zipfile raise many types for a corrupt archive
+        raise LogError(f"not a graphnav npz log: {exc.__class__.__name__}: {exc}", file=str(path)) from None
+    order = _get(data, "order", path, integer=True)
+    meta_arr = data.get("meta", np.array("{}"))
     try:
-        meta = json.loads(str(data.get("meta", "{}")))
+        meta = json.loads(str(meta_arr.item())) if meta_arr.dtype.kind == "U" and meta_arr.ndim == 0 else None
     except json.JSONDecodeError:
-        raise LogError("meta is not JSON", file=str(path), field="meta") from None
+        meta = None
+    if not isinstance(meta, dict):
+        raise LogError("meta must be a JSON object string", file=str(path), field="meta")
     meta["source"] = str(path)
     per_kind: dict[str, list[Record]] = {}
     for kind in KINDS:
-        key_t = f"{kind}/t"
-        if key_t not in data:
+        if f"{kind}/t" not in data:
             continue
-        n = data[key_t].shape[0]
-        cols = {}
-        for name in SCALAR_FIELDS[kind]:
-            arr = data.get(f"{kind}/{name}")
-            if arr is None or arr.shape != (n,):
-                raise LogError(f"missing or of the wrong length (expected {n})", file=str(path),
-                               field=f"{kind}/{name}")
-            cols[name] = arr.tolist()
+        n = _get(data, f"{kind}/t", path).shape[0]
+        cols = {name: _get(data, f"{kind}/{name}", path, numeric=name != "id", length=n).tolist()
+                for name in SCALAR_FIELDS[kind]}
         recs: list[Record] = []
         if kind == "scan":
-            off = data.get("scan/offsets")
-            rng, ang = data.get("scan/ranges"), data.get("scan/angles")
-            if off is None or rng is None or ang is None or off.shape != (n + 1,) or rng.shape != ang.shape \
-                    or off[-1] != rng.shape[0]:
-                raise LogError("scan arrays inconsistent", file=str(path), field="scan/offsets")
-            rng, ang = rng.astype(float), ang.astype(float)
+            off = _get(data, "scan/offsets", path, integer=True, length=n + 1)
+            rng = _get(data, "scan/ranges", path).astype(float)
+            ang = _get(data, "scan/angles", path, length=rng.shape[0]).astype(float)
+            if off[0] != 0 or np.any(np.diff(off) < 0) or off[-1] != rng.shape[0]:
+                raise LogError("offsets must rise from 0 to the number of beams", file=str(path), field="scan/offsets")
             for i in range(n):
                 recs.append(Scan(float(cols["t"][i]), rng[off[i]:off[i + 1]], ang[off[i]:off[i + 1]]))
         else:
@@ -95,22 +106,26 @@ def read_npz(path: str | Path) -> NavLog:
             except LogError as err:
                 raise LogError(f"record {i}: {err.message}", file=str(path), field=f"{kind}/{err.field}") from None
         per_kind[kind] = recs
-    order = data["order"]
     cursor = dict.fromkeys(per_kind, 0)
     records: list[Record] = []
     for c in order.tolist():
-        if not 0 <= c < len(KINDS) or KINDS[c] not in per_kind or cursor[KINDS[c]] >= len(per_kind[KINDS[c]]):
+        k = KINDS[c] if 0 <= c < len(KINDS) else None
+        if k is None or k not in per_kind or cursor[k] >= len(per_kind[k]):
             raise LogError("record order does not match the record arrays", file=str(path), field="order")
-        k = KINDS[c]
         records.append(per_kind[k][cursor[k]])
         cursor[k] += 1
     if any(cursor[k] != len(v) for k, v in per_kind.items()):
         raise LogError("record order does not match the record arrays", file=str(path), field="order")
     known = []
     if "beacon_known/id" in data:
-        ids = data["beacon_known/id"].tolist()
-        known = [KnownBeacon(str(ids[i]), float(data["beacon_known/x"][i]), float(data["beacon_known/y"][i]),
-                             float(data["beacon_known/sigma"][i])) for i in range(len(ids))]
+        ids = _get(data, "beacon_known/id", path, numeric=False).tolist()
+        xs, ys, sg = (_get(data, f"beacon_known/{f}", path, length=len(ids)) for f in ("x", "y", "sigma"))
+        known = [KnownBeacon(str(ids[i]), float(xs[i]), float(ys[i]), float(sg[i])) for i in range(len(ids))]
+        for b in known:
+            try:
+                check_record(b)
+            except LogError as err:
+                raise LogError(err.message, file=str(path), field=f"beacon_known/{err.field}") from None
     try:
         return NavLog(records, known, meta)
     except LogError as err:
