@@ -67,13 +67,17 @@ class Params:
     """Registration settings (metres, radians).
 
     ``max_corr`` correspondence distance; ``voxel`` VGICP voxel size; ``neighbors`` for local
-    covariances/normals; ``curtain`` half-height of the vertical extrusion (small_gicp);
+    covariances/normals (open3d: within ``normal_radius``, and a normal only where the smaller
+    eigenvalue is below ``planarity`` times the larger: a line, not a corner); ``curtain``
+    half-height of the vertical extrusion (small_gicp);
     ``max_iter`` iterations; ``eps_*`` convergence thresholds of the SE(2) update.
     """
 
     max_corr: float = 2.0
     voxel: float = 1.0
     neighbors: int = 10
+    normal_radius: float = 2.0
+    planarity: float = 0.3
     curtain: float = 0.3
     max_iter: int = 30
     eps_trans: float = 1e-3
@@ -144,15 +148,23 @@ def compose(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float6
     return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2])])
 
 
-def local_frames_2d(xy: NDArray[np.float64], k: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """In-plane unit normals (N, 2) and sorted eigenvalues (N, 2) of each point's k-neighbourhood."""
+def local_frames_2d(xy: NDArray[np.float64], k: int, radius: float = np.inf
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """In-plane unit normals (N, 2) and ascending eigenvalues (N, 2) of the covariance of each
+    point's ``k`` nearest neighbours within ``radius`` (a neighbourhood must not reach round a
+    corner onto the next wall). Points with fewer than 3 such neighbours get eigenvalues NaN."""
     n = len(xy)
     k = int(min(max(k, 3), n))
-    _, idx = cKDTree(xy).query(xy, k=k)
+    dist, idx = cKDTree(xy).query(xy, k=k, distance_upper_bound=radius)
+    w = np.isfinite(dist).astype(float)
+    idx = np.where(np.isfinite(dist), idx, 0)
+    cnt = w.sum(axis=1)
     nb = xy[idx]
-    d = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", d, d) / k
+    mean = (nb * w[..., None]).sum(axis=1) / cnt[:, None]
+    d = (nb - mean[:, None, :]) * w[..., None]
+    cov = np.einsum("nki,nkj->nij", d, d) / cnt[:, None, None]
     evals, evecs = np.linalg.eigh(cov)
+    evals[cnt < 3] = np.nan
     return evecs[:, :, 0], evals
 
 
@@ -204,21 +216,29 @@ def _sg_cloud(xy: NDArray[np.float64], kind: str, p: Params):
 
 
 def _o3d_cloud(xy: NDArray[np.float64], p: Params, normals: bool, covs: bool):
-    """open3d cloud of 2D points at z = 0 with in-plane normals / GICP covariances from 2D PCA."""
+    """open3d cloud of 2D points at z = 0 with in-plane normals / GICP covariances from 2D PCA over
+    neighbours within ``p.normal_radius``. With ``normals`` the points without a defined normal
+    (isolated returns) are left out: a made-up normal would pull the solution."""
     import open3d as o3d
 
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(embed(xy)))
+    nrm = ok = None
     if normals or covs:
-        nrm, _ = local_frames_2d(xy, p.neighbors)
-        if normals:
-            pc.normals = o3d.utility.Vector3dVector(embed(nrm))
-        if covs:
-            # plane-to-plane regularisation (Segal et al. 2009) in 2D: thin across the line
-            t = np.column_stack([-nrm[:, 1], nrm[:, 0]])
-            c = np.zeros((len(xy), 3, 3))
-            c[:, :2, :2] = 1e-3 * np.einsum("ni,nj->nij", nrm, nrm) + np.einsum("ni,nj->nij", t, t)
-            c[:, 2, 2] = 1e-3
-            pc.covariances = o3d.utility.Matrix3dVector(c)
+        nrm, ev = local_frames_2d(xy, p.neighbors, p.normal_radius)
+        ok = np.isfinite(ev[:, 0]) & (ev[:, 0] <= p.planarity * ev[:, 1])
+    if normals:
+        xy, nrm = xy[ok], nrm[ok]
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(embed(xy)))
+    if normals:
+        pc.normals = o3d.utility.Vector3dVector(embed(nrm))
+    if covs:
+        # plane-to-plane regularisation (Segal et al. 2009) in 2D: thin across the line; isotropic
+        # in the plane where no line is defined; always thin in z (the scan plane)
+        t = np.column_stack([-nrm[:, 1], nrm[:, 0]])
+        c = np.zeros((len(xy), 3, 3))
+        c[:, :2, :2] = 1e-3 * np.einsum("ni,nj->nij", nrm, nrm) + np.einsum("ni,nj->nij", t, t)
+        c[~ok, :2, :2] = np.eye(2)
+        c[:, 2, 2] = 1e-3
+        pc.covariances = o3d.utility.Matrix3dVector(c)
     return pc
 
 
