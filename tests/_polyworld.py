@@ -21,7 +21,7 @@ def basin() -> np.ndarray:
         rect(-20, -30, 100, 40),            # quay walls
         rect(10, 25, 14, 40), rect(40, 18, 43, 40), rect(70, 28, 74, 40),   # piers from the north quay
         rect(25, -30, 28, -18), rect(60, -30, 62, -12),                     # piers from the south quay
-        rect(30, 8, 33, 10), rect(55, -8, 58, -5), rect(85, 5, 88, 9),      # moored boats
+        rect(30, -12, 33, -10), rect(55, -8, 58, -5), rect(5, 12, 8, 15),      # moored boats
     ]
     segs = []
     for p in polys:
@@ -46,7 +46,8 @@ def raycast(pose: np.ndarray, angles: np.ndarray, segs: np.ndarray, max_range: f
 
 
 def track(n: int, dt: float = 0.5, v: float = 1.5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Times, poses (n, 3) and (v, w) of a straight run, a left turn, and a straight run."""
+    """Times, poses (n, 3) and (v, w) of a straight run, a left turn, and a straight run (clear of
+    the obstacles of :func:`basin` for n <= 80)."""
     t = np.arange(n) * dt
     w = np.where((t > 0.3 * t[-1]) & (t < 0.6 * t[-1]), 0.12, 0.0)
     poses = np.zeros((n, 3))

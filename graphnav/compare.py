@@ -1,0 +1,82 @@
+"""Run several estimators on one log and score them the same way: one loop.
+
+Pure: no files, no printing. :mod:`graphnav.report` turns the result into report.md and figures,
+:mod:`graphnav.commands.compare` is the CLI.
+"""
+
+from __future__ import annotations
+
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from . import estimators
+from .estimators import RunResult
+from .evaluate import summarize
+from .log import NavLog
+
+
+@dataclass
+class Entry:
+    """One estimator's outcome: ``summary`` (the shared JSON keys of :func:`summarize`) and the
+    ``result``, or ``error`` when it could not run or failed."""
+
+    name: str
+    kind: str = ""
+    description: str = ""
+    options: dict[str, Any] = field(default_factory=dict)
+    result: RunResult | None = None
+    summary: dict[str, Any] | None = None
+    error: str | None = None
+    runtime_s: float = float("nan")
+    traceback: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def compare(log: NavLog, names: Sequence[str] | None = None, *,
+            options: dict[str, dict[str, Any]] | None = None,
+            progress: Callable[[str], None] | None = None) -> list[Entry]:
+    """Run ``names`` (default: every estimator the log can feed, :func:`estimators.runnable`) on
+    ``log``; each with its own ``options[name]``. A failing estimator is recorded, not raised."""
+    names = list(names) if names is not None else estimators.runnable(log)
+    options = options or {}
+    out: list[Entry] = []
+    for name in names:
+        opts = dict(options.get(name, {}))
+        entry = Entry(name, options=opts)
+        out.append(entry)
+        try:
+            spec = estimators.get(name)
+        except KeyError as exc:
+            entry.error = str(exc.args[0])
+            continue
+        entry.kind, entry.description = spec.kind, spec.description
+        if progress:
+            progress(name)
+        t0 = time.perf_counter()
+        try:
+            res = estimators.run(name, log, **opts)
+            entry.runtime_s = time.perf_counter() - t0
+            entry.result = res
+            entry.summary = summarize(name, res, log, runtime_s=entry.runtime_s)
+        except Exception as exc:  # an estimator that fails is reported, not fatal
+            entry.runtime_s = time.perf_counter() - t0
+            entry.error = f"{type(exc).__name__}: {exc}"
+            entry.result = None
+            entry.summary = None
+            entry.traceback = traceback.format_exc()
+    return out
+
+
+def ranked(entries: Sequence[Entry], key: str = "ate_rmse_m") -> list[Entry]:
+    """Successful entries by ``key`` (smallest first; missing values last), then the failures."""
+    def k(e: Entry) -> tuple[int, float]:
+        v = (e.summary or {}).get(key)
+        return (0, float(v)) if isinstance(v, int | float) and v == v else (1, 0.0)
+
+    return sorted((e for e in entries if e.ok), key=k) + [e for e in entries if not e.ok]

@@ -1,0 +1,206 @@
+"""Comparison figures (matplotlib, Agg): trajectories, position error, error CDF, SOG/COG errors,
+covariance ellipses. Each function takes trajectories and writes one PNG; nothing else.
+
+Errors are taken at the estimate/reference pairs of :func:`graphnav.metrics.associate` — the same
+pairs that the report's numbers use. SOG/COG errors follow the weighted-ICP paper's Figs. 12-15
+(difference versus time and its histogram), with COG scored only while the reference moves.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Ellipse, Patch  # noqa: E402
+from matplotlib.ticker import FuncFormatter  # noqa: E402
+
+from .geometry import wrap_angle  # noqa: E402
+from .metrics import associate, movement  # noqa: E402
+from .trajectory import Trajectory  # noqa: E402
+
+EVENT_STYLE = {"gnss_outage": ("tab:orange", "GNSS outage"), "gnss_jump": ("tab:red", "GNSS jump")}
+MAX_DT = 0.02
+CDF_FLOOR = 1e-3
+
+
+def colors(names: Sequence[str]) -> dict[str, Any]:
+    cmap = plt.get_cmap("tab10")
+    return {n: cmap(i % 10) for i, n in enumerate(names)}
+
+
+def paired(est: Trajectory, ref: Trajectory, max_dt: float = MAX_DT) -> tuple[Trajectory, Trajectory]:
+    ie, ir = associate(est, ref, max_dt)
+    return Trajectory(est.t[ie], est.poses[ie]), Trajectory(ref.t[ir], ref.poses[ir])
+
+
+def position_errors(est: Trajectory, ref: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """Times and unaligned position errors [m] at the associated pairs."""
+    e, r = paired(est, ref)
+    return e.t, np.hypot(e.x - r.x, e.y - r.y)
+
+
+def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0.2) -> dict[str, np.ndarray]:
+    """Signed SOG [m/s] and COG [deg] errors (estimate minus reference) versus interval mid-time."""
+    e, r = paired(est, ref)
+    a, b = movement(e), movement(r)
+    moving = b["sog"] > min_speed
+    return {"t": a["t"], "sog": a["sog"] - b["sog"],
+            "t_cog": a["t"][moving], "cog": np.degrees(wrap_angle(a["cog"] - b["cog"]))[moving]}
+
+
+def _shade_events(ax, events: Sequence[dict]) -> list[Patch]:
+    handles, seen = [], set()
+    for ev in events or ():
+        color, label = EVENT_STYLE.get(ev.get("kind", ""), ("tab:gray", str(ev.get("kind", "event"))))
+        ax.axvspan(ev["t0"], ev["t1"], color=color, alpha=0.15, lw=0)
+        if label not in seen:
+            seen.add(label)
+            handles.append(Patch(color=color, alpha=0.3, label=label))
+    return handles
+
+
+def _finish(fig, path: Path) -> Path:
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def plot_trajectories(trajs: dict[str, Trajectory], truth: Trajectory | None, path: Path,
+                      gnss: np.ndarray | None = None, title: str = "") -> Path:
+    fig, ax = plt.subplots(figsize=(8, 7))
+    col = colors(list(trajs))
+    if gnss is not None and len(gnss):
+        ax.plot(gnss[:, 0], gnss[:, 1], ".", ms=2.5, color="0.6", label="GNSS fixes", zorder=1)
+    if truth is not None and len(truth):
+        ax.plot(truth.x, truth.y, "-", color="k", lw=2.2, label="truth", zorder=2)
+        ax.plot(truth.x[0], truth.y[0], "o", color="k", ms=6, zorder=4)
+    for name, tr in trajs.items():
+        ax.plot(tr.x, tr.y, "-", lw=1.3, color=col[name], label=name, zorder=3)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (east) [m]")
+    ax.set_ylabel("y (north) [m]")
+    ax.set_title(title or "Trajectories over the truth (start: black dot)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
+    return _finish(fig, path)
+
+
+def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
+                        events: Sequence[dict] = ()) -> Path:
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    col = colors(list(trajs))
+    for name, tr in trajs.items():
+        t, e = position_errors(tr, truth)
+        ax.plot(t, e, "-", lw=1.2, color=col[name], label=name)
+    handles = _shade_events(ax, events)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("position error [m]")
+    ax.set_title("Position error versus time (unaligned, log frame)")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    h, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=h + handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
+    return _finish(fig, path)
+
+
+def plot_error_cdf(trajs: dict[str, Trajectory], truth: Trajectory, path: Path) -> Path:
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    col = colors(list(trajs))
+    for name, tr in trajs.items():
+        _, e = position_errors(tr, truth)
+        if len(e):
+            s = np.sort(np.maximum(e, CDF_FLOOR))
+            ax.step(s, np.arange(1, len(s) + 1) / len(s), where="post", color=col[name], label=name)
+    ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.set_xlabel(f"position error [m] (log scale; below {CDF_FLOOR:g} m shown at {CDF_FLOOR:g})")
+    ax.set_ylabel("fraction of poses")
+    ax.set_ylim(0, 1.02)
+    ax.set_title("Cumulative distribution of the position error")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
+    return _finish(fig, path)
+
+
+def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
+                 events: Sequence[dict] = ()) -> Path:
+    """The weighted-ICP paper's Figs. 12-15: SOG and COG differences versus time, and histograms."""
+    fig, axes = plt.subplots(2, 2, figsize=(12, 7.5), gridspec_kw={"width_ratios": [2.2, 1]})
+    col = colors(list(trajs))
+    series = {n: movement_error_series(tr, truth) for n, tr in trajs.items()}
+
+    def robust_range(key: str, floor: float) -> float:
+        vals = np.concatenate([np.abs(s[key][np.isfinite(s[key])]) for s in series.values()] or [np.zeros(0)])
+        return max(float(np.percentile(vals, 98)) if len(vals) else floor, floor)
+
+    rows = [("sog", "t", "m/s", "SOG"), ("cog", "t_cog", "deg", "COG")]
+    for row, (key, tkey, unit, label) in enumerate(rows):
+        ax_t, ax_h = axes[row]
+        lim = robust_range(key, 0.05 if key == "sog" else 0.5)
+        bins = np.linspace(-lim, lim, 41)
+        for name, s in series.items():
+            ax_t.plot(s[tkey], s[key], "-", lw=0.9, color=col[name], label=name)
+            v = s[key][np.isfinite(s[key])]
+            ax_h.hist(np.clip(v, -lim, lim), bins=bins, histtype="step", lw=1.4, color=col[name])
+        shade = _shade_events(ax_t, events)
+        ax_t.set_ylim(-1.1 * lim, 1.1 * lim)
+        ax_t.axhline(0, color="k", lw=0.6)
+        ax_t.set_xlabel("time [s]")
+        ax_t.set_ylabel(f"{label} error [{unit}]")
+        moving = " (moving only)" if key == "cog" else ""
+        ax_t.set_title(f"{label}$_{{est}}$ − {label}$_{{truth}}${moving}")
+        ax_t.grid(alpha=0.3)
+        ax_h.set_xlabel(f"{label} error [{unit}] (clipped at ±{lim:.2g})")
+        ax_h.set_ylabel("count")
+        ax_h.set_title(f"Histogram of {label} error")
+        ax_h.grid(alpha=0.3)
+        if row == 0:
+            h, _ = ax_t.get_legend_handles_labels()
+            fig.legend(handles=h + shade, loc="upper center", ncol=min(len(h) + len(shade), 5), fontsize=9,
+                       frameon=False, bbox_to_anchor=(0.5, 1.04))
+    fig.tight_layout()
+    return _finish(fig, path)
+
+
+def plot_covariance(trajs: dict[str, Trajectory], truth: Trajectory | None, path: Path, *,
+                    n_ellipses: int = 25, nsigma: float = 2.0) -> Path | None:
+    """Position covariance ellipses (``nsigma``) at regular intervals, one panel per estimator with
+    covariances; ``None`` (no file) when no trajectory carries covariances."""
+    with_cov = {n: t for n, t in trajs.items() if t.cov is not None and len(t)}
+    if not with_cov:
+        return None
+    n = len(with_cov)
+    ncol = min(n, 3)
+    nrow = int(np.ceil(n / ncol))
+    fig, axes = plt.subplots(nrow, ncol, figsize=(5.5 * ncol, 5 * nrow), squeeze=False)
+    col = colors(list(trajs))
+    for ax, (name, tr) in zip(axes.ravel(), with_cov.items(), strict=False):
+        if truth is not None and len(truth):
+            ax.plot(truth.x, truth.y, "-", color="k", lw=1.5, label="truth")
+        ax.plot(tr.x, tr.y, "-", color=col[name], lw=1.0, label=name)
+        idx = np.unique(np.linspace(0, len(tr) - 1, n_ellipses).astype(int))
+        for i in idx:
+            c = tr.cov[i, :2, :2]
+            if not np.all(np.isfinite(c)):
+                continue
+            w, v = np.linalg.eigh(0.5 * (c + c.T))
+            w = np.clip(w, 0, None)
+            ang = np.degrees(np.arctan2(v[1, 1], v[0, 1]))
+            ax.add_patch(Ellipse((tr.x[i], tr.y[i]), 2 * nsigma * np.sqrt(w[1]), 2 * nsigma * np.sqrt(w[0]),
+                                 angle=ang, fill=False, color=col[name], lw=1.0))
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("x (east) [m]")
+        ax.set_ylabel("y (north) [m]")
+        ax.set_title(f"{name}: {nsigma:g}σ position ellipses")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="best")
+    for ax in axes.ravel()[n:]:
+        ax.axis("off")
+    fig.tight_layout()
+    return _finish(fig, path)
