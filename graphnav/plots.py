@@ -17,6 +17,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Ellipse, Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
@@ -144,8 +145,16 @@ def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
         ax_t, ax_h = axes[row]
         lim = robust_range(key, 0.05 if key == "sog" else 0.5)
         bins = np.linspace(-lim, lim, 41)
-        for name, s in series.items():
-            ax_t.plot(s[tkey], s[key], "-", lw=0.9, color=col[name], label=name)
+        # the noisiest series first (underneath, faded), the most accurate on top
+        def rms(n: str, key: str = key) -> float:
+            v = series[n][key][np.isfinite(series[n][key])]
+            return float(np.sqrt(np.mean(v**2))) if len(v) else np.inf
+
+        order = sorted(series, key=rms, reverse=True)
+        for z, name in enumerate(order):
+            s = series[name]
+            alpha = 0.45 if z < len(order) - 3 else 0.95
+            ax_t.plot(s[tkey], s[key], "-", lw=0.9, color=col[name], alpha=alpha, zorder=2 + z)
             v = s[key][np.isfinite(s[key])]
             ax_h.hist(np.clip(v, -lim, lim), bins=bins, histtype="step", lw=1.4, color=col[name])
         shade = _shade_events(ax_t, events)
@@ -160,12 +169,18 @@ def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
         ax_h.set_ylabel("count")
         ax_h.set_title(f"Histogram of {label} error")
         ax_h.grid(alpha=0.3)
-        if row == 0:
-            h, _ = ax_t.get_legend_handles_labels()
-            fig.legend(handles=h + shade, loc="upper center", ncol=min(len(h) + len(shade), 5), fontsize=9,
-                       frameon=False, bbox_to_anchor=(0.5, 1.04))
     fig.tight_layout()
+    handles = [Line2D([], [], color=col[n], lw=1.5, label=n) for n in trajs] + shade
+    fig.legend(handles=handles, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=9, frameon=False)
     return _finish(fig, path)
+
+
+def _nice_magnification(m: float) -> float:
+    """1 when ellipses are already visible, else the next 1/2/5 x 10^k at or below ``m``."""
+    if m <= 1.0:
+        return 1.0
+    k = 10 ** np.floor(np.log10(m))
+    return float(max(s * k for s in (1, 2, 5) if s * k <= m))
 
 
 def plot_covariance(trajs: dict[str, Trajectory], truth: Trajectory | None, path: Path, *,
@@ -180,6 +195,14 @@ def plot_covariance(trajs: dict[str, Trajectory], truth: Trajectory | None, path
     nrow = int(np.ceil(n / ncol))
     fig, axes = plt.subplots(nrow, ncol, figsize=(5.5 * ncol, 5 * nrow), squeeze=False)
     col = colors(list(trajs))
+    allxy = np.vstack([np.column_stack([t.x, t.y]) for t in with_cov.values()])
+    extent = float(np.max(np.ptp(allxy, axis=0))) or 1.0
+    # one magnification for every panel (sizes stay comparable), chosen so the typical ellipse is
+    # visible at the scale of the track
+    semi = [np.sqrt(max(np.linalg.eigvalsh(c[:2, :2]).max(), 0.0)) for t in with_cov.values()
+            for c in t.cov[:: max(1, len(t) // n_ellipses)] if np.all(np.isfinite(c[:2, :2]))]
+    mag = _nice_magnification(0.02 * extent / max(nsigma * float(np.median(semi)) if semi else 1.0, 1e-9))
+    label = f" (magnified ×{mag:g})" if mag != 1 else ""
     for ax, (name, tr) in zip(axes.ravel(), with_cov.items(), strict=False):
         if truth is not None and len(truth):
             ax.plot(truth.x, truth.y, "-", color="k", lw=1.5, label="truth")
@@ -192,12 +215,12 @@ def plot_covariance(trajs: dict[str, Trajectory], truth: Trajectory | None, path
             w, v = np.linalg.eigh(0.5 * (c + c.T))
             w = np.clip(w, 0, None)
             ang = np.degrees(np.arctan2(v[1, 1], v[0, 1]))
-            ax.add_patch(Ellipse((tr.x[i], tr.y[i]), 2 * nsigma * np.sqrt(w[1]), 2 * nsigma * np.sqrt(w[0]),
-                                 angle=ang, fill=False, color=col[name], lw=1.0))
+            a, b = 2 * mag * nsigma * np.sqrt(w[1]), 2 * mag * nsigma * np.sqrt(w[0])
+            ax.add_patch(Ellipse((tr.x[i], tr.y[i]), a, b, angle=ang, fill=False, color=col[name], lw=1.0))
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("x (east) [m]")
         ax.set_ylabel("y (north) [m]")
-        ax.set_title(f"{name}: {nsigma:g}σ position ellipses")
+        ax.set_title(f"{name}: {nsigma:g}σ position ellipses{label}")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="best")
     for ax in axes.ravel()[n:]:

@@ -64,7 +64,10 @@ def to_json(entries: Sequence[Entry], log_name: str, **extra: Any) -> dict[str, 
 
 
 def markdown_table(entries: Sequence[Entry]) -> str:
-    cols = [c for c in COLUMNS if any(e.ok and (e.summary or {}).get(c[0]) is not None for e in entries)]
+    def present(v: Any) -> bool:
+        return v is not None and not (isinstance(v, float) and not math.isfinite(v))
+
+    cols = [c for c in COLUMNS if any(e.ok and present((e.summary or {}).get(c[0])) for e in entries)]
     head = "| rank | estimator | kind | " + " | ".join(h for _, h, _ in cols) + " |"
     sep = "|---:|---|---|" + "|".join("---:" for _ in cols) + "|"
     rows = [head, sep]
