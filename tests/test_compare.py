@@ -160,3 +160,14 @@ def test_cli_rejects_a_malformed_option(log, tmp_path):
     path = tmp_path / "l.jsonl"
     save_log(log, path)
     assert main(["compare", str(path), "--out", str(tmp_path / "o"), "-O", "backend=gicp"]) == 2
+
+
+def test_event_shading_has_one_legend_entry_per_kind():
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ev = [("gnss_outage", 1, 2), ("gnss_outage", 5, 6), ("gnss_jump", 3, 4), ("other", 7, 8)]
+    h = plots._shade_events(ax, [{"kind": k, "t0": a, "t1": b} for k, a, b in ev])
+    plt.close(fig)
+    assert [p.get_label() for p in h] == ["GNSS outage", "GNSS jump", "other"]
+    assert len(ax.patches) == 4
