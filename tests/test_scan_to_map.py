@@ -195,3 +195,16 @@ def test_scan_to_map_on_the_marina_data(marina_log):
     assert res.info["registration_fitness_mean"] > 0.9
     a = ate(res.trajectory, marina_log.truth(), align=True)
     assert a["n"] == 176 and a["rmse"] < 3.0
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.floats(-1.0, 1.0), st.floats(-0.5, 0.5), st.floats(-0.04, 0.04))
+def test_vgicp_recovers_random_planar_motion(dx, dy, dth):
+    """Any motion of up to 1 m / 2.3 deg between two scans is recovered from the identity (larger
+    rotations move far returns beyond the 2 m correspondence distance: that is what the
+    constant-velocity guess of scan-to-map is for)."""
+    a = np.array([45.0, 0.0, 0.2])
+    b = se2_compose(a, [dx, dy, dth])
+    res = align(scan_at(b, 0.01, 7), scan_at(a, 0.01, 8), (0.0, 0.0, 0.0), "vgicp")
+    err = se2_between(np.array([dx, dy, dth]), res.pose)
+    assert np.hypot(err[0], err[1]) < 0.03 and abs(np.degrees(err[2])) < 0.3
