@@ -58,10 +58,11 @@ class ScanToMapConfig:
     min_points: int = 20
     min_fitness: float = 0.3
     max_correction: float = 5.0
+    threads: int = 1
 
     def params(self) -> Params:
         return Params(max_corr=self.max_corr, voxel=self.voxel, neighbors=self.neighbors,
-                      max_iter=self.max_iter, planar=self.planar)
+                      max_iter=self.max_iter, planar=self.planar, threads=self.threads)
 
 
 def make_config(**options: Any) -> ScanToMapConfig:
