@@ -42,28 +42,39 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
             options: dict[str, dict[str, Any]] | None = None,
             progress: Callable[[str], None] | None = None) -> list[Entry]:
     """Run ``names`` (default: every estimator the log can feed, :func:`estimators.runnable`) on
-    ``log``; each with its own ``options[name]``. A failing estimator is recorded, not raised."""
+    ``log``; each with its own ``options[name]``. A failing estimator is recorded, not raised.
+
+    A name ``LABEL=ESTIMATOR`` runs ``ESTIMATOR`` under the label ``LABEL`` (options keyed by the
+    label), so one estimator can appear twice, e.g. ``["scan-to-map", "s2m-gicp=scan-to-map"]``
+    with ``options={"s2m-gicp": {"backend": "gicp"}}``.
+    """
     names = list(names) if names is not None else estimators.runnable(log)
     options = options or {}
     out: list[Entry] = []
     for name in names:
-        opts = dict(options.get(name, {}))
-        entry = Entry(name, options=opts)
+        label, _, est = name.partition("=") if "=" in name else (name, "", name)
+        opts = dict(options.get(label, {}))
+        entry = Entry(label, options=opts)
         out.append(entry)
+        if any(e.name == label for e in out[:-1]):
+            entry.error = f"label {label!r} given twice"
+            continue
         try:
-            spec = estimators.get(name)
+            spec = estimators.get(est)
         except KeyError as exc:
             entry.error = str(exc.args[0])
             continue
         entry.kind, entry.description = spec.kind, spec.description
+        if est != label:
+            entry.description = f"{spec.description} (estimator {est!r})"
         if progress:
-            progress(name)
+            progress(label)
         t0 = time.perf_counter()
         try:
-            res = estimators.run(name, log, **opts)
+            res = estimators.run(est, log, **opts)
             entry.runtime_s = time.perf_counter() - t0
             entry.result = res
-            entry.summary = summarize(name, res, log, runtime_s=entry.runtime_s)
+            entry.summary = summarize(label, res, log, runtime_s=entry.runtime_s)
         except Exception as exc:  # an estimator that fails is reported, not fatal
             entry.runtime_s = time.perf_counter() - t0
             entry.error = f"{type(exc).__name__}: {exc}"

@@ -171,3 +171,14 @@ def test_event_shading_has_one_legend_entry_per_kind():
     plt.close(fig)
     assert [p.get_label() for p in h] == ["GNSS outage", "GNSS jump", "other"]
     assert len(ax.patches) == 4
+
+
+def test_one_estimator_twice_under_labels(log):
+    entries = compare(log, ["scan-to-map", "s2m-gicp=scan-to-map", "s2m-gicp=dead-reckoning"],
+                      options={"s2m-gicp": {"backend": "gicp"}})
+    a, b, c = entries
+    assert (a.name, b.name) == ("scan-to-map", "s2m-gicp") and a.ok and b.ok
+    assert a.result.info["config"]["backend"] == "small_gicp:VGICP"
+    assert b.result.info["config"]["backend"] == "small_gicp:GICP"
+    assert b.summary["estimator"] == "s2m-gicp" and "scan-to-map" in b.description
+    assert not c.ok and "given twice" in c.error

@@ -23,10 +23,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_log_args(p)
     p.add_argument("--out", type=Path, required=True, help="output directory (report.md, *.png, *.tum)")
     p.add_argument("--estimators", "-e", default=None,
-                   help="comma-separated names (default: every estimator the log can feed); known: "
+                   help="comma-separated names, LABEL=NAME to run one estimator twice under another "
+                        "label (default: every estimator the log can feed); known: "
                         + ", ".join(estimators.names()))
     p.add_argument("--option", "-O", action="append", metavar="NAME.KEY=VALUE",
-                   help="option for one estimator, e.g. scan-to-map.backend=gicp; repeatable")
+                   help="option for one estimator (or label), e.g. scan-to-map.backend=gicp; repeatable")
     add_json_flag(p)
     p.set_defaults(func=run)
 
