@@ -208,3 +208,19 @@ def test_vgicp_recovers_random_planar_motion(dx, dy, dth):
     res = align(scan_at(b, 0.01, 7), scan_at(a, 0.01, 8), (0.0, 0.0, 0.0), "vgicp")
     err = se2_between(np.array([dx, dy, dth]), res.pose)
     assert np.hypot(err[0], err[1]) < 0.03 and abs(np.degrees(err[2])) < 0.3
+
+
+def test_rejected_registrations_keep_the_prediction_and_stay_out_of_the_map(log):
+    """Scans blanked in the middle (open water): the prediction carries the track across and the
+    registrations resume against the map of real scans."""
+    blank = {s.t for s in log.of("scan")[15:18]}
+
+    def strip(r):
+        if r.kind == "scan" and r.t in blank:
+            return type(r)(r.t, np.full_like(r.ranges, np.nan), r.angles)
+        return r
+
+    gap = NavLog([strip(r) for r in log.records], [], dict(log.meta))
+    res = estimators.run("scan-to-map", gap)
+    assert res.info["failed_registrations"] == 3
+    assert ate(res.trajectory, log.truth())["rmse"] < 0.2

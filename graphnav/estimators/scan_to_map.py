@@ -117,6 +117,7 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
         xy = voxel_downsample(xy, cfg.scan_voxel)
         enough = len(xy) >= cfg.min_points
         source = None
+        registered = target is None  # no map yet: this scan starts it at the (predicted) pose
         if not poses:
             pose = np.array(pose0, dtype=float)
         else:
@@ -138,12 +139,14 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
                 ok = np.all(np.isfinite(res.pose)) and jump <= cfg.max_correction
                 if ok and res.fitness >= cfg.min_fitness:
                     pose = res.pose
+                    registered = True
                 else:
                     failed += 1
             else:
                 failed += 1
-        # keyframe and local-map update (timed as the step; registration time is icp_ms)
-        if enough and (
+        # keyframe and local-map update (timed as the step; registration time is icp_ms); a scan
+        # whose registration was rejected does not enter the map
+        if enough and registered and (
             last_kf is None
             or np.hypot(*(pose[:2] - last_kf[:2])) >= cfg.keyframe_dist
             or abs(wrap_angle(pose[2] - last_kf[2])) >= np.radians(cfg.keyframe_angle_deg)
