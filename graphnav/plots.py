@@ -93,12 +93,16 @@ def plot_trajectories(trajs: dict[str, Trajectory], truth: Trajectory | None, pa
 
 
 def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
-                        events: Sequence[dict] = ()) -> Path:
+                        events: Sequence[dict] = (), online: dict[str, Trajectory] | None = None) -> Path:
+    """Position error versus time; ``online`` estimates (smoothers) dashed in the same colour."""
     fig, ax = plt.subplots(figsize=(10, 4.5))
     col = colors(list(trajs))
     for name, tr in trajs.items():
         t, e = position_errors(tr, truth)
         ax.plot(t, e, "-", lw=1.2, color=col[name], label=name)
+        if online and name in online:
+            t, e = position_errors(online[name], truth)
+            ax.plot(t, e, "--", lw=1.0, color=col[name], label=f"{name} (online)")
     handles = _shade_events(ax, events)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("position error [m]")

@@ -114,11 +114,13 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: 
                                                             title=f"Trajectories over the truth — {log_name}")
         figs.append(("Trajectories", "trajectories.png"))
         if truth is not None:
+            online = {e.name: e.result.online for e in ok
+                      if e.result.online is not None and e.result.online is not e.result.trajectory}
             files["position_error.png"] = plots.plot_position_error(trajs, truth, out / "position_error.png",
-                                                                    events)
+                                                                    events, online)
             files["error_cdf.png"] = plots.plot_error_cdf(trajs, truth, out / "error_cdf.png")
             files["sog_cog.png"] = plots.plot_sog_cog(trajs, truth, out / "sog_cog.png", events)
-            figs += [("Position error versus time", "position_error.png"),
+            figs += [("Position error versus time (smoothers: online estimate dashed)", "position_error.png"),
                      ("Error CDF", "error_cdf.png"),
                      ("SOG and COG errors (weighted-ICP paper, Figs. 12-15 style)", "sog_cog.png")]
         cov = plots.plot_covariance(trajs, truth, out / "covariance.png")
