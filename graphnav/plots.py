@@ -25,7 +25,8 @@ from .geometry import wrap_angle  # noqa: E402
 from .metrics import associate, movement  # noqa: E402
 from .trajectory import Trajectory  # noqa: E402
 
-EVENT_STYLE = {"gnss_outage": ("tab:orange", "GNSS outage"), "gnss_jump": ("tab:red", "GNSS jump")}
+# (face colour, hatch, label): light fills/hatches, so they do not read as an estimator's line colour
+EVENT_STYLE = {"gnss_outage": ("#f2d64b", "", "GNSS outage"), "gnss_jump": ("#e8a0a0", "xx", "GNSS jump")}
 MAX_DT = 0.02
 CDF_FLOOR = 1e-3
 
@@ -58,11 +59,13 @@ def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0
 def _shade_events(ax, events: Sequence[dict]) -> list[Patch]:
     handles, seen = [], set()
     for ev in events or ():
-        color, label = EVENT_STYLE.get(ev.get("kind", ""), ("tab:gray", str(ev.get("kind", "event"))))
-        ax.axvspan(ev["t0"], ev["t1"], color=color, alpha=0.15, lw=0)
+        kind = str(ev.get("kind", "event"))
+        color, hatch, label = EVENT_STYLE.get(kind, ("#bbbbbb", "..", kind))
+        ax.axvspan(ev["t0"], ev["t1"], facecolor=color, alpha=0.3, hatch=hatch, edgecolor="0.5", lw=0)
         if label not in seen:
             seen.add(label)
-            handles.append(Patch(color=color, alpha=0.3, label=label))
+            handles.append(Patch(facecolor=color, alpha=0.45, hatch=hatch, edgecolor="0.5", lw=0,
+                                 label=label))
     return handles
 
 
