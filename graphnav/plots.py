@@ -56,10 +56,15 @@ def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0
             "t_cog": a["t"][moving], "cog": np.degrees(wrap_angle(a["cog"] - b["cog"]))[moving]}
 
 
-def _shade_events(ax, events: Sequence[dict]) -> list[Patch]:
+def _shade_events(ax, events: Sequence[dict], span: tuple[float, float] | None = None) -> list[Patch]:
+    """Shade event intervals; one legend handle per kind. Events other than GNSS outages/jumps that
+    cover most of ``span`` (a condition of the whole log, e.g. a compass bias) are not shaded."""
     handles, seen = [], set()
     for ev in events or ():
         kind = str(ev.get("kind", "event"))
+        if kind not in EVENT_STYLE and span is not None and span[1] > span[0]:
+            if (min(ev["t1"], span[1]) - max(ev["t0"], span[0])) > 0.8 * (span[1] - span[0]):
+                continue
         color, hatch, label = EVENT_STYLE.get(kind, ("#bbbbbb", "..", kind))
         ax.axvspan(ev["t0"], ev["t1"], facecolor=color, alpha=0.3, hatch=hatch, edgecolor="0.5", lw=0)
         if label not in seen:
@@ -70,14 +75,14 @@ def _shade_events(ax, events: Sequence[dict]) -> list[Patch]:
 
 
 def _finish(fig, path: Path) -> Path:
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
 
 
 def plot_trajectories(trajs: dict[str, Trajectory], truth: Trajectory | None, path: Path,
                       gnss: np.ndarray | None = None, title: str = "") -> Path:
-    fig, ax = plt.subplots(figsize=(8, 7))
+    fig, ax = plt.subplots(figsize=(8, 7), layout="constrained")
     col = colors(list(trajs))
     if gnss is not None and len(gnss):
         ax.plot(gnss[:, 0], gnss[:, 1], ".", ms=2.5, color="0.6", label="GNSS fixes", zorder=1)
@@ -98,7 +103,7 @@ def plot_trajectories(trajs: dict[str, Trajectory], truth: Trajectory | None, pa
 def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
                         events: Sequence[dict] = (), online: dict[str, Trajectory] | None = None) -> Path:
     """Position error versus time; ``online`` estimates (smoothers) dashed in the same colour."""
-    fig, ax = plt.subplots(figsize=(10, 4.5))
+    fig, ax = plt.subplots(figsize=(10, 4.5), layout="constrained")
     col = colors(list(trajs))
     for name, tr in trajs.items():
         t, e = position_errors(tr, truth)
@@ -106,7 +111,7 @@ def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: P
         if online and name in online:
             t, e = position_errors(online[name], truth)
             ax.plot(t, e, "--", lw=1.0, color=col[name], label=f"{name} (online)")
-    handles = _shade_events(ax, events)
+    handles = _shade_events(ax, events, (float(truth.t[0]), float(truth.t[-1])) if len(truth) else None)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("position error [m]")
     ax.set_title("Position error versus time (unaligned, log frame)")
@@ -118,7 +123,7 @@ def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: P
 
 
 def plot_error_cdf(trajs: dict[str, Trajectory], truth: Trajectory, path: Path) -> Path:
-    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    fig, ax = plt.subplots(figsize=(7.5, 4.5), layout="constrained")
     col = colors(list(trajs))
     for name, tr in trajs.items():
         _, e = position_errors(tr, truth)
@@ -139,7 +144,8 @@ def plot_error_cdf(trajs: dict[str, Trajectory], truth: Trajectory, path: Path) 
 def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
                  events: Sequence[dict] = ()) -> Path:
     """The weighted-ICP paper's Figs. 12-15: SOG and COG differences versus time, and histograms."""
-    fig, axes = plt.subplots(2, 2, figsize=(12, 7.5), gridspec_kw={"width_ratios": [2.2, 1]})
+    fig, axes = plt.subplots(2, 2, figsize=(12, 7.5), gridspec_kw={"width_ratios": [2.2, 1]},
+                             layout="constrained")
     col = colors(list(trajs))
     series = {n: movement_error_series(tr, truth) for n, tr in trajs.items()}
 
@@ -164,7 +170,7 @@ def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
             ax_t.plot(s[tkey], s[key], "-", lw=0.9, color=col[name], alpha=alpha, zorder=2 + z)
             v = s[key][np.isfinite(s[key])]
             ax_h.hist(np.clip(v, -lim, lim), bins=bins, histtype="step", lw=1.4, color=col[name])
-        shade = _shade_events(ax_t, events)
+        shade = _shade_events(ax_t, events, (float(truth.t[0]), float(truth.t[-1])) if len(truth) else None)
         ax_t.set_ylim(-1.1 * lim, 1.1 * lim)
         ax_t.axhline(0, color="k", lw=0.6)
         ax_t.set_xlabel("time [s]")
@@ -176,9 +182,8 @@ def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
         ax_h.set_ylabel("count")
         ax_h.set_title(f"Histogram of {label} error")
         ax_h.grid(alpha=0.3)
-    fig.tight_layout()
     handles = [Line2D([], [], color=col[n], lw=1.5, label=n) for n in trajs] + shade
-    fig.legend(handles=handles, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=9, frameon=False)
+    fig.legend(handles=handles, loc="outside right center", fontsize=9, frameon=False)
     return _finish(fig, path)
 
 
@@ -200,7 +205,8 @@ def plot_covariance(trajs: dict[str, Trajectory], truth: Trajectory | None, path
     n = len(with_cov)
     ncol = min(n, 3)
     nrow = int(np.ceil(n / ncol))
-    fig, axes = plt.subplots(nrow, ncol, figsize=(5.5 * ncol, 5 * nrow), squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(5.5 * ncol, 5 * nrow), squeeze=False,
+                             layout="constrained")
     col = colors(list(trajs))
     allxy = np.vstack([np.column_stack([t.x, t.y]) for t in with_cov.values()])
     extent = float(np.max(np.ptp(allxy, axis=0))) or 1.0
@@ -232,5 +238,4 @@ def plot_covariance(trajs: dict[str, Trajectory], truth: Trajectory | None, path
         ax.legend(fontsize=8, loc="best")
     for ax in axes.ravel()[n:]:
         ax.axis("off")
-    fig.tight_layout()
     return _finish(fig, path)

@@ -89,6 +89,7 @@ def _config(e: Entry) -> dict[str, Any]:
 
 def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: str = "") -> dict[str, Path]:
     """Write report.md, the PNGs and one TUM file per estimator into ``out``; returns the paths."""
+    log_name = log_name or str(log.meta.get("name", "log"))
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, Path] = {}
     ok = [e for e in entries if e.ok and e.result is not None]
@@ -128,13 +129,13 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: 
             files["covariance.png"] = cov
             figs.append(("Covariance ellipses (2σ)", "covariance.png"))
 
-    lines = [f"# Estimator comparison — {log_name or log.meta.get('name', 'log')}", ""]
+    lines = [f"# Estimator comparison — {log_name}", ""]
     counts = ", ".join(f"{k}: {v}" for k, v in log.counts().items())
     span = f"{log.t1 - log.t0:.1f} s" if log.records else "empty"
     lines += [f"Log: {counts}; duration {span}.", ""]
     if events:
-        lines += ["Events (shaded in the time plots): " + "; ".join(
-            f"{ev.get('kind')} {ev.get('t0'):.1f}–{ev.get('t1'):.1f} s" for ev in events), ""]
+        listed = "; ".join(f"{ev.get('kind')} {ev.get('t0'):.1f}–{ev.get('t1'):.1f} s" for ev in events)
+        lines += [f"Events (GNSS outages/jumps and shorter conditions shaded in the plots): {listed}", ""]
     lines += ["## Results", "",
               "Ranked by ATE RMSE. ATE is unaligned (in the log's frame), over poses time-associated with "
               "the truth; RPE over 1 and 10 associated poses; SOG/COG/ROT errors between consecutive "

@@ -182,3 +182,13 @@ def test_one_estimator_twice_under_labels(log):
     assert b.result.info["config"]["backend"] == "small_gicp:GICP"
     assert b.summary["estimator"] == "s2m-gicp" and "scan-to-map" in b.description
     assert not c.ok and "given twice" in c.error
+
+
+def test_a_whole_log_condition_is_not_shaded_but_gnss_events_are():
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ev = [("compass_bias", 0, 100), ("gnss_outage", 0, 100), ("noise_increase", 50, 60)]
+    h = plots._shade_events(ax, [{"kind": k, "t0": a, "t1": b} for k, a, b in ev], span=(0.0, 100.0))
+    plt.close(fig)
+    assert [p.get_label() for p in h] == ["GNSS outage", "noise_increase"]
