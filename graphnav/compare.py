@@ -38,23 +38,43 @@ class Entry:
         return self.error is None
 
 
+def _run(entry: Entry, est: str, log: NavLog) -> Entry:
+    """Run one estimator into ``entry`` (timing, summary, or the error)."""
+    t0 = time.perf_counter()
+    try:
+        res = estimators.run(est, log, **entry.options)
+        entry.runtime_s = time.perf_counter() - t0
+        entry.result = res
+        entry.summary = summarize(entry.name, res, log, runtime_s=entry.runtime_s)
+    except Exception as exc:  # an estimator that fails is reported, not fatal
+        entry.runtime_s = time.perf_counter() - t0
+        entry.error = f"{type(exc).__name__}: {exc}"
+        entry.result = None
+        entry.summary = None
+        entry.traceback = traceback.format_exc()
+    return entry
+
+
 def compare(log: NavLog, names: Sequence[str] | None = None, *,
             options: dict[str, dict[str, Any]] | None = None,
-            progress: Callable[[str], None] | None = None) -> list[Entry]:
+            progress: Callable[[str], None] | None = None, workers: int = 1) -> list[Entry]:
     """Run ``names`` (default: every estimator the log can feed, :func:`estimators.runnable`) on
     ``log``; each with its own ``options[name]``. A failing estimator is recorded, not raised.
 
     A name ``LABEL=ESTIMATOR`` runs ``ESTIMATOR`` under the label ``LABEL`` (options keyed by the
     label), so one estimator can appear twice, e.g. ``["scan-to-map", "s2m-gicp=scan-to-map"]``
     with ``options={"s2m-gicp": {"backend": "gicp"}}``.
+
+    ``workers > 1`` runs the estimators in that many processes at once (results in the same
+    order); each ``runtime_s`` is then measured while the others run, so it includes contention.
     """
     names = list(names) if names is not None else estimators.runnable(log)
     options = options or {}
     out: list[Entry] = []
+    todo: list[tuple[int, str]] = []
     for name in names:
         label, _, est = name.partition("=") if "=" in name else (name, "", name)
-        opts = dict(options.get(label, {}))
-        entry = Entry(label, options=opts)
+        entry = Entry(label, options=dict(options.get(label, {})))
         out.append(entry)
         if any(e.name == label for e in out[:-1]):
             entry.error = f"label {label!r} given twice"
@@ -67,20 +87,23 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
         entry.kind, entry.description = spec.kind, spec.description
         if est != label:
             entry.description = f"{spec.description} (estimator {est!r})"
-        if progress:
-            progress(label)
-        t0 = time.perf_counter()
-        try:
-            res = estimators.run(est, log, **opts)
-            entry.runtime_s = time.perf_counter() - t0
-            entry.result = res
-            entry.summary = summarize(label, res, log, runtime_s=entry.runtime_s)
-        except Exception as exc:  # an estimator that fails is reported, not fatal
-            entry.runtime_s = time.perf_counter() - t0
-            entry.error = f"{type(exc).__name__}: {exc}"
-            entry.result = None
-            entry.summary = None
-            entry.traceback = traceback.format_exc()
+        todo.append((len(out) - 1, est))
+    if workers > 1 and len(todo) > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        ctx = multiprocessing.get_context("fork")  # children inherit the registry as it is here
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            futures = [(i, pool.submit(_run, out[i], est, log)) for i, est in todo]
+            for i, fut in futures:
+                if progress:
+                    progress(out[i].name)
+                out[i] = fut.result()
+    else:
+        for i, est in todo:
+            if progress:
+                progress(out[i].name)
+            _run(out[i], est, log)
     return out
 
 

@@ -192,3 +192,16 @@ def test_a_whole_log_condition_is_not_shaded_but_gnss_events_are():
     h = plots._shade_events(ax, [{"kind": k, "t0": a, "t1": b} for k, a, b in ev], span=(0.0, 100.0))
     plt.close(fig)
     assert [p.get_label() for p in h] == ["GNSS outage", "noise_increase"]
+
+
+def test_parallel_workers_give_the_same_table(log, fakes):
+    names = ["dead-reckoning", "fake-smoother", "zz-boom"]
+    seq = compare(log, names)
+    par = compare(log, names, workers=2)
+    assert [e.name for e in par] == names
+    for a, b in zip(seq, par, strict=True):
+        assert a.ok == b.ok
+        if a.ok:
+            assert b.summary["ate_rmse_m"] == pytest.approx(a.summary["ate_rmse_m"])
+            assert np.allclose(a.result.trajectory.poses, b.result.trajectory.poses)
+    assert "deliberate failure" in par[2].error

@@ -28,6 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         + ", ".join(estimators.names()))
     p.add_argument("--option", "-O", action="append", metavar="NAME.KEY=VALUE",
                    help="option for one estimator (or label), e.g. scan-to-map.backend=gicp; repeatable")
+    p.add_argument("--workers", "-j", type=int, default=1,
+                   help="run this many estimators at once in separate processes (runtimes then include "
+                        "contention; default 1)")
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -48,13 +51,13 @@ def run(args: argparse.Namespace) -> int:
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     t0 = time.perf_counter()
     entries = compare(log, names, options=_options(args.option),
-                      progress=lambda n: log_.info("running %s on %s", n, args.log))
+                      progress=lambda n: log_.info("running %s on %s", n, args.log), workers=args.workers)
     files = write_report(entries, log, args.out, log_name=str(args.log))
     total = time.perf_counter() - t0
     for e in entries:
         if not e.ok:
             log_.warning("%s failed: %s", e.name, e.error)
-    obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total)
+    obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=args.workers)
     lines = [f"{'estimator':16s} {'ATE RMSE [m]':>12s} {'RPE [m]':>9s} {'runtime [s]':>11s}  note"]
     for e in ranked(entries):
         s = e.summary or {}
