@@ -48,12 +48,17 @@ def position_errors(est: Trajectory, ref: Trajectory) -> tuple[np.ndarray, np.nd
 
 
 def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0.2) -> dict[str, np.ndarray]:
-    """Signed SOG [m/s] and COG [deg] errors (estimate minus reference) versus interval mid-time."""
+    """Signed errors (estimate minus reference) versus interval mid-time: SOG [m/s], COG [deg] and
+    the weighted-ICP paper's ΔCOG [deg] (change of COG between consecutive intervals, Figs. 14-15),
+    COG and ΔCOG only while the reference moves faster than ``min_speed``."""
     e, r = paired(est, ref)
     a, b = movement(e), movement(r)
     moving = b["sog"] > min_speed
+    both = moving[1:] & moving[:-1]
+    dcog = np.degrees(wrap_angle(np.diff(a["cog"]) - np.diff(b["cog"])))
     return {"t": a["t"], "sog": a["sog"] - b["sog"],
-            "t_cog": a["t"][moving], "cog": np.degrees(wrap_angle(a["cog"] - b["cog"]))[moving]}
+            "t_cog": a["t"][moving], "cog": np.degrees(wrap_angle(a["cog"] - b["cog"]))[moving],
+            "t_dcog": a["t"][1:][both], "dcog": dcog[both]}
 
 
 def _shade_events(ax, events: Sequence[dict], span: tuple[float, float] | None = None) -> list[Patch]:
@@ -143,8 +148,9 @@ def plot_error_cdf(trajs: dict[str, Trajectory], truth: Trajectory, path: Path) 
 
 def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
                  events: Sequence[dict] = ()) -> Path:
-    """The weighted-ICP paper's Figs. 12-15: SOG and COG differences versus time, and histograms."""
-    fig, axes = plt.subplots(2, 2, figsize=(12, 7.5), gridspec_kw={"width_ratios": [2.2, 1]},
+    """The weighted-ICP paper's Figs. 12-15: SOG, COG and ΔCOG differences versus time, and their
+    histograms."""
+    fig, axes = plt.subplots(3, 2, figsize=(12, 10.5), gridspec_kw={"width_ratios": [2.2, 1]},
                              layout="constrained")
     col = colors(list(trajs))
     series = {n: movement_error_series(tr, truth) for n, tr in trajs.items()}
@@ -153,10 +159,10 @@ def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
         vals = np.concatenate([np.abs(s[key][np.isfinite(s[key])]) for s in series.values()] or [np.zeros(0)])
         return max(float(np.percentile(vals, 98)) if len(vals) else floor, floor)
 
-    rows = [("sog", "t", "m/s", "SOG"), ("cog", "t_cog", "deg", "COG")]
+    rows = [("sog", "t", "m/s", "SOG"), ("cog", "t_cog", "deg", "COG"), ("dcog", "t_dcog", "deg", "ΔCOG")]
     for row, (key, tkey, unit, label) in enumerate(rows):
         ax_t, ax_h = axes[row]
-        lim = robust_range(key, 0.05 if key == "sog" else 0.5)
+        lim = robust_range(key, 0.05 if key == "sog" else 0.2)
         bins = np.linspace(-lim, lim, 41)
         # the noisiest series first (underneath, faded), the most accurate on top
         def rms(n: str, key: str = key) -> float:
@@ -175,7 +181,7 @@ def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
         ax_t.axhline(0, color="k", lw=0.6)
         ax_t.set_xlabel("time [s]")
         ax_t.set_ylabel(f"{label} error [{unit}]")
-        moving = " (moving only)" if key == "cog" else ""
+        moving = " (moving only)" if key != "sog" else ""
         ax_t.set_title(f"{label}$_{{est}}$ − {label}$_{{truth}}${moving}")
         ax_t.grid(alpha=0.3)
         ax_h.set_xlabel(f"{label} error [{unit}] (clipped at ±{lim:.2g})")

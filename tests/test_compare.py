@@ -205,3 +205,16 @@ def test_parallel_workers_give_the_same_table(log, fakes):
             assert b.summary["ate_rmse_m"] == pytest.approx(a.summary["ate_rmse_m"])
             assert np.allclose(a.result.trajectory.poses, b.result.trajectory.poses)
     assert "deliberate failure" in par[2].error
+
+
+def test_dcog_error_ignores_a_constant_course_offset(log):
+    """A track rotated as a whole has a constant COG error and no ΔCOG error (the weighted-ICP
+    paper's increment differences, Figs. 14-15)."""
+    from graphnav.geometry import se2_compose
+
+    ref = log.truth()
+    rotated = Trajectory(ref.t, se2_compose(np.array([0.0, 0.0, 0.05]), ref.poses))
+    s = plots.movement_error_series(rotated, ref)
+    assert np.allclose(s["cog"], np.degrees(0.05))
+    assert np.allclose(s["dcog"], 0.0, atol=1e-9) and len(s["dcog"]) == len(s["cog"]) - 1
+    assert np.allclose(s["sog"], 0.0, atol=1e-9)
