@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,11 @@ COLUMNS: list[tuple[str, str, str]] = [
 ]
 # the keys every estimator gets in the --json object (issue #7), plus the rest of summarize()
 JSON_KEYS = ("ate_rmse_m", "rpe_rmse_m", "runtime_s", "step_ms_median")
+
+
+def file_stem(name: str) -> str:
+    """An estimator name (or label) as a safe file name stem."""
+    return re.sub(r"[^A-Za-z0-9_.+-]", "_", name).lstrip(".") or "estimator"
 
 
 def _fmt(v: Any, f: str) -> str:
@@ -95,12 +101,12 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: 
     ok = [e for e in entries if e.ok and e.result is not None]
     trajs = {e.name: e.result.trajectory for e in ok}
     for e in ok:
-        p = out / f"{e.name}.tum"
+        p = out / f"{file_stem(e.name)}.tum"
         e.result.trajectory.to_tum(p)
-        files[f"{e.name}.tum"] = p
+        files[p.name] = p
         onl = e.result.online
         if onl is not None and onl is not e.result.trajectory and len(onl):
-            p = out / f"{e.name}.online.tum"
+            p = out / f"{file_stem(e.name)}.online.tum"
             onl.to_tum(p)
             files[p.name] = p
     truth = log.truth() if log.has_truth else None
@@ -123,7 +129,7 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: 
             files["sog_cog.png"] = plots.plot_sog_cog(trajs, truth, out / "sog_cog.png", events)
             figs += [("Position error versus time (smoothers: online estimate dashed)", "position_error.png"),
                      ("Error CDF", "error_cdf.png"),
-                     ("SOG and COG errors (weighted-ICP paper, Figs. 12-15 style)", "sog_cog.png")]
+                     ("SOG, COG and ΔCOG errors (weighted-ICP paper, Figs. 12-15 style)", "sog_cog.png")]
         cov = plots.plot_covariance(trajs, truth, out / "covariance.png")
         if cov is not None:
             files["covariance.png"] = cov
@@ -160,7 +166,8 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: 
         lines += ["## Figures", ""]
         for title, f in figs:
             lines += [f"### {title}", "", f"![{title}]({f})", ""]
-    lines += ["Trajectories: " + ", ".join(f"`{e.name}.tum`" for e in ok) + " (TUM, evo-readable).", ""]
+    tums = ", ".join(f"`{file_stem(e.name)}.tum`" for e in ok)
+    lines += [f"Trajectories: {tums} (TUM, evo-readable).", ""]
     p = out / "report.md"
     p.write_text("\n".join(lines))
     files["report.md"] = p
