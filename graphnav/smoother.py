@@ -51,7 +51,7 @@ class SmootherConfig:
     beacon_robust: str | None = "huber"
     unknown_beacons: bool = True  # SLAM on beacons missing from the chart
     use_icp: bool = True
-    icp_cov_scale: float = 1.0
+    icp_cov_scale: float = 1000.0  # the matcher's covariance is ~30x optimistic in sigma on real data (docs/smoother.md)
     icp_sigma_floor_xy: float = 0.005  # [m] added in quadrature to the ICP covariance
     icp_sigma_floor_yaw_deg: float = 0.05
     icp_max_step: float = 5.0  # [m] an ICP step farther than this from the prediction is rejected
@@ -63,9 +63,15 @@ class SmootherConfig:
     motion_sigma_yaw_deg: float = 20.0
     anchor_sigma_xy: float | None = None  # prior on the first pose when there is no pose_prior record
     anchor_sigma_yaw_deg: float = 30.0
-    relinearize_threshold: float = 0.05
+    relinearize_threshold: float = 0.05  # poses: tangent-space change that triggers relinearization
+    relinearize_threshold_landmarks: float = 0.5  # [m] beacons (many factors each: relinearize rarely)
+    relinearize_threshold_bias_deg: float = 2.0  # compass-bias frame (one factor per compass reading)
     relinearize_skip: int = 1
-    isam_extra_updates: int = 0
+    isam_extra_updates: int = 0  # extra ISAM2.update() calls per keyframe
+    final_updates: int = 2  # extra ISAM2.update() calls after the last keyframe (the smoothed result)
+    wildfire_threshold: float = 0.001  # iSAM2 back-substitution stops where the change is below this
+    partial_relinearization_check: bool = True
+    lm_tol: float = 1e-14  # batch LM relative/absolute error-decrease tolerance
     lag: float = 20.0  # fixed-lag window [s]
     covariances: bool = True  # per-pose marginal covariances on the final trajectory
     icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.icp.IcpConfig
@@ -101,6 +107,11 @@ def world_cov(pose: gtsam.Pose2, cov: NDArray[np.float64]) -> NDArray[np.float64
     return R @ cov @ R.T
 
 
+def _const(pose: gtsam.Pose2 | None) -> Callable[[int], gtsam.Pose2 | None]:
+    """``estimate(key)`` for the builder: the estimate of the previous keyframe (the only one asked for)."""
+    return lambda key: pose
+
+
 def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
     return np.array([p.x(), p.y(), p.theta()])
 
@@ -129,8 +140,13 @@ class GraphBuilder:
             raise ValueError("the log has no records to place keyframes on")
         scans = log.of("scan")
         self.scans = scans if (cfg.keyframe_period is None and scans) else None
+        icp_opts = dict(cfg.icp)
+        lidar = log.meta.get("lidar", {}) if isinstance(log.meta.get("lidar"), dict) else {}
+        for k in ("sigma_r_rel", "sigma_alpha"):  # the log's LiDAR error model, when it states one
+            if k in lidar and k not in icp_opts:
+                icp_opts[k] = float(lidar[k])
         self.matcher = matcher if matcher is not None else (
-            default_matcher(cfg.icp) if (cfg.use_icp and self.scans) else None)
+            default_matcher(icp_opts) if (cfg.use_icp and self.scans) else None)
         n = len(self.kf_t)
         self.pending: list[list[tuple[int, Any]]] = [[] for _ in range(n)]
         for kind in ("gnss", "heading", "beacon"):
@@ -323,8 +339,16 @@ class GraphBuilder:
 # -- drivers ---------------------------------------------------------------------------------------
 def _isam_params(cfg: SmootherConfig) -> gtsam.ISAM2Params:
     p = gtsam.ISAM2Params()
-    p.setRelinearizeThreshold(cfg.relinearize_threshold)
+    th = gtsam.ISAM2ThresholdMap()  # per variable type (the symbol's character)
+    th.insert(("x", np.full(3, cfg.relinearize_threshold)))
+    th.insert(("l", np.full(2, cfg.relinearize_threshold_landmarks)))
+    th.insert(("b", np.array([1.0, 1.0, math.radians(cfg.relinearize_threshold_bias_deg)])))
+    p.setRelinearizeThreshold(th)
     p.relinearizeSkip = cfg.relinearize_skip
+    p.enablePartialRelinearizationCheck = cfg.partial_relinearization_check
+    gn = gtsam.ISAM2GaussNewtonParams()
+    gn.setWildfireThreshold(cfg.wildfire_threshold)
+    p.setOptimizationParams(gn)
     return p
 
 
@@ -337,6 +361,7 @@ def _finish(builder: GraphBuilder, t: list[float], poses: list, covs: list | Non
     if values is not None:
         if builder.bias_key is not None and values.exists(builder.bias_key):
             info["compass_bias_deg"] = math.degrees(F.compass_bias(values.atPose2(builder.bias_key)))
+        info["beacon_init"] = {bid: p.tolist() for bid, p in builder.beacon_init.items()}
         info["beacon_estimates"] = {
             bid: values.atPoint2(F.L(i)).tolist() for bid, i in builder.beacon_ids.items() if values.exists(F.L(i))}
     return traj, info
@@ -351,7 +376,7 @@ def run_isam2(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Ma
     on_t, on_p, on_c, step_ms, icp_ms = [], [], [], [], []
     last_pose, last_cov = None, None
     for k in range(len(b.kf_t)):
-        s = b.step(k, lambda key: last_pose, last_cov)  # only X(k-1) is ever asked for
+        s = b.step(k, _const(last_pose), last_cov)  # only X(k-1) is ever asked for
         if s.icp_ms is not None:
             icp_ms.append(s.icp_ms)
         c0 = time.perf_counter()
@@ -367,7 +392,9 @@ def run_isam2(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Ma
         on_c.append(cov)
         if on_estimate is not None:
             on_estimate(s.t, on_p[-1], cov)
-    est = isam.calculateEstimate()
+    for _ in range(cfg.final_updates):
+        isam.update()
+    est = isam.calculateBestEstimate()  # full back-substitution (no wildfire cut-off)
     poses = [_vec(est.atPose2(F.X(k))) for k in range(len(b.kf_t))]
     covs = None
     if cfg.covariances:
@@ -375,6 +402,13 @@ def run_isam2(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Ma
     traj, info = _finish(b, on_t, poses, covs, "isam2", est)
     online = Trajectory(np.array(on_t), np.array(on_p), np.array(on_c), name="isam2-online")
     return RunResult(traj, online, np.array(step_ms), np.array(icp_ms), info)
+
+
+def _gnss_sigma(f: gtsam.PoseTranslationPrior2D) -> float:
+    """The isotropic sigma of a (possibly robust) GNSS factor's noise model."""
+    nm = f.noiseModel()
+    base = nm.noise() if hasattr(nm, "noise") else nm
+    return float(base.sigmas()[0])
 
 
 def run_batch(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Matcher | None = None,
@@ -388,7 +422,7 @@ def run_batch(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Ma
     gnss_sigma: dict[int, float] = {}
     last = None
     for k in range(len(b.kf_t)):
-        s = b.step(k, lambda key: last)
+        s = b.step(k, _const(last))
         if s.icp_ms is not None:
             icp_ms.append(s.icp_ms)
         for i, sig in s.gnss:
@@ -399,23 +433,27 @@ def run_batch(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Ma
     c0 = time.perf_counter()
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(100)
-    params.setRelativeErrorTol(1e-10)
-    params.setAbsoluteErrorTol(1e-10)
+    params.setRelativeErrorTol(cfg.lm_tol)
+    params.setAbsoluteErrorTol(cfg.lm_tol)
     result = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
     dropped = 0
-    if cfg.gnss_gate is not None:
-        keep = gtsam.NonlinearFactorGraph()
+    for _ in range(3 if cfg.gnss_gate is not None else 0):  # drop gross GNSS outliers, re-solve
+        keep, n_drop = gtsam.NonlinearFactorGraph(), 0
         for i in range(graph.size()):
             f = graph.at(i)
-            if i in gnss_sigma:
-                e = f.unwhitenedError(result)
-                if float(np.hypot(*e)) / gnss_sigma[i] > cfg.gnss_gate * math.sqrt(2):
-                    dropped += 1
-                    continue
+            if i in gnss_sigma and float(np.hypot(*f.unwhitenedError(result))) / gnss_sigma[i] > cfg.gnss_gate:
+                n_drop += 1
+                continue
             keep.add(f)
-        if dropped:
-            graph = keep
-            result = gtsam.LevenbergMarquardtOptimizer(graph, result, params).optimize()
+        if not n_drop:
+            break
+        dropped += n_drop
+        gnss_sigma = {}  # indices shift; the kept GNSS factors are re-found below
+        for i in range(keep.size()):
+            if isinstance(keep.at(i), gtsam.PoseTranslationPrior2D):
+                gnss_sigma[i] = _gnss_sigma(keep.at(i))
+        graph = keep
+        result = gtsam.LevenbergMarquardtOptimizer(graph, result, params).optimize()
     solve_ms = (time.perf_counter() - c0) * 1e3
     n = len(b.kf_t)
     poses = [_vec(result.atPose2(F.X(k))) for k in range(n)]
@@ -446,7 +484,7 @@ def run_fixed_lag(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher
     last_pose, last_cov = None, None
     oldest = 0
     for k in range(n):
-        s = b.step(k, lambda key: last_pose, last_cov)
+        s = b.step(k, _const(last_pose), last_cov)
         if s.icp_ms is not None:
             icp_ms.append(s.icp_ms)
         c0 = time.perf_counter()
