@@ -97,6 +97,8 @@ def raycast(segs: NDArray[np.float64], origin: NDArray[np.float64], directions: 
     hi = np.maximum(segs[:, :2], segs[:, 2:]) - origin
     near = np.all((lo <= max_range) & (hi >= -max_range), axis=1)  # bounding boxes within range
     segs = segs[near]
+    if len(segs) == 0:
+        return np.full(len(directions), np.nan)
     p = segs[:, :2] - origin  # (M, 2)
     e = segs[:, 2:] - segs[:, :2]
     d = directions[:, None, :]  # (B, 1, 2)
