@@ -54,6 +54,7 @@ class SmootherConfig:
     icp_cov_scale: float = 1000.0  # the matcher's covariance is ~30x optimistic in sigma on real data (docs/smoother.md)
     icp_sigma_floor_xy: float = 0.005  # [m] added in quadrature to the ICP covariance
     icp_sigma_floor_yaw_deg: float = 0.05
+    icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
     icp_max_step: float = 5.0  # [m] an ICP step farther than this from the prediction is rejected
     use_odometry: bool = True
     odo_sigma_v: float = 0.1  # used when the log gives none
@@ -267,7 +268,7 @@ class GraphBuilder:
                 if ok and np.all(np.isfinite(mp)) and np.all(np.isfinite(mc)) and \
                         np.hypot(mp[0] - init[0], mp[1] - init[1]) <= cfg.icp_max_step:
                     floor = np.diag([cfg.icp_sigma_floor_xy**2] * 2 + [math.radians(cfg.icp_sigma_floor_yaw_deg) ** 2])
-                    g.add(F.icp_between(F.X(k - 1), xk, mp, cfg.icp_cov_scale * mc + floor))
+                    g.add(F.icp_between(F.X(k - 1), xk, mp, cfg.icp_cov_scale * mc + floor, robust=cfg.icp_robust))
                     rel = gtsam.Pose2(*mp)
                 else:
                     self.n_icp_failed += 1
