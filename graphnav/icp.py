@@ -43,19 +43,20 @@ class IcpConfig:
 
     variant: str = "HDL"
     max_iter: int = 50
-    tol: float = 1e-5  # stop when |change of mean pair distance| < tol [m] (Algorithm 1) ...
-    tol_step: float = 1e-3  # ... and the last increment moved no point more than this [m]
+    tol: float = 1e-4  # stop when |change of mean pair distance| < tol [m] (Algorithm 1) ...
+    tol_step: float = 3e-3  # ... and the last increment moved no point more than this [m]
     huber_c: float = 2.0138  # kHu = huber_c * median pair distance (Algorithm 1)
     sigma_r_rel: float = SIGMA_R_REL  # sigma_r = sigma_r_rel * r (eq. 7)
     sigma_alpha: float = SIGMA_ALPHA  # angular 1-sigma [rad] (eq. 6)
     max_range: float | None = None  # range gate [m]
     min_range: float = 0.0
     max_corr_dist: float | None = None  # pairs farther apart get weight 0 (None: keep all, as the paper)
+    line_max_dist: float = 0.5  # HDL only: a point farther than this from its match has no line there [m]
     matching: str = "kdtree"  # "kdtree" (cKDTree) or "delaunay" (the paper's nearest triangle apex)
     equalize: bool = False  # randomly thin the larger cloud to the smaller's size (the paper)
     seed: int = 0  # for equalize
     weight_power: float = 0.5  # w = G^-weight_power; 0.5 is eq. 11
-    normal_k: int = 5  # neighbours of a target point for its line normal (HDL, degeneracy check)
+    normal_k: int = 10  # neighbours of a target point for its line normal (HDL, degeneracy check)
     normals: str = "knn"  # HDL normals: "knn" (PCA of the k nearest) or "scan" (k neighbours in beam order)
     min_points: int = 20  # fewer valid points in either scan -> ok=False
     inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
@@ -203,7 +204,9 @@ def _pose_parts(init: ArrayLike | None) -> tuple[float, NDArray]:
 def _failed(reason: str, init: ArrayLike | None, n_src: int, n_tgt: int, t0: float) -> MatchResult:
     th, t = _pose_parts(init)
     q = {"points_used": 0, "points_source": n_src, "points_target": n_tgt, "inlier_fraction": 0.0,
-         "residual": float("nan"), "condition_number": float("inf"), "iterations": 0, "degenerate": True,
+         "residual": float("nan"),
+         "residual_scale": float("nan"), "condition_number": float("inf"), "iterations": 0,
+         "degenerate": True,
          "converged": False, "reason": reason, "ms": (time.perf_counter() - t0) * 1e3}
     return MatchResult(np.array([t[0], t[1], th]), _BIG_COV.copy(), False, q)
 
@@ -371,7 +374,7 @@ def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat):  # noqa: ANN001, AN
             w = w.copy()
             w[big] *= khu / dist[big]
         if v == "HDL":
-            w = w * flat[idx]
+            w = w * flat[idx] * (d <= cfg.line_max_dist)
     if cfg.max_corr_dist is not None:
         w = np.where(d <= cfg.max_corr_dist, w, 0.0)
     if not np.any(w > 0):
