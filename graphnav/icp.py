@@ -51,6 +51,7 @@ class IcpConfig:
     max_range: float | None = None  # range gate [m]
     min_range: float = 0.0
     max_corr_dist: float | None = None  # pairs farther apart get weight 0 (None: keep all, as the paper)
+    line_max_gap: float = 1.0  # beam neighbours farther apart are not on one line (scan-order normals) [m]
     line_max_dist: float = 0.5  # HDL only: a point farther than this from its match has no line there [m]
     matching: str = "kdtree"  # "kdtree" (cKDTree) or "delaunay" (the paper's nearest triangle apex)
     equalize: bool = False  # randomly thin the larger cloud to the smaller's size (the paper)
@@ -61,7 +62,7 @@ class IcpConfig:
     min_points: int = 20  # fewer valid points in either scan -> ok=False
     inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
     min_inlier_fraction: float = 0.3  # below -> ok=False
-    max_condition: float = 1e3  # condition number of the point-to-line information above -> degenerate
+    max_condition: float = 200.0  # condition number of the point-to-line information above -> degenerate
     cov_scale: float = 1.0  # inflation of the covariance for unmodelled error (docs/weighted-icp.md)
     cov_floor: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 1-sigma floor (x, y, yaw) added in quadrature
     workers: int = 1  # cKDTree query threads
@@ -245,7 +246,7 @@ def match_points(
     normals = flat = None
     if p2l:
         normals, flat = (line_normals(tgt.xy, nnm.tree, cfg.normal_k) if cfg.normals == "knn"
-                         else scan_order_normals(tgt.xy, cfg.normal_k // 2))
+                         else scan_order_normals(tgt.xy, cfg.normal_k // 2, cfg.line_max_gap))
 
     th, t = _pose_parts(init)
     old_res = None
@@ -311,13 +312,18 @@ class _NearestNeighbours:
         return d, idx
 
 
-def scan_order_normals(pts: NDArray, half: int = 2) -> tuple[NDArray, NDArray]:
+def scan_order_normals(pts: NDArray, half: int = 2, max_gap: float = 1.0) -> tuple[NDArray, NDArray]:
     """Normals and flatness of each point from its ``2 half + 1`` neighbours in beam order
-    (sorted by bearing; no neighbour search), by PCA."""
+    (sorted by bearing; no neighbour search), by PCA. A window with a gap wider than ``max_gap``
+    between beam neighbours spans two surfaces: its flatness is 0."""
     n = len(pts)
     order = np.argsort(np.arctan2(pts[:, 1], pts[:, 0]), kind="stable")
+    ps = pts[order]
     win = (np.arange(n)[:, None] + np.arange(-half, half + 1)[None, :]) % n
-    nrm, flat = _pca_normals(pts[order][win])
+    nrm, flat = _pca_normals(ps[win])
+    gap = np.hypot(*(np.roll(ps, -1, axis=0) - ps).T)  # gap[i]: between sorted points i and i+1
+    wide = (gap[win[:, :-1]] > max_gap).any(axis=1)
+    flat = np.where(wide, 0.0, flat)
     out_n = np.empty_like(nrm)
     out_f = np.empty_like(flat)
     out_n[order] = nrm
@@ -437,7 +443,7 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     e = p - q
     d = np.hypot(e[:, 0], e[:, 1])
     if normals is None:  # the degeneracy check needs the target's local lines
-        normals, flat = scan_order_normals(tgt.xy, cfg.normal_k // 2)
+        normals, flat = scan_order_normals(tgt.xy, cfg.normal_k // 2, cfg.line_max_gap)
     w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat)
     n, fl = normals[idx], flat[idx]
     jp = p - pose[:2]
