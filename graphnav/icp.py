@@ -63,7 +63,9 @@ class IcpConfig:
     inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
     min_inlier_fraction: float = 0.3  # below -> ok=False
     max_condition: float = 200.0  # condition number of the point-to-line information above -> degenerate
-    cov_scale: float = 1.0  # inflation of the covariance for unmodelled error (docs/weighted-icp.md)
+    # inflation for correlated, unmodelled error (sampling, motion distortion): measured on the
+    # marina data, docs/weighted-icp.md; 1.0 = the pure least-squares model (independent errors)
+    cov_scale: float = 100.0
     cov_floor: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 1-sigma floor (x, y, yaw) added in quadrature
     workers: int = 1  # cKDTree query threads
 

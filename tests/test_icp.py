@@ -131,7 +131,7 @@ def test_covariance_is_consistent_nees_near_3(variant):
     rng = np.random.default_rng(11)
     world = even_points(room(), 0.4)
     s_rel, s_a = 0.004258, np.radians(0.2)
-    cfg = IcpConfig(variant=variant, sigma_r_rel=s_rel, sigma_alpha=s_a)
+    cfg = IcpConfig(variant=variant, sigma_r_rel=s_rel, sigma_alpha=s_a, cov_scale=1.0)
     nees = []
     for _ in range(100):
         true = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3), np.radians(rng.uniform(-5, 5))])
@@ -152,7 +152,7 @@ def test_covariance_convention_is_gtsam_tangent_not_target_additive():
     segs = np.vstack([corridor(40.0, 2.0), [[-20, -2, -20, 2], [20, -2, 20, 2]]])
     world = even_points(segs, 0.25)
     s_rel, s_a = 0.004258, np.radians(0.2)
-    cfg = IcpConfig(variant="HDL", sigma_r_rel=s_rel, sigma_alpha=s_a, max_condition=1e6)
+    cfg = IcpConfig(variant="HDL", sigma_r_rel=s_rel, sigma_alpha=s_a, max_condition=1e6, cov_scale=1.0)
     n_gtsam, n_wrong, n_target = [], [], []
     for _ in range(60):
         true = np.array([0.3 + rng.normal(0, 0.05), rng.normal(0, 0.05), np.pi / 2 + rng.normal(0, 0.01)])
