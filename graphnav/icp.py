@@ -52,6 +52,7 @@ class IcpConfig:
     min_range: float = 0.0
     max_corr_dist: float | None = None  # pairs farther apart get weight 0 (None: keep all, as the paper)
     line_max_gap: float = 1.0  # beam neighbours farther apart are not on one line (scan-order normals) [m]
+    line_warmup: float = 0.05  # HDL: point-to-point steps until a step moves no point more [m] (0: off)
     line_max_dist: float = 0.5  # HDL only: a point farther than this from its match has no line there [m]
     matching: str = "kdtree"  # "kdtree" (cKDTree) or "delaunay" (the paper's nearest triangle apex)
     equalize: bool = False  # randomly thin the larger cloud to the smaller's size (the paper)
@@ -256,13 +257,15 @@ def match_points(
     it = 0
     src_r = src.r.max()
     idx = np.zeros(0, dtype=int)
+    # HDL: point-to-point (HD) steps while far from the solution; point-to-line has a narrow basin
+    warm = p2l and cfg.line_warmup > 0
     for it in range(1, cfg.max_iter + 1):  # noqa: B007
         r = _rot(th)
         p = src.xy @ r.T + t
         d, idx = nnm.match(p)
         q = tgt.xy[idx]
-        w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat)
-        if p2l:
+        w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=warm)
+        if p2l and not warm:
             dth, dt = _p2l_step(p, q, normals[idx], w)
         else:
             dth, dt = weighted_align(p, q, w)
@@ -272,6 +275,10 @@ def match_points(
         th += dth
         new_res = float(d.mean())
         moved = abs(dth) * src_r + np.hypot(dt[0], dt[1])  # largest displacement of a point
+        if warm:
+            warm = moved > cfg.line_warmup
+            old_res = None
+            continue
         if old_res is not None and abs(new_res - old_res) < cfg.tol and moved < cfg.tol_step:
             converged = True
             break
@@ -349,9 +356,10 @@ def _pca_normals(pts: NDArray) -> tuple[NDArray, NDArray]:
     return n, flat
 
 
-def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat):  # noqa: ANN001, ANN202
-    """Pair weights of Algorithm 1 (eq. 11-13 x Huber) and the pair variances they come from."""
-    v = cfg.variant
+def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=False):  # noqa: ANN001, ANN202
+    """Pair weights of Algorithm 1 (eq. 11-13 x Huber) and the pair variances they come from
+    (``p2p``: HD weights during HDL's point-to-point warm-up)."""
+    v = "HD" if p2p else cfg.variant
     n = len(d)
     if v == "K":
         w = np.ones(n)
@@ -381,8 +389,8 @@ def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat):  # noqa: ANN001, AN
         if khu > 0 and np.any(big):
             w = w.copy()
             w[big] *= khu / dist[big]
-        if v == "HDL":
-            w = w * flat[idx] * (d <= cfg.line_max_dist)
+        if v == "HDL":  # no line where the match is far (the gate widens while far from convergence)
+            w = w * flat[idx] * (d <= max(cfg.line_max_dist, cfg.huber_c * _median(d)))
     if cfg.max_corr_dist is not None:
         w = np.where(d <= cfg.max_corr_dist, w, 0.0)
     if not np.any(w > 0):
