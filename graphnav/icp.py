@@ -43,29 +43,38 @@ class IcpConfig:
 
     variant: str = "HDL"
     max_iter: int = 50
-    tol: float = 1e-5  # stop when |change of mean pair distance| < tol [m] (Algorithm 1)
+    tol: float = 1e-4  # stop when |change of mean pair distance| < tol [m] (Algorithm 1) ...
+    tol_step: float = 3e-3  # ... and the last increment moved no point more than this [m]
     huber_c: float = 2.0138  # kHu = huber_c * median pair distance (Algorithm 1)
     sigma_r_rel: float = SIGMA_R_REL  # sigma_r = sigma_r_rel * r (eq. 7)
     sigma_alpha: float = SIGMA_ALPHA  # angular 1-sigma [rad] (eq. 6)
     max_range: float | None = None  # range gate [m]
     min_range: float = 0.0
     max_corr_dist: float | None = None  # pairs farther apart get weight 0 (None: keep all, as the paper)
+    line_max_gap: float = 1.0  # beam neighbours farther apart are not on one line (scan-order normals) [m]
+    line_warmup: float = 0.05  # HDL: point-to-point steps until a step moves no point more [m] (0: off)
+    line_max_dist: float = 0.5  # HDL only: a point farther than this from its match has no line there [m]
     matching: str = "kdtree"  # "kdtree" (cKDTree) or "delaunay" (the paper's nearest triangle apex)
     equalize: bool = False  # randomly thin the larger cloud to the smaller's size (the paper)
     seed: int = 0  # for equalize
     weight_power: float = 0.5  # w = G^-weight_power; 0.5 is eq. 11
-    normal_k: int = 5  # neighbours of a target point for its line normal (HDL, degeneracy check)
+    normal_k: int = 10  # neighbours of a target point for its line normal (HDL, degeneracy check)
+    normals: str = "knn"  # HDL normals: "knn" (PCA of the k nearest) or "scan" (k neighbours in beam order)
     min_points: int = 20  # fewer valid points in either scan -> ok=False
     inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
     min_inlier_fraction: float = 0.3  # below -> ok=False
-    max_condition: float = 1e3  # condition number of the (length-scaled) point-to-line information -> degenerate
-    cov_scale: float = 1.0  # inflation of the covariance for unmodelled error (docs/weighted-icp.md)
+    max_condition: float = 200.0  # condition number of the point-to-line information above -> degenerate
+    # inflation for correlated, unmodelled error (sampling, motion distortion): measured on the
+    # marina data, docs/weighted-icp.md; 1.0 = the pure least-squares model (independent errors)
+    cov_scale: float = 100.0
     cov_floor: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 1-sigma floor (x, y, yaw) added in quadrature
     workers: int = 1  # cKDTree query threads
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise ValueError(f"unknown ICP variant {self.variant!r}; known: {', '.join(VARIANTS)}")
+        if self.normals not in ("knn", "scan"):
+            raise ValueError(f"unknown normals {self.normals!r}; known: knn, scan")
         if self.matching not in ("kdtree", "delaunay"):
             raise ValueError(f"unknown matching {self.matching!r}; known: kdtree, delaunay")
 
@@ -123,7 +132,7 @@ def weighted_svd_align(
     return r, mq - r @ mp  # eq. 20
 
 
-def weighted_align(p: NDArray[np.float64], q: NDArray[np.float64], w: NDArray[np.float64]) -> tuple[float, NDArray]:
+def weighted_align(p: NDArray, q: NDArray, w: NDArray) -> tuple[float, NDArray]:
     """The 2D closed form of eq. 15-20: returns ``(theta, T)`` with ``R(theta) p + T ~ q``."""
     sw = w.sum()
     mp = w @ p / sw
@@ -145,17 +154,7 @@ def line_normals(pts: NDArray[np.float64], tree: cKDTree, k: int) -> tuple[NDArr
     flatness in [0, 1] (1 = a perfect line)."""
     k = int(min(k, len(pts)))
     _, nb = tree.query(pts, k=k)
-    nbp = pts[nb]  # (N, k, 2)
-    d = nbp - nbp.mean(1, keepdims=True)
-    cxx = (d[..., 0] ** 2).mean(1)
-    cyy = (d[..., 1] ** 2).mean(1)
-    cxy = (d[..., 0] * d[..., 1]).mean(1)
-    phi = 0.5 * np.arctan2(2 * cxy, cxx - cyy)  # direction of the line (major axis)
-    n = np.column_stack([-np.sin(phi), np.cos(phi)])
-    tr = cxx + cyy
-    disc = np.sqrt(np.maximum(0.25 * (cxx - cyy) ** 2 + cxy**2, 0.0))
-    lmin = 0.5 * tr - disc
-    flat = np.where(tr > 0, 1.0 - 2.0 * lmin / np.maximum(tr, 1e-300), 0.0)
+    n, flat = _pca_normals(pts[nb])
     return n, flat
 
 
@@ -209,28 +208,11 @@ def _pose_parts(init: ArrayLike | None) -> tuple[float, NDArray]:
 def _failed(reason: str, init: ArrayLike | None, n_src: int, n_tgt: int, t0: float) -> MatchResult:
     th, t = _pose_parts(init)
     q = {"points_used": 0, "points_source": n_src, "points_target": n_tgt, "inlier_fraction": 0.0,
-         "residual": float("nan"), "condition_number": float("inf"), "iterations": 0, "degenerate": True,
+         "residual": float("nan"),
+         "residual_scale": float("nan"), "condition_number": float("inf"), "iterations": 0,
+         "degenerate": True,
          "converged": False, "reason": reason, "ms": (time.perf_counter() - t0) * 1e3}
     return MatchResult(np.array([t[0], t[1], th]), _BIG_COV.copy(), False, q)
-
-
-def _match(tree: cKDTree, tri: Any, tgt: NDArray, p: NDArray, workers: int) -> tuple[NDArray, NDArray]:
-    """Nearest target point of every point of ``p``: k-d tree, or the paper's Delaunay matching
-    (nearest apex of the target triangle containing the point; k-d tree outside the hull)."""
-    d, idx = tree.query(p, workers=workers)
-    if tri is None:
-        return d, idx
-    simplex = tri.find_simplex(p)
-    inside = simplex >= 0
-    if np.any(inside):
-        verts = tri.simplices[simplex[inside]]  # (m, 3)
-        dd = np.linalg.norm(tgt[verts] - p[inside][:, None, :], axis=2)
-        j = np.argmin(dd, axis=1)
-        idx = idx.copy()
-        d = d.copy()
-        idx[inside] = verts[np.arange(len(j)), j]
-        d[inside] = dd[np.arange(len(j)), j]
-    return d, idx
 
 
 def match_points(
@@ -262,28 +244,28 @@ def match_points(
         rng = np.random.default_rng(cfg.seed)
         big = src if ns > nt else tgt
         big.take(np.sort(rng.choice(max(ns, nt), min(ns, nt), replace=False)))
-    tree = cKDTree(tgt.xy)
-    tri = None
-    if cfg.matching == "delaunay":
-        from scipy.spatial import Delaunay
-
-        tri = Delaunay(tgt.xy)
+    nnm = _NearestNeighbours(tgt.xy, cfg)
     p2l = cfg.variant == "HDL"
     normals = flat = None
     if p2l:
-        normals, flat = line_normals(tgt.xy, tree, cfg.normal_k)
+        normals, flat = (line_normals(tgt.xy, nnm.tree, cfg.normal_k) if cfg.normals == "knn"
+                         else scan_order_normals(tgt.xy, cfg.normal_k // 2, cfg.line_max_gap))
 
     th, t = _pose_parts(init)
     old_res = None
     converged = False
     it = 0
+    src_r = src.r.max()
+    idx = np.zeros(0, dtype=int)
+    # HDL: point-to-point (HD) steps while far from the solution; point-to-line has a narrow basin
+    warm = p2l and cfg.line_warmup > 0
     for it in range(1, cfg.max_iter + 1):  # noqa: B007
         r = _rot(th)
         p = src.xy @ r.T + t
-        d, idx = _match(tree, tri, tgt.xy, p, cfg.workers)
+        d, idx = nnm.match(p)
         q = tgt.xy[idx]
-        w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat)
-        if p2l:
+        w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=warm)
+        if p2l and not warm:
             dth, dt = _p2l_step(p, q, normals[idx], w)
         else:
             dth, dt = weighted_align(p, q, w)
@@ -292,19 +274,92 @@ def match_points(
         t = np.array([c * t[0] - s * t[1], s * t[0] + c * t[1]]) + dt
         th += dth
         new_res = float(d.mean())
-        if old_res is not None and abs(new_res - old_res) < cfg.tol and abs(dth) < 1e-3 and np.hypot(*dt) < 1e-2:
+        moved = abs(dth) * src_r + np.hypot(dt[0], dt[1])  # largest displacement of a point
+        if warm:
+            warm = moved > cfg.line_warmup
+            old_res = None
+            continue
+        if old_res is not None and abs(new_res - old_res) < cfg.tol and moved < cfg.tol_step:
             converged = True
             break
         old_res = new_res
 
-    th = float(np.arctan2(np.sin(th), np.cos(th)))
     pose = np.array([t[0], t[1], th])
-    return _finish(cfg, src, tgt, tree, tri, pose, normals, flat, it, converged, t0, ns, nt)
+    return _finish(cfg, src, tgt, idx, pose, normals, flat, it, converged, t0, ns, nt)
 
 
-def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat):  # noqa: ANN001, ANN202
-    """Pair weights of Algorithm 1 (eq. 11-13 x Huber) and the pair variances they come from."""
-    v = cfg.variant
+class _NearestNeighbours:
+    """Nearest target point of query points: k-d tree (scipy ``cKDTree``), or the paper's
+    Delaunay matching (the nearest apex of the target triangle containing the point; k-d tree
+    outside the hull)."""
+
+    def __init__(self, tgt: NDArray, cfg: IcpConfig):
+        self.tgt = tgt
+        self.tree = cKDTree(tgt)
+        self.workers = cfg.workers
+        self.tri = None
+        if cfg.matching == "delaunay":
+            from scipy.spatial import Delaunay
+
+            self.tri = Delaunay(tgt)
+
+    def match(self, p: NDArray) -> tuple[NDArray, NDArray]:
+        d, idx = self.tree.query(p, workers=self.workers)
+        if self.tri is None:
+            return d, idx
+        simplex = self.tri.find_simplex(p)
+        inside = simplex >= 0
+        if np.any(inside):
+            verts = self.tri.simplices[simplex[inside]]  # (m, 3)
+            dd = np.linalg.norm(self.tgt[verts] - p[inside][:, None, :], axis=2)
+            j = np.argmin(dd, axis=1)
+            rows = np.arange(len(j))
+            idx = idx.copy()
+            d = d.copy()
+            idx[inside] = verts[rows, j]
+            d[inside] = dd[rows, j]
+        return d, idx
+
+
+def scan_order_normals(pts: NDArray, half: int = 2, max_gap: float = 1.0) -> tuple[NDArray, NDArray]:
+    """Normals and flatness of each point from its ``2 half + 1`` neighbours in beam order
+    (sorted by bearing; no neighbour search), by PCA. A window with a gap wider than ``max_gap``
+    between beam neighbours spans two surfaces: its flatness is 0."""
+    n = len(pts)
+    order = np.argsort(np.arctan2(pts[:, 1], pts[:, 0]), kind="stable")
+    ps = pts[order]
+    win = (np.arange(n)[:, None] + np.arange(-half, half + 1)[None, :]) % n
+    nrm, flat = _pca_normals(ps[win])
+    gap = np.hypot(*(np.roll(ps, -1, axis=0) - ps).T)  # gap[i]: between sorted points i and i+1
+    wide = (gap[win[:, :-1]] > max_gap).any(axis=1)
+    flat = np.where(wide, 0.0, flat)
+    out_n = np.empty_like(nrm)
+    out_f = np.empty_like(flat)
+    out_n[order] = nrm
+    out_f[order] = flat
+    return out_n, out_f
+
+
+def _pca_normals(pts: NDArray) -> tuple[NDArray, NDArray]:
+    """Normals and flatness of point groups ``pts`` (N, k, 2) by PCA."""
+    k = pts.shape[1]
+    x = pts[:, :, 0] - pts[:, :, 0].sum(1, keepdims=True) / k
+    y = pts[:, :, 1] - pts[:, :, 1].sum(1, keepdims=True) / k
+    cxx = (x * x).sum(1)
+    cyy = (y * y).sum(1)
+    cxy = (x * y).sum(1)
+    phi = 0.5 * np.arctan2(2 * cxy, cxx - cyy)  # direction of the line (major axis)
+    n = np.column_stack([-np.sin(phi), np.cos(phi)])
+    tr = cxx + cyy
+    disc = np.sqrt(0.25 * (cxx - cyy) ** 2 + cxy**2)
+    flat = np.where(tr > 0, 2.0 * disc / np.where(tr > 0, tr, 1.0), 0.0)  # (l1 - l2) / (l1 + l2)
+    return n, flat
+
+
+def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=False):  # noqa: ANN001, ANN202
+    """Pair weights of Algorithm 1 (eq. 11-13 x Huber) and the pair variances they come from
+    (``p2p``: HD weights during HDL's point-to-point warm-up)."""
+    v = "HD" if p2p else cfg.variant
     n = len(d)
     if v == "K":
         w = np.ones(n)
@@ -329,18 +384,27 @@ def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat):  # noqa: ANN001, AN
             w = g ** (-cfg.weight_power)  # eq. 11
         # Huber (Algorithm 1): kHu = c * median distance
         dist = np.abs(np.einsum("ij,ij->i", p - q, normals[idx])) if v == "HDL" else d
-        khu = cfg.huber_c * float(np.median(dist))
+        khu = cfg.huber_c * _median(dist)
         big = dist > khu
         if khu > 0 and np.any(big):
             w = w.copy()
             w[big] *= khu / dist[big]
-        if v == "HDL":
-            w = w * flat[idx]
+        if v == "HDL":  # no line where the match is far (the gate widens while far from convergence)
+            w = w * flat[idx] * (d <= max(cfg.line_max_dist, cfg.huber_c * _median(d)))
     if cfg.max_corr_dist is not None:
         w = np.where(d <= cfg.max_corr_dist, w, 0.0)
     if not np.any(w > 0):
         w = np.ones(n)
     return w, g
+
+
+def _median(x: NDArray) -> float:
+    n = len(x)
+    h = n // 2
+    if n % 2:
+        return float(np.partition(x, h)[h])
+    part = np.partition(x, (h - 1, h))
+    return 0.5 * float(part[h - 1] + part[h])
 
 
 def _p2l_step(p: NDArray, q: NDArray, n: NDArray, w: NDArray) -> tuple[float, NDArray]:
@@ -358,65 +422,82 @@ def _p2l_step(p: NDArray, q: NDArray, n: NDArray, w: NDArray) -> tuple[float, ND
     return float(x[2]), x[:2]
 
 
-def _finish(cfg, src, tgt, tree, tri, pose, normals, flat, iters, converged, t0, ns, nt):  # noqa: ANN001, ANN202
-    """Quality report and covariance at the solution (right perturbation in the source frame)."""
+def _pair_cov(src: _Cloud, tgt: _Cloud, idx: NDArray, r: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """Eq. 8 covariance of the pair difference (source point rotated into the target frame plus
+    its target match), as its entries ``(sxx, sxy, syy)``."""
+    u = src.u @ r.T
+    ds = src.b2 - src.a2
+    ut = tgt.u[idx]
+    dt = tgt.b2[idx] - tgt.a2[idx]
+    a2 = src.a2 + tgt.a2[idx]
+    sxx = a2 + ds * u[:, 0] ** 2 + dt * ut[:, 0] ** 2
+    syy = a2 + ds * u[:, 1] ** 2 + dt * ut[:, 1] ** 2
+    sxy = ds * u[:, 0] * u[:, 1] + dt * ut[:, 0] * ut[:, 1]
+    return sxx, sxy, syy
+
+
+def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, nt):  # noqa: ANN001, ANN202
+    """Quality report and covariance at the solution.
+
+    The covariance is the sandwich ``k H^-1 B H^-1`` of the weighted least-squares problem at
+    convergence: ``H = sum w J^T J``, ``B = sum w^2 J^T S J`` with ``S`` the pair's error covariance
+    from the LiDAR model (eq. 8; identity for K and H) and ``k`` its scale estimated from the
+    inlier residuals (``k = sum e^T S^-1 e / dof``). ``J`` is the Jacobian of the residual with
+    respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)`` (GTSAM's Pose2 tangent space):
+    ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1], [1, 0]]``.
+    """
     r = _rot(pose[2])
     p = src.xy @ r.T + pose[:2]
-    d, idx = _match(tree, tri, tgt.xy, p, cfg.workers)
-    q = tgt.xy[idx]
-    if normals is None:
-        normals, flat = line_normals(tgt.xy, tree, cfg.normal_k)
-    w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat)
+    pose[2] = np.arctan2(np.sin(pose[2]), np.cos(pose[2]))
+    q = tgt.xy[idx]  # the last iteration's pairs (the last increment moved no point > tol_step)
     e = p - q
-    n = normals[idx]
-    # Jacobian of the transformed source point w.r.t. xi = (vx, vy, w) applied on the right:
-    # d p / d xi = R [I, J p_s], J = [[0, -1], [1, 0]]
-    ps = src.xy
+    d = np.hypot(e[:, 0], e[:, 1])
+    if normals is None:  # the degeneracy check needs the target's local lines
+        normals, flat = scan_order_normals(tgt.xy, cfg.normal_k // 2, cfg.line_max_gap)
+    w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat)
+    n, fl = normals[idx], flat[idx]
+    jp = p - pose[:2]
+    c2 = np.column_stack([-jp[:, 1], jp[:, 0]])  # J (p - t) = R J p_s
     inl = d <= cfg.inlier_dist
     use = w > 0
-    # pair error covariances from the LiDAR model (eq. 8), source rotated into the target frame;
-    # K and H assume isotropic, equal errors
+    sel = use & inl
     model = cfg.variant in ("HM", "HD", "HDL")
     if model:
-        sig = src.cov(slice(None), r) + tgt.cov(idx)
+        sxx, sxy, syy = _pair_cov(src, tgt, idx, r)
     else:
-        sig = np.broadcast_to(np.eye(2), (len(d), 2, 2))
-    jp = np.column_stack([-ps[:, 1], ps[:, 0]])  # J p_s
-    nr = n @ r  # rows n^T R
+        sxx, sxy, syy = np.ones(len(d)), np.zeros(len(d)), np.ones(len(d))
+    # point-to-line rows n^T [R, J (p - t)]: the HDL Jacobian and the degeneracy check
+    nr = n @ r
+    jl = np.column_stack([nr, np.einsum("ij,ij->i", n, c2)])
     if cfg.variant == "HDL":
-        jac = np.column_stack([nr, np.einsum("ij,ij->i", nr, jp)])  # n^T R [I, J p_s]
         res = np.einsum("ij,ij->i", e, n)
-        vi = np.einsum("ij,ijk,ik->i", n, sig, n)
-        h = (jac * w[:, None]).T @ jac
-        bmat = (jac * (w * w * vi)[:, None]).T @ jac
-        sel = use & inl
+        vi = sxx * n[:, 0] ** 2 + 2 * sxy * n[:, 0] * n[:, 1] + syy * n[:, 1] ** 2
+        h = (jl * w[:, None]).T @ jl
+        bmat = (jl * (w * w * vi)[:, None]).T @ jl
         dof = max(int(sel.sum()) - 3, 1)
         kscale = float(np.sum(res[sel] ** 2 / vi[sel]) / dof) if sel.any() else float("nan")
         res_rms = float(np.sqrt(np.sum(w * res**2) / np.sum(w)))
     else:
-        # 2 rows per pair: R [I, J p_s]
-        a = np.zeros((len(d), 2, 3))
+        a = np.empty((len(d), 2, 3))
         a[:, :, 0] = r[:, 0]
         a[:, :, 1] = r[:, 1]
-        a[:, :, 2] = jp @ r.T
-        h = np.einsum("i,iab,iac->bc", w, a, a)
-        bmat = np.einsum("i,iab,iad,idc->bc", w * w, a, sig, a)
-        sel = use & inl
+        a[:, :, 2] = c2
+        sa = np.empty_like(a)
+        sa[:, 0, :] = sxx[:, None] * a[:, 0, :] + sxy[:, None] * a[:, 1, :]
+        sa[:, 1, :] = sxy[:, None] * a[:, 0, :] + syy[:, None] * a[:, 1, :]
+        h = (a * w[:, None, None]).reshape(-1, 3).T @ a.reshape(-1, 3)
+        bmat = (a * (w * w)[:, None, None]).reshape(-1, 3).T @ sa.reshape(-1, 3)
         dof = max(2 * int(sel.sum()) - 3, 1)
-        sinv = np.linalg.inv(sig[sel]) if model else None
-        if sel.any():
-            kscale = float(np.einsum("ij,ijk,ik->", e[sel], sinv, e[sel]) / dof) if model \
-                else float(np.sum(e[sel] ** 2) / dof)
-        else:
-            kscale = float("nan")
+        det = sxx * syy - sxy**2
+        m = (syy * e[:, 0] ** 2 - 2 * sxy * e[:, 0] * e[:, 1] + sxx * e[:, 1] ** 2) / det
+        kscale = float(m[sel].sum() / dof) if sel.any() else float("nan")
         res_rms = float(np.sqrt(np.sum(w * np.sum(e**2, 1)) / np.sum(w)))
     # degeneracy: the point-to-line information (what the geometry constrains), rotation scaled by
-    # the cloud's RMS radius so the condition number is unit-free
-    jl = np.column_stack([nr, np.einsum("ij,ij->i", nr, jp)])
-    wl = (use & inl).astype(float) * flat[idx]
+    # the cloud's RMS radius so that the condition number is unit-free
+    ps = src.xy
     lsc = float(np.sqrt(np.mean(np.sum((ps - ps.mean(0)) ** 2, 1)))) or 1.0
     jl[:, 2] /= lsc
-    info = (jl * wl[:, None]).T @ jl
+    info = (jl * (sel * fl)[:, None]).T @ jl
     ev = np.linalg.eigvalsh(info)
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
     try:
