@@ -65,7 +65,7 @@ def tuning(log) -> list[dict]:
     rows = []
     for thr in (0.01, 0.05, 0.1):
         for skip in (1, 5):
-            opts = {"relinearize_threshold": thr, "relinearize_skip": skip, "covariances": False}
+            opts = {"relinearize_threshold": thr, "relinearize_skip": skip, "covariances": False, "use_icp": False}
             s = run_one("isam2", log, **opts)
             rows.append({**opts, "ate_rmse_m": s["ate_rmse_m"], "online_ate_rmse_m": s["online_ate_rmse_m"],
                          "step_ms_median": s["step_ms_median"], "runtime_s": s["runtime_s"]})
@@ -78,7 +78,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seed", type=int, default=1, help="marina-degraded seed")
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--tuning", action="store_true", help="also sweep iSAM2 relinearisation on a harbour slice")
+    ap.add_argument("--tuning", action="store_true",
+                    help="also sweep iSAM2 relinearisation on a harbour slice (solver only, no ICP)")
     ap.add_argument("-O", "--option", action="append", default=[], help="smoother option KEY=VALUE")
     args = ap.parse_args()
     from graphnav.commands._common import jsonable, parse_options
