@@ -18,8 +18,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -65,12 +63,27 @@ def tuning(log) -> list[dict]:
     rows = []
     for thr in (0.01, 0.05, 0.1):
         for skip in (1, 5):
-            opts = {"relinearize_threshold": thr, "relinearize_skip": skip, "covariances": False, "use_icp": False}
+            opts = {
+                "relinearize_threshold": thr,
+                "relinearize_skip": skip,
+                "covariances": False,
+                "use_icp": False,
+            }
             s = run_one("isam2", log, **opts)
-            rows.append({**opts, "ate_rmse_m": s["ate_rmse_m"], "online_ate_rmse_m": s["online_ate_rmse_m"],
-                         "step_ms_median": s["step_ms_median"], "runtime_s": s["runtime_s"]})
-            print(f"  thr={thr:<5} skip={skip}: ATE {s['ate_rmse_m']:.3f} online {s['online_ate_rmse_m']:.3f} "
-                  f"step {s['step_ms_median']:.2f} ms", file=sys.stderr)
+            rows.append(
+                {
+                    **opts,
+                    "ate_rmse_m": s["ate_rmse_m"],
+                    "online_ate_rmse_m": s["online_ate_rmse_m"],
+                    "step_ms_median": s["step_ms_median"],
+                    "runtime_s": s["runtime_s"],
+                }
+            )
+            print(
+                f"  thr={thr:<5} skip={skip}: ATE {s['ate_rmse_m']:.3f} online {s['online_ate_rmse_m']:.3f} "
+                f"step {s['step_ms_median']:.2f} ms",
+                file=sys.stderr,
+            )
     return rows
 
 
@@ -78,8 +91,11 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seed", type=int, default=1, help="marina-degraded seed")
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--tuning", action="store_true",
-                    help="also sweep iSAM2 relinearisation on a harbour slice (solver only, no ICP)")
+    ap.add_argument(
+        "--tuning",
+        action="store_true",
+        help="also sweep iSAM2 relinearisation on a harbour slice (solver only, no ICP)",
+    )
     ap.add_argument("-O", "--option", action="append", default=[], help="smoother option KEY=VALUE")
     args = ap.parse_args()
     from graphnav.commands._common import jsonable, parse_options
@@ -93,15 +109,22 @@ def main() -> int:
             print(f"{scen:26s} {name:9s} done ({s['runtime_s']:.1f} s)", file=sys.stderr)
     if "marina-degraded (no jump)" in results:
         results["jump_effect"] = {
-            n: (results["marina-degraded"][n]["ate_rmse_m"] / results["marina-degraded (no jump)"][n]["ate_rmse_m"] - 1)
-            for n in ESTIMATORS}
+            n: (
+                results["marina-degraded"][n]["ate_rmse_m"]
+                / results["marina-degraded (no jump)"][n]["ate_rmse_m"]
+                - 1
+            )
+            for n in ESTIMATORS
+        }
     if args.tuning:
         results["tuning_harbour_0_300s"] = tuning(load_log(ROOT / "data" / "harbour.npz").sliced(0, 300))
     if args.json:
         print(json.dumps(jsonable(results)))
         return 0
-    head = (f"{'scenario':26s} {'estimator':9s} {'ATE m':>7s} {'online m':>8s} {'step ms':>8s} {'icp ms':>7s} "
-            f"{'runtime s':>9s} {'x RT':>6s} {'bias deg':>8s} {'GNSS rej':>8s}")
+    head = (
+        f"{'scenario':26s} {'estimator':9s} {'ATE m':>7s} {'online m':>8s} {'step ms':>8s} {'icp ms':>7s} "
+        f"{'runtime s':>9s} {'x RT':>6s} {'bias deg':>8s} {'GNSS rej':>8s}"
+    )
     print(head)
     print("-" * len(head))
     for scen, per in results.items():
@@ -110,13 +133,17 @@ def main() -> int:
         for name, s in per.items():
             on = s.get("online_ate_rmse_m")
             bias = s.get("compass_bias_deg")
-            print(f"{scen:26s} {name:9s} {s['ate_rmse_m']:7.3f} {on if on is not None else float('nan'):8.3f} "
-                  f"{s['step_ms_median']:8.2f} {s['icp_ms_median']:7.1f} {s['runtime_s']:9.1f} "
-                  f"{s['realtime_factor']:6.0f} {bias if bias is not None else float('nan'):8.2f} "
-                  f"{s['gnss_rejected']:8d}")
+            print(
+                f"{scen:26s} {name:9s} {s['ate_rmse_m']:7.3f} {on if on is not None else float('nan'):8.3f} "
+                f"{s['step_ms_median']:8.2f} {s['icp_ms_median']:7.1f} {s['runtime_s']:9.1f} "
+                f"{s['realtime_factor']:6.0f} {bias if bias is not None else float('nan'):8.2f} "
+                f"{s['gnss_rejected']:8d}"
+            )
     if "jump_effect" in results:
-        print("smoothed ATE change from the 20 m jump: " +
-              ", ".join(f"{n} {100 * v:+.1f} %" for n, v in results["jump_effect"].items()))
+        print(
+            "smoothed ATE change from the 20 m jump: "
+            + ", ".join(f"{n} {100 * v:+.1f} %" for n, v in results["jump_effect"].items())
+        )
     return 0
 
 

@@ -34,7 +34,21 @@ def B(i: int = 0) -> int:
 
 
 __all__ = [
-    "B", "L", "X", "beacon_factor", "beacon_prior", "biased_compass_factor", "compass_bias",
-    "compass_bias_prior", "compass_factor", "compose_with_cov", "gnss_factor", "icp_between",
-    "init_from_sighting", "odometry_between", "odometry_increment", "pose_from_two_beacons", "robustify",
+    "B",
+    "L",
+    "X",
+    "beacon_factor",
+    "beacon_prior",
+    "biased_compass_factor",
+    "compass_bias",
+    "compass_bias_prior",
+    "compass_factor",
+    "compose_with_cov",
+    "gnss_factor",
+    "icp_between",
+    "init_from_sighting",
+    "odometry_between",
+    "odometry_increment",
+    "pose_from_two_beacons",
+    "robustify",
 ]

@@ -13,19 +13,29 @@ from numpy.typing import ArrayLike, NDArray
 from .robust import robustify
 
 
-def beacon_factor(pose_key: int, point_key: int, range_: float, bearing: float, sigma_range: float,
-                  sigma_bearing: float, *, robust: str | None = None,
-                  k: float | None = None) -> gtsam.BearingRangeFactor2D:
+def beacon_factor(
+    pose_key: int,
+    point_key: int,
+    range_: float,
+    bearing: float,
+    sigma_range: float,
+    sigma_bearing: float,
+    *,
+    robust: str | None = None,
+    k: float | None = None,
+) -> gtsam.BearingRangeFactor2D:
     """Range [m] and bearing [rad] from pose ``pose_key`` to beacon ``point_key``."""
-    noise = robustify(gtsam.noiseModel.Diagonal.Sigmas(np.array([sigma_bearing, sigma_range], dtype=float)),
-                      robust, k)
+    noise = robustify(
+        gtsam.noiseModel.Diagonal.Sigmas(np.array([sigma_bearing, sigma_range], dtype=float)), robust, k
+    )
     return gtsam.BearingRangeFactor2D(pose_key, point_key, gtsam.Rot2(float(bearing)), float(range_), noise)
 
 
 def beacon_prior(point_key: int, x: float, y: float, sigma: float) -> gtsam.PriorFactorPoint2:
     """A charted beacon at ``(x, y)`` with ``sigma`` [m] per axis."""
-    return gtsam.PriorFactorPoint2(point_key, np.array([x, y], dtype=float),
-                                   gtsam.noiseModel.Isotropic.Sigma(2, float(sigma)))
+    return gtsam.PriorFactorPoint2(
+        point_key, np.array([x, y], dtype=float), gtsam.noiseModel.Isotropic.Sigma(2, float(sigma))
+    )
 
 
 def init_from_sighting(pose: ArrayLike, range_: float, bearing: float) -> NDArray[np.float64]:
@@ -34,8 +44,9 @@ def init_from_sighting(pose: ArrayLike, range_: float, bearing: float) -> NDArra
     return np.array([x + range_ * np.cos(th + bearing), y + range_ * np.sin(th + bearing)])
 
 
-def pose_from_two_beacons(p1: ArrayLike, rb1: tuple[float, float], p2: ArrayLike,
-                          rb2: tuple[float, float]) -> NDArray[np.float64]:
+def pose_from_two_beacons(
+    p1: ArrayLike, rb1: tuple[float, float], p2: ArrayLike, rb2: tuple[float, float]
+) -> NDArray[np.float64]:
     """Pose (x, y, yaw) from simultaneous range/bearing sightings of two charted beacons.
 
     The body-frame vector between the two sightings and the charted world vector differ by the

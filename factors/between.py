@@ -13,8 +13,9 @@ from numpy.typing import ArrayLike, NDArray
 from .robust import robustify
 
 
-def icp_between(k0: int, k1: int, pose: ArrayLike, cov: ArrayLike, *, robust: str | None = None,
-                k: float | None = None) -> gtsam.BetweenFactorPose2:
+def icp_between(
+    k0: int, k1: int, pose: ArrayLike, cov: ArrayLike, *, robust: str | None = None, k: float | None = None
+) -> gtsam.BetweenFactorPose2:
     """ICP relative pose ``pose = (x, y, theta)`` (prev -> current) with its full 3x3 covariance."""
     cov = np.asarray(cov, dtype=float).reshape(3, 3)
     cov = 0.5 * (cov + cov.T)
@@ -23,8 +24,16 @@ def icp_between(k0: int, k1: int, pose: ArrayLike, cov: ArrayLike, *, robust: st
     return gtsam.BetweenFactorPose2(k0, k1, gtsam.Pose2(p[0], p[1], p[2]), noise)
 
 
-def odometry_increment(v: float, w: float, dt: float, sigma_v: float, sigma_w: float, *,
-                       lateral: float = 0.05, floor: float = 1e-4) -> tuple[gtsam.Pose2, NDArray[np.float64]]:
+def odometry_increment(
+    v: float,
+    w: float,
+    dt: float,
+    sigma_v: float,
+    sigma_w: float,
+    *,
+    lateral: float = 0.05,
+    floor: float = 1e-4,
+) -> tuple[gtsam.Pose2, NDArray[np.float64]]:
     """Relative pose and tangent covariance of constant (v, w) over ``dt``.
 
     The beacon paper's motion model (eq. 3) integrated exactly over the step (an arc; eq. 3's
@@ -53,8 +62,9 @@ def odometry_increment(v: float, w: float, dt: float, sigma_v: float, sigma_w: f
     return gtsam.Pose2(x, y, phi), cov
 
 
-def compose_with_cov(a: gtsam.Pose2, cov_a: NDArray[np.float64], b: gtsam.Pose2,
-                     cov_b: NDArray[np.float64]) -> tuple[gtsam.Pose2, NDArray[np.float64]]:
+def compose_with_cov(
+    a: gtsam.Pose2, cov_a: NDArray[np.float64], b: gtsam.Pose2, cov_b: NDArray[np.float64]
+) -> tuple[gtsam.Pose2, NDArray[np.float64]]:
     """``a * b`` and its tangent covariance ``Ad(b^-1) cov_a Ad(b^-1)^T + cov_b`` (independent errors)."""
     A = b.inverse().AdjointMap()
     return a.compose(b), A @ cov_a @ A.T + cov_b

@@ -20,18 +20,22 @@ import numpy as np
 from .robust import robustify
 
 
-def compass_factor(key: int, yaw: float, sigma: float, *, robust: str | None = None,
-                   k: float | None = None) -> gtsam.PoseRotationPrior2D:
+def compass_factor(
+    key: int, yaw: float, sigma: float, *, robust: str | None = None, k: float | None = None
+) -> gtsam.PoseRotationPrior2D:
     """Yaw prior ``yaw`` [rad] with ``sigma`` [rad]."""
     noise = robustify(gtsam.noiseModel.Isotropic.Sigma(1, float(sigma)), robust, k)
     return gtsam.PoseRotationPrior2D(key, gtsam.Rot2(float(yaw)), noise)
 
 
-def biased_compass_factor(bias_key: int, key: int, yaw: float, sigma: float, *, robust: str | None = None,
-                          k: float | None = None) -> gtsam.BetweenFactorPose2:
+def biased_compass_factor(
+    bias_key: int, key: int, yaw: float, sigma: float, *, robust: str | None = None, k: float | None = None
+) -> gtsam.BetweenFactorPose2:
     """Yaw measurement through the bias frame ``bias_key`` (see the module docstring)."""
     noise = gtsam.noiseModel.Diagonal.Precisions(np.array([0.0, 0.0, 1.0 / float(sigma) ** 2]))
-    return gtsam.BetweenFactorPose2(bias_key, key, gtsam.Pose2(0.0, 0.0, float(yaw)), robustify(noise, robust, k))
+    return gtsam.BetweenFactorPose2(
+        bias_key, key, gtsam.Pose2(0.0, 0.0, float(yaw)), robustify(noise, robust, k)
+    )
 
 
 def compass_bias_prior(bias_key: int, sigma_bias: float, *, mean: float = 0.0) -> gtsam.PriorFactorPose2:

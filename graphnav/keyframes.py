@@ -58,8 +58,9 @@ def schedule(kf_t: NDArray[np.float64], t: ArrayLike) -> tuple[NDArray[np.int64]
     return a, np.maximum(a, first_after)
 
 
-def attachment_error_bound(kf_t: NDArray[np.float64], truth_xyyaw: ArrayLike | None = None,
-                           truth_t: ArrayLike | None = None) -> dict[str, float]:
+def attachment_error_bound(
+    kf_t: NDArray[np.float64], truth_xyyaw: ArrayLike | None = None, truth_t: ArrayLike | None = None
+) -> dict[str, float]:
     """The policy's worst-case time offset [s] and, given a reference track, the implied bounds
     on position [m] and yaw [rad] (max speed / yaw rate times half the largest gap)."""
     gap = float(np.max(np.diff(kf_t))) if len(kf_t) > 1 else 0.0

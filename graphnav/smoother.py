@@ -32,7 +32,9 @@ from .keyframes import keyframe_times, schedule
 from .log import NavLog, Scan
 from .trajectory import Trajectory
 
-Matcher = Callable[[Scan, Scan, NDArray[np.float64] | None], tuple[bool, NDArray[np.float64], NDArray[np.float64]]]
+Matcher = Callable[
+    [Scan, Scan, NDArray[np.float64] | None], tuple[bool, NDArray[np.float64], NDArray[np.float64]]
+]
 
 
 @dataclass
@@ -42,7 +44,9 @@ class SmootherConfig:
     keyframe_period: float | None = None  # None: one pose per scan (fixed 0.5 s grid without scans)
     gnss_robust: str | None = "cauchy"
     gnss_k: float | None = None
-    gnss_gate: float | None = 4.0  # reject fixes whose Mahalanobis distance to the online prediction exceeds it
+    gnss_gate: float | None = (
+        4.0  # reject fixes whose Mahalanobis distance to the online prediction exceeds it
+    )
     gnss_gate_max_rejects: int = 15  # ...unless this many in a row were rejected (re-acquire after drift)
     compass_robust: str | None = "huber"
     compass_bias: bool = True  # estimate a constant compass bias (a bias-frame variable)
@@ -51,7 +55,9 @@ class SmootherConfig:
     beacon_robust: str | None = "huber"
     unknown_beacons: bool = True  # SLAM on beacons missing from the chart
     use_icp: bool = True
-    icp_cov_scale: float = 10.0  # on top of IcpConfig.cov_scale (100): the chain must yield to GNSS (docs/smoother.md)
+    icp_cov_scale: float = (
+        10.0  # on top of IcpConfig.cov_scale (100): the chain must yield to GNSS (docs/smoother.md)
+    )
     icp_sigma_floor_xy: float = 0.005  # [m] added in quadrature to the ICP covariance
     icp_sigma_floor_yaw_deg: float = 0.05
     icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
@@ -146,8 +152,11 @@ class GraphBuilder:
         for k in ("sigma_r_rel", "sigma_alpha"):  # the log's LiDAR error model, when it states one
             if k in lidar and k not in icp_opts:
                 icp_opts[k] = float(lidar[k])
-        self.matcher = matcher if matcher is not None else (
-            default_matcher(icp_opts) if (cfg.use_icp and self.scans) else None)
+        self.matcher = (
+            matcher
+            if matcher is not None
+            else (default_matcher(icp_opts) if (cfg.use_icp and self.scans) else None)
+        )
         n = len(self.kf_t)
         self.pending: list[list[tuple[int, Any]]] = [[] for _ in range(n)]
         for kind in ("gnss", "heading", "beacon"):
@@ -158,10 +167,18 @@ class GraphBuilder:
             for r, a, s in zip(recs, att, add, strict=True):
                 self.pending[int(s)].append((int(a), r))
         odo = log.of("odometry") if cfg.use_odometry else []
-        self.odo = np.array([[r.t, r.v, r.w,
-                              r.sigma_v if math.isfinite(r.sigma_v) else cfg.odo_sigma_v,
-                              r.sigma_w if math.isfinite(r.sigma_w) else math.radians(cfg.odo_sigma_w_deg)]
-                             for r in odo]).reshape(-1, 5)
+        self.odo = np.array(
+            [
+                [
+                    r.t,
+                    r.v,
+                    r.w,
+                    r.sigma_v if math.isfinite(r.sigma_v) else cfg.odo_sigma_v,
+                    r.sigma_w if math.isfinite(r.sigma_w) else math.radians(cfg.odo_sigma_w_deg),
+                ]
+                for r in odo
+            ]
+        ).reshape(-1, 5)
         self.has_heading = bool(log.of("heading"))
         self.charted = {b.id: b for b in log.beacons_known}
         self.beacon_ids: dict[str, int] = {}
@@ -178,8 +195,11 @@ class GraphBuilder:
         cfg, log = self.cfg, self.log
         prior = log.pose_prior()
         if prior is not None:
-            return (np.array([prior.x, prior.y, prior.yaw]),
-                    np.array([prior.sigma_xy, prior.sigma_xy, prior.sigma_yaw]), "pose_prior")
+            return (
+                np.array([prior.x, prior.y, prior.yaw]),
+                np.array([prior.sigma_xy, prior.sigma_xy, prior.sigma_yaw]),
+                "pose_prior",
+            )
         yaw_sig = math.radians(cfg.anchor_sigma_yaw_deg)
         gnss, head = log.of("gnss"), log.of("heading")
         if gnss:
@@ -187,7 +207,11 @@ class GraphBuilder:
             yaw = head[0].yaw if head else 0.0
             sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 3.0 * g.sigma
             ys = yaw_sig if head else math.pi
-            return np.array([g.x, g.y, yaw]), np.array([sxy, sxy, ys]), "first GNSS+compass" if head else "first GNSS"
+            return (
+                np.array([g.x, g.y, yaw]),
+                np.array([sxy, sxy, ys]),
+                "first GNSS+compass" if head else "first GNSS",
+            )
         obs = [r for r in log.of("beacon") if r.id in self.charted]
         if obs:
             t0 = obs[0].t
@@ -200,13 +224,21 @@ class GraphBuilder:
             if len(first) >= 2:
                 a, b = list(first.values())[:2]
                 ca, cb = self.charted[a.id], self.charted[b.id]
-                pose = F.pose_from_two_beacons((ca.x, ca.y), (a.range, a.bearing), (cb.x, cb.y), (b.range, b.bearing))
+                pose = F.pose_from_two_beacons(
+                    (ca.x, ca.y), (a.range, a.bearing), (cb.x, cb.y), (b.range, b.bearing)
+                )
                 return pose, np.array([sxy, sxy, yaw_sig]), "charted beacons"
             a = obs[0]
             yaw = head[0].yaw if head else 0.0
             ca = self.charted[a.id]
-            pos = np.array([ca.x, ca.y]) - a.range * np.array([math.cos(yaw + a.bearing), math.sin(yaw + a.bearing)])
-            return np.array([pos[0], pos[1], yaw]), np.array([sxy, sxy, yaw_sig if head else math.pi]), "charted beacons"
+            pos = np.array([ca.x, ca.y]) - a.range * np.array(
+                [math.cos(yaw + a.bearing), math.sin(yaw + a.bearing)]
+            )
+            return (
+                np.array([pos[0], pos[1], yaw]),
+                np.array([sxy, sxy, yaw_sig if head else math.pi]),
+                "charted beacons",
+            )
         for r in log.records:
             if r.kind == "truth":  # nothing absolute in the log: the frame is the reference's start
                 return np.array([r.x, r.y, r.yaw]), np.array([1e-3, 1e-3, 1e-4]), "truth (first pose)"
@@ -234,8 +266,12 @@ class GraphBuilder:
         return delta, cov
 
     # -- one keyframe -----------------------------------------------------------------------------
-    def step(self, k: int, estimate: Callable[[int], gtsam.Pose2 | None],
-             prev_cov: NDArray[np.float64] | None = None) -> Step:
+    def step(
+        self,
+        k: int,
+        estimate: Callable[[int], gtsam.Pose2 | None],
+        prev_cov: NDArray[np.float64] | None = None,
+    ) -> Step:
         """Factors and new values of keyframe ``k``. ``estimate(key)`` gives the current estimate of an
         existing pose key (``None`` if unknown); ``prev_cov`` the world covariance of pose ``k-1``."""
         cfg = self.cfg
@@ -265,16 +301,28 @@ class GraphBuilder:
                 ok, mp, mc = self.matcher(self.scans[k], self.scans[k - 1], init)
                 icp_ms = (time.perf_counter() - c0) * 1e3
                 self.n_icp += 1
-                if ok and np.all(np.isfinite(mp)) and np.all(np.isfinite(mc)) and \
-                        np.hypot(mp[0] - init[0], mp[1] - init[1]) <= cfg.icp_max_step:
-                    floor = np.diag([cfg.icp_sigma_floor_xy**2] * 2 + [math.radians(cfg.icp_sigma_floor_yaw_deg) ** 2])
-                    g.add(F.icp_between(F.X(k - 1), xk, mp, cfg.icp_cov_scale * mc + floor, robust=cfg.icp_robust))
+                if (
+                    ok
+                    and np.all(np.isfinite(mp))
+                    and np.all(np.isfinite(mc))
+                    and np.hypot(mp[0] - init[0], mp[1] - init[1]) <= cfg.icp_max_step
+                ):
+                    floor = np.diag(
+                        [cfg.icp_sigma_floor_xy**2] * 2 + [math.radians(cfg.icp_sigma_floor_yaw_deg) ** 2]
+                    )
+                    g.add(
+                        F.icp_between(
+                            F.X(k - 1), xk, mp, cfg.icp_cov_scale * mc + floor, robust=cfg.icp_robust
+                        )
+                    )
                     rel = gtsam.Pose2(*mp)
                 else:
                     self.n_icp_failed += 1
             if rel is None:  # nothing bridges the gap: a weak constant-velocity factor keeps the chain
                 rel = self.last_rel
-                s = np.array([cfg.motion_sigma_xy, cfg.motion_sigma_xy, math.radians(cfg.motion_sigma_yaw_deg)])
+                s = np.array(
+                    [cfg.motion_sigma_xy, cfg.motion_sigma_xy, math.radians(cfg.motion_sigma_yaw_deg)]
+                )
                 g.add(gtsam.BetweenFactorPose2(F.X(k - 1), xk, rel, gtsam.noiseModel.Diagonal.Sigmas(s)))
             self.last_rel = rel
             pose_k = prev.compose(rel)
@@ -293,8 +341,10 @@ class GraphBuilder:
                     pa = est(a)
                     d = np.array([r.x - pa.x(), r.y - pa.y()])
                     S = prev_cov[:2, :2] + (r.sigma**2) * np.eye(2)
-                    if float(d @ np.linalg.solve(S, d)) > cfg.gnss_gate**2 and \
-                            self.consecutive_rejects < cfg.gnss_gate_max_rejects:
+                    if (
+                        float(d @ np.linalg.solve(S, d)) > cfg.gnss_gate**2
+                        and self.consecutive_rejects < cfg.gnss_gate_max_rejects
+                    ):
                         self.n_rejected += 1
                         self.consecutive_rejects += 1
                         continue
@@ -324,17 +374,26 @@ class GraphBuilder:
                     v.insert(lk, p0)
                 sr = r.sigma_range if math.isfinite(r.sigma_range) else 0.5
                 sb = r.sigma_bearing if math.isfinite(r.sigma_bearing) else math.radians(0.5)
-                g.add(F.beacon_factor(xa, F.L(self.beacon_ids[r.id]), r.range, r.bearing, sr, sb,
-                                      robust=cfg.beacon_robust))
+                g.add(
+                    F.beacon_factor(
+                        xa, F.L(self.beacon_ids[r.id]), r.range, r.bearing, sr, sb, robust=cfg.beacon_robust
+                    )
+                )
         for i in self.beacon_ids.values():
             stamps[F.L(i)] = t
         return Step(k, t, g, v, stamps, icp_ms, gnss_idx)
 
     def info(self) -> dict[str, Any]:
-        return {"anchor": self.anchor, "keyframes": len(self.kf_t), "gnss_rejected": self.n_rejected,
-                "icp_pairs": self.n_icp, "icp_failed": self.n_icp_failed,
-                "icp": self.matcher is not None, "beacons": sorted(self.beacon_ids),
-                "compass_bias_estimated": self.bias_key is not None}
+        return {
+            "anchor": self.anchor,
+            "keyframes": len(self.kf_t),
+            "gnss_rejected": self.n_rejected,
+            "icp_pairs": self.n_icp,
+            "icp_failed": self.n_icp_failed,
+            "icp": self.matcher is not None,
+            "beacons": sorted(self.beacon_ids),
+            "compass_bias_estimated": self.bias_key is not None,
+        }
 
 
 # -- drivers ---------------------------------------------------------------------------------------
@@ -353,8 +412,14 @@ def _isam_params(cfg: SmootherConfig) -> gtsam.ISAM2Params:
     return p
 
 
-def _finish(builder: GraphBuilder, t: list[float], poses: list, covs: list | None, name: str,
-            values: gtsam.Values | None) -> tuple[Trajectory, dict[str, Any]]:
+def _finish(
+    builder: GraphBuilder,
+    t: list[float],
+    poses: list,
+    covs: list | None,
+    name: str,
+    values: gtsam.Values | None,
+) -> tuple[Trajectory, dict[str, Any]]:
     cov = np.array(covs) if covs else None
     traj = Trajectory(np.array(t), np.array(poses).reshape(-1, 3), cov, name=name)
     info = builder.info()
@@ -364,12 +429,16 @@ def _finish(builder: GraphBuilder, t: list[float], poses: list, covs: list | Non
             info["compass_bias_deg"] = math.degrees(F.compass_bias(values.atPose2(builder.bias_key)))
         info["beacon_init"] = {bid: p.tolist() for bid, p in builder.beacon_init.items()}
         info["beacon_estimates"] = {
-            bid: values.atPoint2(F.L(i)).tolist() for bid, i in builder.beacon_ids.items() if values.exists(F.L(i))}
+            bid: values.atPoint2(F.L(i)).tolist()
+            for bid, i in builder.beacon_ids.items()
+            if values.exists(F.L(i))
+        }
     return traj, info
 
 
-def run_isam2(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Matcher | None = None,
-              **options: Any) -> RunResult:
+def run_isam2(
+    log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Matcher | None = None, **options: Any
+) -> RunResult:
     """One ``ISAM2.update`` per keyframe; online = ``calculateEstimatePose2(newest)`` + its marginal."""
     cfg = SmootherConfig.from_options(options)
     b = GraphBuilder(log, cfg, matcher)
@@ -412,8 +481,9 @@ def _gnss_sigma(f: gtsam.PoseTranslationPrior2D) -> float:
     return float(base.sigmas()[0])
 
 
-def run_batch(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Matcher | None = None,
-              **options: Any) -> RunResult:
+def run_batch(
+    log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Matcher | None = None, **options: Any
+) -> RunResult:
     """Levenberg-Marquardt over the whole log (initialised by chaining the relative measurements);
     GNSS fixes left with a residual beyond ``gnss_gate`` sigmas are dropped and LM re-run."""
     cfg = SmootherConfig.from_options(options)
@@ -442,7 +512,10 @@ def run_batch(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Ma
         keep, n_drop = gtsam.NonlinearFactorGraph(), 0
         for i in range(graph.size()):
             f = graph.at(i)
-            if i in gnss_sigma and float(np.hypot(*f.unwhitenedError(result))) / gnss_sigma[i] > cfg.gnss_gate:
+            if (
+                i in gnss_sigma
+                and float(np.hypot(*f.unwhitenedError(result))) / gnss_sigma[i] > cfg.gnss_gate
+            ):
                 n_drop += 1
                 continue
             keep.add(f)
@@ -471,8 +544,9 @@ def run_batch(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Ma
     return RunResult(traj, None, np.full(n, solve_ms / n), np.array(icp_ms), info)
 
 
-def run_fixed_lag(log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Matcher | None = None,
-                  **options: Any) -> RunResult:
+def run_fixed_lag(
+    log: NavLog, *, on_estimate: OnEstimate | None = None, matcher: Matcher | None = None, **options: Any
+) -> RunResult:
     """``IncrementalFixedLagSmoother`` with a ``lag`` [s] window: bounded memory on long runs. The
     final trajectory holds each pose's estimate (and marginal) as it leaves the window."""
     cfg = SmootherConfig.from_options(options)

@@ -118,8 +118,11 @@ def test_compose_with_cov_monte_carlo():
     ca, cb = np.diag([0.01, 0.02, 0.003]), np.diag([0.02, 0.01, 0.002])
     m, c = F.compose_with_cov(a, ca, b, cb)
     xs = []
-    for da, db in zip(rng.multivariate_normal(np.zeros(3), ca, 20000),
-                      rng.multivariate_normal(np.zeros(3), cb, 20000), strict=True):
+    for da, db in zip(
+        rng.multivariate_normal(np.zeros(3), ca, 20000),
+        rng.multivariate_normal(np.zeros(3), cb, 20000),
+        strict=True,
+    ):
         s = a.retract(da).compose(b.retract(db))
         xs.append(gtsam.Pose2.Logmap(m.between(s)))
     np.testing.assert_allclose(c, np.cov(np.array(xs).T), atol=2e-3)

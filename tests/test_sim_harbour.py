@@ -9,8 +9,15 @@ import numpy as np
 import pytest
 
 from graphnav.io import load_log
-from graphnav.sim.harbour import (BEACONS, HarbourConfig, distance_to_segments, harbour_polygons, raycast,
-                                  segments, simulate_harbour)
+from graphnav.sim.harbour import (
+    BEACONS,
+    HarbourConfig,
+    distance_to_segments,
+    harbour_polygons,
+    raycast,
+    segments,
+    simulate_harbour,
+)
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "harbour.npz"
 
@@ -136,5 +143,7 @@ def test_marina_degraded(marina_dir):
     assert jumped.sum() == 10 and np.allclose(d[jumped], j["offset_m"])  # same noise, only the jump differs
     tr = log.truth()
     h = log.of("heading")
-    bias = np.degrees(np.mean([(r.yaw - y + math.pi) % (2 * math.pi) - math.pi for r, y in zip(h, tr.yaw, strict=True)]))
+    bias = np.degrees(
+        np.mean([(r.yaw - y + math.pi) % (2 * math.pi) - math.pi for r, y in zip(h, tr.yaw, strict=True)])
+    )
     assert bias == pytest.approx(3.0, abs=0.6)

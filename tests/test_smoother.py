@@ -36,8 +36,13 @@ def square():
 
 @pytest.fixture(scope="module")
 def square_runs(square):
-    opts = {"gnss_gate": None, "relinearize_threshold": 1e-7, "relinearize_threshold_landmarks": 1e-7,
-            "relinearize_threshold_bias_deg": 1e-7, "final_updates": 10}
+    opts = {
+        "gnss_gate": None,
+        "relinearize_threshold": 1e-7,
+        "relinearize_threshold_landmarks": 1e-7,
+        "relinearize_threshold_bias_deg": 1e-7,
+        "final_updates": 10,
+    }
     return run_batch(square, **opts), run_isam2(square, **opts)
 
 
@@ -131,9 +136,11 @@ def test_online_output_is_flushed_as_it_goes(tmp_path, square):
     path = tmp_path / "online.tum"
     seen = []
     with TrajectoryWriter(path) as w:
+
         def cb(t, pose, cov):
             w.write(t, pose, cov)
             seen.append(sum(1 for line in open(path) if not line.startswith("#")))
+
         r = run_isam2(square.sliced(0, 30.0), on_estimate=cb, **FAST)
     assert seen == list(range(1, len(r.online) + 1))  # every estimate on disk when it was emitted
     back = np.loadtxt(path, comments="#")
@@ -144,12 +151,38 @@ def test_run_cli_json(tmp_path):
     log = square_loop(6, side=20.0)
     path = tmp_path / "sq.npz"
     save_log(log, path)
-    out = subprocess.run([sys.executable, "-m", "graphnav", "run", str(path), "--estimator", "isam2",
-                          "--out", str(tmp_path / "o"), "--json", "-O", "covariances=false"],
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "graphnav",
+            "run",
+            str(path),
+            "--estimator",
+            "isam2",
+            "--out",
+            str(tmp_path / "o"),
+            "--json",
+            "-O",
+            "covariances=false",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     d = json.loads(out.stdout)
-    for k in ("estimator", "steps", "ate_rmse_m", "ate_mean_m", "rpe_rmse_m", "runtime_s", "step_ms_median",
-              "icp_ms_median", "online_ate_rmse_m", "anchor"):
+    for k in (
+        "estimator",
+        "steps",
+        "ate_rmse_m",
+        "ate_mean_m",
+        "rpe_rmse_m",
+        "runtime_s",
+        "step_ms_median",
+        "icp_ms_median",
+        "online_ate_rmse_m",
+        "anchor",
+    ):
         assert k in d, k
     assert d["anchor"] == "pose_prior"
     assert (tmp_path / "o" / "trajectory.tum").exists() and (tmp_path / "o" / "online.tum").exists()

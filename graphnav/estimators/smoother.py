@@ -9,9 +9,13 @@ from ..smoother import run_batch, run_fixed_lag, run_isam2, unmet
 from . import EstimatorSpec
 
 ESTIMATORS = {
-    "isam2": EstimatorSpec(run_isam2, unmet, "iSAM2 factor-graph smoother: online + smoothed, all sensors",
-                           "smoother"),
-    "batch": EstimatorSpec(run_batch, unmet, "batch Levenberg-Marquardt over the whole factor graph", "smoother"),
-    "fixed-lag": EstimatorSpec(run_fixed_lag, unmet, "incremental fixed-lag smoother (bounded memory)",
-                               "smoother"),
+    "isam2": EstimatorSpec(
+        run_isam2, unmet, "iSAM2 factor-graph smoother: online + smoothed, all sensors", "smoother"
+    ),
+    "batch": EstimatorSpec(
+        run_batch, unmet, "batch Levenberg-Marquardt over the whole factor graph", "smoother"
+    ),
+    "fixed-lag": EstimatorSpec(
+        run_fixed_lag, unmet, "incremental fixed-lag smoother (bounded memory)", "smoother"
+    ),
 }

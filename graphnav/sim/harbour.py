@@ -48,9 +48,14 @@ def _hull(cx: float, cy: float, length: float, beam: float, yaw: float) -> NDArr
 def harbour_polygons() -> list[NDArray[np.float64]]:
     """Quay walls, piers, jetty and moored hulls (closed polygons, vertices in order)."""
     polys = [
-        _box(-6, -6, 0, 206), _box(300, -6, 306, 206), _box(-6, 200, 306, 206),  # west, east, north quays
-        _box(-6, -6, 200, 0), _box(260, -6, 306, 0),  # south quay with the entrance 200..260
-        _box(70, 120, 76, 200), _box(150, 110, 156, 200), _box(230, 120, 236, 200),  # piers
+        _box(-6, -6, 0, 206),
+        _box(300, -6, 306, 206),
+        _box(-6, 200, 306, 206),  # west, east, north quays
+        _box(-6, -6, 200, 0),
+        _box(260, -6, 306, 0),  # south quay with the entrance 200..260
+        _box(70, 120, 76, 200),
+        _box(150, 110, 156, 200),
+        _box(230, 120, 236, 200),  # piers
         _box(0, 60, 55, 66),  # jetty from the west quay
     ]
     for y in (135.0, 152.0, 170.0, 186.0):  # hulls alongside the piers
@@ -70,11 +75,18 @@ def harbour_polygons() -> list[NDArray[np.float64]]:
 def _piles(spacing: float = 9.0, size: float = 0.7) -> list[NDArray[np.float64]]:
     """Fender piles along the quay and pier faces (what makes straight walls matchable along-track)."""
     h = size / 2
-    faces = [((0.0, 70.0), (0.0, 199.0), (1.0, 0.0)), ((1.0, 0.0), (199.0, 0.0), (0.0, 1.0)),
-             ((261.0, 0.0), (299.0, 0.0), (0.0, 1.0)), ((300.0, 1.0), (300.0, 199.0), (-1.0, 0.0)),
-             ((1.0, 200.0), (299.0, 200.0), (0.0, -1.0)), ((0.0, 1.0), (0.0, 59.0), (1.0, 0.0)),
-             ((56.0, 67.0), (56.0, 67.0), (1.0, 0.0)), ((157.0, 112.0), (157.0, 199.0), (0.0, 0.0)),
-             ((229.0, 122.0), (229.0, 199.0), (0.0, 0.0)), ((77.0, 122.0), (77.0, 128.0), (0.0, 0.0))]
+    faces = [
+        ((0.0, 70.0), (0.0, 199.0), (1.0, 0.0)),
+        ((1.0, 0.0), (199.0, 0.0), (0.0, 1.0)),
+        ((261.0, 0.0), (299.0, 0.0), (0.0, 1.0)),
+        ((300.0, 1.0), (300.0, 199.0), (-1.0, 0.0)),
+        ((1.0, 200.0), (299.0, 200.0), (0.0, -1.0)),
+        ((0.0, 1.0), (0.0, 59.0), (1.0, 0.0)),
+        ((56.0, 67.0), (56.0, 67.0), (1.0, 0.0)),
+        ((157.0, 112.0), (157.0, 199.0), (0.0, 0.0)),
+        ((229.0, 122.0), (229.0, 199.0), (0.0, 0.0)),
+        ((77.0, 122.0), (77.0, 128.0), (0.0, 0.0)),
+    ]
     out = []
     for (x0, y0), (x1, y1), (nx, ny) in faces:
         n = max(int(np.hypot(x1 - x0, y1 - y0) // spacing), 0) + 1
@@ -89,8 +101,9 @@ def segments(polys: list[NDArray[np.float64]]) -> NDArray[np.float64]:
     return np.vstack([np.hstack([p, np.roll(p, -1, axis=0)]) for p in polys])
 
 
-def raycast(segs: NDArray[np.float64], origin: NDArray[np.float64], directions: NDArray[np.float64],
-            max_range: float) -> NDArray[np.float64]:
+def raycast(
+    segs: NDArray[np.float64], origin: NDArray[np.float64], directions: NDArray[np.float64], max_range: float
+) -> NDArray[np.float64]:
     """Range to the first segment hit along each unit direction (B, 2) from ``origin``; NaN if none
     within ``max_range``. Vectorised over beams x segments."""
     lo = np.minimum(segs[:, :2], segs[:, 2:]) - origin
@@ -127,11 +140,29 @@ def distance_to_segments(segs: NDArray[np.float64], pts: NDArray[np.float64]) ->
     return dmin, u
 
 
-ROUTE = np.array([
-    [30, 25], [180, 25], [268, 30], [272, 95], [208, 102], [208, 160], [193, 182], [178, 160],
-    [178, 104], [125, 100], [125, 160], [111, 182], [97, 160], [97, 96], [74, 82], [70, 45],
-    [40, 36], [22, 30],
-], dtype=float)
+ROUTE = np.array(
+    [
+        [30, 25],
+        [180, 25],
+        [268, 30],
+        [272, 95],
+        [208, 102],
+        [208, 160],
+        [193, 182],
+        [178, 160],
+        [178, 104],
+        [125, 100],
+        [125, 160],
+        [111, 182],
+        [97, 160],
+        [97, 96],
+        [74, 82],
+        [70, 45],
+        [40, 36],
+        [22, 30],
+    ],
+    dtype=float,
+)
 BEACONS = {"B1": (100.0, 5.0), "B2": (250.0, 110.0), "B3": (20.0, 190.0), "B4": (190.0, 60.0)}
 
 
@@ -186,18 +217,22 @@ def vessel_track(cfg: HarbourConfig, rng: np.random.Generator) -> tuple[NDArray,
         if abs(w) < 1e-9:
             pos = pos + v * cfg.dt * np.array([math.cos(yaw), math.sin(yaw)])
         else:
-            pos = pos + (v / w) * np.array([math.sin(yaw + w * cfg.dt) - math.sin(yaw),
-                                            -math.cos(yaw + w * cfg.dt) + math.cos(yaw)])
+            pos = pos + (v / w) * np.array(
+                [math.sin(yaw + w * cfg.dt) - math.sin(yaw), -math.cos(yaw + w * cfg.dt) + math.cos(yaw)]
+            )
         yaw = (yaw + w * cfg.dt + math.pi) % (2 * math.pi) - math.pi
         t += cfg.dt
     return np.array(t_l), np.array(p_l), np.array(c_l)
 
 
-def simulate_harbour(seed: int = 0, cfg: HarbourConfig | None = None, *, duration: float | None = None) -> NavLog:
+def simulate_harbour(
+    seed: int = 0, cfg: HarbourConfig | None = None, *, duration: float | None = None
+) -> NavLog:
     """The harbour log (``duration`` [s] truncates the run, e.g. for tests)."""
     cfg = cfg or HarbourConfig()
-    rng_track, rng_lidar, rng_gnss, rng_misc = (np.random.default_rng(s) for s in
-                                                np.random.SeedSequence(seed).spawn(4))
+    rng_track, rng_lidar, rng_gnss, rng_misc = (
+        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)
+    )
     t, p, ctl = vessel_track(cfg, rng_track)
     if duration is not None:
         keep = t <= duration
@@ -208,15 +243,24 @@ def simulate_harbour(seed: int = 0, cfg: HarbourConfig | None = None, *, duratio
 
     for i in range(0, len(t), step(10.0)):
         recs.append(Truth(float(t[i]), float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
-        recs.append(Odometry(float(t[i]), float(ctl[i, 0] + rng_misc.normal(0, cfg.odo_sigma_v)),
-                             float(ctl[i, 1] + rng_misc.normal(0, cfg.odo_sigma_w)), cfg.odo_sigma_v, cfg.odo_sigma_w))
+        recs.append(
+            Odometry(
+                float(t[i]),
+                float(ctl[i, 0] + rng_misc.normal(0, cfg.odo_sigma_v)),
+                float(ctl[i, 1] + rng_misc.normal(0, cfg.odo_sigma_w)),
+                cfg.odo_sigma_v,
+                cfg.odo_sigma_w,
+            )
+        )
 
     nb = int(round(360.0 / cfg.beam_deg))
     angles = np.radians(np.arange(nb) * cfg.beam_deg) - math.pi
     for i in range(0, len(t), step(cfg.lidar_hz)):
         x, y, yaw = p[i]
         true_dir = yaw + angles + rng_lidar.normal(0.0, cfg.sigma_alpha, nb)
-        r = raycast(segs, np.array([x, y]), np.column_stack([np.cos(true_dir), np.sin(true_dir)]), cfg.max_range)
+        r = raycast(
+            segs, np.array([x, y]), np.column_stack([np.cos(true_dir), np.sin(true_dir)]), cfg.max_range
+        )
         r = r + rng_lidar.normal(0.0, 1.0, nb) * SIGMA_R_REL * np.nan_to_num(r)
         r[rng_lidar.random(nb) < cfg.dropout] = np.nan
         recs.append(Scan(float(t[i]), r.astype(float), angles.copy()))
@@ -245,23 +289,46 @@ def simulate_harbour(seed: int = 0, cfg: HarbourConfig | None = None, *, duratio
             rng_ = math.hypot(dx, dy)
             if rng_ <= cfg.beacon_range:
                 br = math.atan2(dy, dx) - p[i, 2] + rng_misc.normal(0.0, cfg.beacon_sigma_b)
-                recs.append(BeaconObs(ti, bid, float(rng_ + rng_misc.normal(0.0, cfg.beacon_sigma_r)),
-                                      float((br + math.pi) % (2 * math.pi) - math.pi),
-                                      cfg.beacon_sigma_r, cfg.beacon_sigma_b))
+                recs.append(
+                    BeaconObs(
+                        ti,
+                        bid,
+                        float(rng_ + rng_misc.normal(0.0, cfg.beacon_sigma_r)),
+                        float((br + math.pi) % (2 * math.pi) - math.pi),
+                        cfg.beacon_sigma_r,
+                        cfg.beacon_sigma_b,
+                    )
+                )
     px, py = p[0, :2] + rng_misc.normal(0.0, cfg.prior_sigma_xy, 2)
     pyaw = p[0, 2] + rng_misc.normal(0.0, cfg.prior_sigma_yaw)
-    recs.append(PosePrior(float(t[0]), float(px), float(py), float(pyaw), cfg.prior_sigma_xy, cfg.prior_sigma_yaw))
+    recs.append(
+        PosePrior(float(t[0]), float(px), float(py), float(pyaw), cfg.prior_sigma_xy, cfg.prior_sigma_yaw)
+    )
     known = [KnownBeacon(b, bx, by, cfg.chart_sigma) for b, (bx, by) in BEACONS.items()]
-    meta = {"name": "harbour", "seed": seed, "source": "graphnav simulate harbour", "events": events,
-            "lidar": {"sigma_r_rel": SIGMA_R_REL, "sigma_alpha": cfg.sigma_alpha, "max_range": cfg.max_range,
-                      "hz": cfg.lidar_hz, "beam_deg": cfg.beam_deg},
-            "frame": "local harbour frame: x east, y north, origin at the basin's south-west corner"}
+    meta = {
+        "name": "harbour",
+        "seed": seed,
+        "source": "graphnav simulate harbour",
+        "events": events,
+        "lidar": {
+            "sigma_r_rel": SIGMA_R_REL,
+            "sigma_alpha": cfg.sigma_alpha,
+            "max_range": cfg.max_range,
+            "hz": cfg.lidar_hz,
+            "beam_deg": cfg.beam_deg,
+        },
+        "frame": "local harbour frame: x east, y north, origin at the basin's south-west corner",
+    }
     return NavLog.from_unsorted(recs, known, meta)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("harbour", help="a vessel crossing a small harbour: LiDAR, GNSS, compass, odometry, beacons",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "harbour",
+        help="a vessel crossing a small harbour: LiDAR, GNSS, compass, odometry, beacons",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--duration", type=float, default=None, help="truncate the run [s]")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
@@ -276,6 +343,15 @@ def _cli(args: argparse.Namespace) -> int:
     log = simulate_harbour(args.seed, duration=args.duration)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_log(log, args.out)
-    emit(args, {"scenario": "harbour", "seed": args.seed, "out": str(args.out), "records": log.counts(),
-                "t0": log.t0, "t1": log.t1})
+    emit(
+        args,
+        {
+            "scenario": "harbour",
+            "seed": args.seed,
+            "out": str(args.out),
+            "records": log.counts(),
+            "t0": log.t0,
+            "t1": log.t1,
+        },
+    )
     return 0

@@ -27,9 +27,17 @@ COMPASS_SIGMA = math.radians(2.0)
 COMPASS_BIAS = math.radians(3.0)
 
 
-def degrade(base: NavLog, seed: int = 1, *, gnss_sigma: float = GNSS_SIGMA, outage_s: float = 40.0,
-            jump_m: float = 20.0, jump_s: float = 10.0, compass_sigma: float = COMPASS_SIGMA,
-            compass_bias: float = COMPASS_BIAS) -> NavLog:
+def degrade(
+    base: NavLog,
+    seed: int = 1,
+    *,
+    gnss_sigma: float = GNSS_SIGMA,
+    outage_s: float = 40.0,
+    jump_m: float = 20.0,
+    jump_s: float = 10.0,
+    compass_sigma: float = COMPASS_SIGMA,
+    compass_bias: float = COMPASS_BIAS,
+) -> NavLog:
     """Add simulated GNSS and compass records, derived from the ``truth`` records, to a scan log."""
     rng = np.random.default_rng(seed)
     tr = base.truth()
@@ -60,9 +68,15 @@ def degrade(base: NavLog, seed: int = 1, *, gnss_sigma: float = GNSS_SIGMA, outa
         events.append({"kind": "gnss_jump", "t0": j0, "t1": j0 + jump_s, "offset_m": jump.tolist()})
     events.append({"kind": "compass_bias", "t0": t0, "t1": t1, "bias_deg": math.degrees(compass_bias)})
     meta = dict(base.meta)
-    meta.update({"name": "marina-degraded", "seed": seed, "events": events,
-                 "simulated": "gnss (sigma %.1f m, outage, jump), compass (sigma %.1f deg, bias %.1f deg)"
-                 % (gnss_sigma, math.degrees(compass_sigma), math.degrees(compass_bias))})
+    meta.update(
+        {
+            "name": "marina-degraded",
+            "seed": seed,
+            "events": events,
+            "simulated": f"gnss (sigma {gnss_sigma:.1f} m, outage, jump), compass (sigma "
+            f"{math.degrees(compass_sigma):.1f} deg, bias {math.degrees(compass_bias):.1f} deg)",
+        }
+    )
     return NavLog.from_unsorted(recs, base.beacons_known, meta)
 
 
@@ -74,8 +88,12 @@ def simulate_marina_degraded(marina_dir: str | Path, seed: int = 1, **kw) -> Nav
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("marina-degraded", help="real marina scans + simulated GNSS (outage, jump) and biased compass",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "marina-degraded",
+        help="real marina scans + simulated GNSS (outage, jump) and biased compass",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--marina", type=Path, required=True, help="the icp_data_marina directory")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--jump-m", type=float, default=20.0, help="GNSS jump size [m] (0: none, same noise)")
@@ -91,6 +109,14 @@ def _cli(args: argparse.Namespace) -> int:
     log = simulate_marina_degraded(args.marina, args.seed, jump_m=args.jump_m)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_log(log, args.out)
-    emit(args, {"scenario": "marina-degraded", "seed": args.seed, "out": str(args.out), "records": log.counts(),
-                "events": log.meta["events"]})
+    emit(
+        args,
+        {
+            "scenario": "marina-degraded",
+            "seed": args.seed,
+            "out": str(args.out),
+            "records": log.counts(),
+            "events": log.meta["events"],
+        },
+    )
     return 0
