@@ -1,7 +1,8 @@
 """Keyframe policy: which times get a pose variable, and which keyframe each measurement joins.
 
 * Keyframes are the scan times when the log has scans (one pose per scan, ICP between
-  consecutive scans), otherwise a fixed ``period`` [s] (default 0.5 s) from the first record.
+  consecutive scans; ``scan_stride`` N keeps every N-th scan, to bound the matching cost),
+  otherwise a fixed ``period`` [s] (default 0.5 s) from the first record.
 * Every other measurement (GNSS, heading, beacon) is attached to the keyframe **nearest in time**.
   The error this introduces is bounded by the motion over half the largest keyframe gap
   ``dt_max``: position ``<= v_max * dt_max / 2`` and yaw ``<= |ROT|_max * dt_max / 2``
@@ -22,12 +23,15 @@ from .log import NavLog
 DEFAULT_PERIOD = 0.5
 
 
-def keyframe_times(log: NavLog, period: float | None = None) -> NDArray[np.float64]:
-    """Times of the pose variables: the scans (``period=None`` and scans present) or a fixed grid."""
+def keyframe_times(log: NavLog, period: float | None = None, scan_stride: int = 1) -> NDArray[np.float64]:
+    """Times of the pose variables: every ``scan_stride``-th scan (``period=None`` and scans
+    present) or a fixed grid."""
     if period is None:
         scans = log.of("scan")
         if scans:
-            return np.array([s.t for s in scans])
+            if scan_stride < 1:
+                raise ValueError(f"scan_stride must be >= 1, got {scan_stride}")
+            return np.array([s.t for s in scans[::scan_stride]])
         period = DEFAULT_PERIOD
     if period <= 0:
         raise ValueError(f"keyframe period must be > 0, got {period}")

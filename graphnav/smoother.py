@@ -42,6 +42,7 @@ class SmootherConfig:
     """Every tunable of the smoother (settable as ``-O key=value`` on ``graphnav run``)."""
 
     keyframe_period: float | None = None  # None: one pose per scan (fixed 0.5 s grid without scans)
+    scan_stride: int = 1  # with scans: a keyframe (and an ICP match) every N-th scan
     gnss_robust: str | None = "cauchy"
     gnss_k: float | None = None
     gnss_gate: float | None = (
@@ -142,11 +143,11 @@ class GraphBuilder:
 
     def __init__(self, log: NavLog, cfg: SmootherConfig, matcher: Matcher | None = None) -> None:
         self.log, self.cfg = log, cfg
-        self.kf_t = keyframe_times(log, cfg.keyframe_period)
+        self.kf_t = keyframe_times(log, cfg.keyframe_period, cfg.scan_stride)
         if len(self.kf_t) == 0:
             raise ValueError("the log has no records to place keyframes on")
         scans = log.of("scan")
-        self.scans = scans if (cfg.keyframe_period is None and scans) else None
+        self.scans = scans[:: cfg.scan_stride] if (cfg.keyframe_period is None and scans) else None
         icp_opts = dict(cfg.icp)
         lidar = log.meta.get("lidar", {}) if isinstance(log.meta.get("lidar"), dict) else {}
         for k in ("sigma_r_rel", "sigma_alpha"):  # the log's LiDAR error model, when it states one
