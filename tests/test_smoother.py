@@ -208,6 +208,10 @@ def test_keyframe_policy():
     b = attachment_error_bound(t, ref.poses, ref.t)
     assert b["max_offset_s"] == pytest.approx(0.25)
     assert b["position_bound_m"] == pytest.approx(0.25 * 1.0, rel=0.02)  # 1 m/s
+    scans = [Scan(float(t), np.ones(3), np.zeros(3)) for t in (0.0, 0.2, 0.4, 0.6, 0.8)]
+    with_scans = NavLog(scans)
+    np.testing.assert_allclose(keyframe_times(with_scans), [0.0, 0.2, 0.4, 0.6, 0.8])
+    np.testing.assert_allclose(keyframe_times(with_scans, scan_stride=2), [0.0, 0.4, 0.8])
 
 
 def test_world_covariance_rotation():
