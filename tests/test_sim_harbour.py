@@ -147,3 +147,18 @@ def test_marina_degraded(marina_dir):
         np.mean([(r.yaw - y + math.pi) % (2 * math.pi) - math.pi for r, y in zip(h, tr.yaw, strict=True)])
     )
     assert bias == pytest.approx(3.0, abs=0.6)
+
+
+def test_isam2_with_weighted_icp_on_a_harbour_slice():
+    """End to end on 8 s of harbour: real scan matching, odometry, GNSS, compass, beacons."""
+    from graphnav.metrics import ate
+    from graphnav.smoother import run_isam2
+
+    log = simulate_harbour(0, duration=8.0)
+    r = run_isam2(log, covariances=False)
+    assert r.info["icp"] and r.info["icp_pairs"] == len(log.of("scan")) - 1
+    assert r.info["icp_failed"] < 0.2 * r.info["icp_pairs"]
+    assert r.info["anchor"] == "pose_prior"
+    ref = log.truth()
+    assert ate(r.trajectory, ref, max_dt=0.02)["rmse"] < 0.3
+    assert ate(r.online, ref, max_dt=0.02)["rmse"] < 0.6
