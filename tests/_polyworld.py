@@ -1,7 +1,6 @@
-"""A tiny polygon world for tests: exact ray casting of a 2D LiDAR and a small synthetic log.
-
-Not a simulator (the harbour simulator lives in graphnav.sim); just enough geometry to give
-scan matchers and the compare command exact truth.
+"""A tiny polygon world for tests: a small synthetic log with exact truth for the scan matchers and
+the compare command, ray-cast with the harbour simulator's :func:`graphnav.sim.harbour.raycast`
+in a smaller, simpler basin (fast, and with a track known to stay clear of the obstacles).
 """
 
 from __future__ import annotations
@@ -9,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from graphnav.log import Gnss, Heading, NavLog, Odometry, PosePrior, Scan, Truth
+from graphnav.sim import harbour
 
 
 def rect(x0: float, y0: float, x1: float, y1: float) -> list[tuple[float, float]]:
@@ -23,26 +23,15 @@ def basin() -> np.ndarray:
         rect(25, -30, 28, -18), rect(60, -30, 62, -12),                     # piers from the south quay
         rect(30, -12, 33, -10), rect(55, -8, 58, -5), rect(5, 12, 8, 15),      # moored boats
     ]
-    segs = []
-    for p in polys:
-        for a, b in zip(p, p[1:] + p[:1], strict=True):
-            segs.append((*a, *b))
-    return np.array(segs, dtype=float)
+    return harbour.segments([np.array(p, dtype=float) for p in polys])
 
 
 def raycast(pose: np.ndarray, angles: np.ndarray, segs: np.ndarray, max_range: float = 40.0) -> np.ndarray:
-    """Exact ranges [m] of beams at ``angles`` (body frame) from ``pose``; NaN where nothing is hit."""
+    """Exact ranges [m] of beams at ``angles`` (body frame) from ``pose``; NaN where nothing is hit
+    (the harbour simulator's ray caster)."""
     x, y, th = pose
-    d = np.stack([np.cos(th + angles), np.sin(th + angles)], axis=1)  # (B, 2)
-    a = segs[:, :2] - [x, y]                                             # (M, 2)
-    e = segs[:, 2:] - segs[:, :2]                                        # (M, 2)
-    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]  # cross(d, e)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (a[None, :, 0] * e[None, :, 1] - a[None, :, 1] * e[None, :, 0]) / den
-        u = (a[None, :, 0] * d[:, None, 1] - a[None, :, 1] * d[:, None, 0]) / den
-    hit = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
-    t = np.where(hit, t, np.inf).min(axis=1)
-    return np.where(t <= max_range, t, np.nan)
+    d = np.stack([np.cos(th + angles), np.sin(th + angles)], axis=1)
+    return harbour.raycast(segs, np.array([x, y], dtype=float), d, max_range)
 
 
 def track(n: int, dt: float = 0.5, v: float = 1.5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
