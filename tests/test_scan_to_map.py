@@ -198,11 +198,11 @@ def test_scan_to_map_on_the_marina_data(marina_log):
 
 
 @settings(max_examples=15, deadline=None)
-@given(st.floats(-1.0, 1.0), st.floats(-0.5, 0.5), st.floats(-0.04, 0.04))
+@given(st.floats(-0.6, 0.6), st.floats(-0.3, 0.3), st.floats(-0.03, 0.03))
 def test_vgicp_recovers_random_planar_motion(dx, dy, dth):
-    """Any motion of up to 1 m / 2.3 deg between two scans is recovered from the identity (larger
-    rotations move far returns beyond the 2 m correspondence distance: that is what the
-    constant-velocity guess of scan-to-map is for)."""
+    """Any motion that moves every return (<= 40 m) by less than the 2 m correspondence distance
+    (0.67 m + 40 m x 0.03 rad) is recovered from the identity. Larger motions can leave the basin:
+    that is what the constant-velocity guess of scan-to-map is for."""
     a = np.array([45.0, 0.0, 0.2])
     b = se2_compose(a, [dx, dy, dth])
     res = align(scan_at(b, 0.01, 7), scan_at(a, 0.01, 8), (0.0, 0.0, 0.0), "vgicp")
