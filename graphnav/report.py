@@ -86,11 +86,23 @@ def markdown_table(entries: Sequence[Entry]) -> str:
     return "\n".join(rows)
 
 
+def _brief(v: Any, max_len: int = 20) -> Any:
+    """``v`` with long sequences (at any depth) replaced by a note of their length."""
+    if isinstance(v, dict):
+        return {k: _brief(x, max_len) for k, x in v.items()}
+    if isinstance(v, list | tuple | np.ndarray):
+        if len(v) > max_len:
+            return f"<{len(v)} values>"
+        return [_brief(x, max_len) for x in v]
+    return v
+
+
 def _config(e: Entry) -> dict[str, Any]:
+    """The options and ``RunResult.info`` of an estimator, long arrays summarised."""
     info = e.result.info if e.result is not None else {}
     cfg = {"options": e.options} if e.options else {}
-    cfg.update({k: v for k, v in info.items() if not isinstance(v, list | np.ndarray) or len(v) < 20})
-    return jsonable(cfg)
+    cfg.update(info)
+    return jsonable(_brief(cfg))
 
 
 def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: str = "") -> dict[str, Path]:

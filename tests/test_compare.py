@@ -221,3 +221,13 @@ def test_dcog_error_ignores_a_constant_course_offset(log):
     assert np.allclose(s["cog"], np.degrees(0.05))
     assert np.allclose(s["dcog"], 0.0, atol=1e-9) and len(s["dcog"]) == len(s["cog"]) - 1
     assert np.allclose(s["sog"], 0.0, atol=1e-9)
+
+
+def test_report_configuration_summarises_long_arrays():
+    from graphnav.compare import Entry
+    from graphnav.report import _config
+
+    res = RunResult(Trajectory([0.0], [[0.0, 0.0, 0.0]]), info={"k": 3, "nested": {"a": np.arange(500)},
+                                                                "short": [1, 2]})
+    cfg = _config(Entry("x", options={"lag": 2}, result=res))
+    assert cfg == {"options": {"lag": 2}, "k": 3, "nested": {"a": "<500 values>"}, "short": [1, 2]}
