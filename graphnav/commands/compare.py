@@ -1,0 +1,69 @@
+"""``graphnav compare LOG --out DIR [--estimators a,b,...]``: every estimator the log can feed, side
+by side — DIR/report.md, PNG figures and DIR/<estimator>.tum."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+
+from .. import estimators
+from ..compare import compare, ranked
+from ..io import load_log
+from ..report import to_json, write_report
+from ._common import add_json_flag, add_log_args, emit, parse_options
+
+log_ = logging.getLogger("graphnav.compare")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("compare", help="run several estimators on one log and write a report",
+                       description=__doc__)
+    add_log_args(p)
+    p.add_argument("--out", type=Path, required=True, help="output directory (report.md, *.png, *.tum)")
+    p.add_argument("--estimators", "-e", default=None,
+                   help="comma-separated names, LABEL=NAME to run one estimator twice under another "
+                        "label (default: every estimator the log can feed); known: "
+                        + ", ".join(estimators.names()))
+    p.add_argument("--option", "-O", action="append", metavar="NAME.KEY=VALUE",
+                   help="option for one estimator (or label), e.g. scan-to-map.backend=gicp; repeatable")
+    p.add_argument("--workers", "-j", type=int, default=1,
+                   help="run this many estimators at once in separate processes (runtimes then include "
+                        "contention; default 1)")
+    add_json_flag(p)
+    p.set_defaults(func=run)
+
+
+def _options(pairs: list[str] | None) -> dict[str, dict]:
+    out: dict[str, dict] = {}
+    for item in pairs or []:
+        head, sep, _ = item.partition("=")
+        name, dot, key = head.partition(".")
+        if not sep or not dot or not key:
+            raise ValueError(f"option {item!r} is not NAME.KEY=VALUE")
+        out.setdefault(name, {}).update(parse_options([item[len(name) + 1:]]))
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    log = load_log(args.log, lenient=args.lenient)
+    names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
+    t0 = time.perf_counter()
+    entries = compare(log, names, options=_options(args.option),
+                      progress=lambda n: log_.info("running %s on %s", n, args.log), workers=args.workers)
+    files = write_report(entries, log, args.out, log_name=str(args.log))
+    total = time.perf_counter() - t0
+    for e in entries:
+        if not e.ok:
+            log_.warning("%s failed: %s", e.name, e.error)
+    obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=args.workers)
+    lines = [f"{'estimator':16s} {'ATE RMSE [m]':>12s} {'RPE [m]':>9s} {'runtime [s]':>11s}  note"]
+    for e in ranked(entries):
+        s = e.summary or {}
+        a, r, t = (f"{s[k]:.3f}" if isinstance(s.get(k), float) else "–"
+                   for k in ("ate_rmse_m", "rpe_rmse_m", "runtime_s"))
+        lines.append(f"{e.name:16s} {a:>12s} {r:>9s} {t:>11s}  " + ("" if e.ok else f"failed: {e.error}"))
+    lines.append(f"wrote {len(files)} files to {args.out} (report.md) in {total:.1f} s")
+    emit(args, obj, "\n".join(lines))
+    return 0
