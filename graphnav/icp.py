@@ -58,7 +58,7 @@ class IcpConfig:
     equalize: bool = False  # randomly thin the larger cloud to the smaller's size (the paper)
     seed: int = 0  # for equalize
     weight_power: float = 0.5  # w = G^-weight_power; 0.5 is eq. 11
-    normal_k: int = 10  # neighbours of a target point for its line normal (HDL, degeneracy check)
+    normal_k: int = 12  # neighbours of a target point for its line normal (HDL, degeneracy check)
     normals: str = "knn"  # HDL normals: "knn" (PCA of the k nearest) or "scan" (k neighbours in beam order)
     min_points: int = 20  # fewer valid points in either scan -> ok=False
     inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
