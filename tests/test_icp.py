@@ -309,3 +309,35 @@ def test_cli_prints_one_json_object_with_the_issue_keys(tmp_path, capsys):
     assert (tmp_path / "o" / "pairs.csv").exists()
     assert (tmp_path / "o" / "fig12_sog_diff.png").exists()
     assert (tmp_path / "o" / "fig15_dcog_hist.png").exists()
+
+
+# ----------------------------------------------------------------------------- compiled backend
+
+
+def test_numba_backend_equals_numpy():
+    """The compiled K/H/HM/HD loop (grid nearest neighbours) gives the numpy loop's results."""
+    pytest.importorskip("numba")
+    from scipy.spatial import cKDTree
+
+    from graphnav._icp_fast import build_grid, nearest
+
+    rng = np.random.default_rng(8)
+    tgt = rng.uniform(-20, 20, (300, 2))
+    q = rng.uniform(-40, 40, (200, 2))  # also far outside the target's box
+    grid = build_grid(tgt[:, 0].copy(), tgt[:, 1].copy(), 0.5)
+    d_ref, i_ref = cKDTree(tgt).query(q)
+    got = np.array([nearest(x, y, tgt[:, 0].copy(), tgt[:, 1].copy(), grid[0], grid[1], 0.5, *grid[2:])
+                    for x, y in q])
+    assert np.array_equal(got[:, 1].astype(int), i_ref)
+    assert np.allclose(got[:, 0], d_ref, atol=1e-12)
+
+    world = even_points(room(), 0.25)
+    src = observe(world, (0.5, -0.2, 0.04), rng, 0.004, 0.003)
+    tgt = observe(world, (0.0, 0.0, 0.0), rng, 0.004, 0.003)
+    for v in ("K", "H", "HM", "HD"):
+        a = match_points(src, tgt, IcpConfig(variant=v, backend="numba"), init=[0.45, -0.15, 0.03])
+        b = match_points(src, tgt, IcpConfig(variant=v, backend="numpy"), init=[0.45, -0.15, 0.03])
+        assert np.allclose(a.pose, b.pose, atol=1e-10)
+        assert np.allclose(a.cov, b.cov, rtol=1e-8, atol=0)
+        assert a.quality["iterations"] == b.quality["iterations"] and a.ok == b.ok
+        assert a.quality["condition_number"] == pytest.approx(b.quality["condition_number"], rel=1e-8)
