@@ -34,6 +34,9 @@ from scipy.spatial import cKDTree
 from .lidar import SIGMA_ALPHA, SIGMA_R_REL, polar_to_points
 
 VARIANTS = ("K", "H", "HM", "HD", "HDL")
+# default covariance inflation per variant: mean NEES ~3 against the RTK reference on the 160 clean
+# marina pairs (benchmarks/icp_marina.py prints the NEES; docs/weighted-icp.md)
+COV_SCALE = {"K": 300.0, "H": 120.0, "HM": 120.0, "HD": 120.0, "HDL": 50.0}
 _BIG_COV = np.diag([1e4, 1e4, 10.0])  # returned with ok=False when there is nothing to match
 
 
@@ -52,6 +55,7 @@ class IcpConfig:
     min_range: float = 0.0
     max_corr_dist: float | None = None  # pairs farther apart get weight 0 (None: keep all, as the paper)
     line_max_gap: float = 1.0  # beam neighbours farther apart are not on one line (scan-order normals) [m]
+    line_flat_power: float = 4.0  # HDL: weight x flatness^power of the target's local line (0..1)
     line_warmup: float = 0.05  # HDL: point-to-point steps until a step moves no point more [m] (0: off)
     line_max_dist: float = 0.5  # HDL only: a point farther than this from its match has no line there [m]
     matching: str = "kdtree"  # "kdtree" (cKDTree) or "delaunay" (the paper's nearest triangle apex)
@@ -64,9 +68,10 @@ class IcpConfig:
     inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
     min_inlier_fraction: float = 0.3  # below -> ok=False
     max_condition: float = 200.0  # condition number of the point-to-line information above -> degenerate
-    # inflation for correlated, unmodelled error (sampling, motion distortion): measured on the
-    # marina data, docs/weighted-icp.md; 1.0 = the pure least-squares model (independent errors)
-    cov_scale: float = 100.0
+    # inflation for correlated, unmodelled error (sampling, motion distortion); None = the value
+    # measured on the marina data for the variant (COV_SCALE, docs/weighted-icp.md); 1.0 = the pure
+    # least-squares model (independent errors, synthetic scans)
+    cov_scale: float | None = None
     cov_floor: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 1-sigma floor (x, y, yaw) added in quadrature
     workers: int = 1  # cKDTree query threads
     # K/H/HM/HD: "numba" = compiled loop with exact grid matching, same results (optional dependency;
@@ -425,7 +430,7 @@ def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=False):  # noqa:
             w = w.copy()
             w[big] *= khu / dist[big]
         if v == "HDL":  # no line where the match is far (the gate widens while far from convergence)
-            w = w * flat[idx] * (d <= max(cfg.line_max_dist, cfg.huber_c * _median(d)))
+            w = w * flat[idx] ** cfg.line_flat_power * (d <= max(cfg.line_max_dist, cfg.huber_c * _median(d)))
     if cfg.max_corr_dist is not None:
         w = np.where(d <= cfg.max_corr_dist, w, 0.0)
     if not np.any(w > 0):
@@ -562,7 +567,8 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
         cov = kscale * hinv @ bmat @ hinv.T
     except np.linalg.LinAlgError:
         cov = _BIG_COV.copy()
-    cov = 0.5 * (cov + cov.T) * cfg.cov_scale + np.diag(np.square(cfg.cov_floor))
+    scale = COV_SCALE[cfg.variant] if cfg.cov_scale is None else cfg.cov_scale
+    cov = 0.5 * (cov + cov.T) * scale + np.diag(np.square(cfg.cov_floor))
     degenerate = not np.isfinite(cond) or cond > cfg.max_condition
     reasons = []
     if degenerate:
