@@ -173,13 +173,17 @@ class _Cloud:
 
     __slots__ = ("xy", "r", "u", "a2", "b2", "m2")
 
-    def __init__(self, xy: NDArray, cfg: IcpConfig):
+    def __init__(self, xy: NDArray, cfg: IcpConfig, sigma: NDArray | None = None):
         self.xy = np.ascontiguousarray(xy, dtype=float)
         self.r = np.hypot(self.xy[:, 0], self.xy[:, 1])
         rs = np.where(self.r > 0, self.r, 1.0)
         self.u = self.xy / rs[:, None]
-        self.a2 = (cfg.sigma_alpha * self.r) ** 2  # eq. 6, squared
-        self.b2 = (cfg.sigma_r_rel * self.r) ** 2  # eq. 7, squared
+        if sigma is None:
+            self.a2 = (cfg.sigma_alpha * self.r) ** 2  # eq. 6, squared
+            self.b2 = (cfg.sigma_r_rel * self.r) ** 2  # eq. 7, squared
+        else:  # caller's isotropic 1-sigma per point: a circle, a = b = sigma
+            self.a2 = np.broadcast_to(np.asarray(sigma, dtype=float) ** 2, self.r.shape).copy()
+            self.b2 = self.a2.copy()
         self.m2 = self.a2 + self.b2  # eq. 5, squared
 
     def take(self, idx: NDArray) -> None:
@@ -225,6 +229,15 @@ def _failed(reason: str, init: ArrayLike | None, n_src: int, n_tgt: int, t0: flo
     return MatchResult(np.array([t[0], t[1], th]), _BIG_COV.copy(), False, q)
 
 
+def _per_point(sigma: Any, n: int, name: str) -> NDArray | None:
+    if sigma is None:
+        return None
+    s = np.broadcast_to(np.asarray(sigma, dtype=float), (n,)).copy()
+    if not np.all(np.isfinite(s) & (s > 0)):
+        raise ValueError(f"{name} must be finite and > 0")
+    return s
+
+
 def match_points(
     src_xy: ArrayLike,
     tgt_xy: ArrayLike,
@@ -236,20 +249,26 @@ def match_points(
     """Align ``src_xy`` (N, 2), the current scan's points in its sensor frame, to ``tgt_xy`` (M, 2),
     the previous scan's (Algorithm 1). ``init`` is the initial ``(dx, dy, dyaw)`` (e.g. the
     constant-velocity guess). Points are taken in their sensor frame (the LiDAR error model needs
-    the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma`` are reserved (per-point
-    sigmas are computed from the model of eq. 5-9 with the config's sigma_r_rel and sigma_alpha).
+    the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma`` (scalar or one per point,
+    metres) replace that model by an isotropic 1-sigma per point (e.g. for points that are not raw
+    LiDAR returns); by default the model of eq. 5-9 with the config's sigma_r_rel, sigma_alpha.
     """
     cfg = config or IcpConfig()
     t0 = time.perf_counter()
     src_xy = np.asarray(src_xy, dtype=float).reshape(-1, 2)
     tgt_xy = np.asarray(tgt_xy, dtype=float).reshape(-1, 2)
-    src_xy = src_xy[np.all(np.isfinite(src_xy), axis=1)]
-    tgt_xy = tgt_xy[np.all(np.isfinite(tgt_xy), axis=1)]
+    src_sigma = _per_point(src_sigma, len(src_xy), "src_sigma")
+    tgt_sigma = _per_point(tgt_sigma, len(tgt_xy), "tgt_sigma")
+    keep_s = np.all(np.isfinite(src_xy), axis=1)
+    keep_t = np.all(np.isfinite(tgt_xy), axis=1)
+    src_xy, tgt_xy = src_xy[keep_s], tgt_xy[keep_t]
+    src_sigma = None if src_sigma is None else src_sigma[keep_s]
+    tgt_sigma = None if tgt_sigma is None else tgt_sigma[keep_t]
     ns, nt = len(src_xy), len(tgt_xy)
     if ns < cfg.min_points or nt < cfg.min_points:
         return _failed(f"too few points (source {ns}, target {nt}, need {cfg.min_points})", init, ns, nt, t0)
 
-    src, tgt = _Cloud(src_xy, cfg), _Cloud(tgt_xy, cfg)
+    src, tgt = _Cloud(src_xy, cfg, src_sigma), _Cloud(tgt_xy, cfg, tgt_sigma)
     if cfg.equalize and ns != nt:  # the paper: thin the larger set at random
         rng = np.random.default_rng(cfg.seed)
         big = src if ns > nt else tgt

@@ -389,3 +389,23 @@ def test_reference_glitch_rule_known_answer():
     ok = valid_reference_steps(steps)
     bad = set(np.flatnonzero(~ok))
     assert bad == {0, 5, 25, 34, 35, 36, 37, 38, 39}
+
+
+def test_caller_sigmas_replace_the_lidar_model():
+    """Per-point sigmas: equal ones make HM's weights uniform (= H); a huge sigma on the clutter
+    mutes it even without the Huber kernel's help."""
+    rng = np.random.default_rng(7)
+    world = even_points(room(), 0.2)
+    true = np.array([0.3, -0.1, 0.03])
+    tgt = observe(world, (0.0, 0.0, 0.0), rng, 0.002, 0.001)
+    src = observe(world, true, rng, 0.002, 0.001)
+    hm = match_points(src, tgt, IcpConfig(variant="HM"), init=true, src_sigma=0.05, tgt_sigma=0.05)
+    h = match_points(src, tgt, IcpConfig(variant="H"), init=true)
+    assert np.allclose(hm.pose, h.pose, atol=1e-9)
+    junk = np.column_stack([rng.uniform(2.0, 9.0, 150), rng.uniform(-5.0, 5.0, 150)])
+    sig = np.r_[np.full(len(src), 0.01), np.full(150, 100.0)]
+    res = match_points(np.vstack([src, junk]), tgt, IcpConfig(variant="HM", huber_c=1e9), init=np.zeros(3),
+                       src_sigma=sig, tgt_sigma=0.01)
+    assert np.abs(res.pose - true).max() < 0.01
+    with pytest.raises(ValueError, match="src_sigma"):
+        match_points(src, tgt, IcpConfig(), src_sigma=-1.0)
