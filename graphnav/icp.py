@@ -34,6 +34,9 @@ from scipy.spatial import cKDTree
 from .lidar import SIGMA_ALPHA, SIGMA_R_REL, polar_to_points
 
 VARIANTS = ("K", "H", "HM", "HD", "HDL")
+# default covariance inflation per variant: mean NEES ~3 against the RTK reference on the 160 clean
+# marina pairs (benchmarks/icp_marina.py prints the NEES; docs/weighted-icp.md)
+COV_SCALE = {"K": 300.0, "H": 120.0, "HM": 120.0, "HD": 120.0, "HDL": 50.0}
 _BIG_COV = np.diag([1e4, 1e4, 10.0])  # returned with ok=False when there is nothing to match
 
 
@@ -52,27 +55,34 @@ class IcpConfig:
     min_range: float = 0.0
     max_corr_dist: float | None = None  # pairs farther apart get weight 0 (None: keep all, as the paper)
     line_max_gap: float = 1.0  # beam neighbours farther apart are not on one line (scan-order normals) [m]
+    line_flat_power: float = 4.0  # HDL: weight x flatness^power of the target's local line (0..1)
     line_warmup: float = 0.05  # HDL: point-to-point steps until a step moves no point more [m] (0: off)
     line_max_dist: float = 0.5  # HDL only: a point farther than this from its match has no line there [m]
     matching: str = "kdtree"  # "kdtree" (cKDTree) or "delaunay" (the paper's nearest triangle apex)
     equalize: bool = False  # randomly thin the larger cloud to the smaller's size (the paper)
     seed: int = 0  # for equalize
     weight_power: float = 0.5  # w = G^-weight_power; 0.5 is eq. 11
-    normal_k: int = 10  # neighbours of a target point for its line normal (HDL, degeneracy check)
+    normal_k: int = 12  # neighbours of a target point for its line normal (HDL, degeneracy check)
     normals: str = "knn"  # HDL normals: "knn" (PCA of the k nearest) or "scan" (k neighbours in beam order)
     min_points: int = 20  # fewer valid points in either scan -> ok=False
     inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
     min_inlier_fraction: float = 0.3  # below -> ok=False
     max_condition: float = 200.0  # condition number of the point-to-line information above -> degenerate
-    # inflation for correlated, unmodelled error (sampling, motion distortion): measured on the
-    # marina data, docs/weighted-icp.md; 1.0 = the pure least-squares model (independent errors)
-    cov_scale: float = 100.0
+    # inflation for correlated, unmodelled error (sampling, motion distortion); None = the value
+    # measured on the marina data for the variant (COV_SCALE, docs/weighted-icp.md); 1.0 = the pure
+    # least-squares model (independent errors, synthetic scans)
+    cov_scale: float | None = None
     cov_floor: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 1-sigma floor (x, y, yaw) added in quadrature
     workers: int = 1  # cKDTree query threads
+    # K/H/HM/HD: "numba" = compiled loop with exact grid matching, same results (optional dependency;
+    # the first call compiles for 10-50 s, cached afterwards); "auto" = numba when importable
+    backend: str = "numpy"
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise ValueError(f"unknown ICP variant {self.variant!r}; known: {', '.join(VARIANTS)}")
+        if self.backend not in ("auto", "numba", "numpy"):
+            raise ValueError(f"unknown backend {self.backend!r}; known: auto, numba, numpy")
         if self.normals not in ("knn", "scan"):
             raise ValueError(f"unknown normals {self.normals!r}; known: knn, scan")
         if self.matching not in ("kdtree", "delaunay"):
@@ -163,13 +173,17 @@ class _Cloud:
 
     __slots__ = ("xy", "r", "u", "a2", "b2", "m2")
 
-    def __init__(self, xy: NDArray, cfg: IcpConfig):
+    def __init__(self, xy: NDArray, cfg: IcpConfig, sigma: NDArray | None = None):
         self.xy = np.ascontiguousarray(xy, dtype=float)
         self.r = np.hypot(self.xy[:, 0], self.xy[:, 1])
         rs = np.where(self.r > 0, self.r, 1.0)
         self.u = self.xy / rs[:, None]
-        self.a2 = (cfg.sigma_alpha * self.r) ** 2  # eq. 6, squared
-        self.b2 = (cfg.sigma_r_rel * self.r) ** 2  # eq. 7, squared
+        if sigma is None:
+            self.a2 = (cfg.sigma_alpha * self.r) ** 2  # eq. 6, squared
+            self.b2 = (cfg.sigma_r_rel * self.r) ** 2  # eq. 7, squared
+        else:  # caller's isotropic 1-sigma per point: a circle, a = b = sigma
+            self.a2 = np.broadcast_to(np.asarray(sigma, dtype=float) ** 2, self.r.shape).copy()
+            self.b2 = self.a2.copy()
         self.m2 = self.a2 + self.b2  # eq. 5, squared
 
     def take(self, idx: NDArray) -> None:
@@ -215,6 +229,15 @@ def _failed(reason: str, init: ArrayLike | None, n_src: int, n_tgt: int, t0: flo
     return MatchResult(np.array([t[0], t[1], th]), _BIG_COV.copy(), False, q)
 
 
+def _per_point(sigma: Any, n: int, name: str) -> NDArray | None:
+    if sigma is None:
+        return None
+    s = np.broadcast_to(np.asarray(sigma, dtype=float), (n,)).copy()
+    if not np.all(np.isfinite(s) & (s > 0)):
+        raise ValueError(f"{name} must be finite and > 0")
+    return s
+
+
 def match_points(
     src_xy: ArrayLike,
     tgt_xy: ArrayLike,
@@ -226,24 +249,42 @@ def match_points(
     """Align ``src_xy`` (N, 2), the current scan's points in its sensor frame, to ``tgt_xy`` (M, 2),
     the previous scan's (Algorithm 1). ``init`` is the initial ``(dx, dy, dyaw)`` (e.g. the
     constant-velocity guess). Points are taken in their sensor frame (the LiDAR error model needs
-    the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma`` are reserved (per-point
-    sigmas are computed from the model of eq. 5-9 with the config's sigma_r_rel and sigma_alpha).
+    the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma`` (scalar or one per point,
+    metres) replace that model by an isotropic 1-sigma per point (e.g. for points that are not raw
+    LiDAR returns); by default the model of eq. 5-9 with the config's sigma_r_rel, sigma_alpha.
     """
     cfg = config or IcpConfig()
     t0 = time.perf_counter()
     src_xy = np.asarray(src_xy, dtype=float).reshape(-1, 2)
     tgt_xy = np.asarray(tgt_xy, dtype=float).reshape(-1, 2)
-    src_xy = src_xy[np.all(np.isfinite(src_xy), axis=1)]
-    tgt_xy = tgt_xy[np.all(np.isfinite(tgt_xy), axis=1)]
+    src_sigma = _per_point(src_sigma, len(src_xy), "src_sigma")
+    tgt_sigma = _per_point(tgt_sigma, len(tgt_xy), "tgt_sigma")
+    keep_s = np.all(np.isfinite(src_xy), axis=1)
+    keep_t = np.all(np.isfinite(tgt_xy), axis=1)
+    src_xy, tgt_xy = src_xy[keep_s], tgt_xy[keep_t]
+    src_sigma = None if src_sigma is None else src_sigma[keep_s]
+    tgt_sigma = None if tgt_sigma is None else tgt_sigma[keep_t]
     ns, nt = len(src_xy), len(tgt_xy)
     if ns < cfg.min_points or nt < cfg.min_points:
         return _failed(f"too few points (source {ns}, target {nt}, need {cfg.min_points})", init, ns, nt, t0)
 
-    src, tgt = _Cloud(src_xy, cfg), _Cloud(tgt_xy, cfg)
+    src, tgt = _Cloud(src_xy, cfg, src_sigma), _Cloud(tgt_xy, cfg, tgt_sigma)
     if cfg.equalize and ns != nt:  # the paper: thin the larger set at random
         rng = np.random.default_rng(cfg.seed)
         big = src if ns > nt else tgt
         big.take(np.sort(rng.choice(max(ns, nt), min(ns, nt), replace=False)))
+    fast = _fast_loop(cfg)
+    if fast is not None:
+        th0, t0_ = _pose_parts(init)
+        big = np.inf if cfg.max_corr_dist is None else cfg.max_corr_dist
+        th, tx_, ty_, idx, it, converged = fast(
+            src.xy[:, 0].copy(), src.xy[:, 1].copy(), src.u[:, 0].copy(), src.u[:, 1].copy(), src.a2, src.b2,
+            src.m2, tgt.xy[:, 0].copy(), tgt.xy[:, 1].copy(), tgt.u[:, 0].copy(), tgt.u[:, 1].copy(), tgt.a2,
+            tgt.b2, tgt.m2, _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big, cfg.tol,
+            cfg.tol_step, cfg.max_iter, th0, t0_[0], t0_[1], _GRID_CELL)
+        pose = np.array([tx_, ty_, th])
+        return _finish(cfg, src, tgt, idx, pose, None, None, it, converged, t0, ns, nt)
+
     nnm = _NearestNeighbours(tgt.xy, cfg)
     p2l = cfg.variant == "HDL"
     normals = flat = None
@@ -286,6 +327,24 @@ def match_points(
 
     pose = np.array([t[0], t[1], th])
     return _finish(cfg, src, tgt, idx, pose, normals, flat, it, converged, t0, ns, nt)
+
+
+_VARIANT_CODE = {"K": 0, "H": 1, "HM": 2, "HD": 3}
+_GRID_CELL = 0.5  # [m] cell of the compiled loop's nearest-neighbour grid
+
+
+def _fast_loop(cfg: IcpConfig) -> Any:
+    """The compiled point-to-point loop when it applies (K/H/HM/HD, k-d-tree-equivalent exact
+    matching) and numba is importable; else None (the numpy loop)."""
+    if cfg.backend == "numpy" or cfg.variant not in _VARIANT_CODE or cfg.matching != "kdtree":
+        return None
+    try:
+        from ._icp_fast import p2p_loop
+    except ImportError:
+        if cfg.backend == "numba":
+            raise
+        return None
+    return p2p_loop
 
 
 class _NearestNeighbours:
@@ -390,7 +449,7 @@ def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=False):  # noqa:
             w = w.copy()
             w[big] *= khu / dist[big]
         if v == "HDL":  # no line where the match is far (the gate widens while far from convergence)
-            w = w * flat[idx] * (d <= max(cfg.line_max_dist, cfg.huber_c * _median(d)))
+            w = w * flat[idx] ** cfg.line_flat_power * (d <= max(cfg.line_max_dist, cfg.huber_c * _median(d)))
     if cfg.max_corr_dist is not None:
         w = np.where(d <= cfg.max_corr_dist, w, 0.0)
     if not np.any(w > 0):
@@ -436,19 +495,11 @@ def _pair_cov(src: _Cloud, tgt: _Cloud, idx: NDArray, r: NDArray) -> tuple[NDArr
     return sxx, sxy, syy
 
 
-def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, nt):  # noqa: ANN001, ANN202
-    """Quality report and covariance at the solution.
-
-    The covariance is the sandwich ``k H^-1 B H^-1`` of the weighted least-squares problem at
-    convergence: ``H = sum w J^T J``, ``B = sum w^2 J^T S J`` with ``S`` the pair's error covariance
-    from the LiDAR model (eq. 8; identity for K and H) and ``k`` its scale estimated from the
-    inlier residuals (``k = sum e^T S^-1 e / dof``). ``J`` is the Jacobian of the residual with
-    respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)`` (GTSAM's Pose2 tangent space):
-    ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1], [1, 0]]``.
-    """
+def _terms_numpy(cfg, src, tgt, idx, pose, normals, flat):  # noqa: ANN001, ANN202
+    """``H``, ``B``, residual scale, RMS residual, point-to-line information, pairs used and
+    inlier fraction at the solution (see :func:`_finish`)."""
     r = _rot(pose[2])
     p = src.xy @ r.T + pose[:2]
-    pose[2] = np.arctan2(np.sin(pose[2]), np.cos(pose[2]))
     q = tgt.xy[idx]  # the last iteration's pairs (the last increment moved no point > tol_step)
     e = p - q
     d = np.hypot(e[:, 0], e[:, 1])
@@ -498,6 +549,36 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     lsc = float(np.sqrt(np.mean(np.sum((ps - ps.mean(0)) ** 2, 1)))) or 1.0
     jl[:, 2] /= lsc
     info = (jl * (sel * fl)[:, None]).T @ jl
+    return h, bmat, kscale, res_rms, info, int(use.sum()), float(inl.mean())
+
+
+def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, nt):  # noqa: ANN001, ANN202
+    """Quality report and covariance at the solution.
+
+    The covariance is the sandwich ``k H^-1 B H^-1`` of the weighted least-squares problem at
+    convergence: ``H = sum w J^T J``, ``B = sum w^2 J^T S J`` with ``S`` the pair's error covariance
+    from the LiDAR model (eq. 8; identity for K and H) and ``k`` its scale estimated from the
+    inlier residuals (``k = sum e^T S^-1 e / dof``). ``J`` is the Jacobian of the residual with
+    respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)`` (GTSAM's Pose2 tangent space):
+    ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1], [1, 0]]``.
+    """
+    fast = _fast_loop(cfg) is not None
+    if fast:
+        from ._icp_fast import p2p_stats
+
+        big = np.inf if cfg.max_corr_dist is None else cfg.max_corr_dist
+        h, bmat, ksum, dof, n_sel, res_rms, info, n_use, n_inl = p2p_stats(
+            src.xy[:, 0].copy(), src.xy[:, 1].copy(), src.u[:, 0].copy(), src.u[:, 1].copy(), src.a2, src.b2,
+            src.m2, tgt.xy[:, 0].copy(), tgt.xy[:, 1].copy(), tgt.u[:, 0].copy(), tgt.u[:, 1].copy(), tgt.a2,
+            tgt.b2, tgt.m2, _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big, float(pose[2]),
+            float(pose[0]), float(pose[1]), np.asarray(idx, dtype=np.int64), cfg.normal_k // 2,
+            cfg.line_max_gap, cfg.inlier_dist)
+        kscale = ksum / dof if n_sel else float("nan")
+        inlier_fraction = n_inl / len(idx)
+    else:
+        h, bmat, kscale, res_rms, info, n_use, inlier_fraction = _terms_numpy(
+            cfg, src, tgt, idx, pose, normals, flat)
+    pose[2] = np.arctan2(np.sin(pose[2]), np.cos(pose[2]))
     ev = np.linalg.eigvalsh(info)
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
     try:
@@ -505,8 +586,8 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
         cov = kscale * hinv @ bmat @ hinv.T
     except np.linalg.LinAlgError:
         cov = _BIG_COV.copy()
-    cov = 0.5 * (cov + cov.T) * cfg.cov_scale + np.diag(np.square(cfg.cov_floor))
-    inlier_fraction = float(inl.mean())
+    scale = COV_SCALE[cfg.variant] if cfg.cov_scale is None else cfg.cov_scale
+    cov = 0.5 * (cov + cov.T) * scale + np.diag(np.square(cfg.cov_floor))
     degenerate = not np.isfinite(cond) or cond > cfg.max_condition
     reasons = []
     if degenerate:
@@ -517,7 +598,7 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
         reasons.append("non-finite covariance")
         cov = _BIG_COV.copy()
     quality = {
-        "points_used": int(use.sum()),
+        "points_used": int(n_use),
         "points_source": ns,
         "points_target": nt,
         "inlier_fraction": inlier_fraction,

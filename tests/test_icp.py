@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import json
+import os
 
 import gtsam
 import numpy as np
 import pytest
-from _scan_sim import corridor, noisy_scan, raycast, room, to_frame
+from _scan_sim import corridor, even_points, noisy_scan, observe, raycast, room, to_frame
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -25,25 +26,6 @@ from graphnav.log import NavLog, Scan, Truth
 from graphnav.movement import movement_from_increments
 
 TIGHT = {"tol": 1e-12, "tol_step": 1e-10, "max_iter": 100}
-
-
-def even_points(segs: np.ndarray, spacing: float) -> np.ndarray:
-    out = []
-    for s in segs:
-        n = max(int(np.hypot(s[2] - s[0], s[3] - s[1]) / spacing), 1)
-        u = (np.arange(n) + 0.5) / n
-        out.append(s[:2] + u[:, None] * (s[2:] - s[:2]))
-    return np.vstack(out)
-
-
-def observe(world: np.ndarray, pose, rng, s_rel: float, s_a: float) -> np.ndarray:
-    """World points seen from ``pose`` with the LiDAR error model (range and angle noise)."""
-    p = to_frame(world, pose)
-    r = np.hypot(p[:, 0], p[:, 1])
-    a = np.arctan2(p[:, 1], p[:, 0])
-    r = r + rng.normal(0, 1, len(r)) * s_rel * r
-    a = a + rng.normal(0, s_a, len(r))
-    return np.column_stack([r * np.cos(a), r * np.sin(a)])
 
 
 def gtsam_error(est, true) -> np.ndarray:
@@ -309,3 +291,121 @@ def test_cli_prints_one_json_object_with_the_issue_keys(tmp_path, capsys):
     assert (tmp_path / "o" / "pairs.csv").exists()
     assert (tmp_path / "o" / "fig12_sog_diff.png").exists()
     assert (tmp_path / "o" / "fig15_dcog_hist.png").exists()
+
+
+# ----------------------------------------------------------------------------- compiled backend
+
+
+_NUMBA_CHECK = """
+import numpy as np, sys
+sys.path[:0] = [{repo!r}, {tests!r}]
+from _scan_sim import even_points, observe, room
+from graphnav.icp import IcpConfig, match_points
+rng = np.random.default_rng(8)
+world = even_points(room(), 0.5)
+src = observe(world, (0.5, -0.2, 0.04), rng, 0.004, 0.003)
+tgt = observe(world, (0.0, 0.0, 0.0), rng, 0.004, 0.003)
+for v in ("K", "HD"):
+    a = match_points(src, tgt, IcpConfig(variant=v, backend="numba"), init=[0.45, -0.15, 0.03])
+    b = match_points(src, tgt, IcpConfig(variant=v, backend="numpy"), init=[0.45, -0.15, 0.03])
+    assert np.allclose(a.pose, b.pose, atol=1e-10), (a.pose, b.pose)
+    assert np.allclose(a.cov, b.cov, rtol=1e-8, atol=0)
+    assert a.quality["iterations"] == b.quality["iterations"]
+print("ok")
+"""
+
+
+def test_numba_backend_logic_equals_numpy_uncompiled():
+    """The compiled loop's code, run as plain Python (NUMBA_DISABLE_JIT, no compile time), gives
+    the numpy loop's results; the compiled run is the slow test below."""
+    pytest.importorskip("numba")
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    code = _NUMBA_CHECK.format(repo=str(here.parent), tests=str(here))
+    out = subprocess.run([sys.executable, "-c", code], env={**os.environ, "NUMBA_DISABLE_JIT": "1"},
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-2000:]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("GRAPHNAV_RUN_SLOW"),
+                    reason="compiles numba for 20-60 s; set GRAPHNAV_RUN_SLOW=1 (uncompiled check: always)")
+def test_numba_backend_equals_numpy():
+    """The compiled K/H/HM/HD loop (grid nearest neighbours) gives the numpy loop's results
+    (slow: the first run compiles for 20-60 s; cached afterwards)."""
+    pytest.importorskip("numba")
+    from scipy.spatial import cKDTree
+
+    from graphnav._icp_fast import build_grid, nearest
+
+    rng = np.random.default_rng(8)
+    tgt = rng.uniform(-20, 20, (300, 2))
+    q = rng.uniform(-40, 40, (200, 2))  # also far outside the target's box
+    grid = build_grid(tgt[:, 0].copy(), tgt[:, 1].copy(), 0.5)
+    d_ref, i_ref = cKDTree(tgt).query(q)
+    got = np.array([nearest(x, y, tgt[:, 0].copy(), tgt[:, 1].copy(), grid[0], grid[1], 0.5, *grid[2:])
+                    for x, y in q])
+    assert np.array_equal(got[:, 1].astype(int), i_ref)
+    assert np.allclose(got[:, 0], d_ref, atol=1e-12)
+
+    world = even_points(room(), 0.25)
+    src = observe(world, (0.5, -0.2, 0.04), rng, 0.004, 0.003)
+    tgt = observe(world, (0.0, 0.0, 0.0), rng, 0.004, 0.003)
+    for v in ("K", "H", "HM", "HD"):
+        a = match_points(src, tgt, IcpConfig(variant=v, backend="numba"), init=[0.45, -0.15, 0.03])
+        b = match_points(src, tgt, IcpConfig(variant=v, backend="numpy"), init=[0.45, -0.15, 0.03])
+        assert np.allclose(a.pose, b.pose, atol=1e-10)
+        assert np.allclose(a.cov, b.cov, rtol=1e-8, atol=0)
+        assert a.quality["iterations"] == b.quality["iterations"] and a.ok == b.ok
+        assert a.quality["condition_number"] == pytest.approx(b.quality["condition_number"], rel=1e-8)
+
+
+@settings(max_examples=15, deadline=None)
+@given(dx=st.floats(-0.8, 0.8), dy=st.floats(-0.5, 0.5), dth=st.floats(-0.1, 0.1), yaw0=st.floats(-3.1, 3.1))
+def test_property_rigid_motion_is_recovered(dx, dy, dth, yaw0):
+    """Any rigid motion of a noise-free room scan is recovered (K, from a guess 3 cm / 0.3 deg off)."""
+    world = even_points(room(), 0.2)
+    p0 = np.array([0.5, -0.3, yaw0])
+    true = np.array([dx, dy, dth])
+    tgt = to_frame(world, p0)
+    src = to_frame(world, se2_compose(p0, true))
+    res = match_points(src, tgt, IcpConfig(variant="K", **TIGHT), init=true + [0.03, -0.03, 0.005])
+    assert np.abs(res.pose - true).max() < 1e-6
+
+
+def test_reference_glitch_rule_known_answer():
+    from graphnav.icp_pairs import valid_reference_steps
+
+    n = 40
+    steps = np.column_stack([np.full(n, 1.25), np.zeros(n), np.zeros(n)])
+    steps[10:20, 2] = np.radians(3.0)  # a turn: onset and end must stay valid
+    steps[5, 0] = 0.07  # a short step
+    steps[25, 2] = np.radians(-3.0)  # an isolated yaw spike
+    steps[0] = np.nan  # no reference
+    steps[34:, 0] = [1.0, 0.2, 1.2, 1.2, 0.8, 0.0]  # ragged end: 36-37 are fine but isolated
+    ok = valid_reference_steps(steps)
+    bad = set(np.flatnonzero(~ok))
+    assert bad == {0, 5, 25, 34, 35, 36, 37, 38, 39}
+
+
+def test_caller_sigmas_replace_the_lidar_model():
+    """Per-point sigmas: equal ones make HM's weights uniform (= H); a huge sigma on the clutter
+    mutes it even without the Huber kernel's help."""
+    rng = np.random.default_rng(7)
+    world = even_points(room(), 0.2)
+    true = np.array([0.3, -0.1, 0.03])
+    tgt = observe(world, (0.0, 0.0, 0.0), rng, 0.002, 0.001)
+    src = observe(world, true, rng, 0.002, 0.001)
+    hm = match_points(src, tgt, IcpConfig(variant="HM"), init=true, src_sigma=0.05, tgt_sigma=0.05)
+    h = match_points(src, tgt, IcpConfig(variant="H"), init=true)
+    assert np.allclose(hm.pose, h.pose, atol=1e-9)
+    junk = np.column_stack([rng.uniform(2.0, 9.0, 150), rng.uniform(-5.0, 5.0, 150)])
+    sig = np.r_[np.full(len(src), 0.01), np.full(150, 100.0)]
+    res = match_points(np.vstack([src, junk]), tgt, IcpConfig(variant="HM", huber_c=1e9), init=np.zeros(3),
+                       src_sigma=sig, tgt_sigma=0.01)
+    assert np.abs(res.pose - true).max() < 0.01
+    with pytest.raises(ValueError, match="src_sigma"):
+        match_points(src, tgt, IcpConfig(), src_sigma=-1.0)
