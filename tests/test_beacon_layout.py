@@ -107,3 +107,20 @@ def test_summary_picks_the_minimum():
 def test_choices_are_validated():
     with pytest.raises(ValueError):
         Choices(linearize="sometimes")
+
+
+def test_isam2_online_marginals_equal_the_ekf_and_smoothing_only_helps():
+    # GTSAM (native factors, iSAM2) cross-checks the hand-written batched EKF: on the planned track
+    # the filtering marginal of X_k is the EKF covariance after step k
+    from graphnav.beacon_layout_graph import passage_marginals, score_chunk_graph
+
+    lay = np.array([[650.0, 370.0], [300.0, 50.0]])
+    m = passage_marginals(lay)
+    o = propagate(lay[None])
+    # (atol: the graph's 1e-6 m cross-track odometry sigma, where eq. 3 has exactly none)
+    np.testing.assert_allclose(m["online"][:, 0], o["mx"][0] ** 2, rtol=1e-4, atol=1e-9)
+    np.testing.assert_allclose(m["online"][:, 1], o["my"][0] ** 2, rtol=1e-4, atol=1e-9)
+    assert np.all(m["smoothed"] <= m["online"] * (1 + 1e-9))
+    assert np.allclose(m["smoothed"][-1], m["online"][-1], rtol=1e-6)   # the last pose: nothing to smooth
+    r = score_chunk_graph({"layouts": [lay.tolist()], "marginals": "smoothed"})
+    assert r["scores"] == r["scores_smoothed"] and r["scores_smoothed"][0][0] < r["scores_online"][0][0]
