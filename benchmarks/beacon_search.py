@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import time
 
 import numpy as np
@@ -28,14 +29,22 @@ from graphnav.beacon_layout import (
 from graphnav.sweep import run_sweep
 
 
-def search(client, beacons: int, ch: Choices, chunk: int, fw: Fairway | None = None) -> tuple[dict, float]:
+def timed_score_chunk(task: dict) -> dict:
+    """score_chunk plus the worker's CPU time for it (the machine may be shared: wall != CPU)."""
+    c0 = time.process_time()
+    out = score_chunk(task)
+    return {**out, "cpu_s": time.process_time() - c0}
+
+
+def search(client, beacons: int, ch: Choices, chunk: int,
+           fw: Fairway | None = None) -> tuple[dict, float, float]:
     fw = fw or Fairway()
     layouts = grid(beacons)
     t0 = time.perf_counter()
-    res = run_sweep(score_chunk, chunk_tasks(layouts, chunk, fw, ch), scheduler=client, progress=False)
+    res = run_sweep(timed_score_chunk, chunk_tasks(layouts, chunk, fw, ch), scheduler=client, progress=False)
     wall = time.perf_counter() - t0
     scores = np.concatenate([np.asarray(r["scores"]) for r in res])
-    return summarize_search(layouts, scores), wall
+    return summarize_search(layouts, scores), wall, sum(r["cpu_s"] for r in res)
 
 
 def table(rows: dict[int, dict]) -> str:
@@ -92,27 +101,33 @@ def main() -> None:
     client.run(lambda: __import__("graphnav.beacon_layout"))  # warm the workers' imports
     startup = time.perf_counter() - t0
     try:
-        rows, walls = {}, {}
+        rows, walls, cpus = {}, {}, {}
         for b in (1, 2, 4):
-            rows[b], walls[b] = search(client, b, Choices(), args.chunk)
+            rows[b], walls[b], cpus[b] = search(client, b, Choices(), args.chunk)
         total = sum(walls.values())
         print("Table 1 (EKF-SLAM linearised on the true track, P0 eq. 14 with zero cross terms)")
         print(table(rows))
         print()
-        print(f"{'search':10s}{'configs':>9s}{'wall [s]':>10s}{'configs/s':>11s}")
+        print(f"{'search':10s}{'configs':>9s}{'wall [s]':>10s}{'configs/s':>11s}{'CPU [s]':>10s}"
+              f"{'configs/CPU-s':>15s}")
         for b in rows:
             n = rows[b]["configs"]
-            print(f"{b:>2d} beacon{'s' if b > 1 else ' '}{n:9d}{walls[b]:10.2f}{n / walls[b]:11.0f}")
+            print(f"{b:>2d} beacon{'s' if b > 1 else ' '}{n:9d}{walls[b]:10.2f}{n / walls[b]:11.0f}"
+                  f"{cpus[b]:10.2f}{n / cpus[b]:15.0f}")
         n = sum(r["configs"] for r in rows.values())
-        print(f"{'all':10s}{n:9d}{total:10.2f}{n / total:11.0f}   ({args.workers} workers; cluster start-up "
-              f"{startup:.2f} s not included)")
+        cpu = sum(cpus.values())
+        print(f"{'all':10s}{n:9d}{total:10.2f}{n / total:11.0f}{cpu:10.2f}{n / cpu:15.0f}")
+        print(f"({args.workers} workers; cluster start-up {startup:.2f} s not included; "
+              "CPU = sum over workers. "
+              f"On {args.workers} idle cores the wall time would be about CPU / {args.workers} = "
+              f"{cpu / args.workers:.1f} s. Load average now: {os.getloadavg()[0]:.1f})")
         if args.variants:
             print("\nModelling choices, one at a time: min / max / mean-over-configurations of mean M_xy [m]")
             print(f"{'variant':58s}" + "".join(f"{'i=' + str(b):>20s}" for b in (1, 2, 4)))
             for label, kw in VARIANTS:
                 cells = []
                 for b in (1, 2, 4):
-                    s, _ = search(client, b, Choices(**kw), args.chunk)
+                    s, _, _ = search(client, b, Choices(**kw), args.chunk)
                     cells.append(f"{s['best']['mean_mxy']:6.2f}/{s['worst_mean_mxy']:6.2f}/"
                                  f"{s['mean_over_configs_mxy']:6.2f}")
                 print(f"{label:58s}" + "".join(f"{c:>20s}" for c in cells), flush=True)
