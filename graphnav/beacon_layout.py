@@ -209,21 +209,25 @@ def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices, kee
         if est:
             v = fw.v + dv[k - 1]
             th = x[2].copy()
-        else:
-            v = np.full(C, fw.v)
-            th = np.full(C, track[k - 1, 2])
-        c, s = np.cos(th), np.sin(th)
+            c, s = np.cos(th), np.sin(th)
+            zero, one = np.zeros(C), np.ones(C)
+        else:  # on the true track G and R are the same for every layout: scalars, not vectors
+            v, th = fw.v, track[k - 1, 2]
+            c, s = float(np.cos(th)), float(np.sin(th))
+            zero, one = 0.0, 1.0
         ga, gb = -s * dt * v, c * dt * v
         P[0] += ga * P[2]
         P[1] += gb * P[2]
         P[:, 0] += ga * P[:, 2]
         P[:, 1] += gb * P[:, 2]
-        w0 = np.stack([c * dt, s * dt, np.zeros(C)])
-        if ch.w_second == "rot":
-            w1 = np.stack([np.zeros(C), np.zeros(C), np.full(C, dt)])
-        else:
-            w1 = np.stack([ga, gb, np.ones(C)])
-        P[:3, :3] += m_v * w0[:, None] * w0[None] + m_rot * w1[:, None] * w1[None]
+        w0 = (c * dt, s * dt, zero)
+        w1 = (zero, zero, dt * one) if ch.w_second == "rot" else (ga, gb, one)
+        for a in range(3):
+            for e in range(a, 3):
+                r = m_v * w0[a] * w0[e] + m_rot * w1[a] * w1[e]
+                P[a, e] += r
+                if e != a:
+                    P[e, a] += r
         if est:
             x[0] += v * dt * c
             x[1] += v * dt * s
