@@ -5,20 +5,20 @@ fairway, V = 10 m/s, 200 steps of 0.5 s) and observes range and bearing to every
 For each candidate beacon layout the range-bearing EKF-SLAM of sections 3-5 is propagated and the
 layout is scored by the passage means of M_xy = sqrt(P00 + P11) (eq. 28), M_x (eq. 29), M_y (eq. 30).
 
-Everything here is vectorised over configurations: arrays carry a leading axis ``C`` and the filter
-runs all layouts of one search at once (numpy, no Python loop over layouts). The sparsity of G
-(eq. 19) and H (eq. 25) is exploited: the prediction is a rank-1 shear plus the 3x3 motion noise,
-every update a rank-2 correction in expanded Joseph form. The single-configuration reference with
-dense matrices, exactly as the paper writes them, is :class:`graphnav.estimators.ekf_slam.EkfSlam`;
-``tests/test_beacon_layout.py`` checks the two agree.
+Everything here is vectorised over configurations: the filter runs all layouts of a block at once
+(numpy, matrices stored (n, n, C) so every entry is a contiguous vector over layouts; no Python loop
+over layouts). The sparsity of G (eq. 19) and H (eq. 25) is exploited: the prediction is a rank-1
+shear plus the 3x3 motion noise, every correction a rank-2 update built from H's five non-zero
+columns. The single-configuration reference with dense matrices, exactly as the paper writes them
+(Joseph form), is :class:`graphnav.estimators.ekf_slam.EkfSlam`; ``tests/test_beacon_layout.py``
+checks the two agree, and that GTSAM's iSAM2 marginals (:mod:`graphnav.beacon_layout_graph`) agree.
 
 Choices the paper leaves open are explicit fields of :class:`Choices` (see docs/beacon-layout.md).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from itertools import product
 from typing import Any
 
@@ -328,10 +328,6 @@ def summarize_search(layouts: NDArray[np.float64], scores: NDArray[np.float64]) 
             "mean_over_configs_my": float(scores[:, 2].mean())}
 
 
-def with_choices(ch: Choices, **kw: Any) -> Choices:
-    return replace(ch, **kw)
-
-
 PAPER_TABLE1: dict[int, dict[str, Any]] = {
     1: {"layout": [[650.0, 370.0]], "min": 3.46, "min_mx": 1.74, "min_my": 2.87, "max": 58.07, "mean": 9.06,
         "mean_mx": 2.0, "mean_my": 8.58, "configs": 4000},
@@ -341,8 +337,3 @@ PAPER_TABLE1: dict[int, dict[str, Any]] = {
         "mean_mx": 0.27, "mean_my": 0.89, "configs": 10000},
 }
 """Table 1 of the paper (the 4-beacon layout is garbled in the source text)."""
-
-
-def iter_searches(beacons: Iterable[int]) -> Iterable[tuple[int, NDArray[np.float64]]]:
-    for b in beacons:
-        yield b, grid(b)
