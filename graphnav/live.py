@@ -214,8 +214,6 @@ class LiveRunner:
             return
         self.estimates += 1
         self.last_estimate = est
-        if self.writer is not None:
-            self.writer.write(est.t, est.pose, est.cov)
         if self.pub_sock is not None and self.decoder.frame is not None:
             hdop = 1.0
             if est.cov is not None and np.all(np.isfinite(est.cov[:2, :2])):
@@ -228,8 +226,10 @@ class LiveRunner:
                 self.published += len(lines)
             except OSError as exc:
                 log_.warning("publish to %s failed: %s", self.publish, exc)
-        if arrival is not None:
+        if arrival is not None:  # the published solution is the latency-critical path; the file comes next
             self.latency_ms.append((time.perf_counter() - arrival) * 1e3)
+        if self.writer is not None:
+            self.writer.write(est.t, est.pose, est.cov)
 
     # -- the loop
     def run(self) -> dict[str, Any]:

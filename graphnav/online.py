@@ -68,13 +68,16 @@ class GraphOnline:
     solve: one solve per epoch); ``odo_sigma_v`` [m/s], ``odo_sigma_w_deg`` [deg/s],
     ``lateral_sigma`` [m/s] per-second noise of the motion model when the log gives none;
     ``gnss_huber`` Huber threshold in sigmas; ``covariance``: compute the marginal covariance of
-    each estimate (costs ~0.1-1 ms).
+    each estimate (costs ~0.1-1 ms); ``rebase_every``: re-anchor the fixed-lag smoother every so
+    many nodes (bounded memory, see :meth:`_rebase`); ``relinearize_threshold``/``relinearize_skip``:
+    iSAM2's (GTSAM defaults; 0.01/1 is ~4 % more accurate on the synthetic trial and 3x slower).
     """
 
     def __init__(self, *, lag: float | None = 5.0, outage_s: float = 1.5, odo_sigma_v: float = 0.1,
                  odo_sigma_w_deg: float = 0.5, lateral_sigma: float = 0.2, free_speed: float = 3.0,
                  free_rate_deg: float = 10.0, odo_max_age: float = 2.0, gnss_huber: float = 1.5,
-                 covariance: bool = True) -> None:
+                 covariance: bool = True, rebase_every: int | None = 18_000,
+                 relinearize_threshold: float = 0.1, relinearize_skip: int = 10) -> None:
         self.lag = lag
         self.outage_s = outage_s
         self.sv, self.sw = odo_sigma_v, math.radians(odo_sigma_w_deg)
@@ -83,10 +86,14 @@ class GraphOnline:
         self.odo_max_age = odo_max_age
         self.gnss_huber = gnss_huber
         self.covariance = covariance
+        self.rebase_every = rebase_every
+        self.params = None
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(0.01)
-        params.relinearizeSkip = 1
+        params.setRelinearizeThreshold(relinearize_threshold)
+        params.relinearizeSkip = relinearize_skip
+        self.params = params
         self.solver = gtsam.IncrementalFixedLagSmoother(lag, params) if lag else gtsam.ISAM2(params)
+        self.k_base = 0
         self.k = -1  # current node
         self.t: float | None = None  # its time
         self.t_origin: float | None = None
@@ -141,12 +148,10 @@ class GraphOnline:
         t0 = time.perf_counter()
         if self.lag:
             self.solver.update(self.graph, self.values, self.stamps)
-            est = self.solver.calculateEstimate()
         else:
             self.solver.update(self.graph, self.values)
-            est = self.solver.calculateEstimate()
         self.graph, self.values, self.stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
-        p = est.atPose2(self.k)
+        p = self.solver.calculateEstimatePose2(self.k)
         self.pose = np.array([p.x(), p.y(), p.theta()])
         cov = np.asarray(self.solver.marginalCovariance(self.k)) if self.covariance else None
         if cov is not None:  # body-frame (GTSAM) -> world-frame covariance
@@ -155,18 +160,40 @@ class GraphOnline:
             R[:2, :2] = [[c, -s], [s, c]]
             cov = R @ cov @ R.T
         sog = cog = w = None
-        if self.k >= 1 and est.exists(self.k - 1) and self.prev is not None and self.t > self.prev[0]:
-            q = est.atPose2(self.k - 1)
+        if self.k >= 1 and self.prev is not None and self.t > self.prev[0]:
+            try:
+                q = self.solver.calculateEstimatePose2(self.k - 1)
+            except (RuntimeError, IndexError, ValueError):  # marginalized (a gap longer than the lag)
+                q = gtsam.Pose2(*self.prev[1])
             dt = self.t - self.prev[0]
             dx, dy = p.x() - q.x(), p.y() - q.y()
             sog, cog = math.hypot(dx, dy) / dt, math.atan2(dy, dx)
             w = float(wrap_angle(p.theta() - q.theta())) / dt
         if self.odo is not None and self.t - self.odo.t <= self.odo_max_age:
             sog, w = abs(self.odo.v), self.odo.w  # measured rates are less noisy than differenced poses
+        if self.lag and self.rebase_every and self.k - self.k_base >= self.rebase_every:
+            self._rebase(p)
         self.step_ms.append((time.perf_counter() - t0) * 1e3)
         if len(self.step_ms) > 100_000:
             del self.step_ms[:50_000]
         return Estimate(self.t, self.pose.copy(), cov, sog, cog, w)
+
+    def _rebase(self, p: gtsam.Pose2) -> None:
+        """Start a fresh fixed-lag smoother anchored at the current node with its marginal covariance.
+
+        GTSAM's smoothers keep an empty slot for every factor ever removed, so their memory grows
+        ~100 bytes per epoch; re-anchoring every ``rebase_every`` nodes (30 min at 10 Hz) keeps it
+        flat at the cost of dropping the correlation with the older nodes of the window.
+        """
+        cov = np.asarray(self.solver.marginalCovariance(self.k))
+        self.solver = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        g = gtsam.NonlinearFactorGraph()
+        g.add(gtsam.PriorFactorPose2(self.k, p, gtsam.noiseModel.Gaussian.Covariance(cov)))
+        v = gtsam.Values()
+        v.insert(self.k, p)
+        self.solver.update(g, v, {self.k: self.t - self.t_origin})
+        self.k_base = self.k
+        self.counts["rebases"] = self.counts.get("rebases", 0) + 1
 
     # -- the interface
     def add(self, record: Record) -> Estimate | None:
