@@ -43,7 +43,7 @@ import numpy as np
 
 from .errors import LogError
 from .geodesy import LocalFrame
-from .io.nmea import NmeaDecoder, parse_sentence
+from .io.nmea import UERE_M, NmeaDecoder, parse_sentence
 from .io.nmea_out import solution_sentences
 from .log import Gnss, NavLog, Scan
 from .online import Estimate, OnlineEstimator
@@ -168,6 +168,7 @@ class LiveRunner:
         self.wall_s = 0.0
         self.stop_reason = ""
         self.last_estimate: Estimate | None = None
+        self.hdop = 1.0  # published HDOP: from the last estimate that carried a covariance
 
     def stop(self, *_: Any) -> None:
         self._stop.set()
@@ -215,11 +216,10 @@ class LiveRunner:
         self.estimates += 1
         self.last_estimate = est
         if self.pub_sock is not None and self.decoder.frame is not None:
-            hdop = 1.0
-            if est.cov is not None and np.all(np.isfinite(est.cov[:2, :2])):
-                hdop = max(0.01, math.sqrt(max(0.0, 0.5 * (est.cov[0, 0] + est.cov[1, 1]))) / 3.0)
+            if est.cov is not None and np.all(np.isfinite(est.cov[:2, :2])):  # HDOP = sigma / UERE(GPS)
+                self.hdop = max(0.01, math.sqrt(max(0.0, 0.5 * (est.cov[0, 0] + est.cov[1, 1]))) / UERE_M[1])
             lines = solution_sentences(est.t, est.pose, self.decoder.frame, sog=est.sog, cog_yaw=est.cog,
-                                       w=est.w, hdop=hdop)
+                                       w=est.w, hdop=self.hdop)
             try:
                 self.pub_sock.sendto(("\r\n".join(lines) + "\r\n").encode("ascii"),
                                      (self.publish.host, self.publish.port))

@@ -75,3 +75,18 @@ def test_rebase_keeps_the_estimate():
     assert b.counts["rebases"] >= 5 and "rebases" not in a.counts
     assert abs(ate(tb, log.truth())["rmse"] - ate(ta, log.truth())["rmse"]) < 0.1
     assert np.max(np.hypot(*(ta.poses[:, :2] - tb.poses[:, :2]).T)) < 0.5
+
+
+def test_scan_factors_carry_a_gnss_outage_without_odometry():
+    """No odometry, GNSS lost for 30 s: scan-to-scan registration must carry the track."""
+    log = synthetic_trial(duration=50.0, scans=True, seed=2)
+    lg = log.without(lambda r: r.kind == "odometry" or (r.kind == "gnss" and 15 <= r.t - 1.7e9 <= 45))
+    errs = {}
+    for use in (False, True):
+        est = GraphOnline(use_scans=use)
+        tr = run_online(lg, est)
+        m = (tr.t > 1.7e9 + 15) & (tr.t < 1.7e9 + 45)
+        ref = log.truth().poses[np.searchsorted(log.truth().t, tr.t[m] - 1e-6)]
+        errs[use] = float(np.max(np.hypot(*(tr.poses[m, :2] - ref[:, :2]).T)))
+    assert est.counts["icp"] >= 40
+    assert errs[True] < 10.0 and errs[False] > 3 * errs[True], errs
