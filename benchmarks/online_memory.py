@@ -44,6 +44,7 @@ def main() -> int:
     ap.add_argument("--every", type=float, default=30.0, help="sample RSS every N simulated minutes")
     ap.add_argument("--estimator", default="fixed-lag")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--progress", action="store_true", help="each RSS sample to stderr as it is taken")
     args = ap.parse_args()
     est = make_online(args.estimator)
     dec = NmeaDecoder(keep=False)
@@ -58,6 +59,8 @@ def main() -> int:
         if t - t_first >= next_sample:
             rows.append({"sim_h": (t - t_first) / 3600, "rss_mb": rss_mb(),
                          "wall_s": time.perf_counter() - w0, "sentences": n_sent, "estimates": n_est})
+            if args.progress:
+                print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
             next_sample += args.every * 60
         n_sent += 1
         for rec in dec.feed(parse_sentence(s, require_checksum=True)):

@@ -221,7 +221,7 @@ def garbage_line(draw):
     return sentence(",".join(fields))  # valid checksum around garbage fields
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.lists(garbage_line(), min_size=1, max_size=8))
 def test_garbage_only_raises_logerror(tmp_path, lines):
     p = tmp_path / "g.nmea"
