@@ -161,6 +161,7 @@ class LiveRunner:
         self._stop = threading.Event()
         self.sentences_in = 0
         self.bad = 0
+        self.ignored = 0
         self.estimates = 0
         self.published = 0
         self.records = 0
@@ -186,6 +187,9 @@ class LiveRunner:
                 raise LogError("non-ASCII bytes", field="sentence") from None
             recs = self.decoder.feed(parse_sentence(line, require_checksum=self.require_checksum))
         except LogError as err:
+            if err.field == "sentence" and err.message.startswith("unknown sentence type"):
+                self.ignored += 1  # well-formed but of a type pynmea2 does not know (e.g. proprietary)
+                return
             self.bad += 1
             if self.bad <= 20 or self.bad % 1000 == 0:
                 log_.warning("bad sentence #%d (%s): %r", self.bad, err, s[:80])
@@ -297,6 +301,7 @@ class LiveRunner:
             "latency_ms_median": float(np.median(lat)) if lat.size else None,
             "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None,
             "latency_ms_max": float(lat.max()) if lat.size else None,
+            "ignored_sentences": self.ignored,
             "records": self.records,
             "wall_s": self.wall_s,
             "sentences_per_s": self.sentences_in / self.wall_s if self.wall_s > 0 else None,

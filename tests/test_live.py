@@ -21,6 +21,7 @@ import pytest
 from graphnav.geodesy import LocalFrame
 from graphnav.geometry import heading_deg_to_yaw, wrap_angle
 from graphnav.io.nmea import read_nmea
+from graphnav.io.nmea_out import sentence
 from graphnav.io.synthetic import synthetic_trial
 from graphnav.live import LiveRunner, parse_endpoint
 from graphnav.online import GraphOnline, make_online, run_online
@@ -157,7 +158,8 @@ def test_malformed_and_truncated_stream_does_not_stop_the_estimator():
     th, summary = start_runner(runner)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     junk = [b"\xff\xfe\x00garbage", b"$GPGGA,1", b"$" + b"A" * 10000, b"", b"\r\n\r\n", b"$GNGGA,,,,,,,,,*00",
-            b"$HEHDT,1,T*FF", b"!AIVDM,1,1,,A,13aG?P0P00PD;88MD5MTDww@2<0L,0*30"]
+            b"$HEHDT,1,T*FF", b"!AIVDM,1,1,,A,13aG?P0P00PD;88MD5MTDww@2<0L,0*30",
+            (sentence("GPXYZ,1,2") + "\r\n").encode()]  # valid but unknown: ignored, not bad
     half = len(sentences) // 2
     for s in sentences[:half]:
         tx.sendto(s.encode() + b"\r\n", ("127.0.0.1", port))
@@ -171,6 +173,7 @@ def test_malformed_and_truncated_stream_does_not_stop_the_estimator():
     assert not th.is_alive()
     assert summary["bad_sentences"] >= len(sentences) - half + 5
     assert summary["estimates"] == len(log.of("gnss"))  # one per fix, before and after the junk
+    assert summary["ignored_sentences"] == 1
     assert runner.last_estimate is not None and runner.last_estimate.t == pytest.approx(log.t1)
 
 
