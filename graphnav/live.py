@@ -7,10 +7,14 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
   chart plotter's server) and reconnects every second when the link drops. Every line is checked
   (checksum required) and decoded by :class:`graphnav.io.nmea.NmeaDecoder`; a bad sentence is
   counted (``bad_sentences``) and logged (the first 20, then every 1000th), never fatal.
-* **Scans** -- ``scans_from`` (a :class:`NavLog`) replays that log's scans on the NMEA stream's
-  clock: a scan is handed to the estimator when the stream's sentence time passes its time stamp
-  (if the two time bases differ by more than 60 s, the log is shifted so that its first scan falls
-  on the first timed sentence). The run ends when the last scan has been handed over.
+* **Scans** -- ``scan_sources`` (``udp://HOST:PORT``) receive one scan per datagram: a JSON
+  Lines ``scan`` record (docs/log-format.md: ``{"t", "type": "scan", "ranges", "angles"}`` or
+  ``angle_min``/``angle_increment``; ``null``/0 = no return), ``t`` on the NMEA clock (POSIX s);
+  bad packets are counted (``bad_scans``). Or ``scans_from`` (a :class:`NavLog`) replays that
+  log's scans on the NMEA stream's clock: a scan is handed to the estimator when the stream's
+  sentence time passes its time stamp (if the two time bases differ by more than 60 s, the log is
+  shifted so that its first scan falls on the first timed sentence). The run ends when the last
+  scan has been handed over.
 * **Estimator** -- anything implementing :class:`graphnav.online.OnlineEstimator`
   (``add(record) -> Estimate | None``); the built-in adapter is
   :class:`graphnav.online.GraphOnline` (GTSAM fixed-lag by default). The full smoother/EKF plug in
@@ -26,6 +30,7 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import selectors
@@ -43,6 +48,7 @@ import numpy as np
 
 from .errors import LogError
 from .geodesy import LocalFrame
+from .io.jsonl import parse_record
 from .io.nmea import UERE_M, NmeaDecoder, parse_sentence
 from .io.nmea_out import solution_sentences
 from .log import Gnss, NavLog, Scan
@@ -73,10 +79,12 @@ def parse_endpoint(url: str, schemes: tuple[str, ...] = ("udp", "tcp")) -> Endpo
 
 
 class _Source:
-    """One NMEA input: a bound UDP socket or a (re)connecting TCP client with a line buffer."""
+    """One input: a bound UDP socket or a (re)connecting TCP client with a line buffer.
+    ``kind`` is ``"nmea"`` (lines) or ``"scan"`` (UDP, one JSON scan record per datagram)."""
 
-    def __init__(self, ep: Endpoint) -> None:
+    def __init__(self, ep: Endpoint, kind: str = "nmea") -> None:
         self.ep = ep
+        self.kind = kind
         self.sock: socket.socket | None = None
         self.buf = b""
         self.next_try = 0.0
@@ -116,7 +124,7 @@ class _Source:
         try:
             if self.ep.scheme == "udp":
                 data, _ = self.sock.recvfrom(65536)
-                return data.splitlines()
+                return [data] if self.kind == "scan" else data.splitlines()
             data = self.sock.recv(65536)
         except BlockingIOError:
             return []
@@ -143,10 +151,14 @@ class LiveRunner:
     def __init__(self, sources: list[str], estimator: OnlineEstimator, *, publish: str | None = None,
                  out_dir: str | Path | None = None, scans_from: NavLog | None = None,
                  origin: tuple[float, float] | None = None, require_checksum: bool = True,
-                 duration: float | None = None, idle_exit: float | None = None) -> None:
+                 duration: float | None = None, idle_exit: float | None = None,
+                 scan_sources: list[str] | None = None) -> None:
         self.sources = [_Source(parse_endpoint(s)) for s in sources]
         if not self.sources:
             raise ValueError("at least one --nmea source is needed")
+        self.sources += [_Source(parse_endpoint(s, ("udp",)), "scan") for s in scan_sources or []]
+        self.scans_in = 0
+        self.bad_scans = 0
         self.estimator = estimator
         self.publish = parse_endpoint(publish, ("udp",)) if publish else None
         self.out_dir = Path(out_dir) if out_dir else None
@@ -198,6 +210,24 @@ class LiveRunner:
             self._release_scans(self.decoder.t)
         for rec in recs:
             self._record(rec, arrival if isinstance(rec, Gnss) else None)
+
+    def _scan_packet(self, data: bytes) -> None:
+        """One UDP scan datagram: a JSON Lines ``scan`` record (docs/log-format.md), t on the NMEA clock."""
+        self.scans_in += 1
+        try:
+            try:
+                obj = json.loads(data)
+            except (ValueError, RecursionError):
+                raise LogError("scan datagram is not JSON", field="scan") from None
+            if not isinstance(obj, dict) or obj.get("type") != "scan":
+                raise LogError("scan datagram must be a JSON object with type 'scan'", field="type")
+            rec = parse_record(obj)
+        except LogError as err:
+            self.bad_scans += 1
+            if self.bad_scans <= 20 or self.bad_scans % 1000 == 0:
+                log_.warning("bad scan packet #%d (%s)", self.bad_scans, err)
+            return
+        self._record(rec, None)
 
     def _release_scans(self, t_stream: float) -> None:
         assert self.scans is not None
@@ -273,7 +303,10 @@ class LiveRunner:
                     if lines:
                         last_input = time.monotonic()
                     for raw in lines:
-                        self._sentence(raw, arrival)
+                        if src.kind == "scan":
+                            self._scan_packet(raw)
+                        else:
+                            self._sentence(raw, arrival)
                         if self._stop.is_set():
                             break
             if not self.stop_reason:
@@ -309,6 +342,8 @@ class LiveRunner:
         }
         if self.scans is not None:
             out["scans_replayed"] = self.scan_i
+        if any(s.kind == "scan" for s in self.sources):
+            out["scans_in"], out["bad_scans"] = self.scans_in, self.bad_scans
         if self.decoder.frame is not None:
             f = self.decoder.frame
             out["origin"] = {"lat": f.lat0, "lon": f.lon0}

@@ -9,6 +9,8 @@ exercise a receiver's checksum handling.
 
 from __future__ import annotations
 
+import heapq
+import json
 import socket
 import threading
 import time
@@ -17,9 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from .io.jsonl import record_to_obj
 from .io.nmea_out import frame_of, log_to_nmea, trajectory_to_nmea
 from .live import parse_endpoint
-from .log import NavLog
+from .log import NavLog, Scan
 
 
 def log_sentences(log: NavLog, origin: tuple[float, float] | None = None) -> Iterator[tuple[float, str]]:
@@ -44,18 +47,33 @@ def corrupt_sentence(s: str, rng: np.random.Generator) -> str:
     return "".join(chr(int(c)) for c in rng.integers(32, 127, int(rng.integers(1, 60))))
 
 
+def scan_packet(scan: Scan, decimals: int = 3) -> bytes:
+    """One scan as a UDP datagram: its JSON Lines record (ranges rounded to mm, no return = null)."""
+    obj = record_to_obj(scan)
+    obj["ranges"] = [None if r is None else round(r, decimals) for r in obj["ranges"]]
+    obj["angles"] = [None if a is None else round(a, 6) for a in obj["angles"]]
+    return json.dumps(obj, separators=(",", ":")).encode("ascii")
+
+
 def replay(log: NavLog, target: str, *, speed: float = 1.0, origin: tuple[float, float] | None = None,
-           corrupt: float = 0.0, seed: int = 0, stop: threading.Event | None = None) -> dict[str, Any]:
+           corrupt: float = 0.0, seed: int = 0, stop: threading.Event | None = None,
+           scans_target: str | None = None) -> dict[str, Any]:
     """Send the log's sentences to ``udp://HOST:PORT`` paced at ``speed`` x real time (``speed <= 0``:
-    as fast as possible). Returns counts and the wall time."""
+    as fast as possible); with ``scans_target`` also its scans, one JSON datagram each, in time order.
+    Returns counts and the wall time."""
     ep = parse_endpoint(target, ("udp",))
+    sep = parse_endpoint(scans_target, ("udp",)) if scans_target else None
     rng = np.random.default_rng(seed)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sent = damaged = 0
+    sent = damaged = scans_sent = 0
     t_first = t_last = None
     start = time.monotonic()
     try:
-        for t, s in log_sentences(log, origin):
+        stream = log_sentences(log, origin)
+        if sep is not None:
+            scans = ((r.t, r) for r in log.records if isinstance(r, Scan))
+            stream = heapq.merge(stream, scans, key=lambda item: item[0])
+        for t, s in stream:
             if stop is not None and stop.is_set():
                 break
             if t_first is None:
@@ -66,6 +84,10 @@ def replay(log: NavLog, target: str, *, speed: float = 1.0, origin: tuple[float,
                 delay = due - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
+            if isinstance(s, Scan):
+                sock.sendto(scan_packet(s), (sep.host, sep.port))
+                scans_sent += 1
+                continue
             if corrupt > 0 and rng.random() < corrupt:
                 s = corrupt_sentence(s, rng)
                 damaged += 1
@@ -73,5 +95,6 @@ def replay(log: NavLog, target: str, *, speed: float = 1.0, origin: tuple[float,
             sent += 1
     finally:
         sock.close()
-    return {"sentences_sent": sent, "corrupted": damaged, "t0": t_first, "t1": t_last,
+    return {"sentences_sent": sent, "corrupted": damaged, "scans_sent": scans_sent, "t0": t_first,
+            "t1": t_last,
             "wall_s": time.monotonic() - start, "target": str(ep), "speed": speed}

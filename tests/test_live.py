@@ -251,3 +251,23 @@ def test_cli_sigterm_exits_cleanly_with_one_json_object(tmp_path):
     tum = (tmp_path / "o" / "live.tum").read_text().splitlines()
     assert len(tum) - 1 == obj["estimates"]  # nothing lost
     assert json.loads((tmp_path / "o" / "summary.json").read_text())["estimates"] == obj["estimates"]
+
+
+def test_udp_scan_stream_joins_the_graph():
+    """Scans as JSON datagrams (replay --scans-out -> live --scans): they reach the estimator as
+    scan factors; a bad scan packet is counted, never fatal."""
+    log = synthetic_trial(duration=5.0, rate=10.0, scans=True)
+    nport, sport = free_port(), free_port()
+    est = GraphOnline()
+    runner = LiveRunner([f"udp://127.0.0.1:{nport}"], est, scan_sources=[f"udp://127.0.0.1:{sport}"],
+                        idle_exit=1.0, duration=20.0)
+    th, summary = start_runner(runner)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        for junk in (b"not json", b'{"type": "gnss"}', b'{"t": 1, "type": "scan", "ranges": [1, 2]}'):
+            tx.sendto(junk, ("127.0.0.1", sport))
+    time.sleep(0.2)
+    sent = replay(log, f"udp://127.0.0.1:{nport}", speed=10.0, scans_target=f"udp://127.0.0.1:{sport}")
+    th.join(25)
+    assert sent["scans_sent"] == len(log.of("scan")) == 5
+    assert summary["bad_scans"] == 3 and summary["scans_in"] == 8
+    assert est.counts["scan"] == 5 and est.counts.get("icp", 0) >= 3

@@ -20,6 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("live", help="online estimation from NMEA streams", description=__doc__)
     p.add_argument("--nmea", action="append", required=True, metavar="udp://HOST:PORT|tcp://HOST:PORT",
                    help="NMEA 0183 source (UDP: bind; TCP: connect); repeatable")
+    p.add_argument("--scans", action="append", metavar="udp://HOST:PORT",
+                   help="LiDAR scans, one JSON scan record per datagram (docs/live.md); repeatable")
     p.add_argument("--scans-from", metavar="LOG", help="replay this log's scans on the NMEA stream's clock; "
                    "the run ends with the last scan")
     p.add_argument("--estimator", "-e", default="fixed-lag",
@@ -41,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     scans = load_log(args.scans_from) if args.scans_from else None
     runner = LiveRunner(args.nmea, estimator, publish=args.publish, out_dir=args.out, scans_from=scans,
                         origin=parse_origin(args.origin), require_checksum=not args.no_checksum_required,
-                        duration=args.duration, idle_exit=args.idle_exit)
+                        duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans)
     log_.info("listening on %s; publishing to %s", ", ".join(args.nmea), args.publish or "-")
     summary = runner.run()
     if args.out:

@@ -25,6 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="send a log as NMEA 0183 over UDP", description=__doc__)
     add_log_args(p)
     p.add_argument("--nmea-out", required=True, metavar="udp://HOST:PORT", help="where to send the sentences")
+    p.add_argument("--scans-out", metavar="udp://HOST:PORT",
+                   help="also send the log's scans, one JSON scan record per datagram (see docs/live.md)")
     p.add_argument("--speed", type=float, default=1.0, help="x real time (0: as fast as possible)")
     p.add_argument("--origin", metavar="LAT,LON", help="geodetic origin of the log's local frame "
                    "(default: the log's meta origin, else 43.5,16.4)")
@@ -41,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     old = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         out = replay(log, args.nmea_out, speed=args.speed, origin=parse_origin(args.origin),
-                     corrupt=args.corrupt, seed=args.seed, stop=stop)
+                     corrupt=args.corrupt, seed=args.seed, stop=stop, scans_target=args.scans_out)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
