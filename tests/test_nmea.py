@@ -244,3 +244,13 @@ def test_binary_garbage(tmp_path, data):
     except LogError:
         pass
     read_nmea(p, lenient=True)
+
+
+def test_first_error_in_line_order(tmp_path):
+    lines = [GGA_SPEC, sentence("GPGGA,123520,48x7.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,"),
+             GGA_SPEC[:-2] + "00"]
+    with pytest.raises(LogError) as ei:
+        read_nmea(write(tmp_path, lines))
+    assert ei.value.line == 2 and ei.value.field == "lat"
+    log = read_nmea(write(tmp_path, lines), lenient=True)
+    assert log.meta["skipped"] == 2 and ":2:" in log.meta["skipped_errors"][0]

@@ -36,7 +36,7 @@ import calendar
 import gzip
 import math
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import date
 from pathlib import Path
@@ -388,21 +388,25 @@ def _decode(raw: bytes) -> str:
     return s.strip().lstrip("\ufeff")
 
 
-def _first_date_day0(msgs: Iterable[pynmea2.NMEASentence]) -> float | None:
-    """POSIX midnight of day 0 from the first dated sentence (RMC/ZDA), following rollovers."""
+def _first_date_day0(lines: Iterable[bytes]) -> float | None:
+    """POSIX midnight of day 0 from the first dated sentence (RMC/ZDA), following rollovers.
+
+    A cheap first pass: only GGA/RMC/ZDA lines are parsed, bad ones are passed over (the main
+    pass reports them)."""
     probe = NmeaDecoder()
-    for msg in msgs:
-        kind = getattr(msg, "sentence_type", "")
-        if kind not in ("GGA", "RMC", "ZDA"):
+    for raw in lines:
+        if raw[3:6] not in (b"GGA", b"RMC", b"ZDA"):
             continue
         try:
+            msg = parse_sentence(_decode(raw))
+            kind = msg.sentence_type
             if kind == "RMC":
                 probe._rmc(msg)
             elif kind == "ZDA":
                 probe._zda(msg)
             else:
                 probe._stamp(parse_time_of_day(_field(msg, 0)))
-        except LogError:
+        except (LogError, AttributeError):
             continue
         if probe.day0 is not None:
             return probe.day0
@@ -411,9 +415,12 @@ def _first_date_day0(msgs: Iterable[pynmea2.NMEASentence]) -> float | None:
 
 def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, float] | None = None,
                require_checksum: bool = False, **decoder_options: Any) -> tuple[NmeaParse, dict[str, Any]]:
-    """Decode a file into an :class:`NmeaParse` plus ``meta`` (see the module docstring)."""
+    """Decode a file into an :class:`NmeaParse` plus ``meta`` (see the module docstring).
+
+    Sentences are parsed and decoded one line at a time (errors come in line order); only the
+    records are kept."""
     path = Path(path)
-    parsed: list[tuple[int, pynmea2.NMEASentence]] = []
+    lines = _lines(path)
     skipped: list[str] = []
     ignored: Counter = Counter()
 
@@ -423,25 +430,30 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
             raise err from None
         skipped.append(str(err))
 
-    for lineno, raw in enumerate(_lines(path), start=1):
-        try:
-            s = _decode(raw)
-            if not s or s.startswith("#"):
+    def sentences() -> Iterator[tuple[int, pynmea2.NMEASentence]]:
+        for lineno, raw in enumerate(lines, start=1):
+            s = ""
+            try:
+                s = _decode(raw)
+                if not s or s.startswith("#"):
+                    continue
+                if s.startswith("!"):  # AIS and other encapsulated data: not navigation input
+                    ignored["!" + s[1:6]] += 1
+                    continue
+                msg = parse_sentence(s, require_checksum=require_checksum)
+            except LogError as err:
+                if err.field == "sentence" and err.message.startswith("unknown sentence type"):
+                    ignored[s[3:6] if len(s) > 6 else s] += 1
+                    continue
+                bad(err, lineno)
                 continue
-            if s.startswith("!"):  # AIS and other encapsulated data: not navigation input
-                ignored["!" + s[1:6]] += 1
-                continue
-            parsed.append((lineno, parse_sentence(s, require_checksum=require_checksum)))
-        except LogError as err:
-            if err.field == "sentence" and err.message.startswith("unknown sentence type"):
-                ignored[s[3:6] if len(s) > 6 else s] += 1
-                continue
-            bad(err, lineno)
+            yield lineno, msg
+
     frame = LocalFrame(float(origin[0]), float(origin[1]), 0.0) if origin is not None else None
-    dec = NmeaDecoder(frame, day0=_first_date_day0(m for _, m in parsed), **decoder_options)
+    dec = NmeaDecoder(frame, day0=_first_date_day0(lines), **decoder_options)
     pending: list[tuple[int, pynmea2.NMEASentence]] = []  # untimed sentences before the first time
     last_t = -math.inf
-    for lineno, msg in parsed:
+    for lineno, msg in sentences():
         n_before = len(dec.out.records)
         try:
             if dec.t is None and getattr(msg, "sentence_type", "") in ("VTG", "HDT", "THS", "HDG", "ROT"):
