@@ -316,7 +316,10 @@ def make_online(name: str, **options: Any) -> OnlineEstimator:
         have = ", ".join(sorted(ONLINE_ESTIMATORS))
         raise ValueError(f"no online adapter for estimator {name!r} yet (have: {have});"
                          " estimators plug in through graphnav.online.OnlineEstimator")
-    return ONLINE_ESTIMATORS[name](**options)
+    try:
+        return ONLINE_ESTIMATORS[name](**options)
+    except TypeError as exc:  # an unknown -O option
+        raise ValueError(f"estimator {name!r}: {exc}") from None
 
 
 def run_online(log: NavLog, estimator: OnlineEstimator) -> Trajectory:
