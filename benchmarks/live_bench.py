@@ -96,6 +96,7 @@ def session(log_path: Path, seconds: float, speed: float, estimator: str, workdi
         "rss_mb_first_10pct": float(np.median(r[: max(1, n // 10)])),
         "rss_mb_last_10pct": float(np.median(r[-max(1, n // 10):])),
         "rss_mb_max": float(r.max()), "rss_samples": n,
+        "rss_mb_at_25_50_75_100pct": [float(r[min(n - 1, int(q * n))]) for q in (0.25, 0.5, 0.75, 1.0)],
         "solve_ms_median": out.get("estimator", {}).get("step_ms_median"),
         "solve_ms_p99": out.get("estimator", {}).get("step_ms_p99"),
     }
@@ -126,13 +127,16 @@ def main() -> int:
         return 0
     keys = ["sent", "sentences_in", "bad_sentences", "estimates", "published", "received_by_sink",
             "latency_ms_median", "latency_ms_p99", "latency_ms_max", "solve_ms_median", "solve_ms_p99",
-            "sentences_per_s", "wall_s", "rss_mb_first_10pct", "rss_mb_last_10pct", "rss_mb_max"]
+            "sentences_per_s", "wall_s", "rss_mb_first_10pct", "rss_mb_last_10pct", "rss_mb_max",
+            "rss_mb_at_25_50_75_100pct"]
     names = list(rows)
     print("| metric | " + " | ".join(names) + " |")
     print("|---|" + "---|" * len(names))
     for k in keys:
         vals = [rows[n][k] for n in names]
-        print(f"| {k} | " + " | ".join(f"{v:.2f}" if isinstance(v, float) else str(v) for v in vals) + " |")
+        fmt = [f"{v:.2f}" if isinstance(v, float) else
+               (" / ".join(f"{x:.1f}" for x in v) if isinstance(v, list) else str(v)) for v in vals]
+        print(f"| {k} | " + " | ".join(fmt) + " |")
     return 0
 
 

@@ -38,7 +38,6 @@ import signal
 import socket
 import threading
 import time
-from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -177,7 +176,8 @@ class LiveRunner:
         self.estimates = 0
         self.published = 0
         self.records = 0
-        self.latency_ms: deque[float] = deque(maxlen=LATENCY_WINDOW)
+        self.latency_ms = np.full(LATENCY_WINDOW, np.nan)  # ring buffer: constant memory
+        self.n_latency = 0
         self.wall_s = 0.0
         self.stop_reason = ""
         self.last_estimate: Estimate | None = None
@@ -261,7 +261,8 @@ class LiveRunner:
             except OSError as exc:
                 log_.warning("publish to %s failed: %s", self.publish, exc)
         if arrival is not None:  # the published solution is the latency-critical path; the file comes next
-            self.latency_ms.append((time.perf_counter() - arrival) * 1e3)
+            self.latency_ms[self.n_latency % LATENCY_WINDOW] = (time.perf_counter() - arrival) * 1e3
+            self.n_latency += 1
         if self.writer is not None:
             self.writer.write(est.t, est.pose, est.cov)
 
@@ -325,7 +326,7 @@ class LiveRunner:
         return self.summary()
 
     def summary(self) -> dict[str, Any]:
-        lat = np.asarray(self.latency_ms)
+        lat = self.latency_ms[: min(self.n_latency, LATENCY_WINDOW)]
         out: dict[str, Any] = {
             "sentences_in": self.sentences_in,
             "bad_sentences": self.bad,
