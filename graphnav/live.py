@@ -30,6 +30,7 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
 
 from __future__ import annotations
 
+import bisect
 import json
 import logging
 import math
@@ -120,10 +121,19 @@ class _Source:
 
     def read(self, sel: selectors.BaseSelector) -> list[bytes]:
         assert self.sock is not None
+        if self.ep.scheme == "udp":  # drain what is queued (up to 256 datagrams), in arrival order
+            out: list[bytes] = []
+            for _ in range(256):
+                try:
+                    data, _ = self.sock.recvfrom(65536)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError as exc:
+                    log_.warning("%s: %s", self.ep, exc)
+                    break
+                out.extend([data] if self.kind == "scan" else data.splitlines())
+            return out
         try:
-            if self.ep.scheme == "udp":
-                data, _ = self.sock.recvfrom(65536)
-                return [data] if self.kind == "scan" else data.splitlines()
             data = self.sock.recv(65536)
         except BlockingIOError:
             return []
@@ -157,6 +167,7 @@ class LiveRunner:
             raise ValueError("at least one --nmea source is needed")
         self.sources += [_Source(parse_endpoint(s, ("udp",)), "scan") for s in scan_sources or []]
         self.scans_in = 0
+        self.scan_wait: list[Scan] = []  # network scans waiting for the NMEA clock
         self.bad_scans = 0
         self.estimator = estimator
         self.publish = parse_endpoint(publish, ("udp",)) if publish else None
@@ -206,6 +217,8 @@ class LiveRunner:
             if self.bad <= 20 or self.bad % 1000 == 0:
                 log_.warning("bad sentence #%d (%s): %r", self.bad, err, s[:80])
             return
+        if self.scan_wait and self.decoder.t is not None:
+            self._release_waiting(self.decoder.t)
         if self.scans is not None and self.decoder.t is not None:
             self._release_scans(self.decoder.t)
         for rec in recs:
@@ -227,7 +240,18 @@ class LiveRunner:
             if self.bad_scans <= 20 or self.bad_scans % 1000 == 0:
                 log_.warning("bad scan packet #%d (%s)", self.bad_scans, err)
             return
-        self._record(rec, None)
+        # held until the NMEA stream's time reaches it, so a scan that overtakes the sentences of
+        # earlier epochs (another socket) does not make them late
+        if len(self.scan_wait) >= 100:
+            self.scan_wait.pop(0)
+            self.bad_scans += 1
+        bisect.insort(self.scan_wait, rec, key=lambda r: r.t)
+        if self.decoder.t is not None:
+            self._release_waiting(self.decoder.t)
+
+    def _release_waiting(self, t_stream: float) -> None:
+        while self.scan_wait and self.scan_wait[0].t <= t_stream + 1e-6:
+            self._record(self.scan_wait.pop(0), None)
 
     def _release_scans(self, t_stream: float) -> None:
         assert self.scans is not None

@@ -72,7 +72,8 @@ class GraphOnline:
     ``gnss_huber`` Huber threshold in sigmas; ``covariance``: compute the marginal covariance of
     every ``cov_every``-th estimate (0.2-5 ms each; the others carry ``cov=None``);
     ``rebase_every``: re-anchor the fixed-lag smoother every so many nodes (bounded memory, see
-    :meth:`_rebase`); ``use_scans`` and ``icp_*``: scan registration (see :meth:`_scan`);
+    :meth:`_rebase`); ``use_scans`` and ``icp_*``: scan registration (see :meth:`_scan`); a scan
+    older than the newest node joins the node within ``scan_attach_dt`` [s] of it, if any;
     ``relinearize_threshold``/``relinearize_skip``:
     iSAM2's (GTSAM defaults; 0.01/1 is ~4 % more accurate on the synthetic trial and 3x slower).
     """
@@ -83,7 +84,8 @@ class GraphOnline:
                  covariance: bool = True, cov_every: int = 10, rebase_every: int | None = 6_000,
                  relinearize_threshold: float = 0.1, relinearize_skip: int = 10, use_scans: bool = True,
                  icp_sigma_xy: float = 0.2, icp_sigma_yaw_deg: float = 1.0, icp_max_dist: float = 2.0,
-                 icp_min_inliers: float = 0.5, icp_max_step: float = 3.0) -> None:
+                 icp_min_inliers: float = 0.5, icp_max_step: float = 3.0,
+                 scan_attach_dt: float = 0.06) -> None:
         self.lag = lag
         self.outage_s = outage_s
         self.sv, self.sw = odo_sigma_v, math.radians(odo_sigma_w_deg)
@@ -100,6 +102,8 @@ class GraphOnline:
         self.icp_max_dist, self.icp_min_inliers = icp_max_dist, icp_min_inliers
         self.icp_max_step = icp_max_step
         self.last_scan: tuple[int, NDArray[np.float64]] | None = None
+        self.scan_attach_dt = scan_attach_dt
+        self.node_times: deque[tuple[int, float]] = deque(maxlen=256)
         self.icp_ms: deque[float] = deque(maxlen=10_000)
         self.params = None
         params = gtsam.ISAM2Params()
@@ -157,6 +161,7 @@ class GraphOnline:
             self.prev = (self.t, self.pose)
         self.k, self.t, self.pose = k, t, guess
         self.counts["nodes"] += 1
+        self.node_times.append((k, t))
 
     def _solve(self) -> Estimate:
         t0 = time.perf_counter()
@@ -213,7 +218,12 @@ class GraphOnline:
     def add(self, record: Record) -> Estimate | None:
         t = record.t
         if self.t is not None and t < self.t - 1e-9:
-            self.counts["late"] += 1
+            k = self._node_near(t) if isinstance(record, Scan) and self.use_scans else None
+            if k is None:
+                self.counts["late"] += 1
+                return None
+            self.counts["scan"] += 1  # a scan that came in after later sentences (another socket)
+            self._scan(record, k)
             return None
         if isinstance(record, Odometry):
             self.counts["odometry"] += 1
@@ -245,12 +255,17 @@ class GraphOnline:
             if self.use_scans and self.k >= 0:
                 if t > self.t + 1e-9:
                     self._new_node(t, None)
-                self._scan(record)
+                self._scan(record, self.k)
             return None
         self.counts["other"] += 1
         return None
 
-    def _scan(self, scan: Scan) -> None:
+    def _node_near(self, t: float) -> int | None:
+        """The node within ``scan_attach_dt`` of ``t`` (None if there is none)."""
+        best = min(self.node_times, key=lambda kt: abs(kt[1] - t), default=None)
+        return best[0] if best is not None and abs(best[1] - t) <= self.scan_attach_dt else None
+
+    def _scan(self, scan: Scan, k: int) -> None:
         """Scan-to-previous-scan registration (small_gicp GICP) -> ``BetweenFactorPose2``, solved
         with the next fix. Rejected when it does not converge, has too few inliers, or moves more
         than ``icp_max_step`` from the motion-model prediction."""
@@ -259,14 +274,15 @@ class GraphOnline:
         ok = scan.valid()
         r, a = scan.ranges[ok], scan.angles[ok]
         pts = np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(r.size)])
-        prev, self.last_scan = self.last_scan, (self.k, pts)
-        if prev is None or len(pts) < 20 or len(prev[1]) < 20 or prev[0] == self.k:
+        prev, self.last_scan = self.last_scan, (k, pts)
+        if prev is None or len(pts) < 20 or len(prev[1]) < 20 or prev[0] == k:
             return
         try:
             p0 = self.solver.calculateEstimatePose2(prev[0])
+            pk = gtsam.Pose2(*self.pose) if k == self.k else self.solver.calculateEstimatePose2(k)
         except (RuntimeError, IndexError, ValueError):
-            return  # the previous scan's node has left the window
-        guess = p0.between(gtsam.Pose2(*self.pose))
+            return  # a node left the window (or was never solved)
+        guess = p0.between(pk)
         init = np.eye(4)
         init[:2, :2] = [[math.cos(guess.theta()), -math.sin(guess.theta())],
                         [math.sin(guess.theta()), math.cos(guess.theta())]]
@@ -282,7 +298,7 @@ class GraphOnline:
             self.counts["icp_rejected"] = self.counts.get("icp_rejected", 0) + 1
             return
         noise = gtsam.noiseModel.Diagonal.Sigmas(self.icp_sigmas)
-        self.graph.add(gtsam.BetweenFactorPose2(prev[0], self.k, rel, noise))
+        self.graph.add(gtsam.BetweenFactorPose2(prev[0], k, rel, noise))
         self.counts["icp"] = self.counts.get("icp", 0) + 1
 
     def info(self) -> dict[str, Any]:
