@@ -103,7 +103,7 @@ def test_corrupted_sentences_are_invalid():
 
 
 def test_udp_loopback_tracks_truth(tmp_path):
-    """Replay at 20x with 3 % damaged sentences -> live estimates; published NMEA parses and is as
+    """Replay at 10x with 3 % damaged sentences -> live estimates; published NMEA parses and is as
     accurate as the same online estimator run offline on the same sentences."""
     log = synthetic_trial(duration=20.0, rate=10.0, seed=5)
     port = free_port()
@@ -112,7 +112,7 @@ def test_udp_loopback_tracks_truth(tmp_path):
                         publish=f"udp://127.0.0.1:{col.port}",
                         out_dir=tmp_path / "out", idle_exit=1.0, duration=40.0)
     th, summary = start_runner(runner)
-    sent = replay(log, f"udp://127.0.0.1:{port}", speed=20.0, corrupt=0.03, seed=2)
+    sent = replay(log, f"udp://127.0.0.1:{port}", speed=10.0, corrupt=0.03, seed=2)
     th.join(45)
     assert not th.is_alive()
     lines = col.close()
