@@ -31,9 +31,11 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
 from __future__ import annotations
 
 import bisect
+import errno
 import json
 import logging
 import math
+import os
 import selectors
 import signal
 import socket
@@ -88,6 +90,7 @@ class _Source:
         self.sock: socket.socket | None = None
         self.buf = b""
         self.next_try = 0.0
+        self.connecting: float | None = None  # when a non-blocking TCP connect started
 
     def open(self, sel: selectors.BaseSelector) -> None:
         if self.ep.scheme == "udp":
@@ -100,20 +103,35 @@ class _Source:
                 return
             self.next_try = time.monotonic() + 1.0
             s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-            s.settimeout(0.5)
+            s.setblocking(False)  # a non-blocking connect: a dead server never stalls the loop
             try:
-                s.connect((self.ep.host, self.ep.port))
-            except OSError as exc:
+                err = s.connect_ex((self.ep.host, self.ep.port))
+            except OSError as exc:  # e.g. the host name does not resolve
+                err, msg = -1, str(exc)
+            else:
+                msg = os.strerror(err)
+            if err not in (0, errno.EINPROGRESS, errno.EWOULDBLOCK):
                 s.close()
-                log_.debug("tcp %s: %s (retrying)", self.ep, exc)
+                log_.debug("tcp %s: %s (retrying)", self.ep, msg)
                 return
-            log_.info("connected to %s", self.ep)
+            self.sock, self.buf = s, b""
+            self.connecting = time.monotonic() if err else None
+            sel.register(s, selectors.EVENT_WRITE if err else selectors.EVENT_READ, self)
+            if not err:
+                log_.info("connected to %s", self.ep)
+            return
         s.setblocking(False)
         self.sock = s
         self.buf = b""
         sel.register(s, selectors.EVENT_READ, self)
 
+    def connect_timed_out(self, sel: selectors.BaseSelector, limit: float = 3.0) -> None:
+        if self.connecting is not None and time.monotonic() - self.connecting > limit:
+            log_.debug("tcp %s: connect timed out (retrying)", self.ep)
+            self.close(sel)
+
     def close(self, sel: selectors.BaseSelector) -> None:
+        self.connecting = None
         if self.sock is not None:
             sel.unregister(self.sock)
             self.sock.close()
@@ -121,6 +139,16 @@ class _Source:
 
     def read(self, sel: selectors.BaseSelector) -> list[bytes]:
         assert self.sock is not None
+        if self.connecting is not None:  # the non-blocking connect finished (or failed)
+            err = self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR)
+            if err:
+                log_.debug("tcp %s: %s (retrying)", self.ep, os.strerror(err))
+                self.close(sel)
+            else:
+                self.connecting = None
+                sel.modify(self.sock, selectors.EVENT_READ, self)
+                log_.info("connected to %s", self.ep)
+            return []
         if self.ep.scheme == "udp":  # drain what is queued (up to 256 datagrams), in arrival order
             out: list[bytes] = []
             for _ in range(256):
@@ -321,6 +349,8 @@ class LiveRunner:
                 for src in self.sources:
                     if src.sock is None:
                         src.open(sel)
+                    else:
+                        src.connect_timed_out(sel)
                 for key, _ in sel.select(timeout=0.05):
                     src = key.data
                     arrival = time.perf_counter()
