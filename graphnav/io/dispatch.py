@@ -27,7 +27,7 @@ def load_log(path: str | Path, *, lenient: bool = False, **options) -> NavLog:
         if (p / "metadata.yaml").exists():
             from .rosbag import read_bag
 
-            return read_bag(p, **options)
+            return read_bag(p, lenient=lenient, **options)
         raise LogError("directory is neither a marina dataset (ranges.mat, angles.mat, gps.mat) "
                        "nor a ROS 2 bag (metadata.yaml)", file=str(p))
     if name.endswith(JSONL_SUFFIXES):
@@ -45,7 +45,7 @@ def load_log(path: str | Path, *, lenient: bool = False, **options) -> NavLog:
     if name.endswith(BAG_SUFFIXES):
         from .rosbag import read_bag
 
-        return read_bag(p, **options)
+        return read_bag(p, lenient=lenient, **options)
     raise LogError("unknown log type (expected a marina directory, .jsonl[.gz], .npz, .nmea, or a ROS bag)",
                    file=str(p))
 

@@ -1,0 +1,90 @@
+"""Memory and throughput of the live path without sockets, over many hours of 10 Hz NMEA.
+
+A synthetic trial is generated epoch by epoch (constant memory), turned into NMEA sentences
+(ZDA, GGA, RMC, HDT, VTG, ROT), parsed and decoded exactly as ``graphnav live`` does
+(checksum required, :class:`graphnav.io.nmea.NmeaDecoder` with ``keep=False``) and fed to the
+online estimator as fast as possible. RSS is sampled every simulated ``--every`` minutes.
+
+    python benchmarks/online_memory.py --hours 4
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from graphnav.io.nmea import NmeaDecoder, parse_sentence  # noqa: E402
+from graphnav.io.nmea_out import log_to_nmea  # noqa: E402
+from graphnav.io.synthetic import synthetic_records  # noqa: E402
+from graphnav.online import make_online  # noqa: E402
+
+
+class _Stream:  # what log_to_nmea reads: records + meta, here a generator
+    def __init__(self, hours: float) -> None:
+        self.records = (r for r in synthetic_records(hours * 3600, 10.0, seed=7) if r.kind != "truth")
+        self.meta = {"origin": {"lat": 43.5, "lon": 16.4}}
+
+
+def rss_mb() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--hours", type=float, default=4.0)
+    ap.add_argument("--every", type=float, default=30.0, help="sample RSS every N simulated minutes")
+    ap.add_argument("--estimator", default="fixed-lag")
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--progress", action="store_true", help="each RSS sample to stderr as it is taken")
+    args = ap.parse_args()
+    est = make_online(args.estimator)
+    dec = NmeaDecoder(keep=False)
+    rows = []
+    n_sent = n_est = 0
+    t_first = None
+    next_sample = 0.0
+    w0 = time.perf_counter()
+    for t, s in log_to_nmea(_Stream(args.hours), with_rmc=True):
+        if t_first is None:
+            t_first = t
+        if t - t_first >= next_sample:
+            rows.append({"sim_h": (t - t_first) / 3600, "rss_mb": rss_mb(),
+                         "wall_s": time.perf_counter() - w0, "sentences": n_sent, "estimates": n_est})
+            if args.progress:
+                print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
+            next_sample += args.every * 60
+        n_sent += 1
+        for rec in dec.feed(parse_sentence(s, require_checksum=True)):
+            if est.add(rec) is not None:
+                n_est += 1
+    wall = time.perf_counter() - w0
+    rows.append({"sim_h": (t - t_first) / 3600, "rss_mb": rss_mb(), "wall_s": wall, "sentences": n_sent,
+                 "estimates": n_est})
+    summary = {"hours": args.hours, "sentences": n_sent, "estimates": n_est, "wall_s": wall,
+               "sentences_per_s": n_sent / wall, "epochs_per_s": n_est / wall,
+               "realtime_factor_at_10hz": n_est / wall / 10.0, "rss": rows}
+    if args.json:
+        print(json.dumps(summary))
+        return 0
+    print("| simulated h | RSS MB | wall s | sentences | estimates |")
+    print("|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['sim_h']:.2f} | {r['rss_mb']:.1f} | {r['wall_s']:.0f} | {r['sentences']} "
+              f"| {r['estimates']} |")
+    print(f"\nthroughput: {summary['sentences_per_s']:.0f} sentences/s, "
+          f"{summary['epochs_per_s']:.0f} epochs/s = "
+          f"{summary['realtime_factor_at_10hz']:.1f}x real time at 10 Hz")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

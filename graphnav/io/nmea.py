@@ -1,0 +1,506 @@
+"""NMEA 0183 reader (via pynmea2): GGA/RMC fixes, VTG/RMC speed, HDT/HDG/THS heading, ROT, ZDA time.
+
+How sentences become records (full description in docs/nmea.md):
+
+* **Position** -- GGA (preferred) and RMC fixes -> :class:`~graphnav.log.Gnss` in the local
+  east-north tangent frame (:class:`graphnav.geodesy.LocalFrame`) at ``origin`` (the first fix
+  unless given; stored in ``log.meta["origin"]``). ``sigma`` per axis = HDOP x UERE(fix quality)
+  (:data:`UERE_M`; ``DEFAULT_HDOP`` when HDOP is missing, RMC carries none). An RMC position is
+  used only when no GGA was seen within ``GGA_HOLD_S`` of sentence time, and at most one fix is
+  kept per time stamp, so a receiver sending both does not count each fix twice. GGA quality 0 /
+  RMC status ``V`` / mode ``N`` are "no fix" (counted in ``meta["no_fix"]``, not errors).
+* **Speed and course** -- SOG/COG (VTG, RMC) are over ground, along the course, not body
+  odometry, and the log has no course record. SOG is combined with ROT: at every valid ROT
+  sentence, when a SOG no older than ``SOG_MAX_AGE_S`` exists, an
+  :class:`~graphnav.log.Odometry` ``(v = SOG, w = -radians(ROT)/60)`` is produced (NMEA ROT is
+  deg/min, positive turning to starboard). SOG/COG themselves are returned by
+  :func:`parse_nmea` (``NmeaParse.sog_cog``) for movement comparisons, not put in the log.
+* **Heading** -- HDT and THS (true) and HDG (magnetic sensor heading + deviation + variation,
+  east positive; variation from HDG, else the last RMC variation, else none -- counted in
+  ``meta["hdg_without_variation"]``) -> :class:`~graphnav.log.Heading` (yaw via
+  :func:`graphnav.geometry.heading_deg_to_yaw`), sigma :data:`HEADING_SIGMA_DEG`.
+* **Time** -- from the sentences' UTC time of day (GGA, RMC, ZDA). The date comes from RMC or ZDA:
+  with a date, ``t`` is POSIX seconds (UTC); without any, ``t`` is seconds since midnight of the
+  first day. Midnight rollovers (time of day dropping by more than 12 h) advance the day.
+  Sentences without a time (VTG, HDT, HDG, THS, ROT) take the last time seen; those before the
+  first timed sentence take the first time seen.
+* **Errors** -- checksum mismatches and malformed sentences raise :class:`LogError` naming the
+  file, line and field; ``lenient=True`` skips them (``meta["skipped"]``, first messages in
+  ``meta["skipped_errors"]``). Sentence types not listed above (GSV, GSA, AIS ``!`` lines, ...)
+  are ignored and counted per type in ``meta["ignored"]``.
+"""
+
+from __future__ import annotations
+
+import calendar
+import gzip
+import math
+from collections import Counter
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from datetime import date
+from pathlib import Path
+from typing import Any
+
+import pynmea2
+
+from ..errors import LogError
+from ..geodesy import LocalFrame
+from ..geometry import heading_deg_to_yaw
+from ..log import Gnss, Heading, NavLog, Odometry, Record
+
+KNOT = 1852.0 / 3600.0  # m/s
+#: User-equivalent range error [m] per GGA fix quality: sigma per axis = HDOP * UERE.
+UERE_M: dict[int, float] = {1: 3.0, 2: 1.0, 3: 3.0, 4: 0.02, 5: 0.3, 6: 10.0, 7: 3.0, 8: 10.0, 9: 1.0}
+#: RMC mode indicator -> GGA quality (A autonomous, D differential, R RTK fixed, F float, E estimated).
+MODE_QUALITY = {"A": 1, "D": 2, "P": 3, "R": 4, "F": 5, "E": 6, "M": 7, "S": 8}
+DEFAULT_HDOP = 1.5
+HEADING_SIGMA_DEG = {"HDT": 0.5, "THS": 0.5, "HDG": 2.0}
+SOG_MAX_AGE_S = 2.0
+GGA_HOLD_S = 5.0
+DAY = 86400.0
+
+
+class THS(pynmea2.TalkerSentence):
+    """True heading and status (IEC 61162-1), not built into pynmea2."""
+
+    fields = (("Heading", "heading", float), ("Mode indicator", "mode"))
+
+
+# ----------------------------------------------------------------------------- field helpers
+
+def _float(raw: str, name: str, *, lo: float = -math.inf, hi: float = math.inf) -> float:
+    try:
+        v = float(raw)
+    except ValueError:
+        raise LogError(f"not a number: {raw[:20]!r}", field=name) from None
+    if not math.isfinite(v) or not lo <= v <= hi:
+        raise LogError(f"{raw[:20]!r} out of range [{lo}, {hi}]", field=name)
+    return v
+
+
+def _opt_float(raw: str, name: str, **kw) -> float | None:
+    return None if raw.strip() == "" else _float(raw, name, **kw)
+
+
+def _field(msg: pynmea2.NMEASentence, i: int) -> str:
+    return msg.data[i] if i < len(msg.data) else ""
+
+
+def parse_time_of_day(raw: str) -> float | None:
+    """``hhmmss[.sss]`` -> seconds since midnight (None when empty)."""
+    raw = raw.strip()
+    if raw == "":
+        return None
+    if len(raw) < 6 or not raw[:6].isdigit() or (len(raw) > 6 and (raw[6] != "." or not raw[7:].isdigit())):
+        raise LogError(f"time {raw[:20]!r} is not hhmmss[.sss]", field="timestamp")
+    h, m, s = int(raw[:2]), int(raw[2:4]), float(raw[4:])
+    if h > 23 or m > 59 or s >= 61.0:
+        raise LogError(f"time {raw[:20]!r} out of range", field="timestamp")
+    return h * 3600.0 + m * 60.0 + s
+
+
+def parse_latlon(val: str, hemi: str, *, lat: bool) -> float | None:
+    """``ddmm.mmmm``/``dddmm.mmmm`` + N/S/E/W -> signed degrees (None when both empty)."""
+    name = "lat" if lat else "lon"
+    if val.strip() == "" and hemi.strip() == "":
+        return None
+    if hemi not in (("N", "S") if lat else ("E", "W")):
+        raise LogError(f"hemisphere {hemi[:5]!r} is not {'N/S' if lat else 'E/W'}", field=name + "_dir")
+    nd = 2 if lat else 3
+    head = val.split(".")[0]
+    if len(head) < nd + 2 or not head.isdigit():
+        raise LogError(f"{val[:20]!r} is not {'dd' if lat else 'ddd'}mm.mmmm", field=name)
+    deg = int(val[:nd])
+    minutes = _float(val[nd:], name, lo=0.0, hi=60.0)
+    if minutes >= 60.0:
+        raise LogError(f"minutes {minutes} >= 60", field=name)
+    d = deg + minutes / 60.0
+    if d > (90.0 if lat else 180.0):
+        raise LogError(f"{d:.6f} deg out of range", field=name)
+    return -d if hemi in ("S", "W") else d
+
+
+def parse_date(raw: str, name: str = "datestamp") -> date | None:
+    """RMC ``ddmmyy`` (years 70-99 -> 19xx, 00-69 -> 20xx)."""
+    raw = raw.strip()
+    if raw == "":
+        return None
+    if len(raw) != 6 or not raw.isdigit():
+        raise LogError(f"date {raw[:20]!r} is not ddmmyy", field=name)
+    dd, mm, yy = int(raw[:2]), int(raw[2:4]), int(raw[4:])
+    try:
+        return date(1900 + yy if yy >= 70 else 2000 + yy, mm, dd)
+    except ValueError:
+        raise LogError(f"date {raw!r} does not exist", field=name) from None
+
+
+def _posix_midnight(d: date) -> float:
+    return float(calendar.timegm(d.timetuple()))
+
+
+def parse_sentence(line: str, *, require_checksum: bool = False) -> pynmea2.NMEASentence:
+    """Parse one sentence with pynmea2; any problem is a :class:`LogError` naming the field."""
+    try:
+        return pynmea2.parse(line, check=require_checksum)
+    except pynmea2.ChecksumError as exc:
+        raise LogError(str(exc.args[0]) if exc.args else "checksum error", field="checksum") from None
+    except pynmea2.SentenceTypeError as exc:
+        raise LogError(f"unknown sentence type: {str(exc.args[0])[:40]}", field="sentence") from None
+    except (pynmea2.ParseError, ValueError, TypeError, IndexError, AttributeError, KeyError) as exc:
+        raise LogError(f"not an NMEA sentence ({exc.__class__.__name__})", field="sentence") from None
+
+
+# ----------------------------------------------------------------------------- the decoder
+
+@dataclass
+class NmeaParse:
+    """Everything a stream of sentences gave: records, SOG/COG samples and counters."""
+
+    records: list[Record] = field(default_factory=list)
+    sog_cog: list[tuple[float, float, float]] = field(default_factory=list)  # (t, sog m/s, cog deg | nan)
+    counts: Counter = field(default_factory=Counter)
+
+
+class NmeaDecoder:
+    """Turns parsed sentences into records, one at a time (shared by the file reader and live mode).
+
+    ``feed(msg)`` returns the records this sentence completes (often none); with ``keep`` they are
+    also collected in ``out`` (the file reader), without (live mode) memory stays flat. ``frame`` is the
+    local frame (set from the first fix when None). ``day0`` is the POSIX time of midnight of
+    day 0 (``None``: no date yet, ``t`` counts from midnight of the first day until a date arrives).
+    """
+
+    def __init__(self, frame: LocalFrame | None = None, *, day0: float | None = None,
+                 heading_sigma_deg: dict[str, float] | None = None, default_hdop: float = DEFAULT_HDOP,
+                 sog_max_age: float = SOG_MAX_AGE_S, keep: bool = True) -> None:
+        self.frame = frame
+        self.keep = keep  # False (live mode): do not accumulate records/SOG samples
+        self.day0 = day0
+        self.days = 0
+        self.last_tod: float | None = None
+        self.t: float | None = None
+        self.heading_sigma_deg = {**HEADING_SIGMA_DEG, **(heading_sigma_deg or {})}
+        self.default_hdop = default_hdop
+        self.sog_max_age = sog_max_age
+        self.sog: tuple[float, float] | None = None  # (t, m/s)
+        self.variation: float | None = None  # deg, east positive (from RMC)
+        self.last_gga_t = -math.inf
+        self.last_fix_t = -math.inf
+        self.out = NmeaParse()
+
+    # -- time
+    def _stamp(self, tod: float | None) -> float | None:
+        if tod is not None:
+            if self.last_tod is not None and tod < self.last_tod - DAY / 2:
+                self.days += 1
+            self.last_tod = tod
+            self.t = (self.day0 or 0.0) + self.days * DAY + tod
+        return self.t
+
+    def _set_date(self, d: date | None) -> None:
+        if d is not None:
+            self.day0 = _posix_midnight(d) - self.days * DAY
+            if self.last_tod is not None:
+                self.t = self.day0 + self.days * DAY + self.last_tod
+
+    # -- records
+    def _fix(self, t: float | None, lat: float, lon: float, quality: int, hdop: float | None,
+             src: str) -> list[Record]:
+        if t is None:
+            raise LogError("a fix before any time stamp", field="timestamp")
+        if t <= self.last_fix_t:  # one fix per epoch (GGA and RMC of the same epoch)
+            self.out.counts["duplicate_fix"] += 1
+            return []
+        if self.frame is None:
+            self.frame = LocalFrame(lat, lon, 0.0)
+        x, y = self.frame.to_local(lat, lon)
+        h = self.default_hdop if hdop is None or hdop <= 0 else hdop
+        sigma = h * UERE_M.get(quality, UERE_M[1])
+        self.last_fix_t = t
+        self.out.counts[f"fix_{src}"] += 1
+        return [Gnss(t, float(x), float(y), float(sigma))]
+
+    def feed(self, msg: pynmea2.NMEASentence) -> list[Record]:
+        """Decode one parsed sentence. Raises :class:`LogError` (with the field) if malformed."""
+        kind = getattr(msg, "sentence_type", type(msg).__name__)
+        handler = getattr(self, "_" + kind.lower(), None) if kind in HANDLED else None
+        if handler is None:
+            self.out.counts["ignored:" + kind] += 1
+            return []
+        recs = handler(msg)
+        if self.keep:
+            self.out.records.extend(recs)
+        return recs
+
+    def _gga(self, msg) -> list[Record]:
+        t = self._stamp(parse_time_of_day(_field(msg, 0)))
+        q_raw = _field(msg, 5).strip()
+        quality = int(_float(q_raw, "gps_qual", lo=0, hi=9)) if q_raw else 0
+        lat = parse_latlon(_field(msg, 1), _field(msg, 2), lat=True)
+        lon = parse_latlon(_field(msg, 3), _field(msg, 4), lat=False)
+        hdop = _opt_float(_field(msg, 7), "horizontal_dil", lo=0.0, hi=100.0)
+        if quality == 0 or lat is None or lon is None:
+            self.out.counts["no_fix"] += 1
+            return []
+        if t is not None:
+            self.last_gga_t = t
+        return self._fix(t, lat, lon, quality, hdop, "gga")
+
+    def _rmc(self, msg) -> list[Record]:
+        tod = parse_time_of_day(_field(msg, 0))
+        d = parse_date(_field(msg, 8))
+        if tod is not None and d is not None:  # the date belongs to this sentence's time
+            self._stamp(tod)
+            self._set_date(d)
+        t = self._stamp(tod)
+        status = _field(msg, 1).strip()
+        mode = _field(msg, 11).strip()[:1]
+        lat = parse_latlon(_field(msg, 2), _field(msg, 3), lat=True)
+        lon = parse_latlon(_field(msg, 4), _field(msg, 5), lat=False)
+        sog = _opt_float(_field(msg, 6), "spd_over_grnd", lo=0.0, hi=1e4)
+        cog = _opt_float(_field(msg, 7), "true_course", lo=0.0, hi=360.0)
+        var = _opt_float(_field(msg, 9), "mag_variation", lo=0.0, hi=180.0)
+        if var is not None:
+            vd = _field(msg, 10).strip()
+            if vd not in ("E", "W"):
+                raise LogError(f"variation direction {vd[:5]!r} is not E/W", field="mag_var_dir")
+            self.variation = var if vd == "E" else -var
+        if status not in ("A", "V"):
+            raise LogError(f"status {status[:5]!r} is not A/V", field="status")
+        if status == "V" or mode == "N" or lat is None or lon is None:
+            self.out.counts["no_fix"] += 1
+            return []
+        if t is not None and sog is not None:
+            self._speed(t, sog * KNOT, cog)
+        if t is not None and t - self.last_gga_t <= GGA_HOLD_S:
+            return []
+        return self._fix(t, lat, lon, MODE_QUALITY.get(mode, 1), None, "rmc")
+
+    def _zda(self, msg) -> list[Record]:
+        tod = parse_time_of_day(_field(msg, 0))
+        dd, mm, yy = (_field(msg, i).strip() for i in (1, 2, 3))
+        if tod is None:
+            raise LogError("ZDA without time", field="timestamp")
+        self._stamp(tod)
+        if dd or mm or yy:
+            try:
+                d = date(int(_float(yy, "year", lo=1900, hi=2200)), int(_float(mm, "month", lo=1, hi=12)),
+                         int(_float(dd, "day", lo=1, hi=31)))
+            except ValueError:
+                raise LogError(f"date {dd}/{mm}/{yy} does not exist", field="day") from None
+            self._set_date(d)
+        return []
+
+    def _speed(self, t: float, sog: float, cog_deg: float | None) -> None:
+        self.sog = (t, sog)
+        if self.keep:
+            self.out.sog_cog.append((t, sog, math.nan if cog_deg is None else cog_deg))
+
+    def _vtg(self, msg) -> list[Record]:
+        cog = _opt_float(_field(msg, 0), "true_track", lo=0.0, hi=360.0)
+        kts = _opt_float(_field(msg, 4), "spd_over_grnd_kts", lo=0.0, hi=1e4)
+        kmh = _opt_float(_field(msg, 6), "spd_over_grnd_kmph", lo=0.0, hi=2e4)
+        if _field(msg, 8).strip()[:1] == "N" or (kts is None and kmh is None):
+            self.out.counts["no_speed"] += 1
+            return []
+        if self.t is None:
+            self.out.counts["untimed"] += 1
+            return []
+        self._speed(self.t, kts * KNOT if kts is not None else kmh / 3.6, cog)
+        return []
+
+    def _heading(self, heading_deg: float, src: str) -> list[Record]:
+        if self.t is None:
+            self.out.counts["untimed"] += 1
+            return []
+        sigma = math.radians(self.heading_sigma_deg[src])
+        return [Heading(self.t, float(heading_deg_to_yaw(heading_deg % 360.0)), sigma)]
+
+    def _hdt(self, msg) -> list[Record]:
+        h = _opt_float(_field(msg, 0), "heading", lo=0.0, hi=360.0)
+        return [] if h is None else self._heading(h, "HDT")
+
+    def _ths(self, msg) -> list[Record]:
+        h = _opt_float(_field(msg, 0), "heading", lo=0.0, hi=360.0)
+        if h is None or _field(msg, 1).strip()[:1] == "V":
+            self.out.counts["invalid_heading"] += 1
+            return []
+        return self._heading(h, "THS")
+
+    def _hdg(self, msg) -> list[Record]:
+        h = _opt_float(_field(msg, 0), "heading", lo=0.0, hi=360.0)
+        if h is None:
+            return []
+        for i, name in ((1, "deviation"), (3, "variation")):
+            v = _opt_float(_field(msg, i), name, lo=0.0, hi=180.0)
+            if v is None:
+                continue
+            e = _field(msg, i + 1).strip()
+            if e not in ("E", "W"):
+                raise LogError(f"direction {e[:5]!r} is not E/W", field=("dev_dir", "var_dir")[i // 2])
+            h += v if e == "E" else -v
+            if i == 3:
+                break
+        else:  # no variation in the sentence
+            if self.variation is not None:
+                h += self.variation
+            else:
+                self.out.counts["hdg_without_variation"] += 1
+        return self._heading(h, "HDG")
+
+    def _rot(self, msg) -> list[Record]:
+        rot = _opt_float(_field(msg, 0), "rate_of_turn", lo=-1e5, hi=1e5)
+        if rot is None or _field(msg, 1).strip()[:1] == "V":
+            self.out.counts["invalid_rot"] += 1
+            return []
+        if self.t is None:
+            self.out.counts["untimed"] += 1
+            return []
+        if self.sog is None or self.t - self.sog[0] > self.sog_max_age:
+            self.out.counts["rot_without_sog"] += 1
+            return []
+        return [Odometry(self.t, self.sog[1], -math.radians(rot) / 60.0)]
+
+
+HANDLED = {"GGA", "RMC", "ZDA", "VTG", "HDT", "THS", "HDG", "ROT"}
+
+
+# ----------------------------------------------------------------------------- files
+
+def _lines(path: Path) -> list[bytes]:
+    try:
+        if path.name.lower().endswith(".gz"):
+            with gzip.open(path, "rb") as fh:
+                data = fh.read()
+        else:
+            data = path.read_bytes()
+    except (OSError, EOFError) as exc:
+        raise LogError(f"cannot read: {exc}", file=str(path)) from None
+    return data.splitlines()
+
+
+def _decode(raw: bytes) -> str:
+    try:
+        s = raw.decode("ascii")
+    except UnicodeDecodeError:
+        raise LogError("non-ASCII bytes in a sentence", field="sentence") from None
+    return s.strip().lstrip("\ufeff")
+
+
+def _first_date_day0(lines: Iterable[bytes]) -> float | None:
+    """POSIX midnight of day 0 from the first dated sentence (RMC/ZDA), following rollovers.
+
+    A cheap first pass: only GGA/RMC/ZDA lines are parsed, bad ones are passed over (the main
+    pass reports them)."""
+    probe = NmeaDecoder()
+    for raw in lines:
+        if raw[3:6] not in (b"GGA", b"RMC", b"ZDA"):
+            continue
+        try:
+            msg = parse_sentence(_decode(raw))
+            kind = msg.sentence_type
+            if kind == "RMC":
+                probe._rmc(msg)
+            elif kind == "ZDA":
+                probe._zda(msg)
+            else:
+                probe._stamp(parse_time_of_day(_field(msg, 0)))
+        except (LogError, AttributeError):
+            continue
+        if probe.day0 is not None:
+            return probe.day0
+    return None
+
+
+def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, float] | None = None,
+               require_checksum: bool = False, **decoder_options: Any) -> tuple[NmeaParse, dict[str, Any]]:
+    """Decode a file into an :class:`NmeaParse` plus ``meta`` (see the module docstring).
+
+    Sentences are parsed and decoded one line at a time (errors come in line order); only the
+    records are kept."""
+    path = Path(path)
+    lines = _lines(path)
+    skipped: list[str] = []
+    ignored: Counter = Counter()
+
+    def bad(err: LogError, lineno: int) -> None:
+        err = err.located(file=str(path), line=lineno)
+        if not lenient:
+            raise err from None
+        skipped.append(str(err))
+
+    def sentences() -> Iterator[tuple[int, pynmea2.NMEASentence]]:
+        for lineno, raw in enumerate(lines, start=1):
+            s = ""
+            try:
+                s = _decode(raw)
+                if not s or s.startswith("#"):
+                    continue
+                if s.startswith("!"):  # AIS and other encapsulated data: not navigation input
+                    ignored["!" + s[1:6]] += 1
+                    continue
+                msg = parse_sentence(s, require_checksum=require_checksum)
+            except LogError as err:
+                if err.field == "sentence" and err.message.startswith("unknown sentence type"):
+                    ignored[s[3:6] if len(s) > 6 else s] += 1
+                    continue
+                bad(err, lineno)
+                continue
+            yield lineno, msg
+
+    frame = LocalFrame(float(origin[0]), float(origin[1]), 0.0) if origin is not None else None
+    dec = NmeaDecoder(frame, day0=_first_date_day0(lines), **decoder_options)
+    pending: list[tuple[int, pynmea2.NMEASentence]] = []  # untimed sentences before the first time
+    last_t = -math.inf
+    for lineno, msg in sentences():
+        n_before = len(dec.out.records)
+        try:
+            if dec.t is None and getattr(msg, "sentence_type", "") in ("VTG", "HDT", "THS", "HDG", "ROT"):
+                pending.append((lineno, msg))
+                continue
+            dec.feed(msg)
+            if pending and dec.t is not None:
+                todo, pending = pending, []
+                for ln, m in todo:
+                    try:
+                        dec.feed(m)
+                    except LogError as err:
+                        bad(err, ln)
+            if dec.t is not None:
+                if dec.t < last_t:
+                    raise LogError(f"time goes backwards ({dec.t!r} after {last_t!r})", field="timestamp")
+                last_t = dec.t
+        except LogError as err:
+            del dec.out.records[n_before:]
+            bad(err, lineno)
+    for _ln, m in pending:  # no sentence carried a time at all
+        ignored["untimed:" + getattr(m, "sentence_type", "?")] += 1
+    out = dec.out
+    meta: dict[str, Any] = {"source": str(path), "format": "nmea0183",
+                            "time": "posix" if dec.day0 is not None else "seconds since first UTC midnight"}
+    if dec.frame is not None:
+        meta["origin"] = {"lat": dec.frame.lat0, "lon": dec.frame.lon0, "h": dec.frame.h0}
+    for k, v in sorted(out.counts.items()):
+        if k.startswith("ignored:"):
+            ignored[k.split(":", 1)[1]] += v
+        elif k in ("no_fix", "rot_without_sog", "hdg_without_variation", "untimed", "duplicate_fix"):
+            meta[k] = v
+    if ignored:
+        meta["ignored"] = dict(sorted(ignored.items()))
+    meta["sog_cog_samples"] = len(out.sog_cog)
+    if lenient:
+        meta["skipped"] = len(skipped)
+        meta["skipped_errors"] = skipped[:20]
+    return out, meta
+
+
+def read_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, float] | None = None,
+              **options: Any) -> NavLog:
+    """Read an NMEA 0183 file (``.nmea``, ``.txt``, ``.log``, optionally ``.gz``) into a :class:`NavLog`.
+
+    ``origin`` = (lat, lon) degrees of the local frame (default: the first fix). Strict by
+    default: the first bad sentence raises :class:`LogError` with file, line and field.
+    """
+    out, meta = parse_nmea(path, lenient=lenient, origin=origin, **options)
+    return NavLog.from_unsorted(out.records, (), meta)
