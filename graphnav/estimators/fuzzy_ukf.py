@@ -49,27 +49,36 @@ class FuzzyCovarianceMatcher:
         self.buf = np.zeros((3, self.N))
         self.count = np.zeros(3, dtype=int)
         self.c_a = np.zeros(3)
+        self.r_floor = 1e-6 * self.r0
+        self._rows = np.arange(3)
         self.hist = {k: np.full((n_steps, 3), np.nan) for k in ("r_hat", "c_a", "c_t", "dom", "alpha")}
 
-    def __call__(self, k: int, ch: NDArray, eps: NDArray, HPH: NDArray, r0_rows: NDArray) -> NDArray:
+    def __call__(self, k: int, ch: NDArray | slice, eps: NDArray, HPH: NDArray, r0_rows: NDArray) -> NDArray:
         e2 = eps * eps
-        slot = self.count[ch] % self.N
-        old = self.buf[ch, slot]
-        self.buf[ch, slot] = e2
-        self.count[ch] += 1
-        full = self.count[ch] >= self.N
-        # eq. 18 (recursive window mean); before the window is full, the mean of what is there
-        self.c_a[ch] = np.where(full, self.c_a[ch] + (e2 - old) / self.N,
-                                self.c_a[ch] + (e2 - self.c_a[ch]) / np.minimum(self.count[ch], self.N))
+        cnt = self.count[ch]
+        slot = cnt % self.N
+        rows = self._rows[ch]
+        old = self.buf[rows, slot]
+        self.buf[rows, slot] = e2
+        cnt = cnt + 1
+        self.count[ch] = cnt
+        if cnt.min() > self.N:  # eq. 18: add the newest, drop the one leaving the window
+            c_a = self.c_a[ch] + (e2 - old) / self.N
+        else:  # filling the window (eq. 17 over what is there)
+            c_a = self.c_a[ch] + (e2 - self.c_a[ch]) / np.minimum(cnt, self.N)
+            c_a = np.where(cnt > self.N, self.c_a[ch] + (e2 - old) / self.N, c_a)
+        self.c_a[ch] = c_a
         r_prev = self.r[ch]
-        c_t = np.diag(HPH) + r_prev  # eq. 15
-        dom = self.c_a[ch] / c_t  # eq. 20
-        alpha = np.where(full, self.fuzzy(dom), 1.0)
-        base = r_prev if self.compound else self.r0[ch]
-        r_hat = np.maximum(alpha * base, 1e-6 * self.r0[ch])  # eq. 21 (floor only for numerical safety)
+        c_t = HPH.diagonal() + r_prev  # eq. 15
+        dom = c_a / c_t  # eq. 20
+        alpha = self.fuzzy(dom)
+        if cnt.min() < self.N:
+            alpha = np.where(cnt >= self.N, alpha, 1.0)
+        r_hat = alpha * (r_prev if self.compound else self.r0[ch])  # eq. 21
+        r_hat = np.maximum(r_hat, self.r_floor[ch])  # numerical safety only
         self.r[ch] = r_hat
         h = self.hist
-        h["r_hat"][k, ch], h["c_a"][k, ch], h["c_t"][k, ch] = r_hat, self.c_a[ch], c_t
+        h["r_hat"][k, ch], h["c_a"][k, ch], h["c_t"][k, ch] = r_hat, c_a, c_t
         h["dom"][k, ch], h["alpha"][k, ch] = dom, alpha
         return r_hat
 

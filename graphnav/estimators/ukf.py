@@ -128,18 +128,19 @@ class UnscentedNav:
         self.P = (D.T * self.wc) @ D + self._Q(T)
         self.P_pred = self.P
 
-    def innovation(self, idx: NDArray, z: NDArray) -> tuple[NDArray, NDArray]:
-        """``eps = z - H x^-`` (eq. 14, heading wrapped) and ``H P^- H^T`` for the rows ``idx`` of eq. 13."""
+    def innovation(self, idx: NDArray, z: NDArray, ix: tuple | None = None) -> tuple[NDArray, NDArray]:
+        """``eps = z - H x^-`` (eq. 14, heading wrapped) and ``H P^- H^T`` for the rows ``idx`` of eq. 13
+        (``ix`` = ``np.ix_(idx, idx)``, precomputed by callers in a loop)."""
         eps = z - self.x[idx]
         if idx[-1] == 4:
             eps[-1] = (eps[-1] + math.pi) % TWO_PI - math.pi
-        return eps, self.P[np.ix_(idx, idx)]
+        return eps, self.P[ix if ix is not None else np.ix_(idx, idx)]
 
     def update(self, idx: NDArray, eps: NDArray, HPH: NDArray, R: NDArray) -> None:
         """Step 2 of the appendix: ``K = P^- H^T (H P^- H^T + R)^-1``, ``x += K eps``, ``P = (I-KH) P^-``."""
         S = HPH + R
         PHt = self.P[:, idx]
-        K = np.linalg.solve(S, PHt.T).T
+        K = PHt @ np.linalg.inv(S)
         self.x = self.x + K @ eps
         self.x[4] = (self.x[4] + math.pi) % TWO_PI - math.pi
         P = self.P - K @ PHt.T
@@ -227,6 +228,7 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapt
     r_used = np.full((n, 3), np.nan)
     step_ms = np.empty(n - 1)
     pidx = np.array([0, 1, 4])
+    pix = np.ix_(pidx, pidx)
     has = ~np.isnan(z)
     all_idx = np.array([0, 1, 4])
     sel = {}
@@ -238,16 +240,17 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapt
         if m.any():
             key = (m[0], m[1], m[2])
             if key not in sel:
-                sel[key] = (all_idx[m], np.flatnonzero(m))
-            idx, ch = sel[key]
-            eps, HPH = f.innovation(idx, z[k, ch])
+                ch_ = slice(0, 3) if m.all() else np.flatnonzero(m)  # basic slicing is cheaper
+                sel[key] = (all_idx[m], ch_, np.ix_(all_idx[m], all_idx[m]))
+            idx, ch, ix = sel[key]
+            eps, HPH = f.innovation(idx, z[k, ch], ix)
             R = adapter(k, ch, eps, HPH, r0[ch]) if adapter is not None else r0[ch]
             r_used[k, ch] = R
             f.update(idx, eps, HPH, np.diag(R))
         if k:
             step_ms[k - 1] = (time.perf_counter() - t0) * 1e3
         poses[k] = f.x[pidx]
-        cov[k] = f.P[np.ix_(pidx, pidx)]
+        cov[k] = f.P[pix]
         states[k] = f.x
         if on_estimate is not None:
             on_estimate(float(t[k]), poses[k].copy(), cov[k].copy())
