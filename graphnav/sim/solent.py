@@ -79,63 +79,69 @@ class SolentConfig:
     extra: dict = field(default_factory=dict)
 
 
-def current_direction(p: np.ndarray) -> float:
-    """Direction delta [rad, CCW from east] of the tidal stream at position p (eq. 30)."""
-    a, b = COASTLINE[:-1], COASTLINE[1:]
-    d = b - a
-    L2 = np.sum(d * d, axis=1)
-    s = np.clip(np.sum((p - a) * d, axis=1) / L2, 0.0, 1.0)
-    dist2 = np.sum((a + s[:, None] * d - p) ** 2, axis=1)
-    w = 1.0 / (dist2 + 1e2) ** 2
-    u = np.sum(w[:, None] * d / np.sqrt(L2)[:, None], axis=0)
-    return math.atan2(u[1], u[0])
+_SEGS = [(float(a[0]), float(a[1]), float(b[0] - a[0]), float(b[1] - a[1]))
+         for a, b in zip(COASTLINE[:-1], COASTLINE[1:], strict=True)]
+
+
+def current_direction(p) -> float:
+    """Direction delta [rad, CCW from east] of the tidal stream at position p (eq. 30): the
+    inverse-squared-distance weighted mean of the coastline segments' unit directions."""
+    px, py = float(p[0]), float(p[1])
+    ux = uy = 0.0
+    for ax, ay, dx, dy in _SEGS:
+        L2 = dx * dx + dy * dy
+        s = min(1.0, max(0.0, ((px - ax) * dx + (py - ay) * dy) / L2))
+        ex, ey = ax + s * dx - px, ay + s * dy - py
+        w = 1.0 / ((ex * ex + ey * ey + 1e2) ** 2 * math.sqrt(L2))
+        ux += w * dx
+        uy += w * dy
+    return math.atan2(uy, ux)
 
 
 def _truth(cfg: SolentConfig) -> dict[str, np.ndarray]:
     """Integrate the mission; returns per-sample truth and per-interval mean body accel / yaw rate."""
     h = cfg.dt / cfg.substeps
-    p = np.array(START)
+    px, py = START
     psi = float(heading_deg_to_yaw(210.0))
     r = 0.0
     wp = 0
-    vc = cfg.current_speed
+    vc, u = cfg.current_speed, cfg.speed
     rmax = math.radians(cfg.max_rate_deg)
 
-    def ground_vel(p: np.ndarray, psi: float) -> np.ndarray:
-        d = current_direction(p)
-        return np.array([cfg.speed * math.cos(psi) + vc * math.cos(d),
-                         cfg.speed * math.sin(psi) + vc * math.sin(d)])  # eq. 30
+    def ground_vel(px: float, py: float, psi: float) -> tuple[float, float]:
+        d = current_direction((px, py))
+        return u * math.cos(psi) + vc * math.cos(d), u * math.sin(psi) + vc * math.sin(d)  # eq. 30
 
-    v = ground_vel(p, psi)
+    vx, vy = ground_vel(px, py, psi)
     T = [0.0]
-    P, PSI, V = [p.copy()], [psi], [v.copy()]
+    P, PSI, V = [(px, py)], [psi], [(vx, vy)]
     ACC, RATE, WPT = [], [], []
     for k in range(1, cfg.max_steps + 1):
-        acc_b = np.zeros(2)
-        dpsi = 0.0
+        abx = aby = dpsi = 0.0
         for _ in range(cfg.substeps):
-            tgt = np.array(WAYPOINTS[wp])
-            want = math.atan2(tgt[1] - p[1], tgt[0] - p[0])
-            r_cmd = float(np.clip(cfg.heading_gain * wrap_angle(want - psi), -rmax, rmax))
+            tx, ty = WAYPOINTS[wp]
+            err = (math.atan2(ty - py, tx - px) - psi + math.pi) % (2 * math.pi) - math.pi
+            r_cmd = min(rmax, max(-rmax, cfg.heading_gain * err))
             r += (r_cmd - r) * h / cfg.rate_tau
             psi_new = psi + r * h
-            p_new = p + v * h
-            v_new = ground_vel(p_new, psi_new)
-            a_nav = (v_new - v) / h
+            px, py = px + vx * h, py + vy * h
+            vx_new, vy_new = ground_vel(px, py, psi_new)
+            anx, any_ = (vx_new - vx) / h, (vy_new - vy) / h
             psi_mid = 0.5 * (psi + psi_new)
             c, s = math.cos(psi_mid), math.sin(psi_mid)
-            acc_b += np.array([c * a_nav[0] + s * a_nav[1], -s * a_nav[0] + c * a_nav[1]]) * h
+            abx += (c * anx + s * any_) * h  # nav -> body frame
+            aby += (-s * anx + c * any_) * h
             dpsi += r * h
-            p, psi, v = p_new, psi_new, v_new
-            if np.hypot(*(np.array(WAYPOINTS[wp]) - p)) < cfg.clearance:  # eq. 29
+            psi, vx, vy = psi_new, vx_new, vy_new
+            if math.hypot(WAYPOINTS[wp][0] - px, WAYPOINTS[wp][1] - py) < cfg.clearance:  # eq. 29
                 wp += 1
                 if wp == len(WAYPOINTS):
                     break
         T.append(k * cfg.dt)
-        P.append(p.copy())
+        P.append((px, py))
         PSI.append(psi)
-        V.append(v.copy())
-        ACC.append(acc_b / cfg.dt)
+        V.append((vx, vy))
+        ACC.append((abx / cfg.dt, aby / cfg.dt))
         RATE.append(dpsi / cfg.dt)
         WPT.append(wp)
         if wp == len(WAYPOINTS):
