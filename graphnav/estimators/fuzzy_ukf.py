@@ -101,7 +101,13 @@ def run_fuzzy_ukf(log: NavLog, *, on_estimate: OnEstimate | None = None, **optio
     return res
 
 
+def run_fuzzy_ukf_bias(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
+    return run_fuzzy_ukf(log, on_estimate=on_estimate, **{**options, "bias": True})
+
+
 ESTIMATORS = {
     "fuzzy-ukf": EstimatorSpec(run_fuzzy_ukf, unmet,
                                "UKF with fuzzy covariance-matching R adaptation (Liu 2019)", "filter"),
+    "fuzzy-ukf-bias": EstimatorSpec(run_fuzzy_ukf_bias, unmet,
+                                    "fuzzy-ukf on the bias-augmented ukf-bias state (ours)", "filter"),
 }
