@@ -1,0 +1,84 @@
+"""``graphnav beacons search --beacons {1,2,4}``: the exhaustive beacon-layout search of the beacon
+paper (sections 6-7), scored by the EKF-SLAM covariance (eq. 28) or the factor graph's marginals."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..beacon_layout import Choices, Fairway, chunk_tasks, grid, score_chunk, summarize_search
+from ..sweep import run_sweep
+from ._common import add_json_flag, emit
+
+log = logging.getLogger("graphnav.beacons")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("beacons", help="beacon-layout studies", description=__doc__)
+    bsub = p.add_subparsers(dest="beacons_cmd", metavar="CMD", required=True)
+    s = bsub.add_parser("search", help="exhaustive layout search (paper's Table 1)")
+    s.add_argument("--beacons", type=int, choices=(1, 2, 4), required=True, help="number of beacons")
+    s.add_argument("--criterion", choices=("ekf", "smoother"), default="ekf",
+                   help="ekf: EKF-SLAM covariance (eq. 28); smoother: GTSAM marginals (slower)")
+    s.add_argument("--marginals", choices=("online", "smoothed"), default="online",
+                   help="smoother criterion: iSAM2 online marginals or the smoothed ones")
+    s.add_argument("--scheduler", default=None,
+                   help="Dask scheduler address (tcp://host:8786); default: an embedded LocalCluster; "
+                        "'serial' runs in-process")
+    s.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
+    s.add_argument("--chunk", type=int, default=None, help="configurations per sweep task")
+    s.add_argument("--results", type=Path, default=None,
+                   help="JSON-lines file of finished chunks: an interrupted search resumes from it")
+    s.add_argument("--limit", type=int, default=None, help="score only every k-th layout (quick looks)")
+    s.add_argument("--linearize", choices=("truth", "estimate"), default="truth")
+    s.add_argument("--beacon-init", choices=("first-sighting", "zero", "truth"), default="first-sighting")
+    s.add_argument("--p0-cross", choices=("zero", "paper"), default="zero")
+    s.add_argument("--p0-beacon", type=float, default=1e6, help="beacon prior variance [m^2] (eq. 14)")
+    s.add_argument("--w-second", choices=("rot", "theta"), default="rot")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--no-progress", action="store_true")
+    add_json_flag(s)
+    s.set_defaults(func=search)
+
+
+def search(args: argparse.Namespace) -> int:
+    layouts = grid(args.beacons)
+    if args.limit:
+        layouts = layouts[:: args.limit]
+    fw = Fairway()
+    ch = Choices(linearize=args.linearize, beacon_init=args.beacon_init, p0_beacon=args.p0_beacon,
+                 p0_cross=args.p0_cross, w_second=args.w_second, seed=args.seed)
+    t0 = time.perf_counter()
+    if args.criterion == "ekf":
+        chunk = args.chunk or 512
+        tasks = chunk_tasks(layouts, chunk, fw, ch)
+        fn = score_chunk
+    else:
+        from ..beacon_layout_graph import score_chunk_graph
+
+        chunk = args.chunk or 16
+        tasks = chunk_tasks(layouts, chunk, fw, ch, extra={"marginals": args.marginals})
+        fn = score_chunk_graph
+    results = run_sweep(fn, tasks, out=args.results, scheduler=args.scheduler, workers=args.workers,
+                        progress=not args.no_progress, desc=f"{args.beacons}-beacon {args.criterion}")
+    scores = np.concatenate([np.asarray(r["scores"], dtype=float).reshape(-1, 3) for r in results])
+    wall = time.perf_counter() - t0
+    s = summarize_search(layouts, scores)
+    criterion = args.criterion if args.criterion == "ekf" else f"smoother-{args.marginals}"
+    out: dict[str, Any] = {"beacons": s["beacons"], "configs": s["configs"], "criterion": criterion,
+                           "best": s["best"], "worst_mean_mxy": s["worst_mean_mxy"],
+                           "mean_over_configs_mxy": s["mean_over_configs_mxy"], "wall_s": wall}
+    log.info("%d configurations in %.2f s (%.0f configs/s)", len(layouts), wall, len(layouts) / wall)
+    b = s["best"]
+    human = (f"{s['beacons']} beacon(s), {s['configs']} configurations, criterion {out['criterion']}\n"
+             f"best layout {b['layout']}: mean M_xy {b['mean_mxy']:.3f} m (M_x {b['mean_mx']:.3f}, "
+             f"M_y {b['mean_my']:.3f})\nworst mean M_xy {s['worst_mean_mxy']:.3f} m, "
+             f"mean over configurations {s['mean_over_configs_mxy']:.3f} m\n"
+             f"wall {wall:.2f} s ({len(layouts) / wall:.0f} configs/s)")
+    emit(args, out, human)
+    return 0
