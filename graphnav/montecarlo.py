@@ -2,13 +2,13 @@
 
 One trial = one simulated mission (scenario, seed) run through every estimator by name with
 :func:`graphnav.estimators.run`; trials are independent, so they are mapped over a sweep runner
-(:mod:`graphnav.sweep` when present, else serially behind the same :func:`map_trials` boundary).
+(:func:`graphnav.sweep.run_sweep`, see :func:`map_trials`).
 Pure functions; the CLI is :mod:`graphnav.commands.montecarlo`.
 """
 
 from __future__ import annotations
 
-import importlib
+import json
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -48,30 +48,25 @@ def solent_trial(scenario: int, seed: int, names: Sequence[str], options: dict[s
     return out
 
 
-def _sweep_map() -> Callable | None:
-    """``graphnav.sweep``'s map function if that module exists (branch ``ekf``), else None."""
+def _task_call(task: dict[str, Any]) -> Any:
+    """Adapter for :func:`graphnav.sweep.run_sweep`: ``task = {"key", "fn", "kwargs"}``."""
+    return task["fn"](**task["kwargs"])
+
+
+def map_trials(fn: Callable, kwargs_list: list[dict[str, Any]], *, scheduler: str | None = None,
+               workers: int = 2, out: str | None = None, progress: bool = False) -> list[Any]:
+    """Run ``fn(**kw)`` for every ``kw`` on the sweep runner (:func:`graphnav.sweep.run_sweep`:
+    an embedded Dask ``LocalCluster`` of ``workers`` processes, an existing cluster at
+    ``scheduler``, or ``scheduler="serial"``); results in order. ``out`` makes the sweep resumable.
+    Without :mod:`graphnav.sweep` the trials run serially."""
     try:
-        sweep = importlib.import_module("graphnav.sweep")
+        from .sweep import run_sweep
     except ImportError:
-        return None
-    for fn in ("map_tasks", "sweep_map", "map"):
-        if hasattr(sweep, fn):
-            return getattr(sweep, fn)
-    return None
-
-
-def map_trials(fn: Callable, kwargs_list: list[dict[str, Any]], *, scheduler: str | None = None) -> list[Any]:
-    """Run ``fn(**kw)`` for every ``kw``: on the sweep runner when available, else serially."""
-    smap = _sweep_map()
-    if smap is not None:
-        return list(smap(fn, kwargs_list, scheduler=scheduler))
-    if scheduler:
-        from distributed import Client
-
-        with Client(scheduler) as client:
-            futs = [client.submit(fn, pure=False, **kw) for kw in kwargs_list]
-            return client.gather(futs)
-    return [fn(**kw) for kw in kwargs_list]
+        return [fn(**kw) for kw in kwargs_list]
+    tasks = [{"key": f"{fn.__name__}:{json.dumps(kw, sort_keys=True)}", "fn": fn, "kwargs": kw}
+             for kw in kwargs_list]
+    return run_sweep(_task_call, tasks, out=out, scheduler=scheduler, workers=workers, progress=progress,
+                     desc="montecarlo")
 
 
 def aggregate(trials: list[dict[str, dict[str, float]]], names: Sequence[str]) -> dict[str, dict[str, Any]]:

@@ -26,7 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--scenario", type=int, choices=(1, 2, 3), required=True)
     s.add_argument("--runs", type=int, default=50)
     s.add_argument("--seed0", type=int, default=0, help="first seed (runs use seed0 .. seed0+runs-1)")
-    s.add_argument("--scheduler", help="Dask scheduler address (default: the sweep runner's local default)")
+    s.add_argument("--scheduler", help="Dask scheduler address, or 'serial' (default: a local cluster)")
+    s.add_argument("--workers", type=int, default=2, help="local cluster processes (default 2)")
+    s.add_argument("--results", help="JSON-lines file of per-run results (makes the sweep resumable)")
     s.add_argument("--estimators", help="comma-separated names (default: " + ",".join(PAPER_ESTIMATORS) + ")")
     s.add_argument("--option", "-O", action="append", metavar="EST:KEY=VALUE",
                    help="estimator option, e.g. fuzzy-ukf:window=50; repeatable")
@@ -59,7 +61,7 @@ def run_solent(args: argparse.Namespace) -> int:
               "sim_options": sim_opts} for i in range(args.runs)]
     log_.info("montecarlo solent scenario %d: %d runs of %s", args.scenario, args.runs, names)
     t0 = time.perf_counter()
-    trials = map_trials(solent_trial, tasks, scheduler=args.scheduler)
+    trials = map_trials(solent_trial, tasks, scheduler=args.scheduler, workers=args.workers, out=args.results)
     est = aggregate(trials, names)
     out = {"scenario": args.scenario, "runs": args.runs, "estimators": est,
            "improvement_pct": improvement_pct(est)}
