@@ -118,8 +118,8 @@ def test_cli_simulate_and_montecarlo_print_one_json_object(tmp_path):
     log = load_log(out)
     assert log.meta["scenario"] == 2 and len(log.of("imu")) == info["records"]["imu"]
     cmd = [sys.executable, "-m", "graphnav", "montecarlo", "solent", "--scenario", "1", "--runs", "2"]
-    p = subprocess.run(cmd + ["--estimators", "ukf,fuzzy-ukf,no-such-filter", "--scheduler", "serial", "--json"],
-                       capture_output=True, text=True, check=True)
+    args = ["--estimators", "ukf,fuzzy-ukf,no-such-filter", "--scheduler", "serial", "--json"]
+    p = subprocess.run(cmd + args, capture_output=True, text=True, check=True)
     res = json.loads(p.stdout)
     assert res["scenario"] == 1 and res["runs"] == 2
     assert set(res["estimators"]) == {"ukf", "fuzzy-ukf"} and res["skipped"] == ["no-such-filter"]
