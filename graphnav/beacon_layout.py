@@ -155,12 +155,14 @@ def _wrap(a: NDArray) -> NDArray:
 
 
 def propagate(layouts: NDArray[np.float64], fw: Fairway = Fairway(), ch: Choices = Choices(),
-              *, keep_state: bool = False, block: int = 512) -> dict[str, NDArray[np.float64]]:
+              *, keep_state: bool = False, block: int = 512,
+              seeds: NDArray[np.int64] | None = None) -> dict[str, NDArray[np.float64]]:
     """Run the EKF-SLAM of eq. 9-27 over every layout at once (in cache-sized blocks of layouts).
 
     ``layouts`` (C, B, 2) beacon positions. Returns ``mx``, ``my`` (C, steps): sqrt(P00), sqrt(P11)
     after the correction of steps 1..steps; with ``keep_state`` also ``P`` (C, n, n) and ``x``
-    (C, n) after the last step. Beacons are updated one at a time (K is (3+2i) x 2, eq. 24), in
+    (C, n) after the last step. ``seeds`` (C,) overrides ``ch.seed`` per layout (Monte Carlo over
+    draws of one layout). Beacons are updated one at a time (K is (3+2i) x 2, eq. 24), in
     layout order; each correction is the rank-2 update P - K A^T with A = P H^T (K optimal, so it
     equals the Joseph form to rounding; the dense reference uses the Joseph form and the tests
     compare the two).
@@ -168,7 +170,8 @@ def propagate(layouts: NDArray[np.float64], fw: Fairway = Fairway(), ch: Choices
     layouts = np.asarray(layouts, dtype=float)
     if layouts.ndim != 3 or layouts.shape[2] != 2:
         raise ValueError(f"layouts must have shape (C, beacons, 2), got {layouts.shape}")
-    parts = [_propagate_block(layouts[i:i + block], fw, ch, keep_state)
+    seeds = np.full(len(layouts), ch.seed) if seeds is None else np.asarray(seeds)
+    parts = [_propagate_block(layouts[i:i + block], fw, ch, keep_state, seeds[i:i + block])
              for i in range(0, len(layouts), block)]
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
@@ -182,8 +185,8 @@ def _outer_add(P: NDArray, u: NDArray, v: NDArray, tmp: NDArray, sign: float) ->
         P -= tmp
 
 
-def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices,
-                     keep_state: bool) -> dict[str, NDArray[np.float64]]:
+def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices, keep_state: bool,
+                     seeds: NDArray) -> dict[str, NDArray[np.float64]]:
     # Layout (n, n, C): every matrix entry is a contiguous vector over configurations.
     C, B, _ = layouts.shape
     n = 3 + 2 * B
@@ -195,7 +198,7 @@ def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices,
     x = np.zeros((n, C))
     x[:3] = fw.start[:, None]
     if est:
-        noise = [draw_noise(fw, lay, ch.seed) for lay in layouts]
+        noise = [draw_noise(fw, lay, int(sd)) for lay, sd in zip(layouts, seeds, strict=True)]
         dv = np.array([d["dv"] for d in noise]).T               # (steps, C)
         drot = np.array([d["drot"] for d in noise]).T
         dr = np.array([d["dr"] for d in noise]).transpose(1, 2, 0)  # (steps, B, C)

@@ -74,7 +74,11 @@ def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any
     sink = None
     if out is not None:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
+        p = Path(out)
+        torn = p.exists() and p.stat().st_size > 0 and not p.read_bytes().endswith(b"\n")
         sink = open(out, "a", encoding="utf-8")
+        if torn:
+            sink.write("\n")  # end a line torn by an interrupted write; load_done skipped it
     bar = None
     if progress:
         from tqdm import tqdm
