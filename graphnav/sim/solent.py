@@ -16,10 +16,11 @@ Sensors are sampled every T = 1 s:
   (2) GNSS 20 m, compass 5 deg, (3) scenario 1 for the first ``switch_step`` = 300 steps, then 2.
   The records' ``sigma`` is the a-priori (datasheet) value of Table 2 in every scenario (the
   filters' knowledge); the true noise is in ``meta["noise"]``.
-* ``odometry``: what a ship's 2-axis Doppler log (its fore-aft channel: speed over ground along
-  the bow) and a rate-of-turn sensor report, with white noise ``sigma_v`` = 0.05 m/s and
-  ``sigma_w`` = 0.1 deg/s, so odometry-driven estimators (EKF, smoothers) can run on the log.
-  The lateral (crab) component of the ground velocity caused by the current is *not* in it.
+* ``odometry``: speed over ground ``v`` (the log format's meaning: a Doppler log / SOG sensor) and
+  the rate of turn ``w`` of a ROT gyro, white noise ``sigma_v`` = 0.05 m/s, ``sigma_w`` = 0.1 deg/s,
+  so odometry-driven estimators (EKF, smoothers) can run on the log. The *direction* of the ground
+  velocity (course, which differs from the heading by the crab angle the current causes) is not
+  in it. ``odometry="fore_aft"`` writes the fore-aft component of the ground velocity instead.
 * ``truth`` at every step, a ``pose_prior`` at t = 0 (the known start berth, 1 m / 1 deg).
 
 The numeric core :func:`simulate_solent` returns a :class:`NavLog`; :func:`register` is the CLI.
@@ -76,6 +77,7 @@ class SolentConfig:
     calib_residual: float = 0.1  # residual bias after calibration, as a fraction of Table 3's bias
     odo_sigma_v: float = 0.05
     odo_sigma_w_deg: float = 0.1
+    odometry: str = "sog"  # or "fore_aft"
     extra: dict = field(default_factory=dict)
 
 
@@ -183,11 +185,15 @@ def simulate_solent(cfg: SolentConfig | None = None, **kw) -> NavLog:
     gx = tr["p"][:, 0] + rng.normal(0.0, 1.0, n) * sig[:, 0]
     gy = tr["p"][:, 1] + rng.normal(0.0, 1.0, n) * sig[:, 1]
     hd = wrap_angle(tr["psi"] + rng.normal(0.0, 1.0, n) * sig[:, 2])
-    # odometry: fore-aft ground speed (Doppler log) + rate of turn
-    c, s = np.cos(tr["psi"]), np.sin(tr["psi"])
-    v_fwd = c * tr["v"][:, 0] + s * tr["v"][:, 1]
+    # odometry: speed over ground (or its fore-aft component) + rate of turn
+    if cfg.odometry == "sog":
+        v_odo = np.hypot(tr["v"][:, 0], tr["v"][:, 1])
+    elif cfg.odometry == "fore_aft":
+        v_odo = np.cos(tr["psi"]) * tr["v"][:, 0] + np.sin(tr["psi"]) * tr["v"][:, 1]
+    else:
+        raise ValueError(f"odometry must be 'sog' or 'fore_aft', not {cfg.odometry!r}")
     sw = math.radians(cfg.odo_sigma_w_deg)
-    odo_v = v_fwd + rng.normal(0.0, cfg.odo_sigma_v, n)
+    odo_v = v_odo + rng.normal(0.0, cfg.odo_sigma_v, n)
     rate = np.concatenate([tr["rate"][:1], tr["rate"]])  # yaw rate over the interval ending at t_k
     odo_w = rate + rng.normal(0.0, sw, n)
 
