@@ -67,7 +67,8 @@ def run_solent(args: argparse.Namespace) -> int:
            "improvement_pct": improvement_pct(est)}
     if skipped:
         out["skipped"] = skipped
-    out["wall_s"] = time.perf_counter() - t0
+    log_.info("montecarlo solent scenario %d: %d runs in %.1f s", args.scenario, args.runs,
+              time.perf_counter() - t0)
     if opts:
         out["options"] = opts
     if sim_opts:
