@@ -5,20 +5,20 @@ fairway, V = 10 m/s, 200 steps of 0.5 s) and observes range and bearing to every
 For each candidate beacon layout the range-bearing EKF-SLAM of sections 3-5 is propagated and the
 layout is scored by the passage means of M_xy = sqrt(P00 + P11) (eq. 28), M_x (eq. 29), M_y (eq. 30).
 
-Everything here is vectorised over configurations: arrays carry a leading axis ``C`` and the filter
-runs all layouts of one search at once (numpy, no Python loop over layouts). The sparsity of G
-(eq. 19) and H (eq. 25) is exploited: the prediction is a rank-1 shear plus the 3x3 motion noise,
-every update a rank-2 correction in expanded Joseph form. The single-configuration reference with
-dense matrices, exactly as the paper writes them, is :class:`graphnav.estimators.ekf_slam.EkfSlam`;
-``tests/test_beacon_layout.py`` checks the two agree.
+Everything here is vectorised over configurations: the filter runs all layouts of a block at once
+(numpy, matrices stored (n, n, C) so every entry is a contiguous vector over layouts; no Python loop
+over layouts). The sparsity of G (eq. 19) and H (eq. 25) is exploited: the prediction is a rank-1
+shear plus the 3x3 motion noise, every correction a rank-2 update built from H's five non-zero
+columns. The single-configuration reference with dense matrices, exactly as the paper writes them
+(Joseph form), is :class:`graphnav.estimators.ekf_slam.EkfSlam`; ``tests/test_beacon_layout.py``
+checks the two agree, and that GTSAM's iSAM2 marginals (:mod:`graphnav.beacon_layout_graph`) agree.
 
 Choices the paper leaves open are explicit fields of :class:`Choices` (see docs/beacon-layout.md).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from itertools import product
 from typing import Any
 
@@ -155,7 +155,7 @@ def _wrap(a: NDArray) -> NDArray:
 
 
 def propagate(layouts: NDArray[np.float64], fw: Fairway = Fairway(), ch: Choices = Choices(),
-              *, keep_state: bool = False, block: int = 512,
+              *, keep_state: bool = False, block: int | None = None,
               seeds: NDArray[np.int64] | None = None) -> dict[str, NDArray[np.float64]]:
     """Run the EKF-SLAM of eq. 9-27 over every layout at once (in cache-sized blocks of layouts).
 
@@ -171,18 +171,11 @@ def propagate(layouts: NDArray[np.float64], fw: Fairway = Fairway(), ch: Choices
     if layouts.ndim != 3 or layouts.shape[2] != 2:
         raise ValueError(f"layouts must have shape (C, beacons, 2), got {layouts.shape}")
     seeds = np.full(len(layouts), ch.seed) if seeds is None else np.asarray(seeds)
+    n = 3 + 2 * layouts.shape[1]
+    block = block or max(256, 65536 // (n * n))  # P of one block ~0.5 MB: stays in cache
     parts = [_propagate_block(layouts[i:i + block], fw, ch, keep_state, seeds[i:i + block])
              for i in range(0, len(layouts), block)]
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-
-
-def _outer_add(P: NDArray, u: NDArray, v: NDArray, tmp: NDArray, sign: float) -> None:
-    """P[a, b, :] += sign * u[a, :] * v[b, :] (layout (n, n, C)), without allocating."""
-    np.multiply(u[:, None, :], v[None, :, :], out=tmp)
-    if sign > 0:
-        P += tmp
-    else:
-        P -= tmp
 
 
 def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices, keep_state: bool,
@@ -216,21 +209,25 @@ def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices, kee
         if est:
             v = fw.v + dv[k - 1]
             th = x[2].copy()
-        else:
-            v = np.full(C, fw.v)
-            th = np.full(C, track[k - 1, 2])
-        c, s = np.cos(th), np.sin(th)
+            c, s = np.cos(th), np.sin(th)
+            zero, one = np.zeros(C), np.ones(C)
+        else:  # on the true track G and R are the same for every layout: scalars, not vectors
+            v, th = fw.v, track[k - 1, 2]
+            c, s = float(np.cos(th)), float(np.sin(th))
+            zero, one = 0.0, 1.0
         ga, gb = -s * dt * v, c * dt * v
         P[0] += ga * P[2]
         P[1] += gb * P[2]
         P[:, 0] += ga * P[:, 2]
         P[:, 1] += gb * P[:, 2]
-        w0 = np.stack([c * dt, s * dt, np.zeros(C)])
-        if ch.w_second == "rot":
-            w1 = np.stack([np.zeros(C), np.zeros(C), np.full(C, dt)])
-        else:
-            w1 = np.stack([ga, gb, np.ones(C)])
-        P[:3, :3] += m_v * w0[:, None] * w0[None] + m_rot * w1[:, None] * w1[None]
+        w0 = (c * dt, s * dt, zero)
+        w1 = (zero, zero, dt * one) if ch.w_second == "rot" else (ga, gb, one)
+        for a in range(3):
+            for e in range(a, 3):
+                r = m_v * w0[a] * w0[e] + m_rot * w1[a] * w1[e]
+                P[a, e] += r
+                if e != a:
+                    P[e, a] += r
         if est:
             x[0] += v * dt * c
             x[1] += v * dt * s
@@ -251,23 +248,28 @@ def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices, kee
             dx, dy = lx - px, ly - py
             q = dx * dx + dy * dy
             r = np.sqrt(q)
-            # H (eq. 25) on its non-zero columns x, y, theta, xb, yb
-            h0 = (-dx / r, -dy / r, 0.0, dx / r, dy / r)
-            h1 = (dy / q, -dx / q, -1.0, -dy / q, dx / q)
-            cols = (0, 1, 2, b, b + 1)
-            A0 = h0[0] * P[:, 0] + h0[1] * P[:, 1] + h0[3] * P[:, b] + h0[4] * P[:, b + 1]     # (n, C)
-            A1 = h1[0] * P[:, 0] + h1[1] * P[:, 1] - P[:, 2] + h1[3] * P[:, b] + h1[4] * P[:, b + 1]
-            s00 = sum(h0[i] * A0[cols[i]] for i in (0, 1, 3, 4)) + q_r
-            s01 = sum(h0[i] * A1[cols[i]] for i in (0, 1, 3, 4))
-            s11 = sum(h1[i] * A1[cols[i]] for i in range(5)) + q_b
+            # H (eq. 25): the beacon columns are minus the position columns, so H P^T needs only
+            # D = P[:, (x, y)] - P[:, (xb, yb)] and P[:, theta]
+            hx0, hy0, hx1, hy1 = -dx / r, -dy / r, dy / q, -dx / q
+            Dx = P[:, 0] - P[:, b]
+            Dy = P[:, 1] - P[:, b + 1]
+            A = np.empty((n, 2, C))                                             # P H^T
+            A[:, 0] = hx0 * Dx + hy0 * Dy
+            A[:, 1] = hx1 * Dx + hy1 * Dy - P[:, 2]
+            ex, ey = A[0] - A[b], A[1] - A[b + 1]                               # (2, C)
+            s00 = hx0 * ex[0] + hy0 * ey[0] + q_r
+            s01 = hx0 * ex[1] + hy0 * ey[1]
+            s11 = hx1 * ex[1] + hy1 * ey[1] - A[2, 1] + q_b
             det = s00 * s11 - s01 * s01
             i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-            K0 = A0 * i00 + A1 * i01
-            K1 = A0 * i01 + A1 * i11
-            # P -= K H P = K0 (x) A0 + K1 (x) A1 (rank-2; K is optimal, so this equals the Joseph
+            K = np.empty((n, 2, C))                                             # eq. 24
+            K[:, 0] = A[:, 0] * i00 + A[:, 1] * i01
+            K[:, 1] = A[:, 0] * i01 + A[:, 1] * i11
+            K0, K1 = K[:, 0], K[:, 1]
+            # P -= K H P = sum_m K_m (x) A_m (rank 2; K is optimal, so this equals the Joseph
             # form up to rounding: see the dense Joseph-form reference in ekf_slam.EkfSlam)
-            _outer_add(P, K0, A0, tmp, -1.0)
-            _outer_add(P, K1, A1, tmp, -1.0)
+            np.einsum("ikc,jkc->ijc", K, A, out=tmp)
+            P -= tmp
             if est:
                 nu0 = z_r - r
                 nu1 = _wrap(z_b - (np.arctan2(dy, dx) - pth))
@@ -326,10 +328,6 @@ def summarize_search(layouts: NDArray[np.float64], scores: NDArray[np.float64]) 
             "mean_over_configs_my": float(scores[:, 2].mean())}
 
 
-def with_choices(ch: Choices, **kw: Any) -> Choices:
-    return replace(ch, **kw)
-
-
 PAPER_TABLE1: dict[int, dict[str, Any]] = {
     1: {"layout": [[650.0, 370.0]], "min": 3.46, "min_mx": 1.74, "min_my": 2.87, "max": 58.07, "mean": 9.06,
         "mean_mx": 2.0, "mean_my": 8.58, "configs": 4000},
@@ -339,8 +337,3 @@ PAPER_TABLE1: dict[int, dict[str, Any]] = {
         "mean_mx": 0.27, "mean_my": 0.89, "configs": 10000},
 }
 """Table 1 of the paper (the 4-beacon layout is garbled in the source text)."""
-
-
-def iter_searches(beacons: Iterable[int]) -> Iterable[tuple[int, NDArray[np.float64]]]:
-    for b in beacons:
-        yield b, grid(b)

@@ -13,7 +13,8 @@ API
   (an interrupted sweep resumes). A torn last line (killed mid-write) is ignored.
 * ``scheduler``: ``None`` starts an embedded ``LocalCluster`` of ``workers`` processes (one thread
   each) for the duration of the call; ``"tcp://host:8786"`` uses an existing cluster (its workers
-  must be able to import ``fn``'s module); ``"serial"`` runs in this process (no Dask).
+  must be able to import ``fn``'s module); a ``distributed.Client`` is used as is (several sweeps
+  on one cluster); ``"serial"`` runs in this process (no Dask).
 * ``progress``: a tqdm bar on stderr.
 
 Returns the results in task order. :func:`load_done` reads a results file.
@@ -63,7 +64,7 @@ def _check_keys(tasks: Sequence[dict[str, Any]]) -> list[str]:
 
 
 def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any]], *,
-              out: Path | str | None = None, scheduler: str | None = None, workers: int = 2,
+              out: Path | str | None = None, scheduler: Any = None, workers: int = 2,
               progress: bool = True, desc: str = "sweep") -> list[Any]:
     """Run ``fn`` over ``tasks`` (see the module docstring); results in task order."""
     keys = _check_keys(tasks)
@@ -115,17 +116,22 @@ def _roundtrip(result: Any) -> Any:
     return json.loads(json.dumps(result))
 
 
-def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: str | None, workers: int,
+def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: Any, workers: int,
               finish: Callable[[str, Any], None]) -> None:
     from distributed import Client, LocalCluster, as_completed
 
+    for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.core",
+                 "distributed.http.proxy", "distributed.worker"):
+        logging.getLogger(name).setLevel(logging.WARNING)
     cluster = None
     if scheduler is None:
         cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+                               dashboard_address=":0", silence_logs=logging.WARNING)
         client = Client(cluster)
-    else:
+    elif isinstance(scheduler, str):
         client = Client(scheduler)
+    else:  # an existing distributed.Client: used, not closed
+        client = scheduler
     try:
         futures = client.map(fn, pending, pure=False)
         key_of = {f.key: str(t["key"]) for f, t in zip(futures, pending, strict=True)}
@@ -133,6 +139,7 @@ def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: str | None
             finish(key_of[fut.key], _roundtrip(fut.result()))
             fut.release()
     finally:
-        client.close()
+        if client is not scheduler:
+            client.close()
         if cluster is not None:
             cluster.close()

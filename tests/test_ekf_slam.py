@@ -97,3 +97,20 @@ def test_simulate_cli_round_trip(tmp_path):
     log = load_log(out)
     assert log.counts()["beacon"] == 2 * 200 and log.counts()["truth"] == 201
     assert estimators.runnable(log).count("ekf-slam") == 1
+
+
+def test_gate_rejects_a_wild_beacon_return():
+    from dataclasses import replace
+
+    lay = np.array([[500.0, 300.0]])
+    log = simulate_fairway(lay, seed=2)
+    recs = list(log.records)
+    i = [k for k, r in enumerate(recs) if r.kind == "beacon"][120]
+    recs[i] = replace(recs[i], range=recs[i].range + 100.0)        # a 100 m false echo
+    bad = NavLog(recs, [], log.meta)
+    clean = run_ekf_slam(log, gate=0.999)
+    gated = run_ekf_slam(bad, gate=0.999)
+    blind = run_ekf_slam(bad)
+    assert gated.info["rejected"] >= 1
+    assert np.abs(gated.trajectory.poses[-1, :2] - clean.trajectory.poses[-1, :2]).max() < 0.5
+    assert np.abs(blind.trajectory.poses[-1, :2] - clean.trajectory.poses[-1, :2]).max() > 2.0

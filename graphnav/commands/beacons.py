@@ -62,11 +62,12 @@ def search(args: argparse.Namespace) -> int:
         from ..beacon_layout_graph import score_chunk_graph
 
         chunk = args.chunk or 16
-        tasks = chunk_tasks(layouts, chunk, fw, ch, extra={"marginals": args.marginals})
+        tasks = chunk_tasks(layouts, chunk, fw, ch)  # scores both online and smoothed marginals
         fn = score_chunk_graph
     results = run_sweep(fn, tasks, out=args.results, scheduler=args.scheduler, workers=args.workers,
                         progress=not args.no_progress, desc=f"{args.beacons}-beacon {args.criterion}")
-    scores = np.concatenate([np.asarray(r["scores"], dtype=float).reshape(-1, 3) for r in results])
+    pick = "scores" if args.criterion == "ekf" else f"scores_{args.marginals}"
+    scores = np.concatenate([np.asarray(r[pick], dtype=float).reshape(-1, 3) for r in results])
     wall = time.perf_counter() - t0
     s = summarize_search(layouts, scores)
     criterion = args.criterion if args.criterion == "ekf" else f"smoother-{args.marginals}"
