@@ -1,0 +1,113 @@
+"""The fuzzy adaptive UKF of Liu, Liu & Bucknall (IEEE Access 2019), section IV.
+
+The UKF of :mod:`graphnav.estimators.ukf`, with the measurement noise covariance R adapted at every
+update, per measurement channel j (GNSS x, GNSS y, compass):
+
+* innovation ``eps = z - H x^-`` (eq. 14), theoretical covariance ``C_T = H P^- H^T + R`` (eq. 15),
+* actual covariance ``C_A`` = mean of ``eps eps^T`` over the last N innovations (eq. 17), kept
+  recursively (eq. 18: add the newest, drop the one that leaves the window),
+* ``DoM_j = C_A,jj / C_T,jj`` (eq. 20), ``alpha_j`` from the fuzzy system of Table 1 / eq. 22-28
+  (:mod:`graphnav.fuzzy`, thresholds of Table 2),
+* ``R_hat = alpha R`` (eq. 21). With ``r_update="compound"`` (default) R(k) in eq. 21 and eq. 15 is
+  the previous step's R_hat, so R moves until C_T matches C_A (the reading under which R_hat can
+  converge to the true R, as the paper's Figs. 13/17 show); ``r_update="scale_prior"`` uses the
+  fixed prior R of Table 2 in both (R_hat can then grow by at most the largest centroid, ~3.7).
+
+The adaptation starts once the window holds N innovations of a channel (before that R = R_0).
+Options: ``window`` (N, default 30; the paper does not state it), ``r_update``, ``bias`` (true: run
+the adaptation on the bias-augmented ``ukf-bias`` state, our extension), and every option of ``ukf``.
+``info`` holds per-step ``r_hat``, ``c_a``, ``c_t``, ``dom`` and ``alpha`` (arrays (n, 3)).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..fuzzy import FuzzyAlpha, Thresholds
+from ..log import NavLog
+from . import EstimatorSpec, OnEstimate, RunResult
+from .ukf import DEFAULTS, measurement_table, run_nav_filter, unmet
+
+
+class FuzzyCovarianceMatcher:
+    """Per-channel covariance matching with the fuzzy coefficient; call it as the UKF's adapter."""
+
+    def __init__(self, r0: NDArray, n_steps: int, window: int = 30, r_update: str = "compound",
+                 th: Thresholds | None = None) -> None:
+        if r_update not in ("compound", "scale_prior"):
+            raise ValueError(f"r_update must be 'compound' or 'scale_prior', not {r_update!r}")
+        if window < 1:
+            raise ValueError("window must be >= 1")
+        self.r0 = np.asarray(r0, dtype=float)
+        self.r = self.r0.copy()
+        self.N = int(window)
+        self.compound = r_update == "compound"
+        self.fuzzy = FuzzyAlpha(th or Thresholds())
+        self.buf = np.zeros((3, self.N))
+        self.count = np.zeros(3, dtype=int)
+        self.c_a = np.zeros(3)
+        self.r_floor = 1e-6 * self.r0
+        self._rows = np.arange(3)
+        self.hist = {k: np.full((n_steps, 3), np.nan) for k in ("r_hat", "c_a", "c_t", "dom", "alpha")}
+
+    def __call__(self, k: int, ch: NDArray | slice, eps: NDArray, HPH: NDArray, r0_rows: NDArray) -> NDArray:
+        e2 = eps * eps
+        cnt = self.count[ch]
+        slot = cnt % self.N
+        rows = self._rows[ch]
+        old = self.buf[rows, slot]
+        self.buf[rows, slot] = e2
+        cnt = cnt + 1
+        self.count[ch] = cnt
+        if cnt.min() > self.N:  # eq. 18: add the newest, drop the one leaving the window
+            c_a = self.c_a[ch] + (e2 - old) / self.N
+        else:  # filling the window (eq. 17 over what is there)
+            c_a = self.c_a[ch] + (e2 - self.c_a[ch]) / np.minimum(cnt, self.N)
+            c_a = np.where(cnt > self.N, self.c_a[ch] + (e2 - old) / self.N, c_a)
+        self.c_a[ch] = c_a
+        r_prev = self.r[ch]
+        c_t = HPH.diagonal() + r_prev  # eq. 15
+        dom = c_a / c_t  # eq. 20
+        alpha = self.fuzzy(dom)
+        if cnt.min() < self.N:
+            alpha = np.where(cnt >= self.N, alpha, 1.0)
+        r_hat = alpha * (r_prev if self.compound else self.r0[ch])  # eq. 21
+        r_hat = np.maximum(r_hat, self.r_floor[ch])  # numerical safety only
+        self.r[ch] = r_hat
+        h = self.hist
+        h["r_hat"][k, ch], h["c_a"][k, ch], h["c_t"][k, ch] = r_hat, c_a, c_t
+        h["dom"][k, ch], h["alpha"][k, ch] = dom, alpha
+        return r_hat
+
+
+def run_fuzzy_ukf(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
+    options = dict(options)
+    window = int(options.pop("window", 30))
+    r_update = str(options.pop("r_update", "compound"))
+    bias = bool(options.pop("bias", False))
+
+    o = {**DEFAULTS, **options}
+    r0 = np.array([o["r_gps_x"], o["r_gps_y"], np.radians(o["r_com_deg"])]) ** 2
+    n = len(measurement_table(log)["t"])
+    matcher = FuzzyCovarianceMatcher(r0, n, window=window, r_update=r_update)
+    res = run_nav_filter(log, "fuzzy-ukf-bias" if bias else "fuzzy-ukf", bias=bias, adapter=matcher,
+                         on_estimate=on_estimate, options=options)
+    res.info["options"].update(window=window, r_update=r_update, bias=bias)
+    res.info.update(matcher.hist)
+    res.info["r0"] = r0
+    return res
+
+
+def run_fuzzy_ukf_bias(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
+    return run_fuzzy_ukf(log, on_estimate=on_estimate, **{**options, "bias": True})
+
+
+ESTIMATORS = {
+    "fuzzy-ukf": EstimatorSpec(run_fuzzy_ukf, unmet,
+                               "UKF with fuzzy covariance-matching R adaptation (Liu 2019)", "filter"),
+    "fuzzy-ukf-bias": EstimatorSpec(run_fuzzy_ukf_bias, unmet,
+                                    "fuzzy-ukf on the bias-augmented ukf-bias state (ours)", "filter"),
+}
