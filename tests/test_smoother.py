@@ -10,6 +10,8 @@ import sys
 import gtsam
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from graphnav import estimators
 from graphnav.geometry import se2_between
@@ -219,3 +221,19 @@ def test_world_covariance_rotation():
 
     c = world_cov(gtsam.Pose2(0, 0, math.pi / 2), np.diag([4.0, 1.0, 0.1]))
     np.testing.assert_allclose(c, np.diag([1.0, 4.0, 0.1]), atol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.floats(0.01, 5.0), min_size=1, max_size=30),
+    st.lists(st.floats(-2.0, 60.0), min_size=1, max_size=30),
+)
+def test_schedule_properties(gaps, times):
+    kf = np.cumsum(gaps)
+    att, add = schedule(kf, times)
+    t = np.array(times)
+    dist = np.abs(t[:, None] - kf[None, :])
+    np.testing.assert_allclose(dist[np.arange(len(t)), att], dist.min(axis=1))  # nearest keyframe
+    assert np.all(add >= att) and np.all(add - att <= 1)
+    inside = t <= kf[-1]
+    assert np.all(kf[add[inside]] >= t[inside] - 1e-9)  # never added before the measurement exists
