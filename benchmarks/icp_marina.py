@@ -25,7 +25,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from graphnav.geometry import se2_between, se2_from_matrix, wrap_angle  # noqa: E402
+from graphnav.geometry import se2_from_matrix  # noqa: E402
 from graphnav.icp import IcpConfig, line_normals, match_points, scan_points  # noqa: E402
 from graphnav.icp_pairs import (  # noqa: E402
     PairRun,
@@ -69,19 +69,31 @@ def make_methods():
         return c
 
     def o3d_p2p(src, tgt, init):
-        r = reg.registration_icp(o3d_cloud(src), o3d_cloud(tgt), 1.0, _mat(init),
-                                 reg.TransformationEstimationPointToPoint())
+        r = reg.registration_icp(
+            o3d_cloud(src), o3d_cloud(tgt), 1.0, _mat(init), reg.TransformationEstimationPointToPoint()
+        )
         return se2_from_matrix(r.transformation), True
 
     def o3d_p2l(src, tgt, init):
-        r = reg.registration_icp(o3d_cloud(src), o3d_cloud(tgt, normals=True), 1.0, _mat(init),
-                                 reg.TransformationEstimationPointToPlane())
+        r = reg.registration_icp(
+            o3d_cloud(src),
+            o3d_cloud(tgt, normals=True),
+            1.0,
+            _mat(init),
+            reg.TransformationEstimationPointToPlane(),
+        )
         return se2_from_matrix(r.transformation), True
 
     def gicp(src, tgt, init):
-        r = small_gicp.align(np.column_stack([tgt, np.zeros(len(tgt))]), np.column_stack([src, np.zeros(len(src))]),
-                             _mat(init), registration_type="GICP", downsampling_resolution=0.05,
-                             max_correspondence_distance=1.0, num_threads=1)
+        r = small_gicp.align(
+            np.column_stack([tgt, np.zeros(len(tgt))]),
+            np.column_stack([src, np.zeros(len(src))]),
+            _mat(init),
+            registration_type="GICP",
+            downsampling_resolution=0.05,
+            max_correspondence_distance=1.0,
+            num_threads=1,
+        )
         return se2_from_matrix(r.T_target_source), bool(r.converged)
 
     methods = {}
@@ -93,6 +105,24 @@ def make_methods():
             return res, res.ok
 
         methods[v] = ours
+    try:
+        import numba  # noqa: F401
+
+        for v in ("HD",):
+            cfg = IcpConfig(variant=v, backend="numba")
+            match_points(
+                np.random.default_rng(0).normal(0, 5, (50, 2)),
+                np.random.default_rng(1).normal(0, 5, (50, 2)),
+                cfg,
+            )  # compile (or load the cache) outside the timing
+
+            def ours_nb(src, tgt, init, cfg=cfg):
+                res = match_points(src, tgt, cfg, init=init)
+                return res, res.ok
+
+            methods[f"{v} [numba]"] = ours_nb
+    except ImportError:
+        print("numba not installed: no compiled rows", file=sys.stderr)
     methods["open3d p2p"] = o3d_p2p
     methods["open3d p2plane"] = o3d_p2l
     methods["small_gicp GICP"] = gicp
@@ -112,7 +142,7 @@ def run(marina: Path, init: str):
     last = {m: None for m in methods}
     names = list(methods)
     for k in range(n):
-        order = names[k % len(names):] + names[: k % len(names)]  # rotate the order: fair under load
+        order = names[k % len(names) :] + names[: k % len(names)]  # rotate the order: fair under load
         for m in order:
             guess = last[m] if (init == "cv" and last[m] is not None) else np.zeros(3)
             t0 = time.perf_counter()
@@ -132,7 +162,7 @@ def run(marina: Path, init: str):
     rows = []
     for m in methods:
         if results[m]:
-            pr = PairRun(t0, t1, results[m], ms[m], IcpConfig(variant=m), init)
+            pr = PairRun(t0, t1, results[m], ms[m], IcpConfig(variant=m.split()[0]), init)
         else:
             from graphnav.icp import MatchResult
 
@@ -142,7 +172,7 @@ def run(marina: Path, init: str):
         s["variant"] = m
         q = per["scored"].copy()
         q[: QUAY[0]] = False
-        q[QUAY[1] + 1:] = False
+        q[QUAY[1] + 1 :] = False
         s["quay_accum_dtheta_err_deg"] = float(np.sum(per["dtheta_err_deg"][q]))
         s["nees_mean"] = float(np.nanmean(nees(pr, ref, scored))) if results[m] else float("nan")
         s["nees_median"] = float(np.nanmedian(nees(pr, ref, scored))) if results[m] else float("nan")
@@ -152,35 +182,50 @@ def run(marina: Path, init: str):
 
 
 def fmt_table(rows, init: str) -> str:
-    hdr = ("| method | pairs scored | step RMSE (m) | rot RMSE (deg) | quay 76-97 accum. rot err (deg) "
-           "| median ms/pair | NEES mean / median |\n|---|---|---|---|---|---|---|\n")
+    hdr = (
+        "| method | pairs scored | step RMSE (m) | rot RMSE (deg) | quay 76-97 accum. rot err (deg) "
+        "| median ms/pair | NEES mean / median |\n|---|---|---|---|---|---|---|\n"
+    )
     body = ""
     for s in rows:
-        ne = (f"{s['nees_mean']:.2f} / {s['nees_median']:.2f}" if np.isfinite(s["nees_mean"]) else "-")
-        body += (f"| {s['variant']} | {s['pairs_scored']} | {s['step_err_rmse_m']:.4f} | "
-                 f"{s['dtheta_err_rmse_deg']:.3f} | {s['quay_accum_dtheta_err_deg']:+.2f} | "
-                 f"{s['ms_per_pair_median']:.2f} | {ne} |\n")
+        ne = f"{s['nees_mean']:.2f} / {s['nees_median']:.2f}" if np.isfinite(s["nees_mean"]) else "-"
+        body += (
+            f"| {s['variant']} | {s['pairs_scored']} | {s['step_err_rmse_m']:.4f} | "
+            f"{s['dtheta_err_rmse_deg']:.3f} | {s['quay_accum_dtheta_err_deg']:+.2f} | "
+            f"{s['ms_per_pair_median']:.2f} | {ne} |\n"
+        )
     return f"Initial guess: `{init}`.\n\n" + hdr + body
 
 
 def fmt_table1(rows) -> str:
-    hdr = ("| method | mean SOG diff (m/s) | mean dCOG diff (deg) | std SOG | std dCOG | max SOG | max dCOG "
-           "| paper mean SOG / dCOG | paper std | paper max |\n|---|---|---|---|---|---|---|---|---|---|\n")
+    hdr = (
+        "| method | mean SOG diff (m/s) | mean dCOG diff (deg) | std SOG | std dCOG | max SOG | max dCOG "
+        "| paper mean SOG / dCOG | paper std | paper max |\n|---|---|---|---|---|---|---|---|---|---|\n"
+    )
     body = ""
     for s in rows:
         p = PAPER.get(s["variant"])
-        pp = (f"{p[0]:+.3f} / {p[1]:+.2f} | {p[2]:.3f} / {p[3]:.2f} | {p[4]:+.3f} / {p[5]:+.2f}" if p
-              else "- | - | -")
-        body += (f"| {s['variant']} | {s['step_err_mean_m']:+.4f} | {s['dtheta_err_mean_deg']:+.3f} | "
-                 f"{s['step_err_std_m']:.4f} | {s['dtheta_err_std_deg']:.3f} | {s['step_err_max_signed_m']:+.3f} | "
-                 f"{s['dtheta_err_max_signed_deg']:+.2f} | {pp} |\n")
+        pp = (
+            f"{p[0]:+.3f} / {p[1]:+.2f} | {p[2]:.3f} / {p[3]:.2f} | {p[4]:+.3f} / {p[5]:+.2f}"
+            if p
+            else "- | - | -"
+        )
+        body += (
+            f"| {s['variant']} | {s['step_err_mean_m']:+.4f} | {s['dtheta_err_mean_deg']:+.3f} | "
+            f"{s['step_err_std_m']:.4f} | {s['dtheta_err_std_deg']:.3f} | "
+            f"{s['step_err_max_signed_m']:+.3f} | "
+            f"{s['dtheta_err_max_signed_deg']:+.2f} | {pp} |\n"
+        )
     return hdr + body
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("marina", nargs="?", default=os.environ.get("GRAPHNAV_MARINA", str(ROOT.parent / "shared" / "data"
-                                                                                         / "icp_data_marina")))
+    ap.add_argument(
+        "marina",
+        nargs="?",
+        default=os.environ.get("GRAPHNAV_MARINA", str(ROOT.parent / "shared" / "data" / "icp_data_marina")),
+    )
     ap.add_argument("--init", choices=("cv", "zero"), nargs="+", default=["cv", "zero"])
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
@@ -188,9 +233,15 @@ def main() -> int:
     if not (marina / "ranges.mat").exists():
         alt = ROOT.parent.parent / "shared" / "data" / "icp_data_marina"
         marina = alt if (alt / "ranges.mat").exists() else marina
-    out = ["<!-- icp_marina:begin -->", "## Weighted ICP on the marina data (benchmarks/icp_marina.py)", "",
-           f"Command: `/tmp/venvtest/bin/python benchmarks/icp_marina.py` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
-           f"{os.cpu_count()} cores; wall time of one call, methods interleaved pair by pair).", ""]
+    out = [
+        "<!-- icp_marina:begin -->",
+        "## Weighted ICP on the marina data (benchmarks/icp_marina.py)",
+        "",
+        "Command: `/tmp/venvtest/bin/python benchmarks/icp_marina.py` "
+        f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
+        f"{os.cpu_count()} cores; wall time of one call, methods interleaved pair by pair).",
+        "",
+    ]
     for init in args.init:
         rows, scored = run(marina, init)
         t = fmt_table(rows, init)
@@ -198,17 +249,24 @@ def main() -> int:
         out += [t]
         if init == "cv":
             t1 = fmt_table1(rows)
-            print("Table 1 structure (SOG diff = step error / 1 s; dCOG diff = rotation-increment error):\n")
+            print("Table 1 structure (SOG diff = step error / 1 s; dCOG diff = rotation-increment error)\n")
             print(t1)
-            out += ["Table 1 structure (scored pairs; SOG diff = step error per 1 s; dCOG diff = rotation-increment "
-                    "error), beside the paper's Table 1 (865 scans at 0.2 s):", "", t1]
+            out += [
+                "Table 1 structure (scored pairs; SOG diff = step error per 1 s; dCOG diff = "
+                "rotation-increment "
+                "error), beside the paper's Table 1 (865 scans at 0.2 s):",
+                "",
+                t1,
+            ]
     out.append("<!-- icp_marina:end -->")
     if not args.no_write:
         path = ROOT / "docs" / "benchmarks.md"
         text = path.read_text() if path.exists() else "# Benchmarks\n"
         block = "\n".join(out) + "\n"
         if "<!-- icp_marina:begin -->" in text:
-            text = re.sub(r"<!-- icp_marina:begin -->.*?<!-- icp_marina:end -->\n?", lambda _: block, text, flags=re.S)
+            text = re.sub(
+                r"<!-- icp_marina:begin -->.*?<!-- icp_marina:end -->\n?", lambda _: block, text, flags=re.S
+            )
         else:
             text = text.rstrip("\n") + "\n\n" + block
         path.write_text(text)

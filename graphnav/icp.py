@@ -58,7 +58,7 @@ class IcpConfig:
     equalize: bool = False  # randomly thin the larger cloud to the smaller's size (the paper)
     seed: int = 0  # for equalize
     weight_power: float = 0.5  # w = G^-weight_power; 0.5 is eq. 11
-    normal_k: int = 10  # neighbours of a target point for its line normal (HDL, degeneracy check)
+    normal_k: int = 12  # neighbours of a target point for its line normal (HDL, degeneracy check)
     normals: str = "knn"  # HDL normals: "knn" (PCA of the k nearest) or "scan" (k neighbours in beam order)
     min_points: int = 20  # fewer valid points in either scan -> ok=False
     inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
@@ -69,10 +69,15 @@ class IcpConfig:
     cov_scale: float = 100.0
     cov_floor: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 1-sigma floor (x, y, yaw) added in quadrature
     workers: int = 1  # cKDTree query threads
+    # K/H/HM/HD: "numba" = compiled loop with exact grid matching, same results (optional dependency;
+    # the first call compiles for 10-50 s, cached afterwards); "auto" = numba when importable
+    backend: str = "numpy"
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise ValueError(f"unknown ICP variant {self.variant!r}; known: {', '.join(VARIANTS)}")
+        if self.backend not in ("auto", "numba", "numpy"):
+            raise ValueError(f"unknown backend {self.backend!r}; known: auto, numba, numpy")
         if self.normals not in ("knn", "scan"):
             raise ValueError(f"unknown normals {self.normals!r}; known: knn, scan")
         if self.matching not in ("kdtree", "delaunay"):
@@ -244,6 +249,18 @@ def match_points(
         rng = np.random.default_rng(cfg.seed)
         big = src if ns > nt else tgt
         big.take(np.sort(rng.choice(max(ns, nt), min(ns, nt), replace=False)))
+    fast = _fast_loop(cfg)
+    if fast is not None:
+        th0, t0_ = _pose_parts(init)
+        big = np.inf if cfg.max_corr_dist is None else cfg.max_corr_dist
+        th, tx_, ty_, idx, it, converged = fast(
+            src.xy[:, 0].copy(), src.xy[:, 1].copy(), src.u[:, 0].copy(), src.u[:, 1].copy(), src.a2, src.b2,
+            src.m2, tgt.xy[:, 0].copy(), tgt.xy[:, 1].copy(), tgt.u[:, 0].copy(), tgt.u[:, 1].copy(), tgt.a2,
+            tgt.b2, tgt.m2, _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big, cfg.tol,
+            cfg.tol_step, cfg.max_iter, th0, t0_[0], t0_[1], _GRID_CELL)
+        pose = np.array([tx_, ty_, th])
+        return _finish(cfg, src, tgt, idx, pose, None, None, it, converged, t0, ns, nt)
+
     nnm = _NearestNeighbours(tgt.xy, cfg)
     p2l = cfg.variant == "HDL"
     normals = flat = None
@@ -286,6 +303,24 @@ def match_points(
 
     pose = np.array([t[0], t[1], th])
     return _finish(cfg, src, tgt, idx, pose, normals, flat, it, converged, t0, ns, nt)
+
+
+_VARIANT_CODE = {"K": 0, "H": 1, "HM": 2, "HD": 3}
+_GRID_CELL = 0.5  # [m] cell of the compiled loop's nearest-neighbour grid
+
+
+def _fast_loop(cfg: IcpConfig) -> Any:
+    """The compiled point-to-point loop when it applies (K/H/HM/HD, k-d-tree-equivalent exact
+    matching) and numba is importable; else None (the numpy loop)."""
+    if cfg.backend == "numpy" or cfg.variant not in _VARIANT_CODE or cfg.matching != "kdtree":
+        return None
+    try:
+        from ._icp_fast import p2p_loop
+    except ImportError:
+        if cfg.backend == "numba":
+            raise
+        return None
+    return p2p_loop
 
 
 class _NearestNeighbours:
@@ -436,19 +471,11 @@ def _pair_cov(src: _Cloud, tgt: _Cloud, idx: NDArray, r: NDArray) -> tuple[NDArr
     return sxx, sxy, syy
 
 
-def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, nt):  # noqa: ANN001, ANN202
-    """Quality report and covariance at the solution.
-
-    The covariance is the sandwich ``k H^-1 B H^-1`` of the weighted least-squares problem at
-    convergence: ``H = sum w J^T J``, ``B = sum w^2 J^T S J`` with ``S`` the pair's error covariance
-    from the LiDAR model (eq. 8; identity for K and H) and ``k`` its scale estimated from the
-    inlier residuals (``k = sum e^T S^-1 e / dof``). ``J`` is the Jacobian of the residual with
-    respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)`` (GTSAM's Pose2 tangent space):
-    ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1], [1, 0]]``.
-    """
+def _terms_numpy(cfg, src, tgt, idx, pose, normals, flat):  # noqa: ANN001, ANN202
+    """``H``, ``B``, residual scale, RMS residual, point-to-line information, pairs used and
+    inlier fraction at the solution (see :func:`_finish`)."""
     r = _rot(pose[2])
     p = src.xy @ r.T + pose[:2]
-    pose[2] = np.arctan2(np.sin(pose[2]), np.cos(pose[2]))
     q = tgt.xy[idx]  # the last iteration's pairs (the last increment moved no point > tol_step)
     e = p - q
     d = np.hypot(e[:, 0], e[:, 1])
@@ -498,6 +525,36 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     lsc = float(np.sqrt(np.mean(np.sum((ps - ps.mean(0)) ** 2, 1)))) or 1.0
     jl[:, 2] /= lsc
     info = (jl * (sel * fl)[:, None]).T @ jl
+    return h, bmat, kscale, res_rms, info, int(use.sum()), float(inl.mean())
+
+
+def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, nt):  # noqa: ANN001, ANN202
+    """Quality report and covariance at the solution.
+
+    The covariance is the sandwich ``k H^-1 B H^-1`` of the weighted least-squares problem at
+    convergence: ``H = sum w J^T J``, ``B = sum w^2 J^T S J`` with ``S`` the pair's error covariance
+    from the LiDAR model (eq. 8; identity for K and H) and ``k`` its scale estimated from the
+    inlier residuals (``k = sum e^T S^-1 e / dof``). ``J`` is the Jacobian of the residual with
+    respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)`` (GTSAM's Pose2 tangent space):
+    ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1], [1, 0]]``.
+    """
+    fast = _fast_loop(cfg) is not None
+    if fast:
+        from ._icp_fast import p2p_stats
+
+        big = np.inf if cfg.max_corr_dist is None else cfg.max_corr_dist
+        h, bmat, ksum, dof, n_sel, res_rms, info, n_use, n_inl = p2p_stats(
+            src.xy[:, 0].copy(), src.xy[:, 1].copy(), src.u[:, 0].copy(), src.u[:, 1].copy(), src.a2, src.b2,
+            src.m2, tgt.xy[:, 0].copy(), tgt.xy[:, 1].copy(), tgt.u[:, 0].copy(), tgt.u[:, 1].copy(), tgt.a2,
+            tgt.b2, tgt.m2, _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big, float(pose[2]),
+            float(pose[0]), float(pose[1]), np.asarray(idx, dtype=np.int64), cfg.normal_k // 2,
+            cfg.line_max_gap, cfg.inlier_dist)
+        kscale = ksum / dof if n_sel else float("nan")
+        inlier_fraction = n_inl / len(idx)
+    else:
+        h, bmat, kscale, res_rms, info, n_use, inlier_fraction = _terms_numpy(
+            cfg, src, tgt, idx, pose, normals, flat)
+    pose[2] = np.arctan2(np.sin(pose[2]), np.cos(pose[2]))
     ev = np.linalg.eigvalsh(info)
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
     try:
@@ -506,7 +563,6 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     except np.linalg.LinAlgError:
         cov = _BIG_COV.copy()
     cov = 0.5 * (cov + cov.T) * cfg.cov_scale + np.diag(np.square(cfg.cov_floor))
-    inlier_fraction = float(inl.mean())
     degenerate = not np.isfinite(cond) or cond > cfg.max_condition
     reasons = []
     if degenerate:
@@ -517,7 +573,7 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
         reasons.append("non-finite covariance")
         cov = _BIG_COV.copy()
     quality = {
-        "points_used": int(use.sum()),
+        "points_used": int(n_use),
         "points_source": ns,
         "points_target": nt,
         "inlier_fraction": inlier_fraction,
