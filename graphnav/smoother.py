@@ -67,6 +67,7 @@ class SmootherConfig:
     odo_sigma_v: float = 0.1  # used when the log gives none
     odo_sigma_w_deg: float = 1.0
     odo_lateral: float = 0.05
+    compensate_attachment: bool = True  # move each measurement to its keyframe's time by the motion between
     motion_sigma_xy: float = 2.0  # fallback constant-velocity factor when no ICP/odometry bridges a gap
     motion_sigma_yaw_deg: float = 20.0
     anchor_sigma_xy: float | None = None  # prior on the first pose when there is no pose_prior record
@@ -266,6 +267,23 @@ class GraphBuilder:
                 i += 1
         return delta, cov
 
+    def _offset_motion(self, a: int, t: float, k: int) -> gtsam.Pose2 | None:
+        """Motion from keyframe ``a`` to time ``t`` (``None`` when they coincide): odometry when the
+        log has it, else the last relative motion scaled to the time offset (constant velocity)."""
+        ta = float(self.kf_t[a])
+        if abs(t - ta) < 1e-6:
+            return None
+        if len(self.odo):
+            if t > ta:
+                odo = self._odometry(ta, t)
+                return None if odo is None else odo[0]
+            odo = self._odometry(t, ta)
+            return None if odo is None else odo[0].inverse()
+        if k == 0:
+            return None
+        gap = float(self.kf_t[k] - self.kf_t[k - 1])
+        return gtsam.Pose2.Expmap(gtsam.Pose2.Logmap(self.last_rel) * ((t - ta) / gap)) if gap > 0 else None
+
     # -- one keyframe -----------------------------------------------------------------------------
     def step(
         self,
@@ -337,10 +355,16 @@ class GraphBuilder:
         gnss_idx: list[tuple[int, float]] = []
         for a, r in self.pending[k]:
             xa = F.X(a)
+            delta = self._offset_motion(a, r.t, k) if cfg.compensate_attachment else None
             if r.kind == "gnss":
+                rx, ry = r.x, r.y
+                if delta is not None:  # the fix is of the pose at r.t = X_a * delta: move it back to X_a
+                    c, sn = math.cos(est(a).theta()), math.sin(est(a).theta())
+                    rx -= c * delta.x() - sn * delta.y()
+                    ry -= sn * delta.x() + c * delta.y()
                 if cfg.gnss_gate is not None and prev_cov is not None:
                     pa = est(a)
-                    d = np.array([r.x - pa.x(), r.y - pa.y()])
+                    d = np.array([rx - pa.x(), ry - pa.y()])
                     S = prev_cov[:2, :2] + (r.sigma**2) * np.eye(2)
                     if (
                         float(d @ np.linalg.solve(S, d)) > cfg.gnss_gate**2
@@ -351,17 +375,22 @@ class GraphBuilder:
                         continue
                 self.consecutive_rejects = 0
                 gnss_idx.append((g.size(), r.sigma))
-                g.add(F.gnss_factor(xa, r.x, r.y, r.sigma, robust=cfg.gnss_robust, k=cfg.gnss_k))
+                g.add(F.gnss_factor(xa, rx, ry, r.sigma, robust=cfg.gnss_robust, k=cfg.gnss_k))
             elif r.kind == "heading":
                 sig = r.sigma * cfg.compass_sigma_scale
+                yaw = r.yaw - (delta.theta() if delta is not None else 0.0)
                 if self.bias_key is not None:
-                    g.add(F.biased_compass_factor(self.bias_key, xa, r.yaw, sig, robust=cfg.compass_robust))
+                    g.add(F.biased_compass_factor(self.bias_key, xa, yaw, sig, robust=cfg.compass_robust))
                 else:
-                    g.add(F.compass_factor(xa, r.yaw, sig, robust=cfg.compass_robust))
+                    g.add(F.compass_factor(xa, yaw, sig, robust=cfg.compass_robust))
             elif r.kind == "beacon":
                 charted = self.charted.get(r.id)
                 if charted is None and not cfg.unknown_beacons:
                     continue
+                rng_, brg = r.range, r.bearing
+                if delta is not None:  # the sighting from X_a * delta, as seen from X_a
+                    ba = delta.transformFrom(np.array([rng_ * math.cos(brg), rng_ * math.sin(brg)]))
+                    rng_, brg = float(np.hypot(ba[0], ba[1])), math.atan2(ba[1], ba[0])
                 if r.id not in self.beacon_ids:
                     i = len(self.beacon_ids)
                     self.beacon_ids[r.id] = i
@@ -370,14 +399,14 @@ class GraphBuilder:
                         p0 = np.array([charted.x, charted.y])
                         g.add(F.beacon_prior(lk, charted.x, charted.y, charted.sigma))
                     else:
-                        p0 = F.init_from_sighting(_vec(est(a)), r.range, r.bearing)
+                        p0 = F.init_from_sighting(_vec(est(a)), rng_, brg)
                     self.beacon_init[r.id] = p0
                     v.insert(lk, p0)
                 sr = r.sigma_range if math.isfinite(r.sigma_range) else 0.5
                 sb = r.sigma_bearing if math.isfinite(r.sigma_bearing) else math.radians(0.5)
                 g.add(
                     F.beacon_factor(
-                        xa, F.L(self.beacon_ids[r.id]), r.range, r.bearing, sr, sb, robust=cfg.beacon_robust
+                        xa, F.L(self.beacon_ids[r.id]), rng_, brg, sr, sb, robust=cfg.beacon_robust
                     )
                 )
         for i in self.beacon_ids.values():
