@@ -43,7 +43,7 @@ class SmootherConfig:
 
     keyframe_period: float | None = None  # None: one pose per scan (fixed 0.5 s grid without scans)
     scan_stride: int = 1  # with scans: a keyframe (and an ICP match) every N-th scan
-    gnss_robust: str | None = "cauchy"
+    gnss_robust: str | None = "huber"  # gross outliers are gated (online) or dropped (batch)
     gnss_k: float | None = None
     gnss_gate: float | None = (
         4.0  # reject fixes whose Mahalanobis distance to the online prediction exceeds it
