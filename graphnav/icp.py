@@ -34,6 +34,9 @@ from scipy.spatial import cKDTree
 from .lidar import SIGMA_ALPHA, SIGMA_R_REL, polar_to_points
 
 VARIANTS = ("K", "H", "HM", "HD", "HDL")
+# default covariance inflation per variant: mean NEES ~3 against the RTK reference on the 160 clean
+# marina pairs (benchmarks/icp_marina.py prints the NEES; docs/weighted-icp.md)
+COV_SCALE = {"K": 300.0, "H": 120.0, "HM": 120.0, "HD": 120.0, "HDL": 50.0}
 _BIG_COV = np.diag([1e4, 1e4, 10.0])  # returned with ok=False when there is nothing to match
 
 
@@ -52,6 +55,7 @@ class IcpConfig:
     min_range: float = 0.0
     max_corr_dist: float | None = None  # pairs farther apart get weight 0 (None: keep all, as the paper)
     line_max_gap: float = 1.0  # beam neighbours farther apart are not on one line (scan-order normals) [m]
+    line_flat_power: float = 4.0  # HDL: weight x flatness^power of the target's local line (0..1)
     line_warmup: float = 0.05  # HDL: point-to-point steps until a step moves no point more [m] (0: off)
     line_max_dist: float = 0.5  # HDL only: a point farther than this from its match has no line there [m]
     matching: str = "kdtree"  # "kdtree" (cKDTree) or "delaunay" (the paper's nearest triangle apex)
@@ -64,9 +68,10 @@ class IcpConfig:
     inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
     min_inlier_fraction: float = 0.3  # below -> ok=False
     max_condition: float = 200.0  # condition number of the point-to-line information above -> degenerate
-    # inflation for correlated, unmodelled error (sampling, motion distortion): measured on the
-    # marina data, docs/weighted-icp.md; 1.0 = the pure least-squares model (independent errors)
-    cov_scale: float = 100.0
+    # inflation for correlated, unmodelled error (sampling, motion distortion); None = the value
+    # measured on the marina data for the variant (COV_SCALE, docs/weighted-icp.md); 1.0 = the pure
+    # least-squares model (independent errors, synthetic scans)
+    cov_scale: float | None = None
     cov_floor: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 1-sigma floor (x, y, yaw) added in quadrature
     workers: int = 1  # cKDTree query threads
     # K/H/HM/HD: "numba" = compiled loop with exact grid matching, same results (optional dependency;
@@ -168,13 +173,17 @@ class _Cloud:
 
     __slots__ = ("xy", "r", "u", "a2", "b2", "m2")
 
-    def __init__(self, xy: NDArray, cfg: IcpConfig):
+    def __init__(self, xy: NDArray, cfg: IcpConfig, sigma: NDArray | None = None):
         self.xy = np.ascontiguousarray(xy, dtype=float)
         self.r = np.hypot(self.xy[:, 0], self.xy[:, 1])
         rs = np.where(self.r > 0, self.r, 1.0)
         self.u = self.xy / rs[:, None]
-        self.a2 = (cfg.sigma_alpha * self.r) ** 2  # eq. 6, squared
-        self.b2 = (cfg.sigma_r_rel * self.r) ** 2  # eq. 7, squared
+        if sigma is None:
+            self.a2 = (cfg.sigma_alpha * self.r) ** 2  # eq. 6, squared
+            self.b2 = (cfg.sigma_r_rel * self.r) ** 2  # eq. 7, squared
+        else:  # caller's isotropic 1-sigma per point: a circle, a = b = sigma
+            self.a2 = np.broadcast_to(np.asarray(sigma, dtype=float) ** 2, self.r.shape).copy()
+            self.b2 = self.a2.copy()
         self.m2 = self.a2 + self.b2  # eq. 5, squared
 
     def take(self, idx: NDArray) -> None:
@@ -220,6 +229,15 @@ def _failed(reason: str, init: ArrayLike | None, n_src: int, n_tgt: int, t0: flo
     return MatchResult(np.array([t[0], t[1], th]), _BIG_COV.copy(), False, q)
 
 
+def _per_point(sigma: Any, n: int, name: str) -> NDArray | None:
+    if sigma is None:
+        return None
+    s = np.broadcast_to(np.asarray(sigma, dtype=float), (n,)).copy()
+    if not np.all(np.isfinite(s) & (s > 0)):
+        raise ValueError(f"{name} must be finite and > 0")
+    return s
+
+
 def match_points(
     src_xy: ArrayLike,
     tgt_xy: ArrayLike,
@@ -231,20 +249,26 @@ def match_points(
     """Align ``src_xy`` (N, 2), the current scan's points in its sensor frame, to ``tgt_xy`` (M, 2),
     the previous scan's (Algorithm 1). ``init`` is the initial ``(dx, dy, dyaw)`` (e.g. the
     constant-velocity guess). Points are taken in their sensor frame (the LiDAR error model needs
-    the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma`` are reserved (per-point
-    sigmas are computed from the model of eq. 5-9 with the config's sigma_r_rel and sigma_alpha).
+    the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma`` (scalar or one per point,
+    metres) replace that model by an isotropic 1-sigma per point (e.g. for points that are not raw
+    LiDAR returns); by default the model of eq. 5-9 with the config's sigma_r_rel, sigma_alpha.
     """
     cfg = config or IcpConfig()
     t0 = time.perf_counter()
     src_xy = np.asarray(src_xy, dtype=float).reshape(-1, 2)
     tgt_xy = np.asarray(tgt_xy, dtype=float).reshape(-1, 2)
-    src_xy = src_xy[np.all(np.isfinite(src_xy), axis=1)]
-    tgt_xy = tgt_xy[np.all(np.isfinite(tgt_xy), axis=1)]
+    src_sigma = _per_point(src_sigma, len(src_xy), "src_sigma")
+    tgt_sigma = _per_point(tgt_sigma, len(tgt_xy), "tgt_sigma")
+    keep_s = np.all(np.isfinite(src_xy), axis=1)
+    keep_t = np.all(np.isfinite(tgt_xy), axis=1)
+    src_xy, tgt_xy = src_xy[keep_s], tgt_xy[keep_t]
+    src_sigma = None if src_sigma is None else src_sigma[keep_s]
+    tgt_sigma = None if tgt_sigma is None else tgt_sigma[keep_t]
     ns, nt = len(src_xy), len(tgt_xy)
     if ns < cfg.min_points or nt < cfg.min_points:
         return _failed(f"too few points (source {ns}, target {nt}, need {cfg.min_points})", init, ns, nt, t0)
 
-    src, tgt = _Cloud(src_xy, cfg), _Cloud(tgt_xy, cfg)
+    src, tgt = _Cloud(src_xy, cfg, src_sigma), _Cloud(tgt_xy, cfg, tgt_sigma)
     if cfg.equalize and ns != nt:  # the paper: thin the larger set at random
         rng = np.random.default_rng(cfg.seed)
         big = src if ns > nt else tgt
@@ -425,7 +449,7 @@ def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=False):  # noqa:
             w = w.copy()
             w[big] *= khu / dist[big]
         if v == "HDL":  # no line where the match is far (the gate widens while far from convergence)
-            w = w * flat[idx] * (d <= max(cfg.line_max_dist, cfg.huber_c * _median(d)))
+            w = w * flat[idx] ** cfg.line_flat_power * (d <= max(cfg.line_max_dist, cfg.huber_c * _median(d)))
     if cfg.max_corr_dist is not None:
         w = np.where(d <= cfg.max_corr_dist, w, 0.0)
     if not np.any(w > 0):
@@ -562,7 +586,8 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
         cov = kscale * hinv @ bmat @ hinv.T
     except np.linalg.LinAlgError:
         cov = _BIG_COV.copy()
-    cov = 0.5 * (cov + cov.T) * cfg.cov_scale + np.diag(np.square(cfg.cov_floor))
+    scale = COV_SCALE[cfg.variant] if cfg.cov_scale is None else cfg.cov_scale
+    cov = 0.5 * (cov + cov.T) * scale + np.diag(np.square(cfg.cov_floor))
     degenerate = not np.isfinite(cond) or cond > cfg.max_condition
     reasons = []
     if degenerate:

@@ -76,4 +76,24 @@ def to_frame(pts_world: np.ndarray, pose) -> np.ndarray:
     return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
 
 
-__all__ = ["room", "corridor", "raycast", "noisy_scan", "points", "world_points", "to_frame", "se2_compose"]
+def even_points(segs: np.ndarray, spacing: float) -> np.ndarray:
+    out = []
+    for s in segs:
+        n = max(int(np.hypot(s[2] - s[0], s[3] - s[1]) / spacing), 1)
+        u = (np.arange(n) + 0.5) / n
+        out.append(s[:2] + u[:, None] * (s[2:] - s[:2]))
+    return np.vstack(out)
+
+
+def observe(world: np.ndarray, pose, rng, s_rel: float, s_a: float) -> np.ndarray:
+    """World points seen from ``pose`` with the LiDAR error model (range and angle noise)."""
+    p = to_frame(world, pose)
+    r = np.hypot(p[:, 0], p[:, 1])
+    a = np.arctan2(p[:, 1], p[:, 0])
+    r = r + rng.normal(0, 1, len(r)) * s_rel * r
+    a = a + rng.normal(0, s_a, len(r))
+    return np.column_stack([r * np.cos(a), r * np.sin(a)])
+
+
+__all__ = ["room", "corridor", "raycast", "noisy_scan", "points", "world_points", "to_frame", "se2_compose",
+           "even_points", "observe"]
