@@ -56,9 +56,7 @@ class SmootherConfig:
     beacon_robust: str | None = "huber"
     unknown_beacons: bool = True  # SLAM on beacons missing from the chart
     use_icp: bool = True
-    icp_cov_scale: float = (
-        10.0  # on top of IcpConfig.cov_scale (100): the chain must yield to GNSS (docs/smoother.md)
-    )
+    icp_cov_scale: float = 20.0  # x the matcher's own inflation (HDL 50): x1000 in all (docs/smoother.md)
     icp_sigma_floor_xy: float = 0.005  # [m] added in quadrature to the ICP covariance
     icp_sigma_floor_yaw_deg: float = 0.05
     icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
