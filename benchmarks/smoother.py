@@ -44,6 +44,7 @@ def run_one(name: str, log, **options) -> dict:
     s["realtime_factor"] = (log.t1 - log.t0) / rt
     s["cpu_s"] = cpu  # process CPU time: what the run costs without other load on the machine
     s["realtime_factor_cpu"] = (log.t1 - log.t0) / cpu
+    s["step_cpu_ms_median"] = r.info.get("step_cpu_ms_median", float("nan"))
     s["compass_bias_deg"] = r.info.get("compass_bias_deg")
     s["gnss_rejected"] = r.info.get("gnss_rejected", 0) + r.info.get("gnss_dropped_after_lm", 0)
     return s
@@ -129,7 +130,8 @@ def main() -> int:
         return 0
     head = (
         f"{'scenario':26s} {'estimator':9s} {'ATE m':>7s} {'online m':>8s} {'step ms':>8s} {'icp ms':>7s} "
-        f"{'runtime s':>9s} {'x RT':>6s} {'bias deg':>8s} {'GNSS rej':>8s}"
+        f"{'runtime s':>9s} {'x RT':>6s} {'cpu s':>6s} {'x RT cpu':>8s} {'step cpu ms':>11s} "
+        f"{'bias deg':>8s} {'GNSS rej':>8s}"
     )
     print(head)
     print("-" * len(head))
@@ -142,7 +144,8 @@ def main() -> int:
             print(
                 f"{scen:26s} {name:9s} {s['ate_rmse_m']:7.3f} {on if on is not None else float('nan'):8.3f} "
                 f"{s['step_ms_median']:8.2f} {s['icp_ms_median']:7.1f} {s['runtime_s']:9.1f} "
-                f"{s['realtime_factor']:6.0f} {bias if bias is not None else float('nan'):8.2f} "
+                f"{s['realtime_factor']:6.0f} {s['cpu_s']:6.1f} {s['realtime_factor_cpu']:8.0f} "
+                f"{s['step_cpu_ms_median']:11.2f} {bias if bias is not None else float('nan'):8.2f} "
                 f"{s['gnss_rejected']:8d}"
             )
     if "jump_effect" in results:
