@@ -78,6 +78,8 @@ def read_marina(path: str | Path, *, dt: float = MARINA_DT) -> NavLog:
     if ref.ndim != 2 or ref.shape[1] != 3 or ref.shape[0] != ranges.shape[1]:
         raise LogError(f"expected {ranges.shape[1]} x 3, got {ref.shape}", file=str(path / "gps.mat"),
                        field="slam_pose")
+    if ranges.ndim != 2 or ranges.shape[1] == 0:
+        raise LogError("no scans", file=str(path / "ranges.mat"), field="ranges_baza")
     if not np.all(np.isfinite(ref)):
         raise LogError("non-finite reference values", file=str(path / "gps.mat"), field="slam_pose")
     n = ranges.shape[1]
