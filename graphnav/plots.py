@@ -110,17 +110,28 @@ def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: P
     """Position error versus time; ``online`` estimates (smoothers) dashed in the same colour."""
     fig, ax = plt.subplots(figsize=(10, 4.5), layout="constrained")
     col = colors(list(trajs))
+    medians = []
     for name, tr in trajs.items():
         t, e = position_errors(tr, truth)
         ax.plot(t, e, "-", lw=1.2, color=col[name], label=name)
+        if len(e):
+            medians.append(float(np.median(e)))
         if online and name in online:
             t, e = position_errors(online[name], truth)
             ax.plot(t, e, "--", lw=1.0, color=col[name], label=f"{name} (online)")
     handles = _shade_events(ax, events, (float(truth.t[0]), float(truth.t[-1])) if len(truth) else None)
+    # errors spanning orders of magnitude (a diverged estimator beside a smoother): log scale,
+    # so the good estimators stay readable
+    wide = len(medians) > 1 and max(medians) > 30.0 * max(min(medians), CDF_FLOOR)
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("position error [m]")
+    ax.set_ylabel("position error [m]" + (" (log scale)" if wide else ""))
     ax.set_title("Position error versus time (unaligned, log frame)")
-    ax.set_ylim(bottom=0)
+    if wide:
+        ax.set_yscale("log")
+        ax.set_ylim(bottom=CDF_FLOOR)
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    else:
+        ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
     h, _ = ax.get_legend_handles_labels()
     ax.legend(handles=h + handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
