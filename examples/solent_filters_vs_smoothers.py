@@ -7,7 +7,8 @@ Produces, for scenarios 1-3:
 * ``docs/img/solent_track_s{1,2,3}.png``: truth, GNSS and the estimates of one run;
 * a markdown table per scenario of the Monte Carlo means (``--runs``, default 10) on stdout.
 
-Usage: ``python examples/solent_filters_vs_smoothers.py [--runs 50] [--seed 0] [--out docs/img]``
+Usage: ``python examples/solent_filters_vs_smoothers.py [--runs 50] [--seed 0] [--out docs/img]``;
+``--quick`` (one run of the first 150 steps of each mission, serially) checks that it all runs.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from graphnav import estimators  # noqa: E402
 from graphnav.geometry import wrap_angle  # noqa: E402
 from graphnav.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial  # noqa: E402
 from graphnav.sim.solent import simulate_solent  # noqa: E402
+
+QUICK_RUNS, QUICK_STEPS = 1, 150
 
 
 def true_r(log, window: int) -> np.ndarray:
@@ -81,23 +84,31 @@ def plot_track(log, results: dict, path: Path, scenario: int) -> None:
     plt.close(fig)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path("docs/img"))
     ap.add_argument("--scheduler")
-    args = ap.parse_args()
+    ap.add_argument("--quick", action="store_true",
+                    help=f"{QUICK_RUNS} runs of the first {QUICK_STEPS} steps of each mission (a smoke run)")
+    args = ap.parse_args(argv)
+    sim = {}
+    if args.quick:
+        args.runs = min(args.runs, QUICK_RUNS)
+        args.scheduler = args.scheduler or "serial"  # no Dask cluster start-up for one short trial
+        sim = {"max_steps": QUICK_STEPS, "switch_step": QUICK_STEPS // 2}  # scenario 3: noise grows halfway
     args.out.mkdir(parents=True, exist_ok=True)
     names = [n for n in PAPER_ESTIMATORS if n in estimators.names()]
     window = 30
     for sc in (1, 2, 3):
-        log = simulate_solent(scenario=sc, seed=args.seed)
+        log = simulate_solent(scenario=sc, seed=args.seed, **sim)
         res = {n: estimators.run(n, log) for n in names}
         plot_r(log, res["fuzzy-ukf"], args.out / f"solent_rhat_s{sc}.png", sc, window)
         plot_track(log, res, args.out / f"solent_track_s{sc}.png", sc)
-        trials = map_trials(solent_trial, [{"scenario": sc, "seed": args.seed + i, "names": names}
-                                           for i in range(args.runs)], scheduler=args.scheduler)
+        trials = map_trials(solent_trial, [{"scenario": sc, "seed": args.seed + i, "names": names,
+                                            "sim_options": sim} for i in range(args.runs)],
+                            scheduler=args.scheduler)
         est = aggregate(trials, names)
         print(f"\n### Scenario {sc} ({args.runs} runs, seeds {args.seed}..{args.seed + args.runs - 1})\n")
         print("| estimator | pos RMSE mean [m] | pos RMSE median [m] | hdg RMSE mean [deg] | step [ms] |")

@@ -12,7 +12,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from . import estimators
+import numpy as np
+
+from . import estimators, icp_cache
 from .estimators import RunResult
 from .evaluate import summarize
 from .log import NavLog
@@ -40,12 +42,18 @@ class Entry:
 
 def _run(entry: Entry, est: str, log: NavLog) -> Entry:
     """Run one estimator into ``entry`` (timing, summary, or the error)."""
+    cache = icp_cache.current()
+    hits0, n0 = (cache.hits, len(cache.ms)) if cache is not None else (0, 0)
     t0 = time.perf_counter()
     try:
         res = estimators.run(est, log, **entry.options)
         entry.runtime_s = time.perf_counter() - t0
         entry.result = res
         entry.summary = summarize(entry.name, res, log, runtime_s=entry.runtime_s)
+        if cache is not None:
+            entry.summary["icp_cache_hits"] = cache.hits - hits0
+            if cache.hits > hits0:  # a shared match costs what it cost its first computation
+                entry.summary["icp_ms_median"] = float(np.median(cache.ms[n0:]))
     except Exception as exc:  # an estimator that fails is reported, not fatal
         entry.runtime_s = time.perf_counter() - t0
         entry.error = f"{type(exc).__name__}: {exc}"
@@ -57,7 +65,8 @@ def _run(entry: Entry, est: str, log: NavLog) -> Entry:
 
 def compare(log: NavLog, names: Sequence[str] | None = None, *,
             options: dict[str, dict[str, Any]] | None = None,
-            progress: Callable[[str], None] | None = None, workers: int = 1) -> list[Entry]:
+            progress: Callable[[str], None] | None = None, workers: int = 1,
+            cache: icp_cache.MatchCache | None = None) -> list[Entry]:
     """Run ``names`` (default: every estimator the log can feed, :func:`estimators.runnable`) on
     ``log``; each with its own ``options[name]``. A failing estimator is recorded, not raised.
 
@@ -67,6 +76,12 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
 
     ``workers > 1`` runs the estimators in that many processes at once (results in the same
     order); each ``runtime_s`` is then measured while the others run, so it includes contention.
+
+    ``cache`` (:class:`graphnav.icp_cache.MatchCache`) shares weighted-ICP matches between the
+    estimators: a match already computed by an earlier estimator (same scans, config and initial
+    guess) is reused, so the later ones' ``runtime_s`` excludes it; each summary then carries
+    ``icp_cache_hits``, and ``icp_ms_median`` is the matches' computation time (for a shared one,
+    its first computation's). With ``workers > 1`` every process has its own copy.
     """
     names = list(names) if names is not None else estimators.runnable(log)
     options = options or {}
@@ -88,6 +103,13 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
         if est != label:
             entry.description = f"{spec.description} (estimator {est!r})"
         todo.append((len(out) - 1, est))
+    with icp_cache.active(cache):
+        _run_all(out, todo, log, progress, workers)
+    return out
+
+
+def _run_all(out: list[Entry], todo: list[tuple[int, str]], log: NavLog,
+             progress: Callable[[str], None] | None, workers: int) -> None:
     if workers > 1 and len(todo) > 1:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
@@ -104,7 +126,6 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
             if progress:
                 progress(out[i].name)
             _run(out[i], est, log)
-    return out
 
 
 def ranked(entries: Sequence[Entry], key: str = "ate_rmse_m") -> list[Entry]:

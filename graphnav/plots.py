@@ -36,6 +36,13 @@ def colors(names: Sequence[str]) -> dict[str, Any]:
     return {n: cmap(i % 10) for i, n in enumerate(names)}
 
 
+def widths(names: Sequence[str], thick: float = 2.8, thin: float = 1.1) -> dict[str, float]:
+    """Line widths decreasing in drawing order: a curve drawn over an identical one (batch and
+    isam2 often coincide) leaves the earlier one visible as a coloured outline."""
+    n = max(len(names) - 1, 1)
+    return {name: thick - (thick - thin) * i / n for i, name in enumerate(names)}
+
+
 def paired(est: Trajectory, ref: Trajectory, max_dt: float = MAX_DT) -> tuple[Trajectory, Trajectory]:
     ie, ir = associate(est, ref, max_dt)
     return Trajectory(est.t[ie], est.poses[ie]), Trajectory(ref.t[ir], ref.poses[ir])
@@ -92,10 +99,11 @@ def plot_trajectories(trajs: dict[str, Trajectory], truth: Trajectory | None, pa
     if gnss is not None and len(gnss):
         ax.plot(gnss[:, 0], gnss[:, 1], ".", ms=2.5, color="0.6", label="GNSS fixes", zorder=1)
     if truth is not None and len(truth):
-        ax.plot(truth.x, truth.y, "-", color="k", lw=2.2, label="truth", zorder=2)
-        ax.plot(truth.x[0], truth.y[0], "o", color="k", ms=6, zorder=4)
+        ax.plot(truth.x, truth.y, "-", color="k", lw=1.3, label="truth", zorder=5)  # on top: always visible
+        ax.plot(truth.x[0], truth.y[0], "o", color="k", ms=6, zorder=6)
+    lw = widths(list(trajs))
     for name, tr in trajs.items():
-        ax.plot(tr.x, tr.y, "-", lw=1.3, color=col[name], label=name, zorder=3)
+        ax.plot(tr.x, tr.y, "-", lw=lw[name], color=col[name], label=name, zorder=3)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (east) [m]")
     ax.set_ylabel("y (north) [m]")
@@ -111,9 +119,10 @@ def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: P
     fig, ax = plt.subplots(figsize=(10, 4.5), layout="constrained")
     col = colors(list(trajs))
     medians = []
+    lw = widths(list(trajs))
     for name, tr in trajs.items():
         t, e = position_errors(tr, truth)
-        ax.plot(t, e, "-", lw=1.2, color=col[name], label=name)
+        ax.plot(t, e, "-", lw=lw[name], color=col[name], label=name)
         if len(e):
             medians.append(float(np.median(e)))
         if online and name in online:
@@ -141,11 +150,13 @@ def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: P
 def plot_error_cdf(trajs: dict[str, Trajectory], truth: Trajectory, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(7.5, 4.5), layout="constrained")
     col = colors(list(trajs))
+    lw = widths(list(trajs))
     for name, tr in trajs.items():
         _, e = position_errors(tr, truth)
         if len(e):
             s = np.sort(np.maximum(e, CDF_FLOOR))
-            ax.step(s, np.arange(1, len(s) + 1) / len(s), where="post", color=col[name], label=name)
+            ax.step(s, np.arange(1, len(s) + 1) / len(s), where="post", color=col[name], lw=lw[name],
+                    label=name)
     ax.set_xscale("log")
     ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.set_xlabel(f"position error [m] (log scale; below {CDF_FLOOR:g} m shown at {CDF_FLOOR:g})")

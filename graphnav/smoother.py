@@ -95,7 +95,8 @@ class SmootherConfig:
 def default_matcher(options: dict[str, Any]) -> Matcher | None:
     """The weighted-ICP matcher of :mod:`graphnav.icp`, or ``None`` when it is not available."""
     try:
-        from .icp import IcpConfig, match_scans
+        from .icp import IcpConfig
+        from .icp_cache import match_scans  # shared between estimators inside icp_cache.active()
     except ImportError:
         return None
     cfg = IcpConfig(**options)

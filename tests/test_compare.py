@@ -124,6 +124,7 @@ def test_cli_json_is_one_object_with_the_issue_keys(cli_run):
     obj = json.loads(stdout)  # the whole stdout is one JSON object
     assert stdout.strip().count("\n") == 0
     assert obj["log"] == str(path)
+    assert obj["icp_cache_hits"] == 0  # none of these estimators uses the weighted ICP
     est = obj["estimators"]
     assert {"dead-reckoning", "scan-to-map", "fake-smoother", "zz-boom"} <= set(est)
     for name, d in est.items():

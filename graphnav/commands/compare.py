@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .. import estimators
 from ..compare import compare, ranked
+from ..icp_cache import MatchCache
 from ..io import load_log
 from ..report import to_json, write_report
 from ._common import add_json_flag, add_log_args, emit, parse_options
@@ -31,6 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", "-j", type=int, default=1,
                    help="run this many estimators at once in separate processes (runtimes then include "
                         "contention; default 1)")
+    p.add_argument("--no-icp-cache", dest="icp_cache", action="store_false",
+                   help="every estimator computes its own weighted-ICP matches (default: a match shared by "
+                        "several estimators is computed once; their runtimes then exclude it)")
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -50,20 +54,25 @@ def run(args: argparse.Namespace) -> int:
     log = load_log(args.log, lenient=args.lenient)
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     t0 = time.perf_counter()
+    cache = MatchCache() if args.icp_cache else None
     entries = compare(log, names, options=_options(args.option),
-                      progress=lambda n: log_.info("running %s on %s", n, args.log), workers=args.workers)
+                      progress=lambda n: log_.info("running %s on %s", n, args.log), workers=args.workers,
+                      cache=cache)
     files = write_report(entries, log, args.out, log_name=str(args.log))
     total = time.perf_counter() - t0
     for e in entries:
         if not e.ok:
             log_.warning("%s failed: %s", e.name, e.error)
-    obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=args.workers)
+    hits = sum((e.summary or {}).get("icp_cache_hits", 0) for e in entries) if cache is not None else None
+    obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=args.workers,
+                  icp_cache_hits=hits)
     lines = [f"{'estimator':16s} {'ATE RMSE [m]':>12s} {'RPE [m]':>9s} {'runtime [s]':>11s}  note"]
     for e in ranked(entries):
         s = e.summary or {}
         a, r, t = (f"{s[k]:.3f}" if isinstance(s.get(k), float) else "–"
                    for k in ("ate_rmse_m", "rpe_rmse_m", "runtime_s"))
         lines.append(f"{e.name:16s} {a:>12s} {r:>9s} {t:>11s}  " + ("" if e.ok else f"failed: {e.error}"))
-    lines.append(f"wrote {len(files)} files to {args.out} (report.md) in {total:.1f} s")
+    cached = f"; {hits} weighted-ICP matches shared between estimators" if hits else ""
+    lines.append(f"wrote {len(files)} files to {args.out} (report.md) in {total:.1f} s{cached}")
     emit(args, obj, "\n".join(lines))
     return 0

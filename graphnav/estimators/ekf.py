@@ -184,7 +184,7 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
         raise ValueError("ekf: the log has no usable records")
     match_scans = None
     if motion == "icp":
-        from ..icp import match_scans
+        from ..icp_cache import match_scans  # graphnav.icp's, shared inside icp_cache.active()
     t_cur = recs[0].t
     u: Odometry | None = None
     prev_scan: Scan | None = None

@@ -17,8 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from .. import icp_cache
 from ..geometry import se2_compose
-from ..icp import IcpConfig, match_points, scan_points
+from ..icp import IcpConfig, scan_points
 from ..log import NavLog
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
@@ -86,7 +87,7 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
         pts = scan_points(scans[k], cfg)
         guess = last[0] * (dt / last[1]) if (init == "cv" and last is not None and last[1] > 0) else None
         t0 = time.perf_counter()
-        res = match_points(pts, pts_prev, cfg, init=guess)
+        res = icp_cache.match_points(pts, pts_prev, cfg, init=guess)  # = icp.match_points, shared in compare
         icp_ms.append((time.perf_counter() - t0) * 1e3)
         if res.ok:
             inc, q = res.pose, res.cov
