@@ -110,7 +110,9 @@ def main(argv: list[str] | None = None) -> None:
                                             "sim_options": sim} for i in range(args.runs)],
                             scheduler=args.scheduler)
         est = aggregate(trials, names)
-        print(f"\n### Scenario {sc} ({args.runs} runs, seeds {args.seed}..{args.seed + args.runs - 1})\n")
+        runs = f"{args.runs} runs, seeds {args.seed}..{args.seed + args.runs - 1}" if args.runs > 1 else \
+            f"1 run, seed {args.seed}"
+        print(f"\n### Scenario {sc} ({runs})\n")
         print("| estimator | pos RMSE mean [m] | pos RMSE median [m] | hdg RMSE mean [deg] | step [ms] |")
         print("|---|---:|---:|---:|---:|")
         for n, d in est.items():

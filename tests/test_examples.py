@@ -121,7 +121,7 @@ def test_solent_quick(tmp_path, capsys):
     load("solent_filters_vs_smoothers").main(["--quick", "--out", str(tmp_path)])
     out = capsys.readouterr().out
     for sc in (1, 2, 3):
-        assert f"### Scenario {sc} (1 runs" in out
+        assert f"### Scenario {sc} (1 run, seed 0)" in out
         for f in (f"solent_rhat_s{sc}.png", f"solent_track_s{sc}.png"):
             assert (tmp_path / f).stat().st_size > 10_000
     rows = table_rows(out)
