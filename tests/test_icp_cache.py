@@ -53,3 +53,19 @@ def test_compare_with_the_cache_gives_the_same_results(log):
         np.testing.assert_array_equal(p.result.trajectory.poses, s.result.trajectory.poses)
         assert s.summary["ate_rmse_m"] == p.summary["ate_rmse_m"]
     assert icp_cache.current() is None  # compare leaves no cache active
+
+
+def test_compare_command_without_the_flag_in_its_namespace(log, tmp_path, capsys):
+    """`graphnav demo` builds the compare command's Namespace itself (no icp_cache attribute)."""
+    import argparse
+    import json
+
+    from graphnav.commands import compare as cmd
+    from graphnav.io import save_log
+
+    path = tmp_path / "l.jsonl"
+    save_log(log, path)
+    ns = argparse.Namespace(log=str(path), lenient=False, out=tmp_path / "o", estimators="dead-reckoning",
+                            option=None, workers=1, json=True)
+    assert cmd.run(ns) == 0
+    assert json.loads(capsys.readouterr().out)["icp_cache_hits"] == 0

@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     log = load_log(args.log, lenient=args.lenient)
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     t0 = time.perf_counter()
-    cache = MatchCache() if args.icp_cache else None
+    cache = MatchCache() if getattr(args, "icp_cache", True) else None  # (demo builds its own Namespace)
     entries = compare(log, names, options=_options(args.option),
                       progress=lambda n: log_.info("running %s on %s", n, args.log), workers=args.workers,
                       cache=cache)
