@@ -34,6 +34,10 @@ COLUMNS: list[tuple[str, str, str]] = [
     ("icp_ms_median", "scan match [ms] (median)", "{:.2f}"),
     ("icp_cache_hits", "shared matches", "{:d}"),
 ]
+SHARED_NOTE = (" *shared matches*: weighted-ICP matches taken from an earlier estimator of this run (same "
+               "scans, configuration and initial guess; `--no-icp-cache` turns the sharing off); an "
+               "estimator's runtime excludes its shared matches, its *scan match* time is their computation "
+               "time (by the estimator that computed them first).")
 # the keys every estimator gets in the --json object (issue #7), plus the rest of summarize()
 JSON_KEYS = ("ate_rmse_m", "rpe_rmse_m", "runtime_s", "step_ms_median")
 
@@ -160,11 +164,8 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: 
               "the truth; RPE over 1 and 10 associated poses; SOG/COG/ROT errors between consecutive "
               "associated poses (COG only while the truth moves faster than 0.2 m/s). For smoothers ATE is "
               "the smoothed trajectory and *online ATE* the estimate available at each time. *step* is "
-              "solver/filter time per step excluding scan matching; *scan match* is per registration. "
-              "*shared matches*: weighted-ICP matches taken from an earlier estimator of this run (same "
-              "scans, configuration and initial guess; `--no-icp-cache` turns the sharing off); an "
-              "estimator's runtime excludes its shared matches, its *scan match* time is their computation "
-              "time (by the estimator that computed them first).",
+              "solver/filter time per step excluding scan matching; *scan match* is per registration."
+              + (SHARED_NOTE if any((e.summary or {}).get("icp_cache_hits") for e in entries) else ""),
               "", markdown_table(entries), ""]
     if truth is None:
         lines += ["The log has no truth: only timing is reported.", ""]
