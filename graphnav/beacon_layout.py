@@ -173,10 +173,11 @@ def propagate(layouts: NDArray[np.float64], fw: Fairway = Fairway(), ch: Choices
     equals the Joseph form to rounding; the dense reference uses the Joseph form and the tests
     compare the two).
 
-    ``backend``: ``"numba"`` runs the compiled kernel of :mod:`graphnav._beacon_fast` (same
-    figures to ~1e-12, about an order of magnitude faster; truth linearisation only, where the
-    covariance does not depend on the noise draw), ``"numpy"`` the vectorised numpy filter below,
-    ``"auto"`` numba when it is importable and ``ch.linearize == "truth"``, else numpy.
+    ``backend``: ``"numba"`` runs the compiled kernel of :mod:`graphnav._beacon_fast` (the same
+    figures to ~1e-9 relative, ~7x less CPU; truth linearisation only, where the covariance does
+    not depend on the noise draw, so ``seeds`` do not matter; ``block`` is the numpy path's),
+    ``"numpy"`` the vectorised numpy filter below, ``"auto"`` numba when it is importable and
+    ``ch.linearize == "truth"``, else numpy.
     """
     layouts = np.asarray(layouts, dtype=float)
     if layouts.ndim != 3 or layouts.shape[2] != 2:
@@ -378,9 +379,10 @@ def resolve_backend(backend: str, ch: Choices = Choices()) -> str:
 
 
 def layout_cost_s(beacons: int, backend: str, fw: Fairway = Fairway()) -> float:
-    """Rough CPU seconds to score one layout (for the sweep's ``scheduler="auto"``): measured on
-    the 2-core test machine, 22 / 35 / 71 us (numba) and 0.11 / 0.24 / 0.5 ms (numpy) for 1 / 2 / 4
-    beacons, modelled as a + b * steps * beacons * n^2 (the rank-2 updates' O(n^2) work)."""
+    """Rough CPU seconds to score one layout (for the sweep's ``scheduler="auto"``). Measured on
+    the shared 2-core test machine: 10 / 20 / 53 us (numba) and 65 / 133 / 400 us (numpy) for
+    1 / 2 / 4 beacons; modelled, on the high side, as a + b * steps * beacons * n^2 (the rank-2
+    updates' O(n^2) work)."""
     n = 3 + 2 * beacons
     work = fw.steps / 200.0 * beacons * n * n
     return 2e-5 + 1.1e-7 * work if backend == "numba" else 1e-4 + 1.0e-6 * work
