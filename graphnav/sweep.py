@@ -2,7 +2,8 @@
 
 API
 ---
-``run_sweep(fn, tasks, *, out=None, scheduler=None, workers=2, progress=True) -> list``
+``run_sweep(fn, tasks, *, out=None, scheduler=None, workers=2, progress=True, task_cost_s=None,
+report=None) -> list``
 
 * ``fn(task: dict) -> result`` must be picklable (a module-level function) and its result
   JSON-serialisable (floats survive JSON exactly, so a resumed sweep equals an uninterrupted one).
@@ -11,11 +12,16 @@ API
 * ``out``: a JSON-lines file. Every finished task is appended as ``{"key": ..., "result": ...}``
   and flushed as soon as it completes; tasks whose key is already in the file are not recomputed
   (an interrupted sweep resumes). A torn last line (killed mid-write) is ignored.
-* ``scheduler``: ``None`` starts an embedded ``LocalCluster`` of ``workers`` processes (one thread
-  each) for the duration of the call; ``"tcp://host:8786"`` uses an existing cluster (its workers
-  must be able to import ``fn``'s module); a ``distributed.Client`` is used as is (several sweeps
-  on one cluster); ``"serial"`` runs in this process (no Dask).
+* ``scheduler``: ``None`` or ``"local"`` starts an embedded ``LocalCluster`` of ``workers``
+  processes (one thread each) for the duration of the call; ``"tcp://host:8786"`` uses an
+  existing cluster (its workers must be able to import ``fn``'s module); a ``distributed.Client``
+  is used as is (several sweeps on one cluster); ``"serial"`` runs in this process (no Dask);
+  ``"auto"`` runs in this process when starting a cluster costs more than it saves (see
+  :func:`resolve_scheduler`; needs ``task_cost_s``, the estimated CPU seconds of one task),
+  else the ``LocalCluster``.
 * ``progress``: a tqdm bar on stderr.
+* ``report``: a dict, filled with ``scheduler`` (what ran: ``"serial"``, ``"local"`` or the
+  address), ``tasks`` and ``pending`` (tasks not already on disk).
 
 Returns the results in task order. :func:`load_done` reads a results file.
 Monte Carlo runs and parameter studies use the same runner (e.g. :mod:`graphnav.commands.beacons`).
@@ -31,6 +37,29 @@ from pathlib import Path
 from typing import Any
 
 log = logging.getLogger("graphnav.sweep")
+
+CLUSTER_STARTUP_S = 3.0
+"""Wall seconds to start a ``LocalCluster`` of 2 processes and import the task's modules in its
+workers (1-3 s measured on an idle 2-core machine, more under load); ``"auto"`` weighs it."""
+
+
+def resolve_scheduler(scheduler: Any, pending: int, task_cost_s: float | None, workers: int) -> Any:
+    """What ``scheduler="auto"`` means for ``pending`` tasks of ``task_cost_s`` CPU seconds each:
+    ``"serial"`` when a cluster of ``workers`` processes would save at most its start-up
+    (:data:`CLUSTER_STARTUP_S`): total * (1 - 1/w) <= start-up, w = min(workers, pending);
+    else ``"local"``. Unknown cost (``None``): ``"local"``. Other values are returned as they are
+    (``None`` as ``"local"``)."""
+    if scheduler is None:
+        return "local"
+    if scheduler != "auto":
+        return scheduler
+    w = min(max(1, workers), pending)
+    if w <= 1:
+        return "serial"
+    if task_cost_s is None:
+        return "local"
+    saved = pending * task_cost_s * (1.0 - 1.0 / w)
+    return "serial" if saved <= CLUSTER_STARTUP_S else "local"
 
 
 def load_done(out: Path | str | None) -> dict[str, Any]:
@@ -65,13 +94,21 @@ def _check_keys(tasks: Sequence[dict[str, Any]]) -> list[str]:
 
 def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any]], *,
               out: Path | str | None = None, scheduler: Any = None, workers: int = 2,
-              progress: bool = True, desc: str = "sweep") -> list[Any]:
+              progress: bool = True, desc: str = "sweep", task_cost_s: float | None = None,
+              report: dict[str, Any] | None = None) -> list[Any]:
     """Run ``fn`` over ``tasks`` (see the module docstring); results in task order."""
     keys = _check_keys(tasks)
     done = load_done(out)
     pending = [t for t, k in zip(tasks, keys, strict=True) if k not in done]
     if done:
         log.info("resuming: %d of %d tasks already in %s", len(tasks) - len(pending), len(tasks), out)
+    chosen = resolve_scheduler(scheduler, len(pending), task_cost_s, workers)
+    if scheduler == "auto":
+        log.info("scheduler auto: %s (%d tasks, estimated %s s CPU)", chosen, len(pending),
+                 "?" if task_cost_s is None else f"{len(pending) * task_cost_s:.1f}")
+    if report is not None:
+        name = chosen if isinstance(chosen, str) else "client"
+        report.update({"scheduler": name, "tasks": len(tasks), "pending": len(pending)})
     sink = None
     if out is not None:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
@@ -98,11 +135,11 @@ def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any
     try:
         if not pending:
             pass
-        elif scheduler == "serial":
+        elif chosen == "serial":
             for t in pending:
                 finish(str(t["key"]), _roundtrip(fn(t)))
         else:
-            _run_dask(fn, pending, scheduler, workers, finish)
+            _run_dask(fn, pending, None if chosen == "local" else chosen, workers, finish)
     finally:
         if sink is not None:
             sink.close()

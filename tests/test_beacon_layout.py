@@ -1,4 +1,5 @@
-"""Batched beacon-layout EKF: grids, closed forms, agreement with the dense reference, symmetry."""
+"""Batched beacon-layout EKF: grids, closed forms, agreement with the dense reference, symmetry;
+the compiled (numba) kernel against the numpy path, compiled and as plain Python."""
 
 from __future__ import annotations
 
@@ -7,10 +8,22 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from graphnav.beacon_layout import Choices, Fairway, grid, propagate, score, summarize_search
+from graphnav.beacon_layout import (
+    Choices,
+    Fairway,
+    grid,
+    initial_covariance,
+    motion_terms,
+    propagate,
+    resolve_backend,
+    score,
+    summarize_search,
+)
 from graphnav.estimators.ekf_slam import EkfSlam
 
 FW = Fairway()
+BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
+    resolve_backend("auto") != "numba", reason="numba not installed"))]
 
 
 def dense_reference(layout: np.ndarray, fw: Fairway = FW, ch: Choices | None = None):
@@ -44,12 +57,13 @@ def test_grid_counts_and_paper_layouts():
         grid(3)
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("layout", [[[650.0, 370.0]], [[750.0, 0.0], [150.0, 355.0]],
                                     [[200.0, 0.0], [600.0, 100.0], [0.0, 305.0], [900.0, 205.0]]])
-def test_batched_equals_dense_reference(layout):
+def test_batched_equals_dense_reference(layout, backend):
     lay = np.array(layout)
     mx, my, P = dense_reference(lay)
-    o = propagate(lay[None], FW, Choices(), keep_state=True)
+    o = propagate(lay[None], FW, Choices(), keep_state=True, backend=backend)
     np.testing.assert_allclose(o["mx"][0], mx, rtol=1e-7)
     np.testing.assert_allclose(o["my"][0], my, rtol=1e-7)
     np.testing.assert_allclose(o["P"][0][:3, :3], P[:3, :3], rtol=1e-6, atol=1e-12)
@@ -57,8 +71,8 @@ def test_batched_equals_dense_reference(layout):
 
 def test_batched_result_does_not_depend_on_block_size():
     lay = grid(2)[::800]
-    a = propagate(lay, block=512)
-    b = propagate(lay, block=5)
+    a = propagate(lay, block=512, backend="numpy")
+    b = propagate(lay, block=5, backend="numpy")
     np.testing.assert_array_equal(a["mx"], b["mx"])
     c = propagate(lay, ch=Choices(linearize="estimate", seed=3), block=512)
     d = propagate(lay, ch=Choices(linearize="estimate", seed=3), block=7)
@@ -124,3 +138,76 @@ def test_isam2_online_marginals_equal_the_ekf_and_smoothing_only_helps():
     assert np.allclose(m["smoothed"][-1], m["online"][-1], rtol=1e-6)   # the last pose: nothing to smooth
     r = score_chunk_graph({"layouts": [lay.tolist()], "marginals": "smoothed"})
     assert r["scores"] == r["scores_smoothed"] and r["scores_smoothed"][0][0] < r["scores_online"][0][0]
+
+
+# ----------------------------------------------------------------------------- compiled kernel
+
+
+def _numba_kernel():
+    pytest.importorskip("numba")
+    from graphnav import _beacon_fast
+
+    return _beacon_fast
+
+
+def _close(a, b, rtol=1e-9):
+    """Equal to ``rtol`` of the largest entry (the 1e6 m^2 prior's cancellation at the first
+    sighting leaves ~1e-10 relative rounding, whatever the order of operations)."""
+    np.testing.assert_allclose(a, b, rtol=0, atol=rtol * np.abs(b).max())
+
+
+@pytest.mark.parametrize("ch", [Choices(), Choices(w_second="theta")], ids=["reference", "w-theta"])
+def test_numba_kernel_equals_numpy(ch, monkeypatch):
+    """Compiled kernel = numpy path (mx, my every step; final P; x), over blocks of 7 layouts with a
+    partial last block, for 0, 1, 2, 4 beacons."""
+    fast = _numba_kernel()
+    monkeypatch.setattr(fast, "WIDTH", 7)
+    for b in (0, 1, 2, 4):
+        lay = grid(max(b, 1))[::701][:, :b]
+        assert len(lay) % 7 != 0
+        a = propagate(lay, FW, ch, keep_state=True, backend="numba")
+        n = propagate(lay, FW, ch, keep_state=True, backend="numpy")
+        for k in ("mx", "my", "P"):
+            _close(a[k], n[k])
+        np.testing.assert_array_equal(a["x"], n["x"])
+        assert np.array_equal(a["P"], a["P"].transpose(0, 2, 1))   # symmetric by construction
+
+
+def test_numba_kernel_logic_equals_numpy_uncompiled():
+    """The kernel's code run as plain Python (``.py_func``: no compilation) gives the numpy path's
+    figures; the compiled run is the test above."""
+    fast = _numba_kernel()
+    ch = Choices()
+    lay = grid(4)[::3001]                                  # 4 layouts in blocks of 3
+    ga, gb, rq = motion_terms(FW, ch)
+    mx, my, P = fast.propagate_truth.py_func(
+        np.ascontiguousarray(lay[:, :, 0]), np.ascontiguousarray(lay[:, :, 1]), FW.track(),
+        initial_covariance(4, ch), ga, gb, rq, FW.sigma_range**2, FW.sigma_bearing**2, True, 3)
+    n = propagate(lay, FW, ch, keep_state=True, backend="numpy")
+    _close(mx, n["mx"])
+    _close(my, n["my"])
+    _close(P, n["P"])
+
+
+def test_backend_choice():
+    lay = grid(1)[::500]
+    est = Choices(linearize="estimate", seed=2)
+    assert resolve_backend("numpy") == "numpy" and resolve_backend("auto", est) == "numpy"
+    # estimate-linearised: auto is the numpy path, bit for bit; the compiled kernel refuses
+    np.testing.assert_array_equal(propagate(lay, ch=est)["mx"], propagate(lay, ch=est, backend="numpy")["mx"])
+    with pytest.raises(ValueError):
+        propagate(lay, backend="fortran")
+    if resolve_backend("auto") == "numba":
+        with pytest.raises(ValueError, match="truth"):
+            propagate(lay, ch=est, backend="numba")
+
+
+def test_without_numba_auto_falls_back_to_numpy(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "graphnav._beacon_fast", None)   # import now raises ImportError
+    lay = grid(2)[::900]
+    assert resolve_backend("auto") == "numpy"
+    np.testing.assert_array_equal(propagate(lay)["my"], propagate(lay, backend="numpy")["my"])
+    with pytest.raises(ImportError):
+        propagate(lay, backend="numba")

@@ -46,3 +46,18 @@ def test_unknown_estimator_is_a_clear_error(tmp_path):
     save_log(every_record_log(), tmp_path / "l.jsonl")
     r = _cli("run", str(tmp_path / "l.jsonl"), "--estimator", "nope", "--json")
     assert r.returncode == 2 and "unknown estimator" in r.stderr and r.stdout == ""
+
+
+def test_main_loads_only_the_command_it_runs():
+    import argparse
+
+    from graphnav.cli import _parser_for, build_parser
+
+    def commands(parser):
+        return set(next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices)
+
+    every = commands(build_parser())
+    assert {"beacons", "info", "run", "simulate"} <= every
+    assert commands(_parser_for(["beacons", "search", "--beacons", "1"])) == {"beacons"}
+    for argv in (["--help"], ["-v", "info", "x"], ["no-such-command"], [], ["../info"]):
+        assert commands(_parser_for(argv)) == every

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from graphnav.beacon_layout import chunk_tasks, grid, score_chunk
-from graphnav.sweep import load_done, run_sweep
+from graphnav.sweep import CLUSTER_STARTUP_S, load_done, resolve_scheduler, run_sweep
 
 
 def record_call(task: dict) -> dict:
@@ -65,15 +65,30 @@ def test_keys_must_be_unique_and_present():
         run_sweep(record_call, [{"n": 1}], scheduler="serial")
 
 
+def test_auto_scheduler_runs_in_process_unless_a_cluster_pays_off():
+    cheap, dear = CLUSTER_STARTUP_S / 100, CLUSTER_STARTUP_S
+    assert resolve_scheduler("auto", 40, cheap, 2) == "serial"       # 1.2 s of work: a cluster costs more
+    assert resolve_scheduler("auto", 40, dear, 2) == "local"         # 120 s of work: it saves ~60 s
+    assert resolve_scheduler("auto", 1, 1e3, 2) == "serial"          # one task cannot run in parallel
+    assert resolve_scheduler("auto", 40, dear, 1) == "serial"        # nor on one worker
+    assert resolve_scheduler("auto", 40, None, 2) == "local"         # unknown cost: the cluster
+    assert resolve_scheduler(None, 40, cheap, 2) == "local"          # the library default is unchanged
+    assert resolve_scheduler("tcp://h:8786", 40, cheap, 2) == "tcp://h:8786"
+    # the decision counts only the tasks still to do (a resumed sweep)
+    assert resolve_scheduler("auto", 2, dear, 2) == "serial"
+
+
 def test_beacons_search_json_keys(capsys, tmp_path):
     from graphnav.cli import main
 
-    assert main(["beacons", "search", "--beacons", "1", "--limit", "100", "--scheduler", "serial",
+    assert main(["beacons", "search", "--beacons", "1", "--limit", "100", "--chunk", "8",
                  "--no-progress", "--json", "--results", str(tmp_path / "r.jsonl")]) == 0
     out = json.loads(capsys.readouterr().out)
     assert set(out) == {"beacons", "configs", "criterion", "best", "worst_mean_mxy", "mean_over_configs_mxy",
-                        "wall_s"}
+                        "wall_s", "configs_per_s", "scheduler", "backend"}
     assert set(out["best"]) == {"layout", "mean_mxy", "mean_mx", "mean_my"}
     assert out["configs"] == 40 and out["criterion"] == "ekf"
+    assert out["scheduler"] == "serial"                                # auto: 5 small tasks run in-process
+    assert out["configs_per_s"] == pytest.approx(40 / out["wall_s"])
     assert out["best"]["mean_mxy"] <= out["mean_over_configs_mxy"] <= out["worst_mean_mxy"]
     assert os.path.getsize(tmp_path / "r.jsonl") > 0

@@ -11,7 +11,16 @@ from typing import Any
 
 import numpy as np
 
-from ..beacon_layout import Choices, Fairway, chunk_tasks, grid, score_chunk, summarize_search
+from ..beacon_layout import (
+    Choices,
+    Fairway,
+    chunk_tasks,
+    grid,
+    layout_cost_s,
+    resolve_backend,
+    score_chunk,
+    summarize_search,
+)
 from ..sweep import run_sweep
 from ._common import add_json_flag, emit
 
@@ -27,9 +36,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="ekf: EKF-SLAM covariance (eq. 28); smoother: GTSAM marginals (slower)")
     s.add_argument("--marginals", choices=("online", "smoothed"), default="online",
                    help="smoother criterion: iSAM2 online marginals or the smoothed ones")
-    s.add_argument("--scheduler", default=None,
-                   help="Dask scheduler address (tcp://host:8786); default: an embedded LocalCluster; "
-                        "'serial' runs in-process")
+    s.add_argument("--scheduler", default="auto",
+                   help="auto (default): in-process when an embedded Dask LocalCluster would cost more to start "
+                        "than it saves, else the LocalCluster; 'local': always the LocalCluster; "
+                        "'tcp://host:8786': an existing cluster; 'serial': in-process")
+    s.add_argument("--backend", choices=("auto", "numba", "numpy"), default="auto",
+                   help="EKF criterion: compiled kernel (numba, optional dependency) or numpy; auto: numba "
+                        "when importable and --linearize truth")
     s.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
     s.add_argument("--chunk", type=int, default=None, help="configurations per sweep task")
     s.add_argument("--results", type=Path, default=None,
@@ -56,16 +69,21 @@ def search(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     if args.criterion == "ekf":
         chunk = args.chunk or 512
-        tasks = chunk_tasks(layouts, chunk, fw, ch)
+        backend = resolve_backend(args.backend, ch)
+        tasks = chunk_tasks(layouts, chunk, fw, ch, extra={"backend": backend})
         fn = score_chunk
+        cost = len(layouts) * layout_cost_s(args.beacons, backend, fw) / len(tasks)
     else:
         from ..beacon_layout_graph import score_chunk_graph
 
         chunk = args.chunk or 16
         tasks = chunk_tasks(layouts, chunk, fw, ch)  # scores both online and smoothed marginals
         fn = score_chunk_graph
+        cost = len(layouts) * 0.08 * args.beacons / len(tasks)  # iSAM2, both marginals: ~0.08 s per 1-beacon layout
+    report: dict[str, Any] = {}
     results = run_sweep(fn, tasks, out=args.results, scheduler=args.scheduler, workers=args.workers,
-                        progress=not args.no_progress, desc=f"{args.beacons}-beacon {args.criterion}")
+                        progress=not args.no_progress, desc=f"{args.beacons}-beacon {args.criterion}",
+                        task_cost_s=cost, report=report)
     pick = "scores" if args.criterion == "ekf" else f"scores_{args.marginals}"
     scores = np.concatenate([np.asarray(r[pick], dtype=float).reshape(-1, 3) for r in results])
     wall = time.perf_counter() - t0
@@ -73,13 +91,17 @@ def search(args: argparse.Namespace) -> int:
     criterion = args.criterion if args.criterion == "ekf" else f"smoother-{args.marginals}"
     out: dict[str, Any] = {"beacons": s["beacons"], "configs": s["configs"], "criterion": criterion,
                            "best": s["best"], "worst_mean_mxy": s["worst_mean_mxy"],
-                           "mean_over_configs_mxy": s["mean_over_configs_mxy"], "wall_s": wall}
-    log.info("%d configurations in %.2f s (%.0f configs/s)", len(layouts), wall, len(layouts) / wall)
+                           "mean_over_configs_mxy": s["mean_over_configs_mxy"], "wall_s": wall,
+                           "configs_per_s": len(layouts) / wall, "scheduler": report["scheduler"]}
+    if args.criterion == "ekf":
+        out["backend"] = backend
+    log.info("%d configurations in %.2f s (%.0f configs/s; %s)", len(layouts), wall, len(layouts) / wall,
+             report["scheduler"])
     b = s["best"]
     human = (f"{s['beacons']} beacon(s), {s['configs']} configurations, criterion {out['criterion']}\n"
              f"best layout {b['layout']}: mean M_xy {b['mean_mxy']:.3f} m (M_x {b['mean_mx']:.3f}, "
              f"M_y {b['mean_my']:.3f})\nworst mean M_xy {s['worst_mean_mxy']:.3f} m, "
              f"mean over configurations {s['mean_over_configs_mxy']:.3f} m\n"
-             f"wall {wall:.2f} s ({len(layouts) / wall:.0f} configs/s)")
+             f"wall {wall:.2f} s ({len(layouts) / wall:.0f} configs/s; scheduler {report['scheduler']})")
     emit(args, out, human)
     return 0
