@@ -3,9 +3,10 @@
 One module per sensor: :mod:`factors.gnss` (``PoseTranslationPrior2D``), :mod:`factors.compass`
 (``PoseRotationPrior2D`` or a bias-aware ``BetweenFactorPose2``), :mod:`factors.between`
 (ICP and odometry ``BetweenFactorPose2``), :mod:`factors.imu` (``ImuFactor`` preintegration,
-``GPSFactor``/``PoseRotationPrior3D`` on ``Pose3``), :mod:`factors.beacon` (``BearingRangeFactor2D`` and
-``PriorFactorPoint2``), and :mod:`factors.robust` (Huber/Cauchy wrappers). Keys are plain GTSAM
-symbols: ``X(k)`` poses, ``V(k)`` velocities, ``IB(k)`` IMU biases, ``L(i)`` beacons, ``B(0)`` the compass bias frame.
+``GPSFactor``/``PoseRotationPrior3D`` on ``Pose3``), :mod:`factors.beacon` (``BearingRangeFactor2D``
+and ``PriorFactorPoint2``), and :mod:`factors.robust` (Huber/Cauchy wrappers). Keys are plain GTSAM
+symbols: ``X(k)`` poses, ``V(k)`` velocities, ``IB(k)`` IMU biases, ``L(i)`` beacons, ``B(0)`` the
+compass bias frame.
 """
 
 from __future__ import annotations

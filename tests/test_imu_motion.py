@@ -69,6 +69,24 @@ def test_preintegration_matches_closed_form_kinematics():
     np.testing.assert_allclose(F.pose_xy_yaw(sb.pose()), xyz, atol=1e-9)
 
 
+def test_gnss_compass_and_bias_factor_errors_by_hand():
+    vals = gtsam.Values()
+    vals.insert(F.X(0), F.planar_pose(3.0, 4.0, 0.3))
+    g = F.gnss3_factor(F.X(0), 1.0, 1.0, 2.0, robust=None)
+    np.testing.assert_allclose(g.unwhitenedError(vals), [2.0, 3.0, 0.0], atol=1e-12)
+    assert g.error(vals) == pytest.approx(0.5 * 13.0 / 4.0)
+    c = F.compass3_factor(F.X(0), 0.25, math.radians(1.0), robust=None)
+    np.testing.assert_allclose(c.unwhitenedError(vals), [0.0, 0.0, 0.05], atol=1e-12)
+    assert c.error(vals) == pytest.approx(0.5 * (0.05 / math.radians(1.0)) ** 2)
+    h = F.compass3_factor(F.X(0), 0.25, math.radians(1.0))  # Huber: linear beyond k = 1.345 sigma
+    r = 0.05 / math.radians(1.0)
+    assert h.error(vals) == pytest.approx(1.345 * (r - 1.345 / 2))
+    vals.insert(F.IB(0), F.bias_vector())
+    vals.insert(F.IB(1), F.bias_vector(0.002, 0.0, 0.0))
+    bb = F.bias_between(0, 1, 1e-3, 1e-4, 4.0)  # sigma = rw sqrt(dt) = 2e-3
+    assert bb.error(vals) == pytest.approx(0.5)
+
+
 def test_world_cov_planar_rotates_the_body_translation_block():
     c6 = np.diag([1e-6, 1e-6, 0.01, 4.0, 1.0, 1e-6])
     c = F.world_cov_planar(F.planar_pose(0, 0, math.pi / 2), c6)
