@@ -2,9 +2,11 @@
 
 One module per sensor: :mod:`factors.gnss` (``PoseTranslationPrior2D``), :mod:`factors.compass`
 (``PoseRotationPrior2D`` or a bias-aware ``BetweenFactorPose2``), :mod:`factors.between`
-(ICP and odometry ``BetweenFactorPose2``), :mod:`factors.beacon` (``BearingRangeFactor2D`` and
-``PriorFactorPoint2``), and :mod:`factors.robust` (Huber/Cauchy wrappers). Keys are plain GTSAM
-symbols: ``X(k)`` poses, ``L(i)`` beacons, ``B(0)`` the compass bias frame.
+(ICP and odometry ``BetweenFactorPose2``), :mod:`factors.imu` (``ImuFactor`` preintegration,
+``GPSFactor``/``PoseRotationPrior3D`` on ``Pose3``), :mod:`factors.beacon` (``BearingRangeFactor2D``
+and ``PriorFactorPoint2``), and :mod:`factors.robust` (Huber/Cauchy wrappers). Keys are plain GTSAM
+symbols: ``X(k)`` poses, ``V(k)`` velocities, ``IB(k)`` IMU biases, ``L(i)`` beacons, ``B(0)`` the
+compass bias frame.
 """
 
 from __future__ import annotations
@@ -15,6 +17,22 @@ from .beacon import beacon_factor, beacon_prior, init_from_sighting, pose_from_t
 from .between import compose_with_cov, icp_between, odometry_between, odometry_increment
 from .compass import biased_compass_factor, compass_bias, compass_bias_prior, compass_factor
 from .gnss import gnss_factor
+from .imu import (
+    IB,
+    V,
+    bias_between,
+    bias_prior,
+    bias_vector,
+    compass3_factor,
+    gnss3_factor,
+    imu_factor,
+    initial_state_factors,
+    planar_imu_params,
+    planar_pose,
+    pose_xy_yaw,
+    preintegrate,
+    world_cov_planar,
+)
 from .robust import robustify
 
 
@@ -35,20 +53,34 @@ def B(i: int = 0) -> int:
 
 __all__ = [
     "B",
+    "IB",
     "L",
+    "V",
     "X",
     "beacon_factor",
     "beacon_prior",
+    "bias_between",
+    "bias_prior",
+    "bias_vector",
     "biased_compass_factor",
     "compass_bias",
     "compass_bias_prior",
     "compass_factor",
+    "compass3_factor",
     "compose_with_cov",
+    "gnss3_factor",
     "gnss_factor",
+    "imu_factor",
     "icp_between",
     "init_from_sighting",
+    "initial_state_factors",
     "odometry_between",
     "odometry_increment",
+    "planar_imu_params",
+    "planar_pose",
     "pose_from_two_beacons",
+    "pose_xy_yaw",
+    "preintegrate",
     "robustify",
+    "world_cov_planar",
 ]

@@ -25,8 +25,9 @@ PAPER_ESTIMATORS = ("ukf", "fuzzy-ukf", "ukf-bias", "ekf", "isam2", "batch")
 def solent_trial(scenario: int, seed: int, names: Sequence[str], options: dict[str, dict] | None = None,
                  sim_options: dict[str, Any] | None = None) -> dict[str, dict[str, float]]:
     """Simulate one mission and score each estimator: position RMSE [m] and heading RMSE [deg]
-    over every estimate (unaligned, in the log's frame), median step time [ms]. An estimator that
-    raises is reported with ``error``."""
+    over every estimate (unaligned, in the log's frame), median step time [ms]; for smoothers with
+    an online estimate also its position RMSE (``online_pos_rmse_m``: what was known at each time,
+    the filters' situation). An estimator that raises is reported with ``error``."""
     from .sim.solent import simulate_solent
 
     log = simulate_solent(scenario=scenario, seed=seed, **(sim_options or {}))
@@ -45,6 +46,8 @@ def solent_trial(scenario: int, seed: int, names: Sequence[str], options: dict[s
             "step_ms_median": float(np.median(res.step_ms)) if len(res.step_ms) else math.nan,
             "runtime_s": time.perf_counter() - t0,
         }
+        if res.online is not None and res.online is not res.trajectory:
+            out[name]["online_pos_rmse_m"] = ate(res.online, ref)["rmse"]
     return out
 
 
@@ -85,6 +88,9 @@ def aggregate(trials: list[dict[str, dict[str, float]]], names: Sequence[str]) -
             "step_ms_median": float(np.median([r["step_ms_median"] for r in ok])) if ok else math.nan,
             "runs_ok": len(ok),
         }
+        online = [r["online_pos_rmse_m"] for r in ok if "online_pos_rmse_m" in r]
+        if online and len(online) == len(ok):
+            d["online_pos_rmse_m"] = float(np.mean(online))
         if errs:
             d["errors"] = sorted(set(errs))[:3]
         out[name] = d

@@ -111,6 +111,10 @@ def test_aggregate_and_improvement():
     est = aggregate(trials, ["ukf", "fuzzy-ukf"])
     assert est["ukf"]["pos_rmse_m"] == 5.0 and est["fuzzy-ukf"]["runs_ok"] == 1
     assert improvement_pct(est) == pytest.approx(40.0)
+    assert "online_pos_rmse_m" not in est["ukf"]
+    trials[0]["ukf"]["online_pos_rmse_m"] = 5.0
+    trials[1]["ukf"]["online_pos_rmse_m"] = 7.0
+    assert aggregate(trials, ["ukf"])["ukf"]["online_pos_rmse_m"] == 6.0
 
 
 def test_cli_simulate_and_montecarlo_print_one_json_object(tmp_path):
