@@ -253,10 +253,11 @@ def match_points(
     """Align ``src_xy`` (N, 2), the current scan's points in its sensor frame, to ``tgt_xy`` (M, 2),
     the previous scan's (Algorithm 1). ``init`` is the initial ``(dx, dy, dyaw)`` (e.g. the
     constant-velocity guess); a degenerate match takes it along its weak directions and inflates
-    the covariance there (docs/weighted-icp.md). Points are taken in their sensor frame (the LiDAR error model needs
-    the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma`` (scalar or one per point,
-    metres) replace that model by an isotropic 1-sigma per point (e.g. for points that are not raw
-    LiDAR returns); by default the model of eq. 5-9 with the config's sigma_r_rel, sigma_alpha.
+    the covariance there (docs/weighted-icp.md). Points are taken in their sensor frame (the
+    LiDAR error model needs the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma``
+    (scalar or one per point, metres) replace that model by an isotropic 1-sigma per point (e.g. for
+    points that are not raw LiDAR returns); by default the model of eq. 5-9 with the config's
+    sigma_r_rel, sigma_alpha.
     """
     cfg = config or IcpConfig()
     t0 = time.perf_counter()
@@ -574,6 +575,9 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     inlier residuals (``k = sum e^T S^-1 e / dof``). ``J`` is the Jacobian of the residual with
     respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)`` (GTSAM's Pose2 tangent space):
     ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1], [1, 0]]``.
+
+    Degeneracy (:mod:`graphnav.degeneracy`, every variant): weak directions of the point-to-line
+    information; there the pose is replaced by ``init``'s and ``weak_sigma^2`` is added to ``cov``.
     """
     fast = _fast_loop(cfg) is not None
     if fast:
