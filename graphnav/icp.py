@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from . import degeneracy
 from .lidar import SIGMA_ALPHA, SIGMA_R_REL, polar_to_points
 
 VARIANTS = ("K", "H", "HM", "HD", "HDL")
@@ -68,6 +69,8 @@ class IcpConfig:
     inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
     min_inlier_fraction: float = 0.3  # below -> ok=False
     max_condition: float = 200.0  # condition number of the point-to-line information above -> degenerate
+    max_sigma: float = 0.5  # predicted 1-sigma along the weakest direction above -> degenerate [m]
+    weak_sigma: float = 1.0  # 1-sigma added along the weak directions of a degenerate match [m]
     # inflation for correlated, unmodelled error (sampling, motion distortion); None = the value
     # measured on the marina data for the variant (COV_SCALE, docs/weighted-icp.md); 1.0 = the pure
     # least-squares model (independent errors, synthetic scans)
@@ -224,7 +227,8 @@ def _failed(reason: str, init: ArrayLike | None, n_src: int, n_tgt: int, t0: flo
     q = {"points_used": 0, "points_source": n_src, "points_target": n_tgt, "inlier_fraction": 0.0,
          "residual": float("nan"),
          "residual_scale": float("nan"), "condition_number": float("inf"), "iterations": 0,
-         "degenerate": True,
+         "degenerate": True, "sigma_weak": float("inf"), "weak_direction": [float("nan")] * 3, "weak_dims": 3,
+         "inflated": False,
          "converged": False, "reason": reason, "ms": (time.perf_counter() - t0) * 1e3}
     return MatchResult(np.array([t[0], t[1], th]), _BIG_COV.copy(), False, q)
 
@@ -248,10 +252,12 @@ def match_points(
 ) -> MatchResult:
     """Align ``src_xy`` (N, 2), the current scan's points in its sensor frame, to ``tgt_xy`` (M, 2),
     the previous scan's (Algorithm 1). ``init`` is the initial ``(dx, dy, dyaw)`` (e.g. the
-    constant-velocity guess). Points are taken in their sensor frame (the LiDAR error model needs
-    the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma`` (scalar or one per point,
-    metres) replace that model by an isotropic 1-sigma per point (e.g. for points that are not raw
-    LiDAR returns); by default the model of eq. 5-9 with the config's sigma_r_rel, sigma_alpha.
+    constant-velocity guess); a degenerate match takes it along its weak directions and inflates
+    the covariance there (docs/weighted-icp.md). Points are taken in their sensor frame (the
+    LiDAR error model needs the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma``
+    (scalar or one per point, metres) replace that model by an isotropic 1-sigma per point (e.g. for
+    points that are not raw LiDAR returns); by default the model of eq. 5-9 with the config's
+    sigma_r_rel, sigma_alpha.
     """
     cfg = config or IcpConfig()
     t0 = time.perf_counter()
@@ -283,7 +289,7 @@ def match_points(
             tgt.b2, tgt.m2, _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big, cfg.tol,
             cfg.tol_step, cfg.max_iter, th0, t0_[0], t0_[1], _GRID_CELL)
         pose = np.array([tx_, ty_, th])
-        return _finish(cfg, src, tgt, idx, pose, None, None, it, converged, t0, ns, nt)
+        return _finish(cfg, src, tgt, idx, pose, None, None, it, converged, t0, ns, nt, init)
 
     nnm = _NearestNeighbours(tgt.xy, cfg)
     p2l = cfg.variant == "HDL"
@@ -326,7 +332,7 @@ def match_points(
         old_res = new_res
 
     pose = np.array([t[0], t[1], th])
-    return _finish(cfg, src, tgt, idx, pose, normals, flat, it, converged, t0, ns, nt)
+    return _finish(cfg, src, tgt, idx, pose, normals, flat, it, converged, t0, ns, nt, init)
 
 
 _VARIANT_CODE = {"K": 0, "H": 1, "HM": 2, "HD": 3}
@@ -549,10 +555,18 @@ def _terms_numpy(cfg, src, tgt, idx, pose, normals, flat):  # noqa: ANN001, ANN2
     lsc = float(np.sqrt(np.mean(np.sum((ps - ps.mean(0)) ** 2, 1)))) or 1.0
     jl[:, 2] /= lsc
     info = (jl * (sel * fl)[:, None]).T @ jl
-    return h, bmat, kscale, res_rms, info, int(use.sum()), float(inl.mean())
+    s2 = _line_residual_var(e, n, sel * fl)
+    return h, bmat, kscale, res_rms, info, int(use.sum()), float(inl.mean()), s2
 
 
-def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, nt):  # noqa: ANN001, ANN202
+def _line_residual_var(e: NDArray, n: NDArray, f: NDArray) -> float:
+    """Variance of the residuals along the target normals, weighted by ``f`` (flatness x inlier)."""
+    rn = np.einsum("ij,ij->i", e, n)
+    sf = float(f.sum())
+    return float(np.sum(f * rn * rn) / (sf - 3.0)) if sf > 3.0 else float("nan")
+
+
+def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, nt, init=None):  # noqa: ANN001, ANN202
     """Quality report and covariance at the solution.
 
     The covariance is the sandwich ``k H^-1 B H^-1`` of the weighted least-squares problem at
@@ -561,6 +575,9 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     inlier residuals (``k = sum e^T S^-1 e / dof``). ``J`` is the Jacobian of the residual with
     respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)`` (GTSAM's Pose2 tangent space):
     ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1], [1, 0]]``.
+
+    Degeneracy (:mod:`graphnav.degeneracy`, every variant): weak directions of the point-to-line
+    information; there the pose is replaced by ``init``'s and ``weak_sigma^2`` is added to ``cov``.
     """
     fast = _fast_loop(cfg) is not None
     if fast:
@@ -575,12 +592,14 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
             cfg.line_max_gap, cfg.inlier_dist)
         kscale = ksum / dof if n_sel else float("nan")
         inlier_fraction = n_inl / len(idx)
+        nrm, fl = scan_order_normals(tgt.xy, cfg.normal_k // 2, cfg.line_max_gap)
+        e = src.xy @ _rot(pose[2]).T + pose[:2] - tgt.xy[idx]
+        inl = np.hypot(e[:, 0], e[:, 1]) <= cfg.inlier_dist
+        s2 = _line_residual_var(e, nrm[idx], inl * fl[idx])
     else:
-        h, bmat, kscale, res_rms, info, n_use, inlier_fraction = _terms_numpy(
+        h, bmat, kscale, res_rms, info, n_use, inlier_fraction, s2 = _terms_numpy(
             cfg, src, tgt, idx, pose, normals, flat)
     pose[2] = np.arctan2(np.sin(pose[2]), np.cos(pose[2]))
-    ev = np.linalg.eigvalsh(info)
-    cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
     try:
         hinv = np.linalg.inv(h)
         cov = kscale * hinv @ bmat @ hinv.T
@@ -588,15 +607,35 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
         cov = _BIG_COV.copy()
     scale = COV_SCALE[cfg.variant] if cfg.cov_scale is None else cfg.cov_scale
     cov = 0.5 * (cov + cov.T) * scale + np.diag(np.square(cfg.cov_floor))
-    degenerate = not np.isfinite(cond) or cond > cfg.max_condition
+    # degeneracy (docs/weighted-icp.md): the point-to-line information's weak directions, whatever
+    # the variant's metric, its predicted covariance inflated as HDL's (the point-to-line scale);
+    # along weak directions the pose is the initial guess's and the covariance is inflated
+    line_scale = COV_SCALE["HDL"] if cfg.cov_scale is None else cfg.cov_scale
+    deg = degeneracy.analyse(info, s2, degeneracy.rms_radius(src.xy), scale=line_scale,
+                             max_condition=cfg.max_condition, max_sigma=cfg.max_sigma)
+    cond = deg.condition
+    degenerate = deg.degenerate
     reasons = []
     if degenerate:
-        reasons.append(f"degenerate geometry (condition number {cond:.3g} > {cfg.max_condition:g})")
+        why = []
+        if not np.isfinite(cond) or cond > cfg.max_condition:
+            why.append(f"condition number {cond:.3g} > {cfg.max_condition:g}")
+        if deg.sigma_weak > cfg.max_sigma:
+            why.append(f"weakest-direction 1-sigma {deg.sigma_weak:.3g} m > {cfg.max_sigma:g} m")
+        reasons.append(f"degenerate geometry ({', '.join(why) or 'no residual scale'})")
+        if init is not None:  # without a guess the estimate is all there is: only inflate
+            th0, t0_ = _pose_parts(init)
+            pose = degeneracy.keep_constrained(pose, np.array([t0_[0], t0_[1], th0]), deg)
+        if np.all(np.isfinite(cov)):
+            cov = cov + deg.inflation(cfg.weak_sigma)
+    inflated = degenerate
     if inlier_fraction < cfg.min_inlier_fraction:
         reasons.append(f"inlier fraction {inlier_fraction:.2f} < {cfg.min_inlier_fraction}")
+        inflated = False
     if not np.all(np.isfinite(cov)):
         reasons.append("non-finite covariance")
         cov = _BIG_COV.copy()
+        inflated = False
     quality = {
         "points_used": int(n_use),
         "points_source": ns,
@@ -608,6 +647,10 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
         "iterations": int(iters),
         "converged": bool(converged),
         "degenerate": bool(degenerate),
+        "sigma_weak": deg.sigma_weak,
+        "weak_direction": [float(x) for x in deg.weakest],
+        "weak_dims": int(deg.weak.sum()),
+        "inflated": bool(inflated),  # flagged for degeneracy only: covariance inflated along the weak directions
         "reason": "; ".join(reasons),
         "ms": (time.perf_counter() - t0) * 1e3,
     }

@@ -17,6 +17,8 @@ from numpy.typing import NDArray
 from .geometry import se2_between, wrap_angle
 from .icp import IcpConfig, MatchResult, match_points, scan_points
 from .log import NavLog
+from .motion_guess import MotionGuess
+from .odometry_increment import odometry_samples
 
 
 @dataclass
@@ -44,29 +46,24 @@ def run_pairs(log: NavLog, config: IcpConfig | None = None, init: str = "cv",
               on_match: Any = None) -> PairRun:
     """Match every consecutive scan pair of ``log``.
 
-    ``init="cv"``: constant-velocity guess — the last good increment scaled to this pair's time
-    step (zero for the first pair); ``"zero"``: identity. ``on_match(k, result)`` is called after
-    each match (online use).
+    ``init`` (:class:`~graphnav.motion_guess.MotionGuess`): ``"cv"`` constant velocity from the
+    last good match (after a flagged one: the odometry increment when the log has odometry);
+    ``"odometry"`` the odometry increment; ``"zero"`` identity. ``on_match(k, result)`` is called
+    after each match (online use).
     """
-    if init not in ("cv", "zero"):
-        raise ValueError(f"unknown init {init!r}; known: cv, zero")
+    guesser = MotionGuess(init, odometry_samples(log))
     cfg = config or IcpConfig()
     scans = log.of("scan")
     pts = [scan_points(s, cfg) for s in scans]
     results: list[MatchResult] = []
     ms = []
-    last: tuple[NDArray, float] | None = None  # last good increment and its dt
     for k in range(len(scans) - 1):
-        dt = scans[k + 1].t - scans[k].t
-        guess = None
-        if init == "cv" and last is not None and last[1] > 0:
-            guess = last[0] * (dt / last[1])
+        guess = guesser.guess(scans[k].t, scans[k + 1].t)
         t = time.perf_counter()
         res = match_points(pts[k + 1], pts[k], cfg, init=guess)
         ms.append((time.perf_counter() - t) * 1e3)
         results.append(res)
-        if res.ok:
-            last = (res.pose, dt)
+        guesser.update(res, scans[k].t, scans[k + 1].t)
         if on_match is not None:
             on_match(k, res)
     t0 = np.array([s.t for s in scans[:-1]])
@@ -169,6 +166,7 @@ def score_pairs(run: PairRun, ref: NDArray, scored: NDArray) -> tuple[dict[str, 
         "pairs": len(run.results),
         "pairs_scored": int(s.sum()),
         "pairs_ok": int(run.ok.sum()),
+        "pairs_degenerate": int(sum(bool(r.quality.get("degenerate")) for r in run.results)),
         "step_err_mean_m": sm,
         "step_err_std_m": ss,
         "step_err_max_abs_m": abs(sx) if np.isfinite(sx) else sx,

@@ -13,6 +13,7 @@ import numpy as np
 from ..icp import VARIANTS, IcpConfig
 from ..icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
 from ..io import load_log
+from ..motion_guess import INITS
 from ..movement import movement_from_increments
 from ._common import add_json_flag, add_log_args, emit, parse_options
 
@@ -24,8 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description=__doc__)
     add_log_args(p)
     p.add_argument("--variant", choices=VARIANTS, default="HD", help="weighting variant (default HD)")
-    p.add_argument("--init", choices=("cv", "zero"), default="zero",
-                   help="initial guess: constant velocity (last increment) or identity (default)")
+    p.add_argument("--init", choices=INITS, default="zero",
+                   help="initial guess: constant velocity (last good match; odometry after a flagged one), "
+                        "the odometry increment, or identity (default)")
     p.add_argument("--out", type=Path, help="directory for pairs.csv and the Figs. 12-15 style plots")
     p.add_argument("--option", "-O", action="append", metavar="KEY=VALUE",
                    help="IcpConfig field, e.g. -O sigma_alpha=0.005 -O matching=delaunay; repeatable")

@@ -5,8 +5,11 @@ initial guess) and the increment is composed onto the previous pose; the covaria
 propagated to first order (``P' = Ad P Ad^T + Q`` in the body frame, GTSAM's convention) and
 reported in the world frame (the :class:`~graphnav.trajectory.Trajectory` convention).
 The start pose is the log's pose prior, else the first truth pose, else the origin
-(:func:`graphnav.estimators.dead_reckoning.start_pose`). A failed match (``ok`` False) is
-replaced by the constant-velocity guess with an inflated covariance, and counted.
+(:func:`graphnav.estimators.dead_reckoning.start_pose`). Initial guesses come from
+:class:`~graphnav.motion_guess.MotionGuess` (never from a flagged match). A flagged match (``ok``
+False: degenerate geometry, too few points or inliers) is bridged by the odometry increment with its
+covariance when the log has odometry, else by the constant-velocity guess with a wide covariance,
+and counted (``info["failed_matches"]``, ``info["bridged_odometry"]``, ``info["bridged_cv"]``).
 """
 
 from __future__ import annotations
@@ -21,6 +24,8 @@ from .. import icp_cache
 from ..geometry import se2_compose
 from ..icp import IcpConfig, scan_points
 from ..log import NavLog
+from ..motion_guess import MotionGuess
+from ..odometry_increment import odometry_samples
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
 from .dead_reckoning import start_pose
@@ -51,7 +56,7 @@ def _to_world(pose: np.ndarray, cov: np.ndarray) -> np.ndarray:
 def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: str = "HDL",
                init: str = "cv", sigma_xy0: float = 0.0, sigma_yaw0: float = 0.0,
                **options: Any) -> RunResult:
-    """Options: ``variant`` (K, H, HM, HD, HDL), ``init`` ("cv" or "zero"), any :class:`IcpConfig`
+    """Options: ``variant`` (K, H, HM, HD, HDL), ``init`` ("cv", "odometry" or "zero"), any :class:`IcpConfig`
     field, and the start pose's 1-sigma (``sigma_xy0``, ``sigma_yaw0``; a pose prior's own sigmas
     win)."""
     unknown = set(options) - _CONFIG_FIELDS
@@ -80,22 +85,21 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
         on_estimate(scans[0].t, pose, _to_world(pose, cov))
     pts_prev = scan_points(scans[0], cfg)
     icp_ms = []
-    failed = 0
-    last = None
+    bridged = {"odometry": 0, "cv": 0}
+    guesser = MotionGuess(init, odometry_samples(log))
     for k in range(1, len(scans)):
-        dt = scans[k].t - scans[k - 1].t
+        ta, tb = scans[k - 1].t, scans[k].t
         pts = scan_points(scans[k], cfg)
-        guess = last[0] * (dt / last[1]) if (init == "cv" and last is not None and last[1] > 0) else None
+        guess = guesser.guess(ta, tb)
         t0 = time.perf_counter()
         res = icp_cache.match_points(pts, pts_prev, cfg, init=guess)  # = icp.match_points, shared in compare
         icp_ms.append((time.perf_counter() - t0) * 1e3)
+        guesser.update(res, ta, tb)
         if res.ok:
             inc, q = res.pose, res.cov
-            last = (inc, dt)
         else:
-            failed += 1
-            inc = guess if guess is not None else np.zeros(3)
-            q = np.diag([1.0, 1.0, np.radians(10.0) ** 2])  # no information: a wide constant-velocity guess
+            inc, q, how = guesser.bridge(ta, tb)
+            bridged[how] += 1
         a = _adjoint_inv(inc)
         cov = a @ cov @ a.T + q
         pose = se2_compose(pose, inc)
@@ -106,8 +110,8 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
             on_estimate(scans[k].t, pose, covs[-1])
         pts_prev = pts
     traj = Trajectory(np.array(t), np.array(poses), np.array(covs), name="icp-dr")
-    info = {"anchor": anchor, "variant": variant, "init": init, "failed_matches": failed,
-            "matches": len(scans) - 1}
+    info = {"anchor": anchor, "variant": variant, "init": init, "failed_matches": sum(bridged.values()),
+            "bridged_odometry": bridged["odometry"], "bridged_cv": bridged["cv"], "matches": len(scans) - 1}
     return RunResult(traj, traj, np.zeros(0), np.array(icp_ms), info=info)
 
 

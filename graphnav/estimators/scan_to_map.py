@@ -3,9 +3,13 @@
 Each scan is registered against a local map made of the last ``keyframes`` registered keyframe
 scans (a scan becomes a keyframe when the vessel has moved ``keyframe_dist`` metres or turned
 ``keyframe_angle_deg`` since the last one), voxel-downsampled to ``map_voxel`` metres. The initial
-guess is the constant-velocity prediction; the result is the pose in SE(2) (see
-:mod:`graphnav.registration` for how each backend is kept planar). The trajectory is the chain of
-registered poses — odometry, so it drifts, as in the paper's Table 2.
+guess is the odometry increment when the log has odometry (``predict="odometry"``), else the
+constant-velocity prediction; the result is the pose in SE(2) (see :mod:`graphnav.registration`
+for how each backend is kept planar). A registration whose point-to-line information against the
+map's local lines is degenerate (:mod:`graphnav.degeneracy`: condition number above
+``max_condition`` or predicted 1-sigma along the weakest direction above ``max_sigma``) takes the
+prediction along its weak directions and is counted (``info["degenerate_registrations"]``). The
+trajectory is the chain of registered poses — odometry, so it drifts, as in the paper's Table 2.
 
 Options (``graphnav run LOG -e scan-to-map -O key=value``): ``backend`` (``small_gicp:VGICP``
 default, ``small_gicp:GICP``, ``open3d:point_to_point``, ``open3d:point_to_plane``,
@@ -22,11 +26,14 @@ from typing import Any
 
 import numpy as np
 
+from ..degeneracy import analyse, flatness, keep_constrained, line_information
 from ..geometry import se2_between, se2_compose, wrap_angle
 from ..log import NavLog, Scan
+from ..odometry_increment import increment, odometry_samples
 from ..registration import (
     Params,
     Target,
+    local_frames_2d,
     prepare_source,
     resolve_method,
     scan_points,
@@ -59,6 +66,17 @@ class ScanToMapConfig:
     min_fitness: float = 0.3
     max_correction: float = 5.0
     threads: int = 1
+    # degeneracy of each registration (graphnav.degeneracy; docs/weighted-icp.md): point-to-line
+    # information of the scan against the map's local lines within inlier_dist; thresholds measured
+    # on the harbour log (lower than the pair matcher's 200 / 0.5 m)
+    max_condition: float = 40.0
+    max_sigma: float = 0.25  # [m] predicted 1-sigma (x line_scale) along the weakest direction
+    line_scale: float = 50.0  # covariance inflation of the prediction (HDL's, graphnav.icp.COV_SCALE)
+    inlier_dist: float = 0.5
+    # a degenerate registration: "constrained" keeps it across the weak directions and takes the
+    # prediction along them; "predict" takes the prediction (either way the scan may join the map)
+    degenerate: str = "constrained"
+    predict: str = "odometry"  # initial guess: "odometry" (when the log has odometry, else cv) or "cv"
 
     def params(self) -> Params:
         return Params(max_corr=self.max_corr, voxel=self.voxel, neighbors=self.neighbors,
@@ -74,6 +92,10 @@ def make_config(**options: Any) -> ScanToMapConfig:
     resolve_method(cfg.backend)  # fail early on a bad name
     if cfg.planar not in ("constrain", "project"):
         raise ValueError(f"planar must be 'constrain' or 'project', got {cfg.planar!r}")
+    if cfg.degenerate not in ("constrained", "predict"):
+        raise ValueError(f"degenerate must be 'constrained' or 'predict', got {cfg.degenerate!r}")
+    if cfg.predict not in ("odometry", "cv"):
+        raise ValueError(f"predict must be 'odometry' or 'cv', got {cfg.predict!r}")
     return ScanToMapConfig(**{**asdict(cfg), "backend": resolve_method(cfg.backend)})
 
 
@@ -104,7 +126,10 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
     rmse: list[float] = []
     fitness: list[float] = []
     iters: list[int] = []
-    failed = 0
+    conds: list[float] = []
+    failed = degenerate = 0
+    odo = odometry_samples(log) if cfg.predict == "odometry" else np.zeros((0, 5))
+    map_lines: tuple[np.ndarray, np.ndarray] | None = None  # normals, flatness of the map points
     keyframes: deque[tuple[np.ndarray, np.ndarray, Any]] = deque(maxlen=cfg.keyframes)
     vgicp = cfg.backend == "small_gicp:VGICP"  # the voxel map is built from the keyframes' own clouds
     last_kf: np.ndarray | None = None
@@ -121,7 +146,10 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
         if not poses:
             pose = np.array(pose0, dtype=float)
         else:
-            if len(poses) >= 2:
+            inc = increment(odo, ts[-1], scan.t) if len(odo) else None
+            if inc is not None:
+                pred = se2_compose(poses[-1], inc[0])
+            elif len(poses) >= 2:
                 pred = predict_constant_velocity(poses[-2], poses[-1], ts[-1] - ts[-2], scan.t - ts[-1])
             else:
                 pred = poses[-1].copy()
@@ -138,8 +166,18 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
                 jump = np.hypot(*(res.pose[:2] - pred[:2]))
                 ok = np.all(np.isfinite(res.pose)) and jump <= cfg.max_correction
                 if ok and res.fitness >= cfg.min_fitness:
-                    pose = res.pose
-                    registered = True
+                    info_, s2, radius = line_information(xy, res.pose, target.xy, *map_lines, target.tree2,
+                                                         cfg.inlier_dist)
+                    deg = analyse(info_, s2, radius, scale=cfg.line_scale, max_condition=cfg.max_condition,
+                                  max_sigma=cfg.max_sigma)
+                    conds.append(deg.condition)
+                    if not deg.degenerate:
+                        pose = res.pose
+                        registered = True
+                    else:
+                        degenerate += 1  # the prediction (along the weak directions only: "constrained")
+                        pose = keep_constrained(res.pose, pred, deg) if cfg.degenerate == "constrained" else pred
+                        registered = True
                 else:
                     failed += 1
             else:
@@ -158,6 +196,8 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
             world = voxel_downsample(np.vstack([transform2(p, k) for k, p, _ in keyframes]), cfg.map_voxel)
             parts = [(c, p) for _, p, c in keyframes] if vgicp else None
             target = Target(world, cfg.backend, params, parts)
+            nrm, ev = local_frames_2d(world, cfg.neighbors, params.normal_radius)
+            map_lines = (nrm, flatness(ev))
         step_ms.append((time.perf_counter() - t_step) * 1e3 - this_icp)
         ts.append(scan.t)
         poses.append(np.array(pose, dtype=float))
@@ -172,6 +212,8 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
         "scans_skipped_before_anchor": skipped,
         "registrations": len(icp_ms),
         "failed_registrations": failed,
+        "degenerate_registrations": degenerate,
+        "condition_number_median": float(np.median(conds)) if conds else float("nan"),
         "registration_rmse_m_mean": float(np.nanmean(rmse)) if rmse else float("nan"),
         "registration_fitness_mean": float(np.mean(fitness)) if fitness else float("nan"),
         "iterations_median": float(np.median(iters)) if iters else float("nan"),
