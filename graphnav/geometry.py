@@ -76,6 +76,20 @@ def se2_from_matrix(m: ArrayLike) -> NDArray[np.float64]:
     return np.array([m[0, 2], m[1, 2], np.arctan2(m[1, 0], m[0, 0])])
 
 
+def se2_adjoint_inv(inc: ArrayLike) -> NDArray[np.float64]:
+    """``Ad(inc^-1)`` of a Pose2 ``(x, y, yaw)`` (GTSAM's ``Pose2(inc).inverse().AdjointMap()``):
+    the Jacobian that carries a tangent-space covariance across a composed increment,
+    ``P' = Ad(inc^-1) P Ad(inc^-1)^T + Q``."""
+    x, y, th = np.asarray(inc, dtype=float)
+    c, s = np.cos(th), np.sin(th)
+    rt = np.array([[c, s], [-s, c]])
+    ti = -rt @ np.array([x, y])
+    a = np.eye(3)
+    a[:2, :2] = rt
+    a[:2, 2] = [ti[1], -ti[0]]
+    return a
+
+
 def accumulate(increments: ArrayLike, start: ArrayLike = (0.0, 0.0, 0.0)) -> NDArray[np.float64]:
     """Chain relative poses: returns (N+1, 3) absolute poses starting at ``start``."""
     inc = np.asarray(increments, dtype=float).reshape(-1, 3)

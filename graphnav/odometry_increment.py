@@ -14,7 +14,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from .geometry import se2_compose
+from .geometry import se2_adjoint_inv, se2_compose
 from .log import NavLog
 
 
@@ -36,17 +36,6 @@ def arc(v: float, w: float, dt: float, sigma_v: float, sigma_w: float,
     return np.array([d.x(), d.y(), d.theta()]), cov
 
 
-def _adjoint_inv(inc: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``Ad(inc^-1)`` of a Pose2 ``(x, y, yaw)`` (GTSAM's ``AdjointMap`` of the inverse)."""
-    x, y, th = inc
-    c, s = math.cos(th), math.sin(th)
-    rt = np.array([[c, s], [-s, c]])
-    ti = -rt @ np.array([x, y])
-    a = np.eye(3)
-    a[:2, :2] = rt
-    a[:2, 2] = [ti[1], -ti[0]]
-    return a
-
 
 def increment(samples: NDArray[np.float64], t0: float, t1: float, *,
               lateral: float = 0.05) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
@@ -63,7 +52,7 @@ def increment(samples: NDArray[np.float64], t0: float, t1: float, *,
         te = min(t_next, t1)
         _, v, w, sv, sw = samples[i]
         d, q = arc(v, w, te - t, sv, sw, lateral)
-        a = _adjoint_inv(d)
+        a = se2_adjoint_inv(d)
         cov = a @ cov @ a.T + q
         pose = se2_compose(pose, d)
         t = te

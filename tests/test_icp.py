@@ -267,10 +267,10 @@ def test_icp_dead_reckoning_estimator_follows_truth_online():
 
 
 def test_adjoint_matches_gtsam():
-    from graphnav.estimators.icp_odometry import _adjoint_inv
+    from graphnav.geometry import se2_adjoint_inv
 
     inc = np.array([0.7, -0.3, 0.4])
-    assert np.allclose(_adjoint_inv(inc), gtsam.Pose2(*inc).inverse().AdjointMap())
+    assert np.allclose(se2_adjoint_inv(inc), gtsam.Pose2(*inc).inverse().AdjointMap())
 
 
 def test_cli_prints_one_json_object_with_the_issue_keys(tmp_path, capsys):

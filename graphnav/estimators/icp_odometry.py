@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .. import icp_cache
-from ..geometry import se2_compose
+from ..geometry import se2_adjoint_inv, se2_compose
 from ..icp import IcpConfig, scan_points
 from ..log import NavLog
 from ..motion_guess import MotionGuess
@@ -32,18 +32,6 @@ from .dead_reckoning import start_pose
 
 _CONFIG_FIELDS = {f.name for f in fields(IcpConfig)}
 
-
-def _adjoint_inv(inc: np.ndarray) -> np.ndarray:
-    """Jacobian of ``Log((x ∘ inc)^-1 (x Exp(d) ∘ inc))`` w.r.t. ``d``: ``Ad(inc^-1)``."""
-    x, y, th = inc
-    c, s = np.cos(th), np.sin(th)
-    # Ad(T) for Pose2 T=(R,t): [[R, [t_y, -t_x]^T], [0, 1]]; here T = inc^-1
-    rt = np.array([[c, s], [-s, c]])
-    ti = -rt @ np.array([x, y])
-    a = np.eye(3)
-    a[:2, :2] = rt
-    a[:2, 2] = [ti[1], -ti[0]]
-    return a
 
 
 def _to_world(pose: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -100,7 +88,7 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
         else:
             inc, q, how = guesser.bridge(ta, tb)
             bridged[how] += 1
-        a = _adjoint_inv(inc)
+        a = se2_adjoint_inv(inc)
         cov = a @ cov @ a.T + q
         pose = se2_compose(pose, inc)
         t.append(scans[k].t)
