@@ -97,8 +97,8 @@ def make_methods():
         return se2_from_matrix(r.T_target_source), bool(r.converged)
 
     methods = {}
-    for v in ("K", "H", "HM", "HD", "HDL"):
-        cfg = IcpConfig(variant=v)
+    for v in ("K", "H", "HM", "HD", "HDL"):  # the numpy loop (the default backend "auto" picks numba when importable)
+        cfg = IcpConfig(variant=v, backend="numpy")
 
         def ours(src, tgt, init, cfg=cfg):
             res = match_points(src, tgt, cfg, init=init)
@@ -108,7 +108,7 @@ def make_methods():
     try:
         import numba  # noqa: F401
 
-        for v in ("HD",):
+        for v in ("HD", "HDL"):  # the compiled loop: same results, its own timing column
             cfg = IcpConfig(variant=v, backend="numba")
             match_points(
                 np.random.default_rng(0).normal(0, 5, (50, 2)),
@@ -239,7 +239,8 @@ def main() -> int:
         "",
         "Command: `/tmp/venvtest/bin/python benchmarks/icp_marina.py` "
         f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
-        f"{os.cpu_count()} cores; wall time of one call, methods interleaved pair by pair).",
+        f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at the start; wall time of one call, "
+        "methods interleaved pair by pair; `[numba]`: `backend=\"numba\"`, our other rows `backend=\"numpy\"`).",
         "",
     ]
     for init in args.init:

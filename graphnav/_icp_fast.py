@@ -342,3 +342,343 @@ def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, 
                     info[r_, q_] += fl[j] * jl[r_] * jl[q_]
     res_rms = math.sqrt(swe / sw) if sw > 0 else np.nan
     return h, b, ksum, max(2 * n_sel - 3, 1), n_sel, res_rms, info, n_use, n_inl
+
+
+# ----------------------------------------------------------------------------- HDL (point-to-line)
+
+
+@njit(cache=True)
+def _hd_weight(i, j, px, py, d, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, wpow):
+    """HD weight of pair (i, j) (eq. 9, 11, 12): ``beta`` the direction from the source point to its match."""
+    if d > 0:
+        bx = (tx[j] - px) / d
+        by = (ty[j] - py) / d
+    else:
+        bx, by = 1.0, 0.0
+    urx = c * sux[i] - s * suy[i]
+    ury = s * sux[i] + c * suy[i]
+    cs = urx * bx + ury * by
+    ct = tux[j] * bx + tuy[j] * by
+    g = sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)
+    return g ** (-wpow)
+
+
+@njit(cache=True)
+def hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
+                huber_c, wpow, max_corr, flat_pow, line_max_dist, p2p, w):
+    """Pair weights of :func:`graphnav.icp._weights` for HDL into ``w`` (``p2p``: the HD weights
+    of the point-to-point warm-up): directional error along the target normal (eq. 9, 11), Huber
+    on the point-to-line distance, x flatness^power, gated by the pair distance."""
+    n = px.shape[0]
+    if p2p:
+        khu = huber_c * np.median(d)
+        for i in range(n):
+            wi = _hd_weight(i, idx[i], px[i], py[i], d[i], c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy,
+                            ta2, tb2, wpow)
+            if khu > 0 and d[i] > khu:
+                wi *= khu / d[i]
+            w[i] = wi
+    else:
+        dist = np.empty(n)
+        for i in range(n):
+            j = idx[i]
+            dist[i] = abs((px[i] - tx[j]) * nrx[j] + (py[i] - ty[j]) * nry[j])
+        khu = huber_c * np.median(dist)
+        gate = max(line_max_dist, huber_c * np.median(d))
+        for i in range(n):
+            j = idx[i]
+            bx, by = nrx[j], nry[j]
+            cs = (c * sux[i] - s * suy[i]) * bx + (s * sux[i] + c * suy[i]) * by
+            ct = tux[j] * bx + tuy[j] * by
+            g = sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)
+            wi = g ** (-wpow)
+            if khu > 0 and dist[i] > khu:
+                wi *= khu / dist[i]
+            wi = wi * fl[j] ** flat_pow
+            w[i] = wi if d[i] <= gate else 0.0
+    anyw = False
+    for i in range(n):
+        if d[i] > max_corr:
+            w[i] = 0.0
+        if w[i] > 0:
+            anyw = True
+    if not anyw:
+        for i in range(n):
+            w[i] = 1.0
+
+
+@njit(cache=True)
+def _solve3(h, b):
+    """``-(h + 1e-12 I)^-1 b`` as :func:`graphnav.icp._p2l_step` (least squares when singular)."""
+    a = h.copy()
+    for k in range(3):
+        a[k, k] += 1e-12
+    try:
+        return -np.linalg.solve(a, b)
+    except Exception:  # noqa: BLE001
+        return -np.linalg.lstsq(h, b)[0]
+
+
+@njit(cache=True)
+def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr,
+             tol, tol_step, max_iter, th, t0x, t0y, h, flat_pow, warmup, line_max_dist):
+    """Algorithm 1 for HDL: HD point-to-point steps (eq. 15-20) while a step moves a point more than
+    ``warmup``, then Gauss-Newton steps of the point-to-line cost. Returns (theta, tx, ty, idx,
+    iterations, converged), as :func:`p2p_loop`."""
+    n = sx.shape[0]
+    xmin, ymin, nx, ny, start, items = build_grid(tx, ty, h)
+    d = np.empty(n)
+    idx = np.empty(n, np.int64)
+    w = np.empty(n)
+    px = np.empty(n)
+    py = np.empty(n)
+    src_r = 0.0
+    for i in range(n):
+        src_r = max(src_r, math.sqrt(sx[i] * sx[i] + sy[i] * sy[i]))
+    t_x, t_y = t0x, t0y
+    old_res = -1.0
+    converged = False
+    warm = warmup > 0
+    it = 0
+    hm = np.empty((3, 3))
+    bv = np.empty(3)
+    for it in range(1, max_iter + 1):  # noqa: B007
+        c, s = math.cos(th), math.sin(th)
+        for i in range(n):
+            px[i] = c * sx[i] - s * sy[i] + t_x
+            py[i] = s * sx[i] + c * sy[i] + t_y
+            d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+        hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
+                    huber_c, wpow, max_corr, flat_pow, line_max_dist, warm, w)
+        if warm:  # eq. 15-20, 2D closed form
+            sw = mpx = mpy = mqx = mqy = 0.0
+            for i in range(n):
+                sw += w[i]
+                mpx += w[i] * px[i]
+                mpy += w[i] * py[i]
+                mqx += w[i] * tx[idx[i]]
+                mqy += w[i] * ty[idx[i]]
+            mpx /= sw
+            mpy /= sw
+            mqx /= sw
+            mqy /= sw
+            sxx = syy = sxy = syx = 0.0
+            for i in range(n):
+                ax, ay = px[i] - mpx, py[i] - mpy
+                bx2, by2 = tx[idx[i]] - mqx, ty[idx[i]] - mqy
+                sxx += w[i] * ax * bx2
+                syy += w[i] * ay * by2
+                sxy += w[i] * ax * by2
+                syx += w[i] * ay * bx2
+            dth = math.atan2(sxy - syx, sxx + syy)
+            cd, sd = math.cos(dth), math.sin(dth)
+            dtx = mqx - (cd * mpx - sd * mpy)
+            dty = mqy - (sd * mpx + cd * mpy)
+        else:  # one Gauss-Newton step of sum w (n.(p' - q))^2 (graphnav.icp._p2l_step)
+            hm[:] = 0.0
+            bv[:] = 0.0
+            for i in range(n):
+                j = idx[i]
+                a0, a1 = nrx[j], nry[j]
+                a2 = px[i] * nry[j] - py[i] * nrx[j]
+                rn = (px[i] - tx[j]) * a0 + (py[i] - ty[j]) * a1
+                wi = w[i]
+                hm[0, 0] += wi * a0 * a0
+                hm[0, 1] += wi * a0 * a1
+                hm[0, 2] += wi * a0 * a2
+                hm[1, 1] += wi * a1 * a1
+                hm[1, 2] += wi * a1 * a2
+                hm[2, 2] += wi * a2 * a2
+                bv[0] += wi * a0 * rn
+                bv[1] += wi * a1 * rn
+                bv[2] += wi * a2 * rn
+            hm[1, 0], hm[2, 0], hm[2, 1] = hm[0, 1], hm[0, 2], hm[1, 2]
+            x = _solve3(hm, bv)
+            dth, dtx, dty = x[2], x[0], x[1]
+            cd, sd = math.cos(dth), math.sin(dth)
+        # eq. 21-22
+        nxx = cd * t_x - sd * t_y + dtx
+        nyy = sd * t_x + cd * t_y + dty
+        t_x, t_y = nxx, nyy
+        th += dth
+        new_res = 0.0
+        for i in range(n):
+            new_res += d[i]
+        new_res /= n
+        moved = abs(dth) * src_r + math.sqrt(dtx * dtx + dty * dty)
+        if warm:
+            warm = moved > warmup
+            old_res = -1.0
+            continue
+        if old_res >= 0 and abs(new_res - old_res) < tol and moved < tol_step:
+            converged = True
+            break
+        old_res = new_res
+    return th, t_x, t_y, idx, it, converged
+
+
+@njit(cache=True)
+def hdl_stats(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr,
+              flat_pow, line_max_dist, th, t_x, t_y, idx, inlier_dist):
+    """The terms of :func:`graphnav.icp._finish` for HDL (``_terms_numpy``): ``H``, ``B``, the
+    residual scale's numerator and dof, the weighted RMS residual, the point-to-line information,
+    the flatness-weighted residual variance along the normals, pairs used and inliers."""
+    n = sx.shape[0]
+    c, s = math.cos(th), math.sin(th)
+    px = np.empty(n)
+    py = np.empty(n)
+    d = np.empty(n)
+    for i in range(n):
+        px[i] = c * sx[i] - s * sy[i] + t_x
+        py[i] = s * sx[i] + c * sy[i] + t_y
+        d[i] = math.sqrt((px[i] - tx[idx[i]]) ** 2 + (py[i] - ty[idx[i]]) ** 2)
+    w = np.empty(n)
+    hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
+                huber_c, wpow, max_corr, flat_pow, line_max_dist, False, w)
+    msx = msy = 0.0
+    for i in range(n):
+        msx += sx[i]
+        msy += sy[i]
+    msx /= n
+    msy /= n
+    lsc = 0.0
+    for i in range(n):
+        lsc += (sx[i] - msx) ** 2 + (sy[i] - msy) ** 2
+    lsc = math.sqrt(lsc / n)
+    if not lsc > 0:
+        lsc = 1.0
+    h = np.zeros((3, 3))
+    b = np.zeros((3, 3))
+    info = np.zeros((3, 3))
+    jl = np.empty(3)
+    ksum = 0.0
+    n_sel = 0
+    n_use = 0
+    n_inl = 0
+    sw = swr = 0.0
+    sf = sfr = 0.0
+    for i in range(n):
+        j = idx[i]
+        wi = w[i]
+        ex, ey = px[i] - tx[j], py[i] - ty[j]
+        nxj, nyj = nrx[j], nry[j]
+        # eq. 8 pair covariance (source rotated + target), projected on the normal
+        ux = c * sux[i] - s * suy[i]
+        uy = s * sux[i] + c * suy[i]
+        dsv = sb2[i] - sa2[i]
+        dtv = tb2[j] - ta2[j]
+        a2 = sa2[i] + ta2[j]
+        sxx = a2 + dsv * ux * ux + dtv * tux[j] * tux[j]
+        syy = a2 + dsv * uy * uy + dtv * tuy[j] * tuy[j]
+        sxy = dsv * ux * uy + dtv * tux[j] * tuy[j]
+        vi = sxx * nxj * nxj + 2 * sxy * nxj * nyj + syy * nyj * nyj
+        res = ex * nxj + ey * nyj
+        jl[0] = nxj * c + nyj * s
+        jl[1] = -nxj * s + nyj * c
+        jl[2] = nxj * -(py[i] - t_y) + nyj * (px[i] - t_x)
+        for r_ in range(3):
+            for q_ in range(3):
+                h[r_, q_] += wi * jl[r_] * jl[q_]
+                b[r_, q_] += wi * wi * vi * jl[r_] * jl[q_]
+        inl = d[i] <= inlier_dist
+        use = wi > 0
+        n_inl += inl
+        n_use += use
+        sw += wi
+        swr += wi * res * res
+        if inl and use:
+            n_sel += 1
+            ksum += res * res / vi
+            jl[2] /= lsc
+            f = fl[j]
+            for r_ in range(3):
+                for q_ in range(3):
+                    info[r_, q_] += f * jl[r_] * jl[q_]
+            sf += f
+            sfr += f * res * res
+    res_rms = math.sqrt(swr / sw)
+    s2 = sfr / (sf - 3.0) if sf > 3.0 else np.nan
+    return h, b, ksum, max(n_sel - 3, 1), n_sel, res_rms, info, s2, n_use, n_inl
+
+
+@njit(cache=True)
+def _scan_cell_k(px, py, ix, iy, ny, start, items, tx, ty, bd, bi, cnt):
+    """Insert the points of cell (ix, iy) into the sorted k-best lists ``bd``/``bi`` (``cnt`` filled)."""
+    k = bd.shape[0]
+    c = ix * ny + iy
+    for m in range(start[c], start[c + 1]):
+        j = items[m]
+        dx = tx[j] - px
+        dy = ty[j] - py
+        d2 = dx * dx + dy * dy
+        if cnt == k and (d2 > bd[k - 1] or (d2 == bd[k - 1] and j > bi[k - 1])):
+            continue
+        pos = cnt if cnt < k else k - 1
+        while pos > 0 and (bd[pos - 1] > d2 or (bd[pos - 1] == d2 and bi[pos - 1] > j)):
+            if pos < k:
+                bd[pos] = bd[pos - 1]
+                bi[pos] = bi[pos - 1]
+            pos -= 1
+        bd[pos] = d2
+        bi[pos] = j
+        if cnt < k:
+            cnt += 1
+    return cnt
+
+
+@njit(cache=True)
+def knn_line_normals(tx, ty, k, h):
+    """As :func:`graphnav.icp.line_normals`: unit normal and flatness of the line through each
+    target point's ``k`` nearest neighbours (PCA; exact k nearest by rings of grid cells)."""
+    n = tx.shape[0]
+    k = min(k, n)
+    xmin, ymin, nx, ny, start, items = build_grid(tx, ty, h)
+    bd = np.empty(k)
+    bi = np.empty(k, np.int64)
+    nrx = np.empty(n)
+    nry = np.empty(n)
+    fl = np.empty(n)
+    rmax = max(nx, ny)
+    for i in range(n):
+        px, py = tx[i], ty[i]
+        cx = min(max(int(math.floor((px - xmin) / h)), 0), nx - 1)
+        cy = min(max(int(math.floor((py - ymin) / h)), 0), ny - 1)
+        cnt = 0
+        for r in range(rmax + 1):
+            if r == 0:
+                cnt = _scan_cell_k(px, py, cx, cy, ny, start, items, tx, ty, bd, bi, cnt)
+            else:
+                x0, x1 = cx - r, cx + r
+                y0, y1 = cy - r, cy + r
+                for ix in range(max(x0, 0), min(x1, nx - 1) + 1):
+                    if y0 >= 0:
+                        cnt = _scan_cell_k(px, py, ix, y0, ny, start, items, tx, ty, bd, bi, cnt)
+                    if y1 <= ny - 1:
+                        cnt = _scan_cell_k(px, py, ix, y1, ny, start, items, tx, ty, bd, bi, cnt)
+                for iy in range(max(y0 + 1, 0), min(y1 - 1, ny - 1) + 1):
+                    if x0 >= 0:
+                        cnt = _scan_cell_k(px, py, x0, iy, ny, start, items, tx, ty, bd, bi, cnt)
+                    if x1 <= nx - 1:
+                        cnt = _scan_cell_k(px, py, x1, iy, ny, start, items, tx, ty, bd, bi, cnt)
+            bound = r * h  # the query lies in its home cell: a point beyond ring r is at least this far
+            if cnt == k and bd[k - 1] <= bound * bound:
+                break
+        mx = my = 0.0
+        for m in range(k):
+            mx += tx[bi[m]]
+            my += ty[bi[m]]
+        mx /= k
+        my /= k
+        cxx = cyy = cxy = 0.0
+        for m in range(k):
+            dx, dy = tx[bi[m]] - mx, ty[bi[m]] - my
+            cxx += dx * dx
+            cyy += dy * dy
+            cxy += dx * dy
+        phi = 0.5 * math.atan2(2 * cxy, cxx - cyy)
+        nrx[i] = -math.sin(phi)
+        nry[i] = math.cos(phi)
+        tr = cxx + cyy
+        disc = math.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy)
+        fl[i] = 2.0 * disc / tr if tr > 0 else 0.0
+    return nrx, nry, fl

@@ -77,9 +77,10 @@ class IcpConfig:
     cov_scale: float | None = None
     cov_floor: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 1-sigma floor (x, y, yaw) added in quadrature
     workers: int = 1  # cKDTree query threads
-    # K/H/HM/HD: "numba" = compiled loop with exact grid matching, same results (optional dependency;
-    # the first call compiles for 10-50 s, cached afterwards); "auto" = numba when importable
-    backend: str = "numpy"
+    # "numba" = compiled loop with exact grid matching, the numpy loop's results to ~1e-12 (every variant,
+    # k-d tree matching; optional dependency, the first call compiles for 10-50 s, cached afterwards);
+    # "auto" = numba when importable, else numpy
+    backend: str = "auto"
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
@@ -283,20 +284,31 @@ def match_points(
     if fast is not None:
         th0, t0_ = _pose_parts(init)
         big = np.inf if cfg.max_corr_dist is None else cfg.max_corr_dist
-        th, tx_, ty_, idx, it, converged = fast(
-            src.xy[:, 0].copy(), src.xy[:, 1].copy(), src.u[:, 0].copy(), src.u[:, 1].copy(), src.a2, src.b2,
-            src.m2, tgt.xy[:, 0].copy(), tgt.xy[:, 1].copy(), tgt.u[:, 0].copy(), tgt.u[:, 1].copy(), tgt.a2,
-            tgt.b2, tgt.m2, _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big, cfg.tol,
-            cfg.tol_step, cfg.max_iter, th0, t0_[0], t0_[1], _GRID_CELL)
+        if cfg.variant == "HDL":
+            if cfg.normals == "knn":
+                from ._icp_fast import knn_line_normals
+
+                nx_, ny_, flat = knn_line_normals(tgt.xy[:, 0].copy(), tgt.xy[:, 1].copy(), cfg.normal_k, _GRID_CELL)
+                normals = np.column_stack([nx_, ny_])
+            else:
+                normals, flat = _target_lines(tgt.xy, cfg)
+            th, tx_, ty_, idx, it, converged = fast(
+                *_fast_clouds(src, tgt, False), normals[:, 0].copy(), normals[:, 1].copy(), flat, cfg.huber_c,
+                cfg.weight_power, big, cfg.tol, cfg.tol_step, cfg.max_iter, th0, t0_[0], t0_[1], _GRID_CELL,
+                cfg.line_flat_power, cfg.line_warmup, cfg.line_max_dist)
+        else:
+            normals = flat = None
+            th, tx_, ty_, idx, it, converged = fast(
+                *_fast_clouds(src, tgt, True), _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big,
+                cfg.tol, cfg.tol_step, cfg.max_iter, th0, t0_[0], t0_[1], _GRID_CELL)
         pose = np.array([tx_, ty_, th])
-        return _finish(cfg, src, tgt, idx, pose, None, None, it, converged, t0, ns, nt, init)
+        return _finish(cfg, src, tgt, idx, pose, normals, flat, it, converged, t0, ns, nt, init)
 
     nnm = _NearestNeighbours(tgt.xy, cfg)
     p2l = cfg.variant == "HDL"
     normals = flat = None
     if p2l:
-        normals, flat = (line_normals(tgt.xy, nnm.tree, cfg.normal_k) if cfg.normals == "knn"
-                         else scan_order_normals(tgt.xy, cfg.normal_k // 2, cfg.line_max_gap))
+        normals, flat = _target_lines(tgt.xy, cfg, nnm.tree)
 
     th, t = _pose_parts(init)
     old_res = None
@@ -340,17 +352,35 @@ _GRID_CELL = 0.5  # [m] cell of the compiled loop's nearest-neighbour grid
 
 
 def _fast_loop(cfg: IcpConfig) -> Any:
-    """The compiled point-to-point loop when it applies (K/H/HM/HD, k-d-tree-equivalent exact
-    matching) and numba is importable; else None (the numpy loop)."""
-    if cfg.backend == "numpy" or cfg.variant not in _VARIANT_CODE or cfg.matching != "kdtree":
+    """The compiled loop when it applies (k-d-tree-equivalent exact matching: K/H/HM/HD
+    ``p2p_loop``, HDL ``hdl_loop``) and numba is importable (backend "auto" or "numba"); else None
+    (the numpy loop)."""
+    if cfg.backend == "numpy" or cfg.matching != "kdtree":
         return None
     try:
-        from ._icp_fast import p2p_loop
+        from ._icp_fast import hdl_loop, p2p_loop
     except ImportError:
         if cfg.backend == "numba":
             raise
         return None
-    return p2p_loop
+    return hdl_loop if cfg.variant == "HDL" else p2p_loop
+
+
+def _fast_clouds(src: _Cloud, tgt: _Cloud, m2: bool) -> tuple[NDArray, ...]:
+    """The compiled loops' per-point arrays (contiguous columns; ``m2``: with the mean-error terms)."""
+    def col(a: NDArray, k: int) -> NDArray:
+        return np.ascontiguousarray(a[:, k])
+
+    s = (col(src.xy, 0), col(src.xy, 1), col(src.u, 0), col(src.u, 1), src.a2, src.b2) + ((src.m2,) if m2 else ())
+    t = (col(tgt.xy, 0), col(tgt.xy, 1), col(tgt.u, 0), col(tgt.u, 1), tgt.a2, tgt.b2) + ((tgt.m2,) if m2 else ())
+    return s + t
+
+
+def _target_lines(tgt_xy: NDArray, cfg: IcpConfig, tree: cKDTree | None = None) -> tuple[NDArray, NDArray]:
+    """HDL's target normals and flatness (``cfg.normals``: k nearest by PCA, or beam order)."""
+    if cfg.normals == "knn":
+        return line_normals(tgt_xy, cKDTree(tgt_xy) if tree is None else tree, cfg.normal_k)
+    return scan_order_normals(tgt_xy, cfg.normal_k // 2, cfg.line_max_gap)
 
 
 class _NearestNeighbours:
@@ -580,15 +610,22 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     information; there the pose is replaced by ``init``'s and ``weak_sigma^2`` is added to ``cov``.
     """
     fast = _fast_loop(cfg) is not None
-    if fast:
+    big = np.inf if cfg.max_corr_dist is None else cfg.max_corr_dist
+    if fast and cfg.variant == "HDL":
+        from ._icp_fast import hdl_stats
+
+        h, bmat, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl = hdl_stats(
+            *_fast_clouds(src, tgt, False), normals[:, 0].copy(), normals[:, 1].copy(), flat, cfg.huber_c,
+            cfg.weight_power, big, cfg.line_flat_power, cfg.line_max_dist, float(pose[2]), float(pose[0]),
+            float(pose[1]), np.asarray(idx, dtype=np.int64), cfg.inlier_dist)
+        kscale = ksum / dof if n_sel else float("nan")
+        inlier_fraction = n_inl / len(idx)
+    elif fast:
         from ._icp_fast import p2p_stats
 
-        big = np.inf if cfg.max_corr_dist is None else cfg.max_corr_dist
         h, bmat, ksum, dof, n_sel, res_rms, info, n_use, n_inl = p2p_stats(
-            src.xy[:, 0].copy(), src.xy[:, 1].copy(), src.u[:, 0].copy(), src.u[:, 1].copy(), src.a2, src.b2,
-            src.m2, tgt.xy[:, 0].copy(), tgt.xy[:, 1].copy(), tgt.u[:, 0].copy(), tgt.u[:, 1].copy(), tgt.a2,
-            tgt.b2, tgt.m2, _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big, float(pose[2]),
-            float(pose[0]), float(pose[1]), np.asarray(idx, dtype=np.int64), cfg.normal_k // 2,
+            *_fast_clouds(src, tgt, True), _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big,
+            float(pose[2]), float(pose[0]), float(pose[1]), np.asarray(idx, dtype=np.int64), cfg.normal_k // 2,
             cfg.line_max_gap, cfg.inlier_dist)
         kscale = ksum / dof if n_sel else float("nan")
         inlier_fraction = n_inl / len(idx)

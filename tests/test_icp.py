@@ -305,12 +305,23 @@ rng = np.random.default_rng(8)
 world = even_points(room(), 0.5)
 src = observe(world, (0.5, -0.2, 0.04), rng, 0.004, 0.003)
 tgt = observe(world, (0.0, 0.0, 0.0), rng, 0.004, 0.003)
-for v in ("K", "HD"):
+for v in ("K", "HD", "HDL"):
     a = match_points(src, tgt, IcpConfig(variant=v, backend="numba"), init=[0.45, -0.15, 0.03])
     b = match_points(src, tgt, IcpConfig(variant=v, backend="numpy"), init=[0.45, -0.15, 0.03])
     assert np.allclose(a.pose, b.pose, atol=1e-10), (a.pose, b.pose)
     assert np.allclose(a.cov, b.cov, rtol=1e-8, atol=0)
-    assert a.quality["iterations"] == b.quality["iterations"]
+    assert a.quality["iterations"] == b.quality["iterations"] and a.ok == b.ok
+    for k in ("points_used", "inlier_fraction", "residual", "residual_scale", "condition_number", "sigma_weak"):
+        assert np.isclose(a.quality[k], b.quality[k], rtol=1e-8), (v, k, a.quality[k], b.quality[k])
+# HDL on a corridor: degenerate, the guess kept along the corridor, the same inflated covariance
+wall = np.column_stack([np.linspace(-15, 15, 120), np.full(120, 3.0)])
+world = np.vstack([wall, wall * [1, -1]])
+src = observe(world, (0.6, 0.0, 0.0), rng, 0.004, 0.003)
+tgt = observe(world, (0.0, 0.0, 0.0), rng, 0.004, 0.003)
+a = match_points(src, tgt, IcpConfig(variant="HDL", backend="numba"), init=[0.3, 0.02, 0.0])
+b = match_points(src, tgt, IcpConfig(variant="HDL", backend="numpy"), init=[0.3, 0.02, 0.0])
+assert a.quality["degenerate"] and b.quality["degenerate"] and a.ok == b.ok
+assert np.allclose(a.pose, b.pose, atol=1e-10) and np.allclose(a.cov, b.cov, rtol=1e-8, atol=0)
 print("ok")
 """
 
@@ -334,12 +345,13 @@ def test_numba_backend_logic_equals_numpy_uncompiled():
 @pytest.mark.skipif(not os.environ.get("GRAPHNAV_RUN_SLOW"),
                     reason="compiles numba for 20-60 s; set GRAPHNAV_RUN_SLOW=1 (uncompiled check: always)")
 def test_numba_backend_equals_numpy():
-    """The compiled K/H/HM/HD loop (grid nearest neighbours) gives the numpy loop's results
-    (slow: the first run compiles for 20-60 s; cached afterwards)."""
+    """The compiled loops (grid nearest neighbours; HDL's k-nearest line normals) give the numpy
+    loop's results on every variant (slow: the first run compiles for 20-60 s; cached afterwards)."""
     pytest.importorskip("numba")
     from scipy.spatial import cKDTree
 
-    from graphnav._icp_fast import build_grid, nearest
+    from graphnav._icp_fast import build_grid, knn_line_normals, nearest
+    from graphnav.icp import line_normals
 
     rng = np.random.default_rng(8)
     tgt = rng.uniform(-20, 20, (300, 2))
@@ -350,11 +362,14 @@ def test_numba_backend_equals_numpy():
                     for x, y in q])
     assert np.array_equal(got[:, 1].astype(int), i_ref)
     assert np.allclose(got[:, 0], d_ref, atol=1e-12)
+    nx, ny, fl = knn_line_normals(tgt[:, 0].copy(), tgt[:, 1].copy(), 12, 0.5)
+    n_ref, fl_ref = line_normals(tgt, cKDTree(tgt), 12)
+    assert np.allclose(np.column_stack([nx, ny]), n_ref, atol=1e-12) and np.allclose(fl, fl_ref, atol=1e-12)
 
     world = even_points(room(), 0.25)
     src = observe(world, (0.5, -0.2, 0.04), rng, 0.004, 0.003)
     tgt = observe(world, (0.0, 0.0, 0.0), rng, 0.004, 0.003)
-    for v in ("K", "H", "HM", "HD"):
+    for v in ("K", "H", "HM", "HD", "HDL"):
         a = match_points(src, tgt, IcpConfig(variant=v, backend="numba"), init=[0.45, -0.15, 0.03])
         b = match_points(src, tgt, IcpConfig(variant=v, backend="numpy"), init=[0.45, -0.15, 0.03])
         assert np.allclose(a.pose, b.pose, atol=1e-10)
@@ -409,3 +424,21 @@ def test_caller_sigmas_replace_the_lidar_model():
     assert np.abs(res.pose - true).max() < 0.01
     with pytest.raises(ValueError, match="src_sigma"):
         match_points(src, tgt, IcpConfig(), src_sigma=-1.0)
+
+
+def test_backend_auto_falls_back_to_numpy_without_numba(monkeypatch):
+    """``backend="auto"`` (the default) runs the numpy loop when the compiled module cannot be
+    imported; ``"numba"`` then fails loudly."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "graphnav._icp_fast", None)  # import -> ImportError
+    rng = np.random.default_rng(3)
+    world = even_points(room(), 0.5)
+    src = observe(world, (0.2, 0.1, 0.02), rng, 0.004, 0.003)
+    tgt = observe(world, (0.0, 0.0, 0.0), rng, 0.004, 0.003)
+    assert IcpConfig().backend == "auto"
+    a = match_points(src, tgt, IcpConfig(variant="HDL"), init=np.zeros(3))
+    b = match_points(src, tgt, IcpConfig(variant="HDL", backend="numpy"), init=np.zeros(3))
+    assert np.array_equal(a.pose, b.pose) and np.array_equal(a.cov, b.cov)
+    with pytest.raises(ImportError):
+        match_points(src, tgt, IcpConfig(variant="HDL", backend="numba"), init=np.zeros(3))
