@@ -6,6 +6,8 @@ the right perturbation ``T * Exp(d)``), which is what ``BetweenFactorPose2`` whi
 
 from __future__ import annotations
 
+import math
+
 import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -45,20 +47,25 @@ def odometry_increment(
     phi = w * dt
     if abs(phi) < 1e-6:
         x, y = v * dt * (1.0 - phi * phi / 6.0), v * dt * phi / 2.0
-        jv = np.array([dt * (1.0 - phi * phi / 6.0), dt * phi / 2.0, 0.0])
-        jw = np.array([-v * dt * dt * phi / 3.0, v * dt * dt / 2.0, dt])
+        jv = (dt * (1.0 - phi * phi / 6.0), dt * phi / 2.0)
+        jw = (-v * dt * dt * phi / 3.0, v * dt * dt / 2.0)
     else:
-        s, c = np.sin(phi), np.cos(phi)
+        s, c = math.sin(phi), math.cos(phi)
         x, y = v * s / w, v * (1.0 - c) / w
-        jv = np.array([s / w, (1.0 - c) / w, 0.0])
-        jw = np.array([v * (phi * c - s) / w**2, v * (phi * s - (1.0 - c)) / w**2, dt])
-    J = np.column_stack([jv, jw])
-    cov_prev = J @ np.diag([sigma_v**2, sigma_w**2]) @ J.T  # (x, y) in the previous body frame
-    R = np.array([[np.cos(phi), np.sin(phi)], [-np.sin(phi), np.cos(phi)]])  # to the tangent at the end
-    M = np.eye(3)
-    M[:2, :2] = R
-    cov = M @ cov_prev @ M.T
-    cov += np.diag([0.0, (lateral * abs(v) * dt) ** 2, 0.0]) + floor**2 * np.eye(3)
+        jv = (s / w, (1.0 - c) / w)
+        jw = (v * (phi * c - s) / w**2, v * (phi * s - (1.0 - c)) / w**2)
+    # J = d(x, y, theta)/d(v, w) rotated into the tangent at the end (R(-phi) on x, y): M J
+    c, s = math.cos(phi), math.sin(phi)
+    mj = np.array(
+        [
+            [c * jv[0] + s * jv[1], c * jw[0] + s * jw[1]],
+            [-s * jv[0] + c * jv[1], -s * jw[0] + c * jw[1]],
+            [0.0, dt],
+        ]
+    )
+    cov = (mj * (sigma_v**2, sigma_w**2)) @ mj.T  # M J diag(sigma_v^2, sigma_w^2) J^T M^T
+    cov[1, 1] += (lateral * abs(v) * dt) ** 2
+    cov[np.diag_indices(3)] += floor**2
     return gtsam.Pose2(x, y, phi), cov
 
 

@@ -95,14 +95,18 @@ class SmootherConfig:
 def default_matcher(options: dict[str, Any]) -> Matcher | None:
     """The weighted-ICP matcher of :mod:`graphnav.icp`, or ``None`` when it is not available."""
     try:
-        from .icp import IcpConfig
-        from .icp_cache import match_scans  # shared between estimators inside icp_cache.active()
+        from .icp import IcpConfig, scan_points
+        from .icp_cache import match_points  # shared between estimators inside icp_cache.active()
     except ImportError:
         return None
     cfg = IcpConfig(**options)
+    last: list[Any] = [None, None]  # the previous call's current scan and its points
 
     def match(cur: Scan, prev: Scan, init: NDArray[np.float64] | None):
-        r = match_scans(cur, prev, cfg, init=init)
+        prev_xy = last[1] if prev is last[0] else scan_points(prev, cfg)  # consecutive pairs: each scan once
+        cur_xy = scan_points(cur, cfg)
+        last[:] = [cur, cur_xy]
+        r = match_points(cur_xy, prev_xy, cfg, init=init)
         return bool(r.ok), np.asarray(r.pose, dtype=float), np.asarray(r.cov, dtype=float)
 
     return match
