@@ -313,6 +313,12 @@ for v in ("K", "HD", "HDL"):
     assert a.quality["iterations"] == b.quality["iterations"] and a.ok == b.ok
     for k in ("points_used", "inlier_fraction", "residual", "residual_scale", "condition_number", "sigma_weak"):
         assert np.isclose(a.quality[k], b.quality[k], rtol=1e-8), (v, k, a.quality[k], b.quality[k])
+# HDL's other settings: beam-order normals, a correlation gate, no point-to-point warm-up
+opts = dict(variant="HDL", normals="scan", max_corr_dist=0.3, line_warmup=0.0)
+a = match_points(src, tgt, IcpConfig(backend="numba", **opts), init=[0.45, -0.15, 0.03])
+b = match_points(src, tgt, IcpConfig(backend="numpy", **opts), init=[0.45, -0.15, 0.03])
+assert np.allclose(a.pose, b.pose, atol=1e-10) and np.allclose(a.cov, b.cov, rtol=1e-8, atol=0)
+assert a.quality["iterations"] == b.quality["iterations"] and a.quality["points_used"] == b.quality["points_used"]
 # HDL on a corridor: degenerate, the guess kept along the corridor, the same inflated covariance
 wall = np.column_stack([np.linspace(-15, 15, 120), np.full(120, 3.0)])
 world = np.vstack([wall, wall * [1, -1]])
