@@ -319,15 +319,22 @@ def _graph_isam2(**options: Any) -> GraphOnline:
     return GraphOnline(**options)
 
 
-#: name -> factory(**options). The full smoother/EKF adapters register here when they land.
+def _ekf(**options: Any) -> OnlineEstimator:
+    from .ekf_online import EkfOnline
+
+    return EkfOnline(**options)
+
+
+#: name -> factory(**options). The full smoother adapter registers here when it lands.
 ONLINE_ESTIMATORS: dict[str, Callable[..., OnlineEstimator]] = {
     "fixed-lag": _graph_fixed_lag,
     "isam2": _graph_isam2,
+    "ekf": _ekf,
 }
 
 
 def make_online(name: str, **options: Any) -> OnlineEstimator:
-    """An online estimator by name (``fixed-lag`` (default for unbounded runs), ``isam2``)."""
+    """An online estimator by name (``fixed-lag`` (default for unbounded runs), ``isam2``, ``ekf``)."""
     if name not in ONLINE_ESTIMATORS:
         have = ", ".join(sorted(ONLINE_ESTIMATORS))
         raise ValueError(f"no online adapter for estimator {name!r} yet (have: {have});"
