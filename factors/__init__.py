@@ -3,7 +3,8 @@
 One module per sensor: :mod:`factors.gnss` (``PoseTranslationPrior2D``), :mod:`factors.compass`
 (``PoseRotationPrior2D`` or a bias-aware ``BetweenFactorPose2``), :mod:`factors.between`
 (ICP and odometry ``BetweenFactorPose2``), :mod:`factors.beacon` (``BearingRangeFactor2D`` and
-``PriorFactorPoint2``), and :mod:`factors.robust` (Huber/Cauchy wrappers). Keys are plain GTSAM
+``PriorFactorPoint2``), :mod:`factors.prior` (``PriorFactorPose2``) and :mod:`factors.robust`
+(Huber/Cauchy wrappers). Keys are plain GTSAM
 symbols: ``X(k)`` poses, ``L(i)`` beacons, ``B(0)`` the compass bias frame.
 """
 
@@ -15,6 +16,7 @@ from .beacon import beacon_factor, beacon_prior, init_from_sighting, pose_from_t
 from .between import compose_with_cov, icp_between, odometry_between, odometry_increment
 from .compass import biased_compass_factor, compass_bias, compass_bias_prior, compass_factor
 from .gnss import gnss_factor
+from .prior import pose_prior
 from .robust import robustify
 
 
@@ -50,5 +52,6 @@ __all__ = [
     "odometry_between",
     "odometry_increment",
     "pose_from_two_beacons",
+    "pose_prior",
     "robustify",
 ]
