@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from ..geometry import wrap_angle
 from ..log import Gnss, Heading, NavLog, Odometry, PosePrior, Record, Scan, Truth
@@ -52,6 +52,13 @@ class PoseEkf:
         self.max_rejects = max_rejects
         self.rejects: dict[str, int] = {}
         self.counts = {"accepted": 0, "rejected": 0, "forced": 0}
+        self._limit: dict[int, float] = {}  # chi-square gate per degrees of freedom
+
+    def gate_limit(self, dof: int) -> float:
+        """``chi2.ppf(gate, dof)`` (the same expression as scipy.stats' ``chi2``), computed once per dof."""
+        if dof not in self._limit:
+            self._limit[dof] = float(2.0 * gammaincinv(dof / 2.0, self.gate))
+        return self._limit[dof]
 
     @property
     def has_speed(self) -> bool:
@@ -102,7 +109,7 @@ class PoseEkf:
         S = H @ self.P @ H.T + R
         if self.gate is not None:
             d2 = float(nu @ np.linalg.solve(S, nu))
-            if d2 > chi2.ppf(self.gate, len(nu)):
+            if d2 > self.gate_limit(len(nu)):
                 self.rejects[sensor] = self.rejects.get(sensor, 0) + 1
                 if self.rejects[sensor] <= self.max_rejects:
                     self.counts["rejected"] += 1
