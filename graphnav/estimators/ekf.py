@@ -192,7 +192,7 @@ MatchFn = Callable[..., Any]  # graphnav.icp.match_scans(scan, prev, init=...) -
 
 class EkfStepper:
     """The EKF's record-by-record cycle, shared by the batch :func:`run_ekf` and the online
-    :class:`EkfOnline`: ``step(record)`` predicts to the record's time (unicycle odometry, the
+    :class:`graphnav.ekf_online.EkfOnline`: ``step(record)`` predicts to the record's time (unicycle odometry, the
     beacon paper's eq. 3, with the last SOG/ROT control held) or composes an ICP increment
     (``motion="icp"``: consecutive scans matched by ``match``, default
     :func:`graphnav.icp.match_scans`), then applies the gated GNSS/heading update (:class:`PoseEkf`).
