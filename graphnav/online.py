@@ -3,9 +3,10 @@ GTSAM fixed-lag / iSAM2 adapter that live mode (:mod:`graphnav.live`) runs by de
 
 The interface is one method: ``add(record) -> Estimate | None``. Records arrive in time order
 (late ones are the estimator's business); an :class:`Estimate` is returned whenever the
-navigation solution changed enough to be published. The full estimators (``isam2``/``fixed-lag``
-of :mod:`graphnav.smoother`, ``ekf``) plug into live mode by implementing this protocol and
-registering a factory in :data:`ONLINE_ESTIMATORS`; ``ekf`` does (:mod:`graphnav.ekf_online`).
+navigation solution changed enough to be published. Estimators plug into live mode by
+implementing this protocol and registering a factory in :data:`ONLINE_ESTIMATORS`: ``fixed-lag``
+and ``isam2`` (:class:`GraphOnline`), ``ekf`` (:class:`graphnav.ekf_online.EkfOnline`, the batch
+``ekf`` step for step); the full smoother of :mod:`graphnav.smoother` has no adapter yet.
 
 :class:`GraphOnline` is deliberately small: one ``Pose2`` per distinct record time, native GTSAM
 factors built by the :mod:`factors` package, the same constructors as the batch smoother's
