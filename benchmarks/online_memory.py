@@ -1,11 +1,19 @@
 """Memory and throughput of the live path without sockets, over many hours of 10 Hz NMEA.
 
-A synthetic trial is generated epoch by epoch (constant memory), turned into NMEA sentences
-(ZDA, GGA, RMC, HDT, VTG, ROT), parsed and decoded exactly as ``graphnav live`` does
-(checksum required, :class:`graphnav.io.nmea.NmeaDecoder` with ``keep=False``) and fed to the
-online estimator as fast as possible. RSS is sampled every simulated ``--every`` minutes.
+The harbour scenario with 10 Hz GNSS/compass/odometry (the route repeated for ``--hours``;
+``graphnav.sim.harbour``, no scans) is simulated up front -- its records stay in memory for the
+whole run, so they are part of the first RSS sample, not of any growth -- then turned into NMEA
+sentences (ZDA, GGA, RMC, HDT, VTG, ROT) one at a time, parsed and decoded exactly as
+``graphnav live`` does (checksum required, :class:`graphnav.io.nmea.NmeaDecoder` with
+``keep=False``) and fed to the online estimator as fast as possible. RSS is sampled every
+simulated ``--every`` minutes.
+
+With ``--log FILE.jsonl[.gz]`` the records are instead streamed from that file line by line
+(constant memory: nothing but the estimator grows), e.g. a day made beforehand in its own process:
 
     python benchmarks/online_memory.py --hours 4
+    graphnav simulate harbour --duration 86400 --fix-hz 10 --lidar-hz 0 --t0 1.7e9 --seed 7 --out day.jsonl.gz
+    python benchmarks/online_memory.py --log day.jsonl.gz --every 60
 """
 
 from __future__ import annotations
@@ -14,21 +22,41 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from graphnav.io.jsonl import parse_record  # noqa: E402
 from graphnav.io.nmea import NmeaDecoder, parse_sentence  # noqa: E402
 from graphnav.io.nmea_out import log_to_nmea  # noqa: E402
-from graphnav.io.synthetic import synthetic_records  # noqa: E402
+from graphnav.log import NavLog  # noqa: E402
 from graphnav.online import make_online  # noqa: E402
+from graphnav.sim.harbour import HarbourConfig, simulate_harbour  # noqa: E402
 
 
-class _Stream:  # what log_to_nmea reads: records + meta, here a generator
-    def __init__(self, hours: float) -> None:
-        self.records = (r for r in synthetic_records(hours * 3600, 10.0, seed=7) if r.kind != "truth")
+def sensor_log(hours: float) -> NavLog:
+    """``hours`` of the harbour route, 10 Hz GNSS, compass and SOG/ROT: the NMEA-carried records only."""
+    log = simulate_harbour(7, HarbourConfig(fix_hz=10.0, lidar_hz=0.0, t0=1.7e9), duration=hours * 3600)
+    keep = [r for r in log.records if r.kind in ("gnss", "heading", "odometry")]
+    return NavLog(keep, meta={"origin": {"lat": 43.5, "lon": 16.4}})
+
+
+class _Stream:  # what log_to_nmea reads (records + meta), the records streamed from a JSON Lines file
+    def __init__(self, path: Path) -> None:
+        self.records = self._read(path)
         self.meta = {"origin": {"lat": 43.5, "lon": 16.4}}
+
+    @staticmethod
+    def _read(path: Path) -> Iterator:
+        import gzip
+
+        with (gzip.open(path, "rt") if path.suffix == ".gz" else path.open()) as fh:
+            for line in fh:
+                obj = json.loads(line)
+                if obj.get("type") in ("gnss", "heading", "odometry"):
+                    yield parse_record(obj)
 
 
 def rss_mb() -> float:
@@ -40,12 +68,19 @@ def rss_mb() -> float:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--hours", type=float, default=4.0)
+    ap.add_argument("--hours", type=float, default=4.0, help="simulated hours (ignored with --log)")
+    ap.add_argument("--log", type=Path, help="stream the records from this .jsonl[.gz] instead")
     ap.add_argument("--every", type=float, default=30.0, help="sample RSS every N simulated minutes")
     ap.add_argument("--estimator", default="fixed-lag")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--progress", action="store_true", help="each RSS sample to stderr as it is taken")
     args = ap.parse_args()
+    w_sim = time.perf_counter()
+    if args.log is not None:
+        log = _Stream(args.log)
+    else:
+        log = sensor_log(args.hours)
+        print(f"simulated {len(log.records)} records in {time.perf_counter() - w_sim:.0f} s", file=sys.stderr)
     est = make_online(args.estimator)
     dec = NmeaDecoder(keep=False)
     rows = []
@@ -53,7 +88,7 @@ def main() -> int:
     t_first = None
     next_sample = 0.0
     w0 = time.perf_counter()
-    for t, s in log_to_nmea(_Stream(args.hours), with_rmc=True):
+    for t, s in log_to_nmea(log, with_rmc=True):
         if t_first is None:
             t_first = t
         if t - t_first >= next_sample:
@@ -69,7 +104,9 @@ def main() -> int:
     wall = time.perf_counter() - w0
     rows.append({"sim_h": (t - t_first) / 3600, "rss_mb": rss_mb(), "wall_s": wall, "sentences": n_sent,
                  "estimates": n_est})
-    summary = {"hours": args.hours, "sentences": n_sent, "estimates": n_est, "wall_s": wall,
+    summary = {"hours": (t - t_first) / 3600, "log": str(args.log) if args.log else "simulated in memory",
+               "estimator": args.estimator, "sentences": n_sent, "estimates": n_est,
+               "wall_s": wall,
                "sentences_per_s": n_sent / wall, "epochs_per_s": n_est / wall,
                "realtime_factor_at_10hz": n_est / wall / 10.0, "rss": rows}
     if args.json:

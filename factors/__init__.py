@@ -4,9 +4,9 @@ One module per sensor: :mod:`factors.gnss` (``PoseTranslationPrior2D``), :mod:`f
 (``PoseRotationPrior2D`` or a bias-aware ``BetweenFactorPose2``), :mod:`factors.between`
 (ICP and odometry ``BetweenFactorPose2``), :mod:`factors.imu` (``ImuFactor`` preintegration,
 ``GPSFactor``/``PoseRotationPrior3D`` on ``Pose3``), :mod:`factors.beacon` (``BearingRangeFactor2D``
-and ``PriorFactorPoint2``), and :mod:`factors.robust` (Huber/Cauchy wrappers). Keys are plain GTSAM
-symbols: ``X(k)`` poses, ``V(k)`` velocities, ``IB(k)`` IMU biases, ``L(i)`` beacons, ``B(0)`` the
-compass bias frame.
+and ``PriorFactorPoint2``), :mod:`factors.prior` (``PriorFactorPose2``) and :mod:`factors.robust`
+(Huber/Cauchy wrappers). Keys are plain GTSAM symbols: ``X(k)`` poses, ``V(k)`` velocities,
+``IB(k)`` IMU biases, ``L(i)`` beacons, ``B(0)`` the compass bias frame.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from .imu import (
     preintegrate,
     world_cov_planar,
 )
+from .prior import pose_prior
 from .robust import robustify
 
 
@@ -79,6 +80,7 @@ __all__ = [
     "planar_imu_params",
     "planar_pose",
     "pose_from_two_beacons",
+    "pose_prior",
     "pose_xy_yaw",
     "preintegrate",
     "robustify",

@@ -1,6 +1,10 @@
 """The ``graphnav`` command line. Each sub-command lives in ``graphnav/commands/<name>.py``
 with a ``register(subparsers)`` function; this module only discovers and dispatches.
 
+Discovery is lazy: only the invoked command's module is imported (commands pull in GTSAM,
+Open3D, Dask...); the others are listed by name with the ``help=`` of their ``add_parser`` call,
+read from the source without importing it. ``graphnav --help`` therefore imports no command.
+
 Contract: with ``--json`` a command prints exactly one JSON object on stdout; logs and
 progress go to stderr.
 """
@@ -8,45 +12,63 @@ progress go to stderr.
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
 import logging
 import pkgutil
 import sys
+from pathlib import Path
 
 from . import commands
 from .errors import LogError
 
 
-def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    """The parser of every command, or (``only``) of the one in ``graphnav/commands/<only>.py``:
-    importing every command costs ~2 s CPU (plotting, scipy.stats), so ``main`` loads only the
-    command it runs."""
+def command_names() -> list[str]:
+    """The sub-commands: the public modules of :mod:`graphnav.commands`."""
+    return sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
+
+
+def command_help(name: str) -> str | None:
+    """The ``help=`` string of the command's ``add_parser`` call (else its docstring's first line),
+    read from the module source without importing it."""
+    try:
+        tree = ast.parse(Path(commands.__path__[0], f"{name}.py").read_text(encoding="utf-8"))
+    except (OSError, SyntaxError):
+        return None
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "add_parser":
+            for kw in node.keywords:
+                if kw.arg == "help" and isinstance(kw.value, ast.Constant) and isinstance(kw.value.value, str):
+                    return kw.value.value
+            break
+    doc = ast.get_docstring(tree)
+    return doc.strip().splitlines()[0] if doc else None
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser. ``command``: register only that command for real (the others are named
+    placeholders, not imported); ``None``: import and register every command."""
     parser = argparse.ArgumentParser(
         prog="graphnav", description="Factor-graph navigation for unmanned surface vessels."
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging (stderr)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for mod in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if not mod.name.startswith("_") and only in (None, mod.name):
-            importlib.import_module(f"{commands.__name__}.{mod.name}").register(sub)
+    for name in command_names():
+        if command is None or name == command:
+            importlib.import_module(f"{commands.__name__}.{name}").register(sub)
+        else:
+            sub.add_parser(name, help=command_help(name))
     return parser
 
 
-def _parser_for(argv: list[str]) -> argparse.ArgumentParser:
-    """Only the named command's module when the first argument names one that registers it;
-    otherwise (help, options first, a typo) all of them."""
-    name = argv[0] if argv else ""
-    if name.isidentifier() and any(m.name == name for m in pkgutil.iter_modules(commands.__path__)):
-        parser = build_parser(only=name)
-        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        if name in sub.choices:
-            return parser
-    return build_parser()
+def _invoked(argv: list[str]) -> str:
+    """The command named on the command line ('' if none): the first non-option argument."""
+    return next((a for a in argv if not a.startswith("-")), "")
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    parser = _parser_for(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser(_invoked(argv))
     args = parser.parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,

@@ -16,9 +16,9 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
   shifted so that its first scan falls on the first timed sentence). The run ends when the last
   scan has been handed over.
 * **Estimator** -- anything implementing :class:`graphnav.online.OnlineEstimator`
-  (``add(record) -> Estimate | None``); the built-in adapter is
-  :class:`graphnav.online.GraphOnline` (GTSAM fixed-lag by default). The full smoother/EKF plug in
-  through the same interface (:data:`graphnav.online.ONLINE_ESTIMATORS`).
+  (``add(record) -> Estimate | None``), by name from :data:`graphnav.online.ONLINE_ESTIMATORS`:
+  :class:`graphnav.online.GraphOnline` (GTSAM fixed-lag, the default, or iSAM2) or
+  :class:`graphnav.ekf_online.EkfOnline` (the ``ekf`` estimator).
 * **Output** -- every estimate is appended to ``DIR/live.tum`` (+ ``live.cov``), flushed
   (:class:`graphnav.trajectory_writer.TrajectoryWriter`), and published as GGA, HDT, VTG, ROT
   (valid checksums, one datagram per estimate) to ``publish`` (``udp://HOST:PORT``).

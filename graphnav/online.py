@@ -3,18 +3,21 @@ GTSAM fixed-lag / iSAM2 adapter that live mode (:mod:`graphnav.live`) runs by de
 
 The interface is one method: ``add(record) -> Estimate | None``. Records arrive in time order
 (late ones are the estimator's business); an :class:`Estimate` is returned whenever the
-navigation solution changed enough to be published. The full estimators (``isam2``/``fixed-lag``
-of :mod:`graphnav.smoother`, ``ekf``) plug into live mode by implementing this protocol and
-registering a factory in :data:`ONLINE_ESTIMATORS`.
+navigation solution changed enough to be published. Estimators plug into live mode by
+implementing this protocol and registering a factory in :data:`ONLINE_ESTIMATORS`: ``fixed-lag``
+and ``isam2`` (:class:`GraphOnline`), ``ekf`` (:class:`graphnav.ekf_online.EkfOnline`, the batch
+``ekf`` step for step); the full smoother of :mod:`graphnav.smoother` has no adapter yet.
 
 :class:`GraphOnline` is deliberately small: one ``Pose2`` per distinct record time, native GTSAM
-factors only (``BetweenFactorPose2`` from the SOG/ROT unicycle increment -- the beacon paper's
-motion model, eq. 3 -- or a weak constant-position model without odometry; Huber-robust
-``PoseTranslationPrior2D`` GNSS fixes; ``PoseRotationPrior2D`` headings), solved by
+factors built by the :mod:`factors` package, the same constructors as the batch smoother's
+(``odometry_between`` from the SOG/ROT increment -- the beacon paper's motion model, eq. 3,
+integrated exactly with its eq. 4-5 noise propagated (:func:`factors.odometry_increment`) -- or a
+weak constant-position model without odometry; Huber-robust ``gnss_factor`` fixes;
+``compass_factor`` headings; ``pose_prior`` anchors), solved by
 ``gtsam.IncrementalFixedLagSmoother`` (bounded memory; ``lag`` seconds) or plain ``gtsam.ISAM2``
 (``lag=None``, grows without bound). Scans are registered to the previous scan with small_gicp's
 GICP (fixed sigmas, not the weighted-ICP covariance model -- the paper's weighted-ICP factors come
-with the full smoother through the same interface) and join the graph as ``BetweenFactorPose2``.
+with the full smoother through the same interface) and join the graph as ``icp_between`` factors.
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ from typing import Any, Protocol
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
+
+import factors as F
 
 from .geometry import wrap_angle
 from .log import Gnss, Heading, NavLog, Odometry, Record, Scan
@@ -55,11 +60,10 @@ class OnlineEstimator(Protocol):
 
 
 def unicycle_increment(v: float, w: float, dt: float) -> NDArray[np.float64]:
-    """Body-frame pose increment (dx, dy, dyaw) for constant (v, w) over dt (beacon paper eq. 3)."""
-    th = w * dt
-    if abs(th) < 1e-9:
-        return np.array([v * dt, 0.5 * v * dt * th, th])
-    return np.array([v / w * math.sin(th), v / w * (1.0 - math.cos(th)), th])
+    """Body-frame pose increment (dx, dy, dyaw) for constant (v, w) over dt (beacon paper eq. 3,
+    integrated exactly: :func:`factors.odometry_increment`)."""
+    d, _ = F.odometry_increment(v, w, dt, 0.0, 0.0)
+    return np.array([d.x(), d.y(), d.theta()])
 
 
 class GraphOnline:
@@ -67,8 +71,9 @@ class GraphOnline:
 
     ``lag`` [s] fixed-lag window (None: full iSAM2); ``outage_s``: without GNSS for this long,
     heading records also yield estimates (otherwise a heading joins the graph at the next fix's
-    solve: one solve per epoch); ``odo_sigma_v`` [m/s], ``odo_sigma_w_deg`` [deg/s],
-    ``lateral_sigma`` [m/s] per-second noise of the motion model when the log gives none;
+    solve: one solve per epoch); ``odo_sigma_v`` [m/s], ``odo_sigma_w_deg`` [deg/s]: odometry noise
+    when the log gives none; ``lateral_sigma`` [m/s]: sway/current, a lateral random walk added to
+    the motion model (``lateral_sigma * dt`` per step);
     ``gnss_huber`` Huber threshold in sigmas; ``covariance``: compute the marginal covariance of
     every ``cov_every``-th estimate (0.2-5 ms each; the others carry ``cov=None``);
     ``rebase_every``: re-anchor the fixed-lag smoother every so many nodes (bounded memory, see
@@ -127,17 +132,18 @@ class GraphOnline:
         self.step_ms: deque[float] = deque(maxlen=10_000)  # the last 10 000 solves
 
     # -- graph building
-    def _motion(self, dt: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _motion(self, dt: float) -> tuple[gtsam.Pose2, NDArray[np.float64]]:
+        """Increment and tangent covariance from the last node to one ``dt`` later."""
         o = self.odo
         if o is not None and self.t is not None and self.t - o.t <= self.odo_max_age:
             sv = o.sigma_v if math.isfinite(o.sigma_v) else self.sv
             sw = o.sigma_w if math.isfinite(o.sigma_w) else self.sw
-            inc = unicycle_increment(o.v, o.w, dt)
-            sig = np.array([sv * dt, self.lateral * dt + abs(o.v) * sw * dt * dt, sw * dt])
-        else:  # no (recent) odometry: constant position with a generous random walk
-            inc = np.zeros(3)
-            sig = np.array([self.free_speed * dt, self.free_speed * dt, self.free_rate * dt])
-        return inc, np.maximum(sig, 1e-4)
+            inc, cov = F.odometry_increment(o.v, o.w, dt, sv, sw, lateral=0.0)
+            cov[1, 1] += (self.lateral * dt) ** 2
+            return inc, cov
+        # no (recent) odometry: constant position with a generous random walk
+        sig = np.maximum([self.free_speed * dt, self.free_speed * dt, self.free_rate * dt], 1e-4)
+        return gtsam.Pose2(), np.diag(np.square(sig))
 
     def _new_node(self, t: float, xy: tuple[float, float] | None) -> None:
         k = self.k + 1
@@ -145,16 +151,13 @@ class GraphOnline:
             yaw, syaw = self.yaw0 if self.yaw0 else (0.0, math.pi)
             assert xy is not None
             guess = np.array([xy[0], xy[1], yaw])
-            prior = gtsam.noiseModel.Diagonal.Sigmas(np.array([100.0, 100.0, syaw]))
-            self.graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*guess), prior))
+            self.graph.add(F.pose_prior(k, guess, np.array([100.0, 100.0, syaw])))
             self.t_origin = t
         else:
-            inc, sig = self._motion(t - self.t)
-            self.graph.add(gtsam.BetweenFactorPose2(self.k, k, gtsam.Pose2(*inc),
-                                                    gtsam.noiseModel.Diagonal.Sigmas(sig)))
-            c, s = math.cos(self.pose[2]), math.sin(self.pose[2])
-            guess = np.array([self.pose[0] + c * inc[0] - s * inc[1], self.pose[1] + s * inc[0] + c * inc[1],
-                              wrap_angle(self.pose[2] + inc[2])])
+            inc, cov = self._motion(t - self.t)
+            self.graph.add(F.odometry_between(self.k, k, inc, cov))
+            g = gtsam.Pose2(*self.pose).compose(inc)
+            guess = np.array([g.x(), g.y(), g.theta()])
         self.values.insert(k, gtsam.Pose2(*guess))
         self.stamps[k] = t - self.t_origin
         if self.pose is not None and self.t is not None:
@@ -207,7 +210,7 @@ class GraphOnline:
         cov = np.asarray(self.solver.marginalCovariance(self.k))
         self.solver = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
         g = gtsam.NonlinearFactorGraph()
-        g.add(gtsam.PriorFactorPose2(self.k, p, gtsam.noiseModel.Gaussian.Covariance(cov)))
+        g.add(F.pose_prior(self.k, [p.x(), p.y(), p.theta()], cov))
         v = gtsam.Values()
         v.insert(self.k, p)
         self.solver.update(g, v, {self.k: self.t - self.t_origin})
@@ -236,8 +239,7 @@ class GraphOnline:
                 return None
             if t > self.t + 1e-9:
                 self._new_node(t, None)
-            self.graph.add(gtsam.PoseRotationPrior2D(self.k, gtsam.Rot2(record.yaw),
-                                                     gtsam.noiseModel.Isotropic.Sigma(1, record.sigma)))
+            self.graph.add(F.compass_factor(self.k, record.yaw, record.sigma))
             if t - self.last_gnss_t > self.outage_s:  # GNSS outage: headings drive the output
                 return self._solve()
             return None  # solved with the next fix (one solve per epoch)
@@ -245,9 +247,7 @@ class GraphOnline:
             self.counts["gnss"] += 1
             if self.k < 0 or t > self.t + 1e-9:
                 self._new_node(t, (record.x, record.y))
-            noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(self.gnss_huber),
-                                                   gtsam.noiseModel.Isotropic.Sigma(2, record.sigma))
-            self.graph.add(gtsam.PoseTranslationPrior2D(self.k, np.array([record.x, record.y]), noise))
+            self.graph.add(F.gnss_factor(self.k, record.x, record.y, record.sigma, robust="huber", k=self.gnss_huber))
             self.last_gnss_t = t
             return self._solve()
         if isinstance(record, Scan):
@@ -297,8 +297,7 @@ class GraphOnline:
         if not res.converged or res.num_inliers < self.icp_min_inliers * len(pts) or step > self.icp_max_step:
             self.counts["icp_rejected"] = self.counts.get("icp_rejected", 0) + 1
             return
-        noise = gtsam.noiseModel.Diagonal.Sigmas(self.icp_sigmas)
-        self.graph.add(gtsam.BetweenFactorPose2(prev[0], k, rel, noise))
+        self.graph.add(F.icp_between(prev[0], k, [rel.x(), rel.y(), rel.theta()], np.diag(self.icp_sigmas**2)))
         self.counts["icp"] = self.counts.get("icp", 0) + 1
 
     def info(self) -> dict[str, Any]:
@@ -319,15 +318,22 @@ def _graph_isam2(**options: Any) -> GraphOnline:
     return GraphOnline(**options)
 
 
-#: name -> factory(**options). The full smoother/EKF adapters register here when they land.
+def _ekf(**options: Any) -> OnlineEstimator:
+    from .ekf_online import EkfOnline
+
+    return EkfOnline(**options)
+
+
+#: name -> factory(**options). The full smoother adapter registers here when it lands.
 ONLINE_ESTIMATORS: dict[str, Callable[..., OnlineEstimator]] = {
     "fixed-lag": _graph_fixed_lag,
     "isam2": _graph_isam2,
+    "ekf": _ekf,
 }
 
 
 def make_online(name: str, **options: Any) -> OnlineEstimator:
-    """An online estimator by name (``fixed-lag`` (default for unbounded runs), ``isam2``)."""
+    """An online estimator by name (``fixed-lag`` (default for unbounded runs), ``isam2``, ``ekf``)."""
     if name not in ONLINE_ESTIMATORS:
         have = ", ".join(sorted(ONLINE_ESTIMATORS))
         raise ValueError(f"no online adapter for estimator {name!r} yet (have: {have});"

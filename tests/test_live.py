@@ -17,12 +17,12 @@ from pathlib import Path
 import numpy as np
 import pynmea2
 import pytest
+from _harbour import harbour_trial
 
 from graphnav.geodesy import LocalFrame
 from graphnav.geometry import heading_deg_to_yaw, wrap_angle
 from graphnav.io.nmea import read_nmea
 from graphnav.io.nmea_out import sentence
-from graphnav.io.synthetic import synthetic_trial
 from graphnav.live import LiveRunner, parse_endpoint
 from graphnav.online import GraphOnline, make_online, run_online
 from graphnav.replay import corrupt_sentence, log_sentences, replay
@@ -94,7 +94,7 @@ def test_parse_endpoint():
 
 def test_corrupted_sentences_are_invalid():
     rng = np.random.default_rng(0)
-    log = synthetic_trial(duration=1.0)
+    log = harbour_trial(duration=1.0)
     for _, s in list(log_sentences(log))[:40]:
         bad = corrupt_sentence(s, rng)
         assert bad != s
@@ -105,7 +105,7 @@ def test_corrupted_sentences_are_invalid():
 def test_udp_loopback_tracks_truth(tmp_path):
     """Replay at 10x with 3 % damaged sentences -> live estimates; published NMEA parses and is as
     accurate as the same online estimator run offline on the same sentences."""
-    log = synthetic_trial(duration=20.0, rate=10.0, seed=5)
+    log = harbour_trial(duration=20.0, rate=10.0, seed=5)
     port = free_port()
     col = Collector()
     runner = LiveRunner([f"udp://127.0.0.1:{port}"], make_online("fixed-lag"),
@@ -151,7 +151,7 @@ def test_udp_loopback_tracks_truth(tmp_path):
 
 
 def test_malformed_and_truncated_stream_does_not_stop_the_estimator():
-    log = synthetic_trial(duration=4.0, rate=10.0)
+    log = harbour_trial(duration=4.0, rate=10.0)
     sentences = [s for _, s in log_sentences(log)]
     port = free_port()
     runner = LiveRunner([f"udp://127.0.0.1:{port}"], GraphOnline(), idle_exit=0.7, duration=20.0)
@@ -178,7 +178,7 @@ def test_malformed_and_truncated_stream_does_not_stop_the_estimator():
 
 
 def test_tcp_source_reassembles_lines_and_reconnects():
-    log = synthetic_trial(duration=3.0, rate=10.0)
+    log = harbour_trial(duration=3.0, rate=10.0)
     data = "".join(s + "\r\n" for _, s in log_sentences(log)).encode()
     srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -210,7 +210,7 @@ def test_tcp_source_reassembles_lines_and_reconnects():
 
 
 def test_scans_from_replay_ends_the_run(tmp_path):
-    log = synthetic_trial(duration=3.0, rate=10.0, scans=True)
+    log = harbour_trial(duration=3.0, rate=10.0, scans=True)
     scans = log.of("scan")
     est = GraphOnline()
     port = free_port()
@@ -224,7 +224,7 @@ def test_scans_from_replay_ends_the_run(tmp_path):
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 def test_cli_sigterm_exits_cleanly_with_one_json_object(tmp_path):
-    log = synthetic_trial(duration=2.0, rate=10.0)
+    log = harbour_trial(duration=2.0, rate=10.0)
     port = free_port()
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     p = subprocess.Popen([sys.executable, "-m", "graphnav", "live", "--nmea", f"udp://127.0.0.1:{port}",
@@ -256,7 +256,7 @@ def test_cli_sigterm_exits_cleanly_with_one_json_object(tmp_path):
 def test_udp_scan_stream_joins_the_graph():
     """Scans as JSON datagrams (replay --scans-out -> live --scans): they reach the estimator as
     scan factors; a bad scan packet is counted, never fatal."""
-    log = synthetic_trial(duration=5.0, rate=10.0, scans=True)
+    log = harbour_trial(duration=5.0, rate=10.0, scans=True)
     nport, sport = free_port(), free_port()
     est = GraphOnline()
     runner = LiveRunner([f"udp://127.0.0.1:{nport}"], est, scan_sources=[f"udp://127.0.0.1:{sport}"],
@@ -274,7 +274,7 @@ def test_udp_scan_stream_joins_the_graph():
 
 
 def test_tcp_source_down_then_up_does_not_stall_udp():
-    log = synthetic_trial(duration=2.0, rate=10.0)
+    log = harbour_trial(duration=2.0, rate=10.0)
     data = "".join(s + "\r\n" for _, s in log_sentences(log)).encode()
     uport, tport = free_port(), free_port(socket.SOCK_STREAM)
     est = GraphOnline()

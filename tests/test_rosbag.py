@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from _harbour import harbour_trial
 
 from graphnav.cli import main
 from graphnav.errors import LogError
@@ -14,7 +15,6 @@ from graphnav.geometry import wrap_angle
 from graphnav.io import load_log
 from graphnav.io.nmea_out import log_to_nmea
 from graphnav.io.rosbag import choose_topics, parse_topic_args, read_bag, write_bag, yaw_of_quaternion
-from graphnav.io.synthetic import synthetic_trial
 from graphnav.log import Imu, NavLog
 
 ORIGIN = (43.5, 16.4)
@@ -22,7 +22,7 @@ ORIGIN = (43.5, 16.4)
 
 @pytest.fixture(scope="module")
 def trial():
-    log = synthetic_trial(duration=3.0, rate=10.0, scans=True, seed=1)
+    log = harbour_trial(duration=3.0, rate=10.0, scans=True, seed=1)
     recs = [r for r in log.records if r.kind != "truth"]
     recs += [Imu(1.7e9 + 0.05 * k, 0.1 * k, -0.2, 0.03) for k in range(20)]
     return NavLog.from_unsorted(recs, meta=log.meta)

@@ -112,6 +112,31 @@ def test_gnss_outage_and_multipath_events():
     np.testing.assert_allclose(diff, amp[:, None] * away, atol=1e-9)
 
 
+def test_live_options_rates_time_base_and_laps(short):
+    """fix_hz, lidar_hz=0, t0 (what the live tests and benchmarks use) and laps; the defaults are
+    the embedded scenario, so the 1 Hz draws of a 10 Hz run are not compared (other streams)."""
+    cfg = HarbourConfig(fix_hz=10.0, lidar_hz=0.0, t0=1.7e9)
+    log = simulate_harbour(0, cfg, duration=20.0)
+    c = log.counts()
+    assert "scan" not in c and c["gnss"] == c["heading"] == c["truth"] == 201  # 10 Hz, both ends
+    assert c["beacon"] == short.counts()["beacon"]  # beacons stay at 1 Hz
+    assert log.t0 == 1.7e9 and log.t1 == pytest.approx(1.7e9 + 20.0)
+    np.testing.assert_allclose(log.truth().poses, short.truth().poses)  # the same track, shifted in time
+    ev = {e["kind"]: e for e in log.meta["events"]}
+    assert ev["gnss_outage"]["t0"] == 1.7e9 + HarbourConfig().outage_t0
+    from graphnav.sim.harbour import vessel_track
+
+    coarse = HarbourConfig(dt=0.1, lidar_hz=0.0)  # 0.1 s track steps: a lap in ~7000 steps
+    t1, p1, _ = vessel_track(coarse, np.random.default_rng(0))
+    t2, p2, _ = vessel_track(coarse, np.random.default_rng(0), laps=2, t_max=t1[-1] + 60.0)
+    np.testing.assert_array_equal(p2[: len(p1)], p1)  # the second lap continues the first
+    assert t2[-1] == pytest.approx(t1[-1] + 60.0, abs=0.2)  # up to t_max
+    moved = np.hypot(*(p2[-1, :2] - p1[-1, :2]))
+    assert moved > 40.0  # ~1.5 m/s on towards the route's second waypoint
+    more = simulate_harbour(0, coarse, duration=t1[-1] + 60.0)  # a duration beyond a lap adds laps
+    assert more.t1 == pytest.approx(t1[-1] + 60.0, abs=0.2)
+
+
 @pytest.mark.skipif(not DATA.exists(), reason="data/harbour.npz not generated")
 def test_embedded_log_is_seed0():
     log = load_log(DATA)

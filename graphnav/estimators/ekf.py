@@ -10,20 +10,25 @@ innovation, so the filter recovers from its own divergence (e.g. after a long ou
 Heading innovations are wrapped to [-pi, pi); the yaw state is kept wrapped.
 Updates use the Joseph form. With ``speed=True`` the state is [x, y, yaw, v]: v is a random walk
 (``sigma_acc``) and odometry speed becomes a measurement of it. See docs/ekf.md.
+
+:class:`PoseEkf` is the filter algebra; :class:`EkfStepper` the record-by-record cycle around it,
+shared by the batch :func:`run_ekf` and the live adapter :class:`graphnav.ekf_online.EkfOnline`.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections import deque
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from ..geometry import wrap_angle
-from ..log import Gnss, Heading, NavLog, Odometry, Scan
+from ..log import Gnss, Heading, NavLog, Odometry, PosePrior, Record, Scan, Truth
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
 
@@ -47,6 +52,13 @@ class PoseEkf:
         self.max_rejects = max_rejects
         self.rejects: dict[str, int] = {}
         self.counts = {"accepted": 0, "rejected": 0, "forced": 0}
+        self._limit: dict[int, float] = {}  # chi-square gate per degrees of freedom
+
+    def gate_limit(self, dof: int) -> float:
+        """``chi2.ppf(gate, dof)`` (the same expression as scipy.stats' ``chi2``), computed once per dof."""
+        if dof not in self._limit:
+            self._limit[dof] = float(2.0 * gammaincinv(dof / 2.0, self.gate))
+        return self._limit[dof]
 
     @property
     def has_speed(self) -> bool:
@@ -97,7 +109,7 @@ class PoseEkf:
         S = H @ self.P @ H.T + R
         if self.gate is not None:
             d2 = float(nu @ np.linalg.solve(S, nu))
-            if d2 > chi2.ppf(self.gate, len(nu)):
+            if d2 > self.gate_limit(len(nu)):
                 self.rejects[sensor] = self.rejects.get(sensor, 0) + 1
                 if self.rejects[sensor] <= self.max_rejects:
                     self.counts["rejected"] += 1
@@ -133,26 +145,37 @@ class PoseEkf:
         return self._update("speed", np.array([v - self.x[3]]), H, np.array([[sigma**2]]))
 
 
-def _initial(log: NavLog, speed: bool) -> tuple[NDArray, NDArray, str]:
-    prior = log.pose_prior()
-    gnss, heads = log.of("gnss"), log.of("heading")
+def initial_state(records: Iterable[Record], speed: bool) -> tuple[NDArray, NDArray, str]:
+    """Initial state, covariance and anchor from a log's records: its first ``pose_prior``; else
+    the first GNSS fix with the first compass heading (yaw sigma pi without one); else the first
+    truth pose; else the origin. With ``speed``, v starts at the first odometry speed (sigma 1 m/s)."""
+    prior = gnss = head = odo = truth = None
+    for r in records:
+        if prior is None and isinstance(r, PosePrior):
+            prior = r
+        elif gnss is None and isinstance(r, Gnss):
+            gnss = r
+        elif head is None and isinstance(r, Heading):
+            head = r
+        elif odo is None and isinstance(r, Odometry):
+            odo = r
+        elif truth is None and isinstance(r, Truth):
+            truth = r
     if prior is not None:
         x = [prior.x, prior.y, prior.yaw]
         P = np.diag([prior.sigma_xy**2, prior.sigma_xy**2, prior.sigma_yaw**2])
         anchor = "pose_prior"
-    elif gnss:
-        yaw, sy = (heads[0].yaw, heads[0].sigma) if heads else (0.0, math.pi)
-        x = [gnss[0].x, gnss[0].y, yaw]
-        P = np.diag([gnss[0].sigma**2, gnss[0].sigma**2, sy**2])
+    elif gnss is not None:
+        yaw, sy = (head.yaw, head.sigma) if head is not None else (0.0, math.pi)
+        x = [gnss.x, gnss.y, yaw]
+        P = np.diag([gnss.sigma**2, gnss.sigma**2, sy**2])
         anchor = "gnss"
     else:
-        truth = log.of("truth")
-        x = [truth[0].x, truth[0].y, truth[0].yaw] if truth else [0.0, 0.0, 0.0]
+        x = [truth.x, truth.y, truth.yaw] if truth is not None else [0.0, 0.0, 0.0]
         P = np.zeros((3, 3))
-        anchor = "truth" if truth else "origin"
+        anchor = "truth" if truth is not None else "origin"
     if speed:
-        odo = log.of("odometry")
-        x = [*x, odo[0].v if odo else 0.0]
+        x = [*x, odo.v if odo is not None else 0.0]
         P4 = np.zeros((4, 4))
         P4[:3, :3] = P
         P4[3, 3] = 1.0
@@ -164,80 +187,123 @@ def _sig(v: float, default: float) -> float:
     return default if not math.isfinite(v) else v
 
 
+MatchFn = Callable[..., Any]  # graphnav.icp.match_scans(scan, prev, init=...) -> MatchResult
+
+
+class EkfStepper:
+    """The EKF's record-by-record cycle, shared by the batch :func:`run_ekf` and the online
+    :class:`graphnav.ekf_online.EkfOnline`: ``step(record)`` predicts to the record's time (unicycle odometry, the
+    beacon paper's eq. 3, with the last SOG/ROT control held) or composes an ICP increment
+    (``motion="icp"``: consecutive scans matched by ``match``, default
+    :func:`graphnav.icp.match_scans`), then applies the gated GNSS/heading update (:class:`PoseEkf`).
+    ``keep`` bounds the timing buffers (``None``: keep all)."""
+
+    def __init__(self, x0: NDArray[np.float64], P0: NDArray[np.float64], *, motion: str = "odometry",
+                 gate: float | None = 0.999, max_rejects: int = 10, sigma_v: float = 0.5,
+                 sigma_w: float = math.radians(0.5), sigma_acc: float = 0.5, use_gnss: bool = True,
+                 use_heading: bool = True, icp_inflate: float = 100.0, match: MatchFn | None = None,
+                 keep: int | None = None) -> None:
+        if motion not in ("odometry", "icp"):
+            raise ValueError(f"motion must be 'odometry' or 'icp', not {motion!r}")
+        if motion == "icp" and match is None:
+            if not icp_available():
+                raise ValueError("ICP motion needs graphnav.icp (not installed in this build)")
+            from ..icp_cache import match_scans as match  # graphnav.icp's, shared inside icp_cache.active()
+        self.f = PoseEkf(x0, P0, gate=gate, max_rejects=max_rejects)
+        self.motion = motion
+        self.kinds: tuple[type, ...] = (Gnss, Heading, Odometry) if motion == "odometry" else (Gnss, Heading, Scan)
+        self.sigma_v, self.sigma_w, self.sigma_acc = sigma_v, sigma_w, sigma_acc
+        self.use_gnss, self.use_heading = use_gnss, use_heading
+        self.icp_inflate = icp_inflate
+        self.match = match
+        self.t: float | None = None  # time the state refers to
+        self.u: Odometry | None = None  # the held control
+        self.prev_scan: Scan | None = None
+        self.last_inc, self.last_cov = np.zeros(3), np.eye(3)
+        self.icp_failed = 0
+        self.step_ms: deque[float] = deque(maxlen=keep)
+        self.icp_ms: deque[float] = deque(maxlen=keep)
+
+    def uses(self, r: Record) -> bool:
+        """Whether :meth:`step` takes this record (the others are ignored)."""
+        return isinstance(r, self.kinds)
+
+    def step(self, r: Record) -> bool:
+        """Process one record (time order); False if its type is not used."""
+        if not isinstance(r, self.kinds):
+            return False
+        if self.t is None:
+            self.t = r.t
+        f = self.f
+        if isinstance(r, Scan):
+            if self.prev_scan is not None:
+                inc, cov = self._icp_increment(r, self.prev_scan)
+                t0 = time.perf_counter()
+                f.predict_increment(inc, cov)
+                self.step_ms.append((time.perf_counter() - t0) * 1e3)
+            self.prev_scan = r
+            self.t = r.t
+            return True
+        t0 = time.perf_counter()
+        if r.t > self.t and self.motion == "odometry":
+            u = self.u
+            if u is not None:
+                f.predict_odometry(u.v, u.w, r.t - self.t, _sig(u.sigma_v, self.sigma_v),
+                                   _sig(u.sigma_w, self.sigma_w), self.sigma_acc)
+            self.t = r.t
+        if isinstance(r, Odometry):
+            self.u = r
+            if f.has_speed:
+                f.update_speed(r.v, _sig(r.sigma_v, self.sigma_v))
+        elif isinstance(r, Gnss) and self.use_gnss:
+            f.update_position((r.x, r.y), r.sigma)
+        elif isinstance(r, Heading) and self.use_heading:
+            f.update_heading(r.yaw, r.sigma)
+        self.step_ms.append((time.perf_counter() - t0) * 1e3)
+        return True
+
+    def _icp_increment(self, scan: Scan, prev: Scan) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Body-frame increment prev -> scan and its covariance (a failed match re-uses the last
+        increment, covariance x ``icp_inflate``). The one place the EKF matches scans."""
+        t0 = time.perf_counter()
+        res = self.match(scan, prev, init=self.last_inc)
+        self.icp_ms.append((time.perf_counter() - t0) * 1e3)
+        if res.ok:
+            self.last_inc, self.last_cov = np.asarray(res.pose, float), np.asarray(res.cov_target, float)
+            return self.last_inc, self.last_cov
+        self.icp_failed += 1
+        return self.last_inc, self.last_cov * self.icp_inflate
+
+
 def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str = "auto", speed: bool = False,
             gate: float | None = 0.999, max_rejects: int = 10, sigma_v: float = 0.5,
             sigma_w: float = math.radians(0.5), sigma_acc: float = 0.5, use_gnss: bool = True,
             use_heading: bool = True, icp_inflate: float = 100.0) -> RunResult:
     """EKF over a log. ``motion``: ``"odometry"``, ``"icp"`` or ``"auto"`` (odometry if the log has
     it, else ICP on the scans). ``gate``: chi-square probability (``None`` disables gating).
-    Sigmas in the records win over ``sigma_v``/``sigma_w``."""
-    odo_n = len(log.of("odometry"))
+    Sigmas in the records win over ``sigma_v``/``sigma_w``. One estimate per record time."""
     if motion == "auto":
-        motion = "odometry" if odo_n >= 2 else "icp"
-    if motion == "icp" and not icp_available():
-        raise ValueError("ICP motion needs graphnav.icp (not installed in this build)")
-    x0, P0, anchor = _initial(log, speed)
-    f = PoseEkf(x0, P0, gate=gate, max_rejects=max_rejects)
-    kinds = (Gnss, Heading, Odometry) if motion == "odometry" else (Gnss, Heading, Scan)
-    recs = [r for r in log.records if isinstance(r, kinds)]
+        motion = "odometry" if len(log.of("odometry")) >= 2 else "icp"
+    x0, P0, anchor = initial_state(log.records, speed)
+    st = EkfStepper(x0, P0, motion=motion, gate=gate, max_rejects=max_rejects, sigma_v=sigma_v,
+                    sigma_w=sigma_w, sigma_acc=sigma_acc, use_gnss=use_gnss, use_heading=use_heading,
+                    icp_inflate=icp_inflate)
+    recs = [r for r in log.records if st.uses(r)]
     if not recs:
         raise ValueError("ekf: the log has no usable records")
-    match_scans = None
-    if motion == "icp":
-        from ..icp_cache import match_scans  # graphnav.icp's, shared inside icp_cache.active()
-    t_cur = recs[0].t
-    u: Odometry | None = None
-    prev_scan: Scan | None = None
-    last_inc, last_cov = np.zeros(3), np.eye(3)
-    ts, poses, covs, step_ms, icp_ms = [], [], [], [], []
-    icp_failed = 0
-
-    def emit(t: float) -> None:
-        ts.append(t)
-        poses.append(f.x[:3].copy())
-        covs.append(f.P[:3, :3].copy())
-        if on_estimate is not None:
-            on_estimate(t, poses[-1], covs[-1])
-
+    ts, poses, covs = [], [], []
     for i, r in enumerate(recs):
-        if isinstance(r, Scan):
-            if prev_scan is not None:
-                t0 = time.perf_counter()
-                res = match_scans(r, prev_scan, init=last_inc)
-                icp_ms.append((time.perf_counter() - t0) * 1e3)
-                if res.ok:
-                    last_inc, last_cov = np.asarray(res.pose, float), np.asarray(res.cov_target, float)
-                    inc, cov = last_inc, last_cov
-                else:
-                    icp_failed += 1
-                    inc, cov = last_inc, last_cov * icp_inflate
-                t0 = time.perf_counter()
-                f.predict_increment(inc, cov)
-                step_ms.append((time.perf_counter() - t0) * 1e3)
-            prev_scan = r
-            t_cur = r.t
-        else:
-            t0 = time.perf_counter()
-            if r.t > t_cur and motion == "odometry":
-                if u is not None:
-                    f.predict_odometry(u.v, u.w, r.t - t_cur, _sig(u.sigma_v, sigma_v),
-                                       _sig(u.sigma_w, sigma_w), sigma_acc)
-                t_cur = r.t
-            if isinstance(r, Odometry):
-                u = r
-                if f.has_speed:
-                    f.update_speed(r.v, _sig(r.sigma_v, sigma_v))
-            elif isinstance(r, Gnss) and use_gnss:
-                f.update_position((r.x, r.y), r.sigma)
-            elif isinstance(r, Heading) and use_heading:
-                f.update_heading(r.yaw, r.sigma)
-            step_ms.append((time.perf_counter() - t0) * 1e3)
-        if i + 1 == len(recs) or recs[i + 1].t > r.t:
-            emit(r.t)
+        st.step(r)
+        if i + 1 == len(recs) or recs[i + 1].t > r.t:  # the last record of this time
+            ts.append(r.t)
+            poses.append(st.f.x[:3].copy())
+            covs.append(st.f.P[:3, :3].copy())
+            if on_estimate is not None:
+                on_estimate(r.t, poses[-1], covs[-1])
     traj = Trajectory(np.array(ts), np.array(poses), np.array(covs), name="ekf")
     info: dict[str, Any] = {"anchor": anchor, "motion": motion, "speed_state": speed, "gate": gate,
-                            **f.counts, "icp_failed": icp_failed}
-    return RunResult(traj, traj, np.array(step_ms), np.array(icp_ms), info=info)
+                            **st.f.counts, "icp_failed": st.icp_failed}
+    return RunResult(traj, traj, np.array(st.step_ms), np.array(st.icp_ms), info=info)
 
 
 def _unmet(log: NavLog) -> str | None:

@@ -3,19 +3,21 @@
 Geometry: a 300 m x 200 m basin closed by quay walls (entrance gap in the south wall), three
 piers from the north quay, a jetty from the west quay and moored hulls alongside, all polygons.
 The vessel follows a waypoint route through the slips at ~1.5 m/s (heading-rate-limited turns),
-about 11 minutes.
+about 11 minutes a lap; ``laps`` (or a ``duration`` longer than a lap) repeats the route, so the
+same scenario also makes hours-long logs for the live-mode benchmarks.
 
 Sensors (all deterministic per seed):
 
-* 2D LiDAR at 5 Hz, 1 deg beam spacing, 40 m range, ray-cast against the polygons (vectorised over
-  beams and segments), with the weighted-ICP paper's error model: range sigma ``0.004258 r`` and
-  an angular (beam-direction) sigma of 0.5 deg; beyond range or dropped (1 %) = NaN.
-* GNSS at 1 Hz, sigma 3 m per axis, plus a multipath bias near the quays (up to 4 m, pointing
+* 2D LiDAR at 5 Hz (``lidar_hz``; 0: no scans), 1 deg beam spacing, 40 m range, ray-cast against
+  the polygons (vectorised over beams and segments), with the weighted-ICP paper's error model:
+  range sigma ``0.004258 r`` and an angular (beam-direction) sigma of 0.5 deg; beyond range or
+  dropped (1 %) = NaN.
+* GNSS at 1 Hz (``fix_hz``), sigma 3 m per axis, plus a multipath bias near the quays (up to 4 m, pointing
   away from the nearest wall, fading out 15 m from it) and one 30 s outage.
-* compass at 1 Hz, sigma 2 deg; odometry (SOG/ROT) at 10 Hz, sigma 0.05 m/s and 0.3 deg/s.
+* compass at the GNSS rate, sigma 2 deg; odometry (SOG/ROT) at 10 Hz, sigma 0.05 m/s and 0.3 deg/s.
 * 4 charted beacons (chart sigma 0.2 m), range/bearing at 1 Hz within 150 m, sigma 0.5 m / 0.5 deg.
 * truth at 10 Hz, a pose prior at the start, and ``meta["events"]`` for the outage and the
-  multipath intervals.
+  multipath intervals. Times start at ``t0`` (0; a POSIX time makes NMEA-ready logs).
 """
 
 from __future__ import annotations
@@ -190,20 +192,26 @@ class HarbourConfig:
     chart_sigma: float = 0.2
     prior_sigma_xy: float = 0.3
     prior_sigma_yaw: float = math.radians(1.0)
+    fix_hz: float = 1.0  # GNSS and compass rate (beacons stay at 1 Hz)
+    t0: float = 0.0  # time of the first record [s]
 
 
-def vessel_track(cfg: HarbourConfig, rng: np.random.Generator) -> tuple[NDArray, NDArray, NDArray]:
-    """Times, poses (N, 3) and (v, w) controls following :data:`ROUTE` with rate-limited turns."""
-    pos = ROUTE[0].copy()
-    yaw = math.atan2(*(ROUTE[1] - ROUTE[0])[::-1])
+def vessel_track(cfg: HarbourConfig, rng: np.random.Generator, *, laps: int = 1,
+                 t_max: float = math.inf) -> tuple[NDArray, NDArray, NDArray]:
+    """Times, poses (N, 3) and (v, w) controls following :data:`ROUTE` ``laps`` times with
+    rate-limited turns (each further lap continues from the last waypoint to the second one), up
+    to ``t_max`` [s]."""
+    route = np.vstack([ROUTE] + [ROUTE[1:]] * (laps - 1))
+    pos = route[0].copy()
+    yaw = math.atan2(*(route[1] - route[0])[::-1])
     wp = 1
     t_l, p_l, c_l = [], [], []
     t = 0.0
     v_slow = 0.0
     t_wp = 0.0
-    while wp < len(ROUTE):
-        to = ROUTE[wp] - pos
-        if np.hypot(*to) < 6.0 or t - t_wp > 3.0 * np.hypot(*(ROUTE[wp] - ROUTE[wp - 1])) / cfg.speed + 30.0:
+    while wp < len(route) and t <= t_max:
+        to = route[wp] - pos
+        if np.hypot(*to) < 6.0 or t - t_wp > 3.0 * np.hypot(*(route[wp] - route[wp - 1])) / cfg.speed + 30.0:
             wp += 1  # reached (or unreachable within the turn radius: go on)
             t_wp = t
             continue
@@ -226,26 +234,30 @@ def vessel_track(cfg: HarbourConfig, rng: np.random.Generator) -> tuple[NDArray,
 
 
 def simulate_harbour(
-    seed: int = 0, cfg: HarbourConfig | None = None, *, duration: float | None = None
+    seed: int = 0, cfg: HarbourConfig | None = None, *, duration: float | None = None, laps: int | None = None
 ) -> NavLog:
-    """The harbour log (``duration`` [s] truncates the run, e.g. for tests)."""
+    """The harbour log: ``laps`` of the route (default 1, or as many as ``duration`` needs),
+    truncated to ``duration`` [s] if given."""
     cfg = cfg or HarbourConfig()
     rng_track, rng_lidar, rng_gnss, rng_misc = (
         np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)
     )
-    t, p, ctl = vessel_track(cfg, rng_track)
+    if laps is None:
+        laps = 1 if duration is None else 1 + int(duration // 300.0)  # a lap takes > 600 s
+    t, p, ctl = vessel_track(cfg, rng_track, laps=laps, t_max=math.inf if duration is None else duration)
     if duration is not None:
         keep = t <= duration
         t, p, ctl = t[keep], p[keep], ctl[keep]
     segs = segments(harbour_polygons())
     recs: list = []
     step = lambda hz: max(int(round(1.0 / (hz * cfg.dt))), 1)  # noqa: E731
+    ts = t + cfg.t0  # record time stamps
 
     for i in range(0, len(t), step(10.0)):
-        recs.append(Truth(float(t[i]), float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
+        recs.append(Truth(float(ts[i]), float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
         recs.append(
             Odometry(
-                float(t[i]),
+                float(ts[i]),
                 float(ctl[i, 0] + rng_misc.normal(0, cfg.odo_sigma_v)),
                 float(ctl[i, 1] + rng_misc.normal(0, cfg.odo_sigma_w)),
                 cfg.odo_sigma_v,
@@ -255,7 +267,7 @@ def simulate_harbour(
 
     nb = int(round(360.0 / cfg.beam_deg))
     angles = np.radians(np.arange(nb) * cfg.beam_deg) - math.pi
-    for i in range(0, len(t), step(cfg.lidar_hz)):
+    for i in range(0, len(t) if cfg.lidar_hz > 0 else 0, step(max(cfg.lidar_hz, 1e-9))):
         x, y, yaw = p[i]
         true_dir = yaw + angles + rng_lidar.normal(0.0, cfg.sigma_alpha, nb)
         r = raycast(
@@ -263,15 +275,19 @@ def simulate_harbour(
         )
         r = r + rng_lidar.normal(0.0, 1.0, nb) * SIGMA_R_REL * np.nan_to_num(r)
         r[rng_lidar.random(nb) < cfg.dropout] = np.nan
-        recs.append(Scan(float(t[i]), r.astype(float), angles.copy()))
+        recs.append(Scan(float(ts[i]), r.astype(float), angles.copy()))
 
-    gi = np.arange(0, len(t), step(1.0))
-    dist, away = distance_to_segments(segs, p[gi, :2])
+    gi = np.arange(0, len(t), step(cfg.fix_hz))
+    dist, away = np.full(len(gi), np.inf), np.zeros((len(gi), 2))
+    if cfg.multipath_amp > 0:
+        for c in range(0, len(gi), 2000):  # chunks: the distance matrix is points x segments
+            dist[c:c + 2000], away[c:c + 2000] = distance_to_segments(segs, p[gi[c:c + 2000], :2])
     amp = cfg.multipath_amp * np.clip(1.0 - dist / cfg.multipath_dist, 0.0, 1.0)
-    events = [{"kind": "gnss_outage", "t0": cfg.outage_t0, "t1": cfg.outage_t0 + cfg.outage_len}]
+    events = [{"kind": "gnss_outage", "t0": cfg.t0 + cfg.outage_t0, "t1": cfg.t0 + cfg.outage_t0 + cfg.outage_len}]
     in_mp = False
+    beacon_every = step(1.0)
     for j, i in enumerate(gi):
-        ti = float(t[i])
+        t_rel, ti = float(t[i]), float(ts[i])
         noise = rng_gnss.normal(0.0, cfg.gnss_sigma, 2)
         mp = amp[j] > 0.5
         if mp and not in_mp:
@@ -279,12 +295,12 @@ def simulate_harbour(
         if mp:
             events[-1]["t1"] = ti
         in_mp = mp
-        if not (cfg.outage_t0 <= ti < cfg.outage_t0 + cfg.outage_len):
+        if not (cfg.outage_t0 <= t_rel < cfg.outage_t0 + cfg.outage_len):
             gx, gy = p[i, :2] + amp[j] * away[j] + noise
             recs.append(Gnss(ti, float(gx), float(gy), cfg.gnss_sigma))
         hd = p[i, 2] + rng_misc.normal(0.0, cfg.compass_sigma)
         recs.append(Heading(ti, float((hd + math.pi) % (2 * math.pi) - math.pi), cfg.compass_sigma))
-        for bid, (bx, by) in BEACONS.items():
+        for bid, (bx, by) in BEACONS.items() if i % beacon_every == 0 else ():
             dx, dy = bx - p[i, 0], by - p[i, 1]
             rng_ = math.hypot(dx, dy)
             if rng_ <= cfg.beacon_range:
@@ -302,7 +318,7 @@ def simulate_harbour(
     px, py = p[0, :2] + rng_misc.normal(0.0, cfg.prior_sigma_xy, 2)
     pyaw = p[0, 2] + rng_misc.normal(0.0, cfg.prior_sigma_yaw)
     recs.append(
-        PosePrior(float(t[0]), float(px), float(py), float(pyaw), cfg.prior_sigma_xy, cfg.prior_sigma_yaw)
+        PosePrior(float(ts[0]), float(px), float(py), float(pyaw), cfg.prior_sigma_xy, cfg.prior_sigma_yaw)
     )
     known = [KnownBeacon(b, bx, by, cfg.chart_sigma) for b, (bx, by) in BEACONS.items()]
     meta = {
@@ -330,7 +346,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--duration", type=float, default=None, help="truncate the run [s]")
+    p.add_argument("--duration", type=float, default=None,
+                   help="length of the run [s] (shorter: truncated; longer: the route repeats)")
+    p.add_argument("--laps", type=int, default=None, help="times round the route (default 1, or what --duration needs)")
+    p.add_argument("--fix-hz", type=float, default=1.0, help="GNSS and compass rate [Hz] (default 1)")
+    p.add_argument("--lidar-hz", type=float, default=5.0, help="LiDAR scan rate [Hz] (default 5; 0: no scans)")
+    p.add_argument("--t0", type=float, default=0.0, help="time of the first record [s] (e.g. a POSIX time)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     p.set_defaults(func=_cli)
@@ -340,7 +361,8 @@ def _cli(args: argparse.Namespace) -> int:
     from ..commands._common import emit
     from ..io import save_log
 
-    log = simulate_harbour(args.seed, duration=args.duration)
+    cfg = HarbourConfig(fix_hz=args.fix_hz, lidar_hz=args.lidar_hz, t0=args.t0)
+    log = simulate_harbour(args.seed, cfg, duration=args.duration, laps=args.laps)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_log(log, args.out)
     emit(
