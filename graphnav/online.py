@@ -265,6 +265,15 @@ class GraphOnline:
         best = min(self.node_times, key=lambda kt: abs(kt[1] - t), default=None)
         return best[0] if best is not None and abs(best[1] - t) <= self.scan_attach_dt else None
 
+    def _node_pose(self, k: int) -> gtsam.Pose2:
+        """Node ``k``'s current estimate: its initial guess while it waits for the next solve (nodes
+        made by scans between fixes), else the solver's."""
+        if self.values.exists(k):
+            return self.values.atPose2(k)
+        if k == self.k:
+            return gtsam.Pose2(*self.pose)
+        return self.solver.calculateEstimatePose2(k)
+
     def _scan(self, scan: Scan, k: int) -> None:
         """Scan-to-previous-scan registration (small_gicp GICP) -> ``BetweenFactorPose2``, solved
         with the next fix. Rejected when it does not converge, has too few inliers, or moves more
@@ -278,10 +287,10 @@ class GraphOnline:
         if prev is None or len(pts) < 20 or len(prev[1]) < 20 or prev[0] == k:
             return
         try:
-            p0 = self.solver.calculateEstimatePose2(prev[0])
-            pk = gtsam.Pose2(*self.pose) if k == self.k else self.solver.calculateEstimatePose2(k)
-        except (RuntimeError, IndexError, ValueError):
-            return  # a node left the window (or was never solved)
+            p0, pk = self._node_pose(prev[0]), self._node_pose(k)
+        except (RuntimeError, IndexError, ValueError):  # the node left the window
+            self.counts["icp_skipped"] = self.counts.get("icp_skipped", 0) + 1
+            return
         guess = p0.between(pk)
         init = np.eye(4)
         init[:2, :2] = [[math.cos(guess.theta()), -math.sin(guess.theta())],
