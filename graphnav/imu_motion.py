@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import gtsam
@@ -40,6 +40,7 @@ from factors.imu import IB, V
 from .estimators import OnEstimate, RunResult
 from .keyframes import schedule
 from .log import NavLog
+from .options import config_from_options
 from .trajectory import Trajectory
 
 
@@ -76,11 +77,7 @@ class ImuGraphConfig:
 
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> ImuGraphConfig:
-        known = {f.name for f in fields(cls)}
-        bad = sorted(set(options) - known)
-        if bad:
-            raise ValueError(f"unknown IMU-graph option(s) {bad}; known: {sorted(known)}")
-        return cls(**options)
+        return config_from_options(cls, options, "IMU-graph")
 
 
 @dataclass

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import gtsam
@@ -30,6 +30,7 @@ import factors as F
 from .estimators import OnEstimate, RunResult
 from .keyframes import keyframe_times, schedule
 from .log import NavLog, Scan
+from .options import config_from_options
 from .trajectory import Trajectory
 
 Matcher = Callable[
@@ -85,11 +86,7 @@ class SmootherConfig:
 
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> SmootherConfig:
-        known = {f.name for f in fields(cls)}
-        bad = sorted(set(options) - known)
-        if bad:
-            raise ValueError(f"unknown smoother option(s) {bad}; known: {sorted(known)}")
-        return cls(**options)
+        return config_from_options(cls, options, "smoother")
 
 
 def default_matcher(options: dict[str, Any]) -> Matcher | None:

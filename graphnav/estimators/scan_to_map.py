@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -30,6 +30,7 @@ from ..degeneracy import analyse, flatness, keep_constrained, line_information
 from ..geometry import se2_between, se2_compose, wrap_angle
 from ..log import NavLog, Scan
 from ..odometry_increment import increment, odometry_samples
+from ..options import config_from_options
 from ..registration import (
     Params,
     Target,
@@ -84,11 +85,7 @@ class ScanToMapConfig:
 
 
 def make_config(**options: Any) -> ScanToMapConfig:
-    known = {f.name for f in fields(ScanToMapConfig)}
-    bad = sorted(set(options) - known)
-    if bad:
-        raise ValueError(f"unknown scan-to-map option(s) {bad}; known: {sorted(known)}")
-    cfg = ScanToMapConfig(**options)
+    cfg = config_from_options(ScanToMapConfig, options, "scan-to-map")
     resolve_method(cfg.backend)  # fail early on a bad name
     if cfg.planar not in ("constrain", "project"):
         raise ValueError(f"planar must be 'constrain' or 'project', got {cfg.planar!r}")
