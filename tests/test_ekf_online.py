@@ -4,9 +4,7 @@ estimates per fix and through outages, and ``graphnav live --estimator ekf`` on 
 from __future__ import annotations
 
 import json
-import os
 import socket
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -15,6 +13,7 @@ import numpy as np
 import pynmea2
 import pytest
 from _harbour import harbour_trial
+from _live import start_live
 
 from graphnav.ekf_online import EkfOnline
 from graphnav.estimators.ekf import run_ekf
@@ -110,17 +109,12 @@ def test_live_cli_with_the_ekf_publishes_parseable_nmea(tmp_path):
     sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sink.bind(("127.0.0.1", 0))
     sink.settimeout(0.05)
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    p = subprocess.Popen([sys.executable, "-m", "graphnav", "live", "--estimator", "ekf", "--nmea",
-                          f"udp://127.0.0.1:{port}", "--publish", f"udp://127.0.0.1:{sink.getsockname()[1]}",
-                          "--out", str(tmp_path / "o"), "--idle-exit", "1", "--duration", "60", "--json"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    p = start_live(tmp_path / "o", "--estimator", "ekf", "--nmea", f"udp://127.0.0.1:{port}",
+                   "--publish", f"udp://127.0.0.1:{sink.getsockname()[1]}", "--idle-exit", "1", "--duration", "60",
+                   "--json")
     data = []
+    deadline = time.monotonic() + 30
     try:
-        deadline = time.monotonic() + 30
-        while not (tmp_path / "o" / "live.tum").exists() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(0.2)
         replay(log, f"udp://127.0.0.1:{port}", speed=10.0)
         while p.poll() is None and time.monotonic() < deadline + 30:
             try:

@@ -5,10 +5,8 @@ Every network test binds 127.0.0.1 only and is bounded in time (duration / idle-
 from __future__ import annotations
 
 import json
-import os
 import signal
 import socket
-import subprocess
 import sys
 import threading
 import time
@@ -18,6 +16,7 @@ import numpy as np
 import pynmea2
 import pytest
 from _harbour import harbour_trial
+from _live import start_live
 
 from graphnav.geodesy import LocalFrame
 from graphnav.geometry import heading_deg_to_yaw, wrap_angle
@@ -226,15 +225,8 @@ def test_scans_from_replay_ends_the_run(tmp_path):
 def test_cli_sigterm_exits_cleanly_with_one_json_object(tmp_path):
     log = harbour_trial(duration=2.0, rate=10.0)
     port = free_port()
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    p = subprocess.Popen([sys.executable, "-m", "graphnav", "live", "--nmea", f"udp://127.0.0.1:{port}",
-                          "--out", str(tmp_path / "o"), "--duration", "60", "--json"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    p = start_live(tmp_path / "o", "--nmea", f"udp://127.0.0.1:{port}", "--duration", "60", "--json")
     try:
-        deadline = time.monotonic() + 30
-        while not (tmp_path / "o" / "live.tum").exists() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(0.2)
         replay(log, f"udp://127.0.0.1:{port}", speed=0)
         time.sleep(1.0)
         p.send_signal(signal.SIGTERM)

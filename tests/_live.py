@@ -1,0 +1,24 @@
+"""Test helper: a real ``graphnav live`` process on loopback, started and waited for."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def start_live(out_dir: Path, *args: str, ready_s: float = 30.0) -> subprocess.Popen:
+    """``python -m graphnav live --out OUT_DIR ARGS...`` (this checkout's code), returned once it
+    listens (its ``live.tum`` exists) or ``ready_s`` has passed."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    p = subprocess.Popen([sys.executable, "-m", "graphnav", "live", "--out", str(out_dir), *args],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=out_dir.parent)
+    deadline = time.monotonic() + ready_s
+    while not (out_dir / "live.tum").exists() and time.monotonic() < deadline and p.poll() is None:
+        time.sleep(0.05)
+    time.sleep(0.2)
+    return p
