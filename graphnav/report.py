@@ -134,8 +134,8 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: 
         gnss = np.column_stack([c["x"], c["y"]])
     figs: list[tuple[str, str]] = []
     if trajs:
-        files["trajectories.png"] = plots.plot_trajectories(trajs, truth, out / "trajectories.png", gnss,
-                                                            title=f"Trajectories over the truth — {log_name}")
+        title = f"Trajectories over the truth — {Path(log_name).name or log_name}"
+        files["trajectories.png"] = plots.plot_trajectories(trajs, truth, out / "trajectories.png", gnss, title=title)
         figs.append(("Trajectories", "trajectories.png"))
         if truth is not None:
             online = {e.name: e.result.online for e in ok
