@@ -30,6 +30,7 @@ import factors as F
 from .estimators import OnEstimate, RunResult
 from .keyframes import keyframe_times, schedule
 from .log import NavLog, Scan
+from .odometry_increment import increment, odometry_samples
 from .options import config_from_options
 from .trajectory import Trajectory
 
@@ -168,19 +169,8 @@ class GraphBuilder:
             att, add = schedule(self.kf_t, [r.t for r in recs])
             for r, a, s in zip(recs, att, add, strict=True):
                 self.pending[int(s)].append((int(a), r))
-        odo = log.of("odometry") if cfg.use_odometry else []
-        self.odo = np.array(
-            [
-                [
-                    r.t,
-                    r.v,
-                    r.w,
-                    r.sigma_v if math.isfinite(r.sigma_v) else cfg.odo_sigma_v,
-                    r.sigma_w if math.isfinite(r.sigma_w) else math.radians(cfg.odo_sigma_w_deg),
-                ]
-                for r in odo
-            ]
-        ).reshape(-1, 5)
+        self.odo = (odometry_samples(log, cfg.odo_sigma_v, math.radians(cfg.odo_sigma_w_deg)) if cfg.use_odometry
+                    else np.zeros((0, 5)))
         self.has_heading = bool(log.of("heading"))
         self.charted = {b.id: b for b in log.beacons_known}
         self.beacon_ids: dict[str, int] = {}
@@ -248,24 +238,14 @@ class GraphBuilder:
 
     # -- relative motion --------------------------------------------------------------------------
     def _odometry(self, t0: float, t1: float) -> tuple[gtsam.Pose2, NDArray[np.float64]] | None:
-        """Compose the odometry (zero-order hold of the latest sample) over ``[t0, t1]``."""
+        """Compose the odometry (zero-order hold of the latest sample) over ``[t0, t1]``; no motion
+        before the first sample."""
         if len(self.odo) == 0 or self.odo[0, 0] > t0 + 1e-9 and self.odo[0, 0] >= t1:
             return None
-        i = max(int(np.searchsorted(self.odo[:, 0], t0, side="right")) - 1, 0)
-        if self.odo[i, 0] > t0 + 1e-9 and i == 0:
-            t0 = self.odo[0, 0]
-        delta, cov = gtsam.Pose2(), np.zeros((3, 3))
-        t = t0
-        while t < t1 - 1e-12:
-            t_next = self.odo[i + 1, 0] if i + 1 < len(self.odo) else math.inf
-            te = min(t_next, t1)
-            _, v, w, sv, sw = self.odo[i]
-            d, c = F.odometry_increment(v, w, te - t, sv, sw, lateral=self.cfg.odo_lateral)
-            delta, cov = F.compose_with_cov(delta, cov, d, c)
-            t = te
-            if te >= t_next:
-                i += 1
-        return delta, cov
+        inc = increment(self.odo, max(t0, float(self.odo[0, 0])), t1, lateral=self.cfg.odo_lateral)
+        if inc is None:
+            return None
+        return gtsam.Pose2(*inc[0]), inc[1]
 
     def _offset_motion(self, a: int, t: float, k: int) -> gtsam.Pose2 | None:
         """Motion from keyframe ``a`` to time ``t`` (``None`` when they coincide): odometry when the
