@@ -95,6 +95,25 @@ def nearest(px, py, tx, ty, xmin, ymin, h, nx, ny, start, items):
 
 
 @njit(cache=True)
+def nearest_from(px, py, j0, tx, ty, xmin, ymin, h, nx, ny, start, items):
+    """As :func:`nearest`, given a candidate ``j0``: the nearest point is no farther than ``j0``, so
+    only the cells meeting the square around that disc are searched (exact, same tie rule)."""
+    dx = tx[j0] - px
+    dy = ty[j0] - py
+    best = dx * dx + dy * dy
+    bi = j0
+    r = math.sqrt(best) * (1.0 + 1e-12) + 1e-12  # padded against rounding at the box's edge
+    x0 = max(int(math.floor((px - r - xmin) / h)), 0)
+    x1 = min(int(math.floor((px + r - xmin) / h)), nx - 1)
+    y0 = max(int(math.floor((py - r - ymin) / h)), 0)
+    y1 = min(int(math.floor((py + r - ymin) / h)), ny - 1)
+    for ix in range(x0, x1 + 1):
+        for iy in range(y0, y1 + 1):
+            best, bi = _scan_cell(px, py, ix, iy, ny, start, items, tx, ty, best, bi)
+    return math.sqrt(best), bi
+
+
+@njit(cache=True)
 def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow,
              max_corr, tol, tol_step, max_iter, th, t0x, t0y, h):
     """Algorithm 1 for variant 0=K, 1=H, 2=HM, 3=HD. Returns (theta, tx, ty, idx, iterations,
@@ -118,7 +137,10 @@ def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, v
         for i in range(n):
             px[i] = c * sx[i] - s * sy[i] + t_x
             py[i] = s * sx[i] + c * sy[i] + t_y
-            d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+            if it == 1:
+                d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+            else:  # the last match bounds the search (the points moved little)
+                d[i], idx[i] = nearest_from(px[i], py[i], idx[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
         khu = huber_c * np.median(d)
         sw = 0.0
         for i in range(n):
@@ -471,7 +493,10 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
         for i in range(n):
             px[i] = c * sx[i] - s * sy[i] + t_x
             py[i] = s * sx[i] + c * sy[i] + t_y
-            d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+            if it == 1:
+                d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+            else:  # the last match bounds the search (the points moved little)
+                d[i], idx[i] = nearest_from(px[i], py[i], idx[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
         hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
                     huber_c, wpow, max_corr, flat_pow, line_max_dist, warm, w)
         if warm:  # eq. 15-20, 2D closed form

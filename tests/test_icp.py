@@ -372,7 +372,7 @@ def test_numba_backend_equals_numpy():
     pytest.importorskip("numba")
     from scipy.spatial import cKDTree
 
-    from graphnav._icp_fast import build_grid, knn_line_normals, nearest
+    from graphnav._icp_fast import build_grid, knn_line_normals, nearest, nearest_from
     from graphnav.icp import line_normals
 
     rng = np.random.default_rng(8)
@@ -384,6 +384,11 @@ def test_numba_backend_equals_numpy():
                     for x, y in q])
     assert np.array_equal(got[:, 1].astype(int), i_ref)
     assert np.allclose(got[:, 0], d_ref, atol=1e-12)
+    # the search bounded by a candidate (any target point, near or far) finds the same point
+    j0 = rng.integers(0, len(tgt), len(q))
+    got = np.array([nearest_from(x, y, j, tgt[:, 0].copy(), tgt[:, 1].copy(), grid[0], grid[1], 0.5, *grid[2:])
+                    for (x, y), j in zip(q, j0, strict=True)])
+    assert np.array_equal(got[:, 1].astype(int), i_ref)
     nx, ny, fl = knn_line_normals(tgt[:, 0].copy(), tgt[:, 1].copy(), 12, 0.5)
     n_ref, fl_ref = line_normals(tgt, cKDTree(tgt), 12)
     assert np.allclose(np.column_stack([nx, ny]), n_ref, atol=1e-12) and np.allclose(fl, fl_ref, atol=1e-12)
