@@ -1,8 +1,12 @@
-"""Compiled (numba) inner loop of the point-to-point variants K/H/HM/HD.
+"""Compiled (numba) matcher of :mod:`graphnav.icp`: every variant, from the points to the covariance.
 
 The same algorithm as the numpy loop in :mod:`graphnav.icp` (Algorithm 1, eq. 9-22), with an
 exact grid-based nearest-neighbour search instead of ``cKDTree``; tests check that both give
-the same matches. Imported lazily; absent numba, :mod:`graphnav.icp` uses its numpy loop.
+the same matches. :func:`p2p_match` (K/H/HM/HD) and :func:`hdl_match` (HDL) run the whole
+numeric part of one match in one call (the LiDAR error model of eq. 5-8, the target's lines,
+the loop, the covariance and the point-to-line information); only the eigen-analysis of
+:mod:`graphnav.degeneracy` and the report stay in Python. Imported lazily; absent numba,
+:mod:`graphnav.icp` uses its numpy loop.
 """
 
 from __future__ import annotations
@@ -58,11 +62,13 @@ def nearest(px, py, tx, ty, xmin, ymin, h, nx, ny, start, items):
     cy = int(math.floor((py - ymin) / h))
     cx = min(max(cx, 0), nx - 1)
     cy = min(max(cy, 0), ny - 1)
-    # distance from p to the home cell's box (0 inside)
+    # distance from p to the home cell's box (0 inside); inside, the margin to its nearest edge
     bx0, by0 = xmin + cx * h, ymin + cy * h
     ox = max(bx0 - px, 0.0, px - (bx0 + h))
     oy = max(by0 - py, 0.0, py - (by0 + h))
     off = math.sqrt(ox * ox + oy * oy)
+    if off == 0.0:
+        off = -min(px - bx0, bx0 + h - px, py - by0, by0 + h - py)
     best = np.inf
     bi = -1
     rmax = max(nx, ny)
@@ -83,8 +89,27 @@ def nearest(px, py, tx, ty, xmin, ymin, h, nx, ny, start, items):
                 if x1 <= nx - 1:
                     best, bi = _scan_cell(px, py, x1, iy, ny, start, items, tx, ty, best, bi)
         bound = r * h - off  # any point in a ring beyond r is at least this far
-        if bi >= 0 and bound > 0 and best <= bound * bound:
+        if bi >= 0 and bound > 0 and best < bound * bound:
             break
+    return math.sqrt(best), bi
+
+
+@njit(cache=True)
+def nearest_from(px, py, j0, tx, ty, xmin, ymin, h, nx, ny, start, items):
+    """As :func:`nearest`, given a candidate ``j0``: the nearest point is no farther than ``j0``, so
+    only the cells meeting the square around that disc are searched (exact, same tie rule)."""
+    dx = tx[j0] - px
+    dy = ty[j0] - py
+    best = dx * dx + dy * dy
+    bi = j0
+    r = math.sqrt(best) * (1.0 + 1e-12) + 1e-12  # padded against rounding at the box's edge
+    x0 = max(int(math.floor((px - r - xmin) / h)), 0)
+    x1 = min(int(math.floor((px + r - xmin) / h)), nx - 1)
+    y0 = max(int(math.floor((py - r - ymin) / h)), 0)
+    y1 = min(int(math.floor((py + r - ymin) / h)), ny - 1)
+    for ix in range(x0, x1 + 1):
+        for iy in range(y0, y1 + 1):
+            best, bi = _scan_cell(px, py, ix, iy, ny, start, items, tx, ty, best, bi)
     return math.sqrt(best), bi
 
 
@@ -112,7 +137,10 @@ def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, v
         for i in range(n):
             px[i] = c * sx[i] - s * sy[i] + t_x
             py[i] = s * sx[i] + c * sy[i] + t_y
-            d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+            if it == 1:
+                d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+            else:  # the last match bounds the search (the points moved little)
+                d[i], idx[i] = nearest_from(px[i], py[i], idx[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
         khu = huber_c * np.median(d)
         sw = 0.0
         for i in range(n):
@@ -184,6 +212,18 @@ def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, v
 
 
 @njit(cache=True)
+def _wrap(k, n):
+    """``k % n`` (no division for ``-n <= k < 2 n``, the usual case)."""
+    if 0 <= k < n:
+        return k
+    if -n <= k < 0:
+        return k + n
+    if n <= k < 2 * n:
+        return k - n
+    return k % n
+
+
+@njit(cache=True)
 def scan_order_normals(tx, ty, half, max_gap):
     """As :func:`graphnav.icp.scan_order_normals` (PCA of beam-order windows, gap check)."""
     n = tx.shape[0]
@@ -202,7 +242,7 @@ def scan_order_normals(tx, ty, half, max_gap):
         mx = my = 0.0
         wide = False
         for o in range(-half, half + 1):
-            k = (i + o) % n
+            k = _wrap(i + o, n)
             mx += xs[k]
             my += ys[k]
             if o < half and gap[k] > max_gap:
@@ -211,7 +251,7 @@ def scan_order_normals(tx, ty, half, max_gap):
         my /= m
         cxx = cyy = cxy = 0.0
         for o in range(-half, half + 1):
-            k = (i + o) % n
+            k = _wrap(i + o, n)
             dx, dy = xs[k] - mx, ys[k] - my
             cxx += dx * dx
             cyy += dy * dy
@@ -230,8 +270,9 @@ def scan_order_normals(tx, ty, half, max_gap):
 def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow,
               max_corr, th, t_x, t_y, idx, half, max_gap, inlier_dist):
     """The terms of :func:`graphnav.icp._finish` for K/H/HM/HD: ``H``, ``B``, the residual scale's
-    numerator and dof, the weighted RMS residual, the point-to-line information (degeneracy),
-    the number of pairs used and of inliers."""
+    numerator and dof, the weighted RMS residual, the point-to-line information (degeneracy), the
+    flatness-weighted residual variance along the normals, the number of pairs used and of inliers,
+    the source's RMS radius."""
     n = sx.shape[0]
     c, s = math.cos(th), math.sin(th)
     px = np.empty(n)
@@ -267,6 +308,7 @@ def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, 
     n_inl = 0
     sw = 0.0
     swe = 0.0
+    sf = sfr = 0.0
     ws = np.empty(n)
     for i in range(n):
         j = idx[i]
@@ -340,8 +382,12 @@ def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, 
             for r_ in range(3):
                 for q_ in range(3):
                     info[r_, q_] += fl[j] * jl[r_] * jl[q_]
+            rn = ex * nxj + ey * nyj  # residual along the normal (graphnav.icp._line_residual_var)
+            sf += fl[j]
+            sfr += fl[j] * rn * rn
     res_rms = math.sqrt(swe / sw) if sw > 0 else np.nan
-    return h, b, ksum, max(2 * n_sel - 3, 1), n_sel, res_rms, info, n_use, n_inl
+    s2 = sfr / (sf - 3.0) if sf > 3.0 else np.nan
+    return h, b, ksum, max(2 * n_sel - 3, 1), n_sel, res_rms, info, s2, n_use, n_inl, lsc
 
 
 # ----------------------------------------------------------------------------- HDL (point-to-line)
@@ -447,7 +493,10 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
         for i in range(n):
             px[i] = c * sx[i] - s * sy[i] + t_x
             py[i] = s * sx[i] + c * sy[i] + t_y
-            d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+            if it == 1:
+                d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+            else:  # the last match bounds the search (the points moved little)
+                d[i], idx[i] = nearest_from(px[i], py[i], idx[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
         hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
                     huber_c, wpow, max_corr, flat_pow, line_max_dist, warm, w)
         if warm:  # eq. 15-20, 2D closed form
@@ -522,7 +571,8 @@ def hdl_stats(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, 
               flat_pow, line_max_dist, th, t_x, t_y, idx, inlier_dist):
     """The terms of :func:`graphnav.icp._finish` for HDL (``_terms_numpy``): ``H``, ``B``, the
     residual scale's numerator and dof, the weighted RMS residual, the point-to-line information,
-    the flatness-weighted residual variance along the normals, pairs used and inliers."""
+    the flatness-weighted residual variance along the normals, pairs used and inliers, the source's
+    RMS radius."""
     n = sx.shape[0]
     c, s = math.cos(th), math.sin(th)
     px = np.empty(n)
@@ -598,7 +648,7 @@ def hdl_stats(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, 
             sfr += f * res * res
     res_rms = math.sqrt(swr / sw)
     s2 = sfr / (sf - 3.0) if sf > 3.0 else np.nan
-    return h, b, ksum, max(n_sel - 3, 1), n_sel, res_rms, info, s2, n_use, n_inl
+    return h, b, ksum, max(n_sel - 3, 1), n_sel, res_rms, info, s2, n_use, n_inl, lsc
 
 
 @njit(cache=True)
@@ -643,6 +693,8 @@ def knn_line_normals(tx, ty, k, h):
         px, py = tx[i], ty[i]
         cx = min(max(int(math.floor((px - xmin) / h)), 0), nx - 1)
         cy = min(max(int(math.floor((py - ymin) / h)), 0), ny - 1)
+        bx0, by0 = xmin + cx * h, ymin + cy * h
+        edge = max(min(px - bx0, bx0 + h - px, py - by0, by0 + h - py), 0.0)  # margin to the home cell's edge
         cnt = 0
         for r in range(rmax + 1):
             if r == 0:
@@ -660,8 +712,8 @@ def knn_line_normals(tx, ty, k, h):
                         cnt = _scan_cell_k(px, py, x0, iy, ny, start, items, tx, ty, bd, bi, cnt)
                     if x1 <= nx - 1:
                         cnt = _scan_cell_k(px, py, x1, iy, ny, start, items, tx, ty, bd, bi, cnt)
-            bound = r * h  # the query lies in its home cell: a point beyond ring r is at least this far
-            if cnt == k and bd[k - 1] <= bound * bound:
+            bound = r * h + edge  # the query lies in its home cell: a point beyond ring r is at least this far
+            if cnt == k and bd[k - 1] < bound * bound:
                 break
         mx = my = 0.0
         for m in range(k):
@@ -682,3 +734,91 @@ def knn_line_normals(tx, ty, k, h):
         disc = math.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy)
         fl[i] = 2.0 * disc / tr if tr > 0 else 0.0
     return nrx, nry, fl
+
+
+# ----------------------------------------------------------------------------- one whole match
+
+
+@njit(cache=True)
+def cloud_terms(x, y, sig, use_sig, sigma_alpha, sigma_r_rel):
+    """As :class:`graphnav.icp._Cloud`: unit radial vector, squared semi-axes ``a^2, b^2`` (eq. 6-7;
+    ``use_sig``: the caller's isotropic 1-sigma per point, a = b) and the mean error ``M^2`` (eq. 5)."""
+    n = x.shape[0]
+    ux = np.empty(n)
+    uy = np.empty(n)
+    a2 = np.empty(n)
+    b2 = np.empty(n)
+    m2 = np.empty(n)
+    for i in range(n):
+        r = math.hypot(x[i], y[i])
+        rs = r if r > 0 else 1.0
+        ux[i] = x[i] / rs
+        uy[i] = y[i] / rs
+        if use_sig:
+            a2[i] = sig[i] ** 2
+            b2[i] = a2[i]
+        else:
+            a2[i] = (sigma_alpha * r) ** 2
+            b2[i] = (sigma_r_rel * r) ** 2
+        m2[i] = a2[i] + b2[i]
+    return ux, uy, a2, b2, m2
+
+
+@njit(cache=True)
+def sandwich(h, b, k):
+    """``k H^-1 B H^-T`` (:func:`graphnav.icp._finish`); ``ok`` False when ``H`` is singular."""
+    try:
+        hi = np.linalg.inv(h)
+    except Exception:  # noqa: BLE001
+        return np.full((3, 3), np.nan), False
+    m = np.zeros((3, 3))
+    for r_ in range(3):
+        for q_ in range(3):
+            for k_ in range(3):
+                m[r_, q_] += k * hi[r_, k_] * b[k_, q_]
+    out = np.zeros((3, 3))
+    for r_ in range(3):
+        for q_ in range(3):
+            for k_ in range(3):
+                out[r_, q_] += m[r_, k_] * hi[q_, k_]
+    return out, True
+
+
+@njit(cache=True)
+def p2p_match(sx, sy, ssig, use_ssig, tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel, variant, huber_c, wpow,
+              max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, half, max_gap, inlier_dist):
+    """One K/H/HM/HD match (:func:`p2p_loop` then :func:`p2p_stats`): ``(theta, tx, ty, iterations,
+    converged, cov, cov_ok, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, radius)`` with
+    ``cov = k H^-1 B H^-T`` before scaling, ``k = ksum / dof``."""
+    sux, suy, sa2, sb2, sm2 = cloud_terms(sx, sy, ssig, use_ssig, sigma_alpha, sigma_r_rel)
+    tux, tuy, ta2, tb2, tm2 = cloud_terms(tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel)
+    th, t_x, t_y, idx, it, converged = p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2,
+                                                variant, huber_c, wpow, max_corr, tol, tol_step, max_iter, th,
+                                                t0x, t0y, h)
+    hm, bm, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, lsc = p2p_stats(
+        sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow, max_corr,
+        th, t_x, t_y, idx, half, max_gap, inlier_dist)
+    cov, ok = sandwich(hm, bm, ksum / dof if n_sel else np.nan)
+    return th, t_x, t_y, it, converged, cov, ok, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, lsc
+
+
+@njit(cache=True)
+def hdl_match(sx, sy, ssig, use_ssig, tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel, knn, normal_k, max_gap,
+              huber_c, wpow, max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, flat_pow, warmup, line_max_dist,
+              inlier_dist):
+    """One HDL match: the target's lines (``knn``: :func:`knn_line_normals`, else beam order,
+    :func:`scan_order_normals`), :func:`hdl_loop`, :func:`hdl_stats`; returns as :func:`p2p_match`."""
+    sux, suy, sa2, sb2, _ = cloud_terms(sx, sy, ssig, use_ssig, sigma_alpha, sigma_r_rel)
+    tux, tuy, ta2, tb2, _ = cloud_terms(tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel)
+    if knn:
+        nrx, nry, fl = knn_line_normals(tx, ty, normal_k, h)
+    else:
+        nrx, nry, fl = scan_order_normals(tx, ty, normal_k // 2, max_gap)
+    th, t_x, t_y, idx, it, converged = hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry,
+                                                fl, huber_c, wpow, max_corr, tol, tol_step, max_iter, th, t0x,
+                                                t0y, h, flat_pow, warmup, line_max_dist)
+    hm, bm, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, lsc = hdl_stats(
+        sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr, flat_pow,
+        line_max_dist, th, t_x, t_y, idx, inlier_dist)
+    cov, ok = sandwich(hm, bm, ksum / dof if n_sel else np.nan)
+    return th, t_x, t_y, it, converged, cov, ok, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, lsc

@@ -190,10 +190,6 @@ class _Cloud:
             self.b2 = self.a2.copy()
         self.m2 = self.a2 + self.b2  # eq. 5, squared
 
-    def take(self, idx: NDArray) -> None:
-        for k in self.__slots__:
-            setattr(self, k, getattr(self, k)[idx])
-
     def dir_var(self, idx: NDArray | slice, radial: NDArray, direction: NDArray) -> NDArray:
         """Eq. 9: error variance of points ``idx`` along unit ``direction`` (``radial`` rotated into
         the frame of ``direction``)."""
@@ -264,46 +260,23 @@ def match_points(
     t0 = time.perf_counter()
     src_xy = np.asarray(src_xy, dtype=float).reshape(-1, 2)
     tgt_xy = np.asarray(tgt_xy, dtype=float).reshape(-1, 2)
-    src_sigma = _per_point(src_sigma, len(src_xy), "src_sigma")
-    tgt_sigma = _per_point(tgt_sigma, len(tgt_xy), "tgt_sigma")
-    keep_s = np.all(np.isfinite(src_xy), axis=1)
-    keep_t = np.all(np.isfinite(tgt_xy), axis=1)
-    src_xy, tgt_xy = src_xy[keep_s], tgt_xy[keep_t]
-    src_sigma = None if src_sigma is None else src_sigma[keep_s]
-    tgt_sigma = None if tgt_sigma is None else tgt_sigma[keep_t]
+    src_xy, src_sigma = _finite(src_xy, _per_point(src_sigma, len(src_xy), "src_sigma"))
+    tgt_xy, tgt_sigma = _finite(tgt_xy, _per_point(tgt_sigma, len(tgt_xy), "tgt_sigma"))
     ns, nt = len(src_xy), len(tgt_xy)
     if ns < cfg.min_points or nt < cfg.min_points:
         return _failed(f"too few points (source {ns}, target {nt}, need {cfg.min_points})", init, ns, nt, t0)
-
-    src, tgt = _Cloud(src_xy, cfg, src_sigma), _Cloud(tgt_xy, cfg, tgt_sigma)
     if cfg.equalize and ns != nt:  # the paper: thin the larger set at random
         rng = np.random.default_rng(cfg.seed)
-        big = src if ns > nt else tgt
-        big.take(np.sort(rng.choice(max(ns, nt), min(ns, nt), replace=False)))
-    fast = _fast_loop(cfg)
-    if fast is not None:
-        th0, t0_ = _pose_parts(init)
-        big = np.inf if cfg.max_corr_dist is None else cfg.max_corr_dist
-        if cfg.variant == "HDL":
-            if cfg.normals == "knn":
-                from ._icp_fast import knn_line_normals
-
-                nx_, ny_, flat = knn_line_normals(tgt.xy[:, 0].copy(), tgt.xy[:, 1].copy(), cfg.normal_k, _GRID_CELL)
-                normals = np.column_stack([nx_, ny_])
-            else:
-                normals, flat = _target_lines(tgt.xy, cfg)
-            th, tx_, ty_, idx, it, converged = fast(
-                *_fast_clouds(src, tgt, False), normals[:, 0].copy(), normals[:, 1].copy(), flat, cfg.huber_c,
-                cfg.weight_power, big, cfg.tol, cfg.tol_step, cfg.max_iter, th0, t0_[0], t0_[1], _GRID_CELL,
-                cfg.line_flat_power, cfg.line_warmup, cfg.line_max_dist)
+        keep = np.sort(rng.choice(max(ns, nt), min(ns, nt), replace=False))
+        if ns > nt:
+            src_xy, src_sigma = src_xy[keep], None if src_sigma is None else src_sigma[keep]
         else:
-            normals = flat = None
-            th, tx_, ty_, idx, it, converged = fast(
-                *_fast_clouds(src, tgt, True), _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big,
-                cfg.tol, cfg.tol_step, cfg.max_iter, th0, t0_[0], t0_[1], _GRID_CELL)
-        pose = np.array([tx_, ty_, th])
-        return _finish(cfg, src, tgt, idx, pose, normals, flat, it, converged, t0, ns, nt, init)
+            tgt_xy, tgt_sigma = tgt_xy[keep], None if tgt_sigma is None else tgt_sigma[keep]
+    fast = _fast_kernels(cfg)
+    if fast is not None:
+        return _match_compiled(fast, cfg, src_xy, tgt_xy, src_sigma, tgt_sigma, init, t0, ns, nt)
 
+    src, tgt = _Cloud(src_xy, cfg, src_sigma), _Cloud(tgt_xy, cfg, tgt_sigma)
     nnm = _NearestNeighbours(tgt.xy, cfg)
     p2l = cfg.variant == "HDL"
     normals = flat = None
@@ -348,32 +321,58 @@ def match_points(
 
 
 _VARIANT_CODE = {"K": 0, "H": 1, "HM": 2, "HD": 3}
-_GRID_CELL = 0.5  # [m] cell of the compiled loop's nearest-neighbour grid
+_GRID_CELL = 1.0  # [m] cell of the compiled nearest-neighbour grids (exact at any size; 1 m: fastest on the marina)
 
 
-def _fast_loop(cfg: IcpConfig) -> Any:
-    """The compiled loop when it applies (k-d-tree-equivalent exact matching: K/H/HM/HD
-    ``p2p_loop``, HDL ``hdl_loop``) and numba is importable (backend "auto" or "numba"); else None
+_NO_SIGMA = np.zeros(0)
+
+
+def _finite(xy: NDArray, sigma: NDArray | None) -> tuple[NDArray, NDArray | None]:
+    """Rows of ``xy`` (and ``sigma``) with finite coordinates (no copy when all are)."""
+    if np.isfinite(xy).all():
+        return xy, sigma
+    keep = np.isfinite(xy).all(axis=1)
+    return xy[keep], None if sigma is None else sigma[keep]
+
+
+def _fast_kernels(cfg: IcpConfig) -> Any:
+    """The compiled matcher when it applies (k-d-tree-equivalent exact matching: K/H/HM/HD
+    ``p2p_match``, HDL ``hdl_match``) and numba is importable (backend "auto" or "numba"); else None
     (the numpy loop)."""
     if cfg.backend == "numpy" or cfg.matching != "kdtree":
         return None
     try:
-        from ._icp_fast import hdl_loop, p2p_loop
+        from ._icp_fast import hdl_match, p2p_match
     except ImportError:
         if cfg.backend == "numba":
             raise
         return None
-    return hdl_loop if cfg.variant == "HDL" else p2p_loop
+    return hdl_match if cfg.variant == "HDL" else p2p_match
 
 
-def _fast_clouds(src: _Cloud, tgt: _Cloud, m2: bool) -> tuple[NDArray, ...]:
-    """The compiled loops' per-point arrays (contiguous columns; ``m2``: with the mean-error terms)."""
-    def col(a: NDArray, k: int) -> NDArray:
-        return np.ascontiguousarray(a[:, k])
-
-    s = (col(src.xy, 0), col(src.xy, 1), col(src.u, 0), col(src.u, 1), src.a2, src.b2) + ((src.m2,) if m2 else ())
-    t = (col(tgt.xy, 0), col(tgt.xy, 1), col(tgt.u, 0), col(tgt.u, 1), tgt.a2, tgt.b2) + ((tgt.m2,) if m2 else ())
-    return s + t
+def _match_compiled(kernel: Any, cfg: IcpConfig, src_xy: NDArray, tgt_xy: NDArray, src_sigma: NDArray | None,
+                    tgt_sigma: NDArray | None, init: ArrayLike | None, t0: float, ns: int, nt: int) -> MatchResult:
+    """:func:`match_points` by one call of the compiled ``p2p_match`` / ``hdl_match`` (the same
+    numbers as the numpy loop and :func:`_finish`), then the shared report :func:`_report`."""
+    th0, g = _pose_parts(init)
+    big = np.inf if cfg.max_corr_dist is None else cfg.max_corr_dist
+    s, t = src_xy.T.copy(), tgt_xy.T.copy()  # contiguous x and y rows
+    clouds = (s[0], s[1], _NO_SIGMA if src_sigma is None else src_sigma, src_sigma is not None,
+              t[0], t[1], _NO_SIGMA if tgt_sigma is None else tgt_sigma, tgt_sigma is not None,
+              cfg.sigma_alpha, cfg.sigma_r_rel)
+    if cfg.variant == "HDL":
+        out = kernel(*clouds, cfg.normals == "knn", cfg.normal_k, cfg.line_max_gap, cfg.huber_c,
+                     cfg.weight_power, big, cfg.tol, cfg.tol_step, cfg.max_iter, th0, g[0], g[1], _GRID_CELL,
+                     cfg.line_flat_power, cfg.line_warmup, cfg.line_max_dist, cfg.inlier_dist)
+    else:
+        out = kernel(*clouds, _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big, cfg.tol,
+                     cfg.tol_step, cfg.max_iter, th0, g[0], g[1], _GRID_CELL, cfg.normal_k // 2,
+                     cfg.line_max_gap, cfg.inlier_dist)
+    th, tx, ty, it, converged, cov, cov_ok, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, radius = out
+    kscale = ksum / dof if n_sel else float("nan")
+    pose = np.array([tx, ty, th])
+    return _report(cfg, pose, cov if cov_ok else None, kscale, res_rms, info, s2, radius, n_use, n_inl / s.shape[1],
+                   it, converged, t0, ns, nt, init)
 
 
 def _target_lines(tgt_xy: NDArray, cfg: IcpConfig, tree: cKDTree | None = None) -> tuple[NDArray, NDArray]:
@@ -609,38 +608,22 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     Degeneracy (:mod:`graphnav.degeneracy`, every variant): weak directions of the point-to-line
     information; there the pose is replaced by ``init``'s and ``weak_sigma^2`` is added to ``cov``.
     """
-    fast = _fast_loop(cfg) is not None
-    big = np.inf if cfg.max_corr_dist is None else cfg.max_corr_dist
-    if fast and cfg.variant == "HDL":
-        from ._icp_fast import hdl_stats
-
-        h, bmat, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl = hdl_stats(
-            *_fast_clouds(src, tgt, False), normals[:, 0].copy(), normals[:, 1].copy(), flat, cfg.huber_c,
-            cfg.weight_power, big, cfg.line_flat_power, cfg.line_max_dist, float(pose[2]), float(pose[0]),
-            float(pose[1]), np.asarray(idx, dtype=np.int64), cfg.inlier_dist)
-        kscale = ksum / dof if n_sel else float("nan")
-        inlier_fraction = n_inl / len(idx)
-    elif fast:
-        from ._icp_fast import p2p_stats
-
-        h, bmat, ksum, dof, n_sel, res_rms, info, n_use, n_inl = p2p_stats(
-            *_fast_clouds(src, tgt, True), _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big,
-            float(pose[2]), float(pose[0]), float(pose[1]), np.asarray(idx, dtype=np.int64), cfg.normal_k // 2,
-            cfg.line_max_gap, cfg.inlier_dist)
-        kscale = ksum / dof if n_sel else float("nan")
-        inlier_fraction = n_inl / len(idx)
-        nrm, fl = scan_order_normals(tgt.xy, cfg.normal_k // 2, cfg.line_max_gap)
-        e = src.xy @ _rot(pose[2]).T + pose[:2] - tgt.xy[idx]
-        inl = np.hypot(e[:, 0], e[:, 1]) <= cfg.inlier_dist
-        s2 = _line_residual_var(e, nrm[idx], inl * fl[idx])
-    else:
-        h, bmat, kscale, res_rms, info, n_use, inlier_fraction, s2 = _terms_numpy(
-            cfg, src, tgt, idx, pose, normals, flat)
-    pose[2] = np.arctan2(np.sin(pose[2]), np.cos(pose[2]))
+    h, bmat, kscale, res_rms, info, n_use, inlier_fraction, s2 = _terms_numpy(cfg, src, tgt, idx, pose, normals, flat)
     try:
         hinv = np.linalg.inv(h)
         cov = kscale * hinv @ bmat @ hinv.T
     except np.linalg.LinAlgError:
+        cov = None
+    return _report(cfg, pose, cov, kscale, res_rms, info, s2, degeneracy.rms_radius(src.xy), n_use,
+                   inlier_fraction, iters, converged, t0, ns, nt, init)
+
+
+def _report(cfg, pose, cov, kscale, res_rms, info, s2, radius, n_use, inlier_fraction, iters, converged, t0,  # noqa: ANN001, ANN202, PLR0913
+            ns, nt, init):
+    """The part of :func:`_finish` shared with the compiled matcher: covariance scaling (``cov``
+    None: ``H`` was singular), degeneracy (the weak directions take ``init``'s pose), the report."""
+    pose[2] = np.arctan2(np.sin(pose[2]), np.cos(pose[2]))
+    if cov is None:
         cov = _BIG_COV.copy()
     scale = COV_SCALE[cfg.variant] if cfg.cov_scale is None else cfg.cov_scale
     cov = 0.5 * (cov + cov.T) * scale + np.diag(np.square(cfg.cov_floor))
@@ -648,7 +631,7 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     # the variant's metric, its predicted covariance inflated as HDL's (the point-to-line scale);
     # along weak directions the pose is the initial guess's and the covariance is inflated
     line_scale = COV_SCALE["HDL"] if cfg.cov_scale is None else cfg.cov_scale
-    deg = degeneracy.analyse(info, s2, degeneracy.rms_radius(src.xy), scale=line_scale,
+    deg = degeneracy.analyse(info, s2, radius, scale=line_scale,
                              max_condition=cfg.max_condition, max_sigma=cfg.max_sigma)
     cond = deg.condition
     degenerate = deg.degenerate

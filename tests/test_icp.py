@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
 import gtsam
 import numpy as np
@@ -319,6 +320,21 @@ a = match_points(src, tgt, IcpConfig(backend="numba", **opts), init=[0.45, -0.15
 b = match_points(src, tgt, IcpConfig(backend="numpy", **opts), init=[0.45, -0.15, 0.03])
 assert np.allclose(a.pose, b.pose, atol=1e-10) and np.allclose(a.cov, b.cov, rtol=1e-8, atol=0)
 assert a.quality["iterations"] == b.quality["iterations"] and a.quality["points_used"] == b.quality["points_used"]
+# the caller's per-point sigmas (and a missing return), equalised counts, a correlation gate tighter
+# than the inlier distance (the residual variance over the pairs used), HDL's beam-order normals
+src_nan = np.vstack([src, [[np.nan, 2.0]]])
+sig = rng.uniform(0.01, 0.05, len(src_nan))
+cases = [("HM", {{}}, sig, 0.02), ("HD", {{"max_corr_dist": 0.05}}, None, None),
+         ("K", {{"equalize": True}}, None, None), ("HDL", {{"equalize": True, "normals": "scan"}}, sig, 0.03)]
+for v, kw, ss, ts in cases:
+    a = match_points(src_nan, tgt[:-7], IcpConfig(variant=v, backend="numba", **kw), init=[0.45, -0.15, 0.03],
+                     src_sigma=ss, tgt_sigma=ts)
+    b = match_points(src_nan, tgt[:-7], IcpConfig(variant=v, backend="numpy", **kw), init=[0.45, -0.15, 0.03],
+                     src_sigma=ss, tgt_sigma=ts)
+    assert np.allclose(a.pose, b.pose, atol=1e-10) and np.allclose(a.cov, b.cov, rtol=1e-8, atol=0), (v, a.pose, b.pose)
+    assert a.quality["iterations"] == b.quality["iterations"] and a.ok == b.ok
+    for k in ("points_used", "inlier_fraction", "residual", "residual_scale", "condition_number", "sigma_weak"):
+        assert np.isclose(a.quality[k], b.quality[k], rtol=1e-8), (v, k, a.quality[k], b.quality[k])
 # HDL on a corridor: degenerate, the guess kept along the corridor, the same inflated covariance
 wall = np.column_stack([np.linspace(-15, 15, 120), np.full(120, 3.0)])
 world = np.vstack([wall, wall * [1, -1]])
@@ -356,7 +372,7 @@ def test_numba_backend_equals_numpy():
     pytest.importorskip("numba")
     from scipy.spatial import cKDTree
 
-    from graphnav._icp_fast import build_grid, knn_line_normals, nearest
+    from graphnav._icp_fast import build_grid, knn_line_normals, nearest, nearest_from
     from graphnav.icp import line_normals
 
     rng = np.random.default_rng(8)
@@ -368,6 +384,11 @@ def test_numba_backend_equals_numpy():
                     for x, y in q])
     assert np.array_equal(got[:, 1].astype(int), i_ref)
     assert np.allclose(got[:, 0], d_ref, atol=1e-12)
+    # the search bounded by a candidate (any target point, near or far) finds the same point
+    j0 = rng.integers(0, len(tgt), len(q))
+    got = np.array([nearest_from(x, y, j, tgt[:, 0].copy(), tgt[:, 1].copy(), grid[0], grid[1], 0.5, *grid[2:])
+                    for (x, y), j in zip(q, j0, strict=True)])
+    assert np.array_equal(got[:, 1].astype(int), i_ref)
     nx, ny, fl = knn_line_normals(tgt[:, 0].copy(), tgt[:, 1].copy(), 12, 0.5)
     n_ref, fl_ref = line_normals(tgt, cKDTree(tgt), 12)
     assert np.allclose(np.column_stack([nx, ny]), n_ref, atol=1e-12) and np.allclose(fl, fl_ref, atol=1e-12)
@@ -382,6 +403,9 @@ def test_numba_backend_equals_numpy():
         assert np.allclose(a.cov, b.cov, rtol=1e-8, atol=0)
         assert a.quality["iterations"] == b.quality["iterations"] and a.ok == b.ok
         assert a.quality["condition_number"] == pytest.approx(b.quality["condition_number"], rel=1e-8)
+    # the uncompiled check's cases (caller sigmas, equalised counts, gates, corridor), compiled
+    here = Path(__file__).resolve().parent
+    exec(_NUMBA_CHECK.format(repo=str(here.parent), tests=str(here)), {})  # noqa: S102
 
 
 @settings(max_examples=15, deadline=None)
