@@ -114,6 +114,33 @@ def nearest_from(px, py, j0, tx, ty, xmin, ymin, h, nx, ny, start, items):
 
 
 @njit(cache=True)
+def weighted_align(px, py, tx, ty, idx, w, n, sw):
+    """Weighted SVD alignment of ``p`` onto ``t[idx]`` in closed form for 2D (eq. 15-20): the
+    rotation ``dth`` and translation ``(dtx, dty)`` with ``t ~ R(dth) p + d``; ``sw`` = sum of ``w``."""
+    mpx = mpy = mqx = mqy = 0.0
+    for i in range(n):
+        mpx += w[i] * px[i]
+        mpy += w[i] * py[i]
+        mqx += w[i] * tx[idx[i]]
+        mqy += w[i] * ty[idx[i]]
+    mpx /= sw
+    mpy /= sw
+    mqx /= sw
+    mqy /= sw
+    sxx = syy = sxy = syx = 0.0
+    for i in range(n):
+        ax, ay = px[i] - mpx, py[i] - mpy
+        bx2, by2 = tx[idx[i]] - mqx, ty[idx[i]] - mqy
+        sxx += w[i] * ax * bx2
+        syy += w[i] * ay * by2
+        sxy += w[i] * ax * by2
+        syx += w[i] * ay * bx2
+    dth = math.atan2(sxy - syx, sxx + syy)
+    cd, sd = math.cos(dth), math.sin(dth)
+    return dth, mqx - (cd * mpx - sd * mpy), mqy - (sd * mpx + cd * mpy)
+
+
+@njit(cache=True)
 def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow,
              max_corr, tol, tol_step, max_iter, th, t0x, t0y, h):
     """Algorithm 1 for variant 0=K, 1=H, 2=HM, 3=HD. Returns (theta, tx, ty, idx, iterations,
@@ -171,29 +198,8 @@ def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, v
             for i in range(n):
                 w[i] = 1.0
             sw = n
-        # eq. 15-20, 2D closed form
-        mpx = mpy = mqx = mqy = 0.0
-        for i in range(n):
-            mpx += w[i] * px[i]
-            mpy += w[i] * py[i]
-            mqx += w[i] * tx[idx[i]]
-            mqy += w[i] * ty[idx[i]]
-        mpx /= sw
-        mpy /= sw
-        mqx /= sw
-        mqy /= sw
-        sxx = syy = sxy = syx = 0.0
-        for i in range(n):
-            ax, ay = px[i] - mpx, py[i] - mpy
-            bx2, by2 = tx[idx[i]] - mqx, ty[idx[i]] - mqy
-            sxx += w[i] * ax * bx2
-            syy += w[i] * ay * by2
-            sxy += w[i] * ax * by2
-            syx += w[i] * ay * bx2
-        dth = math.atan2(sxy - syx, sxx + syy)
+        dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)  # eq. 15-20
         cd, sd = math.cos(dth), math.sin(dth)
-        dtx = mqx - (cd * mpx - sd * mpy)
-        dty = mqy - (sd * mpx + cd * mpy)
         # eq. 21-22
         nxx = cd * t_x - sd * t_y + dtx
         nyy = sd * t_x + cd * t_y + dty
@@ -500,29 +506,11 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
         hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
                     huber_c, wpow, max_corr, flat_pow, line_max_dist, warm, w)
         if warm:  # eq. 15-20, 2D closed form
-            sw = mpx = mpy = mqx = mqy = 0.0
+            sw = 0.0
             for i in range(n):
                 sw += w[i]
-                mpx += w[i] * px[i]
-                mpy += w[i] * py[i]
-                mqx += w[i] * tx[idx[i]]
-                mqy += w[i] * ty[idx[i]]
-            mpx /= sw
-            mpy /= sw
-            mqx /= sw
-            mqy /= sw
-            sxx = syy = sxy = syx = 0.0
-            for i in range(n):
-                ax, ay = px[i] - mpx, py[i] - mpy
-                bx2, by2 = tx[idx[i]] - mqx, ty[idx[i]] - mqy
-                sxx += w[i] * ax * bx2
-                syy += w[i] * ay * by2
-                sxy += w[i] * ax * by2
-                syx += w[i] * ay * bx2
-            dth = math.atan2(sxy - syx, sxx + syy)
+            dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)
             cd, sd = math.cos(dth), math.sin(dth)
-            dtx = mqx - (cd * mpx - sd * mpy)
-            dty = mqy - (sd * mpx + cd * mpy)
         else:  # one Gauss-Newton step of sum w (n.(p' - q))^2 (graphnav.icp._p2l_step)
             hm[:] = 0.0
             bv[:] = 0.0

@@ -50,6 +50,10 @@ def test_closed_form_alignment_equals_weighted_svd(seed, th):
     th_cf, t_cf = weighted_align(p, q, w)
     assert np.arctan2(r_svd[1, 0], r_svd[0, 0]) == pytest.approx(th_cf, abs=1e-9)
     assert np.allclose(t_svd, t_cf, atol=1e-9)
+    fast = pytest.importorskip("graphnav._icp_fast")  # the compiled loops' copy, run uncompiled
+    idx = np.arange(30)
+    th_k, tx_k, ty_k = fast.weighted_align.py_func(p[:, 0], p[:, 1], q[:, 0], q[:, 1], idx, w, 30, w.sum())
+    assert th_k == pytest.approx(th_cf, abs=1e-9) and np.allclose([tx_k, ty_k], t_cf, atol=1e-9)
 
 
 def test_config_rejects_unknown_variant():
