@@ -114,6 +114,38 @@ def nearest_from(px, py, j0, tx, ty, xmin, ymin, h, nx, ny, start, items):
 
 
 @njit(cache=True)
+def moved_pairs(sx, sy, tx, ty, idx, c, s, t_x, t_y, n):
+    """Source points moved by ``(R(c, s), t)`` and their distances to the matched target points."""
+    px = np.empty(n)
+    py = np.empty(n)
+    d = np.empty(n)
+    for i in range(n):
+        px[i] = c * sx[i] - s * sy[i] + t_x
+        py[i] = s * sx[i] + c * sy[i] + t_y
+        d[i] = math.sqrt((px[i] - tx[idx[i]]) ** 2 + (py[i] - ty[idx[i]]) ** 2)
+    return px, py, d
+
+
+@njit(cache=True)
+def rms_radius(sx, sy, n):
+    """RMS distance of the points from their centroid (1 for a degenerate cloud): the length that
+    makes rotation commensurate with translation in the degeneracy test."""
+    msx = msy = 0.0
+    for i in range(n):
+        msx += sx[i]
+        msy += sy[i]
+    msx /= n
+    msy /= n
+    lsc = 0.0
+    for i in range(n):
+        lsc += (sx[i] - msx) ** 2 + (sy[i] - msy) ** 2
+    lsc = math.sqrt(lsc / n)
+    if not lsc > 0:
+        lsc = 1.0
+    return lsc
+
+
+@njit(cache=True)
 def weighted_align(px, py, tx, ty, idx, w, n, sw):
     """Weighted SVD alignment of ``p`` onto ``t[idx]`` in closed form for 2D (eq. 15-20): the
     rotation ``dth`` and translation ``(dtx, dty)`` with ``t ~ R(dth) p + d``; ``sw`` = sum of ``w``."""
@@ -281,27 +313,10 @@ def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, 
     the source's RMS radius."""
     n = sx.shape[0]
     c, s = math.cos(th), math.sin(th)
-    px = np.empty(n)
-    py = np.empty(n)
-    d = np.empty(n)
-    for i in range(n):
-        px[i] = c * sx[i] - s * sy[i] + t_x
-        py[i] = s * sx[i] + c * sy[i] + t_y
-        d[i] = math.sqrt((px[i] - tx[idx[i]]) ** 2 + (py[i] - ty[idx[i]]) ** 2)
+    px, py, d = moved_pairs(sx, sy, tx, ty, idx, c, s, t_x, t_y, n)
     khu = huber_c * np.median(d)
     nx_, ny_, fl = scan_order_normals(tx, ty, half, max_gap)
-    msx = msy = 0.0
-    for i in range(n):
-        msx += sx[i]
-        msy += sy[i]
-    msx /= n
-    msy /= n
-    lsc = 0.0
-    for i in range(n):
-        lsc += (sx[i] - msx) ** 2 + (sy[i] - msy) ** 2
-    lsc = math.sqrt(lsc / n)
-    if not lsc > 0:
-        lsc = 1.0
+    lsc = rms_radius(sx, sy, n)
     h = np.zeros((3, 3))
     b = np.zeros((3, 3))
     info = np.zeros((3, 3))
@@ -563,28 +578,11 @@ def hdl_stats(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, 
     RMS radius."""
     n = sx.shape[0]
     c, s = math.cos(th), math.sin(th)
-    px = np.empty(n)
-    py = np.empty(n)
-    d = np.empty(n)
-    for i in range(n):
-        px[i] = c * sx[i] - s * sy[i] + t_x
-        py[i] = s * sx[i] + c * sy[i] + t_y
-        d[i] = math.sqrt((px[i] - tx[idx[i]]) ** 2 + (py[i] - ty[idx[i]]) ** 2)
+    px, py, d = moved_pairs(sx, sy, tx, ty, idx, c, s, t_x, t_y, n)
     w = np.empty(n)
     hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
                 huber_c, wpow, max_corr, flat_pow, line_max_dist, False, w)
-    msx = msy = 0.0
-    for i in range(n):
-        msx += sx[i]
-        msy += sy[i]
-    msx /= n
-    msy /= n
-    lsc = 0.0
-    for i in range(n):
-        lsc += (sx[i] - msx) ** 2 + (sy[i] - msy) ** 2
-    lsc = math.sqrt(lsc / n)
-    if not lsc > 0:
-        lsc = 1.0
+    lsc = rms_radius(sx, sy, n)
     h = np.zeros((3, 3))
     b = np.zeros((3, 3))
     info = np.zeros((3, 3))
