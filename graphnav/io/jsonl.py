@@ -53,6 +53,8 @@ def _open_text(path: Path, mode: str) -> TextIO:
 
 
 def _num(obj: dict, name: str) -> float:
+    if name not in obj:
+        raise LogError(f"missing in a '{obj.get('type', '?')}' record", field=name)
     v = obj[name]
     if isinstance(v, bool) or not isinstance(v, int | float):
         raise LogError(f"expected a number, got {json.dumps(v)[:40]}", field=name)
