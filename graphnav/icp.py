@@ -531,8 +531,9 @@ def _pair_cov(src: _Cloud, tgt: _Cloud, idx: NDArray, r: NDArray) -> tuple[NDArr
 
 
 def _terms_numpy(cfg, src, tgt, idx, pose, normals, flat):  # noqa: ANN001, ANN202
-    """``H``, ``B``, residual scale, RMS residual, point-to-line information, pairs used and
-    inlier fraction at the solution (see :func:`_finish`)."""
+    """``H``, ``B``, residual scale, RMS residual, point-to-line information, pairs used,
+    inlier fraction, residual variance along the normals and the source's RMS radius at the
+    solution (see :func:`_finish`)."""
     r = _rot(pose[2])
     p = src.xy @ r.T + pose[:2]
     q = tgt.xy[idx]  # the last iteration's pairs (the last increment moved no point > tol_step)
@@ -580,12 +581,11 @@ def _terms_numpy(cfg, src, tgt, idx, pose, normals, flat):  # noqa: ANN001, ANN2
         res_rms = float(np.sqrt(np.sum(w * np.sum(e**2, 1)) / np.sum(w)))
     # degeneracy: the point-to-line information (what the geometry constrains), rotation scaled by
     # the cloud's RMS radius so that the condition number is unit-free
-    ps = src.xy
-    lsc = float(np.sqrt(np.mean(np.sum((ps - ps.mean(0)) ** 2, 1)))) or 1.0
+    lsc = degeneracy.rms_radius(src.xy)
     jl[:, 2] /= lsc
     info = (jl * (sel * fl)[:, None]).T @ jl
     s2 = _line_residual_var(e, n, sel * fl)
-    return h, bmat, kscale, res_rms, info, int(use.sum()), float(inl.mean()), s2
+    return h, bmat, kscale, res_rms, info, int(use.sum()), float(inl.mean()), s2, lsc
 
 
 def _line_residual_var(e: NDArray, n: NDArray, f: NDArray) -> float:
@@ -608,13 +608,14 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     Degeneracy (:mod:`graphnav.degeneracy`, every variant): weak directions of the point-to-line
     information; there the pose is replaced by ``init``'s and ``weak_sigma^2`` is added to ``cov``.
     """
-    h, bmat, kscale, res_rms, info, n_use, inlier_fraction, s2 = _terms_numpy(cfg, src, tgt, idx, pose, normals, flat)
+    h, bmat, kscale, res_rms, info, n_use, inlier_fraction, s2, radius = _terms_numpy(
+        cfg, src, tgt, idx, pose, normals, flat)
     try:
         hinv = np.linalg.inv(h)
         cov = kscale * hinv @ bmat @ hinv.T
     except np.linalg.LinAlgError:
         cov = None
-    return _report(cfg, pose, cov, kscale, res_rms, info, s2, degeneracy.rms_radius(src.xy), n_use,
+    return _report(cfg, pose, cov, kscale, res_rms, info, s2, radius, n_use,
                    inlier_fraction, iters, converged, t0, ns, nt, init)
 
 
