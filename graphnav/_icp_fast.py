@@ -403,7 +403,7 @@ def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, 
             for r_ in range(3):
                 for q_ in range(3):
                     info[r_, q_] += fl[j] * jl[r_] * jl[q_]
-            rn = ex * nxj + ey * nyj  # residual along the normal (graphnav.icp._line_residual_var)
+            rn = ex * nxj + ey * nyj  # residual along the normal (graphnav.degeneracy.residual_var)
             sf += fl[j]
             sfr += fl[j] * rn * rn
     res_rms = math.sqrt(swe / sw) if sw > 0 else np.nan

@@ -130,10 +130,16 @@ def line_information(src_xy: NDArray[np.float64], pose: NDArray[np.float64], tgt
     f = np.nan_to_num(tgt_flat[idx])
     rows = line_rows(p, pose[:2], rot, n, radius)
     info = (rows * f[:, None]).T @ rows
-    rn = np.einsum("ij,ij->i", p - tgt_xy[idx], n)
+    return info, residual_var(p - tgt_xy[idx], n, f), radius
+
+
+def residual_var(e: NDArray[np.float64], normals: NDArray[np.float64], f: NDArray[np.float64]) -> float:
+    """``s2``: the variance of the pair residuals ``e`` (N, 2) along the target ``normals``,
+    weighted by ``f`` (flatness, 0 for pairs left out), 3 degrees of freedom taken (NaN when the
+    weights sum to 3 or less)."""
+    rn = np.einsum("ij,ij->i", e, normals)
     sf = float(f.sum())
-    s2 = float(np.sum(f * rn * rn) / (sf - 3.0)) if sf > 3.0 else float("nan")
-    return info, s2, radius
+    return float(np.sum(f * rn * rn) / (sf - 3.0)) if sf > 3.0 else float("nan")
 
 
 def flatness(evals: NDArray[np.float64]) -> NDArray[np.float64]:

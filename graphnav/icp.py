@@ -584,15 +584,8 @@ def _terms_numpy(cfg, src, tgt, idx, pose, normals, flat):  # noqa: ANN001, ANN2
     lsc = degeneracy.rms_radius(src.xy)
     jl[:, 2] /= lsc
     info = (jl * (sel * fl)[:, None]).T @ jl
-    s2 = _line_residual_var(e, n, sel * fl)
+    s2 = degeneracy.residual_var(e, n, sel * fl)
     return h, bmat, kscale, res_rms, info, int(use.sum()), float(inl.mean()), s2, lsc
-
-
-def _line_residual_var(e: NDArray, n: NDArray, f: NDArray) -> float:
-    """Variance of the residuals along the target normals, weighted by ``f`` (flatness x inlier)."""
-    rn = np.einsum("ij,ij->i", e, n)
-    sf = float(f.sum())
-    return float(np.sum(f * rn * rn) / (sf - 3.0)) if sf > 3.0 else float("nan")
 
 
 def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, nt, init=None):  # noqa: ANN001, ANN202
