@@ -52,29 +52,25 @@ class MotionGuess:
     def _odo(self, t0: float, t1: float) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
         return None if self.odometry is None else increment(self.odometry, t0, t1)
 
+    def _odo_guess(self, t0: float, t1: float) -> NDArray[np.float64] | None:
+        odo = self._odo(t0, t1)
+        return None if odo is None else odo[0]
+
     def guess(self, t0: float, t1: float) -> NDArray[np.float64] | None:
         """Initial ``(dx, dy, dyaw)`` for the match of the scan at ``t1`` to the scan at ``t0``
         (``None``: identity)."""
         self.source = "none"
         if self.mode == "zero":
             return None
-        if self.mode == "odometry":
-            odo = self._odo(t0, t1)
-            if odo is not None:
-                self.source = "odometry"
-                return odo[0]
-        g = self._cv(t0, t1, fresh_only=True)
-        if g is not None:
-            self.source = "cv"
-            return g
-        odo = self._odo(t0, t1)
-        if odo is not None:
-            self.source = "odometry"
-            return odo[0]
-        g = self._cv(t0, t1, fresh_only=False)
-        if g is not None:
-            self.source = "stale-cv"
-        return g
+        fresh = ("cv", lambda: self._cv(t0, t1, fresh_only=True))
+        odo = ("odometry", lambda: self._odo_guess(t0, t1))
+        stale = ("stale-cv", lambda: self._cv(t0, t1, fresh_only=False))
+        for source, make in (odo, fresh, stale) if self.mode == "odometry" else (fresh, odo, stale):
+            g = make()
+            if g is not None:
+                self.source = source
+                return g
+        return None
 
     def update(self, result: MatchResult, t0: float, t1: float) -> None:
         """Feed the match of the pair ``(t0, t1)``; only a good one (``ok``) is remembered."""
