@@ -173,33 +173,53 @@ def weighted_align(px, py, tx, ty, idx, w, n, sw):
 
 
 @njit(cache=True)
+def loop_start(sx, sy, tx, ty, h):
+    """What both loops set up: the target's grid (:func:`build_grid`), the work arrays ``d``, ``idx``,
+    ``w``, ``px``, ``py`` and the source's largest range (a step's bound on a point's motion)."""
+    n = sx.shape[0]
+    xmin, ymin, nx, ny, start, items = build_grid(tx, ty, h)
+    src_r = 0.0
+    for i in range(n):
+        src_r = max(src_r, math.sqrt(sx[i] * sx[i] + sy[i] * sy[i]))
+    return (xmin, ymin, nx, ny, start, items, np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n),
+            np.empty(n), src_r)
+
+
+@njit(cache=True)
+def move_and_match(sx, sy, c, s, t_x, t_y, first, tx, ty, xmin, ymin, h, nx, ny, start, items, px, py, d, idx):
+    """Source points moved by ``(R(c, s), t)`` into ``px``, ``py`` and their nearest target points
+    into ``d``, ``idx``: a full search on the ``first`` iteration, else bounded by the last match
+    (the points moved little)."""
+    for i in range(sx.shape[0]):
+        px[i] = c * sx[i] - s * sy[i] + t_x
+        py[i] = s * sx[i] + c * sy[i] + t_y
+        if first:
+            d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+        else:
+            d[i], idx[i] = nearest_from(px[i], py[i], idx[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+
+
+@njit(cache=True)
+def step_pose(th, t_x, t_y, dth, dtx, dty):
+    """Eq. 21-22: the pose after the left increment ``(dth, dtx, dty)``."""
+    cd, sd = math.cos(dth), math.sin(dth)
+    return th + dth, cd * t_x - sd * t_y + dtx, sd * t_x + cd * t_y + dty
+
+
+@njit(cache=True)
 def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow,
              max_corr, tol, tol_step, max_iter, th, t0x, t0y, h):
     """Algorithm 1 for variant 0=K, 1=H, 2=HM, 3=HD. Returns (theta, tx, ty, idx, iterations,
     converged)."""
     n = sx.shape[0]
-    xmin, ymin, nx, ny, start, items = build_grid(tx, ty, h)
-    d = np.empty(n)
-    idx = np.empty(n, np.int64)
-    w = np.empty(n)
-    px = np.empty(n)
-    py = np.empty(n)
-    src_r = 0.0
-    for i in range(n):
-        src_r = max(src_r, math.sqrt(sx[i] * sx[i] + sy[i] * sy[i]))
+    xmin, ymin, nx, ny, start, items, d, idx, w, px, py, src_r = loop_start(sx, sy, tx, ty, h)
     t_x, t_y = t0x, t0y
     old_res = -1.0
     converged = False
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007
         c, s = math.cos(th), math.sin(th)
-        for i in range(n):
-            px[i] = c * sx[i] - s * sy[i] + t_x
-            py[i] = s * sx[i] + c * sy[i] + t_y
-            if it == 1:
-                d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
-            else:  # the last match bounds the search (the points moved little)
-                d[i], idx[i] = nearest_from(px[i], py[i], idx[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+        move_and_match(sx, sy, c, s, t_x, t_y, it == 1, tx, ty, xmin, ymin, h, nx, ny, start, items, px, py, d, idx)
         khu = huber_c * np.median(d)
         sw = 0.0
         for i in range(n):
@@ -231,12 +251,7 @@ def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, v
                 w[i] = 1.0
             sw = n
         dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)  # eq. 15-20
-        cd, sd = math.cos(dth), math.sin(dth)
-        # eq. 21-22
-        nxx = cd * t_x - sd * t_y + dtx
-        nyy = sd * t_x + cd * t_y + dty
-        t_x, t_y = nxx, nyy
-        th += dth
+        th, t_x, t_y = step_pose(th, t_x, t_y, dth, dtx, dty)
         new_res = 0.0
         for i in range(n):
             new_res += d[i]
@@ -493,15 +508,7 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
     ``warmup``, then Gauss-Newton steps of the point-to-line cost. Returns (theta, tx, ty, idx,
     iterations, converged), as :func:`p2p_loop`."""
     n = sx.shape[0]
-    xmin, ymin, nx, ny, start, items = build_grid(tx, ty, h)
-    d = np.empty(n)
-    idx = np.empty(n, np.int64)
-    w = np.empty(n)
-    px = np.empty(n)
-    py = np.empty(n)
-    src_r = 0.0
-    for i in range(n):
-        src_r = max(src_r, math.sqrt(sx[i] * sx[i] + sy[i] * sy[i]))
+    xmin, ymin, nx, ny, start, items, d, idx, w, px, py, src_r = loop_start(sx, sy, tx, ty, h)
     t_x, t_y = t0x, t0y
     old_res = -1.0
     converged = False
@@ -511,13 +518,7 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
     bv = np.empty(3)
     for it in range(1, max_iter + 1):  # noqa: B007
         c, s = math.cos(th), math.sin(th)
-        for i in range(n):
-            px[i] = c * sx[i] - s * sy[i] + t_x
-            py[i] = s * sx[i] + c * sy[i] + t_y
-            if it == 1:
-                d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
-            else:  # the last match bounds the search (the points moved little)
-                d[i], idx[i] = nearest_from(px[i], py[i], idx[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+        move_and_match(sx, sy, c, s, t_x, t_y, it == 1, tx, ty, xmin, ymin, h, nx, ny, start, items, px, py, d, idx)
         hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
                     huber_c, wpow, max_corr, flat_pow, line_max_dist, warm, w)
         if warm:  # eq. 15-20, 2D closed form
@@ -525,7 +526,6 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
             for i in range(n):
                 sw += w[i]
             dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)
-            cd, sd = math.cos(dth), math.sin(dth)
         else:  # one Gauss-Newton step of sum w (n.(p' - q))^2 (graphnav.icp._p2l_step)
             hm[:] = 0.0
             bv[:] = 0.0
@@ -547,12 +547,7 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
             hm[1, 0], hm[2, 0], hm[2, 1] = hm[0, 1], hm[0, 2], hm[1, 2]
             x = _solve3(hm, bv)
             dth, dtx, dty = x[2], x[0], x[1]
-            cd, sd = math.cos(dth), math.sin(dth)
-        # eq. 21-22
-        nxx = cd * t_x - sd * t_y + dtx
-        nyy = sd * t_x + cd * t_y + dty
-        t_x, t_y = nxx, nyy
-        th += dth
+        th, t_x, t_y = step_pose(th, t_x, t_y, dth, dtx, dty)
         new_res = 0.0
         for i in range(n):
             new_res += d[i]
