@@ -320,6 +320,21 @@ def scan_order_normals(tx, ty, half, max_gap):
 
 
 @njit(cache=True)
+def pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2):
+    """Eq. 8 covariance ``(sxx, sxy, syy)`` of pair ``(i, j)``: source point ``i`` rotated by
+    ``R(c, s)`` plus target point ``j`` (:func:`graphnav.icp._pair_cov`)."""
+    ux = c * sux[i] - s * suy[i]
+    uy = s * sux[i] + c * suy[i]
+    dsv = sb2[i] - sa2[i]
+    dtv = tb2[j] - ta2[j]
+    a2 = sa2[i] + ta2[j]
+    sxx = a2 + dsv * ux * ux + dtv * tux[j] * tux[j]
+    syy = a2 + dsv * uy * uy + dtv * tuy[j] * tuy[j]
+    sxy = dsv * ux * uy + dtv * tux[j] * tuy[j]
+    return sxx, sxy, syy
+
+
+@njit(cache=True)
 def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow,
               max_corr, th, t_x, t_y, idx, half, max_gap, inlier_dist):
     """The terms of :func:`graphnav.icp._finish` for K/H/HM/HD: ``H``, ``B``, the residual scale's
@@ -380,14 +395,7 @@ def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, 
         wi = ws[i]
         ex, ey = px[i] - tx[j], py[i] - ty[j]
         if variant >= 2:  # eq. 8 pair covariance: source rotated + target
-            ux = c * sux[i] - s * suy[i]
-            uy = s * sux[i] + c * suy[i]
-            dsv = sb2[i] - sa2[i]
-            dtv = tb2[j] - ta2[j]
-            a2 = sa2[i] + ta2[j]
-            sxx = a2 + dsv * ux * ux + dtv * tux[j] * tux[j]
-            syy = a2 + dsv * uy * uy + dtv * tuy[j] * tuy[j]
-            sxy = dsv * ux * uy + dtv * tux[j] * tuy[j]
+            sxx, sxy, syy = pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2)
         else:
             sxx, sxy, syy = 1.0, 0.0, 1.0
         c2x, c2y = -(py[i] - t_y), px[i] - t_x
@@ -594,14 +602,7 @@ def hdl_stats(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, 
         ex, ey = px[i] - tx[j], py[i] - ty[j]
         nxj, nyj = nrx[j], nry[j]
         # eq. 8 pair covariance (source rotated + target), projected on the normal
-        ux = c * sux[i] - s * suy[i]
-        uy = s * sux[i] + c * suy[i]
-        dsv = sb2[i] - sa2[i]
-        dtv = tb2[j] - ta2[j]
-        a2 = sa2[i] + ta2[j]
-        sxx = a2 + dsv * ux * ux + dtv * tux[j] * tux[j]
-        syy = a2 + dsv * uy * uy + dtv * tuy[j] * tuy[j]
-        sxy = dsv * ux * uy + dtv * tux[j] * tuy[j]
+        sxx, sxy, syy = pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2)
         vi = sxx * nxj * nxj + 2 * sxy * nxj * nyj + syy * nyj * nyj
         res = ex * nxj + ey * nyj
         jl[0] = nxj * c + nyj * s
