@@ -60,7 +60,7 @@ class EkfOnline:
         x0, P0, self.anchor = initial_state(self.pending, self.speed)
         self.stepper = st = EkfStepper(x0, P0, motion=self.motion, **self.options)
         for r in self.pending:
-            if st.step(r) and isinstance(r, Gnss):
+            if st.step(r) and isinstance(r, Gnss) and st.use_gnss:  # as in add: an unused fix is none
                 self.last_fix_t = r.t
         self.pending.clear()
 

@@ -76,6 +76,15 @@ def test_one_estimate_per_fix_and_dead_reckoning_in_an_outage():
     assert np.sqrt(np.mean(err**2)) < 1.5  # GNSS sigma 1.5 m per axis, 15 s of dead reckoning
 
 
+def test_without_gnss_updates_every_record_is_an_outage_from_the_start():
+    """``use_gnss=False``: the fixes held for the start are no more fixes than the later ones, so
+    the output does not wait ``outage_s`` after them."""
+    log = harbour_trial(duration=5.0, rate=5.0)
+    est = EkfOnline(use_gnss=False)
+    t = np.array([e.t for r in log.records if (e := est.add(r)) is not None])
+    assert len(t) and t[0] < log.t0 + 0.5
+
+
 def test_late_records_are_counted_and_ignored():
     log = harbour_trial(duration=5.0, rate=5.0)
     est = EkfOnline()
