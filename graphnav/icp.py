@@ -335,19 +335,34 @@ def _finite(xy: NDArray, sigma: NDArray | None) -> tuple[NDArray, NDArray | None
     return xy[keep], None if sigma is None else sigma[keep]
 
 
+_COMPILED: list[Any] = []  # after the first look: [(p2p_match, hdl_match)], or [the ImportError]
+
+
+def _compiled() -> tuple[Any, Any] | ImportError:
+    """The compiled matcher's entry points, imported once: a failed import is not retried on every
+    match (without numba it cost ~8 ms a call, as much as a match)."""
+    if not _COMPILED:
+        try:
+            from ._icp_fast import hdl_match, p2p_match
+        except ImportError as exc:
+            _COMPILED.append(exc)
+        else:
+            _COMPILED.append((p2p_match, hdl_match))
+    return _COMPILED[0]
+
+
 def _fast_kernels(cfg: IcpConfig) -> Any:
     """The compiled matcher when it applies (k-d-tree-equivalent exact matching: K/H/HM/HD
     ``p2p_match``, HDL ``hdl_match``) and numba is importable (backend "auto" or "numba"); else None
     (the numpy loop)."""
     if cfg.backend == "numpy" or cfg.matching != "kdtree":
         return None
-    try:
-        from ._icp_fast import hdl_match, p2p_match
-    except ImportError:
+    kernels = _compiled()
+    if isinstance(kernels, ImportError):
         if cfg.backend == "numba":
-            raise
+            raise kernels.with_traceback(None)
         return None
-    return hdl_match if cfg.variant == "HDL" else p2p_match
+    return kernels[1] if cfg.variant == "HDL" else kernels[0]
 
 
 def _match_compiled(kernel: Any, cfg: IcpConfig, src_xy: NDArray, tgt_xy: NDArray, src_sigma: NDArray | None,

@@ -465,7 +465,10 @@ def test_backend_auto_falls_back_to_numpy_without_numba(monkeypatch):
     imported; ``"numba"`` then fails loudly."""
     import sys
 
+    import graphnav.icp
+
     monkeypatch.setitem(sys.modules, "graphnav._icp_fast", None)  # import -> ImportError
+    monkeypatch.setattr(graphnav.icp, "_COMPILED", [])  # the import is tried once per process: again here
     rng = np.random.default_rng(3)
     world = even_points(room(), 0.5)
     src = observe(world, (0.2, 0.1, 0.02), rng, 0.004, 0.003)
