@@ -56,6 +56,17 @@ def test_online_is_the_batch_filter_when_anchored_by_the_first_fix():
     assert est.info()["anchor"] == batch.info["anchor"] == "gnss"
 
 
+def test_online_is_the_batch_filter_with_icp_motion():
+    """``motion="icp"``: the state moves at scans only, but each estimate carries its record's time
+    (it carried the last scan's)."""
+    log = harbour_trial(duration=6.0, rate=5.0, scans=True, scan_hz=1.0)
+    batch = run_ekf(log, motion="icp")
+    est = EkfOnline(motion="icp", emit="all")
+    t, poses = last_per_time(run_online(log, est))
+    np.testing.assert_array_equal(t, batch.trajectory.t[1:])
+    np.testing.assert_array_equal(poses, batch.trajectory.poses[1:])
+
+
 def test_one_estimate_per_fix_and_dead_reckoning_in_an_outage():
     log = harbour_trial(duration=40.0, rate=5.0, seed=1)
     t0 = log.t0

@@ -216,7 +216,7 @@ class EkfStepper:
         self.use_gnss, self.use_heading = use_gnss, use_heading
         self.icp_inflate = icp_inflate
         self.match = match
-        self.t: float | None = None  # time the state refers to
+        self.t: float | None = None  # time of the latest record taken (the state is reported at it)
         self.u: Odometry | None = None  # the held control
         self.prev_scan: Scan | None = None
         self.last_inc, self.last_cov = np.zeros(3), np.eye(3)
@@ -245,9 +245,9 @@ class EkfStepper:
             self.t = r.t
             return True
         t0 = time.perf_counter()
-        if r.t > self.t and self.motion == "odometry":
+        if r.t > self.t:  # (with ICP motion the state only moves at scans, but it is reported at r.t)
             u = self.u
-            if u is not None:
+            if u is not None and self.motion == "odometry":
                 f.predict_odometry(u.v, u.w, r.t - self.t, _sig(u.sigma_v, self.sigma_v),
                                    _sig(u.sigma_w, self.sigma_w), self.sigma_acc)
             self.t = r.t
