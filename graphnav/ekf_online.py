@@ -14,7 +14,7 @@ the batch filter's (``tests/test_ekf_online.py``).
 from __future__ import annotations
 
 import math
-from collections import deque
+from collections import Counter, deque
 from typing import Any
 
 import numpy as np
@@ -40,21 +40,36 @@ class EkfOnline:
         EkfStepper(np.zeros(3), np.eye(3), motion=motion, **self.options)  # validate the options now
         self.stepper: EkfStepper | None = None
         self.pending: deque[Record] = deque(maxlen=10_000)
+        self.held: Counter[type] = Counter()  # kinds of the held records
+        self.t_first_fix: float | None = None  # time of the first held fix or pose prior
         self.anchor: str | None = None
         self.last_fix_t = -math.inf
         self.last_emit_t = -math.inf
-        self.counts = {"gnss": 0, "heading": 0, "odometry": 0, "scan": 0, "late": 0, "other": 0}
+        self.counts = {"gnss": 0, "heading": 0, "odometry": 0, "scan": 0, "late": 0, "other": 0,
+                       "dropped_before_start": 0}
 
     # -- initialisation
+    def _hold(self, record: Record) -> None:
+        """Keep a record until the filter starts (the newest ``pending.maxlen``; the held kinds and
+        the first held fix are kept up to date, so :meth:`_ready` is O(1))."""
+        if len(self.pending) == self.pending.maxlen:  # no fix for so many records: keep the newest
+            old = self.pending.popleft()
+            self.counts["dropped_before_start"] += 1
+            self.held[type(old)] -= 1
+            if old.t == self.t_first_fix and isinstance(old, Gnss | PosePrior):
+                self.t_first_fix = next((r.t for r in self.pending if isinstance(r, Gnss | PosePrior)), None)
+        self.pending.append(record)
+        self.held[type(record)] += 1
+        if self.t_first_fix is None and isinstance(record, Gnss | PosePrior):
+            self.t_first_fix = record.t
+
     def _ready(self, t_now: float) -> bool:
         """Whether the held records (all older than ``t_now``) are enough to start."""
-        kinds = {type(r) for r in self.pending}
-        t_fix = next((r.t for r in self.pending if isinstance(r, Gnss | PosePrior)), None)
-        if t_fix is None:
+        if self.t_first_fix is None:
             return False
-        if t_now - t_fix >= self.init_wait:
+        if t_now - self.t_first_fix >= self.init_wait:
             return True
-        return (PosePrior in kinds or Heading in kinds) and (not self.speed or Odometry in kinds)
+        return (self.held[PosePrior] > 0 or self.held[Heading] > 0) and (not self.speed or self.held[Odometry] > 0)
 
     def _start(self) -> None:
         x0, P0, self.anchor = initial_state(self.pending, self.speed)
@@ -63,6 +78,8 @@ class EkfOnline:
             if st.step(r) and isinstance(r, Gnss) and st.use_gnss:  # as in add: an unused fix is none
                 self.last_fix_t = r.t
         self.pending.clear()
+        self.held.clear()
+        self.t_first_fix = None
 
     # -- the interface
     def add(self, record: Record) -> Estimate | None:
@@ -70,7 +87,7 @@ class EkfOnline:
         if self.stepper is None:
             if not (self.pending and record.t > self.pending[-1].t + 1e-9 and self._ready(record.t)):
                 self.counts[kind] += 1
-                self.pending.append(record)
+                self._hold(record)
                 return None
             self._start()  # the first epoch is complete: start, then take this record
         st = self.stepper

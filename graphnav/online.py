@@ -59,13 +59,6 @@ class OnlineEstimator(Protocol):
     def add(self, record: Record) -> Estimate | None: ...
 
 
-def unicycle_increment(v: float, w: float, dt: float) -> NDArray[np.float64]:
-    """Body-frame pose increment (dx, dy, dyaw) for constant (v, w) over dt (beacon paper eq. 3,
-    integrated exactly: :func:`factors.odometry_increment`)."""
-    d, _ = F.odometry_increment(v, w, dt, 0.0, 0.0)
-    return np.array([d.x(), d.y(), d.theta()])
-
-
 class GraphOnline:
     """Minimal online factor graph (see the module docstring). Options (all have defaults):
 

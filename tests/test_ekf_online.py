@@ -19,7 +19,7 @@ from graphnav.ekf_online import EkfOnline
 from graphnav.estimators.ekf import run_ekf
 from graphnav.geodesy import LocalFrame
 from graphnav.io import load_log
-from graphnav.log import Gnss, NavLog
+from graphnav.log import Gnss, Heading, NavLog
 from graphnav.metrics import ate
 from graphnav.online import make_online, run_online
 from graphnav.replay import replay
@@ -165,3 +165,12 @@ def test_live_cli_with_the_ekf_publishes_parseable_nmea(tmp_path):
     rms = lambda e: float(np.sqrt(np.mean(np.square(e))))  # noqa: E731
     assert rms(err) <= 1.2 * rms(off_err) + 0.05, (rms(err), rms(off_err))  # the NMEA path costs ~nothing
     assert rms(err) < 1.5  # inside the GNSS noise (1.5 m per axis)
+
+
+def test_records_held_before_the_first_fix_are_bounded_and_counted():
+    est = EkfOnline()
+    n = est.pending.maxlen + 5
+    for k in range(n):
+        assert est.add(Heading(0.1 * k, 0.3, 0.02)) is None  # no fix yet: held, nothing estimated
+    assert len(est.pending) == est.pending.maxlen and est.counts["dropped_before_start"] == 5
+    assert est.counts["heading"] == n

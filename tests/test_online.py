@@ -8,17 +8,20 @@ import numpy as np
 import pytest
 from _harbour import harbour_trial
 
+import factors as F
 from graphnav.estimators.dead_reckoning import unicycle_step
 from graphnav.log import Gnss, Heading, NavLog, Odometry
 from graphnav.metrics import ate
-from graphnav.online import GraphOnline, make_online, run_online, unicycle_increment
+from graphnav.online import GraphOnline, make_online, run_online
 
 
 @pytest.mark.parametrize("v,w,dt", [(2.0, 0.0, 0.1), (2.0, 0.3, 1.0), (-1.0, -0.05, 2.0), (0.0, 0.2, 0.5)])
-def test_unicycle_increment_matches_dead_reckoning(v, w, dt):
+def test_motion_model_increment_matches_dead_reckoning(v, w, dt):
+    """The online graph's motion model (factors.odometry_increment, eq. 3 integrated exactly)."""
     pose = np.array([1.0, -2.0, 0.7])
     ref = unicycle_step(pose, v, w, dt)
-    inc = unicycle_increment(v, w, dt)
+    d, _ = F.odometry_increment(v, w, dt, 0.0, 0.0)
+    inc = [d.x(), d.y(), d.theta()]
     c, s = math.cos(pose[2]), math.sin(pose[2])
     got = pose + [c * inc[0] - s * inc[1], s * inc[0] + c * inc[1], inc[2]]
     np.testing.assert_allclose(got[:2], ref[:2], atol=1e-9)
