@@ -252,16 +252,22 @@ def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, v
             sw = n
         dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)  # eq. 15-20
         th, t_x, t_y = step_pose(th, t_x, t_y, dth, dtx, dty)
-        new_res = 0.0
-        for i in range(n):
-            new_res += d[i]
-        new_res /= n
-        moved = abs(dth) * src_r + math.sqrt(dtx * dtx + dty * dty)
+        new_res, moved = residual_and_move(d, n, dth, dtx, dty, src_r)
         if old_res >= 0 and abs(new_res - old_res) < tol and moved < tol_step:
             converged = True
             break
         old_res = new_res
     return th, t_x, t_y, idx, it, converged
+
+
+@njit(cache=True)
+def residual_and_move(d, n, dth, dtx, dty, src_r):
+    """The convergence test's inputs: mean pair distance and how far the step moved the farthest
+    source point (rotation at radius ``src_r`` plus translation)."""
+    res = 0.0
+    for i in range(n):
+        res += d[i]
+    return res / n, abs(dth) * src_r + math.sqrt(dtx * dtx + dty * dty)
 
 
 @njit(cache=True)
@@ -556,11 +562,7 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
             x = _solve3(hm, bv)
             dth, dtx, dty = x[2], x[0], x[1]
         th, t_x, t_y = step_pose(th, t_x, t_y, dth, dtx, dty)
-        new_res = 0.0
-        for i in range(n):
-            new_res += d[i]
-        new_res /= n
-        moved = abs(dth) * src_r + math.sqrt(dtx * dtx + dty * dty)
+        new_res, moved = residual_and_move(d, n, dth, dtx, dty, src_r)
         if warm:
             warm = moved > warmup
             old_res = -1.0
