@@ -2,7 +2,9 @@
 # graphnav's two set-up commands (fresh Debian, Python >= 3.11):
 #   ./dev.sh demo   create .venv, install everything, run the main job on the embedded data
 #   ./dev.sh test   create .venv, install everything, run the test suite
-# Also: ./dev.sh lint | bench | shell CMD...   (PYTHON=python3.12 ./dev.sh ... picks another interpreter)
+# Also: ./dev.sh lint | bench | lock | shell CMD...   (PYTHON=python3.12 ./dev.sh ... picks another interpreter)
+# Installs are locked: requirements.lock pins every package with its hashes (what CI tested);
+# `./dev.sh lock` re-resolves it from pyproject.toml (uv, universal markers) after a dependency change.
 set -euo pipefail
 cd "$(dirname "$0")"
 PYTHON=${PYTHON:-python3}
@@ -29,10 +31,12 @@ setup() {
   bash tools/sysdeps.sh
   if [ ! -x "$VENV/bin/python" ]; then "$PYTHON" -m venv "$VENV"; fi
   local stamp="$VENV/.installed"
-  if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-    echo "dev.sh: installing graphnav and its dependencies into $VENV (first time: a few minutes)" >&2
-    "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip
-    "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -e '.[dev]'
+  if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ requirements.lock -nt "$stamp" ]; then
+    echo "dev.sh: installing graphnav and its locked dependencies into $VENV (first time: a few minutes)" >&2
+    local pip=("$VENV/bin/python" -m pip --quiet --disable-pip-version-check)
+    "${pip[@]}" install --require-hashes --no-deps -r requirements.lock
+    "${pip[@]}" install --no-deps --no-build-isolation -e .
+    "$VENV/bin/python" -m pip check >&2 || { echo "dev.sh: error: requirements.lock is out of step with pyproject.toml; run ./dev.sh lock" >&2; exit 1; }
     touch "$stamp"
   fi
 }
@@ -43,7 +47,11 @@ case "$cmd" in
   demo)  setup; exec "$VENV/bin/graphnav" demo --out "$OUT" "$@" ;;
   test)  setup; exec "$VENV/bin/python" -m pytest -q -p no:cacheprovider "$@" ;;
   lint)  setup; exec "$VENV/bin/ruff" check graphnav factors tests benchmarks examples ;;
+  lock)  setup
+         "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check 'uv>=0.9'
+         exec "$VENV/bin/uv" pip compile pyproject.toml --extra dev --universal --python-version 3.11 \
+           --generate-hashes --custom-compile-command './dev.sh lock' --quiet -o requirements.lock ;;
   bench) setup; for b in benchmarks/*.py; do "$VENV/bin/python" "$b"; done ;;
   shell) setup; exec "$VENV/bin/$1" "${@:2}" ;;
-  *) echo "usage: ./dev.sh demo | test | lint | bench | shell CMD..." >&2; exit 2 ;;
+  *) echo "usage: ./dev.sh demo | test | lint | bench | lock | shell CMD..." >&2; exit 2 ;;
 esac
