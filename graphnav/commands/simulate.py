@@ -2,6 +2,8 @@
 
 Scenarios are the modules of :mod:`graphnav.sim`; each declares
 ``register(subparsers)`` adding its own sub-parser (with ``set_defaults(func=...)``).
+``degrade`` (simulated sensors added to an existing log) has its CLI glue here, in
+:mod:`graphnav.commands._simulate_degrade`.
 """
 
 from __future__ import annotations
@@ -21,3 +23,6 @@ def register(sub: argparse._SubParsersAction) -> None:
             m = importlib.import_module(f"{sim.__name__}.{mod.name}")
             if hasattr(m, "register"):
                 m.register(scen)
+    from ._simulate_degrade import register as register_degrade
+
+    register_degrade(scen)
