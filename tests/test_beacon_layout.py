@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from graphnav.beacon_layout import (
+from graphnav.beacons.layout import (
     Choices,
     Fairway,
     grid,
@@ -126,7 +126,7 @@ def test_choices_are_validated():
 def test_isam2_online_marginals_equal_the_ekf_and_smoothing_only_helps():
     # GTSAM (native factors, iSAM2) cross-checks the hand-written batched EKF: on the planned track
     # the filtering marginal of X_k is the EKF covariance after step k
-    from graphnav.beacon_layout_graph import passage_marginals, score_chunk_graph
+    from graphnav.beacons.layout_graph import passage_marginals, score_chunk_graph
 
     lay = np.array([[650.0, 370.0], [300.0, 50.0]])
     m = passage_marginals(lay)
@@ -145,7 +145,7 @@ def test_isam2_online_marginals_equal_the_ekf_and_smoothing_only_helps():
 
 def _numba_kernel():
     pytest.importorskip("numba")
-    from graphnav import _beacon_fast
+    from graphnav.beacons import _fast as _beacon_fast
 
     return _beacon_fast
 
@@ -205,7 +205,7 @@ def test_backend_choice():
 def test_without_numba_auto_falls_back_to_numpy(monkeypatch):
     import sys
 
-    monkeypatch.setitem(sys.modules, "graphnav._beacon_fast", None)   # import now raises ImportError
+    monkeypatch.setitem(sys.modules, "graphnav.beacons._fast", None)   # import now raises ImportError
     lay = grid(2)[::900]
     assert resolve_backend("auto") == "numpy"
     np.testing.assert_array_equal(propagate(lay)["my"], propagate(lay, backend="numpy")["my"])

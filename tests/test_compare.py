@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 from _polyworld import synthetic_log
 
-from graphnav import estimators, plots
+from graphnav import estimators
 from graphnav.cli import main
-from graphnav.compare import compare, ranked
 from graphnav.estimators import EstimatorSpec, RunResult
+from graphnav.evaluation import plots
+from graphnav.evaluation.compare import compare, ranked
+from graphnav.evaluation.metrics import ate, movement_errors
 from graphnav.io import save_log
-from graphnav.metrics import ate, movement_errors
 from graphnav.trajectory import Trajectory
 
 
@@ -225,8 +226,8 @@ def test_dcog_error_ignores_a_constant_course_offset(log):
 
 
 def test_report_configuration_summarises_long_arrays():
-    from graphnav.compare import Entry
-    from graphnav.report import _config
+    from graphnav.evaluation.compare import Entry
+    from graphnav.evaluation.report import _config
 
     res = RunResult(Trajectory([0.0], [[0.0, 0.0, 0.0]]), info={"k": 3, "nested": {"a": np.arange(500)},
                                                                 "short": [1, 2]})

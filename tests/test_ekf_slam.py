@@ -9,7 +9,7 @@ import pytest
 from scipy.stats import chi2
 
 from graphnav import estimators
-from graphnav.beacon_layout import Choices, Fairway, propagate
+from graphnav.beacons.layout import Choices, Fairway, propagate
 from graphnav.estimators.ekf_slam import EkfSlam, run_ekf_slam
 from graphnav.geometry import wrap_angle
 from graphnav.log import KnownBeacon, NavLog

@@ -8,8 +8,8 @@ import skfuzzy as fuzz
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from graphnav.estimators.fuzzy import FuzzyAlpha, Thresholds, alpha_direct, input_memberships, output_memberships
 from graphnav.estimators.fuzzy_ukf import FuzzyCovarianceMatcher
-from graphnav.fuzzy import FuzzyAlpha, Thresholds, alpha_direct, input_memberships, output_memberships
 
 TH = Thresholds()
 

@@ -1,4 +1,4 @@
-"""Weighted ICP on synthetic scans with exact truth (graphnav.icp)."""
+"""Weighted ICP on synthetic scans with exact truth (graphnav.scan.icp)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from graphnav.geometry import se2_between, se2_compose
-from graphnav.icp import (
+from graphnav.log import NavLog, Scan, Truth
+from graphnav.scan.icp import (
     VARIANTS,
     IcpConfig,
     MatchResult,
@@ -23,8 +24,7 @@ from graphnav.icp import (
     weighted_align,
     weighted_svd_align,
 )
-from graphnav.log import NavLog, Scan, Truth
-from graphnav.movement import movement_from_increments
+from graphnav.scan.movement import movement_from_increments
 
 TIGHT = {"tol": 1e-12, "tol_step": 1e-10, "max_iter": 100}
 
@@ -50,7 +50,7 @@ def test_closed_form_alignment_equals_weighted_svd(seed, th):
     th_cf, t_cf = weighted_align(p, q, w)
     assert np.arctan2(r_svd[1, 0], r_svd[0, 0]) == pytest.approx(th_cf, abs=1e-9)
     assert np.allclose(t_svd, t_cf, atol=1e-9)
-    fast = pytest.importorskip("graphnav._icp_fast")  # the compiled loops' copy, run uncompiled
+    fast = pytest.importorskip("graphnav.scan._icp_fast")  # the compiled loops' copy, run uncompiled
     idx = np.arange(30)
     th_k, tx_k, ty_k = fast.weighted_align.py_func(p[:, 0], p[:, 1], q[:, 0], q[:, 1], idx, w, 30, w.sum())
     assert th_k == pytest.approx(th_cf, abs=1e-9) and np.allclose([tx_k, ty_k], t_cf, atol=1e-9)
@@ -305,7 +305,7 @@ _NUMBA_CHECK = """
 import numpy as np, sys
 sys.path[:0] = [{repo!r}, {tests!r}]
 from _scan_sim import even_points, observe, room
-from graphnav.icp import IcpConfig, match_points
+from graphnav.scan.icp import IcpConfig, match_points
 rng = np.random.default_rng(8)
 world = even_points(room(), 0.5)
 src = observe(world, (0.5, -0.2, 0.04), rng, 0.004, 0.003)
@@ -376,8 +376,8 @@ def test_numba_backend_equals_numpy():
     pytest.importorskip("numba")
     from scipy.spatial import cKDTree
 
-    from graphnav._icp_fast import build_grid, knn_line_normals, nearest, nearest_from
-    from graphnav.icp import line_normals
+    from graphnav.scan._icp_fast import build_grid, knn_line_normals, nearest, nearest_from
+    from graphnav.scan.icp import line_normals
 
     rng = np.random.default_rng(8)
     tgt = rng.uniform(-20, 20, (300, 2))
@@ -426,7 +426,7 @@ def test_property_rigid_motion_is_recovered(dx, dy, dth, yaw0):
 
 
 def test_reference_glitch_rule_known_answer():
-    from graphnav.icp_pairs import valid_reference_steps
+    from graphnav.scan.icp_pairs import valid_reference_steps
 
     n = 40
     steps = np.column_stack([np.full(n, 1.25), np.zeros(n), np.zeros(n)])
@@ -465,10 +465,10 @@ def test_backend_auto_falls_back_to_numpy_without_numba(monkeypatch):
     imported; ``"numba"`` then fails loudly."""
     import sys
 
-    import graphnav.icp
+    import graphnav.scan.icp
 
-    monkeypatch.setitem(sys.modules, "graphnav._icp_fast", None)  # import -> ImportError
-    monkeypatch.setattr(graphnav.icp, "_COMPILED", [])  # the import is tried once per process: again here
+    monkeypatch.setitem(sys.modules, "graphnav.scan._icp_fast", None)  # import -> ImportError
+    monkeypatch.setattr(graphnav.scan.icp, "_COMPILED", [])  # the import is tried once per process: again here
     rng = np.random.default_rng(3)
     world = even_points(room(), 0.5)
     src = observe(world, (0.2, 0.1, 0.02), rng, 0.004, 0.003)

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from _polyworld import synthetic_log
 
-from graphnav import icp, icp_cache
-from graphnav.compare import compare
+from graphnav.evaluation.compare import compare
+from graphnav.scan import icp, icp_cache
 
 
 @pytest.fixture(scope="module")

@@ -7,13 +7,12 @@ import numpy as np
 import pytest
 from _scan_sim import corridor, even_points, noisy_scan, observe, room
 
-from graphnav import degeneracy
 from graphnav.estimators.icp_odometry import run_icp_dr
-from graphnav.geometry import se2_compose
-from graphnav.icp import VARIANTS, IcpConfig, MatchResult, match_points
-from graphnav.log import NavLog, Odometry, PosePrior, Scan, Truth
-from graphnav.motion_guess import MotionGuess
-from graphnav.odometry_increment import increment, odometry_samples
+from graphnav.geometry import increment, se2_compose
+from graphnav.log import NavLog, Odometry, PosePrior, Scan, Truth, odometry_samples
+from graphnav.scan import degeneracy
+from graphnav.scan.icp import VARIANTS, IcpConfig, MatchResult, match_points
+from graphnav.scan.motion_guess import MotionGuess
 
 
 def _wall_pair(variant: str, seed: int = 4):

@@ -1,4 +1,4 @@
-"""The IMU factor graph (graphnav.imu_motion, factors.imu) on synthetic logs with exact truth."""
+"""The IMU factor graph (graphnav.graph.imu_motion, factors.imu) on synthetic logs with exact truth."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import pytest
 
 import factors as F
 from graphnav import estimators
-from graphnav.imu_motion import ImuGraphConfig, run_batch, run_fixed_lag, run_isam2, wants_imu_graph
+from graphnav.evaluation.metrics import ate, heading_error
+from graphnav.graph.imu_motion import ImuGraphConfig, run_batch, run_fixed_lag, run_isam2, wants_imu_graph
 from graphnav.log import Gnss, Heading, Imu, NavLog, PosePrior, Truth
-from graphnav.metrics import ate, heading_error
 from graphnav.sim.solent import simulate_solent
 
 FAST = {"covariances": False}

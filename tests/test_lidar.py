@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from graphnav.lidar import (
+from graphnav.scan.lidar import (
     SIGMA_R_REL,
     directional_error_sq,
     directional_error_sq_vec,

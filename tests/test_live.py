@@ -20,11 +20,12 @@ from _live import start_live
 
 from graphnav.geodesy import LocalFrame
 from graphnav.geometry import heading_deg_to_yaw, wrap_angle
+from graphnav.graph.graph_online import GraphOnline
 from graphnav.io.nmea import read_nmea
 from graphnav.io.nmea_out import sentence
-from graphnav.live import LiveRunner, parse_endpoint
-from graphnav.online import GraphOnline, make_online, run_online
-from graphnav.replay import corrupt_sentence, log_sentences, replay
+from graphnav.online.live import LiveRunner, parse_endpoint
+from graphnav.online.replay import corrupt_sentence, log_sentences, replay
+from graphnav.online.runner import make_online, run_online
 
 REPO = Path(__file__).resolve().parents[1]
 

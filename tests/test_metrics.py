@@ -3,8 +3,8 @@ import copy
 import numpy as np
 import pytest
 
+from graphnav.evaluation.metrics import associate, ate, heading_error, movement, movement_errors, rpe, umeyama_se2
 from graphnav.geometry import accumulate, se2_compose
-from graphnav.metrics import associate, ate, heading_error, movement, movement_errors, rpe, umeyama_se2
 from graphnav.trajectory import Trajectory
 
 

@@ -10,9 +10,10 @@ from _harbour import harbour_trial
 
 import factors as F
 from graphnav.estimators.dead_reckoning import unicycle_step
+from graphnav.evaluation.metrics import ate
+from graphnav.graph.graph_online import GraphOnline
 from graphnav.log import Gnss, Heading, NavLog, Odometry
-from graphnav.metrics import ate
-from graphnav.online import GraphOnline, make_online, run_online
+from graphnav.online.runner import make_online, run_online
 
 
 @pytest.mark.parametrize("v,w,dt", [(2.0, 0.0, 0.1), (2.0, 0.3, 1.0), (-1.0, -0.05, 2.0), (0.0, 0.2, 0.5)])

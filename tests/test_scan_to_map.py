@@ -10,10 +10,10 @@ from hypothesis import strategies as st
 
 from graphnav import estimators
 from graphnav.estimators.scan_to_map import make_config, predict_constant_velocity
+from graphnav.evaluation.metrics import ate
 from graphnav.geometry import se2_between, se2_compose, wrap_angle
 from graphnav.log import NavLog, PosePrior
-from graphnav.metrics import ate
-from graphnav.registration import (
+from graphnav.scan.registration import (
     METHODS,
     Target,
     align,

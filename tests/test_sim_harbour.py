@@ -176,8 +176,8 @@ def test_marina_degraded(marina_dir):
 
 def test_isam2_with_weighted_icp_on_a_harbour_slice():
     """End to end on 8 s of harbour: real scan matching, odometry, GNSS, compass, beacons."""
-    from graphnav.metrics import ate
-    from graphnav.smoother import run_isam2
+    from graphnav.evaluation.metrics import ate
+    from graphnav.graph.smoother import run_isam2
 
     log = simulate_harbour(0, duration=8.0)
     r = run_isam2(log, covariances=False)

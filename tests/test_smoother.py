@@ -14,14 +14,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from graphnav import estimators
+from graphnav.evaluation.metrics import ate
 from graphnav.geometry import se2_between
+from graphnav.graph.keyframes import attachment_error_bound, keyframe_times, nearest, schedule
+from graphnav.graph.smoother import SmootherConfig, run_batch, run_fixed_lag, run_isam2
 from graphnav.io import save_log
-from graphnav.keyframes import attachment_error_bound, keyframe_times, nearest, schedule
+from graphnav.io.tum import TrajectoryWriter
 from graphnav.log import NavLog, Scan
-from graphnav.metrics import ate
 from graphnav.sim.square import square_loop
-from graphnav.smoother import SmootherConfig, run_batch, run_fixed_lag, run_isam2
-from graphnav.trajectory_writer import TrajectoryWriter
 
 BEACONS = {"A": (20.0, -25.0), "B": (65.0, 20.0), "C": (-20.0, 30.0)}
 FAST = {"covariances": False}
@@ -217,7 +217,7 @@ def test_keyframe_policy():
 
 
 def test_world_covariance_rotation():
-    from graphnav.smoother import world_cov
+    from graphnav.graph.smoother import world_cov
 
     c = world_cov(gtsam.Pose2(0, 0, math.pi / 2), np.diag([4.0, 1.0, 0.1]))
     np.testing.assert_allclose(c, np.diag([1.0, 4.0, 0.1]), atol=1e-12)

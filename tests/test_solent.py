@@ -10,9 +10,9 @@ import sys
 import numpy as np
 import pytest
 
+from graphnav.evaluation.montecarlo import aggregate, improvement_pct
 from graphnav.geometry import wrap_angle, yaw_to_heading_deg
 from graphnav.io import load_log
-from graphnav.montecarlo import aggregate, improvement_pct
 from graphnav.sim.solent import START, WAYPOINTS, SolentConfig, _truth, current_direction, simulate_solent
 
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from graphnav.beacon_layout import chunk_tasks, grid, score_chunk
-from graphnav.sweep import CLUSTER_STARTUP_S, load_done, resolve_scheduler, run_sweep
+from graphnav.beacons.layout import chunk_tasks, grid, score_chunk
+from graphnav.evaluation.sweep import CLUSTER_STARTUP_S, load_done, resolve_scheduler, run_sweep
 
 
 def record_call(task: dict) -> dict:

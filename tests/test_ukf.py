@@ -10,9 +10,9 @@ from filterpy.kalman import MerweScaledSigmaPoints, unscented_transform
 
 from graphnav import estimators
 from graphnav.estimators.ukf import TABLE2, UnscentedNav, merwe_weights, sigma_points, wrapped_mean
-from graphnav.evaluate import summarize
+from graphnav.evaluation.evaluate import summarize
+from graphnav.evaluation.metrics import ate
 from graphnav.log import Gnss, Heading, Imu, NavLog, PosePrior
-from graphnav.metrics import ate
 from graphnav.sim.solent import simulate_solent
 
 

@@ -10,7 +10,7 @@ charted position with their charted variance. The correction uses the Joseph for
 symmetric and positive semidefinite to round-off (``tests/test_ekf_slam.py`` runs it for 10,000 steps).
 
 Matrices here are dense, written as the paper writes them: this class is also the reference the
-batched search (:mod:`graphnav.beacon_layout`) is tested against.
+batched search (:mod:`graphnav.beacons.layout`) is tested against.
 """
 
 from __future__ import annotations

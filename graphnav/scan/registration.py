@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from .geometry import wrap_angle
+from ..geometry import wrap_angle
 
 METHODS = (
     "small_gicp:VGICP",

@@ -1,6 +1,6 @@
 """Compiled (numba) covariance propagation of the beacon-layout EKF-SLAM, many layouts at once.
 
-The same filter as the numpy path of :func:`graphnav.beacon_layout.propagate` (eq. 18-26),
+The same filter as the numpy path of :func:`graphnav.beacons.layout.propagate` (eq. 18-26),
 linearised on the true track. There G (eq. 19), W (eq. 22) and so R (eq. 20-23) are the same for
 every layout, and H (eq. 25) depends only on the layout and the true track, never on the noise
 draw: the covariance, and so M_xy (eq. 28), is a deterministic function of the layout (a
@@ -16,7 +16,7 @@ upper triangle is stored and updated.
 Layout: P is (n, n, W) for a block of W layouts, the layout index innermost, so every scalar
 operation of the filter is a loop over W contiguous values that LLVM vectorises (SIMD).
 
-Imported lazily; absent numba, :mod:`graphnav.beacon_layout` uses its numpy path. ``cache=True``:
+Imported lazily; absent numba, :mod:`graphnav.beacons.layout` uses its numpy path. ``cache=True``:
 the first call compiles (a few seconds), later processes load the cached machine code.
 """
 

@@ -1,5 +1,5 @@
 """Write a comparison to a directory: ``report.md`` (one table, configurations, figures), the PNGs
-of :mod:`graphnav.plots`, and ``<estimator>.tum`` per estimator (evo-readable)."""
+of :mod:`graphnav.evaluation.plots`, and ``<estimator>.tum`` per estimator (evo-readable)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
+from ..io.jsonsafe import jsonable
+from ..log import NavLog
 from . import plots
-from .commands._common import jsonable
 from .compare import Entry, ranked
-from .log import NavLog
 
 # (summary key, column header, format)
 COLUMNS: list[tuple[str, str, str]] = [

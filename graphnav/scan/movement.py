@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .geometry import wrap_angle
+from ..geometry import wrap_angle
 
 
 def movement_from_increments(

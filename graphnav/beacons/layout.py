@@ -11,11 +11,11 @@ over layouts). The sparsity of G (eq. 19) and H (eq. 25) is exploited: the predi
 shear plus the 3x3 motion noise, every correction a rank-2 update built from H's five non-zero
 columns. Linearised on the true track (the default), G, W, R and H do not depend on the noise
 draw, so neither does P nor M_xy: each layout's score is deterministic and the search needs no
-Monte Carlo. That case also has a compiled kernel (:mod:`graphnav._beacon_fast`, numba, the same
+Monte Carlo. That case also has a compiled kernel (:mod:`graphnav.beacons._fast`, numba, the same
 algorithm with the layouts on the SIMD axis), used when numba is importable (``backend="auto"``).
 The single-configuration reference with dense matrices, exactly as the paper writes them
 (Joseph form), is :class:`graphnav.estimators.ekf_slam.EkfSlam`; ``tests/test_beacon_layout.py``
-checks the two agree, and that GTSAM's iSAM2 marginals (:mod:`graphnav.beacon_layout_graph`) agree.
+checks the two agree, and that GTSAM's iSAM2 marginals (:mod:`graphnav.beacons.layout_graph`) agree.
 
 Choices the paper leaves open are explicit fields of :class:`Choices` (see docs/beacon-layout.md).
 """
@@ -173,7 +173,7 @@ def propagate(layouts: NDArray[np.float64], fw: Fairway = Fairway(), ch: Choices
     equals the Joseph form to rounding; the dense reference uses the Joseph form and the tests
     compare the two).
 
-    ``backend``: ``"numba"`` runs the compiled kernel of :mod:`graphnav._beacon_fast` (the same
+    ``backend``: ``"numba"`` runs the compiled kernel of :mod:`graphnav.beacons._fast` (the same
     figures to ~1e-9 relative, ~7x less CPU; truth linearisation only, where the covariance does
     not depend on the noise draw, so ``seeds`` do not matter; ``block`` is the numpy path's),
     ``"numpy"`` the vectorised numpy filter below, ``"auto"`` numba when it is importable and
@@ -203,7 +203,7 @@ def _fast_kernel(backend: str, ch: Choices) -> Any:
         raise ValueError('backend="numba" covers linearize="truth" only (the covariance analysis); '
                          'use backend="numpy" for linearize="estimate"')
     try:
-        return importlib.import_module(f"{__package__}._beacon_fast")
+        return importlib.import_module(f"{__package__}._fast")
     except ImportError:
         if backend == "numba":
             raise
@@ -362,7 +362,7 @@ def score(layouts: NDArray[np.float64], fw: Fairway = Fairway(),
 
 
 # --------------------------------------------------------------------------------------------------
-# the search: a sweep task per chunk of layouts (picklable, for graphnav.sweep)
+# the search: a sweep task per chunk of layouts (picklable, for graphnav.evaluation.sweep)
 
 def score_chunk(task: dict[str, Any]) -> dict[str, Any]:
     """Sweep task: ``{"layouts": [[[x, y], ...], ...], "fairway": {...}, "choices": {...},

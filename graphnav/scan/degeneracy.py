@@ -10,7 +10,7 @@ covariance of the estimate is ``scale * s2 * info^-1``: an eigenvector ``v_i`` o
 *weak* when its predicted 1-sigma ``sqrt(scale * s2 / lambda_i)`` exceeds ``max_sigma`` or when
 ``lambda_max / lambda_i > max_condition`` (a single straight quay, a corridor, nearly empty water).
 
-Pure numerics; used by :mod:`graphnav.icp` and the scan-to-map estimator.
+Pure numerics; used by :mod:`graphnav.scan.icp` and the scan-to-map estimator.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from .geometry import se2_between, se2_compose
+from ..geometry import se2_between, se2_compose
 
 
 @dataclass

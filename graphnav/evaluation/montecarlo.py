@@ -2,7 +2,7 @@
 
 One trial = one simulated mission (scenario, seed) run through every estimator by name with
 :func:`graphnav.estimators.run`; trials are independent, so they are mapped over a sweep runner
-(:func:`graphnav.sweep.run_sweep`, see :func:`map_trials`).
+(:func:`graphnav.evaluation.sweep.run_sweep`, see :func:`map_trials`).
 Pure functions; the CLI is :mod:`graphnav.commands.montecarlo`.
 """
 
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from . import estimators
+from .. import estimators
 from .metrics import ate, heading_error
 
 PAPER_ESTIMATORS = ("ukf", "fuzzy-ukf", "ukf-bias", "ekf", "isam2", "batch")
@@ -28,7 +28,7 @@ def solent_trial(scenario: int, seed: int, names: Sequence[str], options: dict[s
     over every estimate (unaligned, in the log's frame), median step time [ms]; for smoothers with
     an online estimate also its position RMSE (``online_pos_rmse_m``: what was known at each time,
     the filters' situation). An estimator that raises is reported with ``error``."""
-    from .sim.solent import simulate_solent
+    from ..sim.solent import simulate_solent
 
     log = simulate_solent(scenario=scenario, seed=seed, **(sim_options or {}))
     ref = log.truth()
@@ -52,16 +52,16 @@ def solent_trial(scenario: int, seed: int, names: Sequence[str], options: dict[s
 
 
 def _task_call(task: dict[str, Any]) -> Any:
-    """Adapter for :func:`graphnav.sweep.run_sweep`: ``task = {"key", "fn", "kwargs"}``."""
+    """Adapter for :func:`graphnav.evaluation.sweep.run_sweep`: ``task = {"key", "fn", "kwargs"}``."""
     return task["fn"](**task["kwargs"])
 
 
 def map_trials(fn: Callable, kwargs_list: list[dict[str, Any]], *, scheduler: str | None = None,
                workers: int = 2, out: str | None = None, progress: bool = False) -> list[Any]:
-    """Run ``fn(**kw)`` for every ``kw`` on the sweep runner (:func:`graphnav.sweep.run_sweep`:
+    """Run ``fn(**kw)`` for every ``kw`` on the sweep runner (:func:`graphnav.evaluation.sweep.run_sweep`:
     an embedded Dask ``LocalCluster`` of ``workers`` processes, an existing cluster at
     ``scheduler``, or ``scheduler="serial"``); results in order. ``out`` makes the sweep resumable.
-    Without :mod:`graphnav.sweep` the trials run serially."""
+    Without :mod:`graphnav.evaluation.sweep` the trials run serially."""
     try:
         from .sweep import run_sweep
     except ImportError:

@@ -1,12 +1,7 @@
-"""Record-by-record (online) estimation: the :class:`OnlineEstimator` interface and a minimal
-GTSAM fixed-lag / iSAM2 adapter that live mode (:mod:`graphnav.live`) runs by default.
-
-The interface is one method: ``add(record) -> Estimate | None``. Records arrive in time order
-(late ones are the estimator's business); an :class:`Estimate` is returned whenever the
-navigation solution changed enough to be published. Estimators plug into live mode by
-implementing this protocol and registering a factory in :data:`ONLINE_ESTIMATORS`: ``fixed-lag``
-and ``isam2`` (:class:`GraphOnline`), ``ekf`` (:class:`graphnav.ekf_online.EkfOnline`, the batch
-``ekf`` step for step); the full smoother of :mod:`graphnav.smoother` has no adapter yet.
+"""A minimal online factor graph: the GTSAM fixed-lag / iSAM2 adapter that live mode
+(:mod:`graphnav.online.live`) runs by default, registered as ``fixed-lag`` and ``isam2`` in
+:data:`graphnav.online.runner.ONLINE_ESTIMATORS`; it implements
+:class:`graphnav.result.OnlineEstimator` (``add(record) -> Estimate | None``).
 
 :class:`GraphOnline` is deliberately small: one ``Pose2`` per distinct record time, native GTSAM
 factors built by the :mod:`factors` package, the same constructors as the batch smoother's
@@ -25,9 +20,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -35,28 +28,9 @@ from numpy.typing import NDArray
 
 import factors as F
 
-from .geometry import wrap_angle
-from .log import Gnss, Heading, NavLog, Odometry, Record, Scan
-from .trajectory import Trajectory
-
-
-@dataclass
-class Estimate:
-    """The navigation solution at time ``t``: pose (x, y, yaw), its 3x3 covariance (or None) and,
-    when known, speed over ground [m/s], course over ground [rad, CCW from east], yaw rate [rad/s]."""
-
-    t: float
-    pose: NDArray[np.float64]
-    cov: NDArray[np.float64] | None = None
-    sog: float | None = None
-    cog: float | None = None
-    w: float | None = None
-
-
-class OnlineEstimator(Protocol):
-    """What live mode needs from an estimator."""
-
-    def add(self, record: Record) -> Estimate | None: ...
+from ..geometry import wrap_angle
+from ..log import Gnss, Heading, Odometry, Record, Scan
+from ..result import Estimate
 
 
 class GraphOnline:
@@ -309,49 +283,3 @@ class GraphOnline:
                 "icp_ms_median": float(np.median(icp)) if icp.size else None,
                 "step_ms_median": float(np.median(s)) if s.size else None,
                 "step_ms_p99": float(np.percentile(s, 99)) if s.size else None}
-
-
-def _graph_fixed_lag(**options: Any) -> GraphOnline:
-    return GraphOnline(**options)
-
-
-def _graph_isam2(**options: Any) -> GraphOnline:
-    options["lag"] = None
-    return GraphOnline(**options)
-
-
-def _ekf(**options: Any) -> OnlineEstimator:
-    from .ekf_online import EkfOnline
-
-    return EkfOnline(**options)
-
-
-#: name -> factory(**options). The full smoother adapter registers here when it lands.
-ONLINE_ESTIMATORS: dict[str, Callable[..., OnlineEstimator]] = {
-    "fixed-lag": _graph_fixed_lag,
-    "isam2": _graph_isam2,
-    "ekf": _ekf,
-}
-
-
-def make_online(name: str, **options: Any) -> OnlineEstimator:
-    """An online estimator by name (``fixed-lag`` (default for unbounded runs), ``isam2``, ``ekf``)."""
-    if name not in ONLINE_ESTIMATORS:
-        have = ", ".join(sorted(ONLINE_ESTIMATORS))
-        raise ValueError(f"no online adapter for estimator {name!r} yet (have: {have});"
-                         " estimators plug in through graphnav.online.OnlineEstimator")
-    try:
-        return ONLINE_ESTIMATORS[name](**options)
-    except TypeError as exc:  # an unknown -O option
-        raise ValueError(f"estimator {name!r}: {exc}") from None
-
-
-def run_online(log: NavLog, estimator: OnlineEstimator) -> Trajectory:
-    """Feed a log's records in order; the trajectory of the estimates as they were produced."""
-    t, poses = [], []
-    for r in log.records:
-        e = estimator.add(r)
-        if e is not None:
-            t.append(e.t)
-            poses.append(e.pose)
-    return Trajectory(np.array(t), np.array(poses).reshape(-1, 3), name="online")

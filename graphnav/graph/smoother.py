@@ -3,7 +3,7 @@ iSAM2 (incremental, online + smoothed), batch Levenberg-Marquardt, or an increme
 smoother.
 
 :class:`GraphBuilder` turns the log into one batch of new factors/values per keyframe
-(:mod:`graphnav.keyframes`); the three drivers (:func:`run_isam2`, :func:`run_batch`,
+(:mod:`graphnav.graph.keyframes`); the three drivers (:func:`run_isam2`, :func:`run_batch`,
 :func:`run_fixed_lag`) consume the same batches, so they solve exactly the same problem.
 
 Factors (see :mod:`factors`): an anchor ``PriorFactorPose2`` on the first pose; weighted-ICP
@@ -27,12 +27,12 @@ from numpy.typing import NDArray
 
 import factors as F
 
-from .estimators import OnEstimate, RunResult
+from ..config import config_from_options
+from ..geometry import increment
+from ..log import NavLog, Scan, odometry_samples
+from ..result import OnEstimate, RunResult
+from ..trajectory import Trajectory
 from .keyframes import keyframe_times, schedule
-from .log import NavLog, Scan
-from .odometry_increment import increment, odometry_samples
-from .options import config_from_options
-from .trajectory import Trajectory
 
 Matcher = Callable[
     [Scan, Scan, NDArray[np.float64] | None], tuple[bool, NDArray[np.float64], NDArray[np.float64]]
@@ -83,7 +83,7 @@ class SmootherConfig:
     lm_tol: float = 1e-14  # batch LM relative/absolute error-decrease tolerance
     lag: float = 20.0  # fixed-lag window [s]
     covariances: bool = True  # per-pose marginal covariances on the final trajectory
-    icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.icp.IcpConfig
+    icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.icp.IcpConfig
 
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> SmootherConfig:
@@ -91,10 +91,10 @@ class SmootherConfig:
 
 
 def default_matcher(options: dict[str, Any]) -> Matcher | None:
-    """The weighted-ICP matcher of :mod:`graphnav.icp`, or ``None`` when it is not available."""
+    """The weighted-ICP matcher of :mod:`graphnav.scan.icp`, or ``None`` when it is not available."""
     try:
-        from .icp import IcpConfig, scan_points
-        from .icp_cache import match_points  # shared between estimators inside icp_cache.active()
+        from ..scan.icp import IcpConfig, scan_points
+        from ..scan.icp_cache import match_points  # shared between estimators inside icp_cache.active()
     except ImportError:
         return None
     cfg = IcpConfig(**options)

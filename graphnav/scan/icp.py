@@ -613,7 +613,7 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, n
     respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)`` (GTSAM's Pose2 tangent space):
     ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1], [1, 0]]``.
 
-    Degeneracy (:mod:`graphnav.degeneracy`, every variant): weak directions of the point-to-line
+    Degeneracy (:mod:`graphnav.scan.degeneracy`, every variant): weak directions of the point-to-line
     information; there the pose is replaced by ``init``'s and ``weak_sigma^2`` is added to ``cov``.
     """
     h, bmat, kscale, res_rms, info, n_use, inlier_fraction, s2, radius = _terms_numpy(

@@ -1,7 +1,7 @@
 """Comparison figures (matplotlib, Agg): trajectories, position error, error CDF, SOG/COG errors,
 covariance ellipses. Each function takes trajectories and writes one PNG; nothing else.
 
-Errors are taken at the estimate/reference pairs of :func:`graphnav.metrics.associate` — the same
+Errors are taken at the estimate/reference pairs of :func:`graphnav.evaluation.metrics.associate` — the same
 pairs that the report's numbers use. SOG/COG errors follow the weighted-ICP paper's Figs. 12-15
 (difference versus time and its histogram), with COG scored only while the reference moves.
 """
@@ -21,9 +21,9 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Ellipse, Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
-from .geometry import wrap_angle  # noqa: E402
+from ..geometry import wrap_angle  # noqa: E402
+from ..trajectory import Trajectory  # noqa: E402
 from .metrics import associate, movement  # noqa: E402
-from .trajectory import Trajectory  # noqa: E402
 
 # (face colour, hatch, label): light fills/hatches, so they do not read as an estimator's line colour
 EVENT_STYLE = {"gnss_outage": ("#f2d64b", "", "GNSS outage"), "gnss_jump": ("#e8a0a0", "xx", "GNSS jump")}

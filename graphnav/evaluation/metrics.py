@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .geometry import se2_between, se2_compose, wrap_angle
-from .trajectory import Trajectory
+from ..geometry import se2_between, se2_compose, wrap_angle
+from ..trajectory import Trajectory
 
 
 def associate(est: Trajectory, ref: Trajectory, max_dt: float = 0.02) -> tuple[NDArray, NDArray]:

@@ -1,12 +1,12 @@
-"""Compiled (numba) matcher of :mod:`graphnav.icp`: every variant, from the points to the covariance.
+"""Compiled (numba) matcher of :mod:`graphnav.scan.icp`: every variant, from the points to the covariance.
 
-The same algorithm as the numpy loop in :mod:`graphnav.icp` (Algorithm 1, eq. 9-22), with an
+The same algorithm as the numpy loop in :mod:`graphnav.scan.icp` (Algorithm 1, eq. 9-22), with an
 exact grid-based nearest-neighbour search instead of ``cKDTree``; tests check that both give
 the same matches. :func:`p2p_match` (K/H/HM/HD) and :func:`hdl_match` (HDL) run the whole
 numeric part of one match in one call (the LiDAR error model of eq. 5-8, the target's lines,
 the loop, the covariance and the point-to-line information); only the eigen-analysis of
-:mod:`graphnav.degeneracy` and the report stay in Python. Imported lazily; absent numba,
-:mod:`graphnav.icp` uses its numpy loop.
+:mod:`graphnav.scan.degeneracy` and the report stay in Python. Imported lazily; absent numba,
+:mod:`graphnav.scan.icp` uses its numpy loop.
 """
 
 from __future__ import annotations
@@ -284,7 +284,7 @@ def _wrap(k, n):
 
 @njit(cache=True)
 def scan_order_normals(tx, ty, half, max_gap):
-    """As :func:`graphnav.icp.scan_order_normals` (PCA of beam-order windows, gap check)."""
+    """As :func:`graphnav.scan.icp.scan_order_normals` (PCA of beam-order windows, gap check)."""
     n = tx.shape[0]
     order = np.argsort(np.arctan2(ty, tx), kind="mergesort")
     xs = tx[order]
@@ -328,7 +328,7 @@ def scan_order_normals(tx, ty, half, max_gap):
 @njit(cache=True)
 def pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2):
     """Eq. 8 covariance ``(sxx, sxy, syy)`` of pair ``(i, j)``: source point ``i`` rotated by
-    ``R(c, s)`` plus target point ``j`` (:func:`graphnav.icp._pair_cov`)."""
+    ``R(c, s)`` plus target point ``j`` (:func:`graphnav.scan.icp._pair_cov`)."""
     ux = c * sux[i] - s * suy[i]
     uy = s * sux[i] + c * suy[i]
     dsv = sb2[i] - sa2[i]
@@ -343,7 +343,7 @@ def pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2):
 @njit(cache=True)
 def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow,
               max_corr, th, t_x, t_y, idx, half, max_gap, inlier_dist):
-    """The terms of :func:`graphnav.icp._finish` for K/H/HM/HD: ``H``, ``B``, the residual scale's
+    """The terms of :func:`graphnav.scan.icp._finish` for K/H/HM/HD: ``H``, ``B``, the residual scale's
     numerator and dof, the weighted RMS residual, the point-to-line information (degeneracy), the
     flatness-weighted residual variance along the normals, the number of pairs used and of inliers,
     the source's RMS radius."""
@@ -432,7 +432,7 @@ def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, 
             for r_ in range(3):
                 for q_ in range(3):
                     info[r_, q_] += fl[j] * jl[r_] * jl[q_]
-            rn = ex * nxj + ey * nyj  # residual along the normal (graphnav.degeneracy.residual_var)
+            rn = ex * nxj + ey * nyj  # residual along the normal (graphnav.scan.degeneracy.residual_var)
             sf += fl[j]
             sfr += fl[j] * rn * rn
     res_rms = math.sqrt(swe / sw) if sw > 0 else np.nan
@@ -462,7 +462,7 @@ def _hd_weight(i, j, px, py, d, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2,
 @njit(cache=True)
 def hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
                 huber_c, wpow, max_corr, flat_pow, line_max_dist, p2p, w):
-    """Pair weights of :func:`graphnav.icp._weights` for HDL into ``w`` (``p2p``: the HD weights
+    """Pair weights of :func:`graphnav.scan.icp._weights` for HDL into ``w`` (``p2p``: the HD weights
     of the point-to-point warm-up): directional error along the target normal (eq. 9, 11), Huber
     on the point-to-line distance, x flatness^power, gated by the pair distance."""
     n = px.shape[0]
@@ -505,7 +505,7 @@ def hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2,
 
 @njit(cache=True)
 def _solve3(h, b):
-    """``-(h + 1e-12 I)^-1 b`` as :func:`graphnav.icp._p2l_step` (least squares when singular)."""
+    """``-(h + 1e-12 I)^-1 b`` as :func:`graphnav.scan.icp._p2l_step` (least squares when singular)."""
     a = h.copy()
     for k in range(3):
         a[k, k] += 1e-12
@@ -540,7 +540,7 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
             for i in range(n):
                 sw += w[i]
             dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)
-        else:  # one Gauss-Newton step of sum w (n.(p' - q))^2 (graphnav.icp._p2l_step)
+        else:  # one Gauss-Newton step of sum w (n.(p' - q))^2 (graphnav.scan.icp._p2l_step)
             hm[:] = 0.0
             bv[:] = 0.0
             for i in range(n):
@@ -577,7 +577,7 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
 @njit(cache=True)
 def hdl_stats(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr,
               flat_pow, line_max_dist, th, t_x, t_y, idx, inlier_dist):
-    """The terms of :func:`graphnav.icp._finish` for HDL (``_terms_numpy``): ``H``, ``B``, the
+    """The terms of :func:`graphnav.scan.icp._finish` for HDL (``_terms_numpy``): ``H``, ``B``, the
     residual scale's numerator and dof, the weighted RMS residual, the point-to-line information,
     the flatness-weighted residual variance along the normals, pairs used and inliers, the source's
     RMS radius."""
@@ -662,7 +662,7 @@ def _scan_cell_k(px, py, ix, iy, ny, start, items, tx, ty, bd, bi, cnt):
 
 @njit(cache=True)
 def knn_line_normals(tx, ty, k, h):
-    """As :func:`graphnav.icp.line_normals`: unit normal and flatness of the line through each
+    """As :func:`graphnav.scan.icp.line_normals`: unit normal and flatness of the line through each
     target point's ``k`` nearest neighbours (PCA; exact k nearest by rings of grid cells)."""
     n = tx.shape[0]
     k = min(k, n)
@@ -725,7 +725,7 @@ def knn_line_normals(tx, ty, k, h):
 
 @njit(cache=True)
 def cloud_terms(x, y, sig, use_sig, sigma_alpha, sigma_r_rel):
-    """As :class:`graphnav.icp._Cloud`: unit radial vector, squared semi-axes ``a^2, b^2`` (eq. 6-7;
+    """As :class:`graphnav.scan.icp._Cloud`: unit radial vector, squared semi-axes ``a^2, b^2`` (eq. 6-7;
     ``use_sig``: the caller's isotropic 1-sigma per point, a = b) and the mean error ``M^2`` (eq. 5)."""
     n = x.shape[0]
     ux = np.empty(n)
@@ -750,7 +750,7 @@ def cloud_terms(x, y, sig, use_sig, sigma_alpha, sigma_r_rel):
 
 @njit(cache=True)
 def sandwich(h, b, k):
-    """``k H^-1 B H^-T`` (:func:`graphnav.icp._finish`); ``ok`` False when ``H`` is singular."""
+    """``k H^-1 B H^-T`` (:func:`graphnav.scan.icp._finish`); ``ok`` False when ``H`` is singular."""
     try:
         hi = np.linalg.inv(h)
     except Exception:  # noqa: BLE001

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .log import NavLog
+from ..log import NavLog
 
 DEFAULT_PERIOD = 0.5
 

@@ -1,11 +1,11 @@
 """A shared weighted-ICP match cache: estimators that match the same scan pairs compute each once.
 
 ``graphnav compare`` runs several estimators on one log; isam2, batch and fixed-lag (one shared
-:class:`~graphnav.smoother.GraphBuilder` sequence), the EKF with ICP increments and ``icp-dr``
-all call :func:`graphnav.icp.match_points` on the same consecutive scans. Inside
+:class:`~graphnav.graph.smoother.GraphBuilder` sequence), the EKF with ICP increments and ``icp-dr``
+all call :func:`graphnav.scan.icp.match_points` on the same consecutive scans. Inside
 ``with active(MatchCache()):`` the call sites that go through :func:`match_points` /
 :func:`match_scans` of this module look the match up first. The key is the exact content of
-both point sets, the whole :class:`~graphnav.icp.IcpConfig` and the initial guess, so a hit
+both point sets, the whole :class:`~graphnav.scan.icp.IcpConfig` and the initial guess, so a hit
 returns exactly what the call would have computed (ICP is deterministic); an estimator with
 another guess or config computes its own match. Outside ``active`` nothing is cached.
 """
@@ -59,7 +59,7 @@ class MatchCache:
 
     def match_points(self, src_xy: ArrayLike, tgt_xy: ArrayLike, cfg: icp.IcpConfig | None = None,
                      init: ArrayLike | None = None) -> icp.MatchResult:
-        """:func:`graphnav.icp.match_points`, computed once per key (a copy is returned)."""
+        """:func:`graphnav.scan.icp.match_points`, computed once per key (a copy is returned)."""
         cfg = cfg or icp.IcpConfig()
         k = self.key(src_xy, tgt_xy, cfg, init)
         got = self._store.get(k)
@@ -99,7 +99,7 @@ def current() -> MatchCache | None:
 
 def match_points(src_xy: ArrayLike, tgt_xy: ArrayLike, config: icp.IcpConfig | None = None,
                  init: ArrayLike | None = None) -> icp.MatchResult:
-    """:func:`graphnav.icp.match_points` through the active cache (plain call when none is active)."""
+    """:func:`graphnav.scan.icp.match_points` through the active cache (plain call when none is active)."""
     cache = _active
     if cache is None:
         return icp.match_points(src_xy, tgt_xy, config, init)
@@ -108,6 +108,6 @@ def match_points(src_xy: ArrayLike, tgt_xy: ArrayLike, config: icp.IcpConfig | N
 
 def match_scans(source: Any, target: Any, config: icp.IcpConfig | None = None,
                 init: ArrayLike | None = None) -> icp.MatchResult:
-    """:func:`graphnav.icp.match_scans` through the active cache."""
+    """:func:`graphnav.scan.icp.match_scans` through the active cache."""
     cfg = config or icp.IcpConfig()
     return match_points(icp.scan_points(source, cfg), icp.scan_points(target, cfg), cfg, init)

@@ -14,11 +14,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .geometry import se2_between, wrap_angle
+from ..geometry import se2_between, wrap_angle
+from ..log import NavLog, odometry_samples
 from .icp import IcpConfig, MatchResult, match_points, scan_points
-from .log import NavLog
 from .motion_guess import MotionGuess
-from .odometry_increment import odometry_samples
 
 
 @dataclass
@@ -46,7 +45,7 @@ def run_pairs(log: NavLog, config: IcpConfig | None = None, init: str = "cv",
               on_match: Any = None) -> PairRun:
     """Match every consecutive scan pair of ``log``.
 
-    ``init`` (:class:`~graphnav.motion_guess.MotionGuess`): ``"cv"`` constant velocity from the
+    ``init`` (:class:`~graphnav.scan.motion_guess.MotionGuess`): ``"cv"`` constant velocity from the
     last good match (after a flagged one: the odometry increment when the log has odometry);
     ``"odometry"`` the odometry increment; ``"zero"`` identity. ``on_match(k, result)`` is called
     after each match (online use).

@@ -1,6 +1,6 @@
 """The IMU factor graph: preintegrated IMU motion + robust GNSS / compass, for logs with ``imu`` records.
 
-The odometry graph of :mod:`graphnav.smoother` moves each pose along its heading by the logged speed
+The odometry graph of :mod:`graphnav.graph.smoother` moves each pose along its heading by the logged speed
 (a unicycle), which cannot represent a boat crabbing across a current. Here the motion model is
 the IMU itself (:mod:`factors.imu`): one ``Pose3`` ``X(k)``, nav-frame velocity ``V(k)`` and IMU
 bias ``IB(k)`` per keyframe (default: one per GNSS epoch, or per IMU sample if they are slower;
@@ -13,7 +13,7 @@ between consecutive keyframes
   (``bias_rw_*``); ``IB(0)`` has a zero-mean prior of the calibration's accuracy (``bias_sigma_*``);
 
 plus Huber-robust ``GPSFactor`` (GNSS, z = 0) and yaw-only ``PoseRotationPrior3D`` (compass) factors
-on the keyframe nearest to each record (:func:`graphnav.keyframes.schedule`: causal online). The
+on the keyframe nearest to each record (:func:`graphnav.graph.keyframes.schedule`: causal online). The
 first pose and velocity get the log's ``pose_prior`` and ``meta["initial_velocity"]`` (as the UKFs).
 
 Drivers (same batches, same problem): :func:`run_isam2` (one ``ISAM2.update`` per keyframe; the
@@ -37,11 +37,11 @@ from numpy.typing import NDArray
 import factors as F
 from factors.imu import IB, V
 
-from .estimators import OnEstimate, RunResult
+from ..config import config_from_options
+from ..log import NavLog
+from ..result import OnEstimate, RunResult
+from ..trajectory import Trajectory
 from .keyframes import schedule
-from .log import NavLog
-from .options import config_from_options
-from .trajectory import Trajectory
 
 
 @dataclass

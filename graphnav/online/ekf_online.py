@@ -1,4 +1,4 @@
-"""The ``ekf`` estimator record by record: :class:`EkfOnline`, the :class:`graphnav.online.OnlineEstimator`
+"""The ``ekf`` estimator record by record: :class:`EkfOnline`, the :class:`graphnav.result.OnlineEstimator`
 adapter that ``graphnav live --estimator ekf`` runs.
 
 It is the batch ``ekf`` (:func:`graphnav.estimators.ekf.run_ekf`) step for step: the same
@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from .estimators.ekf import EkfStepper, initial_state
-from .log import Gnss, Heading, Odometry, PosePrior, Record
-from .online import Estimate
+from ..estimators.ekf import EkfStepper, initial_state
+from ..log import Gnss, Heading, Odometry, PosePrior, Record
+from ..result import Estimate
 
 
 class EkfOnline:

@@ -6,7 +6,7 @@ forward, so a bad match cannot become the next pair's guess and run away. Modes:
 * ``cv``: constant velocity, the last good increment scaled to this pair's time step, when that
   match was the previous pair's; otherwise (after a flagged match) the odometry increment when
   the log has odometry, else the last good increment however old, else zero;
-* ``odometry``: the odometry increment (:mod:`graphnav.odometry_increment`), else as ``cv``;
+* ``odometry``: the odometry increment (:func:`graphnav.geometry.increment`), else as ``cv``;
 * ``zero``: identity.
 
 :meth:`MotionGuess.bridge` gives what to chain instead of a flagged match: the odometry increment
@@ -20,8 +20,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from ..geometry import increment
 from .icp import MatchResult
-from .odometry_increment import increment
 
 INITS = ("cv", "zero", "odometry")
 # 1-sigma of a constant-velocity bridge (no odometry): x, y [m], yaw [rad]
@@ -31,7 +31,7 @@ CV_BRIDGE_SIGMA = (1.0, 1.0, math.radians(10.0))
 class MotionGuess:
     """Initial guess of the motion between scans at ``t0`` and ``t1`` (``guess``), fed with each
     match (``update``); ``odometry`` is an (N, 5) array from
-    :func:`graphnav.odometry_increment.odometry_samples` (or ``None``)."""
+    :func:`graphnav.log.odometry_samples` (or ``None``)."""
 
     def __init__(self, mode: str = "cv", odometry: NDArray[np.float64] | None = None) -> None:
         if mode not in INITS:

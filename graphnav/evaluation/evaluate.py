@@ -6,8 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from .estimators import RunResult
-from .log import NavLog
+from ..log import NavLog
+from ..result import RunResult
 from .metrics import ate, heading_error, movement_errors, rpe
 
 

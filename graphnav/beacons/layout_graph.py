@@ -23,7 +23,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from .beacon_layout import Fairway
+from .layout import Fairway
 
 X = gtsam.symbol_shorthand.X
 L = gtsam.symbol_shorthand.L
@@ -78,7 +78,7 @@ def _means(var: NDArray) -> list[float]:
 
 
 def score_chunk_graph(task: dict[str, Any]) -> dict[str, Any]:
-    """Sweep task (see :func:`graphnav.beacon_layout.chunk_tasks`) -> ``scores`` for
+    """Sweep task (see :func:`graphnav.beacons.layout.chunk_tasks`) -> ``scores`` for
     ``task["marginals"]`` (``"online"`` or ``"smoothed"``) plus both, ``scores_online`` and
     ``scores_smoothed``, each a list of [mean_mxy, mean_mx, mean_my]."""
     fw = Fairway(**task.get("fairway", {}))

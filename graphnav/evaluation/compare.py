@@ -1,6 +1,6 @@
 """Run several estimators on one log and score them the same way: one loop.
 
-Pure: no files, no printing. :mod:`graphnav.report` turns the result into report.md and figures,
+Pure: no files, no printing. :mod:`graphnav.evaluation.report` turns the result into report.md and figures,
 :mod:`graphnav.commands.compare` is the CLI.
 """
 
@@ -14,10 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from . import estimators, icp_cache
-from .estimators import RunResult
+from .. import estimators
+from ..log import NavLog
+from ..result import RunResult
+from ..scan import icp_cache
 from .evaluate import summarize
-from .log import NavLog
 
 
 @dataclass
@@ -77,7 +78,7 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
     ``workers > 1`` runs the estimators in that many processes at once (results in the same
     order); each ``runtime_s`` is then measured while the others run, so it includes contention.
 
-    ``cache`` (:class:`graphnav.icp_cache.MatchCache`) shares weighted-ICP matches between the
+    ``cache`` (:class:`graphnav.scan.icp_cache.MatchCache`) shares weighted-ICP matches between the
     estimators: a match already computed by an earlier estimator (same scans, config and initial
     guess) is reused, so the later ones' ``runtime_s`` excludes it; each summary then carries
     ``icp_cache_hits``, and ``icp_ms_median`` is the matches' computation time (for a shared one,

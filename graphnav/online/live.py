@@ -15,12 +15,12 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
   sentence time passes its time stamp (if the two time bases differ by more than 60 s, the log is
   shifted so that its first scan falls on the first timed sentence). The run ends when the last
   scan has been handed over.
-* **Estimator** -- anything implementing :class:`graphnav.online.OnlineEstimator`
-  (``add(record) -> Estimate | None``), by name from :data:`graphnav.online.ONLINE_ESTIMATORS`:
-  :class:`graphnav.online.GraphOnline` (GTSAM fixed-lag, the default, or iSAM2) or
-  :class:`graphnav.ekf_online.EkfOnline` (the ``ekf`` estimator).
+* **Estimator** -- anything implementing :class:`graphnav.result.OnlineEstimator`
+  (``add(record) -> Estimate | None``), by name from :data:`graphnav.online.runner.ONLINE_ESTIMATORS`:
+  :class:`graphnav.graph.graph_online.GraphOnline` (GTSAM fixed-lag, the default, or iSAM2) or
+  :class:`graphnav.online.ekf_online.EkfOnline` (the ``ekf`` estimator).
 * **Output** -- every estimate is appended to ``DIR/live.tum`` (+ ``live.cov``), flushed
-  (:class:`graphnav.trajectory_writer.TrajectoryWriter`), and published as GGA, HDT, VTG, ROT
+  (:class:`graphnav.io.tum.TrajectoryWriter`), and published as GGA, HDT, VTG, ROT
   (valid checksums, one datagram per estimate) to ``publish`` (``udp://HOST:PORT``).
 * **Stopping** -- SIGINT/SIGTERM (or :meth:`LiveRunner.stop`, ``duration``, ``idle_exit``, the
   end of the scan replay) ends the loop; files are flushed and closed and ``summary()`` returns
@@ -48,14 +48,14 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from .errors import LogError
-from .geodesy import LocalFrame
-from .io.jsonl import parse_record
-from .io.nmea import UERE_M, NmeaDecoder, parse_sentence
-from .io.nmea_out import solution_sentences
-from .log import Gnss, NavLog, Scan
-from .online import Estimate, OnlineEstimator
-from .trajectory_writer import TrajectoryWriter
+from ..errors import LogError
+from ..geodesy import LocalFrame
+from ..io.jsonl import parse_record
+from ..io.nmea import UERE_M, NmeaDecoder, parse_sentence
+from ..io.nmea_out import solution_sentences
+from ..io.tum import TrajectoryWriter
+from ..log import Gnss, NavLog, Scan
+from ..result import Estimate, OnlineEstimator
 
 log_ = logging.getLogger("graphnav.live")
 LATENCY_WINDOW = 100_000
