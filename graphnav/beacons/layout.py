@@ -14,7 +14,7 @@ draw, so neither does P nor M_xy: each layout's score is deterministic and the s
 Monte Carlo. That case also has a compiled kernel (:mod:`graphnav.beacons._fast`, numba, the same
 algorithm with the layouts on the SIMD axis), used when numba is importable (``backend="auto"``).
 The single-configuration reference with dense matrices, exactly as the paper writes them
-(Joseph form), is :class:`graphnav.estimators.ekf_slam.EkfSlam`; ``tests/test_beacon_layout.py``
+(Joseph form), is :class:`graphnav.estimators.ekf_slam.EkfSlam`; ``tests/beacons/test_beacon_layout.py``
 checks the two agree, and that GTSAM's iSAM2 marginals (:mod:`graphnav.beacons.layout_graph`) agree.
 
 Choices the paper leaves open are explicit fields of :class:`Choices` (see docs/beacon-layout.md).

@@ -8,7 +8,7 @@ until an epoch (a record time) is complete and that rule has its inputs (a ``pos
 GNSS fix and a heading -- and an odometry speed with ``speed=True``), or for ``init_wait`` seconds
 after the first fix, then replayed; the first estimate is that of the record that completed the
 epoch. So on a log whose first epoch has those inputs, every later estimate is bit-identical to
-the batch filter's (``tests/test_ekf_online.py``).
+the batch filter's (``tests/online/test_ekf_online.py``).
 """
 
 from __future__ import annotations

@@ -3,9 +3,9 @@ import json
 
 import numpy as np
 import pytest
+from _logfactory import every_record_log, logs_equal
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
-from logfactory import every_record_log, logs_equal
 
 from graphnav.errors import LogError
 from graphnav.io import load_log, save_log

@@ -19,7 +19,7 @@ from graphnav.sim.harbour import (
     simulate_harbour,
 )
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "harbour.npz"
+DATA = Path(__file__).resolve().parents[2] / "data" / "harbour.npz"
 
 
 @pytest.fixture(scope="module")

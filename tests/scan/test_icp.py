@@ -360,7 +360,7 @@ def test_numba_backend_logic_equals_numpy_uncompiled():
     import sys
     from pathlib import Path
 
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # tests/
     code = _NUMBA_CHECK.format(repo=str(here.parent), tests=str(here))
     out = subprocess.run([sys.executable, "-c", code], env={**os.environ, "NUMBA_DISABLE_JIT": "1"},
                          capture_output=True, text=True, timeout=300)
@@ -408,7 +408,7 @@ def test_numba_backend_equals_numpy():
         assert a.quality["iterations"] == b.quality["iterations"] and a.ok == b.ok
         assert a.quality["condition_number"] == pytest.approx(b.quality["condition_number"], rel=1e-8)
     # the uncompiled check's cases (caller sigmas, equalised counts, gates, corridor), compiled
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # tests/
     exec(_NUMBA_CHECK.format(repo=str(here.parent), tests=str(here)), {})  # noqa: S102
 
 

@@ -24,7 +24,7 @@ from graphnav.online.ekf_online import EkfOnline
 from graphnav.online.replay import replay
 from graphnav.online.runner import make_online, run_online
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def last_per_time(tr):

@@ -27,7 +27,7 @@ from graphnav.online.live import LiveRunner, parse_endpoint
 from graphnav.online.replay import corrupt_sentence, log_sentences, replay
 from graphnav.online.runner import make_online, run_online
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def free_port(kind=socket.SOCK_DGRAM) -> int:
