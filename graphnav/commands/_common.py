@@ -17,7 +17,7 @@ def add_json_flag(p: argparse.ArgumentParser) -> None:
 
 
 def add_log_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("log", help="log: marina directory, .jsonl[.gz], .npz, .nmea, or a ROS bag")
+    p.add_argument("log", help="log: marina directory, .jsonl[.gz], .npz, .nmea, a CARMEN .log[.gz], or a ROS bag")
     p.add_argument("--lenient", action="store_true", help="skip malformed records (and count them)")
 
 
