@@ -172,7 +172,7 @@ def test_real_robots(dataset6, robot):
 
 def test_real_robot1_dead_reckoning_drifts_like_the_readme_says(dataset6):
     from graphnav import estimators
-    from graphnav.evaluate import summarize
+    from graphnav.evaluation.evaluate import summarize
 
     log = read_mrclam(dataset6, 1)
     res = estimators.run("dead-reckoning", log)
