@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 from . import commands
-from .errors import LogError
+from .errors import EXIT_BUG, EXIT_INPUT, EXIT_INTERRUPTED, GraphnavError
 
 
 def command_names() -> list[str]:
@@ -77,12 +77,31 @@ def main(argv: list[str] | None = None) -> int:
     )
     try:
         return int(args.func(args) or 0)
-    except LogError as err:
-        print(f"graphnav: error: {err}", file=sys.stderr)
-        return 2
-    except (ValueError, KeyError, FileNotFoundError) as err:
-        print(f"graphnav: error: {err}", file=sys.stderr)
-        return 2
+    except GraphnavError as err:
+        return _fail(args, str(err), err.where, EXIT_INPUT, message=err.message)
+    except OSError as err:  # a file, directory, port or address the user named
+        where = None if err.filename is None else str(err.filename)
+        message = err.strerror or str(err)
+        return _fail(args, message if where is None else f"{where}: {message}", where, EXIT_INPUT, message=message)
+    except (ValueError, KeyError) as err:  # bad arguments or options (the message names them)
+        return _fail(args, str(err).strip("'\""), None, EXIT_INPUT)
+    except KeyboardInterrupt:
+        return _fail(args, "interrupted", None, EXIT_INTERRUPTED)
+    except Exception as err:  # noqa: BLE001 - a bug: one line, the traceback with -v
+        logging.getLogger("graphnav").debug("internal error", exc_info=True)
+        return _fail(args, f"internal error ({type(err).__name__}: {err}); run with -v for the traceback",
+                     None, EXIT_BUG)
+
+
+def _fail(args: argparse.Namespace, text: str, where: str | None, code: int, *, message: str | None = None) -> int:
+    """``graphnav: error: TEXT`` on stderr; with ``--json`` also ``{"error": MESSAGE, "where": WHERE}``
+    on stdout (the one JSON object of the contract)."""
+    print(f"graphnav: error: {text}", file=sys.stderr)
+    if getattr(args, "json", False):
+        import json
+
+        sys.stdout.write(json.dumps({"error": message if message is not None else text, "where": where}) + "\n")
+    return code
 
 
 if __name__ == "__main__":

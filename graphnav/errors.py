@@ -1,9 +1,29 @@
-"""Error types. A bad record names the file, the line and the field."""
+"""Error types. A bad record names the file, the line and the field.
+
+Every failure that input or the environment can cause is a :class:`GraphnavError` (a bad record:
+its subclass :class:`LogError`); the CLI prints it as ``graphnav: error: ...`` and exits with
+:data:`EXIT_INPUT`. Anything else is an internal bug (:data:`EXIT_BUG`).
+"""
 
 from __future__ import annotations
 
+EXIT_OK = 0
+EXIT_BUG = 1          # an internal error: a bug in graphnav
+EXIT_INPUT = 2        # bad input, bad arguments or environment (file, address, option): the message says where
+EXIT_INTERRUPTED = 130
 
-class LogError(ValueError):
+
+class GraphnavError(Exception):
+    """A failure caused by input or environment, not by a bug: ``where`` names the file, line,
+    field, address or option at fault (``None`` when the message already says it all)."""
+
+    def __init__(self, message: str, *, where: str | None = None) -> None:
+        self.message = message
+        self.where = where
+        super().__init__(f"{where}: {message}" if where else message)
+
+
+class LogError(GraphnavError, ValueError):
     """A malformed or inconsistent navigation-log record.
 
     ``str(err)`` reads ``FILE:LINE: field 'F': message`` (parts that are unknown are left out),
@@ -17,7 +37,16 @@ class LogError(ValueError):
         self.file = file
         self.line = line
         self.field = field
-        super().__init__(self._render())
+        ValueError.__init__(self, self._render())
+        self.where = self._where() or None
+
+    def _where(self) -> str:
+        parts = [str(self.file)] if self.file is not None else []
+        if self.line is not None:
+            parts.append(f"line {self.line}")
+        if self.field:
+            parts.append(f"field '{self.field}'")
+        return ", ".join(parts)
 
     def _render(self) -> str:
         where = ""

@@ -2,7 +2,7 @@ import json
 import subprocess
 import sys
 
-from logfactory import every_record_log
+from _logfactory import every_record_log
 
 from graphnav.io import save_log
 
@@ -25,8 +25,17 @@ def test_bad_input_exit_code_and_message(tmp_path):
     p = tmp_path / "bad.jsonl"
     p.write_text('{"t": 0, "type": "gnss", "x": 1, "y": "north", "sigma": 1}\n')
     r = _cli("info", str(p), "--json")
-    assert r.returncode == 2 and r.stdout == ""
-    assert f"{p}:1: field 'y'" in r.stderr
+    assert r.returncode == 2
+    assert f"{p}:1: field 'y'" in r.stderr and "Traceback" not in r.stderr
+    err = json.loads(r.stdout)  # --json: the error is the one JSON object on stdout
+    assert set(err) == {"error", "where"} and err["where"] == f"{p}, line 1, field 'y'"
+    assert _cli("info", str(p)).stdout == ""  # without --json, stdout stays empty
+
+
+def test_missing_file_is_an_input_error_naming_it(tmp_path):
+    r = _cli("info", str(tmp_path / "absent.jsonl"), "--json")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert json.loads(r.stdout)["where"] == str(tmp_path / "absent.jsonl")
 
 
 def test_run_dead_reckoning_writes_outputs(tmp_path):
@@ -45,7 +54,8 @@ def test_run_dead_reckoning_writes_outputs(tmp_path):
 def test_unknown_estimator_is_a_clear_error(tmp_path):
     save_log(every_record_log(), tmp_path / "l.jsonl")
     r = _cli("run", str(tmp_path / "l.jsonl"), "--estimator", "nope", "--json")
-    assert r.returncode == 2 and "unknown estimator" in r.stderr and r.stdout == ""
+    assert r.returncode == 2 and "unknown estimator" in r.stderr
+    assert "unknown estimator" in json.loads(r.stdout)["error"]
 
 
 def test_main_loads_only_the_command_it_runs():
