@@ -17,10 +17,10 @@ from graphnav.sim.fairway import parse_beacons, simulate_fairway
 
 
 def test_estimator_on_simulated_log_equals_batched_filter():
-    # the log-driven estimator and the batched layout filter see the same noise draw
+    # the log-driven estimator in the paper's mode and the batched layout filter see the same noise draw
     lay = np.array([[650.0, 370.0], [300.0, 50.0]])
     log = simulate_fairway(lay, seed=7)
-    res = estimators.run("ekf-slam", log)
+    res = estimators.run("ekf-slam", log, paper=True)
     o = propagate(lay[None], Fairway(), Choices(linearize="estimate", seed=7), keep_state=True)
     assert len(res.trajectory) == Fairway().steps + 1
     np.testing.assert_allclose(np.sqrt(res.trajectory.cov[1:, 0, 0]), o["mx"][0], rtol=1e-7)
@@ -117,9 +117,9 @@ def test_gate_rejects_a_wild_beacon_return():
     i = [k for k, r in enumerate(recs) if r.kind == "beacon"][120]
     recs[i] = replace(recs[i], range=recs[i].range + 100.0)        # a 100 m false echo
     bad = NavLog(recs, [], log.meta)
-    clean = run_ekf_slam(log, gate=0.999)
-    gated = run_ekf_slam(bad, gate=0.999)
-    blind = run_ekf_slam(bad)
+    clean = run_ekf_slam(log)                    # the gate (0.999) is on by default
+    gated = run_ekf_slam(bad)
+    blind = run_ekf_slam(bad, gate=None)
     assert gated.info["rejected"] >= 1
     assert np.abs(gated.trajectory.poses[-1, :2] - clean.trajectory.poses[-1, :2]).max() < 0.5
     assert np.abs(blind.trajectory.poses[-1, :2] - clean.trajectory.poses[-1, :2]).max() > 2.0
