@@ -99,6 +99,16 @@ class EkfSlam:
         self.seen = np.append(self.seen, False)
         return len(self.seen) - 1
 
+    def forget(self, j: int) -> None:
+        """Slot ``j`` back to unseen: mean 0, variance ``p0_beacon``, no correlation (its next
+        sighting initialises it again)."""
+        b = 3 + 2 * j
+        self.x[b:b + 2] = 0.0
+        self.P[b:b + 2, :] = 0.0
+        self.P[:, b:b + 2] = 0.0
+        self.P[b:b + 2, b:b + 2] = np.eye(2) * self.p0_beacon
+        self.seen[j] = False
+
     def set_beacon(self, j: int, xy: tuple[float, float], var: float) -> None:
         """A charted beacon: mean ``xy``, variance ``var`` per axis, uncorrelated."""
         b = 3 + 2 * j
@@ -266,7 +276,8 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
                  sigma_v: float | None = None, sigma_rot: float | None = None, sigma_range: float | None = None,
                  sigma_bearing: float | None = None, gate: float | None | str = "default",
                  init: str | None = None, adaptive: bool | None = None, window: int = 20,
-                 iterations: int = 1, p0_beacon: float = 1e6, p0_cross: str = "zero", w_second: str = "rot",
+                 iterations: int = 1, reinit_after: int | None = 3, p0_beacon: float = 1e6,
+                 p0_cross: str = "zero", w_second: str = "rot",
                  use_known: bool = True) -> RunResult:
     """EKF-SLAM over a log with odometry (V, ROT) and beacon range/bearing records.
 
@@ -289,7 +300,11 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
     odometry rate; as per-record white noise, 100 Hz odometry would average its own error away).
     The control of an odometry record is held until the next one (as dead reckoning); each record
     time with a new estimate is reported through ``on_estimate``. ``iterations`` > 1: iterated EKF
-    corrections (:meth:`EkfSlam.update`).
+    corrections (:meth:`EkfSlam.update`). ``reinit_after``: a beacon whose first sighting was
+    never confirmed (no re-sighting accepted yet) and whose next ``reinit_after`` re-sightings in a
+    row are all gated out was most likely initialised from a gross outlier (a first sighting
+    cannot be gated): it is forgotten and initialised again from the current sighting (``None``:
+    never; off in the paper's mode).
     """
     defaults = PAPER_SIGMAS if paper else SENSOR_DEFAULTS
     sv = defaults["sigma_v"] if sigma_v is None else sigma_v
@@ -304,6 +319,8 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
     adaptive = (not paper) if adaptive is None else adaptive
     density = not paper  # the defaults' meaning (see above); given sigmas are always per record
     grow = p0_cross != "paper" and not paper
+    if paper:
+        reinit_after = None
 
     known = {b.id for b in log.beacons_known} if use_known else set()
     slot: dict[str, int] = {}
@@ -324,8 +341,10 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
     t_cur = recs[0].t
     u: Odometry | None = None
     ts, poses, covs, step_ms = [], [], [], []
-    used = rejected = invalid = 0
+    used = rejected = invalid = reinitialised = 0
     defaulted: set[str] = set()
+    confirmed: dict[int, bool] = {slot[kb.id]: True for kb in log.beacons_known} if use_known else {}
+    misses: dict[int, int] = {}
 
     def emit(t: float) -> None:
         ts.append(t)
@@ -363,11 +382,21 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
                 j = slot[r.id]
                 if not (_given(r.sigma_range) and _given(r.sigma_bearing)):
                     defaulted.add("beacon")
+                zr = r.sigma_range if _given(r.sigma_range) else sr
+                zb = r.sigma_bearing if _given(r.sigma_bearing) else sb
                 resight = bool(f.seen[j])
-                ok = f.update(j, r.range, r.bearing, r.sigma_range if _given(r.sigma_range) else sr,
-                              r.sigma_bearing if _given(r.sigma_bearing) else sb, gate, iterations)
+                ok = f.update(j, r.range, r.bearing, zr, zb, gate, iterations)
                 if nis is not None and resight:
                     nis.add(f.last_nis)
+                if resight and ok:
+                    confirmed[j], misses[j] = True, 0
+                elif resight:
+                    misses[j] = misses.get(j, 0) + 1
+                    if reinit_after is not None and not confirmed.get(j, False) and misses[j] >= reinit_after:
+                        f.forget(j)
+                        ok = f.update(j, r.range, r.bearing, zr, zb, gate, iterations)
+                        misses[j] = 0
+                        reinitialised += 1
                 used += ok
                 rejected += not ok
         step_ms.append((time.perf_counter() - t0) * 1e3)
@@ -376,7 +405,8 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
     traj = Trajectory(np.array(ts), np.array(poses), np.array(covs), name="ekf-slam")
     beacons = {i: f.x[3 + 2 * j: 5 + 2 * j].tolist() for i, j in slot.items() if f.seen[j]}
     info: dict[str, Any] = {"anchor": anchor, "beacons": beacons, "updates": used, "rejected": rejected,
-                            "invalid": invalid, "mode": "paper" if paper else "robust", "gate": gate,
+                            "invalid": invalid, "reinitialised": reinitialised,
+                            "mode": "paper" if paper else "robust", "gate": gate,
                             "init": init, "p0_beacon": p0_beacon, "p0_cross": p0_cross, "w_second": w_second,
                             "defaults_used": sorted(defaulted),
                             "sigmas": {"sigma_v": sv, "sigma_rot": sw, "sigma_range": sr, "sigma_bearing": sb,
