@@ -13,7 +13,7 @@ report=None) -> list``
   and flushed as soon as it completes; tasks whose key is already in the file are not recomputed
   (an interrupted sweep resumes). A torn last line (killed mid-write) is ignored.
 * ``scheduler``: ``None`` or ``"local"`` starts an embedded ``LocalCluster`` of ``workers``
-  processes (one thread each) for the duration of the call; ``"tcp://host:8786"`` uses an
+  processes (one thread each, on 127.0.0.1, no dashboard) for the duration of the call; ``"tcp://host:8786"`` uses an
   existing cluster (its workers must be able to import ``fn``'s module); a ``distributed.Client``
   is used as is (several sweeps on one cluster); ``"serial"`` runs in this process (no Dask);
   ``"auto"`` runs in this process when starting a cluster costs more than it saves (see
@@ -163,7 +163,7 @@ def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: Any, worke
     cluster = None
     if scheduler is None:
         cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
-                               dashboard_address=":0", silence_logs=logging.WARNING)
+                               host="127.0.0.1", dashboard_address=None, silence_logs=logging.WARNING)
         client = Client(cluster)
     elif isinstance(scheduler, str):
         client = Client(scheduler)
