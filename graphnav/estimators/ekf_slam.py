@@ -60,7 +60,7 @@ class EkfSlam:
 
     def __init__(self, pose0: NDArray[np.float64], n_beacons: int = 0, *, pose_cov0: NDArray | None = None,
                  p0_beacon: float = 1e6, p0_cross: str = "zero", w_second: str = "rot",
-                 init: str = "paper") -> None:
+                 init: str = "paper", fej: bool = False) -> None:
         if init not in ("paper", "inverse"):
             raise ValueError(f"init must be 'paper' or 'inverse', not {init!r}")
         n = 3 + 2 * n_beacons
@@ -77,6 +77,9 @@ class EkfSlam:
         self.seen = np.zeros(n_beacons, dtype=bool)
         self.p0_beacon, self.p0_cross, self.w_second, self.init = p0_beacon, p0_cross, w_second, init
         self.last_nis = math.nan  # normalised innovation squared of the last correction (gated or not)
+        self.fej = fej
+        self.pose_pred = self.x[:3].copy()   # the pose predicted for the current time, before its corrections
+        self.first: dict[int, NDArray[np.float64]] = {}  # each beacon's first estimate (FEJ)
 
     @property
     def n(self) -> int:
@@ -108,6 +111,7 @@ class EkfSlam:
         self.P[:, b:b + 2] = 0.0
         self.P[b:b + 2, b:b + 2] = np.eye(2) * self.p0_beacon
         self.seen[j] = False
+        self.first.pop(j, None)
 
     def set_beacon(self, j: int, xy: tuple[float, float], var: float) -> None:
         """A charted beacon: mean ``xy``, variance ``var`` per axis, uncorrelated."""
@@ -117,17 +121,25 @@ class EkfSlam:
         self.P[:, b:b + 2] = 0.0
         self.P[b:b + 2, b:b + 2] = np.eye(2) * var
         self.seen[j] = True
+        self.first[j] = np.array(xy, dtype=float)
 
     def predict(self, v: float, rot: float, dt: float, sigma_v: float, sigma_rot: float) -> None:
         """Eq. 18 (mean) and eq. 19-23 (covariance).
 
         G (eq. 19) is the identity outside the vessel block, so ``G P G^T`` is computed as the
-        vessel rows and columns times the 3x3 block of G (the same product, without the n^3)."""
+        vessel rows and columns times the 3x3 block of G (the same product, without the n^3).
+        With ``fej`` (first-estimates Jacobian, Huang, Mourikis & Roumeliotis 2008) G's heading
+        column is ``(-(y_k+1|k - y_k|k-1), x_k+1|k - x_k|k-1)``: the displacement from the pose
+        predicted for time k, not the corrected one, so that every Jacobian of one pose is taken
+        at one estimate (the EKF then gains no spurious heading information)."""
         th = self.x[2]
         c, s = math.cos(th), math.sin(th)
         g = np.eye(3)                                        # eq. 19, vessel block
         g[0, 2] = -s * dt * v
         g[1, 2] = c * dt * v
+        if self.fej:
+            g[0, 2] = -(self.x[1] + v * dt * s - self.pose_pred[1])
+            g[1, 2] = self.x[0] + v * dt * c - self.pose_pred[0]
         W = np.zeros((3, 2))                                 # eq. 22, vessel rows (the rest is 0)
         W[0, 0], W[1, 0] = c * dt, s * dt
         if self.w_second == "rot":
@@ -138,6 +150,7 @@ class EkfSlam:
         self.x[0] += v * dt * c
         self.x[1] += v * dt * s
         self.x[2] = wrap_angle(th + rot * dt)
+        self.pose_pred = self.x[:3].copy()
         P = self.P                                           # eq. 23
         P[:3, :] = g @ P[:3, :]
         P[:, :3] = P[:, :3] @ g.T
@@ -168,6 +181,7 @@ class EkfSlam:
         self.P[:, b:b + 2] = cross.T
         self.P[b:b + 2, b:b + 2] = gx @ self.P[:3, :3] @ gx.T + gz @ Q @ gz.T
         self.seen[j] = True
+        self.first[j] = xy.copy()
 
     def update(self, j: int, z_range: float, z_bearing: float, sigma_range: float, sigma_bearing: float,
                gate: float | None = None, iterations: int = 1) -> bool:
@@ -192,6 +206,7 @@ class EkfSlam:
             a = z_bearing + self.x[2]
             self.x[b] = self.x[0] + z_range * math.cos(a)
             self.x[b + 1] = self.x[1] + z_range * math.sin(a)
+            self.first[j] = self.x[b:b + 2].copy()
         Q = np.diag([sigma_range**2, sigma_bearing**2])      # eq. 16
         x_prior = self.x
         xi = x_prior
@@ -201,10 +216,16 @@ class EkfSlam:
             r = math.sqrt(q)
             if r == 0.0:
                 return False
+            nu = np.array([z_range - r, wrap_angle(z_bearing - (math.atan2(dy, dx) - xi[2]))])
+            if self.fej and j in self.first:                 # H at the predicted pose and first beacon estimate
+                dx, dy = self.first[j][0] - self.pose_pred[0], self.first[j][1] - self.pose_pred[1]
+                q = dx * dx + dy * dy
+                r = math.sqrt(q)
+                if r == 0.0:
+                    return False
             H = np.zeros((2, self.n))                        # eq. 25
             H[0, [0, 1, b, b + 1]] = [-dx / r, -dy / r, dx / r, dy / r]
             H[1, [0, 1, 2, b, b + 1]] = [dy / q, -dx / q, -1.0, -dy / q, dx / q]
-            nu = np.array([z_range - r, wrap_angle(z_bearing - (math.atan2(dy, dx) - xi[2]))])
             S = H @ self.P @ H.T + Q
             if it == 0:
                 self.last_nis = float(nu @ np.linalg.solve(S, nu))
@@ -276,8 +297,8 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
                  sigma_v: float | None = None, sigma_rot: float | None = None, sigma_range: float | None = None,
                  sigma_bearing: float | None = None, gate: float | None | str = "default",
                  init: str | None = None, adaptive: bool | None = None, window: int = 20,
-                 iterations: int = 1, reinit_after: int | None = 3, p0_beacon: float = 1e6,
-                 p0_cross: str = "zero", w_second: str = "rot",
+                 iterations: int = 1, fej: bool | None = None, reinit_after: int | None = 3,
+                 p0_beacon: float = 1e6, p0_cross: str = "zero", w_second: str = "rot",
                  use_known: bool = True) -> RunResult:
     """EKF-SLAM over a log with odometry (V, ROT) and beacon range/bearing records.
 
@@ -327,8 +348,11 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
     if not grow:  # the paper's eq. 14-15: a slot per beacon of the log from the start
         slot = {i: j for j, i in enumerate(sorted({r.id for r in log.of("beacon")} | known))}
     pose0, cov0, anchor = _start(log)
+    fej = (not paper and iterations <= 1) if fej is None else fej
+    if fej and iterations > 1:
+        raise ValueError("fej and iterations > 1 exclude each other (the iterated update relinearises)")
     f = EkfSlam(pose0, len(slot), pose_cov0=cov0, p0_beacon=p0_beacon, p0_cross=p0_cross, w_second=w_second,
-                init=init)
+                init=init, fej=fej)
     if use_known:
         for kb in log.beacons_known:
             if kb.id not in slot:
@@ -399,6 +423,8 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
                         reinitialised += 1
                 used += ok
                 rejected += not ok
+                if ok and not np.all(np.isfinite(f.x[:3])):
+                    raise ValueError(f"ekf-slam diverged (non-finite state) at the beacon record of t = {r.t}")
         step_ms.append((time.perf_counter() - t0) * 1e3)
         if i + 1 == len(recs) or recs[i + 1].t > r.t:
             emit(r.t)
@@ -407,7 +433,8 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
     info: dict[str, Any] = {"anchor": anchor, "beacons": beacons, "updates": used, "rejected": rejected,
                             "invalid": invalid, "reinitialised": reinitialised,
                             "mode": "paper" if paper else "robust", "gate": gate,
-                            "init": init, "p0_beacon": p0_beacon, "p0_cross": p0_cross, "w_second": w_second,
+                            "init": init, "fej": fej, "p0_beacon": p0_beacon, "p0_cross": p0_cross,
+                            "w_second": w_second,
                             "defaults_used": sorted(defaulted),
                             "sigmas": {"sigma_v": sv, "sigma_rot": sw, "sigma_range": sr, "sigma_bearing": sb,
                                        "density": density}}
