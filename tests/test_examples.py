@@ -110,8 +110,8 @@ def test_fairway_charted_beacons_help_every_estimator(capsys):
     rows = table_rows(out)
     ate = {(r[0], r[1]): float(r[3]) for r in rows}
     assert set(ate) == {(c, e) for c in ("unknown", "charted")
-                        for e in ("ekf-slam", "isam2", "batch", "dead-reckoning")}
-    for e in ("ekf-slam", "isam2", "batch"):
+                        for e in ("ekf-slam", "ekf-slam-paper", "isam2", "batch", "dead-reckoning")}
+    for e in ("ekf-slam", "ekf-slam-paper", "isam2", "batch"):
         assert ate[("charted", e)] < ate[("unknown", e)]  # the chart removes the beacons' uncertainty
         assert ate[("unknown", e)] < 0.5 * ate[("unknown", "dead-reckoning")]
     assert ate[("charted", "dead-reckoning")] == ate[("unknown", "dead-reckoning")]  # beacons unused
