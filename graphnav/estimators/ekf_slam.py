@@ -1,16 +1,21 @@
-"""Range-bearing EKF-SLAM exactly as the beacon paper's sections 3-5 (Marchel, Naus & Specht 2019).
+"""Range-bearing EKF-SLAM of the beacon paper's sections 3-5 (Marchel, Naus & Specht 2019), and a
+mode of it that holds on real beacon data.
 
 State [x, y, theta, x_1, y_1, ..., x_i, y_i]; motion eq. 3 with control (V, ROT); G eq. 19;
 W eq. 22 (second column dg/dROT); R = W M W^T eq. 20-23; range-bearing measurement eq. 6 with
 Jacobian H eq. 25; one beacon per correction (K is (3+2i) x 2, eq. 24); P0 eq. 14 (zero vessel
-block unless the log has a pose prior, beacon variances ``p0_beacon`` = 1e6 m^2).
-Every beacon seen in the log has a slot from the start (eq. 14-15); its mean is set at first
-sighting from the inverse observation. Charted beacons (``beacon_known`` records) start at their
-charted position with their charted variance. The correction uses the Joseph form, so P stays
-symmetric and positive semidefinite to round-off (``tests/estimators/test_ekf_slam.py`` runs it for 10,000 steps).
+block unless the log has a pose prior, beacon variances ``p0_beacon`` = 1e6 m^2). Charted beacons
+(``beacon_known`` records) start at their charted position with their charted variance. The
+correction uses the Joseph form, so P stays symmetric and positive semidefinite to round-off
+(``tests/estimators/test_ekf_slam.py`` runs it for 10,000 steps).
 
-Matrices here are dense, written as the paper writes them: this class is also the reference the
-batched search (:mod:`graphnav.beacons.layout`) is tested against.
+:class:`EkfSlam`'s keyword defaults are the paper's filter (a slot per beacon from the start, the
+first sighting corrected against the ``p0_beacon`` prior, no gate): it is the reference the batched
+search (:mod:`graphnav.beacons.layout`) is tested against, so those defaults do not change. The
+``ekf-slam`` estimator (:func:`run_ekf_slam`) defaults to the real-log mode (chi-square gate,
+textbook first sighting, slots added when first seen, first-estimates Jacobians, sensor-type
+default sigmas as noise densities, an innovation-based motion-noise scale); ``paper=True`` gives
+the paper's filter. docs/ekf.md compares the two on MRCLAM.
 """
 
 from __future__ import annotations
@@ -452,6 +457,6 @@ def _unmet(log: NavLog) -> str | None:
 
 
 ESTIMATORS = {
-    "ekf-slam": EstimatorSpec(run_ekf_slam, _unmet, "range-bearing EKF-SLAM (beacon paper, eq. 3-27)",
-                              "filter"),
+    "ekf-slam": EstimatorSpec(run_ekf_slam, _unmet, "range-bearing EKF-SLAM (beacon paper, eq. 3-27): gated, "
+                              "FEJ, for real logs; paper=true: the paper's filter", "filter"),
 }
