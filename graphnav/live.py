@@ -48,7 +48,7 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from .errors import LogError
+from .errors import AddressError, LogError
 from .geodesy import LocalFrame
 from .io.jsonl import parse_record
 from .io.nmea import UERE_M, NmeaDecoder, parse_sentence
@@ -73,11 +73,27 @@ class Endpoint:
 
 
 def parse_endpoint(url: str, schemes: tuple[str, ...] = ("udp", "tcp")) -> Endpoint:
-    """``udp://HOST:PORT`` / ``tcp://HOST:PORT`` -> :class:`Endpoint` (ValueError otherwise)."""
+    """``udp://HOST:PORT`` / ``tcp://HOST:PORT`` -> :class:`Endpoint` (:class:`AddressError`, a
+    ValueError naming the address, otherwise)."""
+    expected = f"expected {' or '.join(s + '://HOST:PORT' for s in schemes)}"
     u = urlsplit(url)
-    if u.scheme not in schemes or not u.hostname or u.port is None:
-        raise ValueError(f"{url!r}: expected {' or '.join(s + '://HOST:PORT' for s in schemes)}")
-    return Endpoint(u.scheme, u.hostname, u.port)
+    try:
+        port = u.port
+    except ValueError:  # e.g. "Port out of range 0-65535"
+        raise AddressError(url, f"port out of range 0-65535 ({expected})") from None
+    if u.scheme not in schemes or not u.hostname or port is None:
+        raise AddressError(url, expected)
+    return Endpoint(u.scheme, u.hostname, port)
+
+
+def resolve(ep: Endpoint) -> tuple[str, int]:
+    """The IPv4 socket address of ``ep`` (:class:`AddressError` naming it if the host does not resolve)."""
+    try:
+        info = socket.getaddrinfo(ep.host, ep.port, socket.AF_INET,
+                                  socket.SOCK_DGRAM if ep.scheme == "udp" else socket.SOCK_STREAM)
+    except OSError as exc:  # socket.gaierror
+        raise AddressError(str(ep), f"cannot resolve host {ep.host!r}: {exc.strerror or exc}") from None
+    return info[0][4][:2]
 
 
 class _Source:
@@ -94,10 +110,15 @@ class _Source:
 
     def open(self, sel: selectors.BaseSelector) -> None:
         if self.ep.scheme == "udp":
+            addr = resolve(self.ep)
             s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
-            s.bind((self.ep.host, self.ep.port))
+            try:
+                s.bind(addr)
+            except OSError as exc:  # in use, not an address of this machine, privileged port...
+                s.close()
+                raise AddressError(str(self.ep), f"cannot listen: {exc.strerror or exc}") from None
         else:
             if time.monotonic() < self.next_try:
                 return
@@ -307,8 +328,7 @@ class LiveRunner:
             lines = solution_sentences(est.t, est.pose, self.decoder.frame, sog=est.sog, cog_yaw=est.cog,
                                        w=est.w, hdop=self.hdop)
             try:
-                self.pub_sock.sendto(("\r\n".join(lines) + "\r\n").encode("ascii"),
-                                     (self.publish.host, self.publish.port))
+                self.pub_sock.sendto(("\r\n".join(lines) + "\r\n").encode("ascii"), self.pub_addr)
                 self.published += len(lines)
             except OSError as exc:
                 log_.warning("publish to %s failed: %s", self.publish, exc)
@@ -332,9 +352,12 @@ class LiveRunner:
                 self.out_dir.mkdir(parents=True, exist_ok=True)
                 self.writer = TrajectoryWriter(self.out_dir / "live.tum")
             if self.publish is not None:
+                self.pub_addr = resolve(self.publish)
                 self.pub_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             for src in self.sources:
                 src.open(sel)
+            log_.info("listening on %s; publishing to %s", ", ".join(str(s.ep) for s in self.sources),
+                      self.publish or "-")
             t_start = time.monotonic()
             last_input = None
             while not self._stop.is_set():

@@ -29,14 +29,23 @@ Monte Carlo runs and parameter studies use the same runner (e.g. :mod:`graphnav.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
+import signal
 import sys
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from .errors import AddressError, GraphnavError
+
 log = logging.getLogger("graphnav.sweep")
+
+SCHEDULER_TIMEOUT_S = 5.0
+"""Seconds to wait for an existing scheduler (``"tcp://host:8786"``) to answer before giving up
+with an error naming it (Dask's own default is 30 s)."""
 
 CLUSTER_STARTUP_S = 3.0
 """Wall seconds to start a ``LocalCluster`` of 2 processes and import the task's modules in its
@@ -67,6 +76,7 @@ def load_done(out: Path | str | None) -> dict[str, Any]:
     done: dict[str, Any] = {}
     if out is None or not Path(out).exists():
         return done
+    _check_file(out)
     with open(out, encoding="utf-8") as f:
         for line in f:
             line = line.strip()
@@ -79,6 +89,13 @@ def load_done(out: Path | str | None) -> dict[str, Any]:
             if isinstance(rec, dict) and "key" in rec and "result" in rec:
                 done[str(rec["key"])] = rec["result"]
     return done
+
+
+def _check_file(out: Path | str) -> None:
+    """A results path must be a file (or not exist yet): a directory is an input error naming it."""
+    if Path(out).is_dir():
+        raise GraphnavError("is a directory; the results file must be a file name (it is created if "
+                            "missing)", where=str(out))
 
 
 def _check_keys(tasks: Sequence[dict[str, Any]]) -> list[str]:
@@ -98,6 +115,8 @@ def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any
               report: dict[str, Any] | None = None) -> list[Any]:
     """Run ``fn`` over ``tasks`` (see the module docstring); results in task order."""
     keys = _check_keys(tasks)
+    if out is not None:
+        _check_file(out)
     done = load_done(out)
     pending = [t for t, k in zip(tasks, keys, strict=True) if k not in done]
     if done:
@@ -140,6 +159,11 @@ def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any
                 finish(str(t["key"]), _roundtrip(fn(t)))
         else:
             _run_dask(fn, pending, None if chosen == "local" else chosen, workers, finish)
+    except KeyboardInterrupt:
+        if sink is not None:
+            log.warning("interrupted: %d of %d tasks are in %s; the same command resumes from there",
+                        len([k for k in keys if k in done]), len(tasks), out)
+        raise
     finally:
         if sink is not None:
             sink.close()
@@ -153,6 +177,22 @@ def _roundtrip(result: Any) -> Any:
     return json.loads(json.dumps(result))
 
 
+@contextlib.contextmanager
+def _workers_ignore_sigint() -> Iterator[None]:
+    """SIGINT ignored while the LocalCluster spawns its worker processes, which inherit that: Ctrl-C
+    reaches the whole process group, and only this process should act on it (stop, close the
+    cluster, keep the finished results); otherwise every worker prints a KeyboardInterrupt
+    traceback. A Ctrl-C during the 1-3 s start-up itself is therefore ignored."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: Any, workers: int,
               finish: Callable[[str, Any], None]) -> None:
     from distributed import Client, LocalCluster, as_completed
@@ -162,11 +202,19 @@ def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: Any, worke
         logging.getLogger(name).setLevel(logging.WARNING)
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
-                               dashboard_address=":0", silence_logs=logging.WARNING)
+        with _workers_ignore_sigint():
+            cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=logging.ERROR)
         client = Client(cluster)
     elif isinstance(scheduler, str):
-        client = Client(scheduler)
+        try:
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+        except (ValueError, TypeError) as exc:
+            raise AddressError(scheduler, f"not a Dask scheduler address ({exc}); expected tcp://HOST:PORT, "
+                                          "'local', 'auto' or 'serial'") from None
+        except OSError as exc:  # unreachable or refused (distributed raises OSError on its timeout)
+            raise AddressError(scheduler, f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S:g} s "
+                                          f"({exc})") from None
     else:  # an existing distributed.Client: used, not closed
         client = scheduler
     try:

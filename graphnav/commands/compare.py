@@ -12,6 +12,7 @@ from .. import estimators
 from ..compare import compare, ranked
 from ..icp_cache import MatchCache
 from ..io import load_log
+from ..io.outputs import ensure_dir
 from ..report import to_json, write_report
 from ._common import add_json_flag, add_log_args, emit, parse_options
 
@@ -51,6 +52,7 @@ def _options(pairs: list[str] | None) -> dict[str, dict]:
 
 
 def run(args: argparse.Namespace) -> int:
+    ensure_dir(args.out)
     log = load_log(args.log, lenient=args.lenient)
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     t0 = time.perf_counter()

@@ -11,6 +11,7 @@ import argparse
 import logging
 from pathlib import Path
 
+from ..io.outputs import ensure_dir
 from . import compare
 
 log_ = logging.getLogger("graphnav.demo")
@@ -42,6 +43,7 @@ def embedded_log(out_dir: Path) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
+    ensure_dir(args.out)
     log_path = args.log or embedded_log(args.out)
     log_.info("graphnav demo: comparing every estimator on %s", log_path)
     cargs = argparse.Namespace(log=str(log_path), lenient=False, out=args.out, estimators=None, option=None,

@@ -13,6 +13,7 @@ import numpy as np
 from ..icp import VARIANTS, IcpConfig
 from ..icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
 from ..io import load_log
+from ..io.outputs import ensure_dir
 from ..motion_guess import INITS
 from ..movement import movement_from_increments
 from ._common import add_json_flag, add_log_args, emit, parse_options
@@ -36,6 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.out:
+        ensure_dir(args.out)
     log = load_log(args.log, lenient=args.lenient)
     options = parse_options(args.option)
     if isinstance(options.get("cov_floor"), list):
@@ -53,7 +56,6 @@ def run(args: argparse.Namespace) -> int:
     summary["nees_median"] = float(np.nanmedian(ne)) if np.isfinite(ne).any() else float("nan")
     summary["options"] = options
     if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
         write_pairs_csv(args.out / "pairs.csv", pr, ref, scored, per, ne)
         summary["plots"] = write_plots(args.out, args.variant, per)
         summary["out"] = str(args.out)

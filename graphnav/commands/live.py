@@ -8,6 +8,7 @@ import json
 import logging
 
 from ..io import load_log
+from ..io.outputs import ensure_dir
 from ..live import LiveRunner
 from ..online import ONLINE_ESTIMATORS, make_online
 from ._common import add_json_flag, emit, jsonable, parse_options
@@ -39,12 +40,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.out:
+        ensure_dir(args.out)
     estimator = make_online(args.estimator, **parse_options(args.option))
     scans = load_log(args.scans_from) if args.scans_from else None
     runner = LiveRunner(args.nmea, estimator, publish=args.publish, out_dir=args.out, scans_from=scans,
                         origin=parse_origin(args.origin), require_checksum=not args.no_checksum_required,
                         duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans)
-    log_.info("listening on %s; publishing to %s", ", ".join(args.nmea), args.publish or "-")
     summary = runner.run()
     if args.out:
         from pathlib import Path

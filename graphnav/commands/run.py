@@ -11,6 +11,7 @@ from pathlib import Path
 from .. import estimators
 from ..evaluate import summarize
 from ..io import load_log
+from ..io.outputs import ensure_dir
 from ..trajectory_writer import TrajectoryWriter
 from ._common import add_json_flag, add_log_args, emit, jsonable, parse_options
 
@@ -29,11 +30,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.out:
+        ensure_dir(args.out)
     log = load_log(args.log, lenient=args.lenient)
     options = parse_options(args.option)
     writer = None
     if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
         writer = TrajectoryWriter(args.out / "online.tum")  # appended and flushed as estimates arrive
     log_.info("running %s on %s (%d records)", args.estimator, args.log, len(log))
     t0 = time.perf_counter()
