@@ -19,7 +19,8 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
   (``add(record) -> Estimate | None``), by name from :data:`graphnav.online.ONLINE_ESTIMATORS`:
   :class:`graphnav.online.GraphOnline` (GTSAM fixed-lag, the default, or iSAM2) or
   :class:`graphnav.ekf_online.EkfOnline` (the ``ekf`` estimator).
-* **Output** -- every estimate is appended to ``DIR/live.tum`` (+ ``live.cov``), flushed
+* **Output** -- every estimate is appended to a new file per run, ``DIR/live-YYYYmmddTHHMMSSZ.tum``
+  (UTC start time; + ``.cov``; an earlier run's file is never touched), flushed line by line
   (:class:`graphnav.trajectory_writer.TrajectoryWriter`), and published as GGA, HDT, VTG, ROT
   (valid checksums, one datagram per estimate) to ``publish`` (``udp://HOST:PORT``).
 * **Stopping** -- SIGINT/SIGTERM (or :meth:`LiveRunner.stop`, ``duration``, ``idle_exit``, the
@@ -48,11 +49,12 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from .errors import AddressError, LogError
+from .errors import AddressError, GraphnavError, LogError
 from .geodesy import LocalFrame
 from .io.jsonl import parse_record
 from .io.nmea import UERE_M, NmeaDecoder, parse_sentence
 from .io.nmea_out import solution_sentences
+from .io.outputs import ensure_dir
 from .log import Gnss, NavLog, Scan
 from .online import Estimate, OnlineEstimator
 from .trajectory_writer import TrajectoryWriter
@@ -202,9 +204,27 @@ class _Source:
         return lines
 
 
+def new_live_file(out_dir: Path, now: float | None = None) -> TrajectoryWriter:
+    """A writer on a new file ``out_dir/live-YYYYmmddTHHMMSSZ[-N].tum`` (UTC; ``-N`` when that second's
+    name is taken): a live run appends to its own file and never replaces an earlier run's."""
+    ensure_dir(out_dir)
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(now))
+    for n in range(1000):
+        path = out_dir / f"live-{stamp}{f'-{n}' if n else ''}.tum"
+        if path.with_suffix(".cov").exists():
+            continue
+        try:
+            return TrajectoryWriter(path, exclusive=True)
+        except FileExistsError:
+            continue
+    raise GraphnavError("no free live-*.tum file name for this second", where=str(out_dir))
+
+
 class LiveRunner:
     """The live loop (see the module docstring). ``run()`` blocks until stopped, then returns
     :meth:`summary`."""
+
+    writer: TrajectoryWriter | None = None
 
     def __init__(self, sources: list[str], estimator: OnlineEstimator, *, publish: str | None = None,
                  out_dir: str | Path | None = None, scans_from: NavLog | None = None,
@@ -349,8 +369,7 @@ class LiveRunner:
                 old[sig] = signal.signal(sig, self.stop)
         try:
             if self.out_dir is not None:
-                self.out_dir.mkdir(parents=True, exist_ok=True)
-                self.writer = TrajectoryWriter(self.out_dir / "live.tum")
+                self.writer = new_live_file(self.out_dir)
             if self.publish is not None:
                 self.pub_addr = resolve(self.publish)
                 self.pub_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -427,6 +446,8 @@ class LiveRunner:
             out["origin"] = {"lat": f.lat0, "lon": f.lon0}
         if self.out_dir is not None:
             out["out"] = str(self.out_dir)
+            if self.writer is not None:
+                out["tum"] = str(self.writer.path)
         info = getattr(self.estimator, "info", None)
         if callable(info):
             out["estimator"] = info()

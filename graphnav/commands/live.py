@@ -8,7 +8,7 @@ import json
 import logging
 
 from ..io import load_log
-from ..io.outputs import ensure_dir
+from ..io.outputs import ensure_dir, write_text_atomic
 from ..live import LiveRunner
 from ..online import ONLINE_ESTIMATORS, make_online
 from ._common import add_json_flag, emit, jsonable, parse_options
@@ -29,7 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"online estimator: {', '.join(sorted(ONLINE_ESTIMATORS))} (default fixed-lag)")
     p.add_argument("--option", "-O", action="append", metavar="KEY=VALUE", help="estimator option")
     p.add_argument("--publish", metavar="udp://HOST:PORT", help="send the solution as NMEA here")
-    p.add_argument("--out", metavar="DIR", help="write every estimate to DIR/live.tum (flushed)")
+    p.add_argument("--out", metavar="DIR", help="write every estimate to a new DIR/live-YYYYmmddTHHMMSSZ.tum "
+                   "(UTC start; flushed line by line), the summary beside it (.summary.json)")
     p.add_argument("--origin", metavar="LAT,LON", help="local frame origin (default: the first fix)")
     p.add_argument("--no-checksum-required", action="store_true",
                    help="accept sentences without a checksum (a wrong checksum is always rejected)")
@@ -48,9 +49,7 @@ def run(args: argparse.Namespace) -> int:
                         origin=parse_origin(args.origin), require_checksum=not args.no_checksum_required,
                         duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans)
     summary = runner.run()
-    if args.out:
-        from pathlib import Path
-
-        (Path(args.out) / "summary.json").write_text(json.dumps(jsonable(summary), indent=2))
+    if args.out and runner.writer is not None:  # beside this run's own TUM file, written atomically
+        write_text_atomic(runner.writer.path.with_suffix(".summary.json"), json.dumps(jsonable(summary), indent=2))
     emit(args, summary)
     return 0
