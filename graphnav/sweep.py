@@ -3,7 +3,7 @@
 API
 ---
 ``run_sweep(fn, tasks, *, out=None, scheduler=None, workers=2, progress=True, task_cost_s=None,
-report=None) -> list``
+report=None, dashboard=None) -> list``
 
 * ``fn(task: dict) -> result`` must be picklable (a module-level function) and its result
   JSON-serialisable (floats survive JSON exactly, so a resumed sweep equals an uninterrupted one).
@@ -19,6 +19,9 @@ report=None) -> list``
   ``"auto"`` runs in this process when starting a cluster costs more than it saves (see
   :func:`resolve_scheduler`; needs ``task_cost_s``, the estimated CPU seconds of one task),
   else the ``LocalCluster``.
+  The embedded ``LocalCluster`` listens on 127.0.0.1 only (scheduler and workers) and has no
+  dashboard unless ``dashboard`` gives its address (e.g. ``"127.0.0.1:8787"``; ``:0`` picks a
+  free port); the link is then logged and put in ``report["dashboard"]``.
 * ``progress``: a tqdm bar on stderr.
 * ``report``: a dict, filled with ``scheduler`` (what ran: ``"serial"``, ``"local"`` or the
   address), ``tasks`` and ``pending`` (tasks not already on disk).
@@ -30,6 +33,7 @@ Monte Carlo runs and parameter studies use the same runner (e.g. :mod:`graphnav.
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import json
 import logging
 import signal
@@ -112,7 +116,7 @@ def _check_keys(tasks: Sequence[dict[str, Any]]) -> list[str]:
 def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any]], *,
               out: Path | str | None = None, scheduler: Any = None, workers: int = 2,
               progress: bool = True, desc: str = "sweep", task_cost_s: float | None = None,
-              report: dict[str, Any] | None = None) -> list[Any]:
+              report: dict[str, Any] | None = None, dashboard: str | None = None) -> list[Any]:
     """Run ``fn`` over ``tasks`` (see the module docstring); results in task order."""
     keys = _check_keys(tasks)
     if out is not None:
@@ -158,7 +162,8 @@ def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any
             for t in pending:
                 finish(str(t["key"]), _roundtrip(fn(t)))
         else:
-            _run_dask(fn, pending, None if chosen == "local" else chosen, workers, finish)
+            _run_dask(fn, pending, None if chosen == "local" else chosen, workers, finish, dashboard=dashboard,
+                      report=report)
     except KeyboardInterrupt:
         if sink is not None:
             log.warning("interrupted: %d of %d tasks are in %s; the same command resumes from there",
@@ -194,7 +199,8 @@ def _workers_ignore_sigint() -> Iterator[None]:
 
 
 def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: Any, workers: int,
-              finish: Callable[[str, Any], None]) -> None:
+              finish: Callable[[str, Any], None], *, dashboard: str | None = None,
+              report: dict[str, Any] | None = None) -> None:
     from distributed import Client, LocalCluster, as_completed
 
     for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.core",
@@ -202,10 +208,17 @@ def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: Any, worke
         logging.getLogger(name).setLevel(logging.WARNING)
     cluster = None
     if scheduler is None:
-        with _workers_ignore_sigint():
+        if dashboard is not None and importlib.util.find_spec("bokeh") is None:
+            log.warning("--dashboard: the Dask dashboard needs bokeh, which is not installed; running without it")
+            dashboard = None
+        with _workers_ignore_sigint():  # loopback only; no dashboard unless asked for
             cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
-                                   dashboard_address=":0", silence_logs=logging.ERROR)
+                                   host="127.0.0.1", dashboard_address=dashboard, silence_logs=logging.ERROR)
         client = Client(cluster)
+        if dashboard is not None:
+            log.info("Dask dashboard: %s", cluster.dashboard_link)
+            if report is not None:
+                report["dashboard"] = cluster.dashboard_link
     elif isinstance(scheduler, str):
         try:
             client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)

@@ -21,6 +21,12 @@ def add_overwrite_flag(p: argparse.ArgumentParser) -> None:
                         "(listed in its .graphnav-outputs.json) are deleted first, other files are left alone")
 
 
+def add_dashboard_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dashboard", nargs="?", const="127.0.0.1:8787", default=None, metavar="HOST:PORT",
+                   help="serve the embedded Dask LocalCluster's dashboard (default off; bare --dashboard: "
+                        "127.0.0.1:8787, loopback only)")
+
+
 def add_log_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="log: marina directory, .jsonl[.gz], .npz, .nmea, or a ROS bag")
     p.add_argument("--lenient", action="store_true", help="skip malformed records (and count them)")

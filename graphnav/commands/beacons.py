@@ -22,7 +22,7 @@ from ..beacon_layout import (
     summarize_search,
 )
 from ..sweep import run_sweep
-from ._common import add_json_flag, emit
+from ._common import add_dashboard_flag, add_json_flag, emit
 
 log = logging.getLogger("graphnav.beacons")
 
@@ -44,6 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="EKF criterion: compiled kernel (numba, optional dependency) or numpy; auto: numba "
                         "when importable and --linearize truth")
     s.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
+    add_dashboard_flag(s)
     s.add_argument("--chunk", type=int, default=None, help="configurations per sweep task")
     s.add_argument("--results", type=Path, default=None,
                    help="JSON-lines file of finished chunks: an interrupted search resumes from it")
@@ -83,7 +84,7 @@ def search(args: argparse.Namespace) -> int:
     report: dict[str, Any] = {}
     results = run_sweep(fn, tasks, out=args.results, scheduler=args.scheduler, workers=args.workers,
                         progress=not args.no_progress, desc=f"{args.beacons}-beacon {args.criterion}",
-                        task_cost_s=cost, report=report)
+                        task_cost_s=cost, report=report, dashboard=args.dashboard)
     pick = "scores" if args.criterion == "ekf" else f"scores_{args.marginals}"
     scores = np.concatenate([np.asarray(r[pick], dtype=float).reshape(-1, 3) for r in results])
     wall = time.perf_counter() - t0

@@ -1,5 +1,6 @@
-"""``graphnav live --nmea udp://0.0.0.0:10110 --publish udp://HOST:PORT --out DIR``: online
-navigation from NMEA streams, the solution published as NMEA (GGA, HDT, VTG, ROT)."""
+"""``graphnav live --nmea udp://127.0.0.1:10110 --publish udp://127.0.0.1:10111 --out DIR``: online
+navigation from NMEA streams, the solution published as NMEA (GGA, HDT, VTG, ROT). Listen on
+loopback unless the sender is another machine (then bind that interface's address)."""
 
 from __future__ import annotations
 
