@@ -9,9 +9,17 @@ report=None, dashboard=None) -> list``
   JSON-serialisable (floats survive JSON exactly, so a resumed sweep equals an uninterrupted one).
 * ``tasks``: a list of dicts, each with a unique string ``"key"``; everything else is ``fn``'s.
   Make tasks coarse (e.g. a chunk of configurations each) so scheduling overhead stays small.
-* ``out``: a JSON-lines file. Every finished task is appended as ``{"key": ..., "result": ...}``
-  and flushed as soon as it completes; tasks whose key is already in the file are not recomputed
-  (an interrupted sweep resumes). A torn last line (killed mid-write) is ignored.
+* ``out``: a JSON-lines results file. Its first line is a header naming the code that wrote it,
+  ``{"graphnav_results": 2, "code": "VERSION+SOURCEHASH"}`` (:func:`code_version`: the package
+  version and a hash of every graphnav/factors source file). Every finished task is appended as
+  ``{"key": KEY#HASH, "result": ...}`` and flushed as soon as it completes, ``HASH`` being a hash
+  of the task's whole content (every parameter it carries, :func:`task_key`). A task whose
+  ``KEY#HASH`` is in the file is not recomputed (an interrupted sweep resumes); a task whose
+  parameters changed has another hash and is computed afresh (the file keeps both; results of
+  other parameters are never returned). A file written by other code (another version or
+  changed sources, or the format before the header) is refused with a :class:`GraphnavError`
+  unless ``overwrite``, which starts the file afresh. A torn last line (killed mid-write) is
+  ignored.
 * ``scheduler``: ``None`` or ``"local"`` starts an embedded ``LocalCluster`` of ``workers``
   processes (one thread each) for the duration of the call; ``"tcp://host:8786"`` uses an
   existing cluster (its workers must be able to import ``fn``'s module); a ``distributed.Client``
@@ -33,6 +41,8 @@ Monte Carlo runs and parameter studies use the same runner (e.g. :mod:`graphnav.
 from __future__ import annotations
 
 import contextlib
+import functools
+import hashlib
 import importlib.util
 import json
 import logging
@@ -44,6 +54,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import AddressError, GraphnavError
+from .io.outputs import write_text_atomic
 
 log = logging.getLogger("graphnav.sweep")
 
@@ -75,8 +86,65 @@ def resolve_scheduler(scheduler: Any, pending: int, task_cost_s: float | None, w
     return "serial" if saved <= CLUSTER_STARTUP_S else "local"
 
 
+RESULTS_FORMAT = 2
+
+
+@functools.lru_cache(maxsize=1)
+def code_version() -> str:
+    """``graphnav.__version__ + "+" +`` the first 12 hex digits of a SHA-256 over every ``*.py`` of the
+    ``graphnav`` and ``factors`` packages (relative path and content, sorted): any change to the
+    code that computes a result changes it."""
+    import factors
+
+    from . import __version__
+
+    h = hashlib.sha256()
+    for pkg in (Path(__file__).resolve().parent, Path(factors.__file__).resolve().parent):
+        for f in sorted(pkg.rglob("*.py")):
+            h.update(f"{pkg.name}/{f.relative_to(pkg).as_posix()}\0".encode())
+            h.update(f.read_bytes())
+    return f"{__version__}+{h.hexdigest()[:12]}"
+
+
+def _canonical(obj: Any) -> Any:
+    """JSON fallback for task content: functions by qualified name, numpy values as Python ones."""
+    if callable(obj) and hasattr(obj, "__qualname__"):
+        return f"{getattr(obj, '__module__', '?')}.{obj.__qualname__}"
+    if hasattr(obj, "tolist"):  # numpy arrays and scalars
+        return obj.tolist()
+    if isinstance(obj, set | frozenset):
+        return sorted(obj, key=repr)
+    if isinstance(obj, Path):
+        return str(obj)
+    return repr(obj)
+
+
+def task_key(task: dict[str, Any]) -> str:
+    """``KEY#HASH``: the task's key and a 16-hex-digit SHA-256 of everything else it carries
+    (canonical JSON: sorted keys, floats exact), so two tasks share a results line only if every
+    parameter agrees."""
+    body = {k: v for k, v in task.items() if k != "key"}
+    text = json.dumps(body, sort_keys=True, default=_canonical, separators=(",", ":"))
+    return f"{task['key']}#{hashlib.sha256(text.encode()).hexdigest()[:16]}"
+
+
+def read_header(out: Path | str) -> dict[str, Any] | None:
+    """The header of a results file (None if the file is missing, empty or has none)."""
+    p = Path(out)
+    if not p.exists():
+        return None
+    _check_file(p)
+    with open(p, encoding="utf-8") as f:
+        first = f.readline().strip()
+    try:
+        obj = json.loads(first) if first else None
+    except json.JSONDecodeError:
+        return None
+    return obj if isinstance(obj, dict) and "graphnav_results" in obj else None
+
+
 def load_done(out: Path | str | None) -> dict[str, Any]:
-    """Finished results in a JSON-lines results file, by key (missing file: empty)."""
+    """Finished results in a JSON-lines results file, by stored key (``KEY#HASH``; missing file: empty)."""
     done: dict[str, Any] = {}
     if out is None or not Path(out).exists():
         return done
@@ -93,6 +161,24 @@ def load_done(out: Path | str | None) -> dict[str, Any]:
             if isinstance(rec, dict) and "key" in rec and "result" in rec:
                 done[str(rec["key"])] = rec["result"]
     return done
+
+
+def _prepare_results(out: Path, overwrite: bool) -> None:
+    """Make ``out`` a results file of this code: created with a header when missing or empty, or
+    when ``overwrite``; a file written by other code is an error naming the flag that discards it."""
+    code = code_version()
+    if out.exists() and out.stat().st_size > 0 and not overwrite:
+        head = read_header(out)
+        if head is not None and head.get("code") == code and head.get("graphnav_results") == RESULTS_FORMAT:
+            return
+        other = f"graphnav {head.get('code')}" if head else "an earlier graphnav (no header)"
+        raise GraphnavError(f"holds results computed by {other}, not by this code ({code}), so they may differ; "
+                            "pass --overwrite to discard them and start afresh, or give another --results file",
+                            where=str(out))
+    if out.exists() and out.stat().st_size > 0:
+        log.warning("%s: --overwrite: discarding its %d results", out, len(load_done(out)))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out, json.dumps({"graphnav_results": RESULTS_FORMAT, "code": code}) + "\n")
 
 
 def _check_file(out: Path | str) -> None:
@@ -116,15 +202,23 @@ def _check_keys(tasks: Sequence[dict[str, Any]]) -> list[str]:
 def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any]], *,
               out: Path | str | None = None, scheduler: Any = None, workers: int = 2,
               progress: bool = True, desc: str = "sweep", task_cost_s: float | None = None,
-              report: dict[str, Any] | None = None, dashboard: str | None = None) -> list[Any]:
+              report: dict[str, Any] | None = None, dashboard: str | None = None,
+              overwrite: bool = False) -> list[Any]:
     """Run ``fn`` over ``tasks`` (see the module docstring); results in task order."""
-    keys = _check_keys(tasks)
+    stored = dict(zip(_check_keys(tasks), (task_key(t) for t in tasks), strict=True))  # KEY -> KEY#HASH
+    keys = list(stored.values())
     if out is not None:
         _check_file(out)
+        _prepare_results(Path(out), overwrite)
     done = load_done(out)
     pending = [t for t, k in zip(tasks, keys, strict=True) if k not in done]
     if done:
-        log.info("resuming: %d of %d tasks already in %s", len(tasks) - len(pending), len(tasks), out)
+        reused = len(tasks) - len(pending)
+        log.info("resuming: %d of %d tasks already in %s", reused, len(tasks), out)
+        other = len(done) - reused
+        if other:
+            log.warning("%s also holds %d result(s) computed with other parameters: not used (kept in the file)",
+                        out, other)
     chosen = resolve_scheduler(scheduler, len(pending), task_cost_s, workers)
     if scheduler == "auto":
         log.info("scheduler auto: %s (%d tasks, estimated %s s CPU)", chosen, len(pending),
@@ -134,7 +228,6 @@ def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any
         report.update({"scheduler": name, "tasks": len(tasks), "pending": len(pending)})
     sink = None
     if out is not None:
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
         p = Path(out)
         torn = p.exists() and p.stat().st_size > 0 and not p.read_bytes().endswith(b"\n")
         sink = open(out, "a", encoding="utf-8")
@@ -147,7 +240,8 @@ def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any
         bar = tqdm(total=len(tasks), initial=len(tasks) - len(pending), desc=desc, file=sys.stderr,
                    unit="task", leave=False)
 
-    def finish(key: str, result: Any) -> None:
+    def finish(user_key: str, result: Any) -> None:
+        key = stored[user_key]
         done[key] = result
         if sink is not None:
             sink.write(json.dumps({"key": key, "result": result}) + "\n")

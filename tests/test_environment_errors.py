@@ -123,7 +123,7 @@ def test_ctrl_c_during_beacons_search_exits_130_keeps_results_and_resumes(tmp_pa
                          stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
     try:
         deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and p.poll() is None and not (results.exists() and results.stat().st_size):
+        while time.monotonic() < deadline and p.poll() is None and not (results.exists() and load_done(results)):
             time.sleep(0.05)
         time.sleep(0.5)
         assert p.poll() is None, "the search ended before it could be interrupted"

@@ -47,7 +47,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_dashboard_flag(s)
     s.add_argument("--chunk", type=int, default=None, help="configurations per sweep task")
     s.add_argument("--results", type=Path, default=None,
-                   help="JSON-lines file of finished chunks: an interrupted search resumes from it")
+                   help="JSON-lines file of finished chunks: an interrupted search resumes from it (a chunk "
+                        "is reused only if every parameter of it is the same; a file written by other "
+                        "code is refused)")
+    s.add_argument("--overwrite", action="store_true",
+                   help="discard what --results holds and start it afresh")
     s.add_argument("--limit", type=int, default=None, help="score only every k-th layout (quick looks)")
     s.add_argument("--linearize", choices=("truth", "estimate"), default="truth")
     s.add_argument("--beacon-init", choices=("first-sighting", "zero", "truth"), default="first-sighting")
@@ -84,7 +88,7 @@ def search(args: argparse.Namespace) -> int:
     report: dict[str, Any] = {}
     results = run_sweep(fn, tasks, out=args.results, scheduler=args.scheduler, workers=args.workers,
                         progress=not args.no_progress, desc=f"{args.beacons}-beacon {args.criterion}",
-                        task_cost_s=cost, report=report, dashboard=args.dashboard)
+                        task_cost_s=cost, report=report, dashboard=args.dashboard, overwrite=args.overwrite)
     pick = "scores" if args.criterion == "ekf" else f"scores_{args.marginals}"
     scores = np.concatenate([np.asarray(r[pick], dtype=float).reshape(-1, 3) for r in results])
     wall = time.perf_counter() - t0

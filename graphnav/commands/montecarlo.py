@@ -30,7 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--scheduler", help="Dask scheduler address, or 'serial' (default: a local cluster)")
     s.add_argument("--workers", type=int, default=2, help="local cluster processes (default 2)")
     add_dashboard_flag(s)
-    s.add_argument("--results", help="JSON-lines file of per-run results (makes the sweep resumable)")
+    s.add_argument("--results", help="JSON-lines file of per-run results (makes the sweep resumable; a run is "
+                   "reused only if all its parameters are the same; a file written by other code is refused)")
+    s.add_argument("--overwrite", action="store_true", help="discard what --results holds and start it afresh")
     s.add_argument("--estimators", help="comma-separated names (default: " + ",".join(PAPER_ESTIMATORS) + ")")
     s.add_argument("--option", "-O", action="append", metavar="EST:KEY=VALUE",
                    help="estimator option, e.g. fuzzy-ukf:window=50; repeatable")
@@ -64,7 +66,7 @@ def run_solent(args: argparse.Namespace) -> int:
     log_.info("montecarlo solent scenario %d: %d runs of %s", args.scenario, args.runs, names)
     t0 = time.perf_counter()
     trials = map_trials(solent_trial, tasks, scheduler=args.scheduler, workers=args.workers, out=args.results,
-                        dashboard=args.dashboard)
+                        dashboard=args.dashboard, overwrite=args.overwrite)
     est = aggregate(trials, names)
     out = {"scenario": args.scenario, "runs": args.runs, "estimators": est,
            "improvement_pct": improvement_pct(est)}
