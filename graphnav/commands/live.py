@@ -44,11 +44,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.out:
         ensure_dir(args.out)
-    estimator = make_online(args.estimator, **parse_options(args.option))
+    options = parse_options(args.option)
+    estimator = make_online(args.estimator, **options)
     scans = load_log(args.scans_from) if args.scans_from else None
     runner = LiveRunner(args.nmea, estimator, publish=args.publish, out_dir=args.out, scans_from=scans,
                         origin=parse_origin(args.origin), require_checksum=not args.no_checksum_required,
-                        duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans)
+                        duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans,
+                        restart=lambda: make_online(args.estimator, **options))
     summary = runner.run()
     if args.out and runner.writer is not None:  # beside this run's own TUM file, written atomically
         write_text_atomic(runner.writer.path.with_suffix(".summary.json"), json.dumps(jsonable(summary), indent=2))
