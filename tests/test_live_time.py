@@ -120,7 +120,8 @@ def test_a_sustained_clock_step_is_accepted_as_a_resync(step, caplog):
     k = 40
     t_cut = log.of("gnss")[k].t
     assert _hhmmss(t_cut + step)[:2] != "00"  # the step stays inside the day (ZDA dates unchanged)
-    sents = [(t, retimed(x, t + step) if t >= t_cut - 1e-9 and x[3:6] in ("GGA", "ZDA", "RMC") else x) for t, x in sents]
+    timed = ("GGA", "ZDA", "RMC")
+    sents = [(t, retimed(x, t + step) if t >= t_cut - 1e-9 and x[3:6] in timed else x) for t, x in sents]
     with caplog.at_level(logging.WARNING, logger="graphnav.live"):
         r = feed(sents, "ekf")
     summary = r.summary()
