@@ -18,24 +18,41 @@ from numpy.typing import NDArray
 
 from .errors import LogError
 
+#: Maximum range [m] of a scan whose log states none: a return beyond it is a missing return.
+#: Above the rated range of the 2D LiDARs used on vessels and indoors (Scanse Sweep 40 m, Hokuyo
+#: UTM-30LX 30 m, SICK LMS1xx 20-50 m / LMS5xx 80 m, Velodyne VLP-16 100 m), so it drops no real
+#: return of theirs, and small enough to bound the scan matcher's work (docs/log-format.md).
+DEFAULT_MAX_RANGE = 200.0
+#: Largest ``range_max`` a log may state [m] (long-range survey LiDARs reach ~2 km; 10 km is none's).
+MAX_STATED_RANGE = 1e4
+
 
 @dataclass(frozen=True, slots=True)
 class Scan:
     """A 2D LiDAR scan in polar form (sensor frame = body frame, x forward, CCW angles).
 
-    ``ranges`` [m] and ``angles`` [rad] have equal length; NaN, inf or ``<= 0`` ranges are
-    missing returns (kept, so the beam layout survives a round trip).
+    ``ranges`` [m] and ``angles`` [rad] have equal length; NaN, inf, ``<= 0`` ranges and ranges
+    beyond the sensor's maximum are missing returns (kept, so the beam layout survives a round
+    trip). ``range_max`` [m] is the sensor's stated maximum range (NaN: not stated, then
+    :data:`DEFAULT_MAX_RANGE` applies).
     """
 
     t: float
     ranges: NDArray[np.float64]
     angles: NDArray[np.float64]
+    range_max: float = math.nan
     kind: ClassVar[str] = "scan"
 
+    @property
+    def max_range(self) -> float:
+        """The maximum range in force [m]: ``range_max`` when stated, else :data:`DEFAULT_MAX_RANGE`."""
+        return self.range_max if math.isfinite(self.range_max) else DEFAULT_MAX_RANGE
+
     def valid(self) -> NDArray[np.bool_]:
-        """Mask of real returns (finite and > 0)."""
+        """Mask of real returns (finite, > 0 and <= :attr:`max_range`)."""
         r = self.ranges
-        return np.isfinite(r) & (r > 0.0)
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(r) & (r > 0.0) & (r <= self.max_range)
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,6 +176,9 @@ def check_record(rec: Record | KnownBeacon) -> None:
             raise LogError(f"expected a number, got {type(v).__name__}", field=f.name)
         elif f.name == "t" and not math.isfinite(v):
             raise LogError("timestamp must be finite", field="t")
+        elif f.name == "range_max":
+            if not (math.isnan(v) or 0.0 < v <= MAX_STATED_RANGE):
+                raise LogError(f"range_max must be in (0, {MAX_STATED_RANGE:g}] m (or absent)", field="range_max")
         elif f.name.startswith("sigma"):
             optional = isinstance(f.default, float) and math.isnan(f.default)
             if not ((optional and math.isnan(v)) or (math.isfinite(v) and v > 0.0)):

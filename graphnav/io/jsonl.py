@@ -27,6 +27,7 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "beacon_known": ("id", "x", "y", "sigma"),
 }
 OPTIONAL: dict[str, tuple[str, ...]] = {
+    "scan": ("range_max",),
     "odometry": ("sigma_v", "sigma_w"),
     "beacon": ("sigma_range", "sigma_bearing"),
 }
@@ -99,7 +100,8 @@ def parse_record(obj: Any, frame: LocalFrame | None = None) -> Record | KnownBea
             angles = _num(obj, "angle_min") + _num(obj, "angle_increment") * np.arange(ranges.size)
         else:
             raise LogError("a scan needs 'angles' (or 'angle_min' and 'angle_increment')", field="angles")
-        rec: Record | KnownBeacon = Scan(_num(obj, "t"), ranges, angles)
+        rmax = _num(obj, "range_max") if obj.get("range_max") is not None else math.nan
+        rec: Record | KnownBeacon = Scan(_num(obj, "t"), ranges, angles, rmax)
     elif kind == "gnss":
         if "x" in obj and "y" in obj:
             x, y = _num(obj, "x"), _num(obj, "y")
@@ -222,6 +224,8 @@ def record_to_obj(rec: Record | KnownBeacon) -> dict[str, Any]:
     if isinstance(rec, Scan):
         obj["ranges"] = [_clean(r) for r in rec.ranges.tolist()]
         obj["angles"] = [_clean(a) for a in rec.angles.tolist()]
+        if math.isfinite(rec.range_max):
+            obj["range_max"] = rec.range_max
         return obj
     for name in REQUIRED[rec.kind] + OPTIONAL.get(rec.kind, ()):
         if name == "t":

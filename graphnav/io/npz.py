@@ -8,6 +8,7 @@ round-trip exactly, ``beacon_known/<field>``, and ``meta`` (a JSON string).
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ from ..log import RECORD_TYPES, SCALAR_FIELDS, KnownBeacon, NavLog, Record, Scan
 
 KINDS = list(RECORD_TYPES)
 FORMAT_VERSION = 1
+OPTIONAL_COLUMNS = ("range_max",)  # added after version 1 files were written: NaN when absent
 
 
 def write_npz(log: NavLog, path: str | Path) -> None:
@@ -86,6 +88,7 @@ def read_npz(path: str | Path) -> NavLog:
             continue
         n = _get(data, f"{kind}/t", path).shape[0]
         cols = {name: _get(data, f"{kind}/{name}", path, numeric=name != "id", length=n).tolist()
+                if f"{kind}/{name}" in data or name not in OPTIONAL_COLUMNS else [math.nan] * n
                 for name in SCALAR_FIELDS[kind]}
         recs: list[Record] = []
         if kind == "scan":
@@ -95,7 +98,8 @@ def read_npz(path: str | Path) -> NavLog:
             if off[0] != 0 or np.any(np.diff(off) < 0) or off[-1] != rng.shape[0]:
                 raise LogError("offsets must rise from 0 to the number of beams", file=str(path), field="scan/offsets")
             for i in range(n):
-                recs.append(Scan(float(cols["t"][i]), rng[off[i]:off[i + 1]], ang[off[i]:off[i + 1]]))
+                recs.append(Scan(float(cols["t"][i]), rng[off[i]:off[i + 1]], ang[off[i]:off[i + 1]],
+                                 float(cols["range_max"][i])))
         else:
             cls = RECORD_TYPES[kind]
             for i in range(n):

@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import LogError
 from ..geodesy import LocalFrame
 from ..geometry import wrap_angle
-from ..log import Gnss, Heading, Imu, NavLog, Odometry, Record, Scan
+from ..log import MAX_STATED_RANGE, Gnss, Heading, Imu, NavLog, Odometry, Record, Scan
 from .nmea import NmeaDecoder, parse_sentence
 
 DEFAULT_GNSS_SIGMA = 3.0  # [m] NavSatFix with COVARIANCE_TYPE_UNKNOWN
@@ -105,7 +105,8 @@ class _Converter:
         r = np.asarray(m.ranges, dtype=float).copy()
         r[~np.isfinite(r) | (r < m.range_min) | (r > m.range_max)] = np.nan
         a = m.angle_min + m.angle_increment * np.arange(r.size)
-        return [Scan(t, r, a)]
+        top = float(m.range_max)  # the sensor's stated range, when it is one a log may state
+        return [Scan(t, r, a, top if 0.0 < top <= MAX_STATED_RANGE else math.nan)]
 
     def gnss(self, m, t: float, topic: str) -> list[Record]:
         if m.status.status < 0 or not (math.isfinite(m.latitude) and math.isfinite(m.longitude)):
@@ -327,7 +328,7 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
                 put("/scan", "sensor_msgs/msg/LaserScan", r.t, T["sensor_msgs/msg/LaserScan"](
                     header=_header(ts, r.t, "laser", ros1), angle_min=float(a[0]) if a.size else 0.0,
                     angle_max=float(a[-1]) if a.size else 0.0, angle_increment=inc, time_increment=0.0,
-                    scan_time=0.0, range_min=0.0, range_max=1e4, ranges=ranges,
+                    scan_time=0.0, range_min=0.0, range_max=float(r.max_range), ranges=ranges,
                     intensities=np.zeros(0, dtype=np.float32)))
             elif isinstance(r, Gnss):
                 lat, lon = frame.to_geodetic(r.x, r.y)
