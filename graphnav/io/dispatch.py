@@ -37,7 +37,7 @@ def load_log(path: str | Path, *, lenient: bool = False, **options) -> NavLog:
     if name.endswith(".npz"):
         from .npz import read_npz
 
-        return read_npz(p)
+        return read_npz(p, **{k: v for k, v in options.items() if k == "max_bytes"})
     if name.endswith(NMEA_SUFFIXES):
         from .nmea import read_nmea
 

@@ -14,6 +14,7 @@ import numpy as np
 from ..errors import LogError
 from ..geodesy import LocalFrame
 from ..log import RECORD_TYPES, BeaconObs, Gnss, KnownBeacon, NavLog, Record, Scan, check_record
+from .textlines import Lines, note_truncation
 
 REQUIRED: dict[str, tuple[str, ...]] = {
     "scan": ("t",),
@@ -59,7 +60,10 @@ def _num(obj: dict, name: str) -> float:
     v = obj[name]
     if isinstance(v, bool) or not isinstance(v, int | float):
         raise LogError(f"expected a number, got {json.dumps(v)[:40]}", field=name)
-    return float(v)
+    try:
+        return float(v)
+    except OverflowError:  # an integer beyond float range (e.g. 400 digits)
+        raise LogError(f"integer with {len(str(abs(v)))} digits is out of range", field=name) from None
 
 
 def _array(obj: dict, name: str) -> np.ndarray:
@@ -73,7 +77,10 @@ def _array(obj: dict, name: str) -> np.ndarray:
         elif isinstance(x, bool) or not isinstance(x, int | float):
             raise LogError(f"element {i} is not a number", field=name)
         else:
-            out[i] = float(x)
+            try:
+                out[i] = float(x)
+            except OverflowError:
+                raise LogError(f"element {i} is out of range", field=name) from None
     return out
 
 
@@ -146,20 +153,18 @@ def read_jsonl(path: str | Path, *, lenient: bool = False) -> NavLog:
     frame: LocalFrame | None = None
     skipped: list[str] = []
     last_t = -math.inf
-    try:
-        fh = _open_text(path, "r")
-        lines = fh.read().splitlines()
-        fh.close()
-    except (OSError, UnicodeDecodeError, EOFError) as exc:
-        raise LogError(f"cannot read: {exc}", file=str(path)) from exc
-    for lineno, line in enumerate(lines, start=1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
+    lines = Lines(path, lenient=lenient)  # read and decompressed line by line
+    for lineno, raw in lines:
         try:
             try:
+                s = raw.decode("utf-8").strip()
+            except UnicodeDecodeError as exc:
+                raise LogError(f"not UTF-8 (byte {exc.start})") from None
+            if not s or s.startswith("#"):
+                continue
+            try:
                 obj = json.loads(s)
-            except (json.JSONDecodeError, RecursionError) as exc:
+            except (ValueError, RecursionError) as exc:  # JSONDecodeError, or an integer of > 4300 digits
                 raise LogError(f"not valid JSON ({exc.__class__.__name__}: {str(exc)[:60]})") from None
             if isinstance(obj, dict) and obj.get("type") == "gnss" and "lat" in obj and frame is None:
                 frame = _frame_from(meta, obj)
@@ -185,6 +190,7 @@ def read_jsonl(path: str | Path, *, lenient: bool = False) -> NavLog:
     if frame is not None:
         meta["origin"] = {"lat": frame.lat0, "lon": frame.lon0, "h": frame.h0}
     if lenient:
+        note_truncation(meta, lines, skipped)
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
     return NavLog(records, known, meta)

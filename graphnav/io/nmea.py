@@ -33,7 +33,6 @@ How sentences become records (full description in docs/nmea.md):
 from __future__ import annotations
 
 import calendar
-import gzip
 import math
 from collections import Counter
 from collections.abc import Iterable, Iterator
@@ -48,6 +47,7 @@ from ..errors import LogError
 from ..geodesy import LocalFrame
 from ..geometry import heading_deg_to_yaw
 from ..log import Gnss, Heading, NavLog, Odometry, Record
+from .textlines import Lines, note_truncation
 
 KNOT = 1852.0 / 3600.0  # m/s
 #: User-equivalent range error [m] per GGA fix quality: sigma per axis = HDOP * UERE.
@@ -368,16 +368,14 @@ HANDLED = {"GGA", "RMC", "ZDA", "VTG", "HDT", "THS", "HDG", "ROT"}
 
 # ----------------------------------------------------------------------------- files
 
-def _lines(path: Path) -> list[bytes]:
-    try:
-        if path.name.lower().endswith(".gz"):
-            with gzip.open(path, "rb") as fh:
-                data = fh.read()
-        else:
-            data = path.read_bytes()
-    except (OSError, EOFError) as exc:
-        raise LogError(f"cannot read: {exc}", file=str(path)) from None
-    return data.splitlines()
+def _lines(path: Path, lenient: bool = False) -> tuple[list[bytes], Lines]:
+    """The file's sentences (``\r\n``, ``\n`` or ``\r`` separated), decompressed when ``.gz``;
+    a damaged stream: :class:`graphnav.io.textlines.Lines` (LogError, or lenient: the lines before it)."""
+    reader = Lines(path, lenient=lenient)
+    out: list[bytes] = []
+    for _n, raw in reader:
+        out.extend(raw.splitlines())
+    return out, reader
 
 
 def _decode(raw: bytes) -> str:
@@ -420,7 +418,7 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
     Sentences are parsed and decoded one line at a time (errors come in line order); only the
     records are kept."""
     path = Path(path)
-    lines = _lines(path)
+    lines, reader = _lines(path, lenient)
     skipped: list[str] = []
     ignored: Counter = Counter()
 
@@ -490,6 +488,7 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
         meta["ignored"] = dict(sorted(ignored.items()))
     meta["sog_cog_samples"] = len(out.sog_cog)
     if lenient:
+        note_truncation(meta, reader, skipped)
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
     return out, meta
