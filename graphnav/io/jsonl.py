@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import LogError
 from ..geodesy import LocalFrame
-from ..log import RECORD_TYPES, BeaconObs, Gnss, KnownBeacon, NavLog, Record, Scan, check_record
+from ..log import RECORD_TYPES, BeaconObs, Gnss, KnownBeacon, Limits, NavLog, Record, Scan, check_record
 from .textlines import Lines, note_truncation
 
 REQUIRED: dict[str, tuple[str, ...]] = {
@@ -84,10 +84,12 @@ def _array(obj: dict, name: str) -> np.ndarray:
     return out
 
 
-def parse_record(obj: Any, frame: LocalFrame | None = None) -> Record | KnownBeacon | dict:
+def parse_record(obj: Any, frame: LocalFrame | None = None, limits: Limits | None = None
+                 ) -> Record | KnownBeacon | dict:
     """Turn one decoded JSON object into a record (a ``meta`` object is returned as a dict).
 
-    Raises :class:`LogError` naming the field on any problem.
+    Raises :class:`LogError` naming the field on any problem, physical validity included
+    (:func:`graphnav.log.check_record` with ``limits``).
     """
     if not isinstance(obj, dict):
         raise LogError("each line must be a JSON object")
@@ -134,16 +136,17 @@ def parse_record(obj: Any, frame: LocalFrame | None = None) -> Record | KnownBea
     else:
         names = REQUIRED[kind] + OPTIONAL.get(kind, ())
         rec = RECORD_TYPES[kind](**{n: _num(obj, n) for n in names if n in obj})
-    check_record(rec)
+    check_record(rec, limits)
     return rec
 
 
-def read_jsonl(path: str | Path, *, lenient: bool = False) -> NavLog:
+def read_jsonl(path: str | Path, *, lenient: bool = False, limits: Limits | None = None) -> NavLog:
     """Read a ``.jsonl`` / ``.jsonl.gz`` log.
 
     Strict by default: the first bad line raises :class:`LogError` with file, line and field.
-    With ``lenient`` bad lines are skipped and counted in ``log.meta["skipped"]`` (their first
-    messages in ``log.meta["skipped_errors"]``). Blank lines and lines starting with ``#`` are
+    With ``lenient`` bad lines (physically invalid ones too, :class:`graphnav.log.Limits`) are
+    skipped and counted in ``log.meta["skipped"]`` (their first messages in
+    ``log.meta["skipped_errors"]``). Blank lines and lines starting with ``#`` are
     comments.
     """
     path = Path(path)
@@ -168,7 +171,7 @@ def read_jsonl(path: str | Path, *, lenient: bool = False) -> NavLog:
                 raise LogError(f"not valid JSON ({exc.__class__.__name__}: {str(exc)[:60]})") from None
             if isinstance(obj, dict) and obj.get("type") == "gnss" and "lat" in obj and frame is None:
                 frame = _frame_from(meta, obj)
-            rec = parse_record(obj, frame)
+            rec = parse_record(obj, frame, limits)
             if isinstance(rec, dict):
                 meta.update(rec)
                 if "origin" in rec:

@@ -46,7 +46,7 @@ import pynmea2
 from ..errors import LogError
 from ..geodesy import LocalFrame
 from ..geometry import heading_deg_to_yaw
-from ..log import Gnss, Heading, NavLog, Odometry, Record
+from ..log import Gnss, Heading, Limits, NavLog, Odometry, Record, check_record
 from .textlines import Lines, note_truncation
 
 KNOT = 1852.0 / 3600.0  # m/s
@@ -173,8 +173,9 @@ class NmeaDecoder:
 
     def __init__(self, frame: LocalFrame | None = None, *, day0: float | None = None,
                  heading_sigma_deg: dict[str, float] | None = None, default_hdop: float = DEFAULT_HDOP,
-                 sog_max_age: float = SOG_MAX_AGE_S, keep: bool = True) -> None:
+                 sog_max_age: float = SOG_MAX_AGE_S, keep: bool = True, limits: Limits | None = None) -> None:
         self.frame = frame
+        self.limits = limits  # physical validity of every record (graphnav.log.check_record)
         self.keep = keep  # False (live mode): do not accumulate records/SOG samples
         self.day0 = day0
         self.days = 0
@@ -229,6 +230,8 @@ class NmeaDecoder:
             self.out.counts["ignored:" + kind] += 1
             return []
         recs = handler(msg)
+        for r in recs:
+            check_record(r, self.limits)
         if self.keep:
             self.out.records.extend(recs)
         return recs

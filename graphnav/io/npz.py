@@ -16,7 +16,7 @@ import numpy as np
 from numpy.lib import format as npformat
 
 from ..errors import LogError
-from ..log import RECORD_TYPES, SCALAR_FIELDS, KnownBeacon, NavLog, Record, Scan, check_record
+from ..log import RECORD_TYPES, SCALAR_FIELDS, KnownBeacon, Limits, NavLog, Record, Scan, check_record
 
 KINDS = list(RECORD_TYPES)
 FORMAT_VERSION = 1
@@ -131,20 +131,23 @@ def _get(data: _Archive, key: str, path: Path, *, numeric: bool = True, integer:
     return data.read(key)
 
 
-def read_npz(path: str | Path, *, max_bytes: int = MAX_DECODED_BYTES) -> NavLog:
+def read_npz(path: str | Path, *, max_bytes: int = MAX_DECODED_BYTES, lenient: bool = False,
+             limits: Limits | None = None) -> NavLog:
     """Read a log written by :func:`write_npz`. Errors name the file and the array.
 
     Only the members the format defines are read (one at a time, each checked against its header
-    first); ``max_bytes`` bounds their total declared decoded size (:class:`_Archive`)."""
+    first); ``max_bytes`` bounds their total declared decoded size (:class:`_Archive`). Records
+    are checked by :func:`graphnav.log.check_record` (``limits``); with ``lenient`` an invalid
+    record is skipped and counted (``meta["skipped"]``, ``meta["skipped_errors"]``) instead."""
     path = Path(path)
     data = _Archive(path, max_bytes)
     try:
-        return _read(data, path)
+        return _read(data, path, lenient, limits)
     finally:
         data.close()
 
 
-def _read(data: _Archive, path: Path) -> NavLog:
+def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> NavLog:
     order = _get(data, "order", path, integer=True)
     meta_arr = data.read("meta") if "meta" in data else np.array("{}")
     try:
@@ -154,7 +157,8 @@ def _read(data: _Archive, path: Path) -> NavLog:
     if not isinstance(meta, dict):
         raise LogError("meta must be a JSON object string", file=str(path), field="meta")
     meta["source"] = str(path)
-    per_kind: dict[str, list[Record]] = {}
+    per_kind: dict[str, list[Record | None]] = {}
+    skipped: list[str] = []
     for kind in KINDS:
         if f"{kind}/t" not in data:
             continue
@@ -162,7 +166,7 @@ def _read(data: _Archive, path: Path) -> NavLog:
         cols = {name: _get(data, f"{kind}/{name}", path, numeric=name != "id", length=n).tolist()
                 if f"{kind}/{name}" in data or name not in OPTIONAL_COLUMNS else [math.nan] * n
                 for name in SCALAR_FIELDS[kind]}
-        recs: list[Record] = []
+        recs: list[Record | None] = []
         if kind == "scan":
             off = _get(data, "scan/offsets", path, integer=True, length=n + 1)
             if off[0] != 0 or np.any(np.diff(off) < 0):
@@ -178,9 +182,13 @@ def _read(data: _Archive, path: Path) -> NavLog:
                 recs.append(cls(**{k: (str(v[i]) if k == "id" else float(v[i])) for k, v in cols.items()}))
         for i, r in enumerate(recs):
             try:
-                check_record(r)
+                check_record(r, limits)
             except LogError as err:
-                raise LogError(f"record {i}: {err.message}", file=str(path), field=f"{kind}/{err.field}") from None
+                err = LogError(f"record {i}: {err.message}", file=str(path), field=f"{kind}/{err.field}")
+                if not lenient:
+                    raise err from None
+                skipped.append(str(err))
+                recs[i] = None
         per_kind[kind] = recs
     cursor = dict.fromkeys(per_kind, 0)
     records: list[Record] = []
@@ -188,7 +196,9 @@ def _read(data: _Archive, path: Path) -> NavLog:
         k = KINDS[c] if 0 <= c < len(KINDS) else None
         if k is None or k not in per_kind or cursor[k] >= len(per_kind[k]):
             raise LogError("record order does not match the record arrays", file=str(path), field="order")
-        records.append(per_kind[k][cursor[k]])
+        rec = per_kind[k][cursor[k]]
+        if rec is not None:
+            records.append(rec)
         cursor[k] += 1
     if any(cursor[k] != len(v) for k, v in per_kind.items()):
         raise LogError("record order does not match the record arrays", file=str(path), field="order")
@@ -199,9 +209,12 @@ def _read(data: _Archive, path: Path) -> NavLog:
         known = [KnownBeacon(str(ids[i]), float(xs[i]), float(ys[i]), float(sg[i])) for i in range(len(ids))]
         for b in known:
             try:
-                check_record(b)
+                check_record(b, limits)
             except LogError as err:
                 raise LogError(err.message, file=str(path), field=f"beacon_known/{err.field}") from None
+    if lenient:
+        meta["skipped"] = len(skipped)
+        meta["skipped_errors"] = skipped[:20]
     try:
         return NavLog(records, known, meta)
     except LogError as err:

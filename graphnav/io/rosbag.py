@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import LogError
 from ..geodesy import LocalFrame
 from ..geometry import wrap_angle
-from ..log import MAX_STATED_RANGE, Gnss, Heading, Imu, NavLog, Odometry, Record, Scan
+from ..log import MAX_STATED_RANGE, Gnss, Heading, Imu, Limits, NavLog, Odometry, Record, Scan, check_record
 from .nmea import NmeaDecoder, parse_sentence
 
 DEFAULT_GNSS_SIGMA = 3.0  # [m] NavSatFix with COVARIANCE_TYPE_UNKNOWN
@@ -91,11 +91,12 @@ def yaw_of_quaternion(x: float, y: float, z: float, w: float) -> float:
 
 
 class _Converter:
-    def __init__(self, origin: tuple[float, float] | None, imu_heading_hz: float | None) -> None:
+    def __init__(self, origin: tuple[float, float] | None, imu_heading_hz: float | None,
+                 limits: Limits | None = None) -> None:
         self.frame = LocalFrame(float(origin[0]), float(origin[1])) if origin else None
         self.imu_heading_dt = 1.0 / imu_heading_hz if imu_heading_hz else 0.0
         self.last_imu_heading: dict[str, float] = {}
-        self.nmea = NmeaDecoder(self.frame, keep=False)
+        self.nmea = NmeaDecoder(self.frame, keep=False, limits=limits)
         self.counts: dict[str, int] = {}
 
     def count(self, k: str) -> None:
@@ -202,15 +203,16 @@ def choose_topics(conns: list[tuple[str, str, int]], topics: dict[str, str] | No
 
 def read_bag(path: str | Path, topics: dict[str, str] | None = None, *,
              origin: tuple[float, float] | None = None,
-             imu_heading_hz: float | None = 10.0, lenient: bool = False) -> NavLog:
+             imu_heading_hz: float | None = 10.0, lenient: bool = False, limits: Limits | None = None) -> NavLog:
     """Read a ROS 1/ROS 2 bag into a :class:`NavLog` (see the module docstring).
 
     ``topics`` maps a kind (``scan``, ``gnss``, ``imu``, ``heading``, ``odometry``, ``nmea``) to a
     topic name. A damaged bag raises :class:`LogError` naming the file; with ``lenient`` a message
-    that cannot be decoded is skipped and counted in ``meta["skipped"]``.
+    that cannot be decoded, or gives a physically invalid record (:func:`graphnav.log.check_record`,
+    ``limits``), is skipped and counted in ``meta["skipped"]``.
     """
     path = Path(path)
-    conv = _Converter(origin, imu_heading_hz)
+    conv = _Converter(origin, imu_heading_hz, limits)
     records: list[Record] = []
     skipped: list[str] = []
     with _open(path) as reader:
@@ -227,6 +229,8 @@ def read_bag(path: str | Path, topics: dict[str, str] | None = None, *,
                     recs = handlers[kind](msg, _stamp(msg, ns), conn.topic)
                     if kind == "heading":
                         recs = [r for r in recs if isinstance(r, Heading)]
+                    for r in recs:
+                        check_record(r, limits)
                     records.extend(recs)
                 except LogError as err:
                     err = LogError(err.message, file=str(path), line=i + 1, field=f"{conn.topic}/{err.field}")
