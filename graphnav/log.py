@@ -348,3 +348,11 @@ class NavLog:
     def without(self, predicate) -> NavLog:
         """A copy without the records for which ``predicate(record)`` is true."""
         return NavLog([r for r in self.records if not predicate(r)], list(self.beacons_known), dict(self.meta))
+
+
+def odometry_samples(log: NavLog, sigma_v: float = 0.1, sigma_w: float = math.radians(1.0)) -> NDArray[np.float64]:
+    """The log's odometry records as an (N, 5) array ``t, v, w, sigma_v, sigma_w`` (the given
+    sigmas where a record has none); the input of :func:`graphnav.geometry.increment`."""
+    rows = [[r.t, r.v, r.w, r.sigma_v if math.isfinite(r.sigma_v) else sigma_v,
+             r.sigma_w if math.isfinite(r.sigma_w) else sigma_w] for r in log.of("odometry")]
+    return np.array(rows, dtype=float).reshape(-1, 5)

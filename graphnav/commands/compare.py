@@ -9,10 +9,10 @@ import time
 from pathlib import Path
 
 from .. import estimators
-from ..compare import compare, ranked
-from ..icp_cache import MatchCache
+from ..evaluation.compare import compare, ranked
+from ..evaluation.report import to_json, write_report
 from ..io import load_log
-from ..report import to_json, write_report
+from ..scan.icp_cache import MatchCache
 from ._common import add_json_flag, add_log_args, emit, parse_options
 
 log_ = logging.getLogger("graphnav.compare")

@@ -14,7 +14,6 @@ Deterministic per seed.
 
 from __future__ import annotations
 
-import argparse
 import math
 from pathlib import Path
 
@@ -85,38 +84,3 @@ def simulate_marina_degraded(marina_dir: str | Path, seed: int = 1, **kw) -> Nav
     from ..io.marina import read_marina
 
     return degrade(read_marina(marina_dir), seed, **kw)
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "marina-degraded",
-        help="real marina scans + simulated GNSS (outage, jump) and biased compass",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("--marina", type=Path, required=True, help="the icp_data_marina directory")
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--jump-m", type=float, default=20.0, help="GNSS jump size [m] (0: none, same noise)")
-    p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
-    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
-    p.set_defaults(func=_cli)
-
-
-def _cli(args: argparse.Namespace) -> int:
-    from ..commands._common import emit
-    from ..io import save_log
-
-    log = simulate_marina_degraded(args.marina, args.seed, jump_m=args.jump_m)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
-    emit(
-        args,
-        {
-            "scenario": "marina-degraded",
-            "seed": args.seed,
-            "out": str(args.out),
-            "records": log.counts(),
-            "events": log.meta["events"],
-        },
-    )
-    return 0
