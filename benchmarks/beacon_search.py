@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from graphnav.beacon_layout import (
+from graphnav.beacons.layout import (
     PAPER_TABLE1,
     Choices,
     Fairway,
@@ -39,7 +39,7 @@ from graphnav.beacon_layout import (
     score_chunk,
     summarize_search,
 )
-from graphnav.sweep import run_sweep
+from graphnav.evaluation.sweep import run_sweep
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -135,7 +135,7 @@ def cli_search(beacons: int) -> tuple[dict, float, float]:
 _COMPILE = """
 import time, numpy as np
 c0, t0 = time.process_time(), time.perf_counter()
-from graphnav.beacon_layout import propagate
+from graphnav.beacons.layout import propagate
 propagate(np.array([[[650.0, 370.0]]]), backend="numba")
 print(time.process_time() - c0, time.perf_counter() - t0)
 """
@@ -206,7 +206,7 @@ def main() -> None:
         cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=None, silence_logs=logging.WARNING)
         client = Client(cluster)
-        client.run(lambda: __import__("graphnav.beacon_layout"))  # warm the workers' imports
+        client.run(lambda: __import__("graphnav.beacons.layout"))  # warm the workers' imports
         startup = time.perf_counter() - t0
         try:
             crows, cwalls, ccpus = {}, {}, {}

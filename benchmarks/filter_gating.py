@@ -6,7 +6,7 @@ docs/ekf.md, *Gating*.
 
 * ATE RMSE of ``ekf`` on ``data/harbour.npz`` and marina-degraded seeds 1-3 (skipped without the
   marina dataset), the mean position RMSE of ``ekf``, ``ukf``, ``fuzzy-ukf`` over Solent seeds 0-4
-  per scenario (``graphnav.montecarlo.solent_trial``);
+  per scenario (``graphnav.evaluation.montecarlo.solent_trial``);
 * a 1 km GNSS jump for 60 s: the turning drive of tests/test_ekf.py (jump 60-120 s) and Solent
   scenarios 1-2 seed 0 (fixes +1 km east from 200 s to 260 s): the maximum position error inside
   and around the jump beside the same log without it.
@@ -25,12 +25,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "tests" / "estimators"))
 
 from graphnav import estimators  # noqa: E402
+from graphnav.evaluation.metrics import ate  # noqa: E402
+from graphnav.evaluation.montecarlo import solent_trial  # noqa: E402
 from graphnav.io import load_log  # noqa: E402
 from graphnav.log import Gnss, NavLog  # noqa: E402
-from graphnav.metrics import ate  # noqa: E402
-from graphnav.montecarlo import solent_trial  # noqa: E402
 from graphnav.sim.solent import simulate_solent  # noqa: E402
 
 FILTERS = ("ekf", "ukf", "fuzzy-ukf")

@@ -6,7 +6,7 @@ Every method matches the same consecutive scan pairs with the same initial-guess
 (``cv``: the method's own last increment; ``zero``: identity) and the same correspondence
 gate where the method has one (1 m for the peers). Methods run interleaved pair by pair so that
 machine load hits all alike; the time is the wall time of one call, median over the pairs.
-Errors are scored on the pairs whose reference is clean (graphnav.icp_pairs.valid_reference_steps,
+Errors are scored on the pairs whose reference is clean (graphnav.scan.icp_pairs.valid_reference_steps,
 decided from the reference alone). Prints the table and writes it into docs/benchmarks.md
 (between the ``icp_marina`` markers; the rest of the file is left alone).
 """
@@ -26,15 +26,15 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from graphnav.geometry import se2_from_matrix  # noqa: E402
-from graphnav.icp import IcpConfig, line_normals, match_points, scan_points  # noqa: E402
-from graphnav.icp_pairs import (  # noqa: E402
+from graphnav.io.marina import read_marina  # noqa: E402
+from graphnav.scan.icp import IcpConfig, line_normals, match_points, scan_points  # noqa: E402
+from graphnav.scan.icp_pairs import (  # noqa: E402
     PairRun,
     nees,
     reference_increments,
     score_pairs,
     valid_reference_steps,
 )
-from graphnav.io.marina import read_marina  # noqa: E402
 
 QUAY = (76, 97)  # pairs along the long straight quay (inclusive)
 PAPER = {  # Table 1 of the paper (865 scans at 0.2 s): mean, std, max of SOG [m/s] and dCOG [deg]
@@ -164,7 +164,7 @@ def run(marina: Path, init: str):
         if results[m]:
             pr = PairRun(t0, t1, results[m], ms[m], IcpConfig(variant=m.split()[0]), init)
         else:
-            from graphnav.icp import MatchResult
+            from graphnav.scan.icp import MatchResult
 
             fake = [MatchResult(p, np.eye(3), bool(o), {}) for p, o in zip(poses[m], oks[m], strict=True)]
             pr = PairRun(t0, t1, fake, ms[m], IcpConfig(), init)

@@ -32,7 +32,7 @@ from graphnav.io.jsonl import parse_record  # noqa: E402
 from graphnav.io.nmea import NmeaDecoder, parse_sentence  # noqa: E402
 from graphnav.io.nmea_out import log_to_nmea  # noqa: E402
 from graphnav.log import NavLog  # noqa: E402
-from graphnav.online import make_online  # noqa: E402
+from graphnav.online.runner import make_online  # noqa: E402
 from graphnav.sim.harbour import HarbourConfig, simulate_harbour  # noqa: E402
 
 

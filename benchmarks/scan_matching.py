@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from graphnav import estimators
-from graphnav.evaluate import summarize
+from graphnav.evaluation.evaluate import summarize
 from graphnav.io import load_log
-from graphnav.registration import METHODS, scan_points, single_frame
+from graphnav.scan.registration import METHODS, scan_points, single_frame
 
 PAPER = {"FastVGICP": {"ate_rmse_m": 1.862, "rpe_rmse_m": 1.243, "ms": 31.4},
          "FastGICP": {"ate_rmse_m": 2.199, "rpe_rmse_m": 1.341}}

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from graphnav import estimators  # noqa: E402
-from graphnav.evaluate import summarize  # noqa: E402
+from graphnav.evaluation.evaluate import summarize  # noqa: E402
 from graphnav.io import load_log  # noqa: E402
 
 ESTIMATORS = ("isam2", "batch", "fixed-lag")
@@ -103,7 +103,8 @@ def main() -> int:
     ap.add_argument("-O", "--option", action="append", default=[], help="smoother option KEY=VALUE")
     ap.add_argument("--only", choices=("harbour", "marina-degraded"), help="one scenario only")
     args = ap.parse_args()
-    from graphnav.commands._common import jsonable, parse_options
+    from graphnav.commands._common import parse_options
+    from graphnav.io.jsonsafe import jsonable
 
     opts = parse_options(args.option)
     results: dict = {}

@@ -23,8 +23,8 @@ import math
 
 import numpy as np
 
-from graphnav.beacon_layout import Fairway
-from graphnav.compare import compare, ranked
+from graphnav.beacons.layout import Fairway
+from graphnav.evaluation.compare import compare, ranked
 from graphnav.log import KnownBeacon, NavLog, PosePrior
 from graphnav.sim.fairway import parse_beacons, simulate_fairway
 

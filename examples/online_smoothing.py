@@ -1,8 +1,8 @@
 """Online smoothing with live estimates: feed records one at a time, print each new solution.
 
 A short run of the simulated harbour (LiDAR, GNSS with multipath, compass, odometry) is fed record
-by record to the online factor graph of :mod:`graphnav.online` (the same object ``graphnav live``
-runs): ``GraphOnline.add(record)`` returns an :class:`~graphnav.online.Estimate` whenever the
+by record to the online factor graph of :mod:`graphnav.graph.graph_online` (the same object ``graphnav live``
+runs): ``GraphOnline.add(record)`` returns an :class:`~graphnav.result.Estimate` whenever the
 solution changed (one per GNSS fix; during an outage, one per compass reading), with the newest
 pose, speed over ground (SOG), course over ground (COG), yaw rate and, every ``cov_every``-th
 solve, its marginal covariance. ``--lag L`` keeps an incremental fixed-lag smoother of L seconds
@@ -19,8 +19,8 @@ import math
 
 import numpy as np
 
-from graphnav.metrics import ate
-from graphnav.online import GraphOnline
+from graphnav.evaluation.metrics import ate
+from graphnav.graph.graph_online import GraphOnline
 from graphnav.sim.harbour import simulate_harbour
 from graphnav.trajectory import Trajectory
 

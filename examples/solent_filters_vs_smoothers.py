@@ -24,8 +24,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from graphnav import estimators  # noqa: E402
+from graphnav.evaluation.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial  # noqa: E402
 from graphnav.geometry import wrap_angle  # noqa: E402
-from graphnav.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial  # noqa: E402
 from graphnav.sim.solent import simulate_solent  # noqa: E402
 
 QUICK_RUNS, QUICK_STEPS = 1, 150

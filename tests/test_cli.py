@@ -2,7 +2,7 @@ import json
 import subprocess
 import sys
 
-from logfactory import every_record_log
+from _logfactory import every_record_log
 
 from graphnav.io import save_log
 

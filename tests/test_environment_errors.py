@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from graphnav import cli
-from graphnav.sweep import SCHEDULER_TIMEOUT_S, load_done
+from graphnav.evaluation.sweep import SCHEDULER_TIMEOUT_S, load_done
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from graphnav import cli, sweep
+from graphnav import cli
+from graphnav.evaluation import sweep
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -36,6 +37,37 @@ def test_local_cluster_binds_loopback_without_dashboard(cluster_kwargs):
         sweep.run_sweep(len, [{"key": "a"}, {"key": "b"}], scheduler="local", progress=False)
     assert cluster_kwargs["host"] == "127.0.0.1"
     assert cluster_kwargs["dashboard_address"] is None
+    assert cluster_kwargs["scheduler_kwargs"] == {"dashboard_address": "127.0.0.1:0"}  # its health-check server
+
+
+def test_a_real_local_cluster_listens_on_loopback_only():
+    """Every TCP port the sweep's LocalCluster (scheduler, nannies, workers, HTTP) listens on is 127.0.0.1."""
+    psutil = pytest.importorskip("psutil")
+    seen: set[str] = set()
+
+    def probe(task):
+        return task["n"]
+
+    import distributed
+
+    real = distributed.LocalCluster
+
+    def spy(*args, **kwargs):
+        cluster = real(*args, **kwargs)
+        procs = [psutil.Process()] + psutil.Process().children(recursive=True)
+        for p in procs:
+            for c in p.net_connections(kind="tcp"):
+                if c.status == psutil.CONN_LISTEN:
+                    seen.add(c.laddr.ip)
+        return cluster
+
+    distributed.LocalCluster = spy
+    try:
+        assert sweep.run_sweep(probe, [{"key": "a", "n": 1}, {"key": "b", "n": 2}], scheduler="local",
+                               progress=False) == [1, 2]
+    finally:
+        distributed.LocalCluster = real
+    assert seen and seen <= {"127.0.0.1"}, seen
 
 
 def test_dashboard_only_when_asked_and_on_loopback(cluster_kwargs, monkeypatch, capsys):

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from typing import Any
 
-import numpy as np
+from ..io.jsonsafe import jsonable
+
+__all__ = ["add_json_flag", "add_log_args", "emit", "jsonable", "parse_options"]
 
 
 def add_json_flag(p: argparse.ArgumentParser) -> None:
@@ -28,23 +29,11 @@ def add_dashboard_flag(p: argparse.ArgumentParser) -> None:
 
 
 def add_log_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("log", help="log: marina directory, .jsonl[.gz], .npz, .nmea, or a ROS bag")
-    p.add_argument("--lenient", action="store_true", help="skip malformed records (and count them)")
-
-
-def jsonable(obj: Any) -> Any:
-    """Numpy scalars/arrays to Python; NaN/inf to null (JSON has neither)."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return jsonable(obj.item())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
+    p.add_argument("log", help="log: marina directory, .jsonl[.gz], .npz, .nmea, a CARMEN .log[.gz], or a ROS bag")
+    p.add_argument("--lenient", action="store_true",
+                   help="skip malformed or physically invalid records (and count them)")
+    p.add_argument("--max-speed", type=float, metavar="M/S",
+                   help="the vessel's plausible speed limit; faster odometry is invalid (default 50 m/s)")
 
 
 def emit(args: argparse.Namespace, obj: dict[str, Any], human: str | None = None) -> None:

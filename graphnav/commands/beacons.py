@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from ..beacon_layout import (
+from ..beacons.layout import (
     Choices,
     Fairway,
     chunk_tasks,
@@ -21,7 +21,7 @@ from ..beacon_layout import (
     score_chunk,
     summarize_search,
 )
-from ..sweep import run_sweep
+from ..evaluation.sweep import run_sweep
 from ._common import add_dashboard_flag, add_json_flag, emit
 
 log = logging.getLogger("graphnav.beacons")
@@ -79,7 +79,7 @@ def search(args: argparse.Namespace) -> int:
         fn = score_chunk
         cost = len(layouts) * layout_cost_s(args.beacons, backend, fw) / len(tasks)
     else:
-        from ..beacon_layout_graph import score_chunk_graph
+        from ..beacons.layout_graph import score_chunk_graph
 
         chunk = args.chunk or 16
         tasks = chunk_tasks(layouts, chunk, fw, ch)  # scores both online and smoothed marginals

@@ -9,11 +9,11 @@ import time
 from pathlib import Path
 
 from .. import estimators
-from ..compare import compare, ranked
-from ..icp_cache import MatchCache
+from ..evaluation.compare import compare, ranked
+from ..evaluation.report import to_json, write_report
 from ..io import load_log
 from ..io.outputs import OutDir
-from ..report import to_json, write_report
+from ..scan.icp_cache import MatchCache
 from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, parse_options
 
 log_ = logging.getLogger("graphnav.compare")
@@ -55,7 +55,7 @@ def _options(pairs: list[str] | None) -> dict[str, dict]:
 def run(args: argparse.Namespace) -> int:
     out = getattr(args, "out_dir", None)  # (demo prepares its own)
     if out is None:
-        out = OutDir(args.out, command="compare", overwrite=args.overwrite)
+        out = OutDir(args.out, command="compare", overwrite=getattr(args, "overwrite", False))
     log = load_log(args.log, lenient=args.lenient)
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     t0 = time.perf_counter()

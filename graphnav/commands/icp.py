@@ -10,12 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..icp import VARIANTS, IcpConfig
-from ..icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
 from ..io import load_log
 from ..io.outputs import OutDir, atomic_open, atomic_path
-from ..motion_guess import INITS
-from ..movement import movement_from_increments
+from ..scan.icp import VARIANTS, IcpConfig
+from ..scan.icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
+from ..scan.motion_guess import INITS
+from ..scan.movement import movement_from_increments
 from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, parse_options
 
 log_ = logging.getLogger("graphnav.icp")

@@ -10,8 +10,8 @@ import logging
 
 from ..io import load_log
 from ..io.outputs import ensure_dir, write_text_atomic
-from ..live import LiveRunner
-from ..online import ONLINE_ESTIMATORS, make_online
+from ..online.live import LiveRunner
+from ..online.runner import ONLINE_ESTIMATORS, make_online
 from ._common import add_json_flag, emit, jsonable, parse_options
 from .replay import parse_origin
 

@@ -13,7 +13,7 @@ import logging
 import time
 
 from .. import estimators
-from ..montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial
+from ..evaluation.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial
 from ._common import add_dashboard_flag, add_json_flag, emit, parse_options
 
 log_ = logging.getLogger("graphnav.montecarlo")

@@ -9,10 +9,10 @@ import time
 from pathlib import Path
 
 from .. import estimators
-from ..evaluate import summarize
+from ..evaluation.evaluate import summarize
 from ..io import load_log
 from ..io.outputs import OutDir
-from ..trajectory_writer import TrajectoryWriter
+from ..io.tum import TrajectoryWriter
 from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, jsonable, parse_options
 
 log_ = logging.getLogger("graphnav.run")

@@ -1,4 +1,4 @@
-"""Every estimator reads a :class:`NavLog` and returns a :class:`RunResult`.
+"""Every estimator reads a :class:`NavLog` and returns a :class:`~graphnav.result.RunResult`.
 
 Estimator modules in this package declare ``ESTIMATORS = {"name": EstimatorSpec(...)}``;
 they are discovered here, so adding an estimator is adding a module. Comparing estimators is
@@ -10,33 +10,12 @@ from __future__ import annotations
 import importlib
 import pkgutil
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any, NamedTuple, Protocol
 
-import numpy as np
-from numpy.typing import NDArray
-
 from ..log import NavLog
-from ..trajectory import Trajectory
+from ..result import OnEstimate, RunResult  # re-exported: estimator modules import them from here
 
-OnEstimate = Callable[[float, NDArray[np.float64], NDArray[np.float64] | None], None]
-
-
-@dataclass
-class RunResult:
-    """What an estimator returns.
-
-    ``trajectory`` is the final estimate (smoothed, for smoothers); ``online`` the estimate
-    that was available at each time (filters: the same as ``trajectory``); ``step_ms`` the
-    solver/filter time per step [ms] excluding scan matching, ``icp_ms`` scan-matching time per
-    scan pair [ms]; ``info`` configuration and anything worth reporting (JSON-serialisable).
-    """
-
-    trajectory: Trajectory
-    online: Trajectory | None = None
-    step_ms: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
-    icp_ms: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
-    info: dict[str, Any] = field(default_factory=dict)
+__all__ = ["EstimatorSpec", "OnEstimate", "RunFn", "RunResult", "get", "names", "registry", "run", "runnable"]
 
 
 class RunFn(Protocol):

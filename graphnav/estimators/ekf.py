@@ -1,7 +1,7 @@
 """A general EKF on [x, y, yaw] (optionally + speed): the classic filter baseline.
 
 Motion input: odometry (speed + rate of turn, unicycle model as eq. 3 of the beacon paper), or,
-when a log has LiDAR scans but no odometry, ICP increments from :func:`graphnav.icp.match_scans`
+when a log has LiDAR scans but no odometry, ICP increments from :func:`graphnav.scan.icp.match_scans`
 (used only if that module is installed). Measurements: GNSS position and compass heading, each
 gated by a chi-square test on the normalised innovation squared (:class:`InnovationGate`: a GNSS
 jump is rejected, however long it lasts while the filter is tracking); the measured components
@@ -13,7 +13,7 @@ Updates use the Joseph form. With ``speed=True`` the state is [x, y, yaw, v]: v 
 (``sigma_acc``) and odometry speed becomes a measurement of it. See docs/ekf.md.
 
 :class:`PoseEkf` is the filter algebra; :class:`EkfStepper` the record-by-record cycle around it,
-shared by the batch :func:`run_ekf` and the live adapter :class:`graphnav.ekf_online.EkfOnline`.
+shared by the batch :func:`run_ekf` and the live adapter :class:`graphnav.online.ekf_online.EkfOnline`.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from .gating import GATING_DEFAULTS, InnovationGate, reinit_block
 
 def icp_available() -> bool:
     try:
-        from ..icp import match_scans  # noqa: F401
+        from ..scan.icp import match_scans  # noqa: F401
     except ImportError:
         return False
     return True
@@ -188,15 +188,15 @@ def _sig(v: float, default: float) -> float:
     return default if not math.isfinite(v) else v
 
 
-MatchFn = Callable[..., Any]  # graphnav.icp.match_scans(scan, prev, init=...) -> MatchResult
+MatchFn = Callable[..., Any]  # graphnav.scan.icp.match_scans(scan, prev, init=...) -> MatchResult
 
 
 class EkfStepper:
     """The EKF's record-by-record cycle, shared by the batch :func:`run_ekf` and the online
-    :class:`graphnav.ekf_online.EkfOnline`: ``step(record)`` predicts to the record's time (unicycle odometry, the
-    beacon paper's eq. 3, with the last SOG/ROT control held) or composes an ICP increment
+    :class:`graphnav.online.ekf_online.EkfOnline`: ``step(record)`` predicts to the record's time
+    (unicycle odometry, the beacon paper's eq. 3, with the last SOG/ROT control held) or composes an ICP increment
     (``motion="icp"``: consecutive scans matched by ``match``, default
-    :func:`graphnav.icp.match_scans`), then applies the gated GNSS/heading update (:class:`PoseEkf`).
+    :func:`graphnav.scan.icp.match_scans`), then applies the gated GNSS/heading update (:class:`PoseEkf`).
     ``keep`` bounds the timing buffers (``None``: keep all)."""
 
     def __init__(self, x0: NDArray[np.float64], P0: NDArray[np.float64], *, motion: str = "odometry",
@@ -208,8 +208,8 @@ class EkfStepper:
             raise ValueError(f"motion must be 'odometry' or 'icp', not {motion!r}")
         if motion == "icp" and match is None:
             if not icp_available():
-                raise ValueError("ICP motion needs graphnav.icp (not installed in this build)")
-            from ..icp_cache import match_scans as match  # graphnav.icp's, shared inside icp_cache.active()
+                raise ValueError("ICP motion needs graphnav.scan.icp (not installed in this build)")
+            from ..scan.icp_cache import match_scans as match  # graphnav.scan.icp's, shared inside icp_cache.active()
         unknown = set(gating) - set(GATING_DEFAULTS)
         if unknown:
             raise ValueError(f"unknown ekf option(s): {sorted(unknown)}")
@@ -316,7 +316,7 @@ def _unmet(log: NavLog) -> str | None:
     has_odo = len(log.of("odometry")) >= 2
     has_scans = len(log.of("scan")) >= 2
     if not has_odo and not (has_scans and icp_available()):
-        extra = " (scans need graphnav.icp, not installed)" if has_scans else ""
+        extra = " (scans need graphnav.scan.icp, not installed)" if has_scans else ""
         return "needs odometry records" + extra
     return None
 

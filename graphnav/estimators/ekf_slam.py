@@ -7,10 +7,10 @@ block unless the log has a pose prior, beacon variances ``p0_beacon`` = 1e6 m^2)
 Every beacon seen in the log has a slot from the start (eq. 14-15); its mean is set at first
 sighting from the inverse observation. Charted beacons (``beacon_known`` records) start at their
 charted position with their charted variance. The correction uses the Joseph form, so P stays
-symmetric and positive semidefinite to round-off (``tests/test_ekf_slam.py`` runs it for 10,000 steps).
+symmetric and positive semidefinite to round-off (``tests/estimators/test_ekf_slam.py`` runs it for 10,000 steps).
 
 Matrices here are dense, written as the paper writes them: this class is also the reference the
-batched search (:mod:`graphnav.beacon_layout`) is tested against.
+batched search (:mod:`graphnav.beacons.layout`) is tested against.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ update, per measurement channel j (GNSS x, GNSS y, compass):
 * actual covariance ``C_A`` = mean of ``eps eps^T`` over the last N innovations (eq. 17), kept
   recursively (eq. 18: add the newest, drop the one that leaves the window),
 * ``DoM_j = C_A,jj / C_T,jj`` (eq. 20), ``alpha_j`` from the fuzzy system of Table 1 / eq. 22-28
-  (:mod:`graphnav.fuzzy`, thresholds of Table 2),
+  (:mod:`graphnav.estimators.fuzzy`, thresholds of Table 2),
 * ``R_hat = alpha R`` (eq. 21). With ``r_update="compound"`` (default) R(k) in eq. 21 and eq. 15 is
   the previous step's R_hat, so R moves until C_T matches C_A (the reading under which R_hat can
   converge to the true R, as the paper's Figs. 13/17 show); ``r_update="scale_prior"`` uses the
@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..fuzzy import FuzzyAlpha, Thresholds
 from ..log import NavLog
 from . import EstimatorSpec, OnEstimate, RunResult
+from .fuzzy import FuzzyAlpha, Thresholds
 from .ukf import DEFAULTS, measurement_table, run_nav_filter, unmet
 
 

@@ -1,12 +1,12 @@
 """Weighted-ICP dead reckoning: chain the scan matches from the start pose.
 
-Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.icp.match_points`, constant-velocity
+Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.scan.icp.match_points`, constant-velocity
 initial guess) and the increment is composed onto the previous pose; the covariance is
 propagated to first order (``P' = Ad P Ad^T + Q`` in the body frame, GTSAM's convention) and
 reported in the world frame (the :class:`~graphnav.trajectory.Trajectory` convention).
 The start pose is the log's pose prior, else the first truth pose, else the origin
 (:func:`graphnav.estimators.dead_reckoning.start_pose`). Initial guesses come from
-:class:`~graphnav.motion_guess.MotionGuess` (never from a flagged match). A flagged match (``ok``
+:class:`~graphnav.scan.motion_guess.MotionGuess` (never from a flagged match). A flagged match (``ok``
 False: degenerate geometry, too few points or inliers) is bridged by the odometry increment with its
 covariance when the log has odometry, else by the constant-velocity guess with a wide covariance,
 and counted (``info["failed_matches"]``, ``info["bridged_odometry"]``, ``info["bridged_cv"]``).
@@ -20,12 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from .. import icp_cache
 from ..geometry import se2_adjoint_inv, se2_compose
-from ..icp import IcpConfig, scan_points
-from ..log import NavLog
-from ..motion_guess import MotionGuess
-from ..odometry_increment import odometry_samples
+from ..log import NavLog, odometry_samples
+from ..scan import icp_cache
+from ..scan.icp import IcpConfig, scan_points
+from ..scan.motion_guess import MotionGuess
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
 from .dead_reckoning import start_pose

@@ -4,9 +4,9 @@ Each scan is registered against a local map made of the last ``keyframes`` regis
 scans (a scan becomes a keyframe when the vessel has moved ``keyframe_dist`` metres or turned
 ``keyframe_angle_deg`` since the last one), voxel-downsampled to ``map_voxel`` metres. The initial
 guess is the odometry increment when the log has odometry (``predict="odometry"``), else the
-constant-velocity prediction; the result is the pose in SE(2) (see :mod:`graphnav.registration`
+constant-velocity prediction; the result is the pose in SE(2) (see :mod:`graphnav.scan.registration`
 for how each backend is kept planar). A registration whose point-to-line information against the
-map's local lines is degenerate (:mod:`graphnav.degeneracy`: condition number above
+map's local lines is degenerate (:mod:`graphnav.scan.degeneracy`: condition number above
 ``max_condition`` or predicted 1-sigma along the weakest direction above ``max_sigma``) takes the
 prediction along its weak directions and is counted (``info["degenerate_registrations"]``). The
 trajectory is the chain of registered poses — odometry, so it drifts, as in the paper's Table 2.
@@ -26,12 +26,11 @@ from typing import Any
 
 import numpy as np
 
-from ..degeneracy import analyse, flatness, keep_constrained, line_information
-from ..geometry import se2_between, se2_compose, wrap_angle
-from ..log import NavLog, Scan
-from ..odometry_increment import increment, odometry_samples
-from ..options import config_from_options
-from ..registration import (
+from ..config import config_from_options
+from ..geometry import increment, se2_between, se2_compose, wrap_angle
+from ..log import NavLog, Scan, odometry_samples
+from ..scan.degeneracy import analyse, flatness, keep_constrained, line_information
+from ..scan.registration import (
     Params,
     Target,
     local_frames_2d,
@@ -67,12 +66,12 @@ class ScanToMapConfig:
     min_fitness: float = 0.3
     max_correction: float = 5.0
     threads: int = 1
-    # degeneracy of each registration (graphnav.degeneracy; docs/weighted-icp.md): point-to-line
+    # degeneracy of each registration (graphnav.scan.degeneracy; docs/weighted-icp.md): point-to-line
     # information of the scan against the map's local lines within inlier_dist; thresholds measured
     # on the harbour log (lower than the pair matcher's 200 / 0.5 m)
     max_condition: float = 40.0
     max_sigma: float = 0.25  # [m] predicted 1-sigma (x line_scale) along the weakest direction
-    line_scale: float = 50.0  # covariance inflation of the prediction (HDL's, graphnav.icp.COV_SCALE)
+    line_scale: float = 50.0  # covariance inflation of the prediction (HDL's, graphnav.scan.icp.COV_SCALE)
     inlier_dist: float = 0.5
     # a degenerate registration: "constrained" keeps it across the weak directions and takes the
     # prediction along them; "predict" takes the prediction (either way the scan may join the map)
@@ -135,7 +134,8 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
     for scan in scans:
         t_step = time.perf_counter()
         this_icp = 0.0
-        xy = scan_points(scan.ranges, scan.angles, min_range=cfg.min_range, max_range=cfg.max_range)
+        xy = scan_points(scan.ranges, scan.angles, min_range=cfg.min_range,
+                         max_range=min(cfg.max_range, scan.max_range))
         xy = voxel_downsample(xy, cfg.scan_voxel)
         enough = len(xy) >= cfg.min_points
         source = None

@@ -1,18 +1,18 @@
-"""The factor-graph smoothers (:mod:`graphnav.smoother`) as estimators: ``isam2``, ``batch``, ``fixed-lag``.
+"""The factor-graph smoothers (:mod:`graphnav.graph.smoother`) as estimators: ``isam2``, ``batch``, ``fixed-lag``.
 
-Options are the fields of :class:`graphnav.smoother.SmootherConfig` (``-O key=value``), or with the
-IMU motion model those of :class:`graphnav.imu_motion.ImuGraphConfig`. ``-O motion=imu|odometry``
+Options are the fields of :class:`graphnav.graph.smoother.SmootherConfig` (``-O key=value``), or with the
+IMU motion model those of :class:`graphnav.graph.imu_motion.ImuGraphConfig`. ``-O motion=imu|odometry``
 picks the graph; by default (``auto``) a log with IMU records and GNSS but no scans or beacons gets
-the IMU graph (:func:`graphnav.imu_motion.wants_imu_graph`), every other log the odometry/ICP graph.
+the IMU graph (:func:`graphnav.graph.imu_motion.wants_imu_graph`), every other log the odometry/ICP graph.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from .. import imu_motion
+from ..graph import imu_motion
+from ..graph.smoother import run_batch, run_fixed_lag, run_isam2, unmet
 from ..log import NavLog
-from ..smoother import run_batch, run_fixed_lag, run_isam2, unmet
 from . import EstimatorSpec, OnEstimate, RunResult
 
 MOTIONS = ("auto", "odometry", "imu")

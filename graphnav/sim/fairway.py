@@ -4,19 +4,17 @@ Odometry (V, ROT) carries sigma_V = 0.5 m/s, sigma_ROT = 0.1 deg/s errors (eq. 4
 the vessel measures range and bearing to every beacon (sigma_r = 0.5 m, sigma_beta = 0.5 deg,
 eq. 7-8). Truth is the exact track; the start pose is error-free (eq. 1-2).
 
-The noise comes from :func:`graphnav.beacon_layout.draw_noise`, the stream the batched layout
+The noise comes from :func:`graphnav.beacons.layout.draw_noise`, the stream the batched layout
 search uses, so a simulated log and the search see the same draw for a (layout, seed).
 Convention: the odometry record at t_k is the control over (t_k, t_k+1] (as dead reckoning).
 """
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..beacon_layout import Fairway, draw_noise
+from ..beacons.layout import Fairway, draw_noise
 from ..geometry import wrap_angle
 from ..log import BeaconObs, NavLog, Odometry, Truth
 
@@ -54,20 +52,3 @@ def parse_beacons(text: str) -> np.ndarray:
     if not pts or any(len(p) != 2 for p in pts):
         raise ValueError(f"--beacons: expected 'x1,y1;x2,y2;...', got {text!r}")
     return np.array(pts)
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("fairway", help="the beacon paper's fairway passage: odometry + beacon range/bearing",
-                       description=__doc__)
-    p.add_argument("--beacons", required=True, help='beacon positions "x1,y1;x2,y2;..." [m]')
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True, help="output log (.jsonl, .jsonl.gz or .npz)")
-    p.set_defaults(func=_cli)
-
-
-def _cli(args: argparse.Namespace) -> int:
-    from ..io import save_log
-
-    log = simulate_fairway(parse_beacons(args.beacons), args.seed)
-    save_log(log, args.out)
-    return 0

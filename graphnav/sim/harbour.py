@@ -22,10 +22,8 @@ Sensors (all deterministic per seed):
 
 from __future__ import annotations
 
-import argparse
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -336,44 +334,3 @@ def simulate_harbour(
         "frame": "local harbour frame: x east, y north, origin at the basin's south-west corner",
     }
     return NavLog.from_unsorted(recs, known, meta)
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "harbour",
-        help="a vessel crossing a small harbour: LiDAR, GNSS, compass, odometry, beacons",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--duration", type=float, default=None,
-                   help="length of the run [s] (shorter: truncated; longer: the route repeats)")
-    p.add_argument("--laps", type=int, default=None, help="times round the route (default 1, or what --duration needs)")
-    p.add_argument("--fix-hz", type=float, default=1.0, help="GNSS and compass rate [Hz] (default 1)")
-    p.add_argument("--lidar-hz", type=float, default=5.0, help="LiDAR scan rate [Hz] (default 5; 0: no scans)")
-    p.add_argument("--t0", type=float, default=0.0, help="time of the first record [s] (e.g. a POSIX time)")
-    p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
-    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
-    p.set_defaults(func=_cli)
-
-
-def _cli(args: argparse.Namespace) -> int:
-    from ..commands._common import emit
-    from ..io import save_log
-
-    cfg = HarbourConfig(fix_hz=args.fix_hz, lidar_hz=args.lidar_hz, t0=args.t0)
-    log = simulate_harbour(args.seed, cfg, duration=args.duration, laps=args.laps)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
-    emit(
-        args,
-        {
-            "scenario": "harbour",
-            "seed": args.seed,
-            "out": str(args.out),
-            "records": log.counts(),
-            "t0": log.t0,
-            "t1": log.t1,
-        },
-    )
-    return 0

@@ -23,15 +23,13 @@ Sensors are sampled every T = 1 s:
   in it. ``odometry="fore_aft"`` writes the fore-aft component of the ground velocity instead.
 * ``truth`` at every step, a ``pose_prior`` at t = 0 (the known start berth, 1 m / 1 deg).
 
-The numeric core :func:`simulate_solent` returns a :class:`NavLog`; :func:`register` is the CLI.
+The numeric core :func:`simulate_solent` returns a :class:`NavLog`; the CLI is in :mod:`graphnav.commands.simulate`.
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -227,32 +225,3 @@ def simulate_solent(cfg: SolentConfig | None = None, **kw) -> NavLog:
                      "t1": float(t[-1])}] if cfg.scenario == 3 else []),
     }
     return NavLog.from_unsorted(recs, meta=meta)
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("solent", help="the fuzzy-adaptive-UKF paper's Solent waypoint mission (3 scenarios)",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenario", type=int, choices=(1, 2, 3), default=1)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--current-speed", type=float, default=SolentConfig.current_speed)
-    p.add_argument("--calib-residual", type=float, default=SolentConfig.calib_residual,
-                   help="residual IMU bias after calibration, fraction of Table 3's bias (default 0.1)")
-    p.add_argument("--no-calibration", action="store_true", help="leave Table 3's IMU biases in the log")
-    p.add_argument("--out", type=Path, required=True, help="log file (.jsonl, .jsonl.gz or .npz)")
-    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
-    p.set_defaults(func=_cli)
-
-
-def _cli(args: argparse.Namespace) -> int:
-    from ..commands._common import emit
-    from ..io import save_log
-
-    cfg = SolentConfig(scenario=args.scenario, seed=args.seed, current_speed=args.current_speed,
-                       calib_residual=args.calib_residual, calibrate=not args.no_calibration)
-    log = simulate_solent(cfg)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
-    summary = {"out": str(args.out), "scenario": cfg.scenario, "seed": cfg.seed, "records": log.counts(),
-               "duration_s": log.t1 - log.t0, "waypoints_reached": log.meta["waypoints_reached"]}
-    emit(args, summary)
-    return 0

@@ -1,0 +1,54 @@
+"""Score a :class:`RunResult` against the log's truth: the JSON keys every report shares."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..log import NavLog
+from ..result import RunResult
+from .metrics import ate, heading_error, movement_errors, rpe
+
+
+def _median(a: np.ndarray) -> float:
+    return float(np.median(a)) if len(a) else float("nan")
+
+
+def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
+              rpe_delta: int = 10, max_dt: float = 0.02) -> dict[str, Any]:
+    """The standard summary: ``estimator``, ``steps``, ``ate_*``, ``rpe_*``, timing, movement errors.
+
+    ATE is unaligned (in the log's frame) unless the key says ``aligned``. Keys for truth-based
+    figures are present only when the log has truth.
+    """
+    traj = result.trajectory
+    out: dict[str, Any] = {
+        "estimator": name,
+        "steps": len(traj),
+        "runtime_s": runtime_s,
+        "step_ms_median": _median(result.step_ms),
+        "icp_ms_median": _median(result.icp_ms),
+    }
+    if log.has_truth:
+        ref = log.truth()
+        a = ate(traj, ref, max_dt=max_dt)
+        out.update({
+            "ate_rmse_m": a["rmse"], "ate_mean_m": a["mean"], "ate_median_m": a["median"], "ate_max_m": a["max"],
+            "ate_aligned_rmse_m": ate(traj, ref, align=True, max_dt=max_dt)["rmse"],
+            "scored_poses": a["n"],
+        })
+        r1 = rpe(traj, ref, delta=1, all_pairs=True, max_dt=max_dt)
+        rn = rpe(traj, ref, delta=rpe_delta, all_pairs=True, max_dt=max_dt)
+        out.update({"rpe_rmse_m": r1["trans"]["rmse"], "rpe_rot_rmse_deg": r1["rot"]["rmse"],
+                    f"rpe{rpe_delta}_rmse_m": rn["trans"]["rmse"]})
+        out["heading_rmse_deg"] = heading_error(traj, ref, max_dt=max_dt)["rmse"]
+        mv = movement_errors(traj, ref, max_dt=max_dt)
+        out.update({"sog_rmse_mps": mv["sog"]["rmse"], "cog_rmse_deg": mv["cog"]["rmse"],
+                    "rot_rmse_degps": mv["rot"]["rmse"]})
+        if result.online is not None and result.online is not traj:
+            out["online_ate_rmse_m"] = ate(result.online, ref, max_dt=max_dt)["rmse"]
+    for k in ("anchor",):
+        if k in result.info:
+            out[k] = result.info[k]
+    return out

@@ -1,0 +1,148 @@
+"""Trajectory metrics: ATE, RPE and the movement parameters (SOG, COG, ROT, heading).
+
+Pure numerics on :class:`Trajectory` objects. ATE/RPE follow evo's definitions (translation
+part, planar poses) and are cross-checked against evo in the tests.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry import se2_between, se2_compose, wrap_angle
+from ..trajectory import Trajectory
+
+
+def associate(est: Trajectory, ref: Trajectory, max_dt: float = 0.02) -> tuple[NDArray, NDArray]:
+    """Index pairs ``(i_est, i_ref)`` of nearest time stamps within ``max_dt`` seconds.
+
+    Like evo's ``sync.associate_trajectories``: each reference stamp takes the nearest estimate
+    stamp; pairs farther apart than ``max_dt`` are dropped; an estimate is used at most once.
+    """
+    if len(est) == 0 or len(ref) == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    j = np.searchsorted(est.t, ref.t)
+    j0 = np.clip(j - 1, 0, len(est) - 1)
+    j1 = np.clip(j, 0, len(est) - 1)
+    pick = np.where(np.abs(est.t[j0] - ref.t) <= np.abs(est.t[j1] - ref.t), j0, j1)
+    ok = np.abs(est.t[pick] - ref.t) <= max_dt
+    i_est, i_ref = pick[ok], np.nonzero(ok)[0]
+    _, first = np.unique(i_est, return_index=True)
+    return i_est[first], i_ref[first]
+
+
+def _stats(e: NDArray) -> dict[str, float]:
+    if e.size == 0:
+        nan = float("nan")
+        return {"rmse": nan, "mean": nan, "median": nan, "std": nan, "max": nan, "n": 0}
+    return {
+        "rmse": float(np.sqrt(np.mean(e**2))),
+        "mean": float(np.mean(e)),
+        "median": float(np.median(e)),
+        "std": float(np.std(e)),
+        "max": float(np.max(e)),
+        "n": int(e.size),
+    }
+
+
+def umeyama_se2(src: NDArray, dst: NDArray) -> NDArray:
+    """The SE(2) pose ``(x, y, yaw)`` that best maps points ``src`` onto ``dst`` (least squares).
+
+    Umeyama (1991) without scale, in 2D: rotation from the SVD of the cross-covariance.
+    """
+    ms, md = src.mean(0), dst.mean(0)
+    h = (dst - md).T @ (src - ms)
+    u, _, vt = np.linalg.svd(h)
+    s = np.diag([1.0, np.sign(np.linalg.det(u @ vt))])
+    r = u @ s @ vt
+    t = md - r @ ms
+    return np.array([t[0], t[1], np.arctan2(r[1, 0], r[0, 0])])
+
+
+def ate(est: Trajectory, ref: Trajectory, *, align: bool = False, max_dt: float = 0.02) -> dict[str, float]:
+    """Absolute trajectory (position) error statistics in metres.
+
+    With ``align`` the estimate is first moved by the SE(2) transform that best fits it to the
+    reference (evo's ``--align``); without it, errors are in the log's own frame.
+    """
+    ie, ir = associate(est, ref, max_dt)
+    p = est.poses[ie]
+    q = ref.poses[ir]
+    if align and len(p) >= 2:
+        p = se2_compose(umeyama_se2(p[:, :2], q[:, :2]), p)
+    return _stats(np.hypot(p[:, 0] - q[:, 0], p[:, 1] - q[:, 1]))
+
+
+def heading_error(est: Trajectory, ref: Trajectory, *, max_dt: float = 0.02) -> dict[str, float]:
+    """Absolute heading (yaw) error statistics in degrees."""
+    ie, ir = associate(est, ref, max_dt)
+    return _stats(np.degrees(np.abs(wrap_angle(est.yaw[ie] - ref.yaw[ir]))))
+
+
+def rpe(
+    est: Trajectory, ref: Trajectory, *, delta: int = 1, all_pairs: bool = False, max_dt: float = 0.02
+) -> dict[str, dict[str, float]]:
+    """Relative pose error over ``delta`` associated poses (evo ``rpe`` with ``--delta_unit f``).
+
+    Returns ``{"trans": stats [m], "rot": stats [deg]}``. ``all_pairs=False`` uses the
+    non-overlapping pairs ``(0, d), (d, 2d), ...`` as evo does by default.
+    """
+    ie, ir = associate(est, ref, max_dt)
+    p, q = est.poses[ie], ref.poses[ir]
+    n = len(p)
+    if n <= delta:
+        return {"trans": _stats(np.zeros(0)), "rot": _stats(np.zeros(0))}
+    i = np.arange(0, n - delta) if all_pairs else np.arange(0, n - delta, delta)
+    j = i + delta
+    e = se2_between(se2_between(q[i], q[j]), se2_between(p[i], p[j]))
+    return {
+        "trans": _stats(np.hypot(e[:, 0], e[:, 1])),
+        "rot": _stats(np.degrees(np.abs(wrap_angle(e[:, 2])))),
+    }
+
+
+def movement(traj: Trajectory) -> dict[str, NDArray]:
+    """Movement parameters between consecutive poses (the weighted-ICP paper, eq. 23-25).
+
+    Returns arrays of length N-1 stamped at the interval midpoints ``t``: ``sog`` [m/s],
+    ``cog`` [rad, CCW from east; the nautical COG is ``yaw_to_heading_deg(cog)``],
+    ``rot`` [rad/s], ``hdg`` [rad, the yaw at the interval start].
+    """
+    d = np.diff(traj.poses, axis=0)
+    dt = np.diff(traj.t)
+    dt = np.where(dt > 0, dt, np.nan)
+    return {
+        "t": 0.5 * (traj.t[1:] + traj.t[:-1]),
+        "sog": np.hypot(d[:, 0], d[:, 1]) / dt,
+        "cog": np.arctan2(d[:, 1], d[:, 0]),
+        "rot": wrap_angle(d[:, 2]) / dt,
+        "hdg": traj.yaw[:-1].copy(),
+    }
+
+
+def movement_errors(
+    est: Trajectory, ref: Trajectory, *, min_speed: float = 0.2, max_dt: float = 0.02
+) -> dict[str, dict[str, float]]:
+    """Signed errors of SOG [m/s], COG [deg], ROT [deg/s] and heading [deg], estimate minus reference.
+
+    Both trajectories are first associated by time, so the parameters are taken over the same
+    intervals. COG is scored only where the reference moves faster than ``min_speed``.
+    Statistics of signed errors: ``mean``, ``std``, ``max`` (of |e|), ``rmse``.
+    """
+    ie, ir = associate(est, ref, max_dt)
+    a = movement(Trajectory(est.t[ie], est.poses[ie]))
+    b = movement(Trajectory(ref.t[ir], ref.poses[ir]))
+    moving = b["sog"] > min_speed
+
+    def signed(e: NDArray) -> dict[str, float]:
+        e = e[np.isfinite(e)]
+        s = _stats(np.abs(e))
+        return {"mean": float(np.mean(e)) if e.size else float("nan"), "std": float(np.std(e)) if e.size
+                else float("nan"), "max": s["max"], "rmse": s["rmse"], "n": s["n"]}
+
+    return {
+        "sog": signed(a["sog"] - b["sog"]),
+        "cog": signed(np.degrees(wrap_angle(a["cog"] - b["cog"]))[moving]),
+        "rot": signed(np.degrees(a["rot"] - b["rot"])),
+        "hdg": signed(np.degrees(wrap_angle(a["hdg"] - b["hdg"]))),
+    }

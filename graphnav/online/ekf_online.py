@@ -1,0 +1,127 @@
+"""The ``ekf`` estimator record by record: :class:`EkfOnline`, the :class:`graphnav.result.OnlineEstimator`
+adapter that ``graphnav live --estimator ekf`` runs.
+
+It is the batch ``ekf`` (:func:`graphnav.estimators.ekf.run_ekf`) step for step: the same
+:class:`~graphnav.estimators.ekf.EkfStepper`, initialised by the same rule
+(:func:`~graphnav.estimators.ekf.initial_state`) from the records seen so far. Records are held
+until an epoch (a record time) is complete and that rule has its inputs (a ``pose_prior``, or a
+GNSS fix and a heading -- and an odometry speed with ``speed=True``), or for ``init_wait`` seconds
+after the first fix, then replayed; the first estimate is that of the record that completed the
+epoch. So on a log whose first epoch has those inputs, every later estimate is bit-identical to
+the batch filter's (``tests/online/test_ekf_online.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, deque
+from typing import Any
+
+import numpy as np
+
+from ..estimators.ekf import EkfStepper, initial_state
+from ..log import Gnss, Heading, Odometry, PosePrior, Record
+from ..result import Estimate
+
+
+class EkfOnline:
+    """EKF behind ``add(record) -> Estimate | None``. ``emit``: ``"fix"`` (default) yields an
+    estimate per GNSS fix, and per used record while no fix came for ``outage_s`` [s];
+    ``"all"`` one per used record. The other options are :func:`run_ekf`'s (``motion`` is
+    ``"odometry"`` or ``"icp"``; there is no ``"auto"`` without the whole log)."""
+
+    def __init__(self, *, motion: str = "odometry", speed: bool = False, emit: str = "fix", outage_s: float = 1.5,
+                 init_wait: float = 2.0, **ekf_options: Any) -> None:
+        if emit not in ("fix", "all"):
+            raise ValueError(f"emit must be 'fix' or 'all', not {emit!r}")
+        self.motion, self.speed, self.emit = motion, speed, emit
+        self.outage_s, self.init_wait = outage_s, init_wait
+        self.options = {"keep": 10_000, **ekf_options}
+        EkfStepper(np.zeros(3), np.eye(3), motion=motion, **self.options)  # validate the options now
+        self.stepper: EkfStepper | None = None
+        self.pending: deque[Record] = deque(maxlen=10_000)
+        self.held: Counter[type] = Counter()  # kinds of the held records
+        self.t_first_fix: float | None = None  # time of the first held fix or pose prior
+        self.anchor: str | None = None
+        self.last_fix_t = -math.inf
+        self.last_emit_t = -math.inf
+        self.counts = {"gnss": 0, "heading": 0, "odometry": 0, "scan": 0, "late": 0, "other": 0,
+                       "dropped_before_start": 0}
+
+    # -- initialisation
+    def _hold(self, record: Record) -> None:
+        """Keep a record until the filter starts (the newest ``pending.maxlen``; the held kinds and
+        the first held fix are kept up to date, so :meth:`_ready` is O(1))."""
+        if len(self.pending) == self.pending.maxlen:  # no fix for so many records: keep the newest
+            old = self.pending.popleft()
+            self.counts["dropped_before_start"] += 1
+            self.held[type(old)] -= 1
+            if old.t == self.t_first_fix and isinstance(old, Gnss | PosePrior):
+                self.t_first_fix = next((r.t for r in self.pending if isinstance(r, Gnss | PosePrior)), None)
+        self.pending.append(record)
+        self.held[type(record)] += 1
+        if self.t_first_fix is None and isinstance(record, Gnss | PosePrior):
+            self.t_first_fix = record.t
+
+    def _ready(self, t_now: float) -> bool:
+        """Whether the held records (all older than ``t_now``) are enough to start."""
+        if self.t_first_fix is None:
+            return False
+        if t_now - self.t_first_fix >= self.init_wait:
+            return True
+        return (self.held[PosePrior] > 0 or self.held[Heading] > 0) and (not self.speed or self.held[Odometry] > 0)
+
+    def _start(self) -> None:
+        x0, P0, self.anchor = initial_state(self.pending, self.speed)
+        self.stepper = st = EkfStepper(x0, P0, motion=self.motion, **self.options)
+        for r in self.pending:
+            if st.step(r) and isinstance(r, Gnss) and st.use_gnss:  # as in add: an unused fix is none
+                self.last_fix_t = r.t
+        self.pending.clear()
+        self.held.clear()
+        self.t_first_fix = None
+
+    # -- the interface
+    def add(self, record: Record) -> Estimate | None:
+        kind = record.kind if record.kind in self.counts else "other"
+        if self.stepper is None:
+            if not (self.pending and record.t > self.pending[-1].t + 1e-9 and self._ready(record.t)):
+                self.counts[kind] += 1
+                self._hold(record)
+                return None
+            self._start()  # the first epoch is complete: start, then take this record
+        st = self.stepper
+        assert st is not None
+        if st.t is not None and record.t < st.t - 1e-9:
+            self.counts["late"] += 1
+            return None
+        self.counts[kind] += 1
+        if not st.step(record):
+            return None
+        if isinstance(record, Gnss) and st.use_gnss:
+            self.last_fix_t = record.t
+            return self._estimate()
+        if self.emit == "all" or (record.t - self.last_fix_t > self.outage_s and record.t > self.last_emit_t):
+            return self._estimate()
+        return None
+
+    def _estimate(self) -> Estimate:
+        st = self.stepper
+        assert st is not None and st.t is not None
+        f = st.f
+        self.last_emit_t = st.t
+        u = st.u
+        v = float(f.x[3]) if f.has_speed else (u.v if u is not None else None)
+        w = u.w if u is not None else None
+        cog = None if v is None else float(f.x[2] if v >= 0 else math.remainder(f.x[2] + math.pi, 2 * math.pi))
+        return Estimate(st.t, f.x[:3].copy(), f.P[:3, :3].copy(), None if v is None else abs(v), cog, w)
+
+    def info(self) -> dict[str, Any]:
+        st = self.stepper
+        s = np.asarray(st.step_ms if st is not None else [])
+        out: dict[str, Any] = {"estimator": "ekf-online", "motion": self.motion, "anchor": self.anchor,
+                               **self.counts, "step_ms_median": float(np.median(s)) if s.size else None,
+                               "step_ms_p99": float(np.percentile(s, 99)) if s.size else None}
+        if st is not None:
+            out.update(st.f.counts, icp_failed=st.icp_failed)
+        return out

@@ -1,0 +1,56 @@
+"""What estimators return: :class:`RunResult` (batch) and :class:`Estimate` (online, one record at a
+time, from an :class:`OnlineEstimator`).
+
+Kernel types: every layer (graphs, estimators, online runners, evaluation) imports them from here,
+so no package imports back up the one that runs it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .log import Record
+from .trajectory import Trajectory
+
+OnEstimate = Callable[[float, NDArray[np.float64], NDArray[np.float64] | None], None]
+
+
+@dataclass
+class RunResult:
+    """What an estimator returns.
+
+    ``trajectory`` is the final estimate (smoothed, for smoothers); ``online`` the estimate
+    that was available at each time (filters: the same as ``trajectory``); ``step_ms`` the
+    solver/filter time per step [ms] excluding scan matching, ``icp_ms`` scan-matching time per
+    scan pair [ms]; ``info`` configuration and anything worth reporting (JSON-serialisable).
+    """
+
+    trajectory: Trajectory
+    online: Trajectory | None = None
+    step_ms: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    icp_ms: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Estimate:
+    """The navigation solution at time ``t``: pose (x, y, yaw), its 3x3 covariance (or None) and,
+    when known, speed over ground [m/s], course over ground [rad, CCW from east], yaw rate [rad/s]."""
+
+    t: float
+    pose: NDArray[np.float64]
+    cov: NDArray[np.float64] | None = None
+    sog: float | None = None
+    cog: float | None = None
+    w: float | None = None
+
+
+class OnlineEstimator(Protocol):
+    """What live mode needs from an estimator."""
+
+    def add(self, record: Record) -> Estimate | None: ...

@@ -1,0 +1,151 @@
+"""Degeneracy of a 2D registration by eigen-analysis of its point-to-line information.
+
+A match constrains the pose only across the lines (walls) it sees: each pair contributes
+``j = n^T [R, J (p - t)]`` (Censi's point-to-line Jacobian with respect to the right perturbation
+``pose ∘ Exp(xi)``, GTSAM's Pose2 tangent space, order x, y, theta), with the rotation column
+divided by the source cloud's RMS radius ``L`` so that all three coordinates are metres and the
+eigenvalues are comparable (unit-free condition number). With ``info = sum f j j^T`` (``f`` the
+line's flatness) and ``s2`` the variance of the residuals along the normals, the predicted
+covariance of the estimate is ``scale * s2 * info^-1``: an eigenvector ``v_i`` of ``info`` is
+*weak* when its predicted 1-sigma ``sqrt(scale * s2 / lambda_i)`` exceeds ``max_sigma`` or when
+``lambda_max / lambda_i > max_condition`` (a single straight quay, a corridor, nearly empty water).
+
+Pure numerics; used by :mod:`graphnav.scan.icp` and the scan-to-map estimator.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from ..geometry import se2_between, se2_compose
+
+
+@dataclass
+class Degeneracy:
+    """Eigen-analysis of a point-to-line information matrix (scaled coordinates x, y, L theta).
+
+    ``weak`` marks the eigenvectors (columns of ``vectors``) that the geometry does not constrain.
+    """
+
+    condition: float
+    sigmas: NDArray[np.float64]  # predicted 1-sigma along each eigenvector [m], ascending eigenvalues
+    vectors: NDArray[np.float64]  # (3, 3) unit eigenvectors as columns, scaled coordinates
+    weak: NDArray[np.bool_]
+    radius: float  # L [m]
+
+    @property
+    def degenerate(self) -> bool:
+        return bool(self.weak.any())
+
+    @property
+    def sigma_weak(self) -> float:
+        """Predicted 1-sigma along the weakest direction [m]."""
+        return float(self.sigmas[0])
+
+    @property
+    def weakest(self) -> NDArray[np.float64]:
+        """The weakest direction as a tangent vector ``(x, y, theta)`` (x, y unit-free share, theta
+        in rad per metre of the scaled vector)."""
+        return self.vectors[:, 0] * np.array([1.0, 1.0, 1.0 / self.radius])
+
+    def projector(self) -> NDArray[np.float64]:
+        """``P`` (3, 3) in unscaled tangent coordinates: ``P xi`` is the part of ``xi`` along the
+        weak directions."""
+        v = self.vectors[:, self.weak]
+        s = np.diag([1.0, 1.0, 1.0 / self.radius])
+        return s @ v @ v.T @ np.linalg.inv(s)
+
+    def inflation(self, sigma: float) -> NDArray[np.float64]:
+        """Covariance (3, 3, unscaled tangent coordinates) of 1-sigma ``sigma`` [m] along every weak
+        direction (rotation: ``sigma / L`` rad)."""
+        v = self.vectors[:, self.weak] * np.array([1.0, 1.0, 1.0 / self.radius])[:, None]
+        return sigma**2 * v @ v.T
+
+
+def rms_radius(xy: NDArray[np.float64]) -> float:
+    """RMS distance of the points from their centroid (1.0 for an empty or single-point cloud)."""
+    if len(xy) < 2:
+        return 1.0
+    return float(np.sqrt(np.mean(np.sum((xy - xy.mean(0)) ** 2, 1)))) or 1.0
+
+
+def line_rows(p: NDArray[np.float64], t: NDArray[np.float64], rot: NDArray[np.float64],
+              normals: NDArray[np.float64], radius: float) -> NDArray[np.float64]:
+    """Point-to-line Jacobian rows ``n^T [R, J (p - t)]`` (N, 3) of target-frame points ``p`` of a
+    source at ``(t, rot)`` against target normals, rotation column divided by ``radius``."""
+    jp = p - t
+    rows = np.empty((len(p), 3))
+    rows[:, :2] = normals @ rot
+    rows[:, 2] = (normals[:, 1] * jp[:, 0] - normals[:, 0] * jp[:, 1]) / radius
+    return rows
+
+
+def analyse(info: NDArray[np.float64], s2: float, radius: float, *, scale: float = 1.0,
+            max_condition: float = 200.0, max_sigma: float = np.inf) -> Degeneracy:
+    """Weak directions of ``info`` (3, 3, scaled coordinates) given the residual variance ``s2``
+    [m^2] along the normals and the covariance inflation ``scale``."""
+    ev, vec = np.linalg.eigh(0.5 * (info + info.T))
+    cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
+    pos = ev > 0
+    var = np.full(3, np.inf)
+    if np.isfinite(s2):
+        var[pos] = scale * max(s2, 0.0) / ev[pos]
+    sig = np.sqrt(var)
+    weak = ~pos | (ev * max_condition < ev[-1]) | (sig > max_sigma)
+    if not np.isfinite(s2):
+        weak[:] = True
+    return Degeneracy(cond, sig, vec, weak, float(radius))
+
+
+def keep_constrained(pose: NDArray[np.float64], guess: NDArray[np.float64],
+                     deg: Degeneracy) -> NDArray[np.float64]:
+    """``pose`` with its component along the weak directions replaced by the ``guess``'s (first
+    order in the tangent space of ``pose``): the geometry says nothing there, the guess does."""
+    if not deg.weak.any():
+        return pose
+    xi = se2_between(pose, guess)
+    return se2_compose(pose, deg.projector() @ xi)
+
+
+def line_information(src_xy: NDArray[np.float64], pose: NDArray[np.float64], tgt_xy: NDArray[np.float64],
+                     tgt_normals: NDArray[np.float64], tgt_flat: NDArray[np.float64], tree: cKDTree,
+                     inlier_dist: float) -> tuple[NDArray[np.float64], float, float]:
+    """``(info, s2, L)`` of body-frame source points registered at ``pose`` against target points
+    with normals and flatness (``tree``: a k-d tree of ``tgt_xy``): pairs with the nearest target
+    point within ``inlier_dist``, weighted by flatness (NaN flatness counts as 0)."""
+    radius = rms_radius(src_xy)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    rot = np.array([[c, -s], [s, c]])
+    p = src_xy @ rot.T + pose[:2]
+    d, idx = tree.query(p, distance_upper_bound=inlier_dist)
+    ok = np.isfinite(d)
+    if not ok.any():
+        return np.zeros((3, 3)), float("nan"), radius
+    p, idx = p[ok], idx[ok]
+    n = tgt_normals[idx]
+    f = np.nan_to_num(tgt_flat[idx])
+    rows = line_rows(p, pose[:2], rot, n, radius)
+    info = (rows * f[:, None]).T @ rows
+    return info, residual_var(p - tgt_xy[idx], n, f), radius
+
+
+def residual_var(e: NDArray[np.float64], normals: NDArray[np.float64], f: NDArray[np.float64]) -> float:
+    """``s2``: the variance of the pair residuals ``e`` (N, 2) along the target ``normals``,
+    weighted by ``f`` (flatness, 0 for pairs left out), 3 degrees of freedom taken (NaN when the
+    weights sum to 3 or less)."""
+    rn = np.einsum("ij,ij->i", e, normals)
+    sf = float(f.sum())
+    return float(np.sum(f * rn * rn) / (sf - 3.0)) if sf > 3.0 else float("nan")
+
+
+def flatness(evals: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(l1 - l0) / (l1 + l0)`` of ascending 2D eigenvalues (N, 2): 1 on a line, 0 for a blob or
+    undefined (NaN eigenvalues)."""
+    tr = evals[:, 0] + evals[:, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = (evals[:, 1] - evals[:, 0]) / tr
+    return np.where(np.isfinite(f) & (tr > 0), f, 0.0)

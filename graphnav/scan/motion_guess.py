@@ -1,0 +1,88 @@
+"""Initial guesses (and bridging priors) for consecutive scan matches.
+
+``MotionGuess`` keeps the last GOOD match only — a flagged one (``ok`` False) is never fed
+forward, so a bad match cannot become the next pair's guess and run away. Modes:
+
+* ``cv``: constant velocity, the last good increment scaled to this pair's time step, when that
+  match was the previous pair's; otherwise (after a flagged match) the odometry increment when
+  the log has odometry, else the last good increment however old, else zero;
+* ``odometry``: the odometry increment (:func:`graphnav.geometry.increment`), else as ``cv``;
+* ``zero``: identity.
+
+:meth:`MotionGuess.bridge` gives what to chain instead of a flagged match: the odometry increment
+with its covariance, else the constant-velocity guess with a wide covariance.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry import increment
+from .icp import MatchResult
+
+INITS = ("cv", "zero", "odometry")
+# 1-sigma of a constant-velocity bridge (no odometry): x, y [m], yaw [rad]
+CV_BRIDGE_SIGMA = (1.0, 1.0, math.radians(10.0))
+
+
+class MotionGuess:
+    """Initial guess of the motion between scans at ``t0`` and ``t1`` (``guess``), fed with each
+    match (``update``); ``odometry`` is an (N, 5) array from
+    :func:`graphnav.log.odometry_samples` (or ``None``)."""
+
+    def __init__(self, mode: str = "cv", odometry: NDArray[np.float64] | None = None) -> None:
+        if mode not in INITS:
+            raise ValueError(f"unknown init {mode!r}; known: {', '.join(INITS)}")
+        self.mode = mode
+        self.odometry = odometry if odometry is not None and len(odometry) else None
+        self._last: tuple[NDArray[np.float64], float, float] | None = None  # increment, dt, end time
+        self.source = "none"  # where the last guess came from: cv, odometry, stale-cv, none
+
+    def _cv(self, t0: float, t1: float, fresh_only: bool) -> NDArray[np.float64] | None:
+        if self._last is None or self._last[1] <= 0:
+            return None
+        inc, dt, t_end = self._last
+        if fresh_only and abs(t_end - t0) > 1e-6:
+            return None
+        return inc * ((t1 - t0) / dt)
+
+    def _odo(self, t0: float, t1: float) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        return None if self.odometry is None else increment(self.odometry, t0, t1)
+
+    def _odo_guess(self, t0: float, t1: float) -> NDArray[np.float64] | None:
+        odo = self._odo(t0, t1)
+        return None if odo is None else odo[0]
+
+    def guess(self, t0: float, t1: float) -> NDArray[np.float64] | None:
+        """Initial ``(dx, dy, dyaw)`` for the match of the scan at ``t1`` to the scan at ``t0``
+        (``None``: identity)."""
+        self.source = "none"
+        if self.mode == "zero":
+            return None
+        fresh = ("cv", lambda: self._cv(t0, t1, fresh_only=True))
+        odo = ("odometry", lambda: self._odo_guess(t0, t1))
+        stale = ("stale-cv", lambda: self._cv(t0, t1, fresh_only=False))
+        for source, make in (odo, fresh, stale) if self.mode == "odometry" else (fresh, odo, stale):
+            g = make()
+            if g is not None:
+                self.source = source
+                return g
+        return None
+
+    def update(self, result: MatchResult, t0: float, t1: float) -> None:
+        """Feed the match of the pair ``(t0, t1)``; only a good one (``ok``) is remembered."""
+        if result.ok:
+            self._last = (np.asarray(result.pose, dtype=float).copy(), t1 - t0, t1)
+
+    def bridge(self, t0: float, t1: float) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
+        """Increment, covariance and source (``odometry`` or ``cv``) to chain instead of a flagged
+        match: the odometry increment when the log has odometry, else the constant-velocity guess
+        with the wide covariance :data:`CV_BRIDGE_SIGMA`."""
+        odo = self._odo(t0, t1)
+        if odo is not None:
+            return odo[0], odo[1], "odometry"
+        g = self._cv(t0, t1, fresh_only=False)
+        return (np.zeros(3) if g is None else g), np.diag(np.square(CV_BRIDGE_SIGMA)), "cv"

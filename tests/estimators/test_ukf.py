@@ -1,0 +1,170 @@
+"""The paper's UKF (ukf), its bias-augmented variant (ukf-bias) and the fuzzy adaptive UKF."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from filterpy.kalman import MerweScaledSigmaPoints, unscented_transform
+
+from graphnav import estimators
+from graphnav.estimators.ukf import TABLE2, UnscentedNav, merwe_weights, sigma_points, wrapped_mean
+from graphnav.evaluation.evaluate import summarize
+from graphnav.evaluation.metrics import ate
+from graphnav.log import Gnss, Heading, Imu, NavLog, PosePrior
+from graphnav.sim.solent import simulate_solent
+
+
+@pytest.mark.parametrize("n,alpha,beta,kappa", [(5, 0.5, 2.0, 0.0), (8, 0.3, 2.0, 1.0), (5, 1e-2, 2.0, 0.0)])
+def test_sigma_points_and_weights_match_filterpy(n, alpha, beta, kappa):
+    rng = np.random.default_rng(n)
+    A = rng.normal(size=(n, n))
+    P = A @ A.T + n * np.eye(n)
+    x = rng.normal(size=n)
+    ref = MerweScaledSigmaPoints(n, alpha, beta, kappa)
+    wm, wc, lam = merwe_weights(n, alpha, beta, kappa)
+    np.testing.assert_allclose(wm, ref.Wm, rtol=1e-12)
+    np.testing.assert_allclose(wc, ref.Wc, rtol=1e-12)
+    np.testing.assert_allclose(sigma_points(x, P, lam), ref.sigma_points(x, P), rtol=1e-10, atol=1e-10)
+
+
+def _f(X, ax, ay, wz, T):
+    """Reference discretisation of eq. 12 (eq. 1-4) for one sigma point."""
+    px, py, vx, vy, th = X
+    an = np.array([math.cos(th) * ax - math.sin(th) * ay, math.sin(th) * ax + math.cos(th) * ay])
+    return np.array([px + T * vx + 0.5 * T * T * an[0], py + T * vy + 0.5 * T * T * an[1],
+                     vx + T * an[0], vy + T * an[1], (th + T * wz + math.pi) % (2 * math.pi) - math.pi])
+
+
+def _circ_mean(sigmas, Wm):
+    m = Wm @ sigmas
+    m[4] = math.atan2(Wm @ np.sin(sigmas[:, 4]), Wm @ np.cos(sigmas[:, 4]))
+    return m
+
+
+def _resid(a, b):
+    d = a - b
+    d[4] = (d[4] + math.pi) % (2 * math.pi) - math.pi
+    return d
+
+
+def test_prediction_matches_filterpy_unscented_transform_across_the_angle_wrap():
+    x = np.array([10.0, -4.0, 0.8, -0.3, math.pi - 0.01])  # heading right at the +-pi seam
+    P = np.diag([4.0, 3.0, 0.04, 0.05, 1e-4])
+    P[0, 2] = P[2, 0] = 0.1
+    f = UnscentedNav(x, P, q_acc=TABLE2["q_acc"], q_gyro=math.radians(TABLE2["q_gyro_deg"]))
+    Q = f._Q(1.0)
+    f.predict(0.05, -0.02, 0.03, 1.0)
+    pts = MerweScaledSigmaPoints(5, 0.5, 2.0, 0.0, subtract=_resid)
+    sig = np.array([_f(s, 0.05, -0.02, 0.03, 1.0) for s in pts.sigma_points(x, P)])
+    m, Pp = unscented_transform(sig, pts.Wm, pts.Wc, Q, mean_fn=_circ_mean, residual_fn=_resid)
+    assert abs((f.x[4] - m[4] + math.pi) % (2 * math.pi) - math.pi) < 1e-7
+    np.testing.assert_allclose(f.x[:4], m[:4], atol=1e-9)
+    np.testing.assert_allclose(f.P, Pp, rtol=1e-6, atol=1e-10)
+    assert -math.pi <= f.x[4] < math.pi
+
+
+def test_wrapped_mean_of_points_straddling_pi():
+    X = np.zeros((3, 5))
+    X[:, 4] = [math.pi - 0.1, -math.pi + 0.1, math.pi - 0.05]
+    m = wrapped_mean(X, np.array([0.25, 0.25, 0.5]), 4)
+    assert abs(abs(m[4]) - (math.pi - 0.025)) < 1e-12
+
+
+def test_heading_innovation_is_wrapped():
+    f = UnscentedNav(np.array([0, 0, 0, 0, 3.1]), np.eye(5), q_acc=0.01, q_gyro=0.01)
+    eps, _ = f.innovation(np.array([0, 1, 4]), np.array([0.0, 0.0, -3.1]))
+    assert eps[2] == pytest.approx(2 * math.pi - 6.2)
+
+
+def _linear_log(rng, n=40, T=1.0):
+    """Zero body acceleration: the model is linear, so the UKF must equal the Kalman filter."""
+    recs = [PosePrior(0.0, 5.0, -3.0, 0.2, 2.0, 0.1)]
+    for k in range(n + 1):
+        t = k * T
+        gx, gy = 5 + 0.7 * t + rng.normal(0, 6), -3 - 0.4 * t + rng.normal(0, 6)
+        recs.append(Gnss(t, float(gx), float(gy), 6.0))
+        recs.append(Heading(t, float(0.2 + 0.01 * t + rng.normal(0, 0.01)), 0.01))
+        if k:
+            recs.append(Imu(t, 0.0, 0.0, float(0.01 + rng.normal(0, 0.001))))
+    return NavLog.from_unsorted(recs)
+
+
+def test_ukf_equals_the_kalman_filter_on_a_linear_model():
+    log = _linear_log(np.random.default_rng(4))
+    res = estimators.run("ukf", log)
+    T = 1.0
+    F = np.eye(5)
+    F[0, 2] = F[1, 3] = T
+    qa = TABLE2["q_acc"] ** 2
+    Q = np.zeros((5, 5))
+    for i in (0, 1):
+        Q[i, i], Q[i, i + 2], Q[i + 2, i], Q[i + 2, i + 2] = qa / 4, qa / 2, qa / 2, qa
+    Q[4, 4] = math.radians(TABLE2["q_gyro_deg"]) ** 2
+    H = np.zeros((3, 5))
+    H[0, 0] = H[1, 1] = H[2, 4] = 1.0
+    R = np.diag([TABLE2["r_gps_x"] ** 2, TABLE2["r_gps_y"] ** 2, math.radians(TABLE2["r_com_deg"]) ** 2])
+    x = np.array([5.0, -3.0, 0.0, 0.0, 0.2])
+    P = np.diag([4.0, 4.0, 4.0, 4.0, 0.01])
+    g, h, imu = log.columns("gnss"), log.columns("heading"), log.columns("imu")
+    est = []
+    for k in range(len(g["t"])):
+        if k:
+            x = F @ x
+            x[4] += T * imu["wz"][k - 1]
+            P = F @ P @ F.T + Q
+        z = np.array([g["x"][k], g["y"][k], h["yaw"][k]])
+        K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+        x = x + K @ (z - H @ x)
+        P = (np.eye(5) - K @ H) @ P
+        est.append(x[[0, 1, 4]].copy())
+    np.testing.assert_allclose(res.trajectory.poses, np.array(est), atol=1e-8)
+    np.testing.assert_allclose(res.trajectory.cov[-1], P[np.ix_([0, 1, 4], [0, 1, 4])], atol=1e-9)
+
+
+def test_online_estimates_and_step_times_are_reported():
+    log = _linear_log(np.random.default_rng(5), n=10)
+    seen = []
+    res = estimators.run("fuzzy-ukf", log, on_estimate=lambda t, p, c: seen.append((t, p, c)))
+    assert len(seen) == len(res.trajectory) == 11
+    assert len(res.step_ms) == 10 and np.all(res.step_ms > 0)
+    s = summarize("fuzzy-ukf", res, log, runtime_s=0.1)
+    assert s["step_ms_median"] > 0
+
+
+def test_unknown_option_is_an_error():
+    with pytest.raises(ValueError, match="unknown"):
+        estimators.run("ukf", _linear_log(np.random.default_rng(6), n=3), q_acell=1.0)
+
+
+def test_registry_and_unmet():
+    assert {"ukf", "ukf-bias", "fuzzy-ukf"} <= set(estimators.names())
+    no_imu = NavLog([Gnss(0.0, 0.0, 0.0, 1.0)])
+    assert estimators.get("ukf").unmet(no_imu) is not None
+
+
+@pytest.fixture(scope="module")
+def uncalibrated():
+    """Scenario 1 with Table 3's biases left in the IMU (no calibration)."""
+    return simulate_solent(scenario=1, seed=11, calibrate=False)
+
+
+def test_ukf_bias_estimates_an_uncalibrated_bias_and_beats_ukf(uncalibrated):
+    log = uncalibrated
+    rb = estimators.run("ukf-bias", log, sigma_bias_acc=0.05, sigma_bias_gyro_deg=0.5)
+    r = estimators.run("ukf", log)
+    true = np.array(log.meta["imu"]["bias_true"])
+    est = np.array(rb.info["bias_final"])
+    np.testing.assert_allclose(est, true, rtol=0.3)
+    ref = log.truth()
+    assert ate(rb.trajectory, ref)["rmse"] < 0.5 * ate(r.trajectory, ref)["rmse"]
+
+
+def test_fuzzy_ukf_learns_the_larger_noise_of_scenario_2():
+    log = simulate_solent(scenario=2, seed=12)
+    res = estimators.run("fuzzy-ukf", log)
+    r_late = np.sqrt(np.nanmedian(res.info["r_hat"][len(res.trajectory) // 2:], axis=0))
+    # true 20 m / 20 m / 5 deg against Table 2's 6 m / 7 m / 0.5 deg
+    assert 10.0 < r_late[0] < 40.0 and 10.0 < r_late[1] < 40.0
+    assert 2.5 < math.degrees(r_late[2]) < 10.0

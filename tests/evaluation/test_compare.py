@@ -1,0 +1,235 @@
+"""`graphnav compare`: one loop over the estimators, the JSON contract, the files, the report."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from _polyworld import synthetic_log
+
+from graphnav import estimators
+from graphnav.cli import main
+from graphnav.estimators import EstimatorSpec, RunResult
+from graphnav.evaluation import plots
+from graphnav.evaluation.compare import compare, ranked
+from graphnav.evaluation.metrics import ate, movement_errors
+from graphnav.io import save_log
+from graphnav.trajectory import Trajectory
+
+
+def _boom(log, *, on_estimate=None, **options):
+    raise RuntimeError("deliberate failure")
+
+
+def _fake_smoother(log, *, on_estimate=None, **options):
+    """Truth plus a known offset, with covariances; online = a worse copy (as a smoother's)."""
+    tr = log.truth()
+    n = len(tr)
+    cov = np.tile(np.diag([0.04, 0.01, 1e-4]), (n, 1, 1))
+    smoothed = Trajectory(tr.t, tr.poses + [0.3, 0.0, 0.0], cov, name="fake-smoother")
+    online = Trajectory(tr.t, tr.poses + [0.0, 0.6, 0.0], cov, name="fake-smoother")
+    for t, p, c in zip(online.t, online.poses, online.cov, strict=True):
+        if on_estimate:
+            on_estimate(t, p, c)
+    return RunResult(smoothed, online, np.full(n, 0.5), info={"lag": options.get("lag", 5)})
+
+
+FAKES = {
+    "zz-boom": EstimatorSpec(_boom, lambda log: None, "always fails", "filter"),
+    "fake-smoother": EstimatorSpec(_fake_smoother, lambda log: None if log.has_truth else "needs truth",
+                                   "truth + 0.3 m", "smoother"),
+}
+
+
+@pytest.fixture(scope="module")
+def log():
+    return synthetic_log(30)
+
+
+@pytest.fixture
+def fakes(monkeypatch):
+    for k, v in FAKES.items():
+        monkeypatch.setitem(estimators.registry(), k, v)
+
+
+def test_compare_runs_every_runnable_estimator_once(log, fakes):
+    entries = compare(log)
+    names = [e.name for e in entries]
+    assert names == estimators.runnable(log)
+    assert {"dead-reckoning", "scan-to-map", "fake-smoother", "zz-boom"} <= set(names)
+    by = {e.name: e for e in entries}
+    assert not by["zz-boom"].ok and "deliberate failure" in by["zz-boom"].error
+    assert by["zz-boom"].summary is None
+    for n in ("dead-reckoning", "scan-to-map", "fake-smoother"):
+        e = by[n]
+        assert e.ok and e.summary["ate_rmse_m"] >= 0 and e.runtime_s > 0
+    assert by["fake-smoother"].summary["ate_rmse_m"] == pytest.approx(0.3)
+    assert by["fake-smoother"].summary["online_ate_rmse_m"] == pytest.approx(0.6)
+    order = ranked(entries)
+    ates = [e.summary["ate_rmse_m"] for e in order if e.ok]
+    assert ates == sorted(ates) and order[-1].name == "zz-boom"
+
+
+def test_compare_reports_unknown_and_unrunnable_names(log):
+    entries = compare(log.without(lambda r: r.kind == "scan"), ["nope", "scan-to-map", "dead-reckoning"],
+                      options={"dead-reckoning": {}})
+    by = {e.name: e for e in entries}
+    assert "unknown estimator" in by["nope"].error
+    assert "cannot run" in by["scan-to-map"].error
+    assert by["dead-reckoning"].ok
+
+
+def test_compare_passes_options(log):
+    (e,) = compare(log, ["scan-to-map"], options={"scan-to-map": {"backend": "gicp"}})
+    assert e.ok and e.result.info["config"]["backend"] == "small_gicp:GICP"
+
+
+def test_plot_errors_are_the_report_errors(log):
+    """The plotted series are the same pairs and errors as the table's numbers."""
+    est = estimators.run("dead-reckoning", log).trajectory
+    ref = log.truth()
+    _, e = plots.position_errors(est, ref)
+    a = ate(est, ref)
+    assert np.sqrt(np.mean(e**2)) == pytest.approx(a["rmse"]) and e.max() == pytest.approx(a["max"])
+    s = plots.movement_error_series(est, ref)
+    m = movement_errors(est, ref)
+    assert np.sqrt(np.nanmean(s["sog"] ** 2)) == pytest.approx(m["sog"]["rmse"])
+    assert np.sqrt(np.mean(s["cog"] ** 2)) == pytest.approx(m["cog"]["rmse"])
+
+
+@pytest.fixture(scope="module")
+def cli_run(log, tmp_path_factory):
+    d = tmp_path_factory.mktemp("cmp")
+    path = d / "poly.jsonl"
+    save_log(log, path)
+    out = d / "out"
+    with pytest.MonkeyPatch.context() as mp:
+        for k, v in FAKES.items():
+            mp.setitem(estimators.registry(), k, v)
+        import contextlib
+        import io
+
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            # explicit names keep this test's cost independent of how many estimators exist;
+            # discovery is covered by test_compare_runs_every_runnable_estimator_once
+            rc = main(["compare", str(path), "--out", str(out), "--json", "-O", "fake-smoother.lag=7",
+                       "-e", "dead-reckoning,scan-to-map,fake-smoother,zz-boom"])
+    return rc, buf.getvalue(), out, path
+
+
+def test_cli_json_is_one_object_with_the_issue_keys(cli_run):
+    rc, stdout, out, path = cli_run
+    assert rc == 0
+    obj = json.loads(stdout)  # the whole stdout is one JSON object
+    assert stdout.strip().count("\n") == 0
+    assert obj["log"] == str(path)
+    assert obj["icp_cache_hits"] == 0  # none of these estimators uses the weighted ICP
+    est = obj["estimators"]
+    assert {"dead-reckoning", "scan-to-map", "fake-smoother", "zz-boom"} <= set(est)
+    for name, d in est.items():
+        for k in ("ate_rmse_m", "rpe_rmse_m", "runtime_s", "step_ms_median"):
+            assert k in d, (name, k)
+    assert "deliberate failure" in est["zz-boom"]["error"] and est["zz-boom"]["ate_rmse_m"] is None
+    assert est["fake-smoother"]["ate_rmse_m"] == pytest.approx(0.3)
+    assert est["fake-smoother"]["options"] == {"lag": 7}
+    assert est["scan-to-map"]["ate_rmse_m"] < 0.1
+
+
+def test_cli_writes_report_figures_and_tum(cli_run):
+    from evo.tools import file_interface
+
+    _, stdout, out, _ = cli_run
+    est = json.loads(stdout)["estimators"]
+    for f in ("report.md", "trajectories.png", "position_error.png", "error_cdf.png", "sog_cog.png",
+              "covariance.png"):
+        assert (out / f).stat().st_size > 0, f
+    ok = [n for n, d in est.items() if "error" not in d]
+    for n in ok:
+        tum = file_interface.read_tum_trajectory_file(str(out / f"{n}.tum"))
+        assert tum.num_poses > 2
+    assert (out / "fake-smoother.online.tum").exists()
+    assert not (out / "zz-boom.tum").exists()
+    report = (out / "report.md").read_text()
+    for n in est:
+        assert n in report
+    assert "deliberate failure" in report
+    assert "online ATE RMSE" in report
+    assert '"lag": 7' in report  # configuration section
+    for f in ("trajectories.png", "position_error.png", "error_cdf.png", "sog_cog.png", "covariance.png"):
+        assert f"]({f})" in report
+
+
+def test_cli_rejects_a_malformed_option(log, tmp_path):
+    path = tmp_path / "l.jsonl"
+    save_log(log, path)
+    assert main(["compare", str(path), "--out", str(tmp_path / "o"), "-O", "backend=gicp"]) == 2
+
+
+def test_event_shading_has_one_legend_entry_per_kind():
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ev = [("gnss_outage", 1, 2), ("gnss_outage", 5, 6), ("gnss_jump", 3, 4), ("other", 7, 8)]
+    h = plots._shade_events(ax, [{"kind": k, "t0": a, "t1": b} for k, a, b in ev])
+    plt.close(fig)
+    assert [p.get_label() for p in h] == ["GNSS outage", "GNSS jump", "other"]
+    assert len(ax.patches) == 4
+
+
+def test_one_estimator_twice_under_labels(log):
+    entries = compare(log, ["scan-to-map", "s2m-gicp=scan-to-map", "s2m-gicp=dead-reckoning"],
+                      options={"s2m-gicp": {"backend": "gicp"}})
+    a, b, c = entries
+    assert (a.name, b.name) == ("scan-to-map", "s2m-gicp") and a.ok and b.ok
+    assert a.result.info["config"]["backend"] == "small_gicp:VGICP"
+    assert b.result.info["config"]["backend"] == "small_gicp:GICP"
+    assert b.summary["estimator"] == "s2m-gicp" and "scan-to-map" in b.description
+    assert not c.ok and "given twice" in c.error
+
+
+def test_a_whole_log_condition_is_not_shaded_but_gnss_events_are():
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ev = [("compass_bias", 0, 100), ("gnss_outage", 0, 100), ("noise_increase", 50, 60)]
+    h = plots._shade_events(ax, [{"kind": k, "t0": a, "t1": b} for k, a, b in ev], span=(0.0, 100.0))
+    plt.close(fig)
+    assert [p.get_label() for p in h] == ["GNSS outage", "noise_increase"]
+
+
+def test_parallel_workers_give_the_same_table(log, fakes):
+    names = ["dead-reckoning", "fake-smoother", "zz-boom"]
+    seq = compare(log, names)
+    par = compare(log, names, workers=2)
+    assert [e.name for e in par] == names
+    for a, b in zip(seq, par, strict=True):
+        assert a.ok == b.ok
+        if a.ok:
+            assert b.summary["ate_rmse_m"] == pytest.approx(a.summary["ate_rmse_m"])
+            assert np.allclose(a.result.trajectory.poses, b.result.trajectory.poses)
+    assert "deliberate failure" in par[2].error
+
+
+def test_dcog_error_ignores_a_constant_course_offset(log):
+    """A track rotated as a whole has a constant COG error and no ΔCOG error (the weighted-ICP
+    paper's increment differences, Figs. 14-15)."""
+    from graphnav.geometry import se2_compose
+
+    ref = log.truth()
+    rotated = Trajectory(ref.t, se2_compose(np.array([0.0, 0.0, 0.05]), ref.poses))
+    s = plots.movement_error_series(rotated, ref)
+    assert np.allclose(s["cog"], np.degrees(0.05))
+    assert np.allclose(s["dcog"], 0.0, atol=1e-9) and len(s["dcog"]) == len(s["cog"]) - 1
+    assert np.allclose(s["sog"], 0.0, atol=1e-9)
+
+
+def test_report_configuration_summarises_long_arrays():
+    from graphnav.evaluation.compare import Entry
+    from graphnav.evaluation.report import _config
+
+    res = RunResult(Trajectory([0.0], [[0.0, 0.0, 0.0]]), info={"k": 3, "nested": {"a": np.arange(500)},
+                                                                "short": [1, 2]})
+    cfg = _config(Entry("x", options={"lag": 2}, result=res))
+    assert cfg == {"options": {"lag": 2}, "k": 3, "nested": {"a": "<500 values>"}, "short": [1, 2]}

@@ -1,0 +1,120 @@
+import copy
+
+import numpy as np
+import pytest
+
+from graphnav.evaluation.metrics import associate, ate, heading_error, movement, movement_errors, rpe, umeyama_se2
+from graphnav.geometry import accumulate, se2_compose
+from graphnav.trajectory import Trajectory
+
+
+def _pair(seed=0, n=120):
+    rng = np.random.default_rng(seed)
+    inc = np.column_stack([rng.uniform(0.5, 2.0, n - 1), rng.normal(0, 0.05, n - 1), rng.normal(0, 0.08, n - 1)])
+    ref = Trajectory(np.arange(n) * 0.5, accumulate(inc, (3.0, -2.0, 0.4)), name="ref")
+    noisy = inc + rng.normal(0, [0.05, 0.03, 0.01], inc.shape)
+    est = Trajectory(ref.t + rng.uniform(-0.004, 0.004, n), accumulate(noisy, (3.2, -2.1, 0.41)), name="est")
+    return est, ref
+
+
+def test_ate_known_offset():
+    ref = Trajectory(np.arange(5.0), np.column_stack([np.arange(5.0), np.zeros(5), np.zeros(5)]))
+    est = Trajectory(ref.t, ref.poses + [0.0, 2.0, 0.0])
+    a = ate(est, ref)
+    assert a["rmse"] == pytest.approx(2.0) and a["max"] == pytest.approx(2.0) and a["n"] == 5
+    assert ate(est, ref, align=True)["rmse"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_umeyama_recovers_rigid_transform():
+    rng = np.random.default_rng(1)
+    src = rng.normal(size=(50, 2)) * 10
+    T = np.array([4.0, -7.0, 0.9])
+    dst = se2_compose(T, np.column_stack([src, np.zeros(50)]))[:, :2]
+    assert np.allclose(umeyama_se2(src, dst), T)
+
+
+def test_associate_drops_far_stamps():
+    est = Trajectory([0.0, 1.0, 2.0], np.zeros((3, 3)))
+    ref = Trajectory([0.001, 1.5, 2.01], np.zeros((3, 3)))
+    ie, ir = associate(est, ref, max_dt=0.02)
+    assert ie.tolist() == [0, 2] and ir.tolist() == [0, 2]
+
+
+def _to_evo(tr: Trajectory):
+    from evo.core.trajectory import PoseTrajectory3D
+
+    xyz = np.column_stack([tr.x, tr.y, np.zeros(len(tr))])
+    quat = np.column_stack([np.cos(tr.yaw / 2), np.zeros(len(tr)), np.zeros(len(tr)), np.sin(tr.yaw / 2)])
+    return PoseTrajectory3D(positions_xyz=xyz, orientations_quat_wxyz=quat, timestamps=tr.t)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_ate_and_rpe_match_evo(seed):
+    from evo.core import metrics, sync
+
+    est, ref = _pair(seed)
+    e_ref, e_est = sync.associate_trajectories(_to_evo(ref), _to_evo(est), max_diff=0.02)
+    ape = metrics.APE(metrics.PoseRelation.translation_part)
+    ape.process_data((e_ref, e_est))
+    ours = ate(est, ref)
+    for k in ("rmse", "mean", "median", "max", "std"):
+        assert ours[k] == pytest.approx(ape.get_statistic(getattr(metrics.StatisticsType, k)), abs=1e-6)
+
+    aligned = copy.deepcopy(e_est)
+    aligned.align(e_ref)
+    ape.process_data((e_ref, aligned))
+    assert ate(est, ref, align=True)["rmse"] == pytest.approx(ape.get_statistic(metrics.StatisticsType.rmse),
+                                                               abs=1e-6)
+
+    for delta, all_pairs in ((1, False), (10, False), (10, True)):
+        r = metrics.RPE(metrics.PoseRelation.translation_part, delta=delta, all_pairs=all_pairs)
+        r.process_data((e_ref, e_est))
+        mine = rpe(est, ref, delta=delta, all_pairs=all_pairs)
+        for k in ("rmse", "mean", "max"):
+            assert mine["trans"][k] == pytest.approx(r.get_statistic(getattr(metrics.StatisticsType, k)), abs=1e-6)
+        rr = metrics.RPE(metrics.PoseRelation.rotation_angle_deg, delta=delta, all_pairs=all_pairs)
+        rr.process_data((e_ref, e_est))
+        assert mine["rot"]["rmse"] == pytest.approx(rr.get_statistic(metrics.StatisticsType.rmse), abs=1e-6)
+
+
+def test_tum_roundtrip_readable_by_evo(tmp_path):
+    from evo.tools import file_interface
+
+    est, _ = _pair()
+    est.to_tum(tmp_path / "e.tum")
+    back = Trajectory.from_tum(tmp_path / "e.tum")
+    assert np.allclose(back.poses, est.poses, atol=1e-8) and np.allclose(back.t, est.t)
+    ev = file_interface.read_tum_trajectory_file(str(tmp_path / "e.tum"))
+    assert np.allclose(ev.positions_xyz[:, :2], est.poses[:, :2], atol=1e-8)
+
+
+def test_csv_roundtrip_with_covariance(tmp_path):
+    est, _ = _pair()
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(len(est), 3, 3))
+    est.cov = a @ a.transpose(0, 2, 1)
+    est.to_csv(tmp_path / "e.csv")
+    back = Trajectory.from_csv(tmp_path / "e.csv")
+    assert np.allclose(back.poses, est.poses, rtol=1e-8) and np.allclose(back.cov, est.cov, rtol=1e-8)
+
+
+def test_movement_of_a_circle():
+    # constant speed 2 m/s, yaw rate 0.1 rad/s, sampled at 1 s, starting east
+    t = np.arange(30.0)
+    r = 2.0 / 0.1
+    th = 0.1 * t
+    poses = np.column_stack([r * np.sin(th), r - r * np.cos(th), th])
+    mv = movement(Trajectory(t, poses))
+    chord = 2 * r * np.sin(0.05)
+    assert np.allclose(mv["sog"], chord)  # chord speed over one second
+    assert np.allclose(mv["rot"], 0.1)
+    assert np.allclose(np.unwrap(mv["cog"]), th[:-1] + 0.05)  # chord direction = mid-interval yaw
+
+
+def test_movement_errors_and_heading():
+    est, ref = _pair()
+    m = movement_errors(ref, ref)
+    assert all(m[k]["rmse"] == 0.0 for k in m)
+    biased = Trajectory(ref.t, ref.poses + [0.0, 0.0, np.radians(3.0)])
+    assert heading_error(biased, ref)["rmse"] == pytest.approx(3.0)
+    assert movement_errors(biased, ref)["hdg"]["mean"] == pytest.approx(3.0)

@@ -1,0 +1,71 @@
+"""The shared weighted-ICP match cache: a hit is exactly the match it replaces, and `compare` gives
+the same table with and without it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from _polyworld import synthetic_log
+
+from graphnav.evaluation.compare import compare
+from graphnav.scan import icp, icp_cache
+
+
+@pytest.fixture(scope="module")
+def log():
+    return synthetic_log(12)
+
+
+def test_a_hit_is_the_computed_match_and_other_guesses_miss(log):
+    a, b = log.of("scan")[1], log.of("scan")[0]
+    cfg = icp.IcpConfig()
+    ref = icp.match_scans(a, b, cfg, init=[0.7, 0.0, 0.0])
+    cache = icp_cache.MatchCache()
+    with icp_cache.active(cache):
+        first = icp_cache.match_scans(a, b, cfg, init=[0.7, 0.0, 0.0])
+        first.pose[:] = 99.0  # a caller mutating its copy does not touch the cache
+        again = icp_cache.match_scans(a, b, cfg, init=[0.7, 0.0, 0.0])
+        assert (cache.hits, cache.misses) == (1, 1)
+        icp_cache.match_scans(a, b, cfg, init=[0.0, 0.0, 0.0])  # another guess: computed
+        icp_cache.match_scans(a, b, icp.IcpConfig(variant="HD"), init=[0.7, 0.0, 0.0])  # another config
+        assert (cache.hits, cache.misses) == (1, 3) and len(cache) == 3
+    np.testing.assert_array_equal(again.pose, ref.pose)
+    np.testing.assert_array_equal(again.cov, ref.cov)
+    assert again.ok == ref.ok
+    assert len(cache.ms) == 4 and cache.ms[1] == cache.ms[0]  # a hit reports its first computation's time
+    icp_cache.match_scans(a, b, cfg, init=[0.7, 0.0, 0.0])  # outside `active`: not cached
+    assert cache.hits == 1 and icp_cache.current() is None
+
+
+def test_compare_with_the_cache_gives_the_same_results(log):
+    names = ["batch", "isam2", "icp-dr"]
+    plain = compare(log, names)
+    cache = icp_cache.MatchCache()
+    shared = compare(log, names, cache=cache)
+    n_pairs = len(log.of("scan")) - 1
+    by = {e.name: e for e in shared}
+    assert by["batch"].summary["icp_cache_hits"] == 0
+    assert by["isam2"].summary["icp_cache_hits"] == n_pairs  # the same GraphBuilder sequence as batch
+    assert cache.hits == sum(e.summary["icp_cache_hits"] for e in shared)
+    for p, s in zip(plain, shared, strict=True):
+        assert p.ok and s.ok
+        assert "icp_cache_hits" not in p.summary
+        np.testing.assert_array_equal(p.result.trajectory.poses, s.result.trajectory.poses)
+        assert s.summary["ate_rmse_m"] == p.summary["ate_rmse_m"]
+    assert icp_cache.current() is None  # compare leaves no cache active
+
+
+def test_compare_command_without_the_flag_in_its_namespace(log, tmp_path, capsys):
+    """`graphnav demo` builds the compare command's Namespace itself (no icp_cache attribute)."""
+    import argparse
+    import json
+
+    from graphnav.commands import compare as cmd
+    from graphnav.io import save_log
+
+    path = tmp_path / "l.jsonl"
+    save_log(log, path)
+    ns = argparse.Namespace(log=str(path), lenient=False, out=tmp_path / "o", estimators="dead-reckoning",
+                            option=None, workers=1, json=True)
+    assert cmd.run(ns) == 0
+    assert json.loads(capsys.readouterr().out)["icp_cache_hits"] == 0
