@@ -106,7 +106,15 @@ def _ply_count(path: Path, size: int) -> int:
     missing = [c for c in "xyz" if c not in props]
     if missing:
         raise LogError(f"vertex element has no {', '.join(missing)} property", file=str(path))
-    if fmt != "ascii":
+    if fmt == "ascii":  # one line per element row
+        need = sum(count for _, count, _ in elements[: vi + 1])
+        with open(path, "rb") as fh:
+            fh.seek(hlen)
+            rows = sum(1 for line in fh if line.strip())
+        if rows < need:
+            raise LogError(f"truncated: the header declares {elements[vi][1]} vertices ({need} rows), the file "
+                           f"has {rows}", file=str(path))
+    else:
         need = hlen
         for _, count, plist in elements[: vi + 1]:
             if any(t not in _PLY_SIZES for t, _ in plist):

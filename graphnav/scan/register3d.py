@@ -22,9 +22,11 @@ Pose3 tangent, so ``cov`` is a ``BetweenFactorPose3`` noise model as it stands. 
 methods ``cov = s^2 H^-1`` with H the Gauss-Newton Hessian of ``e = 1/2 sum r' M r`` (M = I for ICP,
 the per-axis normal weights of small_gicp's point-to-plane, ``(C_t + R C_s R')^-1`` for GICP/VGICP)
 and ``s^2 = 2 e / (m - 6)`` the residual variance (m scalar residuals: 3 per inlier; 1 per inlier for
-open3d's point-to-plane). small_gicp returns H, b and e of its last linearisation (taken at most one
-converged step, below its epsilons, before ``T``); for open3d they are computed here from its
-correspondences at ``T`` (:func:`lsq_hessian`). NDT: see :mod:`graphnav.scan.ndt`.
+open3d's point-to-plane). small_gicp (its Levenberg-Marquardt loop) returns H and b of its last
+linearisation, taken at most one converged step (below its epsilons) before ``T``, and e after that
+step on the same correspondences (tests/scan/test_register3d.py checks both against
+:func:`lsq_hessian`); for open3d, H and e are computed here from its correspondences at ``T``.
+NDT: see :mod:`graphnav.scan.ndt`.
 
 ``fitness`` is the fraction of the (downsampled) source points with a target point within
 ``max_corr`` at ``T`` and ``rmse`` their RMS distance (eq. 7 of Wang et al. 2023); ``objective`` is
