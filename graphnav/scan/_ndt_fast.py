@@ -178,10 +178,12 @@ def derivs3(pts, R, t, dR, d2R, tkeys, tvals, means, icovs, inv_res, offsets, d1
     p = (t_x, t_y, t_z, phi_x, phi_y, phi_z), T(p) x = R_x R_y R_z x + t (eq. 6.17); ``dR`` (3, 3, 3)
     and ``d2R`` (6, 3, 3: xx, xy, xz, yy, yz, zz) are the first and second derivatives of R by the
     angles, so ``dR[k] @ x`` and ``d2R[kl] @ x`` are the angular terms of eq. 6.18-6.21.
-    Returns f, g (6,), H (6, 6), points with at least one voxel, sum e*m, sum e (e = exp(-d2 m / 2)).
+    Returns f, g (6,), H (6, 6), G (6, 6) the Gauss-Newton part of H (sum c J' A J, c = -d1 d2 e:
+    positive semi-definite), points with at least one voxel, sum e*m, sum e (e = exp(-d2 m / 2)).
     """
     g = np.zeros(6)
     H = np.zeros((6, 6))
+    G = np.zeros((6, 6))
     f = 0.0
     hits = 0
     sem = 0.0
@@ -233,24 +235,28 @@ def derivs3(pts, R, t, dR, d2R, tkeys, tvals, means, icovs, inv_res, offsets, d1
                         H[r, s] += cr * gq[s]
                 for a in range(3):
                     for b in range(a, 3):
-                        H[a, b] += c * A[a, b]
+                        G[a, b] += c * A[a, b]
                 for k in range(3):
                     for a in range(3):
                         Aja[k, a] = A[a, 0] * ja[k, 0] + A[a, 1] * ja[k, 1] + A[a, 2] * ja[k, 2]
                     for a in range(3):
-                        H[a, 3 + k] += c * Aja[k, a]
+                        G[a, 3 + k] += c * Aja[k, a]
                 pi = 0
                 for k in range(3):
                     for l2 in range(k, 3):  # pi enumerates xx, xy, xz, yy, yz, zz
-                        H[3 + k, 3 + l2] += c * (ja[k, 0] * Aja[l2, 0] + ja[k, 1] * Aja[l2, 1] + ja[k, 2] * Aja[l2, 2]
-                                                 + Aq[0] * ha[pi, 0] + Aq[1] * ha[pi, 1] + Aq[2] * ha[pi, 2])
+                        G[3 + k, 3 + l2] += c * (ja[k, 0] * Aja[l2, 0] + ja[k, 1] * Aja[l2, 1] + ja[k, 2] * Aja[l2, 2])
+                        H[3 + k, 3 + l2] += c * (Aq[0] * ha[pi, 0] + Aq[1] * ha[pi, 1] + Aq[2] * ha[pi, 2])
                         pi += 1
         if hit:
             hits += 1
     for r in range(6):
+        for s in range(r, 6):
+            H[r, s] += G[r, s]
+    for r in range(6):
         for s in range(r):
             H[r, s] = H[s, r]
-    return f, g, H, hits, sem, se
+            G[r, s] = G[s, r]
+    return f, g, H, G, hits, sem, se
 
 
 @njit(cache=True)
@@ -258,9 +264,10 @@ def derivs2(pts, p, tkeys, tvals, means, icovs, inv_res, shifts):
     """Biber & Strasser 2003's objective f = -sum exp(-m / 2) over every point and each of the
     shifted grids (``shifts`` (G, 2), the grid origins), with its gradient and Hessian in
     p = (t_x, t_y, phi), x' = R(phi) x + t. Returns f, g (3,), H (3, 3), points with at least one
-    cell, sum e*m, sum e."""
+    cell, sum e*m, sum e; and G, the Gauss-Newton part of H (sum e J' A J)."""
     g = np.zeros(3)
     H = np.zeros((3, 3))
+    G = np.zeros((3, 3))
     f = 0.0
     hits = 0
     sem = 0.0
@@ -294,15 +301,25 @@ def derivs2(pts, p, tkeys, tvals, means, icovs, inv_res, shifts):
             g[2] += e * gq2
             Aj0 = A[0, 0] * j0 + A[0, 1] * j1
             Aj1 = A[1, 0] * j0 + A[1, 1] * j1
-            H[0, 0] += e * (-gq0 * gq0 + A[0, 0])
-            H[0, 1] += e * (-gq0 * gq1 + A[0, 1])
-            H[1, 1] += e * (-gq1 * gq1 + A[1, 1])
-            H[0, 2] += e * (-gq0 * gq2 + Aj0)
-            H[1, 2] += e * (-gq1 * gq2 + Aj1)
-            H[2, 2] += e * (-gq2 * gq2 + j0 * Aj0 + j1 * Aj1 + a0 * h0 + a1 * h1)
+            G[0, 0] += e * A[0, 0]
+            G[0, 1] += e * A[0, 1]
+            G[1, 1] += e * A[1, 1]
+            G[0, 2] += e * Aj0
+            G[1, 2] += e * Aj1
+            G[2, 2] += e * (j0 * Aj0 + j1 * Aj1)
+            H[0, 0] -= e * gq0 * gq0
+            H[0, 1] -= e * gq0 * gq1
+            H[1, 1] -= e * gq1 * gq1
+            H[0, 2] -= e * gq0 * gq2
+            H[1, 2] -= e * gq1 * gq2
+            H[2, 2] += e * (-gq2 * gq2 + a0 * h0 + a1 * h1)
         if hit:
             hits += 1
-    H[1, 0] = H[0, 1]
-    H[2, 0] = H[0, 2]
-    H[2, 1] = H[1, 2]
-    return f, g, H, hits, sem, se
+    for r in range(3):
+        for s2 in range(r, 3):
+            H[r, s2] += G[r, s2]
+    for r in range(3):
+        for s2 in range(r):
+            H[r, s2] = H[s2, r]
+            G[r, s2] = G[s2, r]
+    return f, g, H, G, hits, sem, se
