@@ -2,10 +2,12 @@
 intensity). Returns (N, 3) float64 points; non-finite points are dropped.
 
 open3d reads leniently (a truncated binary PLY comes back full length with a warning on stdout; a
-PLY without y/z properties reads as zeros), so the header is checked here first and the count
+PLY without y/z properties reads as zeros), so the header is checked here first (x, y, z present;
+the declared count at most :data:`MAX_POINTS` and backed by the file's bytes or rows) and the count
 open3d returns is checked against it: a bad file is a :class:`~graphnav.errors.LogError` naming
-the file, never a silent or partial read. open3d's own messages are silenced (they go to stdout,
-which the CLI's ``--json`` contract keeps for the one JSON object).
+the file, never a silent or partial read, nor an allocation the file's size does not back.
+open3d's own messages are silenced (they go to stdout, which the CLI's ``--json`` contract keeps
+for the one JSON object).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ FORMATS = (".ply", ".pcd", ".bin")
 _PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
               "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
 _MAX_HEADER = 1 << 16
+MAX_POINTS = 50_000_000  # a declared count beyond this is refused before anything is allocated
 
 
 def read_cloud(path: str | os.PathLike) -> NDArray[np.float64]:
@@ -76,6 +79,17 @@ def _header_lines(path: Path, last: str) -> tuple[list[str], int]:
     raise LogError(f"no '{last}' line in the first {_MAX_HEADER} bytes: not a valid header", file=str(path))
 
 
+def _count_rows(path: Path, offset: int) -> int:
+    """Lines after ``offset`` (a last line without its newline counts), read in 1 MB chunks."""
+    rows, last = 0, b"\n"
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        while chunk := fh.read(1 << 20):
+            rows += chunk.count(b"\n")
+            last = chunk[-1:]
+    return rows + (last != b"\n")
+
+
 def _ply_count(path: Path, size: int) -> int:
     """Vertex count of a PLY header, after checking it has x, y, z and, when binary, that the file
     is long enough for the elements up to the vertices."""
@@ -106,11 +120,11 @@ def _ply_count(path: Path, size: int) -> int:
     missing = [c for c in "xyz" if c not in props]
     if missing:
         raise LogError(f"vertex element has no {', '.join(missing)} property", file=str(path))
+    if elements[vi][1] > MAX_POINTS:
+        raise LogError(f"the header declares {elements[vi][1]} vertices, more than {MAX_POINTS}", file=str(path))
     if fmt == "ascii":  # one line per element row
         need = sum(count for _, count, _ in elements[: vi + 1])
-        with open(path, "rb") as fh:
-            fh.seek(hlen)
-            rows = sum(1 for line in fh if line.strip())
+        rows = _count_rows(path, hlen)
         if rows < need:
             raise LogError(f"truncated: the header declares {elements[vi][1]} vertices ({need} rows), the file "
                            f"has {rows}", file=str(path))
@@ -142,19 +156,37 @@ def _pcd_count(path: Path, size: int) -> int:
         n = int(fields["POINTS"][0]) if "POINTS" in fields else int(fields["WIDTH"][0]) * int(fields["HEIGHT"][0])
     except (KeyError, IndexError, ValueError):
         raise LogError("no valid POINTS (or WIDTH and HEIGHT) line", file=str(path)) from None
+    if not 0 <= n <= MAX_POINTS:
+        raise LogError(f"the header declares {n} points, not in [0, {MAX_POINTS}]", file=str(path))
     data = (fields.get("DATA") or [""])[0].lower()
     if data not in ("ascii", "binary", "binary_compressed"):
         raise LogError(f"unknown PCD DATA {data!r}", file=str(path))
+    if data == "ascii":
+        rows = _count_rows(path, hlen)
+        if rows < n:
+            raise LogError(f"truncated: the header declares {n} points, the file has {rows} rows", file=str(path))
+        return n
+    try:
+        sizes = [int(s) for s in fields["SIZE"]]
+        counts = [int(c) for c in fields.get("COUNT", ["1"] * len(sizes))]
+    except (KeyError, ValueError):
+        raise LogError("no valid SIZE/COUNT lines", file=str(path)) from None
+    row = sum(s * c for s, c in zip(sizes, counts, strict=False))
     if data == "binary":
-        try:
-            sizes = [int(s) for s in fields["SIZE"]]
-            counts = [int(c) for c in fields.get("COUNT", ["1"] * len(sizes))]
-        except (KeyError, ValueError):
-            raise LogError("no valid SIZE/COUNT lines", file=str(path)) from None
-        need = hlen + n * sum(s * c for s, c in zip(sizes, counts, strict=False))
+        need = hlen + n * row
         if size < need:
             raise LogError(f"truncated: the header declares {n} points ({need} bytes with the header), the file "
                            f"has {size}", file=str(path))
+    else:  # binary_compressed: uint32 compressed and uncompressed sizes, then the LZF block
+        with open(path, "rb") as fh:
+            fh.seek(hlen)
+            head = fh.read(8)
+        if len(head) < 8:
+            raise LogError("truncated: no compressed-block sizes after the header", file=str(path))
+        packed, unpacked = np.frombuffer(head, "<u4").tolist()
+        if hlen + 8 + packed > size or unpacked != n * row:
+            raise LogError(f"compressed block of {packed} bytes ({unpacked} unpacked) does not fit the file "
+                           f"({size} bytes) or {n} points of {row} bytes", file=str(path))
     return n
 
 

@@ -14,14 +14,16 @@ def _points(n=500, seed=0):
     return np.random.default_rng(seed).normal(0, 10, (n, 3))
 
 
-@pytest.mark.parametrize(("ext", "ascii_"), [(".ply", False), (".ply", True), (".pcd", False), (".pcd", True)])
-def test_open3d_formats_round_trip(tmp_path, ext, ascii_):
+@pytest.mark.parametrize(("ext", "ascii_", "compressed"), [(".ply", False, False), (".ply", True, False),
+                                                          (".pcd", False, False), (".pcd", True, False),
+                                                          (".pcd", False, True)])
+def test_open3d_formats_round_trip(tmp_path, ext, ascii_, compressed):
     import open3d as o3d
 
     pts = _points()
     f = tmp_path / f"c{ext}"
     assert o3d.io.write_point_cloud(str(f), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts)),
-                                    write_ascii=ascii_)
+                                    write_ascii=ascii_, compressed=compressed)
     got = read_cloud(f)
     assert got.shape == pts.shape
     assert np.allclose(got, pts, atol=1e-4 if ascii_ else 0)
@@ -68,6 +70,8 @@ def test_a_truncated_binary_ply_is_an_error(tmp_path):
     (b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
      b"end_header\n1 2 3\n", "truncated.*3 rows"),
     (b"ply\nformat ascii 1.0\nbogus line\nend_header\n", "not understood"),
+    (b"ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\n"
+     b"property float z\nend_header\n", "more than"),
 ])
 def test_bad_ply_files_are_errors_naming_the_file(tmp_path, content, message, capfd):
     f = tmp_path / "bad.ply"
@@ -85,6 +89,11 @@ def test_bad_ply_files_are_errors_naming_the_file(tmp_path, content, message, ca
      b"POINTS 10\nDATA binary\n" + b"\0" * 12, "truncated"),
     (b"# .PCD v0.7\nFIELDS x y z\nPOINTS many\nDATA ascii\n", "POINTS"),
     (b"hello", "no 'DATA'"),
+    (b"# .PCD v0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nPOINTS 1000000000000\nDATA ascii\n1 2 3\n",
+     "not in"),
+    (b"# .PCD v0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nPOINTS 3\nDATA ascii\n1 2 3\n", "3 points, the"),
+    (b"# .PCD v0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nPOINTS 10\nDATA binary_compressed\n"
+     + np.array([1000, 120], "<u4").tobytes() + b"\0" * 20, "compressed block"),
 ])
 def test_bad_pcd_files_are_errors_naming_the_file(tmp_path, content, message, capfd):
     f = tmp_path / "bad.pcd"
