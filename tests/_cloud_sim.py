@@ -1,10 +1,22 @@
 """Small synthetic 3D scenes for the registration tests: points sampled on boxes, walls, a floor and
-cylinders (every direction constrained), and rigid transforms to move them."""
+cylinders (every direction constrained), rigid transforms to move them; and where the KITTI pair is."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def find_kitti() -> Path | None:
+    """The KITTI pair at ../shared/data/kitti_pair (one level further up for worktrees), or None."""
+    for c in (REPO.parent / "shared" / "data" / "kitti_pair", REPO.parent.parent / "shared" / "data" / "kitti_pair"):
+        if (c / "source.ply").exists() and (c / "target.ply").exists() and (c / "T_target_source.txt").exists():
+            return c
+    return None
 
 
 def _box(rng, n, lo, hi):

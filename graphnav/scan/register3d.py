@@ -18,7 +18,8 @@ Methods (``METHODS``):
 **Covariance convention.** ``cov`` (6x6) is over delta in ``T exp(delta)`` (right perturbation),
 delta = (omega, v): rotation first, then translation, both in the source frame. This is
 small_gicp's own linearisation (``T_target_source * se3_exp(delta)``, H and b by delta) and GTSAM's
-Pose3 tangent, so ``cov`` is a ``BetweenFactorPose3`` noise model as it stands. For the least-squares
+Pose3 tangent, so ``cov`` has the form of a ``BetweenFactorPose3`` noise model (its scale is
+optimistic, as Hessian covariances are: docs/scan-matching-3d.md). For the least-squares
 methods ``cov = s^2 H^-1`` with H the Gauss-Newton Hessian of ``e = 1/2 sum r' M r`` (M = I for ICP,
 the per-axis normal weights of small_gicp's point-to-plane, ``(C_t + R C_s R')^-1`` for GICP/VGICP)
 and ``s^2 = 2 e / (m - 6)`` the residual variance (m scalar residuals: 3 per inlier; 1 per inlier for

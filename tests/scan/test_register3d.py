@@ -3,12 +3,10 @@ small_gicp's own linearisation and GTSAM's Pose3, known transforms for every met
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import gtsam
 import numpy as np
 import pytest
-from _cloud_sim import apply, pair, rigid
+from _cloud_sim import apply, find_kitti, pair, rigid
 
 from graphnav.scan.register3d import (
     METHODS,
@@ -19,15 +17,6 @@ from graphnav.scan.register3d import (
     register,
     xyzrpy_matrix,
 )
-
-REPO = Path(__file__).resolve().parents[2]
-
-
-def find_kitti() -> Path | None:
-    for c in (REPO.parent / "shared" / "data" / "kitti_pair", REPO.parent.parent / "shared" / "data" / "kitti_pair"):
-        if (c / "source.ply").exists() and (c / "target.ply").exists() and (c / "T_target_source.txt").exists():
-            return c
-    return None
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,7 @@ import sys
 
 import numpy as np
 import pytest
-from _cloud_sim import pair, rigid
-from test_register3d import find_kitti
+from _cloud_sim import find_kitti, pair, rigid
 
 
 def _cli(*args):
