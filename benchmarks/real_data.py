@@ -33,6 +33,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from graphnav.commands._common import add_dashboard_flag  # noqa: E402
 from graphnav.evaluation.real_data import DATASETS, _cost, find_data, plan, run_log  # noqa: E402
 from graphnav.evaluation.sweep import run_sweep  # noqa: E402
 
@@ -119,11 +120,14 @@ def main(argv: list[str] | None = None) -> int:
                          "would cost more to start than it saves; 'tcp://host:8786': an existing cluster; "
                          "serial: in-process")
     ap.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
+    add_dashboard_flag(ap)
     ap.add_argument("--no-icp-cache", action="store_true",
                     help="each estimator computes its own ICP matches (default: shared within a log, as "
                          "'graphnav compare'; later estimators' runtimes then exclude the shared matches)")
     ap.add_argument("--results", type=Path, default=None,
-                    help="JSON-lines file of finished logs: an interrupted run resumes from it")
+                    help="JSON-lines file of finished logs: an interrupted run resumes from it (a log is "
+                         "reused only if its task is the same; a file written by other code is refused)")
+    ap.add_argument("--overwrite", action="store_true", help="discard what --results holds and start it afresh")
     ap.add_argument("--doc", type=Path, default=DOC, help=f"markdown file to write (default {DOC.relative_to(ROOT)})")
     ap.add_argument("--no-doc", action="store_true", help="do not write the markdown file")
     ap.add_argument("--no-progress", action="store_true")
@@ -142,7 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     cost = sum(_cost(t) for t in tasks) / max(1, len(tasks))
     results = run_sweep(run_log, tasks, out=args.results, scheduler=args.scheduler, workers=args.workers,
-                        progress=not args.no_progress, desc="real data", task_cost_s=cost, report=report)
+                        progress=not args.no_progress, desc="real data", task_cost_s=cost, report=report,
+                        dashboard=args.dashboard, overwrite=args.overwrite)
     wall = time.perf_counter() - t0
     lines, fails = table(results)
     out = {"commit": _commit(), "date": datetime.date.today().isoformat(), "scheduler": report.get("scheduler"),
