@@ -281,7 +281,8 @@ def test_five_percent_gross_outliers_keep_the_ate_near_the_outlier_free_run(seed
     assert gated.info["rejected"] >= 0.03 * bad_log.counts()["beacon"]
     assert bad <= 1.25 * clean + 0.05
     try:                                                       # without the gate the outliers do hurt
-        blind = ate(run_ekf_slam(bad_log, gate=None).trajectory, truth)["rmse"]
+        with np.errstate(all="ignore"):                        # (a diverging filter overflows on its way)
+            blind = ate(run_ekf_slam(bad_log, gate=None).trajectory, truth)["rmse"]
     except ValueError as e:                                    # or the filter diverges, and says so
         assert "diverged" in str(e)
     else:
