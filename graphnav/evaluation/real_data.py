@@ -127,9 +127,16 @@ def load_source(src: dict[str, Any]):
 
 
 def _first_line(text: str) -> str:
-    """An error on one line: its lines joined (GTSAM's messages start with a newline and name the
-    variable on the next), at most 200 characters."""
-    return " ".join(ln.strip() for ln in text.strip().splitlines() if ln.strip())[:200]
+    """An error on one line: its non-empty lines joined up to the first that ends a sentence (GTSAM's
+    messages start with a newline and name the variable on the next line; the explanation after
+    that is left out), at most 200 characters."""
+    kept: list[str] = []
+    for ln in text.strip().splitlines():
+        if ln.strip():
+            kept.append(ln.strip())
+            if ln.strip().endswith(".") or len(kept) == 4:
+                break
+    return " ".join(kept)[:200]
 
 
 def _one_line(e: BaseException) -> str:
