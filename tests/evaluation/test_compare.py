@@ -133,6 +133,11 @@ def test_cli_json_is_one_object_with_the_issue_keys(cli_run):
             assert k in d, (name, k)
     assert "deliberate failure" in est["zz-boom"]["error"] and est["zz-boom"]["ate_rmse_m"] is None
     assert est["fake-smoother"]["ate_rmse_m"] == pytest.approx(0.3)
+    # error (0.3, 0) m against cov diag(0.04, 0.01): NEES 0.09/0.04; online (0, 0.6): 0.36/0.01
+    assert est["fake-smoother"]["nees_mean"] == pytest.approx(2.25)
+    assert est["fake-smoother"]["online_nees_mean"] == pytest.approx(36.0)
+    assert est["fake-smoother"]["heading_rmse_deg"] == pytest.approx(0.0, abs=1e-9)
+    assert "nees_mean" in est["scan-to-map"] and est["scan-to-map"]["nees_mean"] is None  # no covariance
     assert est["fake-smoother"]["options"] == {"lag": 7}
     assert est["scan-to-map"]["ate_rmse_m"] < 0.1
 
