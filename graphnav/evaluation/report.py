@@ -133,24 +133,31 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: 
         c = log.columns("gnss")
         gnss = np.column_stack([c["x"], c["y"]])
     figs: list[tuple[str, str]] = []
+
+    def put(fig, fname: str, title: str) -> None:
+        if fig is not None:
+            files[fname] = plots.save(fig, out / fname)
+            figs.append((title, fname))
+
     if trajs:
         title = f"Trajectories over the truth — {Path(log_name).name or log_name}"
-        files["trajectories.png"] = plots.plot_trajectories(trajs, truth, out / "trajectories.png", gnss, title=title)
-        figs.append(("Trajectories", "trajectories.png"))
+        put(plots.plot_trajectories(trajs, truth, gnss, title=title), "trajectories.png", "Trajectories")
+        put(plots.plot_trajectory_panels(trajs, truth), "trajectory_panels.png",
+            "Each estimator over the truth (coloured by position error; inset: the largest error)")
         if truth is not None:
             online = {e.name: e.result.online for e in ok
                       if e.result.online is not None and e.result.online is not e.result.trajectory}
-            files["position_error.png"] = plots.plot_position_error(trajs, truth, out / "position_error.png",
-                                                                    events, online)
-            files["error_cdf.png"] = plots.plot_error_cdf(trajs, truth, out / "error_cdf.png")
-            files["sog_cog.png"] = plots.plot_sog_cog(trajs, truth, out / "sog_cog.png", events)
-            figs += [("Position error versus time (smoothers: online estimate dashed)", "position_error.png"),
-                     ("Error CDF", "error_cdf.png"),
-                     ("SOG, COG and ΔCOG errors (weighted-ICP paper, Figs. 12-15 style)", "sog_cog.png")]
-        cov = plots.plot_covariance(trajs, truth, out / "covariance.png")
-        if cov is not None:
-            files["covariance.png"] = cov
-            figs.append(("Covariance ellipses (2σ)", "covariance.png"))
+            put(plots.plot_position_error(trajs, truth, events, online), "position_error.png",
+                "Position error versus time (smoothers: online estimate dashed)")
+            put(plots.plot_heading_error(trajs, truth, events), "heading_error.png", "Heading error versus time")
+            put(plots.plot_error_cdf(trajs, truth), "error_cdf.png", "Error CDF")
+            put(plots.plot_sog_cog(trajs, truth, events), "sog_cog.png",
+                "SOG, COG and ΔCOG errors (weighted-ICP paper, Figs. 12-15 style)")
+            put(plots.plot_error_bounds(trajs, truth), "error_bounds.png",
+                "Errors in x, y and yaw with the estimators' own ±3σ bounds")
+            put(plots.plot_nees(trajs, truth), "nees.png",
+                "Position NEES over time with its 95 % chi-square band (2 dof)")
+        put(plots.plot_covariance(trajs, truth), "covariance.png", "Covariance ellipses (2σ, each panel its own scale)")
 
     lines = [f"# Estimator comparison — {log_name}", ""]
     counts = ", ".join(f"{k}: {v}" for k, v in log.counts().items())

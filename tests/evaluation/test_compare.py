@@ -42,6 +42,10 @@ FAKES = {
 }
 
 
+FIGURES = ("trajectories.png", "trajectory_panels.png", "position_error.png", "heading_error.png", "error_cdf.png",
+           "sog_cog.png", "error_bounds.png", "nees.png", "covariance.png")
+
+
 @pytest.fixture(scope="module")
 def log():
     return synthetic_log(30)
@@ -147,8 +151,7 @@ def test_cli_writes_report_figures_and_tum(cli_run):
 
     _, stdout, out, _ = cli_run
     est = json.loads(stdout)["estimators"]
-    for f in ("report.md", "trajectories.png", "position_error.png", "error_cdf.png", "sog_cog.png",
-              "covariance.png"):
+    for f in FIGURES + ("report.md",):
         assert (out / f).stat().st_size > 0, f
     ok = [n for n, d in est.items() if "error" not in d]
     for n in ok:
@@ -162,7 +165,7 @@ def test_cli_writes_report_figures_and_tum(cli_run):
     assert "deliberate failure" in report
     assert "online ATE RMSE" in report
     assert '"lag": 7' in report  # configuration section
-    for f in ("trajectories.png", "position_error.png", "error_cdf.png", "sog_cog.png", "covariance.png"):
+    for f in FIGURES:
         assert f"]({f})" in report
 
 
@@ -173,12 +176,11 @@ def test_cli_rejects_a_malformed_option(log, tmp_path):
 
 
 def test_event_shading_has_one_legend_entry_per_kind():
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
-    fig, ax = plt.subplots()
+    ax = Figure().add_subplot()
     ev = [("gnss_outage", 1, 2), ("gnss_outage", 5, 6), ("gnss_jump", 3, 4), ("other", 7, 8)]
     h = plots._shade_events(ax, [{"kind": k, "t0": a, "t1": b} for k, a, b in ev])
-    plt.close(fig)
     assert [p.get_label() for p in h] == ["GNSS outage", "GNSS jump", "other"]
     assert len(ax.patches) == 4
 
@@ -195,12 +197,11 @@ def test_one_estimator_twice_under_labels(log):
 
 
 def test_a_whole_log_condition_is_not_shaded_but_gnss_events_are():
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
-    fig, ax = plt.subplots()
+    ax = Figure().add_subplot()
     ev = [("compass_bias", 0, 100), ("gnss_outage", 0, 100), ("noise_increase", 50, 60)]
     h = plots._shade_events(ax, [{"kind": k, "t0": a, "t1": b} for k, a, b in ev], span=(0.0, 100.0))
-    plt.close(fig)
     assert [p.get_label() for p in h] == ["GNSS outage", "noise_increase"]
 
 
