@@ -175,20 +175,20 @@ def _limits(xy: np.ndarray, margin: float = 0.06, floor: float = 1.0) -> tuple[t
 
 
 def trajectory_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory | None, *,
-                     zoom: bool = True) -> Figure:
+                     zoom_ax: Axes | None = None, color: Any = "tab:red") -> Figure:
     """One estimator over the truth, the track coloured by its position error; the view spans this
-    estimator's track and the truth over the same time (not every estimator's), and with ``zoom`` an
-    inset magnifies the neighbourhood of the largest error."""
+    estimator's track and the truth over the same time (not every estimator's). ``zoom_ax``, when
+    given, shows the neighbourhood of the largest error, a few errors wide."""
     fig = ax.figure
     err = None
+    tr_xy = np.zeros((0, 2))
     if truth is not None and len(truth):
         e, r = paired(est, truth)
         err = np.hypot(e.x - r.x, e.y - r.y) if len(e) else None
-        inside = (truth.t >= est.t[0] - MAX_DT) & (truth.t <= est.t[-1] + MAX_DT) if len(est) else truth.t < 0
-        tr_xy = np.column_stack([truth.x[inside], truth.y[inside]])
+        if len(est):
+            inside = (truth.t >= est.t[0] - MAX_DT) & (truth.t <= est.t[-1] + MAX_DT)
+            tr_xy = np.column_stack([truth.x[inside], truth.y[inside]])
         ax.plot(truth.x, truth.y, "-", color="k", lw=0.8, label="truth", zorder=2)
-    else:
-        tr_xy = np.zeros((0, 2))
     if err is not None:
         pts = np.column_stack([e.x, e.y])
         segs = np.stack([pts[:-1], pts[1:]], axis=1)
@@ -198,13 +198,13 @@ def trajectory_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory | N
         ax.add_collection(lc)
         fig.colorbar(lc, ax=ax, shrink=0.8, pad=0.01, label="position error [m]", extend="max")
     else:
-        ax.plot(est.x, est.y, "-", lw=1.5, color="tab:blue", label=name, zorder=3)
+        ax.plot(est.x, est.y, "-", lw=1.5, color=color, label=name, zorder=3)
     xy = np.vstack([np.column_stack([est.x, est.y]), tr_xy]) if len(est) else tr_xy
     if len(xy):
         (x0, x1), (y0, y1) = _limits(xy)
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x (east) [m]")
     ax.set_ylabel("y (north) [m]")
     title = name
@@ -212,38 +212,49 @@ def trajectory_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory | N
         title += f" — ATE RMSE {np.sqrt(np.mean(err**2)):.3g} m, max {err.max():.3g} m"
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
-    if zoom and err is not None and len(err) > 1:
+    if zoom_ax is not None:
+        if err is None or not len(err):
+            zoom_ax.axis("off")
+            return fig
         k = int(np.argmax(err))
-        half = max(6.0 * float(err[k]), 1.0)  # a window a few errors wide (at least 2 m)
-        full = max(np.ptp(xy[:, 0]), np.ptp(xy[:, 1]), 1e-9)
-        if half < 0.3 * full:
-            # the inset goes into the corner with the fewest track points
-            fx = (xy[:, 0] - xy[:, 0].min()) / max(np.ptp(xy[:, 0]), 1e-9)
-            fy = (xy[:, 1] - xy[:, 1].min()) / max(np.ptp(xy[:, 1]), 1e-9)
-            corners = {(0.62, 0.62): (fx > 0.55) & (fy > 0.55), (0.02, 0.62): (fx < 0.45) & (fy > 0.55),
-                       (0.02, 0.02): (fx < 0.45) & (fy < 0.45), (0.62, 0.02): (fx > 0.55) & (fy < 0.45)}
-            at = min(corners, key=lambda c: int(np.count_nonzero(corners[c])))
-            ins = ax.inset_axes([at[0], at[1], 0.36, 0.36])
-            cx, cy = e.x[k], e.y[k]
-            ins.plot(truth.x, truth.y, "-", color="k", lw=1.0)
-            ins.plot(e.x, e.y, "-", color="tab:red", lw=1.2)
-            ins.plot([cx, r.x[k]], [cy, r.y[k]], "o", ms=3, color="tab:red")
-            ins.set_xlim(cx - half, cx + half)
-            ins.set_ylim(cy - half, cy + half)
-            ins.set_aspect("equal", adjustable="box")
-            ins.tick_params(labelsize=6)
-            ins.set_title(f"largest error, t = {e.t[k]:.0f} s (±{half:.2g} m)", fontsize=7)
-            ax.indicate_inset_zoom(ins, edgecolor="0.3")
+        half = max(4.0 * float(err[k]), 1.0)  # a window a few errors wide (at least 2 m)
+        cx, cy = 0.5 * (e.x[k] + r.x[k]), 0.5 * (e.y[k] + r.y[k])
+        zoom_ax.plot(truth.x, truth.y, "-", color="k", lw=1.2, label="truth")
+        zoom_ax.plot(e.x, e.y, ".-", color=color, lw=1.2, ms=3, label=name)
+        zoom_ax.plot([e.x[k], r.x[k]], [e.y[k], r.y[k]], "-", color="0.4", lw=0.8)
+        zoom_ax.set_xlim(cx - half, cx + half)
+        zoom_ax.set_ylim(cy - half, cy + half)
+        zoom_ax.set_aspect("equal", adjustable="box")
+        zoom_ax.tick_params(labelsize=7)
+        zoom_ax.set_title(f"largest error {err[k]:.3g} m at t = {e.t[k]:.1f} s", fontsize=9)
+        zoom_ax.grid(alpha=0.3)
+        zoom_ax.legend(fontsize=7, loc="best")
+        ax.plot([e.x[k]], [e.y[k]], "s", ms=9, mfc="none", mec="r", zorder=6)
     return fig
 
 
 def plot_trajectory_panels(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory | None, *,
-                           fig: Figure | None = None, ncol: int = 3) -> Figure:
-    """One panel per estimator (:func:`trajectory_panel`), each zoomed to its own track."""
+                           fig: Figure | None = None, ncol: int = 2) -> Figure:
+    """One panel per estimator (:func:`trajectory_panel`), each zoomed to its own track, and beside it
+    (when there is a truth) a close-up of its largest error."""
     trajs = _as_dict(trajs)
-    fig, axes = _grid(fig, len(trajs), ncol, (5.6, 5.0))
-    for ax, (name, tr) in zip(axes.ravel(), trajs.items(), strict=False):
-        trajectory_panel(ax, name, tr, truth)
+    col = colors(list(trajs))
+    zoom = truth is not None and len(truth) > 0
+    per = 2 if zoom else 1
+    ncol = max(1, min(len(trajs), ncol))
+    nrow = int(np.ceil(len(trajs) / ncol))
+    if fig is None:
+        fig = Figure(figsize=((6.2 + 3.4 * (per - 1)) * ncol, 4.6 * nrow), layout="constrained")
+    axes = np.asarray(fig.subplots(nrow, ncol * per, squeeze=False,
+                                   gridspec_kw={"width_ratios": ([2.0, 1.0] if zoom else [1.0]) * ncol}))
+    cells = [(axes[i // ncol, per * (i % ncol)], axes[i // ncol, per * (i % ncol) + 1] if zoom else None)
+             for i in range(nrow * ncol)]
+    for (ax, zax), (name, tr) in zip(cells, trajs.items(), strict=False):
+        trajectory_panel(ax, name, tr, truth, zoom_ax=zax, color=col[name])
+    for ax, zax in cells[len(trajs):]:
+        ax.axis("off")
+        if zax is not None:
+            zax.axis("off")
     return fig
 
 
@@ -285,8 +296,9 @@ def plot_position_error(trajs: dict[str, Trajectory] | Trajectory, truth: Trajec
 
 def plot_heading_error(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, events: Sequence[dict] = (),
                        *, ax: Axes | None = None) -> Figure:
-    """Signed heading error (estimate minus truth, wrapped) versus time; the noisiest series drawn
-    underneath, the axis clipped at the 99th percentile of |error| (stated on the axis)."""
+    """Signed heading error (estimate minus truth, wrapped) versus time, the noisiest series drawn
+    underneath; a symmetric-log axis when the RMSEs span more than a factor 10, else a linear one
+    clipped at the 99th percentile of |error| (either stated on the axis)."""
     trajs = _as_dict(trajs)
     fig, ax = _axes(ax, (10, 4.5))
     col = colors(list(trajs))
@@ -296,13 +308,23 @@ def plot_heading_error(trajs: dict[str, Trajectory] | Trajectory, truth: Traject
         t, e = series[name]
         ax.plot(t, e, "-", lw=1.0, color=col[name], zorder=2 + z, label=f"{name} (RMSE {rms[name]:.3g}°)")
     vals = np.concatenate([np.abs(e) for _, e in series.values()] or [np.zeros(0)])
-    lim = max(float(np.percentile(vals, 99)) if len(vals) else 1.0, 0.05)
-    clipped = len(vals) and float(vals.max()) > 1.1 * lim
     handles = _shade_events(ax, events, _span(truth))
     ax.axhline(0, color="k", lw=0.6)
-    ax.set_ylim(-1.1 * lim, 1.1 * lim)
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("heading error [deg]" + (f" (clipped at ±{1.1 * lim:.2g})" if clipped else ""))
+    finite = [v for v in rms.values() if np.isfinite(v) and v > 0]
+    if len(finite) > 1 and max(finite) > 10 * min(finite):
+        # a diverged estimator beside good ones: symmetric log, linear near zero, nothing clipped
+        lin = max(2.0 * min(finite), 0.01)
+        ax.set_yscale("symlog", linthresh=lin)
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        top = 1.3 * float(vals.max())
+        ax.set_ylim(-top, top)
+        ax.set_ylabel(f"heading error [deg] (symmetric log; linear within ±{lin:.2g})")
+    else:
+        lim = max(float(np.percentile(vals, 99)) if len(vals) else 1.0, 0.05)
+        clipped = len(vals) and float(vals.max()) > 1.1 * lim
+        ax.set_ylim(-1.1 * lim, 1.1 * lim)
+        ax.set_ylabel("heading error [deg]" + (f" (clipped at ±{1.1 * lim:.2g})" if clipped else ""))
     ax.set_title("Heading error versus time (estimate − truth)")
     ax.grid(alpha=0.3)
     _legend_right(ax, handles)
@@ -385,7 +407,7 @@ def plot_sog_cog(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, e
 # -- consistency: ±3σ bounds and NEES --------------------------------------------------------------
 
 def error_bound_panels(axes: Sequence[Axes], name: str, est: Trajectory, truth: Trajectory, *,
-                       nsigma: float = 3.0, color: Any = "tab:blue") -> Figure:
+                       nsigma: float = 3.0, color: Any = "tab:blue", events: Sequence[dict] = ()) -> Figure:
     """Errors in x [m], y [m] and yaw [deg] versus time, each inside its ±``nsigma``·σ bound from the
     estimator's own covariance, on three given axes; each title gives the fraction inside (a
     consistent Gaussian estimator: 99.7 % for 3σ)."""
@@ -397,6 +419,7 @@ def error_bound_panels(axes: Sequence[Axes], name: str, est: Trajectory, truth: 
     sig = np.sqrt(np.clip(var, 0, None)) * np.array([1.0, 1.0, np.degrees(1.0)])[:, None]
     for ax, lab, unit, ei, si in zip(axes, ("x", "y", "yaw"), ("m", "m", "deg"), err, sig, strict=True):
         ok = np.isfinite(si)
+        _shade_events(ax, events, _span(truth))
         ax.fill_between(e.t, -nsigma * si, nsigma * si, where=ok, color=color, alpha=0.18, lw=0,
                         label=f"±{nsigma:g}σ")
         ax.plot(e.t, ei, "-", color=color, lw=0.9, label="error")
@@ -414,8 +437,8 @@ def error_bound_panels(axes: Sequence[Axes], name: str, est: Trajectory, truth: 
     return axes[0].figure
 
 
-def plot_error_bounds(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, *, nsigma: float = 3.0,
-                      fig: Figure | None = None) -> Figure | None:
+def plot_error_bounds(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, events: Sequence[dict] = (),
+                      *, nsigma: float = 3.0, fig: Figure | None = None) -> Figure | None:
     """One row per estimator with covariances: x, y and yaw error with ±3σ bounds
     (:func:`error_bound_panels`); ``None`` when no trajectory carries covariances."""
     trajs = _as_dict(trajs)
@@ -427,7 +450,7 @@ def plot_error_bounds(trajs: dict[str, Trajectory] | Trajectory, truth: Trajecto
         fig = Figure(figsize=(13, 2.3 * len(with_cov) + 0.4), layout="constrained")
     axes = np.asarray(fig.subplots(len(with_cov), 3, squeeze=False, sharex=True))
     for row, (name, tr) in zip(axes, with_cov.items(), strict=True):
-        error_bound_panels(row, name, tr, truth, nsigma=nsigma, color=col[name])
+        error_bound_panels(row, name, tr, truth, nsigma=nsigma, color=col[name], events=events)
     for ax in axes[:-1].ravel():
         ax.set_xlabel("")
     for ax in axes[-1]:
@@ -437,13 +460,14 @@ def plot_error_bounds(trajs: dict[str, Trajectory] | Trajectory, truth: Trajecto
 
 
 def nees_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory, *, color: Any = "tab:blue",
-               window: int | None = None) -> Figure:
+               window: int | None = None, events: Sequence[dict] = ()) -> Figure:
     """Position NEES versus time (dots) with its running mean over ``window`` samples (line; default
     2 % of the samples), the two-sided 95 % chi-square(2) band of one sample and the expected 2."""
     r = position_nees(est, truth)
     if r is None:
         raise ValueError(f"{name}: the trajectory has no covariance")
     t, v = r["t"], r["nees"]
+    _shade_events(ax, events, _span(truth))
     ax.axhspan(*NEES_BAND, color="0.85", zorder=0, label="95 % band, χ²(2)")
     ax.axhline(2.0, color="k", lw=0.8, ls="--", label="expected (2)")
     if len(v):
@@ -470,8 +494,8 @@ def nees_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory, *, color
     return ax.figure
 
 
-def plot_nees(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, *, fig: Figure | None = None,
-              ax: Axes | None = None) -> Figure | None:
+def plot_nees(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, events: Sequence[dict] = (), *,
+              fig: Figure | None = None, ax: Axes | None = None) -> Figure | None:
     """Position NEES over time, one row per estimator with covariances (:func:`nees_panel`); with
     ``ax``, the first such estimator on that axes. ``None`` when none carries covariances."""
     trajs = _as_dict(trajs)
@@ -481,12 +505,12 @@ def plot_nees(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, *, f
         return None
     if ax is not None:
         name, tr = next(iter(with_cov.items()))
-        return nees_panel(ax, name, tr, truth, color=col[name])
+        return nees_panel(ax, name, tr, truth, color=col[name], events=events)
     if fig is None:
         fig = Figure(figsize=(11, 2.3 * len(with_cov) + 0.4), layout="constrained")
     axes = np.asarray(fig.subplots(len(with_cov), 1, squeeze=False, sharex=True)).ravel()
     for a, (name, tr) in zip(axes, with_cov.items(), strict=True):
-        nees_panel(a, name, tr, truth, color=col[name])
+        nees_panel(a, name, tr, truth, color=col[name], events=events)
         if a is not axes[-1]:
             a.set_xlabel("")
     axes[0].legend(fontsize=8, loc="upper right", ncol=3)
@@ -545,7 +569,7 @@ def covariance_panel(ax: Axes, name: str, tr: Trajectory, truth: Trajectory | No
         ax.add_patch(Ellipse((tr.x[i], tr.y[i]), a, b, angle=ang, fill=False, color=color, lw=1.0))
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x (east) [m]")
     ax.set_ylabel("y (north) [m]")
     scale = f"magnified ×{mag:g}" if mag != 1 else "true scale"

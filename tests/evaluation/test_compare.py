@@ -60,7 +60,10 @@ def fakes(monkeypatch):
 def test_compare_runs_every_runnable_estimator_once(log, fakes):
     entries = compare(log)
     names = [e.name for e in entries]
-    assert names == estimators.runnable(log)
+    assert names == estimators.names()  # every estimator has a row: run, or skipped saying why
+    assert [e.name for e in entries if e.skipped is None] == estimators.runnable(log)
+    assert all(e.skipped and e.result is None and e.error is None for e in entries if e.name not in
+               estimators.runnable(log))
     assert {"dead-reckoning", "scan-to-map", "fake-smoother", "zz-boom"} <= set(names)
     by = {e.name: e for e in entries}
     assert not by["zz-boom"].ok and "deliberate failure" in by["zz-boom"].error
@@ -72,7 +75,8 @@ def test_compare_runs_every_runnable_estimator_once(log, fakes):
     assert by["fake-smoother"].summary["online_ate_rmse_m"] == pytest.approx(0.6)
     order = ranked(entries)
     ates = [e.summary["ate_rmse_m"] for e in order if e.ok]
-    assert ates == sorted(ates) and order[-1].name == "zz-boom"
+    assert ates == sorted(ates)
+    assert [e.name for e in order if not e.ok][0] == "zz-boom" and order[-1].skipped  # failures, then skipped
 
 
 def test_compare_reports_unknown_and_unrunnable_names(log):
@@ -80,7 +84,8 @@ def test_compare_reports_unknown_and_unrunnable_names(log):
                       options={"dead-reckoning": {}})
     by = {e.name: e for e in entries}
     assert "unknown estimator" in by["nope"].error
-    assert "cannot run" in by["scan-to-map"].error
+    assert "needs at least two scans" in by["scan-to-map"].skipped and by["scan-to-map"].error is None
+    assert not by["scan-to-map"].ok
     assert by["dead-reckoning"].ok
 
 

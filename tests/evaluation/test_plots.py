@@ -65,6 +65,8 @@ ONE_AXES = [
     ("plot_error_cdf", lambda tr, tj, ax: plots.plot_error_cdf(tj, tr, ax=ax)),
     ("plot_nees", lambda tr, tj, ax: plots.plot_nees(tj, tr, ax=ax)),
     ("trajectory_panel", lambda tr, tj, ax: plots.trajectory_panel(ax, "smoother", tj["smoother"], tr)),
+    ("trajectory_panel+zoom", lambda tr, tj, ax: plots.trajectory_panel(ax, "smoother", tj["smoother"], tr,
+                                                                        zoom_ax=ax.figure.add_subplot(2, 2, 4))),
     ("nees_panel", lambda tr, tj, ax: plots.nees_panel(ax, "smoother", tj["smoother"], tr)),
     ("covariance_panel", lambda tr, tj, ax: plots.covariance_panel(ax, "odometry", tj["odometry"], tr)),
 ]
