@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 
 from ..errors import LogError
 from ..geometry import wrap_angle
-from ..log import NavLog, Record, Scan, Truth
+from ..log import Limits, NavLog, Record, Scan, Truth, check_record
 
 MAX_LINE_BYTES = 4_000_000
 MAX_BEAMS = 100_000
@@ -296,7 +296,7 @@ def dead_beams(scans: list[NDArray[np.float64]]) -> NDArray[np.intp]:
 
 def read_carmen(path: str | Path, *, lenient: bool = False, truth: bool = True,
                 time: Literal["auto", "log", "index"] = "auto", scan_dt: float = DEFAULT_SCAN_DT,
-                max_range: float | None = None) -> NavLog:
+                max_range: float | None = None, limits: Limits | None = None) -> NavLog:
     """Read a CARMEN log (see the module docstring) into scans and, by default, ``truth`` poses.
 
     ``max_range`` [m], when given, replaces every message's own maximum and the FLASER
@@ -304,7 +304,8 @@ def read_carmen(path: str | Path, *, lenient: bool = False, truth: bool = True,
     ``ignored`` (other messages per name), ``unused`` (RAWLASER1 beside pose-carrying lasers),
     ``time``, ``max_range`` (the distinct cuts used per message name, [] = none),
     ``missing_returns`` (max-range and dead-beam returns set missing), ``dead_beams`` and, with
-    ``lenient``, ``skipped``/``skipped_errors``.
+    ``lenient``, ``skipped``/``skipped_errors``. Every record passes :func:`graphnav.log.check_record`
+    (``limits``); an invalid one is an error naming the scan, or with ``lenient`` skipped and counted.
     """
     path = Path(path)
     if time not in ("auto", "log", "index"):
@@ -364,11 +365,21 @@ def read_carmen(path: str | Path, *, lenient: bool = False, truth: bool = True,
     if dead:
         meta["dead_beams"] = dead
     records: list[Record] = []
-    for m, t, r in zip(msgs, times, ranges, strict=True):
-        records.append(Scan(float(t), r, m.angles))
+    for k, (m, t, r) in enumerate(zip(msgs, times, ranges, strict=True)):
+        recs: list[Record] = [Scan(float(t), r, m.angles)]
         if truth and m.pose is not None:
             x, y, th = m.pose
-            records.append(Truth(float(t), x, y, th if -math.pi <= th < math.pi else float(wrap_angle(th))))
+            recs.append(Truth(float(t), x, y, th if -math.pi <= th < math.pi else float(wrap_angle(th))))
+        for rec in recs:
+            try:
+                check_record(rec, limits)
+            except LogError as err:
+                err = LogError(f"{m.kind} scan {k + 1} ({rec.kind}): {err.message}", file=str(path), field=err.field)
+                if not lenient:
+                    raise err from None
+                skipped.append(str(err))
+            else:
+                records.append(rec)
     if lenient:
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
