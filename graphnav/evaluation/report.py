@@ -182,6 +182,8 @@ def _version() -> str:
     except PackageNotFoundError:
         v = "unknown"
     src = Path(__file__).resolve().parents[2]
+    if not (src / "pyproject.toml").exists() or not (src / ".git").exists():
+        return v  # an installed package: no checkout to describe
     try:
         rev = subprocess.run(["git", "-C", str(src), "describe", "--always", "--dirty"], capture_output=True,
                              text=True, timeout=10)
