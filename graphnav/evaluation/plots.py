@@ -30,6 +30,7 @@ from matplotlib.ticker import FuncFormatter, MaxNLocator
 from scipy.stats import chi2
 
 from ..geometry import wrap_angle
+from ..io.outputs import atomic_path
 from ..trajectory import Trajectory
 from .metrics import associate, movement, position_nees
 
@@ -53,8 +54,10 @@ def widths(names: Sequence[str], thick: float = 2.8, thin: float = 1.1) -> dict[
 
 
 def save(fig: Figure, path: str | Path, dpi: int = 110) -> Path:
-    """Write ``fig`` (format from the suffix: .png, .svg, .pdf) without any pyplot backend."""
-    fig.savefig(path, dpi=dpi)
+    """Write ``fig`` (format from the suffix: .png, .svg, .pdf) without any pyplot backend, atomically
+    (a reader never sees half a file)."""
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
     return Path(path)
 
 

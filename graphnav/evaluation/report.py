@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..io.jsonsafe import jsonable
+from ..io.outputs import OutDir, write_text_atomic
 from ..io.tum import write_truth
 from ..log import NavLog
 from . import plots
@@ -415,13 +416,16 @@ def render_html(blocks: Sequence[tuple], images: dict[str, bytes]) -> str:
             + "\n".join(body) + "\n</body></html>\n")
 
 
-def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: str = "",
+def write_report(entries: Sequence[Entry], log: NavLog, out: Path | OutDir, *, log_name: str = "",
                  command: str | None = None, log_path: str | Path | None = None) -> dict[str, Path]:
-    """Write report.md, report.html, the PNGs, one TUM file per estimator and truth.tum into ``out``;
-    returns the paths. ``command`` (the command line) and ``log_path`` (default ``log_name`` when it
-    names a file) go into the provenance header."""
+    """Write report.md, report.html, the PNGs, one TUM file per estimator and truth.tum into ``out``
+    (each atomically; an :class:`~graphnav.io.outputs.OutDir` records every name in its manifest
+    before writing it); returns the paths. ``command`` (the command line) and ``log_path`` (default
+    ``log_name`` when it names a file) go into the provenance header."""
     log_name = log_name or str(log.meta.get("name", "log"))
-    out.mkdir(parents=True, exist_ok=True)
+    if not isinstance(out, OutDir):
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
     files: dict[str, Path] = {}
     ok = [e for e in entries if e.ok and e.result is not None]
     trajs = {e.name: e.result.trajectory for e in ok}
@@ -475,11 +479,7 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: 
     prov = provenance(log_path, command)
     blocks = _blocks(entries, log, log_name, prov, warnings(entries, log), figs,
                      truth_path.name if truth_path is not None else None)
-    p = out / "report.md"
-    p.write_text(render_markdown(blocks), encoding="utf-8")
-    files["report.md"] = p
-    images = {f: (out / f).read_bytes() for _, f in figs}
-    p = out / "report.html"
-    p.write_text(render_html(blocks, images), encoding="utf-8")
-    files["report.html"] = p
+    files["report.md"] = write_text_atomic(out / "report.md", render_markdown(blocks))
+    images = {f: files[f].read_bytes() for _, f in figs}
+    files["report.html"] = write_text_atomic(out / "report.html", render_html(blocks, images))
     return files

@@ -136,8 +136,8 @@ def _zda_date(msg: pynmea2.NMEASentence) -> date | None:
         raise LogError(f"year {yy} out of range [1900, 2200]", field="year")
     try:
         return date(yy, mm, dd)
-    except ValueError:
-        raise LogError(f"date {dd}/{mm}/{yy} does not exist", field="day") from None
+    except (ValueError, OverflowError):  # OverflowError: a 40-digit day
+        raise LogError(f"date {str(dd)[:12]}/{str(mm)[:12]}/{yy} does not exist", field="day") from None
 
 
 def parse_time_of_day(raw: str) -> float | None:
@@ -227,13 +227,14 @@ class NmeaDecoder:
     def __init__(self, frame: LocalFrame | None = None, *, day0: float | None = None,
                  heading_sigma_deg: dict[str, float] | None = None, default_hdop: float = DEFAULT_HDOP,
                  sog_max_age: float = SOG_MAX_AGE_S, keep: bool = True, limits: Limits | None = None,
-                 drop_bad_fields: bool = False) -> None:
+                 drop_bad_fields: bool = False, keep_sog_cog: bool = True) -> None:
         self.frame = frame
         self.drop_bad_fields = drop_bad_fields  # lenient: a bad optional field is dropped, the sentence kept
         self.clock_src = ""  # "fix" or "zda": what set the clock last
         self.back_ok = False  # the last sentence moved the clock back by the ZDA rule
         self.limits = limits  # physical validity of every record (graphnav.log.check_record)
         self.keep = keep  # False (live mode): do not accumulate records/SOG samples
+        self.keep_sog_cog = keep_sog_cog  # False (read_nmea): count the SOG/COG samples, do not hold them
         self.day0 = day0
         self.days = 0
         self.last_tod: float | None = None
@@ -394,7 +395,8 @@ class NmeaDecoder:
 
     def _speed(self, t: float, sog: float, cog_deg: float | None) -> None:
         self.sog = (t, sog)
-        if self.keep:
+        self.out.counts["sog_cog_samples"] += 1
+        if self.keep and self.keep_sog_cog:
             self.out.sog_cog.append((t, sog, math.nan if cog_deg is None else cog_deg))
 
     def _vtg(self, msg) -> list[Record]:
@@ -459,14 +461,19 @@ HANDLED = {"GGA", "RMC", "ZDA", "VTG", "HDT", "THS", "HDG", "ROT"}
 
 # ----------------------------------------------------------------------------- files
 
-def _lines(path: Path, lenient: bool = False) -> tuple[list[bytes], Lines]:
-    """The file's sentences (``\r\n``, ``\n`` or ``\r`` separated), decompressed when ``.gz``;
-    a damaged stream: :class:`graphnav.io.textlines.Lines` (LogError, or lenient: the lines before it)."""
-    reader = Lines(path, lenient=lenient)
-    out: list[bytes] = []
-    for _n, raw in reader:
-        out.extend(raw.splitlines())
-    return out, reader
+class _Sentences:
+    """The file's sentences (``\r\n``, ``\n`` or ``\r`` separated), decompressed when ``.gz``, read
+    afresh on every iteration (two passes, nothing held); a damaged stream:
+    :class:`graphnav.io.textlines.Lines` (LogError, or lenient: the lines before it)."""
+
+    def __init__(self, path: Path, lenient: bool, *, quiet: bool = False) -> None:
+        self.path, self.lenient, self.quiet = path, lenient, quiet
+        self.reader: Lines | None = None
+
+    def __iter__(self) -> Iterator[bytes]:
+        self.reader = Lines(self.path, lenient=self.lenient, quiet=self.quiet)
+        for _n, raw in self.reader:
+            yield from raw.splitlines()
 
 
 def _decode(raw: bytes) -> str:
@@ -509,7 +516,7 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
     Sentences are parsed and decoded one line at a time (errors come in line order); only the
     records are kept."""
     path = Path(path)
-    lines, reader = _lines(path, lenient)
+    lines = _Sentences(path, lenient)
     skipped: list[str] = []
     ignored: Counter = Counter()
 
@@ -540,7 +547,7 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
 
     frame = LocalFrame(float(origin[0]), float(origin[1]), 0.0) if origin is not None else None
     decoder_options.setdefault("drop_bad_fields", lenient)
-    dec = NmeaDecoder(frame, day0=_first_date_day0(lines), **decoder_options)
+    dec = NmeaDecoder(frame, day0=_first_date_day0(_Sentences(path, True, quiet=True)), **decoder_options)
     pending: list[tuple[int, pynmea2.NMEASentence]] = []  # untimed sentences before the first time
     last_t = -math.inf
     for lineno, msg in sentences():
@@ -582,9 +589,9 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
             meta[k] = v
     if ignored:
         meta["ignored"] = dict(sorted(ignored.items()))
-    meta["sog_cog_samples"] = len(out.sog_cog)
+    meta["sog_cog_samples"] = out.counts["sog_cog_samples"]
     if lenient:
-        note_truncation(meta, reader, skipped)
+        note_truncation(meta, lines.reader, skipped)
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
     return out, meta
@@ -597,5 +604,6 @@ def read_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, f
     ``origin`` = (lat, lon) degrees of the local frame (default: the first fix). Strict by
     default: the first bad sentence raises :class:`LogError` with file, line and field.
     """
+    options.setdefault("keep_sog_cog", False)  # the samples are not log records: not held
     out, meta = parse_nmea(path, lenient=lenient, origin=origin, **options)
     return NavLog.from_unsorted(out.records, (), meta)

@@ -30,9 +30,10 @@ class Lines:
     """``for lineno, raw in Lines(path, lenient=...)``: the file's lines (bytes, with their ``\\n``),
     numbered from 1, decompressed on the fly when the name ends in ``.gz``."""
 
-    def __init__(self, path: str | Path, *, lenient: bool = False) -> None:
+    def __init__(self, path: str | Path, *, lenient: bool = False, quiet: bool = False) -> None:
         self.path = Path(path)
         self.lenient = lenient
+        self.quiet = quiet  # lenient without the warning (a reader's first, probing pass)
         self.truncated: LogError | None = None
         self.count = 0
 
@@ -60,11 +61,12 @@ class Lines:
         if not self.lenient:
             raise err from None
         self.truncated = err
-        log_.warning("%s; keeping the %d lines before it", err, self.count)
+        if not self.quiet:
+            log_.warning("%s; keeping the %d lines before it", err, self.count)
 
 
-def note_truncation(meta: dict, lines: Lines, skipped: list[str]) -> None:
+def note_truncation(meta: dict, lines: Lines | None, skipped: list[str]) -> None:
     """Lenient readers: a truncated stream counts as one skipped record and is named in ``meta``."""
-    if lines.truncated is not None:
+    if lines is not None and lines.truncated is not None:
         skipped.append(str(lines.truncated))
         meta["truncated"] = str(lines.truncated)
