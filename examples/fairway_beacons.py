@@ -72,7 +72,8 @@ def main(argv: list[str] | None = None) -> int:
         truth = case_log.truth()
         for e in ranked(compare(case_log, ESTIMATORS, options=OPTIONS)):
             if not e.ok:
-                print(f"| {case} | {e.name} | {e.kind} | failed: {e.error} | | | |")
+                why = f"failed: {e.error}" if e.error is not None else f"not run: {e.skipped}"
+                print(f"| {case} | {e.name} | {e.kind} | {why} | | | |")
                 continue
             tr = e.result.trajectory
             i = int(np.argmin(np.abs(truth.t - tr.t[-1])))

@@ -36,6 +36,31 @@ class RunResult:
     icp_ms: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     info: dict[str, Any] = field(default_factory=dict)
 
+    # -- short summaries (the dataclass repr would print every pose and the whole info) --------------
+    def _facts(self) -> dict[str, str]:
+        def med(a: NDArray) -> str:
+            return f"{float(np.median(a)):.3g} ms (median of {len(a)})" if len(a) else "–"
+
+        online = ("the trajectory" if self.online is self.trajectory else
+                  "none" if self.online is None else f"{len(self.online)} poses")
+        keys = list(self.info)
+        return {"trajectory": repr(self.trajectory), "online": online, "step": med(self.step_ms),
+                "scan match": med(self.icp_ms),
+                "info": ", ".join(keys[:12]) + (f", … ({len(keys)} keys)" if len(keys) > 12 else "")}
+
+    def __repr__(self) -> str:
+        f = self._facts()
+        return (f"<RunResult: {len(self.trajectory)} poses"
+                + (" with covariance" if self.trajectory.cov is not None else "")
+                + f"; online: {f['online']}; step {f['step']}; info keys: {len(self.info)}>")
+
+    def _repr_html_(self) -> str:
+        """A small table for notebooks."""
+        from html import escape
+
+        rows = "".join(f"<tr><th>{k}</th><td>{escape(v)}</td></tr>" for k, v in self._facts().items())
+        return f"<b>RunResult</b><table>{rows}</table>"
+
 
 @dataclass
 class Estimate:

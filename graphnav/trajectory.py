@@ -51,6 +51,31 @@ class Trajectory:
     def yaw(self) -> NDArray[np.float64]:
         return self.poses[:, 2]
 
+    # -- short summaries (the dataclass repr would print every pose) ------------------------------------
+    def _facts(self) -> dict[str, str]:
+        n = len(self)
+        out = {"poses": str(n), "time": f"{self.t[0]:.2f}–{self.t[-1]:.2f} s" if n else "empty"}
+        if n:
+            out["path length"] = f"{float(np.sum(np.hypot(np.diff(self.x), np.diff(self.y)))):.1f} m"
+            out["x range"] = f"{self.x.min():.1f} … {self.x.max():.1f} m"
+            out["y range"] = f"{self.y.min():.1f} … {self.y.max():.1f} m"
+        out["covariance"] = "yes" if self.cov is not None else "no"
+        return out
+
+    def __repr__(self) -> str:
+        f = self._facts()
+        name = f" {self.name[:40]!r}" if self.name else ""
+        cov = ", with covariance" if self.cov is not None else ""
+        length = f", {f['path length']}" if "path length" in f else ""
+        return f"<Trajectory{name}: {f['poses']} poses, {f['time']}{length}{cov}>"
+
+    def _repr_html_(self) -> str:
+        """A small table for notebooks."""
+        from html import escape
+
+        rows = "".join(f"<tr><th>{k}</th><td>{escape(v)}</td></tr>" for k, v in self._facts().items())
+        return f"<b>Trajectory</b> {escape(self.name)}<table>{rows}</table>"
+
     def interpolate(self, times: ArrayLike) -> NDArray[np.float64]:
         """Poses at ``times``: linear in x/y, shortest-arc linear in yaw; clamped at the ends."""
         times = np.asarray(times, dtype=float)

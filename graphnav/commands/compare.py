@@ -1,10 +1,12 @@
 """``graphnav compare LOG --out DIR [--estimators a,b,...]``: every estimator the log can feed, side
-by side — DIR/report.md, PNG figures and DIR/<estimator>.tum."""
+by side — DIR/report.md, DIR/report.html (self-contained), PNG figures, DIR/<estimator>.tum and
+DIR/truth.tum."""
 
 from __future__ import annotations
 
 import argparse
 import logging
+import shlex
 import time
 from pathlib import Path
 
@@ -63,11 +65,14 @@ def run(args: argparse.Namespace) -> int:
     entries = compare(log, names, options=_options(args.option),
                       progress=lambda n: log_.info("running %s on %s", n, args.log), workers=args.workers,
                       cache=cache)
-    files = write_report(entries, log, out, log_name=str(args.log))
+    command = shlex.join(["graphnav", *args.argv]) if hasattr(args, "argv") else None
+    files = write_report(entries, log, out, log_name=str(args.log), command=command)
     total = time.perf_counter() - t0
     for e in entries:
-        if not e.ok:
+        if e.error is not None:
             log_.warning("%s failed: %s", e.name, e.error)
+        elif e.skipped is not None:
+            log_.info("%s not run: %s", e.name, e.skipped)
     hits = sum((e.summary or {}).get("icp_cache_hits", 0) for e in entries) if cache is not None else None
     obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=args.workers,
                   icp_cache_hits=hits)
@@ -76,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
         s = e.summary or {}
         a, r, t = (f"{s[k]:.3f}" if isinstance(s.get(k), float) else "–"
                    for k in ("ate_rmse_m", "rpe_rmse_m", "runtime_s"))
-        lines.append(f"{e.name:16s} {a:>12s} {r:>9s} {t:>11s}  " + ("" if e.ok else f"failed: {e.error}"))
+        note = "" if e.ok else f"failed: {e.error}" if e.error is not None else f"not run: {e.skipped}"
+        lines.append(f"{e.name:16s} {a:>12s} {r:>9s} {t:>11s}  " + note)
     cached = f"; {hits} weighted-ICP matches shared between estimators" if hits else ""
     lines.append(f"wrote {len(files)} files to {args.out} (report.md) in {total:.1f} s{cached}")
     emit(args, obj, "\n".join(lines))

@@ -56,5 +56,6 @@ def run(args: argparse.Namespace) -> int:
     cargs = argparse.Namespace(log=str(log_path), lenient=False, out=args.out, out_dir=out, estimators=None,
                                option=None, workers=args.workers, json=args.json, overwrite=args.overwrite)
     rc = compare.run(cargs)
-    log_.info("report: %s", (args.out / "report.md").resolve())
+    log_.info("report: %s (self-contained, to send: %s)", (args.out / "report.md").resolve(),
+              (args.out / "report.html").resolve())
     return rc

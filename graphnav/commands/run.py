@@ -12,7 +12,7 @@ from .. import estimators
 from ..evaluation.evaluate import summarize
 from ..io import load_log
 from ..io.outputs import OutDir
-from ..io.tum import TrajectoryWriter
+from ..io.tum import TrajectoryWriter, write_truth
 from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, jsonable, parse_options
 
 log_ = logging.getLogger("graphnav.run")
@@ -22,7 +22,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run one estimator on a log", description=__doc__)
     add_log_args(p)
     p.add_argument("--estimator", "-e", required=True, help="one of: " + ", ".join(estimators.names()))
-    p.add_argument("--out", type=Path, help="output directory (trajectory.tum, trajectory.csv, summary.json)")
+    p.add_argument("--out", type=Path,
+                   help="output directory (trajectory.tum, trajectory.csv, summary.json, truth.tum)")
     add_overwrite_flag(p)
     p.add_argument("--option", "-O", action="append", metavar="KEY=VALUE",
                    help="estimator option (value parsed as JSON when it can be); repeatable")
@@ -50,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     summary["options"] = options
     if out is not None:  # each file atomically (temporary file + rename)
         result.trajectory.to_tum(out.file("trajectory.tum"))
+        write_truth(log, out)  # truth.tum beside the estimate: evo_ape tum truth.tum trajectory.tum
         result.trajectory.to_csv(out.file("trajectory.csv"))
         if result.online is not None and result.online is not result.trajectory:
             result.online.to_tum(out.file("online_final.tum"))

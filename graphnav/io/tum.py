@@ -1,10 +1,14 @@
-"""Append estimates to a TUM file as they are computed (flushed), so an interrupted run keeps them."""
+"""Append estimates to a TUM file as they are computed (flushed), so an interrupted run keeps them;
+write a log's truth beside the estimates (``truth.tum``)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+
+from ..log import NavLog
+from .outputs import OutDir
 
 
 class TrajectoryWriter:
@@ -43,3 +47,15 @@ class TrajectoryWriter:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def write_truth(log: NavLog, out: str | Path | OutDir) -> Path | None:
+    """``out/truth.tum``: the log's truth in TUM, as the estimates are written (atomically, by
+    :meth:`graphnav.trajectory.Trajectory.to_tum`), so ``evo_ape tum truth.tum <estimate>.tum`` needs
+    nothing hand-made; ``None`` (nothing written) when the log has no truth. An
+    :class:`~graphnav.io.outputs.OutDir` records the name in its manifest first."""
+    if not log.has_truth:
+        return None
+    p = out.file("truth.tum") if isinstance(out, OutDir) else Path(out) / "truth.tum"
+    log.truth().to_tum(p)
+    return p
