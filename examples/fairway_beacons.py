@@ -10,9 +10,9 @@ every beacon (0.5 m, 0.5 deg) every 0.5 s. The same passage (same noise draw) is
 Both start from the error-free start pose (a tight pose prior, as the paper's eq. 1-2). Estimators:
 ``ekf-slam`` (its default real-log mode: gate, textbook first sighting, first-estimates Jacobians),
 ``ekf-slam-paper`` (the same estimator with ``paper=True``: the paper's filter exactly), ``isam2``
-and ``batch`` (the smoother: ``BearingRangeFactor2D`` per sighting, ``PriorFactorPoint2`` per charted beacon; a smaller lateral slip, see ``OPTIONS``) and
-``dead-reckoning`` (odometry only). The table adds the final position error and the mean error of
-the estimated beacon positions.
+and ``batch`` (the smoother: ``BearingRangeFactor2D`` per sighting, ``PriorFactorPoint2`` per
+charted beacon; a smaller lateral slip, see ``OPTIONS``) and ``dead-reckoning`` (odometry only).
+The table adds the final position error and the mean error of the estimated beacon positions.
 
 Usage: ``python examples/fairway_beacons.py [--beacons "650,370;300,50"] [--seed 3] [--steps 200]``
 """
