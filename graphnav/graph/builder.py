@@ -8,7 +8,9 @@
   time after the first record, the first GNSS fix, one charted sighting, the first truth pose or
   the origin -- the same priority as a look at the whole log), then the held records are replayed;
 * **the keyframes**: one per scan (every ``scan_stride``-th) once scans arrive, else a
-  ``keyframe_period`` grid from the first record (:mod:`graphnav.graph.keyframes`);
+  ``keyframe_period`` grid from the first record (:mod:`graphnav.graph.keyframes`) -- where no
+  record came for ``grid_gap`` seconds (a GNSS outage of a GNSS-only log) the slots inside the
+  gap are skipped: no input, no pose (the motion factor spans the gap);
 * **the attachment**: a measurement between two keyframes waits for the later one, joins the
   nearer of the two (ties: the earlier) and is added with the later keyframe's batch, exactly as
   :func:`graphnav.graph.keyframes.schedule` does on a whole log; a keyframe's batch is ready when a
@@ -32,6 +34,7 @@ from __future__ import annotations
 import bisect
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
@@ -146,6 +149,7 @@ class GraphBuilder:
         self.kf_t: list[float] = []
         self.stepped = 0  # keyframes [0, stepped) have their batch
         self.grid_t0: float | None = None
+        self.grid_i = 0  # the next grid slot
         self.kf_scan: dict[int, Scan] = {}
         self.n_scans = 0
         self.pending: list[Record] = []  # measurements after the newest keyframe
@@ -156,11 +160,16 @@ class GraphBuilder:
         self.odo_defaulted = False
         self.held: list[Record] | None = []  # before the anchor is chosen
         self.t_last: float | None = None
+        self.t_data: float | None = None
         self.finished = False
         # state carried between keyframes
         self.last_rel = gtsam.Pose2()  # relative motion of the newest interval
         self.last_gap = 0.0
         self.twist: NDArray[np.float64] | None = None  # [m/s, m/s, rad/s] of the last measured motion
+        self.twist_t: float | None = None  # ... and its time
+        self.fixes: deque[tuple[float, float, float, float]] = deque(maxlen=256)  # recent GNSS (t, x, y, sigma)
+        self.gnss_twist: tuple[float, NDArray[np.float64], float] | None = None  # (t, twist, speed sigma)
+        self.after_outage: set[int] = set()  # ids of the first fixes after a GNSS outage
         self.beacon_ids: dict[str, int] = {}
         self.beacon_init: dict[str, NDArray[np.float64]] = {}
         self.bias_key: int | None = None
@@ -231,13 +240,21 @@ class GraphBuilder:
         if behind_batch or behind_scan:
             self.counts["late_records"] += 1
             return
+        prev_t = self.t_data  # the last record with data (truth is a reference, not an input)
+        if kind != "truth":
+            self.t_data = t if self.t_data is None else max(self.t_data, t)
         self.t_last = t if self.t_last is None else max(self.t_last, t)
         self.counts[rec.kind] = self.counts.get(rec.kind, 0) + 1
         if self.mode == "grid":
             if self.grid_t0 is None:
                 self.grid_t0 = t
-            while self.grid_t0 + self.period * len(self.kf_t) <= t + EPS * self.period:
-                self._new_keyframe(self.grid_t0 + self.period * len(self.kf_t), None)
+            gap = prev_t is not None and kind != "truth" and t - prev_t > self.cfg.grid_gap
+            while (kind != "truth" or prev_t is None or t - prev_t <= self.cfg.grid_gap) and (
+                    ts := self.grid_t0 + self.period * self.grid_i) <= t + EPS * self.period:
+                self.grid_i += 1
+                # no record for grid_gap seconds: the slots more than a period from both sides are skipped
+                if not gap or ts <= prev_t + self.period + EPS or ts >= t - self.period - EPS:
+                    self._new_keyframe(ts, None)
         if kind == "scan":
             if self.mode == "grid" and not self.grid_only:  # the first scan: one keyframe per scan from now on
                 self.mode = "scan"
@@ -250,6 +267,10 @@ class GraphBuilder:
             if self.cfg.use_odometry:
                 self._odometry_sample(rec)
         elif kind in MEASUREMENTS:
+            if isinstance(rec, Gnss):
+                if self.fixes and t - self.fixes[-1][0] > self.cfg.gnss_gate_outage:
+                    self.after_outage.add(id(rec))  # the first fix after an outage is not gated
+                self.fixes.append((rec.t, rec.x, rec.y, rec.sigma))
             if self.kf_t and t <= self.kf_t[-1] + EPS:  # at (or, late, before) the newest keyframe
                 j = bisect.bisect_left(self.kf_t, t - EPS)  # the first keyframe at or after it: added there
                 if j < self.stepped:
@@ -323,13 +344,14 @@ class GraphBuilder:
             if isinstance(r, PosePrior):
                 return np.array([r.x, r.y, r.yaw]), np.array([r.sigma_xy, r.sigma_xy, r.sigma_yaw]), "pose_prior"
         yaw_sig = math.radians(cfg.anchor_sigma_yaw_deg)
+        yaw_unknown = math.radians(cfg.anchor_sigma_yaw_unknown_deg)
         gnss = [r for r in held if isinstance(r, Gnss)]
         head = [r for r in held if isinstance(r, Heading)]
         if gnss:
             g = gnss[0]
             yaw = head[0].yaw if head else 0.0
             sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 3.0 * g.sigma
-            return (np.array([g.x, g.y, yaw]), np.array([sxy, sxy, yaw_sig if head else math.pi]),
+            return (np.array([g.x, g.y, yaw]), np.array([sxy, sxy, yaw_sig if head else yaw_unknown]),
                     "first GNSS+compass" if head else "first GNSS")
         obs = [r for r in held if isinstance(r, BeaconObs) and r.id in self.charted]
         if obs:
@@ -349,7 +371,7 @@ class GraphBuilder:
             yaw = head[0].yaw if head else 0.0
             ca = self.charted[a.id]
             pos = np.array([ca.x, ca.y]) - a.range * np.array([math.cos(yaw + a.bearing), math.sin(yaw + a.bearing)])
-            return (np.array([pos[0], pos[1], yaw]), np.array([sxy, sxy, yaw_sig if head else math.pi]),
+            return (np.array([pos[0], pos[1], yaw]), np.array([sxy, sxy, yaw_sig if head else yaw_unknown]),
                     "charted beacons")
         for r in held:
             if isinstance(r, Truth):  # nothing absolute in the log: the frame is the reference's start
@@ -359,6 +381,8 @@ class GraphBuilder:
     def _start(self) -> None:
         held, self.held = sorted(self.held or [], key=lambda r: r.t), None
         self.anchor_pose, self.anchor_sigmas, self.anchor = self._choose_anchor(held)
+        if held:  # the grid starts at the first record, whatever it is (as keyframes.keyframe_times)
+            self.grid_t0 = held[0].t
         first_prior = next((r for r in held if isinstance(r, PosePrior)), None)
         for r in held:
             if r is first_prior:  # it is the anchor
@@ -396,23 +420,64 @@ class GraphBuilder:
         gap = self.kf_t[k] - self.kf_t[k - 1]
         return gtsam.Pose2.Expmap(gtsam.Pose2.Logmap(self.last_rel) * ((t - ta) / gap)) if gap > 0 else None
 
-    def motion_prior(self, dt: float) -> tuple[gtsam.Pose2, NDArray[np.float64], str]:
-        """The fallback motion over ``dt`` when no odometry covers it: constant velocity (the last
-        measured motion's twist, sigma ``cv_sigma_* dt``) or, with no measured motion yet or
-        ``motion_model="random-walk"``, a random walk (identity, sigma ``rw_sigma_* dt``); both
-        with the floor in quadrature. Returns the mean, its covariance and the model's name."""
+    def motion_prior(self, dt: float, t: float | None = None) -> tuple[gtsam.Pose2, NDArray[np.float64], str]:
+        """The fallback motion over ``dt`` (ending at ``t``) when no odometry covers it.
+
+        * constant velocity: the twist of the last measured relative motion (odometry, ICP) when it
+          is at most ``cv_max_age`` old, else the GNSS velocity (:meth:`gnss_velocity`: forward
+          at the speed over ground, the unicycle of a vessel or robot); sigma
+          ``sqrt(cv_sigma^2 + sigma_speed^2 + (cv_accel age)^2) dt``, ``age`` the time since that
+          motion was measured (the velocity is less certain the longer it is extrapolated);
+        * random walk (no motion known, or ``motion_model="random-walk"``): identity, sigma
+          ``rw_sigma dt``;
+
+        both with the floor in quadrature (``dt = 0`` stays proper). Returns the mean, its
+        covariance and the model's name."""
         cfg = self.cfg
         dt = max(dt, 0.0)
         floor = np.array([cfg.motion_floor_xy, cfg.motion_floor_xy, math.radians(cfg.motion_floor_yaw_deg)])
-        if cfg.motion_model == "constant-velocity" and self.twist is not None:
-            mean = gtsam.Pose2.Expmap(self.twist * dt)
-            rate = np.array([cfg.cv_sigma_v, cfg.cv_sigma_v, math.radians(cfg.cv_sigma_w_deg)])
+        twist, extra, age = None, 0.0, 0.0
+        if cfg.motion_model == "constant-velocity":
+            if self.twist is not None and (t is None or self.twist_t is None or t - self.twist_t <= cfg.cv_max_age):
+                twist = self.twist
+                age = 0.0 if t is None or self.twist_t is None else max(t - dt - self.twist_t, 0.0)
+            elif t is not None:
+                g = self.gnss_velocity(t)
+                if g is not None:
+                    twist, extra, age = g
+        if twist is not None:
+            mean = gtsam.Pose2.Expmap(twist * dt)
+            sv = math.sqrt(cfg.cv_sigma_v**2 + extra**2 + (cfg.cv_accel * age) ** 2)
+            rate = np.array([sv, sv, math.radians(cfg.cv_sigma_w_deg)])
             name = "constant-velocity"
         else:
             mean = gtsam.Pose2()
             rate = np.array([cfg.rw_sigma_v, cfg.rw_sigma_v, math.radians(cfg.rw_sigma_w_deg)])
             name = "random-walk"
         return mean, np.diag(np.square(floor) + np.square(rate * dt)), name
+
+    def gnss_velocity(self, t: float) -> tuple[NDArray[np.float64], float, float] | None:
+        """Forward motion at the GNSS speed over ground: the least-squares velocity of the fixes of
+        the last ``cv_gnss_window`` seconds before ``t`` (at least 3, spanning a third of it) as a
+        body-frame twist ``(speed, 0, 0)``, and the speed's 1-sigma ``sigma / sqrt(sum (t_i -
+        mean t)^2)`` and its age [s]; zero speed when it is below 3 sigma (direction unknown). A fit
+        whose speed sigma exceeds ``cv_sigma_v`` (few fixes) is not used: through an outage the last
+        good velocity is kept for ``cv_max_age`` seconds."""
+        cfg = self.cfg
+        w = [f for f in self.fixes if t - cfg.cv_gnss_window <= f[0] <= t + EPS]
+        if len(w) >= 3 and w[-1][0] - w[0][0] >= cfg.cv_gnss_window / 3:
+            a = np.array(w)
+            tc = a[:, 0] - a[:, 0].mean()
+            ss = float(tc @ tc)
+            vx, vy = float(tc @ a[:, 1]) / ss, float(tc @ a[:, 2]) / ss
+            sv = float(np.sqrt(np.mean(a[:, 3] ** 2) / ss))
+            speed = math.hypot(vx, vy)
+            if sv <= cfg.cv_sigma_v:  # a fit worth having (else the last one is kept)
+                # below 3 sigma the direction is unknown: no motion, with the speed's sigma
+                self.gnss_twist = (w[-1][0], np.array([speed if speed > 3 * sv else 0.0, 0.0, 0.0]), sv)
+        if self.gnss_twist is None or t - self.gnss_twist[0] > cfg.cv_max_age:
+            return None
+        return self.gnss_twist[1], self.gnss_twist[2], max(t - self.gnss_twist[0], 0.0)
 
     # -- one keyframe ----------------------------------------------------------------------------
     def step(self, k: int, prev: gtsam.Pose2 | None, prev_cov: NDArray[np.float64] | None = None) -> Step:
@@ -444,7 +509,7 @@ class GraphBuilder:
                     rel = odo[0]
             icp_rel = self._icp(s, k, rel, odo_cov)
             if rel is None and icp_rel is None:  # nothing measured: the motion model ties the pose
-                mean, cov, _ = self.motion_prior(dt)
+                mean, cov, _ = self.motion_prior(dt, t)
                 s.add(gtsam.BetweenFactorPose2(F.X(k - 1), xk, mean, gtsam.noiseModel.Gaussian.Covariance(cov)),
                       "motion")
                 self.counts["motion_fallback"] += 1
@@ -453,6 +518,7 @@ class GraphBuilder:
                 rel = icp_rel if icp_rel is not None else rel
                 if dt > 1e-6:
                     self.twist = np.asarray(gtsam.Pose2.Logmap(rel)) / dt
+                    self.twist_t = t
             self.last_rel, self.last_gap = rel, dt
             pose_k = prev.compose(rel)
         s.values.insert(xk, pose_k)
@@ -525,7 +591,7 @@ class GraphBuilder:
                     c, sn = math.cos(at(a).theta()), math.sin(at(a).theta())
                     rx -= c * delta.x() - sn * delta.y()
                     ry -= sn * delta.x() + c * delta.y()
-                if cfg.gnss_gate is not None and prev_cov is not None:
+                if cfg.gnss_gate is not None and prev_cov is not None and id(r) not in self.after_outage:
                     pa = at(a)
                     d = np.array([rx - pa.x(), ry - pa.y()])
                     S = prev_cov[:2, :2] + (r.sigma**2) * np.eye(2)
@@ -535,6 +601,7 @@ class GraphBuilder:
                         self.consecutive_rejects += 1
                         continue
                 self.consecutive_rejects = 0
+                self.after_outage.discard(id(r))
                 s.add(F.gnss_factor(xa, rx, ry, r.sigma, robust=cfg.gnss_robust, k=cfg.gnss_k), "gnss")
             elif isinstance(r, Heading):
                 sig = r.sigma * cfg.compass_sigma_scale

@@ -36,6 +36,7 @@ class SmootherConfig:
     wildfire_threshold: float = 0.001  # iSAM2 back-substitution stops where the change is below this
     partial_relinearization_check: bool = True
     isam_factorization: str = "QR"  # iSAM2 clique factorization: "QR" (robust) or "CHOLESKY" (fails on long chains)
+    isam_optimizer: str = "gauss-newton"  # iSAM2 step: "gauss-newton" or "dogleg" (a trust region; 2-20x the time)
     lm_tol: float = 1e-14  # batch LM relative/absolute error-decrease tolerance
     lm_max_iterations: int = 100
     covariances: bool = True  # per-pose marginal covariances on the final trajectory
@@ -43,6 +44,7 @@ class SmootherConfig:
     # -- keyframes and attachment ---------------------------------------------------------------
     keyframe_period: float | None = None  # None: one pose per scan (a 0.5 s grid without scans)
     scan_stride: int = 1  # with scans: a keyframe (and an ICP match) every N-th scan
+    grid_gap: float = 5.0  # [s] grid slots inside a gap without any record longer than this are skipped
     compensate_attachment: bool = True  # move each measurement to its keyframe's time by the motion between
     anchor_wait: float = 2.0  # [s] records are held this long (log time) to choose the anchor
 
@@ -54,6 +56,9 @@ class SmootherConfig:
     motion_model: str = "constant-velocity"  # without odometry: "constant-velocity" | "random-walk"
     cv_sigma_v: float = 0.5  # [m/s] constant velocity: 1-sigma velocity change -> sigma_xy = cv_sigma_v dt
     cv_sigma_w_deg: float = 10.0  # [deg/s] its yaw counterpart
+    cv_accel: float = 0.3  # [m/s^2] the velocity's 1-sigma grows by this per second since it was measured
+    cv_max_age: float = 60.0  # [s] the last measured motion (or GNSS velocity) is kept this long
+    cv_gnss_window: float = 10.0  # [s] GNSS fixes fitted for the speed over ground (no odometry, no scans)
     rw_sigma_v: float = 2.0  # [m/s] random walk (no motion known): sigma_xy = rw_sigma_v dt
     rw_sigma_w_deg: float = 30.0  # [deg/s]
     motion_floor_xy: float = 1e-3  # [m] added in quadrature to every motion factor (dt = 0 stays proper)
@@ -74,6 +79,7 @@ class SmootherConfig:
     gnss_k: float | None = None
     gnss_gate: float | None = 4.0  # reject fixes whose Mahalanobis distance to the online prediction exceeds it
     gnss_gate_max_rejects: int = 15  # ...unless this many in a row were rejected (re-acquire after drift)
+    gnss_gate_outage: float = 5.0  # [s] ...and the first fix after a gap this long is not gated (outage)
 
     # -- compass ---------------------------------------------------------------------------------
     compass_robust: str | None = "huber"
@@ -90,7 +96,10 @@ class SmootherConfig:
 
     # -- anchor ----------------------------------------------------------------------------------
     anchor_sigma_xy: float | None = None  # prior on the first pose when there is no pose_prior record
-    anchor_sigma_yaw_deg: float = 30.0
+    anchor_sigma_yaw_deg: float = 30.0  # ... its yaw sigma at the first compass reading
+    anchor_sigma_yaw_unknown_deg: float = 60.0  # ... at yaw 0 without one: 1 rad, not pi, or iSAM2's
+    #  Gauss-Newton step diverges where nothing else observes the yaw (a GNSS-only log); odometry and
+    #  GNSS recover a start 180 deg off (square loop: online 0.80 m against 0.68 m with pi)
 
     # -- noise the log does not give --------------------------------------------------------------
     noise_estimation: str = "off"  # variance components per sensor group: "off", "defaulted", "all"

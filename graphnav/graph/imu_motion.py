@@ -210,7 +210,7 @@ def _params(cfg: ImuGraphConfig) -> gtsam.ISAM2Params:
     at ``relinearize_threshold``, biases ``i`` at ``relinearize_threshold_bias``."""
     return isam_params({"x": [cfg.relinearize_threshold] * 6, "v": [cfg.relinearize_threshold] * 3,
                         "i": [cfg.relinearize_threshold_bias] * 6}, skip=cfg.relinearize_skip,
-                       factorization="CHOLESKY")
+                       factorization="CHOLESKY", optimizer="gauss-newton")
 
 
 def _run_incremental(log: NavLog, name: str, fixed_lag: bool, on_estimate: OnEstimate | None,

@@ -65,7 +65,8 @@ def graph_params(cfg: SmootherConfig) -> gtsam.ISAM2Params:
     return isam_params({"x": [cfg.relinearize_threshold] * 3, "l": [cfg.relinearize_threshold_landmarks] * 2,
                         "b": [1.0, 1.0, math.radians(cfg.relinearize_threshold_bias_deg)]},
                        skip=cfg.relinearize_skip, partial_check=cfg.partial_relinearization_check,
-                       wildfire=cfg.wildfire_threshold, factorization=cfg.isam_factorization)
+                       wildfire=cfg.wildfire_threshold, factorization=cfg.isam_factorization,
+                       optimizer=cfg.isam_optimizer)
 
 
 class Navigator:

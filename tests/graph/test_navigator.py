@@ -101,15 +101,18 @@ def test_scan_factors_carry_a_gnss_outage_without_odometry():
     log = full.sliced(t0, None)
     lg = log.without(lambda r: r.kind == "odometry" or (r.kind == "gnss" and 15 <= r.t - t0 <= 45))
     errs = {}
-    for use in (False, True):
-        est = make_online("fixed-lag", use_icp=use)
+    for name, opts in (("random walk", {"use_icp": False, "motion_model": "random-walk"}),
+                       ("gnss velocity", {"use_icp": False}), ("icp", {})):
+        est = make_online("fixed-lag", **opts)
         tr = run_online(lg, est)
         m = (tr.t > t0 + 15) & (tr.t < t0 + 45)
         ref = log.truth().interpolate(tr.t[m])
-        errs[use] = float(np.max(np.hypot(*(tr.poses[m, :2] - ref[:, :2]).T)))
+        errs[name] = float(np.max(np.hypot(*(tr.poses[m, :2] - ref[:, :2]).T)))
     info = est.info()
     assert info["icp_pairs"] >= 40 and info["icp_failed"] <= 2
-    assert errs[True] < 10.0 and errs[False] > 3 * errs[True], errs  # 5.4 m against 32.6 m measured
+    # measured 5.4 m with the scans, 6.7 m on the GNSS velocity alone, 32.6 m with nothing known
+    assert errs["icp"] < 10.0 and errs["random walk"] > 3 * errs["icp"], errs
+    assert errs["icp"] < errs["gnss velocity"] < errs["random walk"], errs
 
 
 def test_navigator_equals_run_isam2_record_by_record():
