@@ -76,6 +76,14 @@ def main(argv: list[str] | None = None) -> int:
         stream=sys.stderr,
     )
     try:
+        if getattr(args, "max_speed", None) is not None:  # --max-speed: the readers' validity bound
+            from dataclasses import replace
+
+            from .log import default_limits, set_default_limits
+
+            if not args.max_speed > 0:
+                raise ValueError(f"--max-speed must be > 0, got {args.max_speed}")
+            set_default_limits(replace(default_limits(), max_speed=args.max_speed))
         return int(args.func(args) or 0)
     except GraphnavError as err:
         return _fail(args, str(err), err.where, EXIT_INPUT, message=err.message)

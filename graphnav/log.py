@@ -18,24 +18,41 @@ from numpy.typing import NDArray
 
 from .errors import LogError
 
+#: Maximum range [m] of a scan whose log states none: a return beyond it is a missing return.
+#: Above the rated range of the 2D LiDARs used on vessels and indoors (Scanse Sweep 40 m, Hokuyo
+#: UTM-30LX 30 m, SICK LMS1xx 20-50 m / LMS5xx 80 m, Velodyne VLP-16 100 m), so it drops no real
+#: return of theirs, and small enough to bound the scan matcher's work (docs/log-format.md).
+DEFAULT_MAX_RANGE = 200.0
+#: Largest ``range_max`` a log may state [m] (long-range survey LiDARs reach ~2 km; 10 km is none's).
+MAX_STATED_RANGE = 1e4
+
 
 @dataclass(frozen=True, slots=True)
 class Scan:
     """A 2D LiDAR scan in polar form (sensor frame = body frame, x forward, CCW angles).
 
-    ``ranges`` [m] and ``angles`` [rad] have equal length; NaN, inf or ``<= 0`` ranges are
-    missing returns (kept, so the beam layout survives a round trip).
+    ``ranges`` [m] and ``angles`` [rad] have equal length; NaN, inf, ``<= 0`` ranges and ranges
+    beyond the sensor's maximum are missing returns (kept, so the beam layout survives a round
+    trip). ``range_max`` [m] is the sensor's stated maximum range (NaN: not stated, then
+    :data:`DEFAULT_MAX_RANGE` applies).
     """
 
     t: float
     ranges: NDArray[np.float64]
     angles: NDArray[np.float64]
+    range_max: float = math.nan
     kind: ClassVar[str] = "scan"
 
+    @property
+    def max_range(self) -> float:
+        """The maximum range in force [m]: ``range_max`` when stated, else :data:`DEFAULT_MAX_RANGE`."""
+        return self.range_max if math.isfinite(self.range_max) else DEFAULT_MAX_RANGE
+
     def valid(self) -> NDArray[np.bool_]:
-        """Mask of real returns (finite and > 0)."""
+        """Mask of real returns (finite, > 0 and <= :attr:`max_range`)."""
         r = self.ranges
-        return np.isfinite(r) & (r > 0.0)
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(r) & (r > 0.0) & (r <= self.max_range)
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,8 +163,52 @@ SCALAR_FIELDS: dict[str, tuple[str, ...]] = {
 }
 
 
-def check_record(rec: Record | KnownBeacon) -> None:
-    """Raise :class:`LogError` (with the offending field) if a record is not well formed."""
+@dataclass(frozen=True)
+class Limits:
+    """Physical validity bounds of :func:`check_record` (docs/log-format.md, "Validity").
+
+    A value outside them is no physical measurement of a surface vessel (or is in the wrong unit),
+    and in a filter its square or inverse can overflow (``sigma: 1e300`` did). Defaults are
+    documented there; ``max_speed`` is the one a fast vessel may need to raise (CLI
+    ``--max-speed``)."""
+
+    max_speed: float = 50.0  # |v| [m/s], ~97 kn: above any surface vessel but racing craft
+    max_yaw_rate: float = 35.0  # |w|, |wz| [rad/s]: 2000 deg/s, the largest MEMS gyro full scale
+    max_accel: float = 160.0  # |ax|, |ay| [m/s^2]: ~16 g, the largest full scale of the usual IMUs
+    max_beacon_range: float = 1e5  # [m]: beyond any radar/AIS horizon of a surface vessel
+    min_sigma: float = 1e-9  # any 1-sigma [field's unit]: below, no sensor; its inverse square ~1e18
+    max_sigma: float = 1e6  # any 1-sigma: above, it states nothing; its square stays far from overflow
+    max_coord: float = 1e7  # |x|, |y| [m] in the local frame: more than the Earth's radius
+    max_time: float = 1e10  # |t| [s]: POSIX seconds reach 1e10 in 2286; larger is ms/us/ns
+    max_angle: float = 1e6  # |yaw|, |bearing| [rad]: unwrapped angles of ~160 000 turns
+
+
+_LIMITS = [Limits()]
+
+
+def default_limits() -> Limits:
+    """The :class:`Limits` readers use when given none (``Limits()`` unless changed)."""
+    return _LIMITS[0]
+
+
+def set_default_limits(limits: Limits) -> None:
+    """Change the process-wide default :class:`Limits` (the CLI's ``--max-speed`` does)."""
+    _LIMITS[0] = limits
+
+
+_BOUNDED = {  # field -> (Limits attribute, what, unit)
+    "t": ("max_time", "time", "s"), "x": ("max_coord", "coordinate", "m"), "y": ("max_coord", "coordinate", "m"),
+    "yaw": ("max_angle", "angle", "rad"), "bearing": ("max_angle", "angle", "rad"),
+    "v": ("max_speed", "speed", "m/s"), "w": ("max_yaw_rate", "yaw rate", "rad/s"),
+    "wz": ("max_yaw_rate", "yaw rate", "rad/s"),
+    "ax": ("max_accel", "acceleration", "m/s^2"), "ay": ("max_accel", "acceleration", "m/s^2"),
+}
+
+
+def check_record(rec: Record | KnownBeacon, limits: Limits | None = None) -> None:
+    """Raise :class:`LogError` (with the offending field) if a record is not well formed or not
+    physically valid (:class:`Limits`; ``None``: :func:`default_limits`)."""
+    lim = limits or _LIMITS[0]
     for f in fields(rec):
         v = getattr(rec, f.name)
         if f.name == "id":
@@ -159,12 +220,29 @@ def check_record(rec: Record | KnownBeacon) -> None:
             raise LogError(f"expected a number, got {type(v).__name__}", field=f.name)
         elif f.name == "t" and not math.isfinite(v):
             raise LogError("timestamp must be finite", field="t")
+        elif f.name == "range_max":
+            if not (math.isnan(v) or 0.0 < v <= MAX_STATED_RANGE):
+                raise LogError(f"range_max must be in (0, {MAX_STATED_RANGE:g}] m (or absent)", field="range_max")
         elif f.name.startswith("sigma"):
             optional = isinstance(f.default, float) and math.isnan(f.default)
-            if not ((optional and math.isnan(v)) or (math.isfinite(v) and v > 0.0)):
+            if optional and math.isnan(v):
+                continue
+            if not (math.isfinite(v) and v > 0.0):
                 raise LogError("sigma must be finite and > 0", field=f.name)
+            if not lim.min_sigma <= v <= lim.max_sigma:
+                raise LogError(f"sigma {v:g} outside the physical range [{lim.min_sigma:g}, {lim.max_sigma:g}]",
+                               field=f.name)
         elif not math.isfinite(v):
             raise LogError("value must be finite", field=f.name)
+        elif f.name == "range":
+            if not 0.0 < v <= lim.max_beacon_range:
+                raise LogError(f"range {v:g} m outside (0, {lim.max_beacon_range:g}]", field="range")
+        elif f.name in _BOUNDED:
+            attr, what, unit = _BOUNDED[f.name]
+            top = getattr(lim, attr)
+            if abs(v) > top:
+                hint = " (--max-speed)" if attr == "max_speed" else ""
+                raise LogError(f"{what} {v:g} {unit} beyond the plausible limit {top:g} {unit}{hint}", field=f.name)
     if isinstance(rec, Scan):
         if rec.ranges.ndim != 1 or rec.angles.ndim != 1:
             raise LogError("ranges and angles must be 1-D arrays", field="ranges")

@@ -45,6 +45,14 @@ def propagate_truth(bx, by, track, p0, ga, gb, rq, q_r, q_b, keep, width):
     n_cfg, n_b = bx.shape
     steps = ga.shape[0]
     n = 3 + 2 * n_b
+    # numba does not bounds-check: every array the loops index must have the shape they assume, so
+    # the work and memory are those of the inputs (no read or write outside them)
+    if by.shape != bx.shape or track.shape[0] != steps + 1 or track.shape[1] < 2 or gb.shape[0] != steps:
+        raise ValueError("propagate_truth: bx/by, track, ga/gb shapes disagree")
+    if rq.shape[0] != steps or rq.shape[1] != 3 or rq.shape[2] != 3 or p0.shape[0] != n or p0.shape[1] != n:
+        raise ValueError("propagate_truth: rq or p0 shape disagrees")
+    if width < 1:
+        raise ValueError("propagate_truth: width must be >= 1")
     mx = np.empty((n_cfg, steps))
     my = np.empty((n_cfg, steps))
     p_out = np.empty((n_cfg if keep else 0, n, n))

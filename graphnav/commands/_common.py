@@ -18,7 +18,10 @@ def add_json_flag(p: argparse.ArgumentParser) -> None:
 
 def add_log_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="log: marina directory, .jsonl[.gz], .npz, .nmea, a CARMEN .log[.gz], or a ROS bag")
-    p.add_argument("--lenient", action="store_true", help="skip malformed records (and count them)")
+    p.add_argument("--lenient", action="store_true",
+                   help="skip malformed or physically invalid records (and count them)")
+    p.add_argument("--max-speed", type=float, metavar="M/S",
+                   help="the vessel's plausible speed limit; faster odometry is invalid (default 50 m/s)")
 
 
 def emit(args: argparse.Namespace, obj: dict[str, Any], human: str | None = None) -> None:

@@ -25,8 +25,8 @@ def run(args: argparse.Namespace) -> int:
         options["topics"] = parse_topic_args(args.topic)
     log = load_log(args.log, lenient=args.lenient, **options)
     out = {"records": log.counts(), "t0": log.t0, "t1": log.t1, "has_truth": log.has_truth}
-    for key in ("name", "origin", "skipped", "skipped_errors", "frame", "reference", "topics", "time", "messages",
-                "ignored", "unused", "missing_returns", "dead_beams", "dropped"):
+    for key in ("name", "origin", "skipped", "skipped_errors", "truncated", "dropped_fields", "frame", "reference",
+                "topics", "time", "messages", "ignored", "unused", "missing_returns", "dead_beams", "dropped"):
         if key in log.meta:
             out[key] = log.meta[key]
     human = "\n".join(

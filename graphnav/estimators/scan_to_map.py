@@ -134,7 +134,8 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
     for scan in scans:
         t_step = time.perf_counter()
         this_icp = 0.0
-        xy = scan_points(scan.ranges, scan.angles, min_range=cfg.min_range, max_range=cfg.max_range)
+        xy = scan_points(scan.ranges, scan.angles, min_range=cfg.min_range,
+                         max_range=min(cfg.max_range, scan.max_range))
         xy = voxel_downsample(xy, cfg.scan_voxel)
         enough = len(xy) >= cfg.min_points
         source = None

@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 
 from ..errors import LogError
 from ..geometry import wrap_angle
-from ..log import NavLog, Record, Scan, Truth
+from ..log import Limits, NavLog, Record, Scan, Truth, check_record
 
 MAX_LINE_BYTES = 4_000_000
 MAX_BEAMS = 100_000
@@ -264,7 +264,7 @@ def is_carmen(path: str | Path, probe_lines: int = 200) -> bool:
     return False
 
 
-def saturation_threshold(ranges: NDArray[np.float64]) -> float | None:
+def saturation_threshold(ranges: NDArray[np.float64] | list[NDArray[np.float64]]) -> float | None:
     """The max-range cut for a sensor that does not state its maximum (FLASER).
 
     Returns ``(1 - SATURATION_BAND) * r_max`` (``r_max`` = the largest return in the log) when the
@@ -272,15 +272,21 @@ def saturation_threshold(ranges: NDArray[np.float64]) -> float | None:
     :data:`SATURATION_MIN_FRACTION` of all returns and
     :data:`SATURATION_SPIKE` times as many as in the band of equal width below -- the spike a
     saturating scanner writes at its maximum (81.91 m, 51.15 m or 32.767 m in the CARMEN logs);
-    ``None`` when there is no such spike (no cut)."""
-    r = ranges[np.isfinite(ranges) & (ranges > 0.0)]
-    if r.size == 0:
+    ``None`` when there is no such spike (no cut). ``ranges``: one array, or a list of them (the
+    scans, counted one at a time: no concatenated copy of the whole log)."""
+    parts = [ranges] if isinstance(ranges, np.ndarray) else ranges
+    n, r_max = 0, -math.inf
+    for p in parts:
+        ok = np.isfinite(p) & (p > 0.0)
+        if ok.any():
+            n += int(np.count_nonzero(ok))
+            r_max = max(r_max, float(p[ok].max()))
+    if n == 0:
         return None
-    r_max = float(r.max())
     cut = (1.0 - SATURATION_BAND) * r_max
-    top = np.count_nonzero(r >= cut)
-    below = np.count_nonzero((r >= cut - SATURATION_BAND * r_max) & (r < cut))
-    spike = top >= SATURATION_MIN_COUNT and top >= SATURATION_MIN_FRACTION * r.size and top >= SATURATION_SPIKE * below
+    top = sum(int(np.count_nonzero(np.isfinite(p) & (p >= cut))) for p in parts)
+    below = sum(int(np.count_nonzero((p >= cut - SATURATION_BAND * r_max) & (p < cut))) for p in parts)
+    spike = top >= SATURATION_MIN_COUNT and top >= SATURATION_MIN_FRACTION * n and top >= SATURATION_SPIKE * below
     return cut if spike else None
 
 
@@ -289,14 +295,16 @@ def dead_beams(scans: list[NDArray[np.float64]]) -> NDArray[np.intp]:
     of one length); none when there are fewer than :data:`DEAD_BEAM_MIN_SCANS` scans."""
     if len(scans) < DEAD_BEAM_MIN_SCANS:
         return np.zeros(0, dtype=np.intp)
-    a = np.vstack(scans)
-    same = np.all(a == a[0], axis=0) & np.isfinite(a[0]) & (a[0] > 0.0)
+    first = scans[0]
+    same = np.isfinite(first) & (first > 0.0)
+    for r in scans[1:]:  # one scan at a time (no stacked copy of the log)
+        same &= r == first
     return np.flatnonzero(same)
 
 
 def read_carmen(path: str | Path, *, lenient: bool = False, truth: bool = True,
                 time: Literal["auto", "log", "index"] = "auto", scan_dt: float = DEFAULT_SCAN_DT,
-                max_range: float | None = None) -> NavLog:
+                max_range: float | None = None, limits: Limits | None = None) -> NavLog:
     """Read a CARMEN log (see the module docstring) into scans and, by default, ``truth`` poses.
 
     ``max_range`` [m], when given, replaces every message's own maximum and the FLASER
@@ -304,7 +312,8 @@ def read_carmen(path: str | Path, *, lenient: bool = False, truth: bool = True,
     ``ignored`` (other messages per name), ``unused`` (RAWLASER1 beside pose-carrying lasers),
     ``time``, ``max_range`` (the distinct cuts used per message name, [] = none),
     ``missing_returns`` (max-range and dead-beam returns set missing), ``dead_beams`` and, with
-    ``lenient``, ``skipped``/``skipped_errors``.
+    ``lenient``, ``skipped``/``skipped_errors``. Every record passes :func:`graphnav.log.check_record`
+    (``limits``); an invalid one is an error naming the scan, or with ``lenient`` skipped and counted.
     """
     path = Path(path)
     if time not in ("auto", "log", "index"):
@@ -364,11 +373,21 @@ def read_carmen(path: str | Path, *, lenient: bool = False, truth: bool = True,
     if dead:
         meta["dead_beams"] = dead
     records: list[Record] = []
-    for m, t, r in zip(msgs, times, ranges, strict=True):
-        records.append(Scan(float(t), r, m.angles))
+    for k, (m, t, r) in enumerate(zip(msgs, times, ranges, strict=True)):
+        recs: list[Record] = [Scan(float(t), r, m.angles)]
         if truth and m.pose is not None:
             x, y, th = m.pose
-            records.append(Truth(float(t), x, y, th if -math.pi <= th < math.pi else float(wrap_angle(th))))
+            recs.append(Truth(float(t), x, y, th if -math.pi <= th < math.pi else float(wrap_angle(th))))
+        for rec in recs:
+            try:
+                check_record(rec, limits)
+            except LogError as err:
+                err = LogError(f"{m.kind} scan {k + 1} ({rec.kind}): {err.message}", file=str(path), field=err.field)
+                if not lenient:
+                    raise err from None
+                skipped.append(str(err))
+            else:
+                records.append(rec)
     if lenient:
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
@@ -379,12 +398,12 @@ def _clean_ranges(msgs: list[LaserMessage], max_range: float | None
                   ) -> tuple[list[NDArray[np.float64]], dict[str, list[float]], dict[str, int], dict[str, list[int]]]:
     """Ranges with max-range returns and dead beams set to NaN, the distinct cuts used per message
     name, the number of returns set missing per cause, and the dead beams per message name/length."""
-    out = [m.ranges.copy() for m in msgs]
+    out = [m.ranges for m in msgs]  # the messages' own arrays, edited in place (no second copy of every scan)
     missing = {"max_range": 0, "dead_beam": 0}
     flaser = [i for i, m in enumerate(msgs) if m.kind == "FLASER"]
     flaser_cut = max_range
     if flaser and max_range is None:
-        flaser_cut = saturation_threshold(np.concatenate([out[i] for i in flaser]))
+        flaser_cut = saturation_threshold([out[i] for i in flaser])
     used: dict[str, set[float]] = {}
     for i, m in enumerate(msgs):
         cut = max_range if max_range is not None else (flaser_cut if m.kind == "FLASER" else m.max_range)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import LogError
-from ..log import NavLog
+from ..log import Limits, NavLog
 
 NMEA_SUFFIXES = (".nmea", ".nmea.gz", ".txt", ".log")
 JSONL_SUFFIXES = (".jsonl", ".jsonl.gz", ".ndjson")
@@ -16,9 +16,10 @@ CARMEN_SUFFIXES = (".clf", ".clf.gz")
 SNIFF_SUFFIXES = (".log", ".log.gz", ".txt", ".txt.gz")  # CARMEN or NMEA, told apart by content
 
 
-def load_log(path: str | Path, *, lenient: bool = False, **options) -> NavLog:
-    """Read any supported log. ``lenient`` skips (and counts) malformed records where the
-    format has records to skip; other ``options`` go to the chosen reader."""
+def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None = None, **options) -> NavLog:
+    """Read any supported log. ``lenient`` skips (and counts) malformed or physically invalid
+    records (``limits``, :class:`graphnav.log.Limits`; default :func:`graphnav.log.default_limits`)
+    where the format has records to skip; other ``options`` go to the chosen reader."""
     p = Path(path)
     name = p.name.lower()
     if not p.exists():
@@ -27,41 +28,41 @@ def load_log(path: str | Path, *, lenient: bool = False, **options) -> NavLog:
         from .marina import is_marina_dir, read_marina
 
         if is_marina_dir(p):
-            return read_marina(p, **options)
+            return read_marina(p, limits=limits, **options)
         from .mrclam import is_mrclam_dir, read_mrclam
 
         if is_mrclam_dir(p):
             if "robot" not in options:
                 raise LogError("an MRCLAM dataset directory: say which robot (load_log(dir, robot=N), or "
                                "graphnav convert mrclam DIR --robot N --out LOG)", file=str(p))
-            return read_mrclam(p, lenient=lenient, **options)
+            return read_mrclam(p, lenient=lenient, limits=limits, **options)
         if (p / "metadata.yaml").exists():
             from .rosbag import read_bag
 
-            return read_bag(p, lenient=lenient, **options)
+            return read_bag(p, lenient=lenient, limits=limits, **options)
         raise LogError("directory is neither a marina dataset (ranges.mat, angles.mat, gps.mat), an MRCLAM "
                        "dataset (Barcodes.dat, Landmark_Groundtruth.dat) nor a ROS 2 bag (metadata.yaml)", file=str(p))
     if name.endswith(JSONL_SUFFIXES):
         from .jsonl import read_jsonl
 
-        return read_jsonl(p, lenient=lenient)
+        return read_jsonl(p, lenient=lenient, limits=limits)
     if name.endswith(".npz"):
         from .npz import read_npz
 
-        return read_npz(p)
+        return read_npz(p, lenient=lenient, limits=limits, **{k: v for k, v in options.items() if k == "max_bytes"})
     if name.endswith(CARMEN_SUFFIXES) or name.endswith(SNIFF_SUFFIXES):
         from .carmen import is_carmen, read_carmen
 
         if name.endswith(CARMEN_SUFFIXES) or is_carmen(p):
-            return read_carmen(p, lenient=lenient, **options)
+            return read_carmen(p, lenient=lenient, limits=limits, **options)
     if name.endswith(NMEA_SUFFIXES) or name.endswith(SNIFF_SUFFIXES):
         from .nmea import read_nmea
 
-        return read_nmea(p, lenient=lenient, **options)
+        return read_nmea(p, lenient=lenient, limits=limits, **options)
     if name.endswith(BAG_SUFFIXES):
         from .rosbag import read_bag
 
-        return read_bag(p, lenient=lenient, **options)
+        return read_bag(p, lenient=lenient, limits=limits, **options)
     raise LogError("unknown log type (expected a marina directory, .jsonl[.gz], .npz, .nmea, a CARMEN .log/.clf, "
                    "or a ROS bag)",
                    file=str(p))

@@ -13,7 +13,8 @@ import numpy as np
 
 from ..errors import LogError
 from ..geodesy import LocalFrame
-from ..log import RECORD_TYPES, BeaconObs, Gnss, KnownBeacon, NavLog, Record, Scan, check_record
+from ..log import RECORD_TYPES, BeaconObs, Gnss, KnownBeacon, Limits, NavLog, Record, Scan, check_record
+from .textlines import Lines, note_truncation
 
 REQUIRED: dict[str, tuple[str, ...]] = {
     "scan": ("t",),
@@ -27,6 +28,7 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "beacon_known": ("id", "x", "y", "sigma"),
 }
 OPTIONAL: dict[str, tuple[str, ...]] = {
+    "scan": ("range_max",),
     "odometry": ("sigma_v", "sigma_w"),
     "beacon": ("sigma_range", "sigma_bearing"),
 }
@@ -58,7 +60,10 @@ def _num(obj: dict, name: str) -> float:
     v = obj[name]
     if isinstance(v, bool) or not isinstance(v, int | float):
         raise LogError(f"expected a number, got {json.dumps(v)[:40]}", field=name)
-    return float(v)
+    try:
+        return float(v)
+    except OverflowError:  # an integer beyond float range (e.g. 400 digits)
+        raise LogError(f"integer with {len(str(abs(v)))} digits is out of range", field=name) from None
 
 
 def _array(obj: dict, name: str) -> np.ndarray:
@@ -72,14 +77,19 @@ def _array(obj: dict, name: str) -> np.ndarray:
         elif isinstance(x, bool) or not isinstance(x, int | float):
             raise LogError(f"element {i} is not a number", field=name)
         else:
-            out[i] = float(x)
+            try:
+                out[i] = float(x)
+            except OverflowError:
+                raise LogError(f"element {i} is out of range", field=name) from None
     return out
 
 
-def parse_record(obj: Any, frame: LocalFrame | None = None) -> Record | KnownBeacon | dict:
+def parse_record(obj: Any, frame: LocalFrame | None = None, limits: Limits | None = None
+                 ) -> Record | KnownBeacon | dict:
     """Turn one decoded JSON object into a record (a ``meta`` object is returned as a dict).
 
-    Raises :class:`LogError` naming the field on any problem.
+    Raises :class:`LogError` naming the field on any problem, physical validity included
+    (:func:`graphnav.log.check_record` with ``limits``).
     """
     if not isinstance(obj, dict):
         raise LogError("each line must be a JSON object")
@@ -99,7 +109,8 @@ def parse_record(obj: Any, frame: LocalFrame | None = None) -> Record | KnownBea
             angles = _num(obj, "angle_min") + _num(obj, "angle_increment") * np.arange(ranges.size)
         else:
             raise LogError("a scan needs 'angles' (or 'angle_min' and 'angle_increment')", field="angles")
-        rec: Record | KnownBeacon = Scan(_num(obj, "t"), ranges, angles)
+        rmax = _num(obj, "range_max") if obj.get("range_max") is not None else math.nan
+        rec: Record | KnownBeacon = Scan(_num(obj, "t"), ranges, angles, rmax)
     elif kind == "gnss":
         if "x" in obj and "y" in obj:
             x, y = _num(obj, "x"), _num(obj, "y")
@@ -125,16 +136,17 @@ def parse_record(obj: Any, frame: LocalFrame | None = None) -> Record | KnownBea
     else:
         names = REQUIRED[kind] + OPTIONAL.get(kind, ())
         rec = RECORD_TYPES[kind](**{n: _num(obj, n) for n in names if n in obj})
-    check_record(rec)
+    check_record(rec, limits)
     return rec
 
 
-def read_jsonl(path: str | Path, *, lenient: bool = False) -> NavLog:
+def read_jsonl(path: str | Path, *, lenient: bool = False, limits: Limits | None = None) -> NavLog:
     """Read a ``.jsonl`` / ``.jsonl.gz`` log.
 
     Strict by default: the first bad line raises :class:`LogError` with file, line and field.
-    With ``lenient`` bad lines are skipped and counted in ``log.meta["skipped"]`` (their first
-    messages in ``log.meta["skipped_errors"]``). Blank lines and lines starting with ``#`` are
+    With ``lenient`` bad lines (physically invalid ones too, :class:`graphnav.log.Limits`) are
+    skipped and counted in ``log.meta["skipped"]`` (their first messages in
+    ``log.meta["skipped_errors"]``). Blank lines and lines starting with ``#`` are
     comments.
     """
     path = Path(path)
@@ -144,24 +156,22 @@ def read_jsonl(path: str | Path, *, lenient: bool = False) -> NavLog:
     frame: LocalFrame | None = None
     skipped: list[str] = []
     last_t = -math.inf
-    try:
-        fh = _open_text(path, "r")
-        lines = fh.read().splitlines()
-        fh.close()
-    except (OSError, UnicodeDecodeError, EOFError) as exc:
-        raise LogError(f"cannot read: {exc}", file=str(path)) from exc
-    for lineno, line in enumerate(lines, start=1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
+    lines = Lines(path, lenient=lenient)  # read and decompressed line by line
+    for lineno, raw in lines:
         try:
             try:
+                s = raw.decode("utf-8").strip()
+            except UnicodeDecodeError as exc:
+                raise LogError(f"not UTF-8 (byte {exc.start})") from None
+            if not s or s.startswith("#"):
+                continue
+            try:
                 obj = json.loads(s)
-            except (json.JSONDecodeError, RecursionError) as exc:
+            except (ValueError, RecursionError) as exc:  # JSONDecodeError, or an integer of > 4300 digits
                 raise LogError(f"not valid JSON ({exc.__class__.__name__}: {str(exc)[:60]})") from None
             if isinstance(obj, dict) and obj.get("type") == "gnss" and "lat" in obj and frame is None:
                 frame = _frame_from(meta, obj)
-            rec = parse_record(obj, frame)
+            rec = parse_record(obj, frame, limits)
             if isinstance(rec, dict):
                 meta.update(rec)
                 if "origin" in rec:
@@ -183,6 +193,7 @@ def read_jsonl(path: str | Path, *, lenient: bool = False) -> NavLog:
     if frame is not None:
         meta["origin"] = {"lat": frame.lat0, "lon": frame.lon0, "h": frame.h0}
     if lenient:
+        note_truncation(meta, lines, skipped)
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
     return NavLog(records, known, meta)
@@ -222,6 +233,8 @@ def record_to_obj(rec: Record | KnownBeacon) -> dict[str, Any]:
     if isinstance(rec, Scan):
         obj["ranges"] = [_clean(r) for r in rec.ranges.tolist()]
         obj["angles"] = [_clean(a) for a in rec.angles.tolist()]
+        if math.isfinite(rec.range_max):
+            obj["range_max"] = rec.range_max
         return obj
     for name in REQUIRED[rec.kind] + OPTIONAL.get(rec.kind, ()):
         if name == "t":

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from ..errors import LogError
 from ..geometry import wrap_angle
-from ..log import NavLog, Record, Scan, Truth
+from ..log import Limits, NavLog, Record, Scan, Truth, check_record
 
 MARINA_DT = 1.0
 YAW_OFFSET = 1.5 * np.pi
@@ -64,8 +64,9 @@ def reference_world_track(slam_pose: NDArray[np.float64]) -> NDArray[np.float64]
     return np.column_stack([xy, yaw])
 
 
-def read_marina(path: str | Path, *, dt: float = MARINA_DT) -> NavLog:
-    """Read the marina directory into a log of 177 scans and 176 ``truth`` records."""
+def read_marina(path: str | Path, *, dt: float = MARINA_DT, limits: Limits | None = None) -> NavLog:
+    """Read the marina directory into a log of 177 scans and 176 ``truth`` records (each checked by
+    :func:`graphnav.log.check_record`; an invalid one is a LogError naming the file and column)."""
     path = Path(path)
     if not path.is_dir():
         raise LogError("not a directory", file=str(path))
@@ -84,14 +85,26 @@ def read_marina(path: str | Path, *, dt: float = MARINA_DT) -> NavLog:
         raise LogError("non-finite reference values", file=str(path / "gps.mat"), field="slam_pose")
     n = ranges.shape[1]
     world = reference_world_track(ref)
+    keep = np.isfinite(angles)  # rows past a scan's length are NaN in both arrays
+    angle_cols = [angles[keep[:, k], k] for k in range(n)]  # copies; each matrix is let go once copied,
+    del angles  # so the peak holds one matrix fewer (benchmarks/reader_memory.py)
+    range_cols = [ranges[keep[:, k], k] for k in range(n)]
+    del ranges
     records: list[Record] = []
     for k in range(n):
-        r, a = ranges[:, k], angles[:, k]
-        keep = np.isfinite(a)  # rows past a scan's length are NaN in both arrays
-        records.append(Scan(k * dt, r[keep].copy(), a[keep].copy()))
+        records.append(Scan(k * dt, range_cols[k], angle_cols[k]))
         if k >= 1:
             x, y, yaw = world[k - 1]
             records.append(Truth(k * dt, float(x), float(y), float(yaw)))
+        for rec in records[-2:] if k >= 1 else records[-1:]:
+            try:
+                check_record(rec, limits)
+            except LogError as err:
+                if isinstance(rec, Scan):  # scan k is column k + 1 of ranges_baza, its truth row k of slam_pose
+                    fname, var, where = "ranges.mat", "ranges_baza", f"column {k + 1}"
+                else:
+                    fname, var, where = "gps.mat", "slam_pose", f"row {k}"
+                raise LogError(f"{where}: {err.message}", file=str(path / fname), field=f"{var}/{err.field}") from None
     meta = {
         "name": "marina",
         "source": str(path),

@@ -36,7 +36,7 @@ from typing import Any
 
 from ..errors import LogError
 from ..geometry import wrap_angle
-from ..log import BeaconObs, KnownBeacon, NavLog, Odometry, PosePrior, Record, Truth
+from ..log import BeaconObs, KnownBeacon, Limits, NavLog, Odometry, PosePrior, Record, Truth, check_record
 
 PRIOR_SIGMA = 0.01
 COLUMNS = {
@@ -142,7 +142,7 @@ def _integer(v: float, name: str) -> int:
 
 
 def read_mrclam(directory: str | Path, robot: int, *, lenient: bool = False, charted: bool = False,
-                prior_sigma: float = PRIOR_SIGMA) -> NavLog:
+                prior_sigma: float = PRIOR_SIGMA, limits: Limits | None = None) -> NavLog:
     """Read robot ``robot`` of an MRCLAM dataset directory (see the module docstring).
 
     ``meta`` holds ``robot``, ``landmarks`` ({id: [x, y, x_std, y_std]}), ``sightings_kept``,
@@ -183,7 +183,7 @@ def read_mrclam(directory: str | Path, robot: int, *, lenient: bool = False, cha
             t.bad(err, lineno)
     records: list[Record] = []
     t = table(f"Robot{robot}_Odometry", "Odometry")
-    for rec in _timed(t, lambda v: Odometry(v[0], v[1], v[2])):
+    for rec in _timed(t, lambda v: Odometry(v[0], v[1], v[2]), limits):
         records.append(rec)
     dropped_robot: Counter = Counter()
     dropped_unknown: Counter = Counter()
@@ -203,11 +203,17 @@ def read_mrclam(directory: str | Path, robot: int, *, lenient: bool = False, cha
         elif subject not in landmarks:
             dropped_robot[subject] += 1
         else:
-            records.append(BeaconObs(tm, str(subject), rng, brg))
+            obs = BeaconObs(tm, str(subject), rng, brg)
+            try:
+                check_record(obs, limits)
+            except LogError as err:
+                t.bad(err, lineno)
+                continue
+            records.append(obs)
             kept += 1
     t = table(f"Robot{robot}_Groundtruth", "Groundtruth")
     first: Truth | None = None
-    for rec in _timed(t, lambda v: Truth(v[0], v[1], v[2], _yaw(v[3]))):
+    for rec in _timed(t, lambda v: Truth(v[0], v[1], v[2], _yaw(v[3])), limits):
         records.append(rec)
         if first is None:
             first = rec
@@ -240,6 +246,14 @@ def _ordered(t: _Table) -> Iterator[tuple[int, list[float]]]:
         yield lineno, vals
 
 
-def _timed(t: _Table, make) -> Iterator[Record]:
-    for _lineno, vals in _ordered(t):
-        yield make(vals)
+def _timed(t: _Table, make, limits: Limits | None = None) -> Iterator[Record]:
+    """Records ``make(values)`` of the rows in time order, each checked by
+    :func:`graphnav.log.check_record` (a bad one raised or counted, as a bad line)."""
+    for lineno, vals in _ordered(t):
+        rec = make(vals)
+        try:
+            check_record(rec, limits)
+        except LogError as err:
+            t.bad(err, lineno)
+            continue
+        yield rec

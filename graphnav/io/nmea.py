@@ -23,17 +23,18 @@ How sentences become records (full description in docs/nmea.md):
   with a date, ``t`` is POSIX seconds (UTC); without any, ``t`` is seconds since midnight of the
   first day. Midnight rollovers (time of day dropping by more than 12 h) advance the day.
   Sentences without a time (VTG, HDT, HDG, THS, ROT) take the last time seen; those before the
-  first timed sentence take the first time seen.
+  first timed sentence take the first time seen. A ZDA moves the clock forward only; a GGA/RMC up to
+  ``ZDA_MAX_LEAD_S`` behind a ZDA-set clock is stamped with its own time (``meta["zda_ahead"]``).
 * **Errors** -- checksum mismatches and malformed sentences raise :class:`LogError` naming the
   file, line and field; ``lenient=True`` skips them (``meta["skipped"]``, first messages in
-  ``meta["skipped_errors"]``). Sentence types not listed above (GSV, GSA, AIS ``!`` lines, ...)
-  are ignored and counted per type in ``meta["ignored"]``.
+  ``meta["skipped_errors"]``); there a bad optional field (variation, SOG, COG, HDOP, date, ...) is
+  dropped and counted per field in ``meta["dropped_fields"]``, the sentence kept. Sentence types not
+  listed above (GSV, GSA, AIS ``!`` lines, ...) are ignored and counted per type in ``meta["ignored"]``.
 """
 
 from __future__ import annotations
 
 import calendar
-import gzip
 import math
 from collections import Counter
 from collections.abc import Iterable, Iterator
@@ -47,7 +48,8 @@ import pynmea2
 from ..errors import LogError
 from ..geodesy import LocalFrame
 from ..geometry import heading_deg_to_yaw
-from ..log import Gnss, Heading, NavLog, Odometry, Record
+from ..log import Gnss, Heading, Limits, NavLog, Odometry, Record, check_record, default_limits
+from .textlines import Lines, note_truncation
 
 KNOT = 1852.0 / 3600.0  # m/s
 #: User-equivalent range error [m] per GGA fix quality: sigma per axis = HDOP * UERE.
@@ -58,6 +60,10 @@ DEFAULT_HDOP = 1.5
 HEADING_SIGMA_DEG = {"HDT": 0.5, "THS": 0.5, "HDG": 2.0}
 SOG_MAX_AGE_S = 2.0
 GGA_HOLD_S = 5.0
+#: A fix time up to this far behind a ZDA-set clock is the fix's own epoch, not time going backwards
+#: (receivers send the ZDA of the coming second(s) before its GGA/RMC: 1 s on et-332, mr-350p, 2 s
+#: on the AC12 of the GPSD corpus).
+ZDA_MAX_LEAD_S = 2.0
 DAY = 86400.0
 
 
@@ -79,12 +85,59 @@ def _float(raw: str, name: str, *, lo: float = -math.inf, hi: float = math.inf) 
     return v
 
 
-def _opt_float(raw: str, name: str, **kw) -> float | None:
-    return None if raw.strip() == "" else _float(raw, name, **kw)
-
-
 def _field(msg: pynmea2.NMEASentence, i: int) -> str:
     return msg.data[i] if i < len(msg.data) else ""
+
+
+def _num(msg: pynmea2.NMEASentence, name: str, *, lo: float = -math.inf, hi: float = math.inf) -> float | None:
+    """Numeric field ``name`` by pynmea2's attribute (its parsed number; None when empty; the raw
+    text when pynmea2 could not parse it, or the field has no type there), checked to be finite and
+    in ``[lo, hi]``; LogError naming the field otherwise."""
+    v = getattr(msg, name, None)
+    if v is None:
+        return None
+    if isinstance(v, str):
+        if v.strip() == "":
+            return None
+        return _float(v, name, lo=lo, hi=hi)
+    x = float(v)
+    if not math.isfinite(x) or not lo <= x <= hi:
+        raise LogError(f"{str(v)[:20]!r} out of range [{lo}, {hi}]", field=name)
+    return x
+
+
+def _tod(msg: pynmea2.NMEASentence) -> float | None:
+    """Seconds since midnight from the sentence's time field (GGA, RMC, ZDA: the first), by
+    :func:`parse_time_of_day`: pynmea2's ``timestamp`` accepts ``" 9"`` as seconds and has no leap
+    second, so its raw text is checked here."""
+    return parse_time_of_day(_field(msg, 0))
+
+
+def _variation(msg: pynmea2.NMEASentence, value: str, direction: str) -> float | None:
+    """A magnetic variation or deviation [deg, east positive] from a value and an E/W field."""
+    v = _num(msg, value, lo=0.0, hi=180.0)
+    if v is None:
+        return None
+    e = str(getattr(msg, direction, "") or "").strip()
+    if e not in ("E", "W"):
+        raise LogError(f"direction {e[:5]!r} is not E/W", field=direction)
+    return v if e == "E" else -v
+
+
+def _zda_date(msg: pynmea2.NMEASentence) -> date | None:
+    """ZDA's day, month, year (pynmea2 integers); None when all three are empty."""
+    parts = [getattr(msg, n, None) for n in ("day", "month", "year")]
+    if all(p is None for p in parts):
+        return None
+    if any(not isinstance(p, int) for p in parts):
+        raise LogError(f"date {'/'.join(str(p) for p in parts)[:30]} is not numeric", field="day")
+    dd, mm, yy = parts
+    if not 1900 <= yy <= 2200:
+        raise LogError(f"year {yy} out of range [1900, 2200]", field="year")
+    try:
+        return date(yy, mm, dd)
+    except ValueError:
+        raise LogError(f"date {dd}/{mm}/{yy} does not exist", field="day") from None
 
 
 def parse_time_of_day(raw: str) -> float | None:
@@ -173,9 +226,15 @@ class NmeaDecoder:
 
     def __init__(self, frame: LocalFrame | None = None, *, day0: float | None = None,
                  heading_sigma_deg: dict[str, float] | None = None, default_hdop: float = DEFAULT_HDOP,
-                 sog_max_age: float = SOG_MAX_AGE_S, keep: bool = True) -> None:
+                 sog_max_age: float = SOG_MAX_AGE_S, keep: bool = True, limits: Limits | None = None,
+                 drop_bad_fields: bool = False, keep_sog_cog: bool = True) -> None:
         self.frame = frame
+        self.drop_bad_fields = drop_bad_fields  # lenient: a bad optional field is dropped, the sentence kept
+        self.clock_src = ""  # "fix" or "zda": what set the clock last
+        self.back_ok = False  # the last sentence moved the clock back by the ZDA rule
+        self.limits = limits  # physical validity of every record (graphnav.log.check_record)
         self.keep = keep  # False (live mode): do not accumulate records/SOG samples
+        self.keep_sog_cog = keep_sog_cog  # False (read_nmea): count the SOG/COG samples, do not hold them
         self.day0 = day0
         self.days = 0
         self.last_tod: float | None = None
@@ -190,19 +249,62 @@ class NmeaDecoder:
         self.out = NmeaParse()
 
     # -- time
-    def _stamp(self, tod: float | None) -> float | None:
-        if tod is not None:
-            if self.last_tod is not None and tod < self.last_tod - DAY / 2:
-                self.days += 1
-            self.last_tod = tod
-            self.t = (self.day0 or 0.0) + self.days * DAY + tod
+    def _stamp(self, tod: float | None, kind: str = "fix") -> float | None:
+        """Move the clock to the time of day ``tod`` of a ``"fix"`` (GGA/RMC) or ``"zda"`` sentence.
+
+        The time rule (docs/nmea.md): a time of day that drops by more than 12 h is the next day;
+        a fix time up to :data:`ZDA_MAX_LEAD_S` behind a clock that a ZDA set is the fix's own epoch
+        (receivers send the ZDA of the coming second before its GGA/RMC): the clock goes back to it
+        (``back_ok``, counted in ``zda_ahead``), across midnight too. A ZDA only moves the clock
+        forward (:meth:`_zda`)."""
+        self.back_ok = False
+        if tod is None:
+            return self.t
+        days, t = self._absolute(tod)
+        if self.t is not None and kind == "fix" and self.clock_src == "zda":
+            if t - self.t > DAY / 2:  # the ZDA crossed midnight before this fix of the old day
+                days -= 1
+                t -= DAY
+            if 0.0 < self.t - t <= ZDA_MAX_LEAD_S:
+                self.back_ok = True
+                self.out.counts["zda_ahead"] += 1
+        self.days, self.last_tod, self.t, self.clock_src = days, tod, t, kind
         return self.t
+
+    def _absolute(self, tod: float) -> tuple[int, float]:
+        """(day count, time) of a time of day: the next day when it drops by more than 12 h."""
+        days = self.days
+        if self.last_tod is not None and tod < self.last_tod - DAY / 2:
+            days += 1
+        return days, (self.day0 or 0.0) + days * DAY + tod
 
     def _set_date(self, d: date | None) -> None:
         if d is not None:
             self.day0 = _posix_midnight(d) - self.days * DAY
             if self.last_tod is not None:
                 self.t = self.day0 + self.days * DAY + self.last_tod
+
+    def _optional(self, parse: Any, *args: Any, **kw: Any) -> Any:
+        """An optional field parsed by ``parse``: its value, or (``drop_bad_fields``) None when it is
+        bad, counted per field in ``dropped_field:<name>`` (the sentence is kept)."""
+        try:
+            return parse(*args, **kw)
+        except LogError as err:
+            if not self.drop_bad_fields:
+                raise
+            self.out.counts["dropped_field:" + (err.field or "?")] += 1
+            return None
+
+    def _sog(self, msg: pynmea2.NMEASentence, name: str, unit: float) -> float | None:
+        """Speed over ground [m/s] from field ``name`` (``unit`` m/s per field unit), checked against
+        the plausible speed (:class:`graphnav.log.Limits`)."""
+        v = _num(msg, name, lo=0.0, hi=math.inf)
+        if v is None:
+            return None
+        top = (self.limits or default_limits()).max_speed
+        if v * unit > top:
+            raise LogError(f"speed {v * unit:.4g} m/s beyond the plausible limit {top:g} m/s", field=name)
+        return v * unit
 
     # -- records
     def _fix(self, t: float | None, lat: float, lon: float, quality: int, hdop: float | None,
@@ -228,18 +330,22 @@ class NmeaDecoder:
         if handler is None:
             self.out.counts["ignored:" + kind] += 1
             return []
+        self.back_ok = False
         recs = handler(msg)
+        for r in recs:
+            check_record(r, self.limits)
         if self.keep:
             self.out.records.extend(recs)
         return recs
 
     def _gga(self, msg) -> list[Record]:
-        t = self._stamp(parse_time_of_day(_field(msg, 0)))
-        q_raw = _field(msg, 5).strip()
-        quality = int(_float(q_raw, "gps_qual", lo=0, hi=9)) if q_raw else 0
-        lat = parse_latlon(_field(msg, 1), _field(msg, 2), lat=True)
-        lon = parse_latlon(_field(msg, 3), _field(msg, 4), lat=False)
-        hdop = _opt_float(_field(msg, 7), "horizontal_dil", lo=0.0, hi=100.0)
+        tod = _tod(msg)
+        q = _num(msg, "gps_qual", lo=0, hi=9)
+        quality = 0 if q is None else int(q)
+        lat = parse_latlon(msg.lat, msg.lat_dir, lat=True)
+        lon = parse_latlon(msg.lon, msg.lon_dir, lat=False)
+        hdop = self._optional(_num, msg, "horizontal_dil", lo=0.0, hi=100.0)
+        t = self._stamp(tod)
         if quality == 0 or lat is None or lon is None:
             self.out.counts["no_fix"] += 1
             return []
@@ -248,66 +354,62 @@ class NmeaDecoder:
         return self._fix(t, lat, lon, quality, hdop, "gga")
 
     def _rmc(self, msg) -> list[Record]:
-        tod = parse_time_of_day(_field(msg, 0))
-        d = parse_date(_field(msg, 8))
+        tod = _tod(msg)
+        status = str(msg.status).strip()
+        if status not in ("A", "V"):
+            raise LogError(f"status {status[:5]!r} is not A/V", field="status")
+        lat = parse_latlon(msg.lat, msg.lat_dir, lat=True)
+        lon = parse_latlon(msg.lon, msg.lon_dir, lat=False)
+        mode = str(msg.mode_indicator).strip()[:1]
+        d = self._optional(parse_date, str(msg.data[8]) if len(msg.data) > 8 else "")
+        sog = self._optional(self._sog, msg, "spd_over_grnd", KNOT)
+        cog = self._optional(_num, msg, "true_course", lo=0.0, hi=360.0)
+        var = self._optional(_variation, msg, "mag_variation", "mag_var_dir")
         if tod is not None and d is not None:  # the date belongs to this sentence's time
             self._stamp(tod)
             self._set_date(d)
         t = self._stamp(tod)
-        status = _field(msg, 1).strip()
-        mode = _field(msg, 11).strip()[:1]
-        lat = parse_latlon(_field(msg, 2), _field(msg, 3), lat=True)
-        lon = parse_latlon(_field(msg, 4), _field(msg, 5), lat=False)
-        sog = _opt_float(_field(msg, 6), "spd_over_grnd", lo=0.0, hi=1e4)
-        cog = _opt_float(_field(msg, 7), "true_course", lo=0.0, hi=360.0)
-        var = _opt_float(_field(msg, 9), "mag_variation", lo=0.0, hi=180.0)
         if var is not None:
-            vd = _field(msg, 10).strip()
-            if vd not in ("E", "W"):
-                raise LogError(f"variation direction {vd[:5]!r} is not E/W", field="mag_var_dir")
-            self.variation = var if vd == "E" else -var
-        if status not in ("A", "V"):
-            raise LogError(f"status {status[:5]!r} is not A/V", field="status")
+            self.variation = var
         if status == "V" or mode == "N" or lat is None or lon is None:
             self.out.counts["no_fix"] += 1
             return []
         if t is not None and sog is not None:
-            self._speed(t, sog * KNOT, cog)
+            self._speed(t, sog, cog)
         if t is not None and t - self.last_gga_t <= GGA_HOLD_S:
             return []
         return self._fix(t, lat, lon, MODE_QUALITY.get(mode, 1), None, "rmc")
 
     def _zda(self, msg) -> list[Record]:
-        tod = parse_time_of_day(_field(msg, 0))
-        dd, mm, yy = (_field(msg, i).strip() for i in (1, 2, 3))
-        if tod is None:
-            raise LogError("ZDA without time", field="timestamp")
-        self._stamp(tod)
-        if dd or mm or yy:
-            try:
-                d = date(int(_float(yy, "year", lo=1900, hi=2200)), int(_float(mm, "month", lo=1, hi=12)),
-                         int(_float(dd, "day", lo=1, hi=31)))
-            except ValueError:
-                raise LogError(f"date {dd}/{mm}/{yy} does not exist", field="day") from None
-            self._set_date(d)
+        tod = _tod(msg)
+        if tod is None:  # a receiver without time yet sends empty ZDAs: no time, not an error
+            self.out.counts["zda_without_time"] += 1
+            return []
+        d = self._optional(_zda_date, msg)
+        if self.t is not None and not 0.0 <= self._absolute(tod)[1] - self.t <= DAY / 2:
+            self.out.counts["zda_behind"] += 1  # behind the clock (or before midnight of a day passed): no new time
+            return []
+        self._stamp(tod, "zda")
+        self._set_date(d)
         return []
 
     def _speed(self, t: float, sog: float, cog_deg: float | None) -> None:
         self.sog = (t, sog)
-        if self.keep:
+        self.out.counts["sog_cog_samples"] += 1
+        if self.keep and self.keep_sog_cog:
             self.out.sog_cog.append((t, sog, math.nan if cog_deg is None else cog_deg))
 
     def _vtg(self, msg) -> list[Record]:
-        cog = _opt_float(_field(msg, 0), "true_track", lo=0.0, hi=360.0)
-        kts = _opt_float(_field(msg, 4), "spd_over_grnd_kts", lo=0.0, hi=1e4)
-        kmh = _opt_float(_field(msg, 6), "spd_over_grnd_kmph", lo=0.0, hi=2e4)
-        if _field(msg, 8).strip()[:1] == "N" or (kts is None and kmh is None):
+        cog = self._optional(_num, msg, "true_track", lo=0.0, hi=360.0)
+        kts = self._optional(self._sog, msg, "spd_over_grnd_kts", KNOT)
+        kmh = self._optional(self._sog, msg, "spd_over_grnd_kmph", 1.0 / 3.6)
+        if str(msg.faa_mode).strip()[:1] == "N" or (kts is None and kmh is None):
             self.out.counts["no_speed"] += 1
             return []
         if self.t is None:
             self.out.counts["untimed"] += 1
             return []
-        self._speed(self.t, kts * KNOT if kts is not None else kmh / 3.6, cog)
+        self._speed(self.t, kts if kts is not None else kmh, cog)
         return []
 
     def _heading(self, heading_deg: float, src: str) -> list[Record]:
@@ -318,40 +420,31 @@ class NmeaDecoder:
         return [Heading(self.t, float(heading_deg_to_yaw(heading_deg % 360.0)), sigma)]
 
     def _hdt(self, msg) -> list[Record]:
-        h = _opt_float(_field(msg, 0), "heading", lo=0.0, hi=360.0)
+        h = _num(msg, "heading", lo=0.0, hi=360.0)
         return [] if h is None else self._heading(h, "HDT")
 
     def _ths(self, msg) -> list[Record]:
-        h = _opt_float(_field(msg, 0), "heading", lo=0.0, hi=360.0)
-        if h is None or _field(msg, 1).strip()[:1] == "V":
+        h = _num(msg, "heading", lo=0.0, hi=360.0)
+        if h is None or str(msg.mode).strip()[:1] == "V":
             self.out.counts["invalid_heading"] += 1
             return []
         return self._heading(h, "THS")
 
     def _hdg(self, msg) -> list[Record]:
-        h = _opt_float(_field(msg, 0), "heading", lo=0.0, hi=360.0)
+        h = _num(msg, "heading", lo=0.0, hi=360.0)
         if h is None:
             return []
-        for i, name in ((1, "deviation"), (3, "variation")):
-            v = _opt_float(_field(msg, i), name, lo=0.0, hi=180.0)
-            if v is None:
-                continue
-            e = _field(msg, i + 1).strip()
-            if e not in ("E", "W"):
-                raise LogError(f"direction {e[:5]!r} is not E/W", field=("dev_dir", "var_dir")[i // 2])
-            h += v if e == "E" else -v
-            if i == 3:
-                break
-        else:  # no variation in the sentence
-            if self.variation is not None:
-                h += self.variation
-            else:
+        dev = self._optional(_variation, msg, "deviation", "dev_dir")
+        var = self._optional(_variation, msg, "variation", "var_dir")
+        if var is None:  # none (or a bad one) in the sentence: the last RMC's
+            var = self.variation
+            if var is None:
                 self.out.counts["hdg_without_variation"] += 1
-        return self._heading(h, "HDG")
+        return self._heading(h + (dev or 0.0) + (var or 0.0), "HDG")
 
     def _rot(self, msg) -> list[Record]:
-        rot = _opt_float(_field(msg, 0), "rate_of_turn", lo=-1e5, hi=1e5)
-        if rot is None or _field(msg, 1).strip()[:1] == "V":
+        rot = _num(msg, "rate_of_turn", lo=-1e5, hi=1e5)
+        if rot is None or str(msg.status).strip()[:1] == "V":
             self.out.counts["invalid_rot"] += 1
             return []
         if self.t is None:
@@ -368,16 +461,19 @@ HANDLED = {"GGA", "RMC", "ZDA", "VTG", "HDT", "THS", "HDG", "ROT"}
 
 # ----------------------------------------------------------------------------- files
 
-def _lines(path: Path) -> list[bytes]:
-    try:
-        if path.name.lower().endswith(".gz"):
-            with gzip.open(path, "rb") as fh:
-                data = fh.read()
-        else:
-            data = path.read_bytes()
-    except (OSError, EOFError) as exc:
-        raise LogError(f"cannot read: {exc}", file=str(path)) from None
-    return data.splitlines()
+class _Sentences:
+    """The file's sentences (``\r\n``, ``\n`` or ``\r`` separated), decompressed when ``.gz``, read
+    afresh on every iteration (two passes, nothing held); a damaged stream:
+    :class:`graphnav.io.textlines.Lines` (LogError, or lenient: the lines before it)."""
+
+    def __init__(self, path: Path, lenient: bool, *, quiet: bool = False) -> None:
+        self.path, self.lenient, self.quiet = path, lenient, quiet
+        self.reader: Lines | None = None
+
+    def __iter__(self) -> Iterator[bytes]:
+        self.reader = Lines(self.path, lenient=self.lenient, quiet=self.quiet)
+        for _n, raw in self.reader:
+            yield from raw.splitlines()
 
 
 def _decode(raw: bytes) -> str:
@@ -393,7 +489,7 @@ def _first_date_day0(lines: Iterable[bytes]) -> float | None:
 
     A cheap first pass: only GGA/RMC/ZDA lines are parsed, bad ones are passed over (the main
     pass reports them)."""
-    probe = NmeaDecoder()
+    probe = NmeaDecoder(drop_bad_fields=True)
     for raw in lines:
         if raw[3:6] not in (b"GGA", b"RMC", b"ZDA"):
             continue
@@ -420,7 +516,7 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
     Sentences are parsed and decoded one line at a time (errors come in line order); only the
     records are kept."""
     path = Path(path)
-    lines = _lines(path)
+    lines = _Sentences(path, lenient)
     skipped: list[str] = []
     ignored: Counter = Counter()
 
@@ -450,7 +546,8 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
             yield lineno, msg
 
     frame = LocalFrame(float(origin[0]), float(origin[1]), 0.0) if origin is not None else None
-    dec = NmeaDecoder(frame, day0=_first_date_day0(lines), **decoder_options)
+    decoder_options.setdefault("drop_bad_fields", lenient)
+    dec = NmeaDecoder(frame, day0=_first_date_day0(_Sentences(path, True, quiet=True)), **decoder_options)
     pending: list[tuple[int, pynmea2.NMEASentence]] = []  # untimed sentences before the first time
     last_t = -math.inf
     for lineno, msg in sentences():
@@ -460,6 +557,7 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
                 pending.append((lineno, msg))
                 continue
             dec.feed(msg)
+            back_ok = dec.back_ok  # a fix behind a ZDA by the time rule
             if pending and dec.t is not None:
                 todo, pending = pending, []
                 for ln, m in todo:
@@ -468,7 +566,7 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
                     except LogError as err:
                         bad(err, ln)
             if dec.t is not None:
-                if dec.t < last_t:
+                if dec.t < last_t and not back_ok:
                     raise LogError(f"time goes backwards ({dec.t!r} after {last_t!r})", field="timestamp")
                 last_t = dec.t
         except LogError as err:
@@ -484,12 +582,16 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
     for k, v in sorted(out.counts.items()):
         if k.startswith("ignored:"):
             ignored[k.split(":", 1)[1]] += v
-        elif k in ("no_fix", "rot_without_sog", "hdg_without_variation", "untimed", "duplicate_fix"):
+        elif k.startswith("dropped_field:"):
+            meta.setdefault("dropped_fields", {})[k.split(":", 1)[1]] = v
+        elif k in ("no_fix", "rot_without_sog", "hdg_without_variation", "untimed", "duplicate_fix", "zda_ahead",
+                   "zda_behind", "zda_without_time"):
             meta[k] = v
     if ignored:
         meta["ignored"] = dict(sorted(ignored.items()))
-    meta["sog_cog_samples"] = len(out.sog_cog)
+    meta["sog_cog_samples"] = out.counts["sog_cog_samples"]
     if lenient:
+        note_truncation(meta, lines.reader, skipped)
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
     return out, meta
@@ -502,5 +604,6 @@ def read_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, f
     ``origin`` = (lat, lon) degrees of the local frame (default: the first fix). Strict by
     default: the first bad sentence raises :class:`LogError` with file, line and field.
     """
+    options.setdefault("keep_sog_cog", False)  # the samples are not log records: not held
     out, meta = parse_nmea(path, lenient=lenient, origin=origin, **options)
     return NavLog.from_unsorted(out.records, (), meta)

@@ -8,15 +8,26 @@ round-trip exactly, ``beacon_known/<field>``, and ``meta`` (a JSON string).
 from __future__ import annotations
 
 import json
+import math
+import zipfile
 from pathlib import Path
 
 import numpy as np
+from numpy.lib import format as npformat
 
 from ..errors import LogError
-from ..log import RECORD_TYPES, SCALAR_FIELDS, KnownBeacon, NavLog, Record, Scan, check_record
+from ..log import RECORD_TYPES, SCALAR_FIELDS, KnownBeacon, Limits, NavLog, Record, Scan, check_record
 
 KINDS = list(RECORD_TYPES)
 FORMAT_VERSION = 1
+OPTIONAL_COLUMNS = ("range_max",)  # added after version 1 files were written: NaN when absent
+KNOWN_MEMBERS = frozenset(
+    ["version", "order", "meta", "scan/offsets", "scan/ranges", "scan/angles"]
+    + [f"{k}/{f}" for k in KINDS for f in SCALAR_FIELDS[k]]
+    + [f"beacon_known/{f}" for f in ("id", "x", "y", "sigma")])
+#: Default bound on the decoded size of the arrays a log declares [bytes]: 4 GiB, a day of 10 Hz
+#: 360-beam scans (float32 ranges + angles, ~2.5 GB) with room to spare. ``read_npz(max_bytes=)``.
+MAX_DECODED_BYTES = 4 << 30
 
 
 def write_npz(log: NavLog, path: str | Path) -> None:
@@ -46,65 +57,138 @@ def write_npz(log: NavLog, path: str | Path) -> None:
         np.savez_compressed(fh, **arrays)
 
 
-def _get(data: dict, key: str, path: Path, *, numeric: bool = True, integer: bool = False,
+class _Archive:
+    """The members of a graphnav ``.npz`` that the reader uses, read one at a time on demand.
+
+    Members with other names are never decompressed. The declared (zip header) sizes of the known
+    members must add up to at most ``max_bytes``, and each member's array header must fit in its
+    declared size, before any array data is read; every read array is exactly the size its header
+    states (numpy preallocates it and streams the member into it)."""
+
+    def __init__(self, path: Path, max_bytes: int) -> None:
+        self.path = path
+        try:
+            self.zf = zipfile.ZipFile(path)
+            infos = {i.filename: i for i in self.zf.infolist()}
+        except Exception as exc:  # zipfile raises many types for a damaged archive
+            raise LogError(f"not a graphnav npz log: {exc.__class__.__name__}: {str(exc)[:200]}",
+                           file=str(path)) from None
+        self.info = {k: infos[k + ".npy"] for k in KNOWN_MEMBERS if k + ".npy" in infos}
+        declared = sum(i.file_size for i in self.info.values())
+        if declared > max_bytes:
+            raise LogError(f"its arrays declare {declared / 2**20:.0f} MiB decoded, more than the "
+                           f"{max_bytes / 2**20:.0f} MiB allowed (max_bytes)", file=str(path))
+
+    def close(self) -> None:
+        self.zf.close()
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.info
+
+    def header(self, key: str) -> tuple[tuple[int, ...], np.dtype]:
+        """Shape and dtype from the member's ``.npy`` header (no array data read)."""
+        zi = self.info[key]
+        try:
+            with self.zf.open(zi) as fp:
+                version = npformat.read_magic(fp)
+                if version == (1, 0):
+                    shape, _, dtype = npformat.read_array_header_1_0(fp)
+                else:
+                    shape, _, dtype = npformat.read_array_header_2_0(fp)
+        except Exception as exc:  # noqa: BLE001 - a damaged member: many exception types
+            raise LogError(f"bad array header: {exc.__class__.__name__}: {str(exc)[:120]}", file=str(self.path),
+                           field=key) from None
+        if dtype.hasobject or math.prod(shape) * dtype.itemsize > zi.file_size:
+            raise LogError(f"array header ({dtype}, shape {shape}) does not fit the member's "
+                           f"{zi.file_size} bytes", file=str(self.path), field=key)
+        return shape, dtype
+
+    def read(self, key: str) -> np.ndarray:
+        self.header(key)
+        try:
+            with self.zf.open(self.info[key]) as fp:
+                return npformat.read_array(fp, allow_pickle=False)
+        except Exception as exc:  # noqa: BLE001 - CRC error, truncated member, ...
+            raise LogError(f"cannot read array: {exc.__class__.__name__}: {str(exc)[:120]}",
+                           file=str(self.path), field=key) from None
+
+
+def _get(data: _Archive, key: str, path: Path, *, numeric: bool = True, integer: bool = False,
          length: int | None = None) -> np.ndarray:
-    """A 1-D array from the archive, checked for kind and length; LogError naming it otherwise."""
-    arr = data.get(key)
-    if arr is None:
+    """A 1-D array from the archive, checked for kind and length (from its header, before its data
+    is read); LogError naming it otherwise."""
+    if key not in data:
         raise LogError("missing array", file=str(path), field=key)
-    ok_kind = (np.issubdtype(arr.dtype, np.integer) if integer else
-               np.issubdtype(arr.dtype, np.number) and not np.issubdtype(arr.dtype, np.complexfloating)
-               if numeric else arr.dtype.kind == "U")
-    if arr.ndim != 1 or not ok_kind:
+    shape, dtype = data.header(key)
+    ok_kind = (np.issubdtype(dtype, np.integer) if integer else
+               np.issubdtype(dtype, np.number) and not np.issubdtype(dtype, np.complexfloating)
+               if numeric else dtype.kind == "U")
+    if len(shape) != 1 or not ok_kind:
         raise LogError(f"expected a 1-D {'integer' if integer else 'numeric' if numeric else 'string'} array, "
-                       f"got {arr.dtype} with shape {arr.shape}", file=str(path), field=key)
-    if length is not None and arr.shape[0] != length:
-        raise LogError(f"expected {length} values, got {arr.shape[0]}", file=str(path), field=key)
-    return arr
+                       f"got {dtype} with shape {shape}", file=str(path), field=key)
+    if length is not None and shape[0] != length:
+        raise LogError(f"expected {length} values, got {shape[0]}", file=str(path), field=key)
+    return data.read(key)
 
 
-def read_npz(path: str | Path) -> NavLog:
-    """Read a log written by :func:`write_npz`. Errors name the file and the array."""
+def read_npz(path: str | Path, *, max_bytes: int = MAX_DECODED_BYTES, lenient: bool = False,
+             limits: Limits | None = None) -> NavLog:
+    """Read a log written by :func:`write_npz`. Errors name the file and the array.
+
+    Only the members the format defines are read (one at a time, each checked against its header
+    first); ``max_bytes`` bounds their total declared decoded size (:class:`_Archive`). Records
+    are checked by :func:`graphnav.log.check_record` (``limits``); with ``lenient`` an invalid
+    record is skipped and counted (``meta["skipped"]``, ``meta["skipped_errors"]``) instead."""
     path = Path(path)
+    data = _Archive(path, max_bytes)
     try:
-        z = np.load(path, allow_pickle=False)
-        data = {k: z[k] for k in z.files}
-    except Exception as exc:  # numpy/zipfile raise many types for a corrupt archive
-        raise LogError(f"not a graphnav npz log: {exc.__class__.__name__}: {exc}", file=str(path)) from None
+        return _read(data, path, lenient, limits)
+    finally:
+        data.close()
+
+
+def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> NavLog:
     order = _get(data, "order", path, integer=True)
-    meta_arr = data.get("meta", np.array("{}"))
+    meta_arr = data.read("meta") if "meta" in data else np.array("{}")
     try:
         meta = json.loads(str(meta_arr.item())) if meta_arr.dtype.kind == "U" and meta_arr.ndim == 0 else None
-    except json.JSONDecodeError:
+    except (ValueError, RecursionError):  # JSONDecodeError, or a > 4300-digit integer
         meta = None
     if not isinstance(meta, dict):
         raise LogError("meta must be a JSON object string", file=str(path), field="meta")
     meta["source"] = str(path)
-    per_kind: dict[str, list[Record]] = {}
+    per_kind: dict[str, list[Record | None]] = {}
+    skipped: list[str] = []
     for kind in KINDS:
         if f"{kind}/t" not in data:
             continue
-        n = _get(data, f"{kind}/t", path).shape[0]
+        n = _get(data, f"{kind}/t", path, length=int(np.count_nonzero(order == KINDS.index(kind)))).shape[0]
         cols = {name: _get(data, f"{kind}/{name}", path, numeric=name != "id", length=n).tolist()
+                if f"{kind}/{name}" in data or name not in OPTIONAL_COLUMNS else [math.nan] * n
                 for name in SCALAR_FIELDS[kind]}
-        recs: list[Record] = []
+        recs: list[Record | None] = []
         if kind == "scan":
             off = _get(data, "scan/offsets", path, integer=True, length=n + 1)
-            rng = _get(data, "scan/ranges", path).astype(float)
-            ang = _get(data, "scan/angles", path, length=rng.shape[0]).astype(float)
-            if off[0] != 0 or np.any(np.diff(off) < 0) or off[-1] != rng.shape[0]:
+            if off[0] != 0 or np.any(np.diff(off) < 0):
                 raise LogError("offsets must rise from 0 to the number of beams", file=str(path), field="scan/offsets")
+            rng = _get(data, "scan/ranges", path, length=int(off[-1])).astype(float)
+            ang = _get(data, "scan/angles", path, length=rng.shape[0]).astype(float)
             for i in range(n):
-                recs.append(Scan(float(cols["t"][i]), rng[off[i]:off[i + 1]], ang[off[i]:off[i + 1]]))
+                recs.append(Scan(float(cols["t"][i]), rng[off[i]:off[i + 1]], ang[off[i]:off[i + 1]],
+                                 float(cols["range_max"][i])))
         else:
             cls = RECORD_TYPES[kind]
             for i in range(n):
                 recs.append(cls(**{k: (str(v[i]) if k == "id" else float(v[i])) for k, v in cols.items()}))
         for i, r in enumerate(recs):
             try:
-                check_record(r)
+                check_record(r, limits)
             except LogError as err:
-                raise LogError(f"record {i}: {err.message}", file=str(path), field=f"{kind}/{err.field}") from None
+                err = LogError(f"record {i}: {err.message}", file=str(path), field=f"{kind}/{err.field}")
+                if not lenient:
+                    raise err from None
+                skipped.append(str(err))
+                recs[i] = None
         per_kind[kind] = recs
     cursor = dict.fromkeys(per_kind, 0)
     records: list[Record] = []
@@ -112,7 +196,9 @@ def read_npz(path: str | Path) -> NavLog:
         k = KINDS[c] if 0 <= c < len(KINDS) else None
         if k is None or k not in per_kind or cursor[k] >= len(per_kind[k]):
             raise LogError("record order does not match the record arrays", file=str(path), field="order")
-        records.append(per_kind[k][cursor[k]])
+        rec = per_kind[k][cursor[k]]
+        if rec is not None:
+            records.append(rec)
         cursor[k] += 1
     if any(cursor[k] != len(v) for k, v in per_kind.items()):
         raise LogError("record order does not match the record arrays", file=str(path), field="order")
@@ -123,9 +209,12 @@ def read_npz(path: str | Path) -> NavLog:
         known = [KnownBeacon(str(ids[i]), float(xs[i]), float(ys[i]), float(sg[i])) for i in range(len(ids))]
         for b in known:
             try:
-                check_record(b)
+                check_record(b, limits)
             except LogError as err:
                 raise LogError(err.message, file=str(path), field=f"beacon_known/{err.field}") from None
+    if lenient:
+        meta["skipped"] = len(skipped)
+        meta["skipped_errors"] = skipped[:20]
     try:
         return NavLog(records, known, meta)
     except LogError as err:

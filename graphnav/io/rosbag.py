@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import LogError
 from ..geodesy import LocalFrame
 from ..geometry import wrap_angle
-from ..log import Gnss, Heading, Imu, NavLog, Odometry, Record, Scan
+from ..log import MAX_STATED_RANGE, Gnss, Heading, Imu, Limits, NavLog, Odometry, Record, Scan, check_record
 from .nmea import NmeaDecoder, parse_sentence
 
 DEFAULT_GNSS_SIGMA = 3.0  # [m] NavSatFix with COVARIANCE_TYPE_UNKNOWN
@@ -91,11 +91,12 @@ def yaw_of_quaternion(x: float, y: float, z: float, w: float) -> float:
 
 
 class _Converter:
-    def __init__(self, origin: tuple[float, float] | None, imu_heading_hz: float | None) -> None:
+    def __init__(self, origin: tuple[float, float] | None, imu_heading_hz: float | None,
+                 limits: Limits | None = None) -> None:
         self.frame = LocalFrame(float(origin[0]), float(origin[1])) if origin else None
         self.imu_heading_dt = 1.0 / imu_heading_hz if imu_heading_hz else 0.0
         self.last_imu_heading: dict[str, float] = {}
-        self.nmea = NmeaDecoder(self.frame, keep=False)
+        self.nmea = NmeaDecoder(self.frame, keep=False, limits=limits)
         self.counts: dict[str, int] = {}
 
     def count(self, k: str) -> None:
@@ -105,7 +106,8 @@ class _Converter:
         r = np.asarray(m.ranges, dtype=float).copy()
         r[~np.isfinite(r) | (r < m.range_min) | (r > m.range_max)] = np.nan
         a = m.angle_min + m.angle_increment * np.arange(r.size)
-        return [Scan(t, r, a)]
+        top = float(m.range_max)  # the sensor's stated range, when it is one a log may state
+        return [Scan(t, r, a, top if 0.0 < top <= MAX_STATED_RANGE else math.nan)]
 
     def gnss(self, m, t: float, topic: str) -> list[Record]:
         if m.status.status < 0 or not (math.isfinite(m.latitude) and math.isfinite(m.longitude)):
@@ -201,15 +203,16 @@ def choose_topics(conns: list[tuple[str, str, int]], topics: dict[str, str] | No
 
 def read_bag(path: str | Path, topics: dict[str, str] | None = None, *,
              origin: tuple[float, float] | None = None,
-             imu_heading_hz: float | None = 10.0, lenient: bool = False) -> NavLog:
+             imu_heading_hz: float | None = 10.0, lenient: bool = False, limits: Limits | None = None) -> NavLog:
     """Read a ROS 1/ROS 2 bag into a :class:`NavLog` (see the module docstring).
 
     ``topics`` maps a kind (``scan``, ``gnss``, ``imu``, ``heading``, ``odometry``, ``nmea``) to a
     topic name. A damaged bag raises :class:`LogError` naming the file; with ``lenient`` a message
-    that cannot be decoded is skipped and counted in ``meta["skipped"]``.
+    that cannot be decoded, or gives a physically invalid record (:func:`graphnav.log.check_record`,
+    ``limits``), is skipped and counted in ``meta["skipped"]``.
     """
     path = Path(path)
-    conv = _Converter(origin, imu_heading_hz)
+    conv = _Converter(origin, imu_heading_hz, limits)
     records: list[Record] = []
     skipped: list[str] = []
     with _open(path) as reader:
@@ -226,6 +229,8 @@ def read_bag(path: str | Path, topics: dict[str, str] | None = None, *,
                     recs = handlers[kind](msg, _stamp(msg, ns), conn.topic)
                     if kind == "heading":
                         recs = [r for r in recs if isinstance(r, Heading)]
+                    for r in recs:
+                        check_record(r, limits)
                     records.extend(recs)
                 except LogError as err:
                     err = LogError(err.message, file=str(path), line=i + 1, field=f"{conn.topic}/{err.field}")
@@ -327,7 +332,7 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
                 put("/scan", "sensor_msgs/msg/LaserScan", r.t, T["sensor_msgs/msg/LaserScan"](
                     header=_header(ts, r.t, "laser", ros1), angle_min=float(a[0]) if a.size else 0.0,
                     angle_max=float(a[-1]) if a.size else 0.0, angle_increment=inc, time_increment=0.0,
-                    scan_time=0.0, range_min=0.0, range_max=1e4, ranges=ranges,
+                    scan_time=0.0, range_min=0.0, range_max=float(r.max_range), ranges=ranges,
                     intensities=np.zeros(0, dtype=np.float32)))
             elif isinstance(r, Gnss):
                 lat, lon = frame.to_geodetic(r.x, r.y)

@@ -43,7 +43,7 @@ import signal
 import socket
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -291,7 +291,7 @@ class LiveRunner:
         while self.scan_i < len(self.scans) and self.scans[self.scan_i].t + self.scan_shift <= t_stream:
             sc = self.scans[self.scan_i]
             self.scan_i += 1
-            self._record(Scan(sc.t + self.scan_shift, sc.ranges, sc.angles) if self.scan_shift else sc, None)
+            self._record(replace(sc, t=sc.t + self.scan_shift) if self.scan_shift else sc, None)
         if self.scan_i >= len(self.scans):
             self.stop_reason = "end of --scans-from replay"
             self._stop.set()

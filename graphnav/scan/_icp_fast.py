@@ -16,12 +16,44 @@ import math
 import numpy as np
 from numba import njit
 
+MAX_CELLS_PER_POINT = 16
+MIN_CELL_CAP = 1 << 16
+"""A grid has at most ``max(MAX_CELLS_PER_POINT * n, MIN_CELL_CAP)`` cells: O(n) memory and work per
+query whatever the points' spread (one far point would otherwise size the grid by its bounding box)."""
+
+
+@njit(cache=True)
+def grid_cell(h, ex, ey, n):
+    """The cell side for points spanning ``ex`` x ``ey``: ``h``, doubled until the grid has at most
+    ``max(MAX_CELLS_PER_POINT * n, MIN_CELL_CAP)`` cells (nearest-neighbour search is exact at any
+    side; only its speed depends on it). The extents must be finite."""
+    if not (math.isfinite(ex) and math.isfinite(ey) and math.isfinite(h) and h > 0.0):
+        raise ValueError("grid: non-finite extent or cell side")
+    cap = max(MAX_CELLS_PER_POINT * n, MIN_CELL_CAP)
+    while (np.floor(ex / h) + 1.0) * (np.floor(ey / h) + 1.0) > cap:
+        h *= 2.0
+    return h
+
+
+@njit(cache=True)
+def cell_index(v, vmin, h, nv):
+    """``floor((v - vmin) / h)`` clamped to ``[0, nv - 1]`` (in floating point first, so a far or
+    non-finite coordinate cannot overflow the integer conversion)."""
+    f = np.floor((v - vmin) / h)
+    if not f >= 0.0:  # also NaN
+        return 0
+    if f > nv - 1:
+        return nv - 1
+    return int(f)
+
 
 @njit(cache=True)
 def build_grid(tx, ty, h):
-    """Bucket target points into square cells of side ``h`` (counting sort)."""
+    """Bucket target points into square cells (counting sort). The cell side is ``h`` or larger
+    (:func:`grid_cell`: at most O(n) cells); returns it with the grid."""
     n = tx.shape[0]
     xmin, ymin = tx.min(), ty.min()
+    h = grid_cell(h, tx.max() - xmin, ty.max() - ymin, n)
     nx = int((tx.max() - xmin) / h) + 1
     ny = int((ty.max() - ymin) / h) + 1
     cell = np.empty(n, np.int64)
@@ -37,7 +69,7 @@ def build_grid(tx, ty, h):
     for i in range(n):
         items[fill[cell[i]]] = i
         fill[cell[i]] += 1
-    return xmin, ymin, nx, ny, start, items
+    return xmin, ymin, h, nx, ny, start, items
 
 
 @njit(cache=True)
@@ -58,10 +90,8 @@ def _scan_cell(px, py, ix, iy, ny, start, items, tx, ty, best, bi):
 def nearest(px, py, tx, ty, xmin, ymin, h, nx, ny, start, items):
     """Exact nearest target point of (px, py): rings of cells around the (clamped) home cell until
     no unvisited cell can hold a closer point. Returns (distance, index)."""
-    cx = int(math.floor((px - xmin) / h))
-    cy = int(math.floor((py - ymin) / h))
-    cx = min(max(cx, 0), nx - 1)
-    cy = min(max(cy, 0), ny - 1)
+    cx = cell_index(px, xmin, h, nx)
+    cy = cell_index(py, ymin, h, ny)
     # distance from p to the home cell's box (0 inside); inside, the margin to its nearest edge
     bx0, by0 = xmin + cx * h, ymin + cy * h
     ox = max(bx0 - px, 0.0, px - (bx0 + h))
@@ -103,10 +133,10 @@ def nearest_from(px, py, j0, tx, ty, xmin, ymin, h, nx, ny, start, items):
     best = dx * dx + dy * dy
     bi = j0
     r = math.sqrt(best) * (1.0 + 1e-12) + 1e-12  # padded against rounding at the box's edge
-    x0 = max(int(math.floor((px - r - xmin) / h)), 0)
-    x1 = min(int(math.floor((px + r - xmin) / h)), nx - 1)
-    y0 = max(int(math.floor((py - r - ymin) / h)), 0)
-    y1 = min(int(math.floor((py + r - ymin) / h)), ny - 1)
+    x0 = cell_index(px - r, xmin, h, nx)
+    x1 = cell_index(px + r, xmin, h, nx)
+    y0 = cell_index(py - r, ymin, h, ny)
+    y1 = cell_index(py + r, ymin, h, ny)
     for ix in range(x0, x1 + 1):
         for iy in range(y0, y1 + 1):
             best, bi = _scan_cell(px, py, ix, iy, ny, start, items, tx, ty, best, bi)
@@ -177,11 +207,11 @@ def loop_start(sx, sy, tx, ty, h):
     """What both loops set up: the target's grid (:func:`build_grid`), the work arrays ``d``, ``idx``,
     ``w``, ``px``, ``py`` and the source's largest range (a step's bound on a point's motion)."""
     n = sx.shape[0]
-    xmin, ymin, nx, ny, start, items = build_grid(tx, ty, h)
+    xmin, ymin, h, nx, ny, start, items = build_grid(tx, ty, h)
     src_r = 0.0
     for i in range(n):
         src_r = max(src_r, math.sqrt(sx[i] * sx[i] + sy[i] * sy[i]))
-    return (xmin, ymin, nx, ny, start, items, np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n),
+    return (xmin, ymin, h, nx, ny, start, items, np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n),
             np.empty(n), src_r)
 
 
@@ -212,7 +242,7 @@ def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, v
     """Algorithm 1 for variant 0=K, 1=H, 2=HM, 3=HD. Returns (theta, tx, ty, idx, iterations,
     converged)."""
     n = sx.shape[0]
-    xmin, ymin, nx, ny, start, items, d, idx, w, px, py, src_r = loop_start(sx, sy, tx, ty, h)
+    xmin, ymin, h, nx, ny, start, items, d, idx, w, px, py, src_r = loop_start(sx, sy, tx, ty, h)
     t_x, t_y = t0x, t0y
     old_res = -1.0
     converged = False
@@ -506,6 +536,9 @@ def hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2,
 @njit(cache=True)
 def _solve3(h, b):
     """``-(h + 1e-12 I)^-1 b`` as :func:`graphnav.scan.icp._p2l_step` (least squares when singular)."""
+    if not (np.all(np.isfinite(h)) and np.all(np.isfinite(b))):
+        return np.zeros(3)  # no step (numba's solvers raise on non-finite input, and a raise in the
+        # except branch below is a numba internal error, not an exception)
     a = h.copy()
     for k in range(3):
         a[k, k] += 1e-12
@@ -522,7 +555,7 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
     ``warmup``, then Gauss-Newton steps of the point-to-line cost. Returns (theta, tx, ty, idx,
     iterations, converged), as :func:`p2p_loop`."""
     n = sx.shape[0]
-    xmin, ymin, nx, ny, start, items, d, idx, w, px, py, src_r = loop_start(sx, sy, tx, ty, h)
+    xmin, ymin, h, nx, ny, start, items, d, idx, w, px, py, src_r = loop_start(sx, sy, tx, ty, h)
     t_x, t_y = t0x, t0y
     old_res = -1.0
     converged = False
@@ -666,7 +699,7 @@ def knn_line_normals(tx, ty, k, h):
     target point's ``k`` nearest neighbours (PCA; exact k nearest by rings of grid cells)."""
     n = tx.shape[0]
     k = min(k, n)
-    xmin, ymin, nx, ny, start, items = build_grid(tx, ty, h)
+    xmin, ymin, h, nx, ny, start, items = build_grid(tx, ty, h)
     bd = np.empty(k)
     bi = np.empty(k, np.int64)
     nrx = np.empty(n)
@@ -675,8 +708,8 @@ def knn_line_normals(tx, ty, k, h):
     rmax = max(nx, ny)
     for i in range(n):
         px, py = tx[i], ty[i]
-        cx = min(max(int(math.floor((px - xmin) / h)), 0), nx - 1)
-        cy = min(max(int(math.floor((py - ymin) / h)), 0), ny - 1)
+        cx = cell_index(px, xmin, h, nx)
+        cy = cell_index(py, ymin, h, ny)
         bx0, by0 = xmin + cx * h, ymin + cy * h
         edge = max(min(px - bx0, bx0 + h - px, py - by0, by0 + h - py), 0.0)  # margin to the home cell's edge
         cnt = 0

@@ -23,6 +23,7 @@ the measurement of a ``gtsam.BetweenFactorPose2(prev, cur, Pose2(dx, dy, dyaw), 
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -31,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ..log import MAX_STATED_RANGE
 from . import degeneracy
 from .lidar import SIGMA_ALPHA, SIGMA_R_REL, polar_to_points
 
@@ -265,6 +267,10 @@ def match_points(
     ns, nt = len(src_xy), len(tgt_xy)
     if ns < cfg.min_points or nt < cfg.min_points:
         return _failed(f"too few points (source {ns}, target {nt}, need {cfg.min_points})", init, ns, nt, t0)
+    th0, g0 = _pose_parts(init)
+    if math.hypot(g0[0], g0[1]) > 2.0 * MAX_STATED_RANGE:  # no point of either scan can overlap the other
+        return _failed(f"initial guess moves the scan {math.hypot(g0[0], g0[1]):.3g} m, beyond any LiDAR's reach",
+                       init, ns, nt, t0)
     if cfg.equalize and ns != nt:  # the paper: thin the larger set at random
         rng = np.random.default_rng(cfg.seed)
         keep = np.sort(rng.choice(max(ns, nt), min(ns, nt), replace=False))
@@ -328,10 +334,14 @@ _NO_SIGMA = np.zeros(0)
 
 
 def _finite(xy: NDArray, sigma: NDArray | None) -> tuple[NDArray, NDArray | None]:
-    """Rows of ``xy`` (and ``sigma``) with finite coordinates (no copy when all are)."""
-    if np.isfinite(xy).all():
+    """Rows of ``xy`` (and ``sigma``) with finite coordinates within
+    :data:`graphnav.log.MAX_STATED_RANGE` of the sensor on each axis (no copy when all are): a
+    point farther away is no LiDAR return, and bounding them bounds the matcher's grid and work."""
+    with np.errstate(invalid="ignore"):
+        ok = np.abs(xy) <= MAX_STATED_RANGE  # False for NaN
+    if ok.all():
         return xy, sigma
-    keep = np.isfinite(xy).all(axis=1)
+    keep = ok.all(axis=1)
     return xy[keep], None if sigma is None else sigma[keep]
 
 
@@ -687,9 +697,13 @@ def _report(cfg, pose, cov, kscale, res_rms, info, s2, radius, n_use, inlier_fra
 
 
 def scan_points(scan: Any, config: IcpConfig | None = None) -> NDArray[np.float64]:
-    """Points of a :class:`graphnav.log.Scan` (eq. 10), missing returns dropped, range-gated."""
+    """Points of a :class:`graphnav.log.Scan` (eq. 10), missing returns dropped, range-gated by the
+    config's ``max_range`` and the scan's own maximum (:attr:`graphnav.log.Scan.max_range`)."""
     cfg = config or IcpConfig()
-    pts, _, _ = polar_to_points(scan.ranges, scan.angles, min_range=cfg.min_range, max_range=cfg.max_range)
+    top = getattr(scan, "max_range", None)
+    if cfg.max_range is not None:
+        top = cfg.max_range if top is None else min(top, cfg.max_range)
+    pts, _, _ = polar_to_points(scan.ranges, scan.angles, min_range=cfg.min_range, max_range=top)
     return pts
 
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..log import DEFAULT_MAX_RANGE
+
 SIGMA_R_REL = 0.004258  # Scanse Sweep range error per metre of range (the paper, section 2)
 SIGMA_ALPHA = np.radians(0.2)  # angular 1-sigma [rad]; the paper gives no figure (see docs/weighted-icp.md)
 
@@ -21,7 +23,8 @@ def polar_to_points(
     """Eq. 10: ``p = (r cos a, r sin a)`` for the valid returns.
 
     Missing returns (NaN, inf, ``<= 0``) are dropped, and so are ranges outside
-    ``[min_range, max_range]``. Returns ``(points (N, 2), r (N,), alpha (N,))``.
+    ``[min_range, max_range]`` (``max_range`` None: :data:`graphnav.log.DEFAULT_MAX_RANGE`, so no
+    return is ever unbounded). Returns ``(points (N, 2), r (N,), alpha (N,))``.
     """
     r = np.asarray(ranges, dtype=float).ravel()
     a = np.asarray(angles, dtype=float).ravel()
@@ -29,8 +32,7 @@ def polar_to_points(
         raise ValueError(f"ranges {r.shape} and angles {a.shape} differ in length")
     with np.errstate(invalid="ignore"):
         keep = np.isfinite(r) & np.isfinite(a) & (r > 0.0) & (r >= min_range)
-        if max_range is not None:
-            keep &= r <= max_range
+        keep &= r <= (DEFAULT_MAX_RANGE if max_range is None else max_range)
     r, a = r[keep], a[keep]
     return np.column_stack([r * np.cos(a), r * np.sin(a)]), r, a
 

@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from ..geometry import wrap_angle
+from ..log import DEFAULT_MAX_RANGE
 
 METHODS = (
     "small_gicp:VGICP",
@@ -103,8 +104,9 @@ class Aligned:
 
 # -- geometry helpers -----------------------------------------------------------------------------
 def scan_points(ranges: ArrayLike, angles: ArrayLike, *, min_range: float = 0.0,
-                max_range: float = np.inf) -> NDArray[np.float64]:
-    """Polar scan -> (N, 2) body-frame points; missing returns (NaN, inf, <= 0) dropped."""
+                max_range: float = DEFAULT_MAX_RANGE) -> NDArray[np.float64]:
+    """Polar scan -> (N, 2) body-frame points; missing returns (NaN, inf, <= 0, beyond
+    ``max_range``) dropped."""
     r = np.asarray(ranges, dtype=float)
     a = np.asarray(angles, dtype=float)
     ok = np.isfinite(r) & (r > max(min_range, 0.0)) & (r <= max_range) & np.isfinite(a)

@@ -28,7 +28,7 @@ from graphnav.io.carmen import (
     saturation_threshold,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 LOGS = ("acapulco", "belgioioso", "edmonton", "freiburg-079", "freiburg-101", "freiburg-campus",
         "infinite-corridor", "orebro", "seattle")
 

@@ -17,7 +17,7 @@ from graphnav.errors import LogError
 from graphnav.io import load_log
 from graphnav.io.mrclam import PRIOR_SIGMA, read_mrclam, robots
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 HEADER = "# UTIAS Multi-Robot Cooperative Localization and Mapping Dataset\n# columns ...\n"
 
 

@@ -384,13 +384,13 @@ def test_numba_backend_equals_numpy():
     q = rng.uniform(-40, 40, (200, 2))  # also far outside the target's box
     grid = build_grid(tgt[:, 0].copy(), tgt[:, 1].copy(), 0.5)
     d_ref, i_ref = cKDTree(tgt).query(q)
-    got = np.array([nearest(x, y, tgt[:, 0].copy(), tgt[:, 1].copy(), grid[0], grid[1], 0.5, *grid[2:])
+    got = np.array([nearest(x, y, tgt[:, 0].copy(), tgt[:, 1].copy(), *grid)
                     for x, y in q])
     assert np.array_equal(got[:, 1].astype(int), i_ref)
     assert np.allclose(got[:, 0], d_ref, atol=1e-12)
     # the search bounded by a candidate (any target point, near or far) finds the same point
     j0 = rng.integers(0, len(tgt), len(q))
-    got = np.array([nearest_from(x, y, j, tgt[:, 0].copy(), tgt[:, 1].copy(), grid[0], grid[1], 0.5, *grid[2:])
+    got = np.array([nearest_from(x, y, j, tgt[:, 0].copy(), tgt[:, 1].copy(), *grid)
                     for (x, y), j in zip(q, j0, strict=True)])
     assert np.array_equal(got[:, 1].astype(int), i_ref)
     nx, ny, fl = knn_line_normals(tgt[:, 0].copy(), tgt[:, 1].copy(), 12, 0.5)
