@@ -156,8 +156,7 @@ class GraphBuilder:
         self.due: dict[int, list[tuple[int, Record]]] = {}  # step -> (attach, record)
         self.late: list[tuple[int, Record]] = []  # after the last keyframe's batch (finish)
         self.odo_t: list[float] = []
-        self.odo_rows: list[tuple[float, float, float, float, float]] = []
-        self.odo_defaulted = False
+        self.odo_rows: list[tuple[float, float, float, float, float, float]] = []  # t, v, w, sv, sw, density
         self.held: list[Record] | None = []  # before the anchor is chosen
         self.t_last: float | None = None
         self.t_data: float | None = None
@@ -301,11 +300,14 @@ class GraphBuilder:
     def _odometry_sample(self, r: Odometry) -> None:
         cfg = self.cfg
         sv, sw = r.sigma_v, r.sigma_w
-        if not (math.isfinite(sv) and math.isfinite(sw)):
-            self.odo_defaulted = True
+        if math.isfinite(sv) and math.isfinite(sw):
+            row = (r.t, r.v, r.w, sv, sw, 0.0)
+        else:  # the defaults: noise densities, relative to the speed and turn rate plus a floor
             self.defaulted.add("odometry")
-        row = (r.t, r.v, r.w, sv if math.isfinite(sv) else cfg.odo_sigma_v,
-               sw if math.isfinite(sw) else math.radians(cfg.odo_sigma_w_deg))
+            w_floor = math.radians(cfg.odo_sigma_w_deg)
+            row = (r.t, r.v, r.w,
+                   sv if math.isfinite(sv) else math.hypot(cfg.odo_sigma_v, cfg.odo_sigma_v_rel * r.v),
+                   sw if math.isfinite(sw) else math.hypot(w_floor, cfg.odo_sigma_w_rel * r.w), 1.0)
         if self.odo_t and r.t == self.odo_t[-1]:
             self.odo_rows[-1] = row  # the newest sample at a time holds (as searchsorted right does)
         elif self.odo_t and r.t < self.odo_t[-1]:  # a little late: in its place
@@ -643,7 +645,8 @@ class GraphBuilder:
             s.values.insert(lk, p0)
         if not (math.isfinite(r.sigma_range) and math.isfinite(r.sigma_bearing)):
             self.defaulted.add("beacon")
-        sr = r.sigma_range if math.isfinite(r.sigma_range) else cfg.beacon_sigma_range
+        sr = r.sigma_range if math.isfinite(r.sigma_range) else math.hypot(cfg.beacon_sigma_range,
+                                                                           cfg.beacon_sigma_range_rel * r.range)
         sb = r.sigma_bearing if math.isfinite(r.sigma_bearing) else math.radians(cfg.beacon_sigma_bearing_deg)
         s.add(F.beacon_factor(xa, F.L(self.beacon_ids[r.id]), rng_, brg, sr, sb, robust=cfg.beacon_robust,
                               k=cfg.beacon_k), "beacon")

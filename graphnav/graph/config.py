@@ -25,6 +25,7 @@ class SmootherConfig:
     # -- solver ------------------------------------------------------------------------------
     solver: str = "isam2"  # "isam2" | "fixed-lag" | "batch" (set by the estimator's name on the CLI)
     lag: float = 20.0  # fixed-lag window [s]
+    rebase_every: int | None = 6000  # live mode (no history kept): re-anchor the fixed-lag smoother every N keyframes
     relinearize_threshold: float = 0.05  # poses: tangent-space change that triggers relinearization
     relinearize_threshold_landmarks: float = 0.5  # [m] beacons (many factors each: relinearize rarely)
     relinearize_threshold_bias_deg: float = 2.0  # compass-bias frame (one factor per compass reading)
@@ -50,8 +51,12 @@ class SmootherConfig:
 
     # -- motion: every new pose is tied to the previous one -------------------------------------
     use_odometry: bool = True
-    odo_sigma_v: float = 0.1  # [m/s] used when the log gives none
-    odo_sigma_w_deg: float = 1.0  # [deg/s]
+    # when the log gives no odometry sigmas: noise densities [per sqrt(s)], so the integrated error
+    # does not depend on the sample rate, hypot(floor, rel * |v|) and hypot(floor, rel * |w|)
+    odo_sigma_v: float = 0.02  # [m/s sqrt(s)] floor
+    odo_sigma_v_rel: float = 0.1  # x |v|
+    odo_sigma_w_deg: float = 1.0  # [deg/s sqrt(s)] floor
+    odo_sigma_w_rel: float = 0.1  # x |w|
     odo_lateral: float = 0.05  # lateral (sway) 1-sigma as a fraction of the distance run
     motion_model: str = "constant-velocity"  # without odometry: "constant-velocity" | "random-walk"
     cv_sigma_v: float = 0.5  # [m/s] constant velocity: 1-sigma velocity change -> sigma_xy = cv_sigma_v dt
@@ -71,7 +76,7 @@ class SmootherConfig:
     icp_sigma_floor_yaw_deg: float = 0.05
     icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
     icp_max_step: float = 5.0  # [m] an ICP step farther than this from the prediction is rejected
-    icp_gate: float | None = None  # reject a match whose Mahalanobis distance to the odometry exceeds it
+    icp_gate: float | None = 4.0  # reject a match whose Mahalanobis distance to the odometry exceeds it
     icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.icp.IcpConfig
 
     # -- GNSS ------------------------------------------------------------------------------------
@@ -91,8 +96,9 @@ class SmootherConfig:
     beacon_robust: str | None = "huber"
     beacon_k: float | None = None
     unknown_beacons: bool = True  # SLAM on beacons missing from the chart
-    beacon_sigma_range: float = 0.5  # [m] when the record gives none
-    beacon_sigma_bearing_deg: float = 0.5  # [deg] when the record gives none
+    beacon_sigma_range: float = 0.1  # [m] when the record gives none: hypot(this, rel * range)
+    beacon_sigma_range_rel: float = 0.03
+    beacon_sigma_bearing_deg: float = 1.0  # [deg] when the record gives none
 
     # -- anchor ----------------------------------------------------------------------------------
     anchor_sigma_xy: float | None = None  # prior on the first pose when there is no pose_prior record

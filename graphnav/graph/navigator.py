@@ -106,6 +106,7 @@ class Navigator:
         self.last_pose: gtsam.Pose2 | None = None
         self.last_cov: NDArray[np.float64] | None = None
         self._prev: tuple[float | None, NDArray[np.float64] | None] = (None, None)
+        self._base = 0  # the keyframe the fixed-lag smoother was last re-anchored at
         self.n_records = 0
         self._rec: Record | None = None
         self._result: RunResult | None = None
@@ -192,11 +193,37 @@ class Navigator:
             self.on_t.append(s.t)
             self.on_p.append(vec)
             self.on_c.append(cov)
-        else:  # bounded: the last 10 000 step times only
+        else:  # bounded: the last 10 000 step times only, and the fixed-lag smoother re-anchored
             del self.step_ms[:-10_000], self.step_cpu[:-10_000], self.icp_ms[:-10_000]
+            if (self.cfg.solver == "fixed-lag" and self.cfg.rebase_every
+                    and k - self._base >= self.cfg.rebase_every):
+                self._rebase(k, s.t)
         if self.on_estimate is not None:
             self.on_estimate(s.t, vec, cov)
         return Estimate(s.t, vec, cov, *self._kinematics(s.t, vec, prev_t, prev_p))
+
+    def _rebase(self, k: int, t: float) -> None:
+        """A fresh fixed-lag smoother with priors carrying the current marginals of the variables
+        still in use: the newest pose, the compass-bias frame and the beacons (live mode)."""
+        g, v, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
+        keys = [F.X(k)] + ([self.builder.bias_key] if self.builder.bias_key is not None else [])
+        keys += [F.L(i) for i in self.builder.beacon_ids.values()]
+        try:
+            for key in keys:
+                cov = self.solver.marginal(key)
+                if gtsam.Symbol(key).chr() == ord("l"):
+                    p = self.solver.estimate(key, "Point2")
+                    g.add(gtsam.PriorFactorPoint2(key, p, gtsam.noiseModel.Gaussian.Covariance(cov)))
+                else:
+                    p = self.solver.estimate(key)
+                    g.add(F.pose_prior(key, _vec(p), cov))
+                v.insert(key, p)
+                stamps[key] = t
+            self.solver.rebase(g, v, stamps)
+        except SolverError as exc:
+            raise self._fail(exc, t) from None
+        self._base = k
+        self.extra["rebases"] = self.extra.get("rebases", 0) + 1
 
     def _kinematics(self, t: float, p: NDArray[np.float64], prev_t: float | None,
                     prev_p: NDArray[np.float64] | None) -> tuple[float | None, float | None, float | None]:
@@ -210,7 +237,7 @@ class Navigator:
             w = float(wrap_angle(p[2] - prev_p[2])) / dt
         b = self.builder
         if b.odo_t and t - b.odo_t[-1] <= 2.0:
-            _, v, wr, _, _ = b.odo_rows[-1]
+            _, v, wr = b.odo_rows[-1][:3]
             sog, w = abs(v), wr
         return sog, cog, w
 
@@ -218,7 +245,7 @@ class Navigator:
         """Counts and timings so far (live mode's summary)."""
         s = np.asarray(self.step_ms)
         icp = np.asarray(self.icp_ms)
-        return {"estimator": f"navigator ({self.cfg.solver})", **self.builder.info(),
+        return {"estimator": f"navigator ({self.cfg.solver})", **self.builder.info(), **self.extra,
                 "keyframes_solved": self.builder.stepped,
                 "icp_ms_median": float(np.median(icp)) if icp.size else None,
                 "step_ms_median": float(np.median(s)) if s.size else None,

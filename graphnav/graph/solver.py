@@ -163,6 +163,23 @@ class Solver:
             raise SolverError(_gtsam_message(exc)) from None
         self.updates += 1
 
+    def rebase(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, stamps: Mapping[int, float]) -> None:
+        """Fixed-lag only: replace the smoother by a fresh one holding ``graph``/``values`` (priors
+        carrying the marginals of the variables still in use). GTSAM's smoothers keep an empty slot
+        for every factor ever removed (~220 bytes each); starting afresh keeps memory flat at the
+        cost of the correlations between those variables."""
+        if self.kind != "fixed-lag":
+            raise ValueError("only the fixed-lag smoother is rebased")
+        self.s = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        self._stamps = {k: v for k, v in self._stamps.items() if values.exists(k)}
+        m = gtsam.FixedLagSmootherKeyTimestampMap()
+        for key, ts in stamps.items():
+            m.insert((key, ts))
+        try:
+            self.s.update(graph, values, m)
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
+
     def relinearize(self, n: int) -> None:
         """``n`` extra ``update()`` calls without new factors (iSAM2 / fixed-lag relinearisation)."""
         if self.kind == "batch":

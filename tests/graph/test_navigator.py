@@ -127,3 +127,17 @@ def test_navigator_equals_run_isam2_record_by_record():
     np.testing.assert_allclose(np.array([e.vec for e in got]), ref.online.poses, atol=1e-9)
     np.testing.assert_allclose(np.array([e.cov for e in got]), ref.online.cov, atol=1e-12)
     np.testing.assert_allclose(nav.smoothed().poses, ref.trajectory.poses, atol=1e-9)
+
+
+def test_rebase_keeps_the_estimate():
+    """Live mode (no history) re-anchors the fixed-lag smoother every rebase_every keyframes (flat
+    memory): the estimate stays the same to within the noise."""
+    from _harbour import harbour_trial as trial
+
+    log = trial(duration=20.0, seed=6)
+    a = make_online("fixed-lag")
+    b = make_online("fixed-lag", rebase_every=10)
+    ta, tb = run_online(log, a), run_online(log, b)
+    assert b.info()["rebases"] >= 3 and "rebases" not in a.info()
+    assert abs(ate(tb, log.truth())["rmse"] - ate(ta, log.truth())["rmse"]) < 0.1
+    assert np.max(np.hypot(*(ta.poses[:, :2] - tb.poses[:, :2]).T)) < 0.5
