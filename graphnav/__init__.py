@@ -7,12 +7,16 @@ The public API, imported lazily (``import graphnav`` stays cheap; GTSAM loads on
     for rec in log:
         est = nav.add(rec)                    # Estimate | None: est.t, est.pose (gtsam.Pose2), est.cov
     traj = nav.smoothed()                     # the smoothed Trajectory with covariances
+
+See README.md.
 """
 
 from __future__ import annotations
 
 import importlib
 from typing import Any
+
+__version__ = "0.1.0"  # = pyproject.toml's [project] version (tests/test_resume.py checks)
 
 _LAZY = {
     "load_log": ("graphnav.io", "load_log"),

@@ -68,12 +68,15 @@ class Trajectory:
     # -- export / import -------------------------------------------------------------------------
     def to_tum(self, path: str | Path) -> None:
         """Write TUM format ``t x y z qx qy qz qw`` (z = 0, rotation about +z) — evo reads it."""
+        from .io.outputs import atomic_path
+
         half = 0.5 * self.yaw
         arr = np.column_stack(
             [self.t, self.x, self.y, np.zeros(len(self)), np.zeros(len(self)), np.zeros(len(self)),
              np.sin(half), np.cos(half)]
         )
-        np.savetxt(path, arr, fmt="%.9f", header="timestamp tx ty tz qx qy qz qw")
+        with atomic_path(path) as tmp:  # written whole or not at all
+            np.savetxt(tmp, arr, fmt="%.9f", header="timestamp tx ty tz qx qy qz qw")
 
     @classmethod
     def from_tum(cls, path: str | Path, name: str = "") -> Trajectory:
@@ -84,11 +87,13 @@ class Trajectory:
         return cls(arr[:, 0], np.column_stack([arr[:, 1], arr[:, 2], yaw]), name=name or Path(path).stem)
 
     def to_csv(self, path: str | Path) -> None:
-        """Write CSV ``t,x,y,yaw`` plus the 6 unique covariance entries when present."""
+        """Write CSV ``t,x,y,yaw`` plus the 6 unique covariance entries when present (atomically)."""
+        from .io.outputs import atomic_open
+
         cols = ["t", "x", "y", "yaw"]
         if self.cov is not None:
             cols += ["cov_xx", "cov_xy", "cov_xyaw", "cov_yy", "cov_yyaw", "cov_yawyaw"]
-        with open(path, "w", newline="") as fh:
+        with atomic_open(path, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(cols)
             for i in range(len(self)):

@@ -12,8 +12,9 @@ from .. import estimators
 from ..evaluation.compare import compare, ranked
 from ..evaluation.report import to_json, write_report
 from ..io import load_log
+from ..io.outputs import OutDir
 from ..scan.icp_cache import MatchCache
-from ._common import add_json_flag, add_log_args, emit, parse_options
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, parse_options
 
 log_ = logging.getLogger("graphnav.compare")
 
@@ -23,6 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description=__doc__)
     add_log_args(p)
     p.add_argument("--out", type=Path, required=True, help="output directory (report.md, *.png, *.tum)")
+    add_overwrite_flag(p)
     p.add_argument("--estimators", "-e", default=None,
                    help="comma-separated names, LABEL=NAME to run one estimator twice under another "
                         "label (default: every estimator the log can feed); known: "
@@ -51,6 +53,9 @@ def _options(pairs: list[str] | None) -> dict[str, dict]:
 
 
 def run(args: argparse.Namespace) -> int:
+    out = getattr(args, "out_dir", None)  # (demo prepares its own)
+    if out is None:
+        out = OutDir(args.out, command="compare", overwrite=getattr(args, "overwrite", False))
     log = load_log(args.log, lenient=args.lenient)
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     t0 = time.perf_counter()
@@ -58,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     entries = compare(log, names, options=_options(args.option),
                       progress=lambda n: log_.info("running %s on %s", n, args.log), workers=args.workers,
                       cache=cache)
-    files = write_report(entries, log, args.out, log_name=str(args.log))
+    files = write_report(entries, log, out, log_name=str(args.log))
     total = time.perf_counter() - t0
     for e in entries:
         if not e.ok:

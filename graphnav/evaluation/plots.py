@@ -22,6 +22,7 @@ from matplotlib.patches import Ellipse, Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
 from ..geometry import wrap_angle  # noqa: E402
+from ..io.outputs import atomic_path  # noqa: E402
 from ..trajectory import Trajectory  # noqa: E402
 from .metrics import associate, movement  # noqa: E402
 
@@ -87,8 +88,11 @@ def _shade_events(ax, events: Sequence[dict], span: tuple[float, float] | None =
 
 
 def _finish(fig, path: Path) -> Path:
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        with atomic_path(path) as tmp:  # a reader never sees half a PNG
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
     return path
 
 

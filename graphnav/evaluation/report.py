@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..io.jsonsafe import jsonable
+from ..io.outputs import OutDir, write_text_atomic
 from ..log import NavLog
 from . import plots
 from .compare import Entry, ranked
@@ -110,10 +111,14 @@ def _config(e: Entry) -> dict[str, Any]:
     return jsonable(_brief(cfg))
 
 
-def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: str = "") -> dict[str, Path]:
-    """Write report.md, the PNGs and one TUM file per estimator into ``out``; returns the paths."""
+def write_report(entries: Sequence[Entry], log: NavLog, out: Path | OutDir, *, log_name: str = "") -> dict[str, Path]:
+    """Write report.md, the PNGs and one TUM file per estimator into ``out`` (each atomically; an
+    :class:`~graphnav.io.outputs.OutDir` records every name in its manifest before writing it);
+    returns the paths."""
     log_name = log_name or str(log.meta.get("name", "log"))
-    out.mkdir(parents=True, exist_ok=True)
+    if not isinstance(out, OutDir):
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
     files: dict[str, Path] = {}
     ok = [e for e in entries if e.ok and e.result is not None]
     trajs = {e.name: e.result.trajectory for e in ok}
@@ -186,7 +191,6 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path, *, log_name: 
             lines += [f"### {title}", "", f"![{title}]({f})", ""]
     tums = ", ".join(f"`{file_stem(e.name)}.tum`" for e in ok)
     lines += [f"Trajectories: {tums} (TUM, evo-readable).", ""]
-    p = out / "report.md"
-    p.write_text("\n".join(lines))
+    p = write_text_atomic(out / "report.md", "\n".join(lines))
     files["report.md"] = p
     return files

@@ -175,7 +175,7 @@ class GraphBuilder:
         self.anchor_pose: NDArray[np.float64] | None = None
         self.anchor_sigmas: NDArray[np.float64] | None = None
         self.anchor: str | None = None
-        self.counts = {"records": 0, "late_records": 0, "ignored": 0, "motion_fallback": 0}
+        self.counts = {"records": 0, "late": 0, "ignored": 0, "motion_fallback": 0}
         self.n_rejected = 0
         self.consecutive_rejects = 0
         self.n_icp = self.n_icp_failed = self.n_icp_degenerate = self.n_icp_gated = 0
@@ -237,7 +237,7 @@ class GraphBuilder:
         behind_batch = self.stepped > 0 and t < self.kf_t[self.stepped - 1] - EPS
         behind_scan = kind == "scan" and self.mode == "scan" and bool(self.kf_t) and t < self.kf_t[-1] - EPS
         if behind_batch or behind_scan:
-            self.counts["late_records"] += 1
+            self.counts["late"] += 1
             return
         prev_t = self.t_data  # the last record with data (truth is a reference, not an input)
         if kind != "truth":
@@ -273,7 +273,7 @@ class GraphBuilder:
             if self.kf_t and t <= self.kf_t[-1] + EPS:  # at (or, late, before) the newest keyframe
                 j = bisect.bisect_left(self.kf_t, t - EPS)  # the first keyframe at or after it: added there
                 if j < self.stepped:
-                    self.counts["late_records"] += 1
+                    self.counts["late"] += 1
                     return
                 a = j - 1 if j > 0 and t - self.kf_t[j - 1] <= self.kf_t[j] - t else j
                 self.due.setdefault(j, []).append((a, rec))

@@ -11,11 +11,13 @@ class TrajectoryWriter:
     """``write(t, pose, cov)`` appends one TUM line and flushes; usable as an ``on_estimate`` callback.
 
     A sidecar ``<name>.cov`` holds ``t`` and the 9 covariance entries when covariances are given.
+    ``exclusive``: never replace an existing file (:class:`FileExistsError` instead).
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, exclusive: bool = False) -> None:
         self.path = Path(path)
-        self._fh = open(self.path, "w", buffering=1)
+        self._mode = "x" if exclusive else "w"
+        self._fh = open(self.path, self._mode, buffering=1)
         self._fh.write("# timestamp tx ty tz qx qy qz qw\n")
         self._cov = None
         self.count = 0
@@ -26,7 +28,7 @@ class TrajectoryWriter:
         self._fh.flush()
         if cov is not None:
             if self._cov is None:
-                self._cov = open(self.path.with_suffix(".cov"), "w", buffering=1)
+                self._cov = open(self.path.with_suffix(".cov"), self._mode, buffering=1)
             self._cov.write(f"{t:.9f} " + " ".join(f"{v:.9g}" for v in np.asarray(cov).ravel()) + "\n")
             self._cov.flush()
         self.count += 1

@@ -66,7 +66,7 @@ def test_noisy_log_beats_gnss_noise(name):
     assert ate(tr, log.truth())["rmse"] < 0.75  # GNSS alone: 1.5 m per axis = 2.1 m 2-D RMSE
 
 
-def test_outage_longer_than_the_lag_and_late_records():
+def test_outage_longer_than_the_lag_and_late():
     log = harbour_trial(duration=30.0, seed=4)
     gap = log.without(lambda r: r.kind in ("gnss", "heading") and 1.7e9 + 10 <= r.t <= 1.7e9 + 20)
     est = make_online("fixed-lag", lag=3.0)
@@ -75,7 +75,7 @@ def test_outage_longer_than_the_lag_and_late_records():
     # through the outage the estimates go on (odometry carries the keyframes)
     assert np.sum((tr.t > 1.7e9 + 10.5) & (tr.t < 1.7e9 + 20)) >= 18
     assert ate(tr, log.truth())["rmse"] < 1.0
-    assert est.add(Gnss(1.7e9, 0.0, 0.0, 1.0)) is None and est.info()["late_records"] == 1
+    assert est.add(Gnss(1.7e9, 0.0, 0.0, 1.0)) is None and est.info()["late"] == 1
 
 
 def test_heading_before_the_first_fix_and_odometry_through_an_outage():

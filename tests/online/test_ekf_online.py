@@ -96,7 +96,7 @@ def test_without_gnss_updates_every_record_is_an_outage_from_the_start():
     assert len(t) and t[0] < log.t0 + 0.5
 
 
-def test_late_records_are_counted_and_ignored():
+def test_late_are_counted_and_ignored():
     log = harbour_trial(duration=5.0, rate=5.0)
     est = EkfOnline()
     run_online(log, est)
