@@ -663,7 +663,6 @@ class GraphBuilder:
             "icp": self.matcher is not None,
             "beacons": sorted(self.beacon_ids),
             "compass_bias_estimated": self.bias_key is not None,
-            "defaulted_sigmas": sorted(self.defaulted | {"motion"} if self.counts["motion_fallback"] else
-                                       self.defaulted),
+            "defaulted_sigmas": sorted(self.defaulted),
             **self.counts,
         }

@@ -361,7 +361,7 @@ class Navigator:
         info["gnss_dropped_after_lm"] = dropped
         if cfg.noise_estimation != "off":
             scalable = noise.SCALABLE if cfg.noise_estimation == "all" else tuple(
-                g for g in noise.SCALABLE if g in self.builder.defaulted or g == "motion")
+                g for g in noise.SCALABLE if g in self.builder.defaulted)
             graph, values, vce = noise.estimate_scales(graph, values, self.groups, scalable, cfg.noise_iterations,
                                                        self.solver.lm)
             info["noise_scale"] = vce
