@@ -64,15 +64,30 @@ class RunResult:
 
 @dataclass
 class Estimate:
-    """The navigation solution at time ``t``: pose (x, y, yaw), its 3x3 covariance (or None) and,
-    when known, speed over ground [m/s], course over ground [rad, CCW from east], yaw rate [rad/s]."""
+    """The navigation solution at time ``t``: ``vec`` = (x, y, yaw) (``pose`` gives it as a
+    ``gtsam.Pose2``), its 3x3 covariance in the world frame, order x, y, yaw (or None) and, when
+    known, speed over ground [m/s], course over ground [rad, CCW from east], yaw rate [rad/s].
+    ``vec`` may be given as a ``gtsam.Pose2``."""
 
     t: float
-    pose: NDArray[np.float64]
+    vec: NDArray[np.float64]
     cov: NDArray[np.float64] | None = None
     sog: float | None = None
     cog: float | None = None
     w: float | None = None
+
+    def __post_init__(self) -> None:
+        v = self.vec
+        if hasattr(v, "theta"):  # a gtsam.Pose2
+            v = (v.x(), v.y(), v.theta())
+        self.vec = np.asarray(v, dtype=float).reshape(3)
+
+    @property
+    def pose(self):  # -> gtsam.Pose2 (gtsam imported only when asked: the kernel stays light)
+        """The pose as a ``gtsam.Pose2``."""
+        import gtsam
+
+        return gtsam.Pose2(float(self.vec[0]), float(self.vec[1]), float(self.vec[2]))
 
 
 class OnlineEstimator(Protocol):

@@ -17,8 +17,10 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
   scan has been handed over.
 * **Estimator** -- anything implementing :class:`graphnav.result.OnlineEstimator`
   (``add(record) -> Estimate | None``), by name from :data:`graphnav.online.runner.ONLINE_ESTIMATORS`:
-  :class:`graphnav.graph.graph_online.GraphOnline` (GTSAM fixed-lag, the default, or iSAM2) or
-  :class:`graphnav.online.ekf_online.EkfOnline` (the ``ekf`` estimator).
+  :class:`graphnav.graph.navigator.Navigator` (the navigation graph of ``graphnav run``, with the
+  fixed-lag smoother, the default, or iSAM2) or :class:`graphnav.online.ekf_online.EkfOnline` (the
+  ``ekf`` estimator). When the loop stops, the estimator's ``flush()`` (if it has one) solves what
+  was waiting for a later record and that estimate is published too.
 * **Output** -- every estimate is appended to a new file per run, ``DIR/live-YYYYmmddTHHMMSSZ.tum``
   (UTC start time; + ``.cov``; an earlier run's file is never touched), flushed line by line
   (:class:`graphnav.io.tum.TrajectoryWriter`), and published as GGA, HDT, VTG, ROT
@@ -497,14 +499,17 @@ class LiveRunner:
     def _record(self, rec, arrival: float | None) -> None:
         self.records += 1
         est = self.estimator.add(rec)
-        if est is None:
-            return
+        if est is not None:
+            self._emit(est, arrival)
+
+    def _emit(self, est: Estimate, arrival: float | None) -> None:
+        """Publish one estimate (NMEA), time its latency, append it to the output file."""
         self.estimates += 1
         self.last_estimate = est
         if self.pub_sock is not None and self.decoder.frame is not None:
             if est.cov is not None and np.all(np.isfinite(est.cov[:2, :2])):  # HDOP = sigma / UERE(GPS)
                 self.hdop = max(0.01, math.sqrt(max(0.0, 0.5 * (est.cov[0, 0] + est.cov[1, 1]))) / UERE_M[1])
-            lines = solution_sentences(est.t, est.pose, self.decoder.frame, sog=est.sog, cog_yaw=est.cog,
+            lines = solution_sentences(est.t, est.vec, self.decoder.frame, sog=est.sog, cog_yaw=est.cog,
                                        w=est.w, hdop=self.hdop)
             try:
                 self.pub_sock.sendto(("\r\n".join(lines) + "\r\n").encode("ascii"), self.pub_addr)
@@ -515,7 +520,7 @@ class LiveRunner:
             self.latency_ms[self.n_latency % LATENCY_WINDOW] = (time.perf_counter() - arrival) * 1e3
             self.n_latency += 1
         if self.writer is not None:
-            self.writer.write(est.t, est.pose, est.cov)
+            self.writer.write(est.t, est.vec, est.cov)
 
     # -- the loop
     def run(self) -> dict[str, Any]:
@@ -567,6 +572,11 @@ class LiveRunner:
                             break
             if not self.stop_reason:
                 self.stop_reason = "signal"
+            flush = getattr(self.estimator, "flush", None)  # keyframes waiting for a later record
+            if callable(flush):
+                est = flush()
+                if est is not None:
+                    self._emit(est, None)
             self.wall_s = time.monotonic() - t_start
         finally:
             for src in self.sources:
