@@ -1,0 +1,132 @@
+"""The place descriptor (graphnav.scan.descriptor) and the correlative matcher
+(graphnav.scan.correlative) on ray-cast scans of synthetic worlds."""
+
+from __future__ import annotations
+
+import math
+
+import _scan_sim as S
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from graphnav.geometry import se2_compose
+from graphnav.scan import correlative as C
+from graphnav.scan import descriptor as D
+from graphnav.scan.icp import IcpConfig, match_points
+
+
+def _world() -> np.ndarray:
+    """A 40 x 30 m basin with irregular piers and boxes (no symmetry)."""
+    segs = list(S.room(40.0, 30.0))
+    segs += [(-12.0, -15.0, -12.0, -8.0), (8.0, 15.0, 8.0, 9.0), (-18.0, 6.0, -13.0, 9.0),
+             (10.0, -6.0, 14.0, -6.0), (14.0, -6.0, 14.0, -3.0), (-6.0, 9.0, -2.0, 12.0)]
+    return np.array(segs, dtype=float)
+
+
+def _scan(segs, pose, seed, beams=180, fov=math.pi):
+    rng = np.random.default_rng(seed)
+    ang = -fov / 2 + np.arange(beams) * fov / beams
+    r = S.raycast(segs, pose, ang)
+    r = r + rng.normal(0, 0.01, beams) * np.isfinite(r)
+    return S.points(r, ang)
+
+
+# -- descriptor ------------------------------------------------------------------------------------
+def test_descriptor_same_place_rotated_is_near_and_gives_the_yaw():
+    segs = _world()
+    p = np.array([2.0, -1.0, 0.4])
+    q = _scan(segs, p, 0, beams=360, fov=2 * math.pi)
+    for dyaw in (0.0, math.radians(60), math.radians(-137), math.pi):
+        c = _scan(segs, p + [0.0, 0.0, dyaw], 1, beams=360, fov=2 * math.pi)
+        d, yaw = D.distance(D.describe(c), D.describe(q))
+        assert d < 0.15
+        assert abs(math.remainder(yaw - dyaw, 2 * math.pi)) <= math.radians(6.0) + 1e-9  # one sector
+        assert np.allclose(D.describe(c).key, D.describe(q).key, atol=0.03)  # ring key: rotation invariant
+
+
+def test_descriptor_different_places_are_far():
+    segs = _world()
+    a = D.describe(_scan(segs, np.array([-12.0, 4.0, 0.0]), 0, beams=360, fov=2 * math.pi))
+    near = D.describe(_scan(segs, np.array([-12.0, 4.0, 1.0]), 1, beams=360, fov=2 * math.pi))
+    for far in ([12.0, 8.0, 0.0], [10.0, -10.0, 2.0], [0.0, -12.0, 0.5]):
+        b = D.describe(_scan(segs, np.array(far), 2, beams=360, fov=2 * math.pi))
+        assert D.distance(a, b)[0] > 2 * D.distance(a, near)[0] + 0.1
+
+
+def test_descriptor_half_fov_and_empty():
+    segs = _world()
+    p = np.array([0.0, 0.0, 0.3])
+    a = D.describe(_scan(segs, p, 0))  # 180 deg: only half the sectors
+    b = D.describe(_scan(segs, p + [0.3, 0.2, 0.2], 1))
+    d, yaw = D.distance(b, a)
+    assert d < 0.3 and abs(yaw - 0.2) <= math.radians(12)
+    assert D.describe(np.zeros((3, 2))) is None
+
+
+# -- correlative matcher ---------------------------------------------------------------------------
+def test_correlative_recovers_a_transform_far_outside_icp_basin():
+    segs = _world()
+    a = np.array([-3.0, 0.5, 0.3])
+    rel = np.array([2.6, -1.7, math.radians(100.0)])
+    ref, src = _scan(segs, a, 0), _scan(segs, se2_compose(a, rel), 1)
+    r = C.correlative_match(src, [ref], None, window=4.0)
+    assert r.ok
+    assert np.hypot(*(r.pose[:2] - rel[:2])) < 0.15
+    assert abs(math.remainder(r.pose[2] - rel[2], 2 * math.pi)) < math.radians(1.0)
+    assert r.hits > 0.35 and r.score > 0.3  # the two 180 deg views share 80 deg
+    # local ICP from the identity does not get there
+    icp = match_points(src, ref, IcpConfig(), init=np.zeros(3))
+    assert np.hypot(*(icp.pose[:2] - rel[:2])) > 0.5 or abs(math.remainder(icp.pose[2] - rel[2], 2 * math.pi)) > 0.2
+
+
+def test_numpy_and_compiled_search_agree():
+    pytest.importorskip("numba")
+    segs = _world()
+    a = np.array([5.0, 3.0, -0.5])
+    rel = np.array([-1.2, 0.8, math.radians(-35.0)])
+    ref, src = _scan(segs, a, 3), _scan(segs, se2_compose(a, rel), 4)
+    r1 = C.correlative_match(src, [ref], None, window=2.0, yaw_window_deg=60.0,
+                             cfg=C.CorrelativeConfig(backend="numpy"))
+    r2 = C.correlative_match(src, [ref], None, window=2.0, yaw_window_deg=60.0,
+                             cfg=C.CorrelativeConfig(backend="numba"))
+    assert r1.score == pytest.approx(r2.score, abs=1e-12)
+    assert np.allclose(r1.pose, r2.pose)
+    assert r1.second == pytest.approx(r2.second, abs=1e-12)
+    g = np.zeros((7, 9))
+    g[2:5, 3:8] = np.arange(15).reshape(3, 5)
+    base = np.array([[[0, 0], [2, 3], [6, 8]], [[1, 1], [-1, 4], [3, 3]]])
+    from graphnav.scan._correlative_fast import block_scores
+    assert np.allclose(block_scores(g, base, 2, 3), C.block_scores_numpy(g, base, 2, 3))
+
+
+def test_bound_grids_bound_the_likelihood():
+    g = C.LikelihoodGrid([np.random.default_rng(0).uniform(-5, 5, (50, 2))], C.CorrelativeConfig(levels=3))
+    for h in range(1, 4):
+        w = 1 << h
+        i, j = 7, 11
+        assert g.bounds[h][i, j] == pytest.approx(g.like[i:i + w, j:j + w].max())
+
+
+def test_corridor_is_ambiguous():
+    segs = S.corridor(200.0, 2.0)
+    ref = _scan(segs, np.array([0.0, 0.0, 0.0]), 0)
+    src = _scan(segs, np.array([1.0, 0.3, 0.05]), 1)
+    r = C.correlative_match(src, [ref], None, window=3.0, yaw_window_deg=30.0, second_above=0.5)
+    assert r.second > 0.95 * r.score  # along the corridor every shift fits
+
+
+@settings(max_examples=12, deadline=None)
+@given(dx=st.floats(-3.0, 3.0), dy=st.floats(-3.0, 3.0), dyaw=st.floats(-math.pi, math.pi),
+       x=st.floats(-8.0, 8.0), y=st.floats(-6.0, 6.0), yaw=st.floats(-math.pi, math.pi))
+def test_correlative_finds_any_pose_in_the_window(dx, dy, dyaw, x, y, yaw):
+    segs = _world()
+    a = np.array([x, y, yaw])
+    rel = np.array([dx, dy, dyaw])
+    ref, src = _scan(segs, a, 0, beams=360, fov=2 * math.pi), _scan(segs, se2_compose(a, rel), 1, beams=360,
+                                                                     fov=2 * math.pi)
+    r = C.correlative_match(src, [ref], None, window=3.5)
+    assert r.ok
+    assert np.hypot(*(r.pose[:2] - rel[:2])) < 0.2
+    assert abs(math.remainder(r.pose[2] - rel[2], 2 * math.pi)) < math.radians(1.5)
