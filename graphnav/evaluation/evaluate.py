@@ -55,7 +55,7 @@ def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
             out["online_ate_rmse_m"] = ate(result.online, ref, max_dt=max_dt)["rmse"]
             ns = nees_stats(result.online, ref, max_dt=max_dt)
             out["online_nees_mean"] = ns["mean"] if ns else None
-    for k in ("anchor",):
+    for k in ("anchor", "loop_closures", "loop_candidates"):
         if k in result.info:
             out[k] = result.info[k]
     return out

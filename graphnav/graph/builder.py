@@ -55,7 +55,7 @@ Matcher = Callable[
 ]
 
 #: sensor groups of the factors (the noise estimation scales ``SCALABLE`` ones)
-GROUPS = ("anchor", "odometry", "motion", "icp", "gnss", "compass", "bias", "beacon", "chart", "pose_prior")
+GROUPS = ("anchor", "odometry", "motion", "icp", "loop", "gnss", "compass", "bias", "beacon", "chart", "pose_prior")
 SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon")
 EPS = 1e-9  # [s] times closer than this are equal (as keyframes.schedule)
 MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior")
@@ -82,6 +82,34 @@ def default_matcher(options: dict[str, Any]) -> Matcher | None:
         return usable, np.asarray(r.pose, dtype=float), np.asarray(r.cov, dtype=float)
 
     return match
+
+
+def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any]) -> Any:
+    """The loop closer of :mod:`graphnav.graph.loops` with the weighted ICP as its refinement and the
+    graph's ICP covariance treatment (``icp_cov_scale``, floor); ``None`` without the matcher."""
+    try:
+        from ..scan.icp import IcpConfig, match_points
+    except ImportError:
+        return None
+    from .loops import LoopCloser, LoopConfig
+
+    icfg = IcpConfig(**icp_opts)
+    floor = np.array([cfg.icp_sigma_floor_xy] * 2 + [math.radians(cfg.icp_sigma_floor_yaw_deg)])
+
+    def refine(src: NDArray[np.float64], tgt: NDArray[np.float64], init: NDArray[np.float64]):
+        r = match_points(src, tgt, icfg, init=init)
+        return bool(r.ok), np.asarray(r.pose, dtype=float), np.asarray(r.cov, dtype=float), r.quality
+
+    closer = LoopCloser(LoopConfig(**cfg.loop), refine,
+                        lambda c: proper_cov(cfg.icp_cov_scale * np.asarray(c, dtype=float), floor))
+    closer.points = lambda scan: scan_points_of(scan, icfg)
+    return closer
+
+
+def scan_points_of(scan: Scan, icfg: Any) -> NDArray[np.float64]:
+    from ..scan.icp import scan_points
+
+    return scan_points(scan, icfg)
 
 
 def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
@@ -140,6 +168,9 @@ class GraphBuilder:
         self._matcher_given = matcher
         self._icp_opts = icp_opts
         self.matcher: Matcher | None = None
+        self.loops: Any = None  # graphnav.graph.loops.LoopCloser, with scans and cfg.loops
+        self._loop_cov: NDArray[np.float64] | None = None  # the loop closer's covariance of the newest pose
+        self._icp_cov: NDArray[np.float64] | None = None  # the newest accepted ICP factor's covariance
         # keyframe policy: "grid" (fixed period) or "scan"; with keyframe_period set always the grid
         self.grid_only = cfg.keyframe_period is not None
         self.period = cfg.keyframe_period if cfg.keyframe_period is not None else DEFAULT_PERIOD
@@ -290,6 +321,8 @@ class GraphBuilder:
         if self.matcher is None and self.cfg.use_icp:
             self.matcher = (self._matcher_given if self._matcher_given is not None
                             else default_matcher(self._icp_opts))
+        if self.loops is None and self.cfg.loops:
+            self.loops = make_loop_closer(self.cfg, self._icp_opts)
 
     def _new_keyframe(self, t: float, scan: Scan | None) -> None:
         k = len(self.kf_t)
@@ -497,6 +530,7 @@ class GraphBuilder:
         s = Step(k, t, gtsam.NonlinearFactorGraph(), gtsam.Values(), {F.X(k): t})
         xk = F.X(k)
         floor = np.array([cfg.motion_floor_xy, cfg.motion_floor_xy, math.radians(cfg.motion_floor_yaw_deg)])
+        step_cov: NDArray[np.float64] | None = None
         if k == 0:
             assert self.anchor_pose is not None and self.anchor_sigmas is not None
             pose_k = gtsam.Pose2(*self.anchor_pose)
@@ -520,14 +554,19 @@ class GraphBuilder:
                       "motion")
                 self.counts["motion_fallback"] += 1
                 rel = mean
+                step_cov = cov
             else:
                 rel = icp_rel if icp_rel is not None else rel
                 if dt > 1e-6:
                     self.twist = np.asarray(gtsam.Pose2.Logmap(rel)) / dt
                     self.twist_t = t
+                covs = [c for c in (odo_cov, self._icp_cov if icp_rel is not None else None) if c is not None]
+                step_cov = np.linalg.inv(sum(np.linalg.inv(c) for c in covs))  # the motion's fused covariance
             self.last_rel, self.last_gap = rel, dt
             pose_k = prev.compose(rel)
         s.values.insert(xk, pose_k)
+        if self.loops is not None:
+            self._loop_step(s, k, pose_k, prev, prev_cov, rel if k > 0 else None, step_cov if k > 0 else None)
         if self.bias_key is not None:
             s.stamps[self.bias_key] = t
         self._measurements(s, k, self.due.pop(k, []), pose_k, prev_cov, prev if k > 0 else None)
@@ -537,6 +576,27 @@ class GraphBuilder:
         self.kf_scan.pop(k - 1, None)
         self._prune_odometry(self.kf_t[k])
         return s
+
+    def _loop_step(self, s: Step, k: int, pose_k: gtsam.Pose2, prev: gtsam.Pose2 | None,
+                   prev_cov: NDArray[np.float64] | None, rel: gtsam.Pose2 | None,
+                   step_cov: NDArray[np.float64] | None) -> None:
+        """Keyframe ``k`` to the loop closer: its predicted pose and world covariance (propagated from
+        the solver's marginal of ``k-1`` when online, else from the closer's own chain), its scan."""
+        from .loops import propagate
+
+        if k == 0 or prev is None or rel is None or step_cov is None:
+            assert self.anchor_sigmas is not None
+            cov_w = np.diag(np.square(self.anchor_sigmas))
+        else:
+            base = prev_cov if prev_cov is not None else self._loop_cov
+            cov_w = propagate(base if base is not None else np.zeros((3, 3)), _vec(prev), rel, step_cov)
+        self._loop_cov = cov_w
+        scan = self.kf_scan.get(k)
+        xy = self.loops.points(scan) if scan is not None else None
+        oldest = 0
+        if self.cfg.solver == "fixed-lag":  # only keyframes still in the window (minus a margin of 10 %)
+            oldest = bisect.bisect_left(self.kf_t, self.kf_t[k] - 0.9 * self.cfg.lag)
+        self.loops.step(s, k, pose_k, cov_w, rel, step_cov, xy, oldest)
 
     def step_late(self, est: Callable[[int], gtsam.Pose2], prev_cov: NDArray[np.float64] | None = None) -> Step | None:
         """After :meth:`finish`: the measurements that came after the last keyframe's batch, as a
@@ -576,6 +636,7 @@ class GraphBuilder:
                 self.n_icp_gated += 1
                 return None
         s.add(F.icp_between(F.X(k - 1), F.X(k), mp, cov, robust=cfg.icp_robust), "icp")
+        self._icp_cov = cov
         return rel
 
     def _measurements(self, s: Step, k: int, due: list[tuple[int, Record]], pose_k: gtsam.Pose2,
@@ -668,5 +729,6 @@ class GraphBuilder:
             "beacons": sorted(self.beacon_ids),
             "compass_bias_estimated": self.bias_key is not None,
             "defaulted_sigmas": sorted(self.defaulted),
+            **(self.loops.info() if self.loops is not None else {}),
             **self.counts,
         }

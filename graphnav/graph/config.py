@@ -79,6 +79,10 @@ class SmootherConfig:
     icp_gate: float | None = 4.0  # reject a match whose Mahalanobis distance to the odometry exceeds it
     icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.icp.IcpConfig
 
+    # -- loop closures (graphnav.graph.loops, docs/loops.md) ------------------------------------
+    loops: bool = True  # close loops when the log has scans
+    loop: dict[str, Any] = field(default_factory=dict)  # options for graphnav.graph.loops.LoopConfig
+
     # -- GNSS ------------------------------------------------------------------------------------
     gnss_robust: str | None = "huber"  # gross outliers are gated (online) or dropped (batch)
     gnss_k: float | None = None

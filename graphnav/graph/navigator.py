@@ -175,14 +175,22 @@ class Navigator:
             self.icp_ms.append(s.icp_ms)
         c0, p0 = time.perf_counter(), time.process_time()
         self._update(s)
+        loops = self.builder.loops
         if not self.solver.online:
             self.last_pose = s.values.atPose2(F.X(k))
+            if loops is not None:
+                loops.stale = False  # batch: the places keep the chained guess
             return None
         try:
+            if loops is not None and loops.stale:  # a loop moved the graph: the places' new estimates
+                values = self.solver.current()
+                loops.refresh(lambda j: _vec(values.atPose2(F.X(j))) if values.exists(F.X(j)) else None)
             pose = self.solver.estimate(F.X(k))
             cov = world_cov(pose, self.solver.marginal(F.X(k)))
         except SolverError as exc:
             raise self._fail(exc, s.t) from None
+        if loops is not None:
+            loops.observe(k, _vec(pose), cov)
         self.step_ms.append((time.perf_counter() - c0) * 1e3)
         self.step_cpu.append((time.process_time() - p0) * 1e3)
         prev_t, prev_p = self._prev

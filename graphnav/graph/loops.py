@@ -1,0 +1,440 @@
+"""Loop closures: a keyframe that comes back to a place seen before is tied to it by a scan match.
+
+:class:`LoopCloser` is fed every keyframe by the :class:`~graphnav.graph.builder.GraphBuilder`
+(:meth:`LoopCloser.step`) and adds the verified loops to that keyframe's factor batch. Four stages:
+
+1. **Places.** A keyframe with a scan enters the place database every ``spacing`` metres of travel:
+   its points, its Scan Context descriptor (:mod:`graphnav.scan.descriptor`), its pose estimate
+   and world covariance, and its path length ``s`` (metres along the chain).
+2. **Candidates** for the keyframe ``k`` (only places at least ``skip_recent`` metres back along the
+   path: nearer ones are the consecutive matches' business), at most ``max_candidates``:
+   * proximity: places whose estimated position lies within the Mahalanobis gate
+     ``d^2 = dp^T (C_k + C_i)^-1 dp <= chi2_2(gate_prob)`` (the marginal covariances of both
+     poses; nearest ``gate_neighbours`` by Euclidean distance from a k-d tree, then the gate);
+   * appearance: the ``descriptor_neighbours`` nearest ring keys (k-d tree), kept when the Scan
+     Context distance is below ``descriptor_max``: the drift may be larger than the gate can
+     trust, but a place that looks the same is within a few metres.
+3. **Verification** of a candidate ``(i, k)``: the correlative matcher
+   (:mod:`graphnav.scan.correlative`) of keyframe ``k``'s scan on a submap of place ``i`` and its
+   ``submap`` neighbours, within ``window`` metres of the guess (the estimate, or the same spot
+   at the descriptor's yaw) and ``yaw_window_deg``; a match needs ``min_hits`` of its points on a
+   reference surface and no distinct second peak above ``max_ambiguity`` of its score (a
+   look-alike place). Then the weighted ICP (:func:`graphnav.scan.icp.match_points`) from the
+   correlative pose: it must converge, not be degenerate and stay within ``refine_agree`` /
+   ``refine_agree_deg`` of the correlative pose. Its covariance is the loop's.
+4. **Consistency** (pairwise, in the spirit of PCM, Mangelson et al. 2018): a verified loop is
+   held until another verified loop within ``pair_span`` metres of path on both ends agrees
+   with it: the cycle loop1 -> chain -> loop2^-1 -> chain closes within ``chi2_3(consistency_prob)``
+   of the sum of the two loops' covariances and the two short chain segments' (the motion factors'
+   covariances compounded). Both then become ``BetweenFactorPose2`` with a robust kernel (Cauchy,
+   ``kernel_k``), so even a wrong pair that passed cannot pull with more than bounded weight.
+
+Everything is bounded: one place per ``spacing`` metres, at most ``max_candidates`` verifications
+per place, k-d trees rebuilt when the unindexed tail exceeds a quarter of the database (amortised
+O(log n) per place, the tail a vectorised scan).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+from scipy.stats import chi2
+
+import factors as F
+
+from ..scan import correlative as corr
+from ..scan import descriptor as desc
+
+Vec = NDArray[np.float64]
+
+
+@dataclass
+class LoopConfig:
+    """Settings of the loop closer (``-O loop='{"key": value}'``; metres, degrees, probabilities)."""
+
+    spacing: float = 1.0  # [m] of travel between two places (and two searches)
+    skip_recent: float = 15.0  # [m] of path: nearer places are not candidates
+    gate_prob: float = 0.999  # proximity gate: chi-square probability (2 dof) of the position difference
+    gate_neighbours: int = 16  # nearest places looked at by the proximity search
+    descriptor_neighbours: int = 8  # nearest ring keys looked at by the appearance search
+    descriptor_max: float = 0.35  # Scan Context distance below which a place is a candidate
+    max_candidates: int = 2  # verifications per place (best first)
+    window: float = 4.0  # [m] half-width of the correlative search (at least) ...
+    max_window: float = 6.0  # [m] ... and at most: 3 sigma of the two poses' position covariance in between
+    yaw_window_deg: float = 30.0  # half-width of its yaw search (around the estimate / the descriptor's yaw)
+    submap: int = 5  # the reference: the place and this many places on each side
+    min_hits: float = 0.4  # fraction of the scan's points within hit_radius of the reference
+    max_ambiguity: float = 0.9  # a distinct second peak above this x the best score: a look-alike place
+    refine_agree: float = 0.5  # [m] the ICP refinement must stay this close to the correlative pose
+    refine_agree_deg: float = 3.0
+    pair_span: float = 30.0  # [m] of path: two loops this close on both ends check each other
+    consistency_prob: float = 0.999  # chi-square probability (3 dof) of the cycle error
+    chain_prob: float = 0.999  # ... of a loop against the estimate (both marginals + the loop's)
+    kernel: str = "cauchy"  # robust kernel of the loop factors: "cauchy", "dcs", "none"
+    kernel_k: float = 1.0  # its parameter (whitened units; DCS: Phi)
+    cov_floor_xy: float = 0.05  # [m] 1-sigma floor of a loop's covariance (quadrature)
+    cov_floor_yaw_deg: float = 0.5
+    correlative: dict[str, Any] = field(default_factory=dict)  # CorrelativeConfig options
+    descriptor: dict[str, Any] = field(default_factory=dict)  # DescriptorConfig options
+
+
+@dataclass
+class Place:
+    k: int
+    s: float  # [m] path length
+    pose: Vec  # estimate (x, y, yaw), world
+    cov: Vec  # world (x, y, yaw) covariance
+    xy: Vec  # scan points, sensor frame, scan order
+    d: desc.Descriptor | None
+
+
+@dataclass
+class Loop:
+    i: int  # place keyframe (older)
+    k: int  # current keyframe
+    si: float
+    sk: float
+    z: Vec  # pose of k in i's frame
+    cov: Vec  # its covariance (GTSAM tangent convention)
+    source: str  # "gate" or "descriptor"
+    accepted: bool = False
+
+
+def propagate(cov_w: Vec, pose_prev: Vec, rel: gtsam.Pose2, q: Vec) -> Vec:
+    """World covariance of ``pose_prev * rel`` from ``cov_w`` (pose_prev's, world x, y, yaw) and the
+    relative motion's body-frame covariance ``q`` (first order)."""
+    c, s = math.cos(pose_prev[2]), math.sin(pose_prev[2])
+    dx = c * rel.x() - s * rel.y()
+    dy = s * rel.x() + c * rel.y()
+    J = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
+    th = pose_prev[2] + rel.theta()
+    R = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0.0, 0.0, 1.0]])
+    return J @ cov_w @ J.T + R @ q @ R.T
+
+
+def compound(steps: list[tuple[gtsam.Pose2, Vec]]) -> tuple[gtsam.Pose2, Vec]:
+    """The relative pose of a chain of steps and its covariance (tangent at the end, GTSAM's
+    right-perturbation convention): ``C <- Ad(step^-1) C Ad(step^-1)^T + Q_step``."""
+    T, C = gtsam.Pose2(), np.zeros((3, 3))
+    for rel, q in steps:
+        A = rel.inverse().AdjointMap()
+        C = A @ C @ A.T + q
+        T = T.compose(rel)
+    return T, C
+
+
+def _pose(v: Vec) -> gtsam.Pose2:
+    return gtsam.Pose2(float(v[0]), float(v[1]), float(v[2]))
+
+
+def _vec(p: gtsam.Pose2) -> Vec:
+    return np.array([p.x(), p.y(), p.theta()])
+
+
+class _Index:
+    """Points that grow one at a time: a k-d tree over the first ``n_tree`` and a linear scan
+    over the rest, rebuilt when the rest exceeds a quarter of all (amortised O(log n))."""
+
+    def __init__(self) -> None:
+        self.rows: list[Vec] = []
+        self.tree: cKDTree | None = None
+        self.n_tree = 0
+
+    def add(self, v: Vec) -> None:
+        self.rows.append(np.asarray(v, dtype=float))
+        if len(self.rows) - self.n_tree > max(32, len(self.rows) // 4):
+            self.rebuild()
+
+    def rebuild(self) -> None:
+        self.n_tree = len(self.rows)
+        self.tree = cKDTree(np.array(self.rows)) if self.rows else None
+
+    def replace(self, rows: list[Vec]) -> None:
+        self.rows = [np.asarray(r, dtype=float) for r in rows]
+        self.rebuild()
+
+    def nearest(self, q: Vec, n: int, valid: int) -> list[tuple[float, int]]:
+        """Up to ``n`` nearest rows among the first ``valid`` ones: (distance, index)."""
+        out: list[tuple[float, int]] = []
+        if self.tree is not None and self.n_tree:
+            kk = min(n + max(0, self.n_tree - valid), self.n_tree)
+            d, idx = self.tree.query(q, k=kk)
+            for dd, ii in zip(np.atleast_1d(d), np.atleast_1d(idx), strict=True):
+                if np.isfinite(dd) and ii < valid:
+                    out.append((float(dd), int(ii)))
+        lo, hi = self.n_tree, min(len(self.rows), valid)
+        if hi > lo:
+            rest = np.array(self.rows[lo:hi])
+            d = np.linalg.norm(rest - q, axis=1)
+            out.extend((float(dd), lo + j) for j, dd in enumerate(d))
+        out.sort()
+        return out[:n]
+
+
+class LoopCloser:
+    """Place database, candidate search, verification and pairwise consistency (module docstring).
+
+    ``icp_match(src_xy, tgt_xy, init) -> (ok, pose, cov, quality)``: the weighted-ICP refinement;
+    ``cov_of(cov)``: the covariance treatment of the graph's ICP factors (scale and floor);
+    ``min_time``: callable ``t -> oldest keyframe time still in the solver`` (fixed-lag) or ``None``.
+    """
+
+    def __init__(self, cfg: LoopConfig, icp_match: Callable[..., tuple[bool, Vec, Vec, dict[str, Any]]],
+                 cov_of: Callable[[Vec], Vec | None]) -> None:
+        self.cfg = cfg
+        self.icp_match = icp_match
+        self.cov_of = cov_of
+        self.ccfg = corr.CorrelativeConfig(**cfg.correlative)
+        self.dcfg = desc.DescriptorConfig(**cfg.descriptor)
+        self.places: list[Place] = []
+        self.place_of: dict[int, int] = {}  # keyframe -> place index
+        self.pos_index = _Index()
+        self.key_index = _Index()
+        self.key_rows: list[int] = []  # key_index row -> place index
+        self.grids: OrderedDict[int, corr.LikelihoodGrid] = OrderedDict()
+        self.steps: list[tuple[gtsam.Pose2, Vec]] = []  # per keyframe: the motion from k-1 and its covariance
+        self.s_of: list[float] = []  # per keyframe: path length
+        self.loops: list[Loop] = []  # verified (pending or accepted)
+        self.chi_gate = float(chi2.ppf(cfg.gate_prob, 2))
+        self.chi_pair = float(chi2.ppf(cfg.consistency_prob, 3))
+        self.chi_chain = float(chi2.ppf(cfg.chain_prob, 3))
+        self.counts = {"loop_candidates": 0, "loop_verified": 0, "loop_closures": 0, "loop_rejected_match": 0,
+                       "loop_rejected_refine": 0, "loop_rejected_chain": 0, "loop_unconfirmed": 0}
+        self.accepted: list[tuple[int, int]] = []
+        self.stale = False  # an accepted loop moved the estimate: refresh the places' poses
+        self.points: Callable[[Any], Vec] | None = None  # a Scan -> its points (set by the builder)
+        self.last_place_s = -math.inf
+
+    # -- per keyframe ------------------------------------------------------------------------------
+    def step(self, s: Any, k: int, pose: gtsam.Pose2, cov_w: Vec, rel: gtsam.Pose2 | None, q: Vec | None,
+             xy: Vec | None, oldest: int = 0) -> None:
+        """Keyframe ``k`` (``pose``: its predicted pose, ``cov_w`` its world covariance; ``rel``/``q``
+        the motion from ``k-1`` and its covariance; ``xy`` its scan's points or ``None``): candidates,
+        verification, consistency; accepted loops go into the batch ``s``. ``oldest``: the oldest
+        keyframe still in the solver."""
+        cfg = self.cfg
+        if k == 0 or rel is None:
+            self.steps.append((gtsam.Pose2(), np.zeros((3, 3))))
+            self.s_of.append(self.s_of[-1] if self.s_of else 0.0)
+        else:
+            self.steps.append((rel, np.asarray(q, dtype=float)))
+            self.s_of.append(self.s_of[-1] + math.hypot(rel.x(), rel.y()))
+        sk = self.s_of[k]
+        if xy is None or len(xy) < self.ccfg.min_points or sk - self.last_place_s < cfg.spacing:
+            return
+        self.last_place_s = sk
+        pk = _vec(pose)
+        place = Place(k, sk, pk, np.asarray(cov_w, dtype=float), np.asarray(xy, dtype=float),
+                      desc.describe(xy, self.dcfg))
+        valid = self._valid(sk)
+        cands = self._candidates(place, valid, oldest)
+        for src, pi, guess, ywin, win in cands[: cfg.max_candidates]:
+            self.counts["loop_candidates"] += 1
+            loop = self._verify(place, self.places[pi], guess, ywin, win, src)
+            if loop is not None:
+                self._consider(s, loop)
+        self._expire(sk)
+        self._add_place(place)
+
+    def observe(self, k: int, pose: Vec, cov_w: Vec | None) -> None:
+        """The solved estimate of keyframe ``k`` (replaces the prediction of its place)."""
+        j = self.place_of.get(k)
+        if j is not None:
+            self.places[j].pose = np.asarray(pose, dtype=float)
+            self.pos_index.rows[j] = self.places[j].pose[:2].copy()
+            if cov_w is not None:
+                self.places[j].cov = np.asarray(cov_w, dtype=float)
+
+    def refresh(self, estimate: Callable[[int], Vec | None]) -> None:
+        """New estimates of every place (after an accepted loop moved the graph)."""
+        for p in self.places:
+            v = estimate(p.k)
+            if v is not None:
+                p.pose = np.asarray(v, dtype=float)
+        self.pos_index.replace([p.pose[:2] for p in self.places])
+        self.grids.clear()
+        self.stale = False
+
+    # -- stages --------------------------------------------------------------------------------------
+    def _valid(self, sk: float) -> int:
+        """Number of places at least ``skip_recent`` metres of path back."""
+        n = len(self.places)
+        while n > 0 and sk - self.places[n - 1].s < self.cfg.skip_recent:
+            n -= 1
+        return n
+
+    def _candidates(self, q: Place, valid: int, oldest: int) -> list[tuple[str, int, Vec, float, float]]:
+        """(source, place index, guess of q's pose in the place's frame, yaw half-window [deg], window [m]),
+        best first: proximity ones by Mahalanobis distance, then appearance ones by descriptor."""
+        cfg = self.cfg
+        if valid == 0:
+            return []
+        out: list[tuple[float, str, int, Vec, float, float]] = []
+        seen: set[int] = set()
+        for _, j in self.pos_index.nearest(q.pose[:2], cfg.gate_neighbours, valid):
+            p = self.places[j]
+            if p.k < oldest:
+                continue
+            dp = q.pose[:2] - p.pose[:2]
+            S = q.cov[:2, :2] + p.cov[:2, :2]
+            d2 = float(dp @ np.linalg.solve(S, dp))
+            if d2 <= self.chi_gate:
+                guess = _vec(_pose(p.pose).between(_pose(q.pose)))
+                sy = math.degrees(math.sqrt(max(q.cov[2, 2] + p.cov[2, 2], 0.0)))
+                sxy = math.sqrt(max(float(np.linalg.eigvalsh(S)[-1]), 0.0))
+                out.append((d2 / self.chi_gate, "gate", j, guess, min(cfg.yaw_window_deg + 3 * sy, 180.0),
+                            float(np.clip(3 * sxy, cfg.window, cfg.max_window))))
+                seen.add(j)
+        if q.d is not None:
+            for _, r in self.key_index.nearest(q.d.key, cfg.descriptor_neighbours, self._valid_keys(valid)):
+                j = self.key_rows[r]
+                p = self.places[j]
+                if j in seen or p.k < oldest or p.d is None:
+                    continue
+                dd, yaw = desc.distance(q.d, p.d, self.dcfg.min_overlap)
+                if dd <= cfg.descriptor_max:
+                    out.append((1.0 + dd, "descriptor", j, np.array([0.0, 0.0, yaw]), cfg.yaw_window_deg,
+                                cfg.window))
+        out.sort(key=lambda c: c[0])
+        return [(src, j, g, yw, w) for _, src, j, g, yw, w in out]
+
+    def _valid_keys(self, valid: int) -> int:
+        n = len(self.key_rows)
+        while n > 0 and self.key_rows[n - 1] >= valid:
+            n -= 1
+        return n
+
+    def _grid(self, j: int) -> corr.LikelihoodGrid:
+        g = self.grids.get(j)
+        if g is not None:
+            self.grids.move_to_end(j)
+            return g
+        cfg = self.cfg
+        base = _pose(self.places[j].pose)
+        lines = []
+        for m in range(max(0, j - cfg.submap), min(len(self.places), j + cfg.submap + 1)):
+            pm = self.places[m]
+            T = base.between(_pose(pm.pose))
+            c, s = math.cos(T.theta()), math.sin(T.theta())
+            xy = pm.xy[np.hypot(pm.xy[:, 0], pm.xy[:, 1]) <= self.ccfg.max_range]
+            lines.append(xy @ np.array([[c, s], [-s, c]]) + np.array([T.x(), T.y()]))
+        g = corr.LikelihoodGrid(lines, self.ccfg)
+        g.points = np.vstack(lines)  # the submap's points (the ICP refinement's target)
+        self.grids[j] = g
+        while len(self.grids) > 32:
+            self.grids.popitem(last=False)
+        return g
+
+    def _verify(self, q: Place, p: Place, guess: Vec, yaw_window: float, window: float, source: str) -> Loop | None:
+        cfg = self.cfg
+        grid = self._grid(self.place_of[p.k])
+        r = corr.correlative_match(q.xy, grid,
+                                   guess, window=window, yaw_window_deg=yaw_window,
+                                   second_above=cfg.max_ambiguity, cfg=self.ccfg)
+        self.last_match = r
+        self.why = "match"
+        if not r.ok or r.hits < cfg.min_hits or r.second > cfg.max_ambiguity * r.score:
+            self.counts["loop_rejected_match"] += 1
+            return None
+        self.why = "chain"
+        if not self._plausible(q, p, r.pose, np.diag([self.ccfg.resolution**2] * 2 + [math.radians(1.0) ** 2])):
+            self.counts["loop_rejected_chain"] += 1
+            return None
+        self.why = "refine"
+        ok, pose, cov, quality = self.icp_match(q.xy, grid.points, r.pose)
+        self.last_refine = (ok, pose, quality)
+        cov2 = self.cov_of(cov) if ok else None
+        if (not ok or cov2 is None or quality.get("degenerate", False)
+                or math.hypot(pose[0] - r.pose[0], pose[1] - r.pose[1]) > cfg.refine_agree
+                or abs(math.remainder(pose[2] - r.pose[2], 2 * math.pi)) > math.radians(cfg.refine_agree_deg)):
+            self.counts["loop_rejected_refine"] += 1
+            return None
+        floor = np.diag([cfg.cov_floor_xy**2] * 2 + [math.radians(cfg.cov_floor_yaw_deg) ** 2])
+        self.counts["loop_verified"] += 1
+        return Loop(p.k, q.k, p.s, q.s, np.asarray(pose, dtype=float), cov2 + floor, source)
+
+    def _plausible(self, q: Place, p: Place, z: Vec, cov_z: Vec) -> bool:
+        """Consistency with the estimate: the loop's relative pose ``z`` against the estimated one,
+        within ``chi2_3(chain_prob)`` of both poses' marginal covariances (rotated into the place's
+        frame) plus the loop's own. The marginals are relative to the anchor, so this bounds the
+        drift generously; a look-alike place farther than the drift can explain is refused."""
+        est = _pose(p.pose).between(_pose(q.pose))
+        e = np.asarray(gtsam.Pose2.Logmap(est.between(_pose(z))))
+        c, s = math.cos(p.pose[2]), math.sin(p.pose[2])
+        R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # world -> the place's frame
+        S = R @ (p.cov + q.cov) @ R.T + cov_z
+        return float(e @ np.linalg.solve(S, e)) <= self.chi_chain
+
+    def chain(self, a: int, b: int) -> tuple[gtsam.Pose2, Vec]:
+        """The chain's relative pose from keyframe ``a`` to ``b`` (either order) and its covariance."""
+        if a <= b:
+            return compound(self.steps[a + 1:b + 1])
+        T, C = compound(self.steps[b + 1:a + 1])
+        A = T.AdjointMap()
+        return T.inverse(), A @ C @ A.T
+
+    def consistent(self, l1: Loop, l2: Loop) -> bool:
+        """The cycle ``i1 -> k1 (loop 1) -> k2 (chain) -> i2 (loop 2 inverted) -> i1 (chain)`` closes
+        within the chi-square bound of its covariance (first order, every term at the identity's
+        frame: the cycle is short)."""
+        z1, z2 = _pose(l1.z), _pose(l2.z)
+        ck, Ck = self.chain(l1.k, l2.k)
+        ci, Ci = self.chain(l2.i, l1.i)
+        cyc = z1.compose(ck).compose(z2.inverse()).compose(ci)
+        e = np.asarray(gtsam.Pose2.Logmap(cyc))
+        S = l1.cov + l2.cov + Ck + Ci
+        return float(e @ np.linalg.solve(S, e)) <= self.chi_pair
+
+    def _consider(self, s: Any, loop: Loop) -> None:
+        cfg = self.cfg
+        partners = [m for m in self.loops if abs(m.sk - loop.sk) <= cfg.pair_span and abs(m.si - loop.si) <= cfg.pair_span
+                    and (m.k != loop.k or m.i != loop.i) and self.consistent(loop, m)]
+        self.loops.append(loop)
+        if not partners:
+            return
+        for m in [*partners, loop]:
+            if not m.accepted:
+                self._add_factor(s, m)
+
+    def _add_factor(self, s: Any, loop: Loop) -> None:
+        cfg = self.cfg
+        base = gtsam.noiseModel.Gaussian.Covariance(loop.cov)
+        if cfg.kernel == "cauchy":
+            model = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(cfg.kernel_k), base)
+        elif cfg.kernel == "dcs":
+            model = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.DCS.Create(cfg.kernel_k), base)
+        else:
+            model = base
+        s.add(gtsam.BetweenFactorPose2(F.X(loop.i), F.X(loop.k), _pose(loop.z), model), "loop")
+        loop.accepted = True
+        self.accepted.append((loop.i, loop.k))
+        self.counts["loop_closures"] += 1
+        self.stale = True
+
+    def _expire(self, sk: float) -> None:
+        keep = []
+        for m in self.loops:
+            if sk - m.sk <= self.cfg.pair_span:
+                keep.append(m)
+            elif not m.accepted:
+                self.counts["loop_unconfirmed"] += 1
+        self.loops = keep
+
+    def _add_place(self, place: Place) -> None:
+        self.place_of[place.k] = len(self.places)
+        self.places.append(place)
+        self.pos_index.add(place.pose[:2])
+        if place.d is not None:
+            self.key_rows.append(len(self.places) - 1)
+            self.key_index.add(place.d.key)
+
+    def info(self) -> dict[str, Any]:
+        return {**self.counts, "places": len(self.places), "loop_edges": [list(e) for e in self.accepted]}
