@@ -37,6 +37,7 @@ O(log n) per place, the tail a vectorised scan).
 from __future__ import annotations
 
 import math
+import time
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -68,8 +69,9 @@ class LoopConfig:
     descriptor_max: float = 0.35  # Scan Context distance below which a place is a candidate
     max_candidates: int = 2  # verifications per place (best first)
     window: float = 4.0  # [m] half-width of the correlative search (at least) ...
-    max_window: float = 6.0  # [m] ... and at most: 3 sigma of the two poses' position covariance in between
-    yaw_window_deg: float = 30.0  # half-width of its yaw search (around the estimate / the descriptor's yaw)
+    max_window: float = 6.0  # [m] ... and at most: 3 sigma of the relative position in between
+    max_chain: int = 2000  # keyframes: the chain's covariance is compounded up to this far apart
+    yaw_margin_deg: float = 5.0  # the yaw search: 3 sigma of the relative yaw (or a descriptor sector) plus this
     submap: int = 5  # the reference: the place and this many places on each side
     min_hits: float = 0.4  # fraction of the scan's points within hit_radius of the reference
     max_ambiguity: float = 0.9  # a distinct second peak above this x the best score: a look-alike place
@@ -201,6 +203,7 @@ class LoopCloser:
         self.key_rows: list[int] = []  # key_index row -> place index
         self.grids: OrderedDict[int, corr.LikelihoodGrid] = OrderedDict()
         self.steps: list[tuple[gtsam.Pose2, Vec]] = []  # per keyframe: the motion from k-1 and its covariance
+        self.adj: list[Vec] = []  # per keyframe: Ad(step^-1) (covariance compounding)
         self.s_of: list[float] = []  # per keyframe: path length
         self.loops: list[Loop] = []  # verified (pending or accepted)
         self.chi_gate = float(chi2.ppf(cfg.gate_prob, 2))
@@ -212,6 +215,7 @@ class LoopCloser:
         self.stale = False  # an accepted loop moved the estimate: refresh the places' poses
         self.points: Callable[[Any], Vec] | None = None  # a Scan -> its points (set by the builder)
         self.last_place_s = -math.inf
+        self.ms = 0.0  # [ms] spent in step()
 
     # -- per keyframe ------------------------------------------------------------------------------
     def step(self, s: Any, k: int, pose: gtsam.Pose2, cov_w: Vec, rel: gtsam.Pose2 | None, q: Vec | None,
@@ -220,12 +224,22 @@ class LoopCloser:
         the motion from ``k-1`` and its covariance; ``xy`` its scan's points or ``None``): candidates,
         verification, consistency; accepted loops go into the batch ``s``. ``oldest``: the oldest
         keyframe still in the solver."""
+        c0 = time.perf_counter()
+        try:
+            self._step(s, k, pose, cov_w, rel, q, xy, oldest)
+        finally:
+            self.ms += (time.perf_counter() - c0) * 1e3
+
+    def _step(self, s: Any, k: int, pose: gtsam.Pose2, cov_w: Vec, rel: gtsam.Pose2 | None, q: Vec | None,
+              xy: Vec | None, oldest: int) -> None:
         cfg = self.cfg
         if k == 0 or rel is None:
             self.steps.append((gtsam.Pose2(), np.zeros((3, 3))))
+            self.adj.append(np.eye(3))
             self.s_of.append(self.s_of[-1] if self.s_of else 0.0)
         else:
             self.steps.append((rel, np.asarray(q, dtype=float)))
+            self.adj.append(rel.inverse().AdjointMap())
             self.s_of.append(self.s_of[-1] + math.hypot(rel.x(), rel.y()))
         sk = self.s_of[k]
         if xy is None or len(xy) < self.ccfg.min_points or sk - self.last_place_s < cfg.spacing:
@@ -288,10 +302,7 @@ class LoopCloser:
             d2 = float(dp @ np.linalg.solve(S, dp))
             if d2 <= self.chi_gate:
                 guess = _vec(_pose(p.pose).between(_pose(q.pose)))
-                sy = math.degrees(math.sqrt(max(q.cov[2, 2] + p.cov[2, 2], 0.0)))
-                sxy = math.sqrt(max(float(np.linalg.eigvalsh(S)[-1]), 0.0))
-                out.append((d2 / self.chi_gate, "gate", j, guess, min(cfg.yaw_window_deg + 3 * sy, 180.0),
-                            float(np.clip(3 * sxy, cfg.window, cfg.max_window))))
+                out.append((d2 / self.chi_gate, "gate", j, guess, 0.0, 0.0))
                 seen.add(j)
         if q.d is not None:
             for _, r in self.key_index.nearest(q.d.key, cfg.descriptor_neighbours, self._valid_keys(valid)):
@@ -301,8 +312,8 @@ class LoopCloser:
                     continue
                 dd, yaw = desc.distance(q.d, p.d, self.dcfg.min_overlap)
                 if dd <= cfg.descriptor_max:
-                    out.append((1.0 + dd, "descriptor", j, np.array([0.0, 0.0, yaw]), cfg.yaw_window_deg,
-                                cfg.window))
+                    sector = 360.0 / self.dcfg.sectors
+                    out.append((1.0 + dd, "descriptor", j, np.array([0.0, 0.0, yaw]), sector, cfg.window))
         out.sort(key=lambda c: c[0])
         return [(src, j, g, yw, w) for _, src, j, g, yw, w in out]
 
@@ -335,6 +346,12 @@ class LoopCloser:
 
     def _verify(self, q: Place, p: Place, guess: Vec, yaw_window: float, window: float, source: str) -> Loop | None:
         cfg = self.cfg
+        S_rel = self.relative_cov(p, q)
+        if source == "gate":  # the search spans 3 sigma of the relative pose (within the bounds)
+            sxy = math.sqrt(max(float(np.linalg.eigvalsh(S_rel[:2, :2])[-1]), 0.0))
+            window = float(np.clip(3 * sxy, cfg.window, cfg.max_window))
+            yaw_window = min(3 * math.degrees(math.sqrt(max(S_rel[2, 2], 0.0))), 180.0)
+        yaw_window = min(yaw_window + cfg.yaw_margin_deg, 180.0)
         grid = self._grid(self.place_of[p.k])
         r = corr.correlative_match(q.xy, grid,
                                    guess, window=window, yaw_window_deg=yaw_window,
@@ -345,7 +362,8 @@ class LoopCloser:
             self.counts["loop_rejected_match"] += 1
             return None
         self.why = "chain"
-        if not self._plausible(q, p, r.pose, np.diag([self.ccfg.resolution**2] * 2 + [math.radians(1.0) ** 2])):
+        if not self._plausible(p, q, r.pose, S_rel + np.diag([self.ccfg.resolution**2] * 2
+                                                             + [math.radians(1.0) ** 2])):
             self.counts["loop_rejected_chain"] += 1
             return None
         self.why = "refine"
@@ -361,16 +379,32 @@ class LoopCloser:
         self.counts["loop_verified"] += 1
         return Loop(p.k, q.k, p.s, q.s, np.asarray(pose, dtype=float), cov2 + floor, source)
 
-    def _plausible(self, q: Place, p: Place, z: Vec, cov_z: Vec) -> bool:
-        """Consistency with the estimate: the loop's relative pose ``z`` against the estimated one,
-        within ``chi2_3(chain_prob)`` of both poses' marginal covariances (rotated into the place's
-        frame) plus the loop's own. The marginals are relative to the anchor, so this bounds the
-        drift generously; a look-alike place farther than the drift can explain is refused."""
-        est = _pose(p.pose).between(_pose(q.pose))
-        e = np.asarray(gtsam.Pose2.Logmap(est.between(_pose(z))))
+    def relative_cov(self, p: Place, q: Place) -> Vec:
+        """Covariance of ``q``'s pose in ``p``'s frame (x, y in that frame, yaw): the smaller (by
+        trace) of the two poses' marginals rotated into it -- relative to the anchor, generous -- and
+        the chain's between them (the motion covariances compounded, loops ignored: an upper bound),
+        the latter when at most ``max_chain`` keyframes apart."""
         c, s = math.cos(p.pose[2]), math.sin(p.pose[2])
         R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # world -> the place's frame
-        S = R @ (p.cov + q.cov) @ R.T + cov_z
+        best = R @ (p.cov + q.cov) @ R.T
+        if 0 < q.k - p.k <= self.cfg.max_chain:
+            C = np.zeros((3, 3))
+            for k in range(p.k + 1, q.k + 1):
+                A = self.adj[k]
+                C = A @ C @ A.T + self.steps[k][1]
+            T = _pose(p.pose).between(_pose(q.pose))
+            A = T.AdjointMap()  # tangent at q -> p's frame
+            C = A @ C @ A.T
+            if np.trace(C) < np.trace(best):
+                best = C
+        return best
+
+    def _plausible(self, p: Place, q: Place, z: Vec, S: Vec) -> bool:
+        """Consistency with the estimate: the loop's relative pose ``z`` against the estimated one,
+        within ``chi2_3(chain_prob)`` of the relative covariance ``S`` (plus the match's
+        resolution): a look-alike place farther than the drift can explain is refused."""
+        est = _pose(p.pose).between(_pose(q.pose))
+        e = np.asarray(gtsam.Pose2.Logmap(est.between(_pose(z))))
         return float(e @ np.linalg.solve(S, e)) <= self.chi_chain
 
     def chain(self, a: int, b: int) -> tuple[gtsam.Pose2, Vec]:
@@ -437,4 +471,4 @@ class LoopCloser:
             self.key_index.add(place.d.key)
 
     def info(self) -> dict[str, Any]:
-        return {**self.counts, "places": len(self.places), "loop_edges": [list(e) for e in self.accepted]}
+        return {**self.counts, "places": len(self.places), "loop_ms": self.ms, "loop_edges": [list(e) for e in self.accepted]}

@@ -37,14 +37,14 @@ from scipy import ndimage
 class CorrelativeConfig:
     """Settings of :func:`correlative_match` (metres, degrees)."""
 
-    resolution: float = 0.1  # [m] fine lattice and grid cell
-    levels: int = 5  # branch-and-bound depth: top blocks of 2^levels x 2^levels fine translations (3.2 m)
-    sigma: float = 0.15  # [m] range of the likelihood field (1-sigma of a return about its surface)
+    resolution: float = 0.2  # [m] fine lattice and grid cell (the ICP refinement does the rest)
+    levels: int = 4  # branch-and-bound depth: top blocks of 2^levels x 2^levels fine translations (3.2 m)
+    sigma: float = 0.2  # [m] range of the likelihood field (1-sigma of a return about its surface)
     hit_radius: float = 0.3  # [m] a source point within this of a reference surface is a hit
     line_gap: float = 1.0  # [m] consecutive reference returns closer than this are one surface
     max_range: float = 30.0  # [m] farther returns are not used (sets the yaw step with resolution)
-    voxel: float = 0.25  # [m] the source points are thinned to one per voxel ...
-    max_points: int = 250  # ... and at most this many (evenly in scan order)
+    voxel: float = 0.3  # [m] the source points are thinned to one per voxel ...
+    max_points: int = 200  # ... and at most this many (evenly in scan order)
     min_points: int = 20
     distinct: float = 1.0  # [m] the second peak lies at least this far from the best ...
     distinct_yaw_deg: float = 10.0  # ... or turned at least this much
@@ -110,15 +110,15 @@ class LikelihoodGrid:
         self.origin = lo
         shape = tuple(np.ceil((hi - lo) / res).astype(int) + 1)
         occ = np.zeros(shape, dtype=bool)
+        # consecutive returns closer than line_gap: the surface between them, sampled every res / 2 at most
+        f = np.linspace(0.0, 1.0, int(math.ceil(2 * cfg.line_gap / res)) + 1)[None, :, None]
         for p in pts:
             dense = [p]
-            if len(p) > 1:  # consecutive returns closer than line_gap: the surface between them
+            if len(p) > 1:
                 a, b = p[:-1], p[1:]
                 seg = np.hypot(*(b - a).T)
-                for i in np.flatnonzero((seg < cfg.line_gap) & (seg > res / 2)):
-                    m = int(math.ceil(seg[i] / (res / 2)))
-                    f = np.linspace(0.0, 1.0, m + 1)[:, None]
-                    dense.append(a[i] + f * (b[i] - a[i]))
+                keep = (seg < cfg.line_gap) & (seg > res / 2)
+                dense.append((a[keep, None, :] + f * (b[keep] - a[keep])[:, None, :]).reshape(-1, 2))
             q = np.vstack(dense)
             ij = np.floor((q - lo) / res).astype(int)
             ij = ij[(ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < shape[0]) & (ij[:, 1] < shape[1])]
@@ -191,9 +191,11 @@ def block_scores_numpy(grid: NDArray[np.float64], base: NDArray[np.int64], step:
 def _rotated_cells(g: LikelihoodGrid, src: NDArray[np.float64], yaws: NDArray[np.float64],
                    corner: NDArray[np.float64]) -> NDArray[np.int64]:
     c, s = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
-    x = c * src[None, :, 0] - s * src[None, :, 1] + corner[0]
-    y = s * src[None, :, 0] + c * src[None, :, 1] + corner[1]
-    return g.cells(np.stack([x, y], axis=-1))
+    out = np.empty((len(yaws), len(src), 2), dtype=np.int64)
+    res = g.cfg.resolution
+    out[..., 0] = np.floor((c * src[None, :, 0] - s * src[None, :, 1] + corner[0] - g.origin[0]) / res)
+    out[..., 1] = np.floor((s * src[None, :, 0] + c * src[None, :, 1] + corner[1] - g.origin[1]) / res)
+    return out
 
 
 def correlative_match(src_xy: NDArray[np.float64], ref: LikelihoodGrid | list[NDArray[np.float64]],

@@ -1,0 +1,232 @@
+"""Loop closures (graphnav.graph.loops): a synthetic loop with known truth, a corridor whose
+look-alike place must be refused, and a wrong loop that the robust kernel and the pairwise
+consistency check must neutralise."""
+
+from __future__ import annotations
+
+import math
+
+import gtsam
+import numpy as np
+import pytest
+
+import _scan_sim as S
+import factors as F
+from graphnav.graph import loops as LP
+from graphnav.graph.builder import Step, make_loop_closer
+from graphnav.graph.config import SmootherConfig
+from graphnav.graph.navigator import Navigator
+from graphnav.log import NavLog, Odometry, Scan, Truth
+
+
+def _box(x0, y0, x1, y1):
+    return [(x0, y0, x1, y0), (x1, y0, x1, y1), (x1, y1, x0, y1), (x0, y1, x0, y0)]
+
+
+def _hall() -> np.ndarray:
+    """A 40 x 30 m hall with irregular boxes off a circle of radius 9 m about the origin."""
+    segs = [*_box(-20, -15, 20, 15), *_box(-16, 11, -12, 13), *_box(13, 10, 15, 13), *_box(12, -13, 17, -11),
+            *_box(-15, -12, -13, -7), *_box(-2, -2, 1, 1), (-18, 2, -15, 5), (4, -15, 6, -12), (8, 15, 10, 12)]
+    return np.array(segs, dtype=float)
+
+
+def _loop_log(seed: int = 0, laps: float = 1.6, sigma_w: float = 0.015) -> tuple[NavLog, np.ndarray]:
+    """Scans (180 beams over 180 deg, 1 s apart), truth and odometry (white noise, its sigmas stated:
+    3 cm/s, ``sigma_w`` rad/s) on a circle of radius 9 m at 1 m/s, counter-clockwise: the track comes
+    back to its start after one lap."""
+    rng = np.random.default_rng(seed)
+    segs = _hall()
+    r0, v = 9.0, 1.0
+    w = v / r0
+    n = int(laps * 2 * math.pi / w)
+    ang = -math.pi / 2 + np.arange(180) * math.pi / 180
+    recs = []
+    poses = []
+    for k in range(n + 1):
+        t = float(k)
+        a = -math.pi / 2 + w * t
+        pose = np.array([r0 * math.cos(a), r0 * math.sin(a), a + math.pi / 2])
+        poses.append(pose)
+        rr = S.raycast(segs, pose, ang) + rng.normal(0, 0.01, 180)
+        recs.append(Scan(t, rr, ang.copy()))
+        recs.append(Truth(t, *map(float, pose)))
+        recs.append(Odometry(t, v + rng.normal(0, 0.03), w + rng.normal(0, sigma_w), 0.03, sigma_w))
+    return NavLog.from_unsorted(recs, meta={"name": "loop"}), np.array(poses)
+
+
+def _run(log: NavLog, **options):
+    nav = Navigator.for_log(log, **options)
+    for rec in log:
+        nav.add(rec)
+    return nav.result()
+
+
+def _ate(res, truth: np.ndarray) -> float:
+    p = res.trajectory.poses
+    return float(np.sqrt(np.mean(np.sum((p[:, :2] - truth[:, :2]) ** 2, axis=1))))
+
+
+def test_synthetic_loop_is_closed_with_bounded_error():
+    log, truth = _loop_log(seed=1)
+    on = _run(log, use_icp=False)  # odometry only: the drift is the loops' to remove
+    off = _run(log, use_icp=False, loops=False)
+    assert on.info["loop_closures"] >= 5
+    assert on.info["loop_candidates"] >= on.info["loop_closures"]
+    for i, k in on.info["loop_edges"]:  # every accepted loop is right
+        z = gtsam.Pose2(*truth[i]).between(gtsam.Pose2(*truth[k]))
+        e = gtsam.Pose2(*on.trajectory.poses[i]).between(gtsam.Pose2(*on.trajectory.poses[k]))
+        assert math.hypot(z.x() - e.x(), z.y() - e.y()) < 0.3
+    a_on, a_off = _ate(on, truth), _ate(off, truth)
+    assert a_off > 0.8  # the drift is real
+    assert a_on < 0.35 * a_off and a_on < 0.6
+    # the online estimate takes the loops too: its last poses are close to the truth
+    last = on.online.poses[-1]
+    assert math.hypot(*(last[:2] - truth[-1, :2])) < 0.5 * math.hypot(*(off.online.poses[-1][:2] - truth[-1, :2]))
+
+
+def test_loops_off_and_batch_and_fixed_lag():
+    log, truth = _loop_log(seed=1, laps=1.3)
+    assert "loop_closures" not in _run(log, use_icp=False, loops=False).info
+    b = _run(log, use_icp=False, solver="batch")
+    assert b.info["loop_closures"] >= 1
+    fl = _run(log, use_icp=False, solver="fixed-lag", lag=20.0)  # the loop lies outside the window: none
+    assert fl.info["loop_closures"] == 0
+
+
+def _corridor_with_doors(period: float = 6.0, length: float = 120.0) -> np.ndarray:
+    """A corridor 4 m wide with identical door recesses every ``period`` metres on both walls."""
+    segs = []
+    x = -length / 2
+    while x < length / 2:
+        for side in (-1, 1):
+            y = 2.0 * side
+            segs += [(x, y, x + period - 1.0, y), (x + period - 1.0, y, x + period - 1.0, y + side),
+                     (x + period - 1.0, y + side, x + period, y + side), (x + period, y + side, x + period, y)]
+        x += period
+    return np.array(segs, dtype=float)
+
+
+def _closer(**loop):
+    cfg = SmootherConfig(loop=loop)
+    return make_loop_closer(cfg, {}), cfg
+
+
+def _step():
+    return Step(0, 0.0, gtsam.NonlinearFactorGraph(), gtsam.Values(), {})
+
+
+def test_repeated_corridor_look_alike_is_refused():
+    """First pass east along the corridor; the second pass east again with an estimate one door
+    period (6 m) ahead of the truth: the look-alike place at the estimate matches perfectly, the
+    true one is as good -- the match is ambiguous and must be refused."""
+    segs = _corridor_with_doors()
+    rng = np.random.default_rng(0)
+    ang = -math.pi / 2 + np.arange(180) * math.pi / 180
+    closer, _ = _closer()
+    cov = np.diag([2.0**2, 2.0**2, math.radians(2.0) ** 2])  # 3 sigma = 6 m: the window holds both peaks
+    k = 0
+    s = _step()
+    for sweep, offset in ((0, 0.0), (1, 6.0)):
+        for x in np.arange(-40.0, 20.0, 1.0):
+            truth = np.array([x + 0.13 * sweep, 0.2 * sweep, 0.0])
+            est = truth + [offset, 0.0, 0.0]
+            xy = S.points(S.raycast(segs, truth, ang) + rng.normal(0, 0.01, 180), ang)
+            rel = gtsam.Pose2(1.0, 0.0, 0.0) if k else None
+            closer.step(s, k, gtsam.Pose2(*est), cov, rel, np.diag([0.01, 0.01, 1e-4]) if k else None, xy)
+            k += 1
+    assert closer.counts["loop_candidates"] > 10
+    assert closer.counts["loop_closures"] == 0
+    assert s.graph.size() == 0
+
+
+def test_featureless_corridor_is_refused():
+    segs = S.corridor(200.0, 2.0)
+    ang = -math.pi / 2 + np.arange(180) * math.pi / 180
+    closer, _ = _closer(min_hits=0.3)
+    s = _step()
+    k = 0
+    cov = np.diag([0.3**2, 0.3**2, math.radians(1.0) ** 2])
+    for sweep in range(2):
+        for x in np.arange(-30.0, 10.0, 1.0):
+            truth = np.array([x + 0.4 * sweep, 0.1 * sweep, 0.0])
+            xy = S.points(S.raycast(segs, truth, ang), ang)
+            closer.step(s, k, gtsam.Pose2(*truth), cov, gtsam.Pose2(1.0, 0.0, 0.0) if k else None,
+                        np.diag([0.01, 0.01, 1e-4]) if k else None, xy)
+            k += 1
+    assert closer.counts["loop_candidates"] > 10
+    assert closer.counts["loop_closures"] == 0  # along a bare corridor no match is informative
+
+
+def _chain_problem(kernel: str, wrong: bool):
+    """A square track of 40 poses (odometry with a small yaw drift), 4 correct loops from the last
+    lap to the first and, if ``wrong``, one loop 8 m off, each added by the closer's factor."""
+    closer, _ = _closer(kernel=kernel)
+    truth = []
+    for k in range(48):
+        side, u = divmod(k, 10)
+        side %= 4
+        c = [(0, 0), (10, 0), (10, 10), (0, 10)][side]
+        d = [(1, 0), (0, 1), (-1, 0), (0, -1)][side]
+        truth.append(np.array([c[0] + d[0] * u, c[1] + d[1] * u, math.atan2(d[1], d[0])]))
+    g = gtsam.NonlinearFactorGraph()
+    v = gtsam.Values()
+    g.add(gtsam.PriorFactorPose2(F.X(0), gtsam.Pose2(*truth[0]), gtsam.noiseModel.Isotropic.Sigma(3, 1e-3)))
+    rng = np.random.default_rng(0)
+    odo = gtsam.noiseModel.Diagonal.Sigmas([0.05, 0.05, math.radians(1.0)])
+    est = gtsam.Pose2(*truth[0])
+    v.insert(F.X(0), est)
+    for k in range(1, len(truth)):
+        z = gtsam.Pose2(*truth[k - 1]).between(gtsam.Pose2(*truth[k]))
+        z = z.compose(gtsam.Pose2(rng.normal(0, 0.02), rng.normal(0, 0.02), math.radians(1.5)))  # yaw drift
+        g.add(gtsam.BetweenFactorPose2(F.X(k - 1), F.X(k), z, odo))
+        est = est.compose(z)
+        v.insert(F.X(k), est)
+    s = _step()
+    cov = np.diag([0.05**2, 0.05**2, math.radians(0.5) ** 2])
+    pairs = [(0, 40), (1, 41), (2, 42), (3, 43)] + ([(5, 46)] if wrong else [])
+    for i, k in pairs:
+        z = gtsam.Pose2(*truth[i]).between(gtsam.Pose2(*truth[k]))
+        if (i, k) == (5, 46):
+            z = z.compose(gtsam.Pose2(8.0, 0.0, 0.0))
+        closer._add_factor(s, LP.Loop(i, k, 0.0, 0.0, np.array([z.x(), z.y(), z.theta()]), cov, "test"))
+    g.push_back(s.graph)
+    res = gtsam.LevenbergMarquardtOptimizer(g, v).optimize()
+    p = np.array([[res.atPose2(F.X(k)).x(), res.atPose2(F.X(k)).y()] for k in range(len(truth))])
+    return float(np.sqrt(np.mean(np.sum((p - np.array(truth)[:, :2]) ** 2, axis=1))))
+
+
+def test_injected_wrong_loop_is_neutralised_by_the_kernel():
+    right = _chain_problem("cauchy", wrong=False)
+    robust = _chain_problem("cauchy", wrong=True)
+    plain = _chain_problem("none", wrong=True)
+    assert right < 0.3
+    assert robust < right + 0.1  # the wrong loop barely moves the robust solution
+    assert plain > 3 * robust  # without the kernel it wrecks the map
+
+
+def test_pairwise_consistency_refuses_a_wrong_loop():
+    closer, _ = _closer()
+    q = np.diag([0.02**2, 0.02**2, math.radians(0.3) ** 2])
+    for k in range(30):  # a straight chain, 1 m steps
+        closer.steps.append((gtsam.Pose2(1.0, 0.0, 0.0) if k else gtsam.Pose2(), q if k else np.zeros((3, 3))))
+    cov = np.diag([0.05**2, 0.05**2, math.radians(0.5) ** 2])
+    # keyframe 20 is beside keyframe 2 (one metre to the left), 22 beside 4: a straight revisit
+    l1 = LP.Loop(2, 20, 2.0, 20.0, np.array([0.0, 1.0, 0.0]), cov, "gate")
+    l2 = LP.Loop(4, 22, 4.0, 22.0, np.array([0.0, 1.0, 0.0]), cov, "gate")
+    bad = LP.Loop(4, 22, 4.0, 22.0, np.array([3.0, 1.0, 0.0]), cov, "gate")  # a look-alike 3 m on
+    # the chains 20 -> 22 and 4 -> 2 are both 2 m: the cycle closes for l2 and not for bad
+    closer.steps[20:23] = [(gtsam.Pose2(1.0, 0.0, 0.0), q)] * 3
+    assert closer.consistent(l1, l2)
+    assert not closer.consistent(l1, bad)
+
+
+def test_compound_and_propagate_against_closed_form():
+    q = np.diag([0.1**2, 0.2**2, 0.05**2])
+    T, C = LP.compound([(gtsam.Pose2(1.0, 0.0, 0.0), q), (gtsam.Pose2(1.0, 0.0, 0.0), q)])
+    assert T.x() == pytest.approx(2.0)
+    # two straight steps: x var adds, y var = 2 * 0.04 + (1 m * yaw sigma of the first step)^2
+    assert C[0, 0] == pytest.approx(0.02)
+    assert C[1, 1] == pytest.approx(0.08 + 0.05**2)
+    assert C[2, 2] == pytest.approx(2 * 0.05**2)
+    w = LP.propagate(np.zeros((3, 3)), np.array([0.0, 0.0, math.pi / 2]), gtsam.Pose2(1.0, 0.0, 0.0), q)
+    assert w[0, 0] == pytest.approx(0.04) and w[1, 1] == pytest.approx(0.01)  # body axes turned by 90 deg
