@@ -63,14 +63,16 @@ def table(rows: list[dict]) -> str:
              "| loop ms / keyframe |", "|" + "---|" * 14]
     for r in rows:
         lo, no = r["loops"], r["no_loops"]
-        lines.append(f"| {r['log']} | {lo['keyframes']} | {f(r['dr'])} | {f(no['ate_rmse_m'])} | {f(lo['ate_rmse_m'])} | "
+        lines.append(f"| {r['log']} | {lo['keyframes']} | {f(r['dr'])} | {f(no['ate_rmse_m'])} | "
+                     f"{f(lo['ate_rmse_m'])} | "
                      f"{f(lo['ate_aligned_rmse_m'])} | {f(r['ate_ratio_dr'], 2)} | {f(r['rpe1_ratio'], 3)} | "
                      f"{r['loop_closures']} | {r['loop_candidates']} | {r['loop_rejected_match']} / "
                      f"{r['loop_rejected_chain']} / {r['loop_rejected_refine']} / {r['loop_unconfirmed']} | "
                      f"{f(lo['runtime_s'], 1)} | {f(r['ms_per_keyframe'], 1)} | {f(r['loop_ms_per_keyframe'], 1)} |")
     ate = [r["loops"]["ate_rmse_m"] for r in rows]
     lines.append("")
-    lines.append(f"median ATE with loops {np.median(ate):.3f} m (target <= 1.0: {'met' if np.median(ate) <= 1.0 else 'missed'}); "
+    met = "met" if np.median(ate) <= 1.0 else "missed"
+    lines.append(f"median ATE with loops {np.median(ate):.3f} m (target <= 1.0: {met}); "
                  f"without {np.median([r['no_loops']['ate_rmse_m'] for r in rows]):.3f} m; "
                  f"ATE <= 0.3 x DR on {sum(r['ate_ratio_dr'] <= 0.3 for r in rows)} of {len(rows)}; "
                  f"RPE1 <= 1.05 x without loops on {sum(r['rpe1_ratio'] <= 1.05 for r in rows)} of {len(rows)}")

@@ -429,7 +429,8 @@ class LoopCloser:
 
     def _consider(self, s: Any, loop: Loop) -> None:
         cfg = self.cfg
-        partners = [m for m in self.loops if abs(m.sk - loop.sk) <= cfg.pair_span and abs(m.si - loop.si) <= cfg.pair_span
+        partners = [m for m in self.loops
+                    if abs(m.sk - loop.sk) <= cfg.pair_span and abs(m.si - loop.si) <= cfg.pair_span
                     and (m.k != loop.k or m.i != loop.i) and self.consistent(loop, m)]
         self.loops.append(loop)
         if not partners:
@@ -471,4 +472,5 @@ class LoopCloser:
             self.key_index.add(place.d.key)
 
     def info(self) -> dict[str, Any]:
-        return {**self.counts, "places": len(self.places), "loop_ms": self.ms, "loop_edges": [list(e) for e in self.accepted]}
+        return {**self.counts, "places": len(self.places), "loop_ms": self.ms,
+                "loop_edges": [list(e) for e in self.accepted]}
