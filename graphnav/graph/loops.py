@@ -68,6 +68,8 @@ class LoopConfig:
     descriptor_neighbours: int = 8  # nearest ring keys looked at by the appearance search
     descriptor_max: float = 0.35  # Scan Context distance below which a place is a candidate
     max_candidates: int = 2  # verifications per place (best first)
+    min_sigma: float = 0.5  # [m] a proximity candidate is verified only when the relative position's 1-sigma
+    #                          (largest axis) exceeds this: else the graph knows it already (GNSS, a short chain)
     window: float = 4.0  # [m] half-width of the correlative search (at least) ...
     max_window: float = 6.0  # [m] ... and at most: 3 sigma of the relative position in between
     max_chain: int = 2000  # keyframes: the chain's covariance is compounded up to this far apart
@@ -75,9 +77,12 @@ class LoopConfig:
     submap: int = 5  # the reference: the place and this many places on each side
     min_hits: float = 0.4  # fraction of the scan's points within hit_radius of the reference
     max_ambiguity: float = 0.9  # a distinct second peak above this x the best score: a look-alike place
+    refine_submap: int = 5  # the refinement's target: the place and this many on each side (more overlap;
+    #                         1 gave fewer, as biased loops on edmonton and lost most of seattle's)
     refine_agree: float = 0.5  # [m] the ICP refinement must stay this close to the correlative pose
     refine_agree_deg: float = 3.0
-    pair_span: float = 30.0  # [m] of path: two loops this close on both ends check each other
+    pair_span: float = 30.0  # [m] of path: two loops this close on both ends check each other ...
+    pair_min: float = 0.0  # [m] ... and at least this far apart at the current end (5 m lost seattle: 0.84 -> 5.2 m)
     consistency_prob: float = 0.999  # chi-square probability (3 dof) of the cycle error
     chain_prob: float = 0.999  # ... of a loop against the estimate (both marginals + the loop's)
     kernel: str = "cauchy"  # robust kernel of the loop factors: "cauchy", "dcs", "none"
@@ -210,7 +215,7 @@ class LoopCloser:
         self.chi_pair = float(chi2.ppf(cfg.consistency_prob, 3))
         self.chi_chain = float(chi2.ppf(cfg.chain_prob, 3))
         self.counts = {"loop_candidates": 0, "loop_verified": 0, "loop_closures": 0, "loop_rejected_match": 0,
-                       "loop_rejected_refine": 0, "loop_rejected_chain": 0, "loop_unconfirmed": 0}
+                       "loop_rejected_refine": 0, "loop_rejected_chain": 0, "loop_known": 0, "loop_unconfirmed": 0}
         self.accepted: list[tuple[int, int]] = []
         self.stale = False  # an accepted loop moved the estimate: refresh the places' poses
         self.points: Callable[[Any], Vec] | None = None  # a Scan -> its points (set by the builder)
@@ -338,7 +343,8 @@ class LoopCloser:
             xy = pm.xy[np.hypot(pm.xy[:, 0], pm.xy[:, 1]) <= self.ccfg.max_range]
             lines.append(xy @ np.array([[c, s], [-s, c]]) + np.array([T.x(), T.y()]))
         g = corr.LikelihoodGrid(lines, self.ccfg)
-        g.points = np.vstack(lines)  # the submap's points (the ICP refinement's target)
+        lo = j - max(0, j - cfg.submap)  # the ICP refinement's target: the place and its nearest neighbours
+        g.points = np.vstack(lines[max(0, lo - cfg.refine_submap):lo + cfg.refine_submap + 1])
         self.grids[j] = g
         while len(self.grids) > 32:
             self.grids.popitem(last=False)
@@ -347,6 +353,10 @@ class LoopCloser:
     def _verify(self, q: Place, p: Place, guess: Vec, yaw_window: float, window: float, source: str) -> Loop | None:
         cfg = self.cfg
         S_rel = self.relative_cov(p, q)
+        if source == "gate" and float(np.linalg.eigvalsh(S_rel[:2, :2])[-1]) < cfg.min_sigma**2:
+            self.counts["loop_known"] += 1  # the relative position is known already: nothing to gain
+            self.why = "known"
+            return None
         if source == "gate":  # the search spans 3 sigma of the relative pose (within the bounds)
             sxy = math.sqrt(max(float(np.linalg.eigvalsh(S_rel[:2, :2])[-1]), 0.0))
             window = float(np.clip(3 * sxy, cfg.window, cfg.max_window))
@@ -430,8 +440,8 @@ class LoopCloser:
     def _consider(self, s: Any, loop: Loop) -> None:
         cfg = self.cfg
         partners = [m for m in self.loops
-                    if abs(m.sk - loop.sk) <= cfg.pair_span and abs(m.si - loop.si) <= cfg.pair_span
-                    and (m.k != loop.k or m.i != loop.i) and self.consistent(loop, m)]
+                    if cfg.pair_min <= abs(m.sk - loop.sk) <= cfg.pair_span and abs(m.si - loop.si) <= cfg.pair_span
+                    and self.consistent(loop, m)]
         self.loops.append(loop)
         if not partners:
             return
