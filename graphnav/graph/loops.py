@@ -65,7 +65,7 @@ class LoopConfig:
     skip_recent: float = 15.0  # [m] of path: nearer places are not candidates
     gate_prob: float = 0.999  # proximity gate: chi-square probability (2 dof) of the position difference
     gate_neighbours: int = 16  # nearest places looked at by the proximity search
-    descriptor_neighbours: int = 8  # nearest ring keys looked at by the appearance search
+    descriptor_neighbours: int = 4  # nearest ring keys looked at by the appearance search
     descriptor_max: float = 0.35  # Scan Context distance below which a place is a candidate
     max_candidates: int = 2  # verifications per place (best first)
     min_sigma: float = 0.5  # [m] a proximity candidate is verified only when the relative position's 1-sigma
@@ -355,8 +355,16 @@ class LoopCloser:
         S_rel = self.relative_cov(p, q)
         if source == "gate" and float(np.linalg.eigvalsh(S_rel[:2, :2])[-1]) < cfg.min_sigma**2:
             self.counts["loop_known"] += 1  # the relative position is known already: nothing to gain
+            #                                 (a descriptor candidate: the estimate cannot be that far off)
             self.why = "known"
             return None
+        if source == "descriptor":  # "the same place": must the estimate have drifted that far?
+            T = _pose(p.pose).between(_pose(q.pose))
+            e = np.array([T.x(), T.y()])
+            if float(e @ np.linalg.solve(S_rel[:2, :2] + (window / 3) ** 2 * np.eye(2), e)) > self.chi_gate:
+                self.counts["loop_known"] += 1
+                self.why = "known"
+                return None
         if source == "gate":  # the search spans 3 sigma of the relative pose (within the bounds)
             sxy = math.sqrt(max(float(np.linalg.eigvalsh(S_rel[:2, :2])[-1]), 0.0))
             window = float(np.clip(3 * sxy, cfg.window, cfg.max_window))

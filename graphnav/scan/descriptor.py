@@ -72,6 +72,18 @@ def ring_key(d: Descriptor) -> NDArray[np.float64]:
     return d.key
 
 
+_DIAG: dict[int, NDArray[np.int64]] = {}
+
+
+def _diagonals(n: int) -> NDArray[np.int64]:
+    """Flat indices of ``(j, (j + s) mod n)`` of an n x n matrix, row ``s`` (cached per ``n``)."""
+    d = _DIAG.get(n)
+    if d is None:
+        j = np.arange(n)
+        d = _DIAG[n] = j[None, :] * n + (j[None, :] + j[:, None]) % n
+    return d
+
+
 def distance(q: Descriptor, c: Descriptor, min_overlap: float = 0.25) -> tuple[float, float]:
     """Scan Context's distance (eq. 5-6) between the query ``q`` and candidate ``c``, and the yaw
     [rad] of the query's frame in the candidate's at the best column shift: ``(d, yaw)``, ``d`` in
@@ -84,10 +96,9 @@ def distance(q: Descriptor, c: Descriptor, min_overlap: float = 0.25) -> tuple[f
     ch = np.divide(c.grid, cn, out=np.zeros_like(c.grid), where=cn > 0)
     cos = qh.T @ ch  # cos[j, l]: query column j against candidate column l
     both = np.outer(qn > 0, cn > 0)
-    j = np.arange(n)
-    shifted = (j[None, :] + j[:, None]) % n  # row s: candidate column j + s (the query rotated by +s sectors)
-    sums = cos[j[None, :], shifted].sum(1)
-    counts = both[j[None, :], shifted].sum(1)
+    flat = _diagonals(n)  # row s: (j, j + s) for every j -- the query rotated by +s sectors
+    sums = cos.ravel()[flat].sum(1)
+    counts = both.ravel()[flat].sum(1)
     with np.errstate(invalid="ignore", divide="ignore"):
         d = np.where(counts >= max(min_overlap * n, 1), 1.0 - sums / np.maximum(counts, 1), 1.0)
     s = int(np.argmin(d))
