@@ -63,3 +63,20 @@ class LocalFrame:
         lat, lon, _h = pymap3d.enu2geodetic(x, y, np.zeros(x.shape), self.lat0, self.lon0, self.h0,
                                             ell=_WGS84, deg=True)
         return _arr(lat), _arr(lon)
+
+
+def origin_frame(meta: dict) -> tuple[LocalFrame | None, str | None]:
+    """The geodetic origin a log records (``meta["origin"] = {"lat", "lon", "h"}``, degrees and m) as
+    a :class:`LocalFrame`, and ``None``; or ``None`` and the reason there is none (absent, or not
+    finite numbers in range). Never a default: a log without an origin has no WGS84 position."""
+    o = meta.get("origin") if isinstance(meta, dict) else None
+    if o is None:
+        return None, "the log has no geodetic origin (meta['origin'] = {lat, lon, h})"
+    try:
+        lat, lon = float(o["lat"]), float(o["lon"])
+        h = float(o.get("h", 0.0) or 0.0)
+    except (TypeError, ValueError, KeyError, AttributeError):
+        return None, f"the log's meta['origin'] is not {{lat, lon, h}} numbers: {str(o)[:60]}"
+    if not (np.isfinite([lat, lon, h]).all() and -90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        return None, f"the log's meta['origin'] is out of range: lat {lat}, lon {lon}, h {h}"
+    return LocalFrame(lat, lon, h), None
