@@ -132,6 +132,10 @@ def log_to_nmea(log: NavLog, *, origin: tuple[float, float] | None = None, quali
     receivers do; the reader keeps one fix per epoch).
     """
     frame = frame_of(log, origin)
+    fixes = [r for r in log.records if isinstance(r, Gnss)]
+    lats, lons = frame.to_geodetic(np.array([r.x for r in fixes]), np.array([r.y for r in fixes]))  # all at once
+    geo = {id(r): (float(la), float(lo)) for r, la, lo in zip(fixes, np.atleast_1d(lats), np.atleast_1d(lons),
+                                                               strict=True)}
     last_t = None
     for r in log.records:
         if not isinstance(r, Gnss | Heading | Odometry):
@@ -140,10 +144,10 @@ def log_to_nmea(log: NavLog, *, origin: tuple[float, float] | None = None, quali
             yield r.t, zda(r.t)
             last_t = r.t
         if isinstance(r, Gnss):
-            lat, lon = frame.to_geodetic(r.x, r.y)
-            yield r.t, gga(r.t, float(lat), float(lon), quality=quality, hdop=hdop_of(r.sigma, quality))
+            lat, lon = geo[id(r)]
+            yield r.t, gga(r.t, lat, lon, quality=quality, hdop=hdop_of(r.sigma, quality))
             if with_rmc:
-                yield r.t, rmc(r.t, float(lat), float(lon))
+                yield r.t, rmc(r.t, lat, lon)
         elif isinstance(r, Heading):
             yield r.t, hdt(r.yaw)
         else:
