@@ -95,7 +95,7 @@ def _graticule(c: _Canvas, frame: LocalFrame) -> list[str]:
         gx, gy = frame.to_local(lat.min() + u * (lat.max() - lat.min()), np.full(u.size, v))
         out.append(f'<polyline points="{c.points(gx, gy)}"/>')
         lx = float(np.interp(c.y0, gy, gx))
-        if c.x0 < lx < c.x1:
+        if c.x0 < lx < c.x1 and float(c.px(lx)) < c.w - 75.0:  # (room for the label)
             out.append(f'<text x="{float(c.px(lx)) + 3:.1f}" y="{c.h - 4:.1f}">{_dm(float(v), False)}</text>')
     out.append("</g>")
     return out
@@ -182,7 +182,7 @@ def track_map_html(trajectories: Mapping[str, Trajectory], meta: dict, *, title:
         legend.append(f'<li><span class="sw" style="background:{col}"></span>{escape(name)} '
                       f"({len(tr)} poses)</li>")
     bar = _nice((c.x1 - c.x0) / 5.0)
-    bx, by = c.w - bar * c.s - 12.0, c.h - 14.0
+    bx, by = c.w - bar * c.s - 12.0, c.h - 26.0  # above the longitude labels
     svg.append(f'<g class="scale"><line x1="{bx:.1f}" y1="{by:.1f}" x2="{bx + bar * c.s:.1f}" y2="{by:.1f}"/>'
                f'<text x="{bx:.1f}" y="{by - 5:.1f}">{bar:g} m</text></g>')
     svg.append(f'<g class="north"><text x="{c.w - 22:.1f}" y="22">N</text>'
