@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import xml.etree.ElementTree as ET
 from datetime import UTC, datetime
 from pathlib import Path
@@ -171,6 +172,7 @@ def test_compare_writes_every_track_and_a_self_contained_map(tmp_path, capsys):
     assert names == {"truth", "ekf", "dead-reckoning"}
     html = (out / "map.html").read_text()
     assert "<svg" in html and "°" in html  # a graticule with degree labels
+    assert not re.search(r"https?://|\bsrc=|\bhref=|url\(|@import|<link|<script", html)  # loads nothing
     out2 = tmp_path / "c2"
     rc, s = graphnav_json(capsys, "compare", str(tiny_log(tmp_path, None)), "-e", "dead-reckoning", "--out", str(out2))
     assert rc == 0 and s["wgs84"] is None and (out2 / "map.html").exists()
