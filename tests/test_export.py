@@ -131,3 +131,11 @@ def test_no_origin_is_a_clean_error_and_writes_nothing(tmp_path, capsys):
     rc, obj = export(capsys, str(run_dir), "--to", "geojson", "--out", str(tmp_path / "x.geojson"))
     assert rc == 2 and "no geodetic origin" in obj["error"] and obj["where"].endswith("summary.json")
     assert not (tmp_path / "x.geojson").exists()
+
+
+def test_bad_out_is_a_clean_error(tmp_path, capsys):
+    log = turning_log(tmp_path)
+    rc, obj = export(capsys, str(log), "--to", "nmea", "--out", str(tmp_path / "no" / "x.nmea"))
+    assert rc == 2 and "does not exist" in obj["error"]
+    rc, obj = export(capsys, str(log), "--out", str(tmp_path / "x.unknown"))
+    assert rc == 2 and "--to" in obj["error"]

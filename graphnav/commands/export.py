@@ -117,6 +117,8 @@ def run(args: argparse.Namespace) -> int:
         raise GraphnavError("--out: the file exists; pass --overwrite to replace it", where=str(args.out))
     if args.out.is_dir():
         raise GraphnavError("--out: is a directory, not a file", where=str(args.out))
+    if not args.out.parent.is_dir():
+        raise GraphnavError("--out: the directory does not exist", where=str(args.out.parent))
     src = Path(args.input)
     if is_run_dir(src):
         if args.source is not None:
@@ -135,8 +137,6 @@ def run(args: argparse.Namespace) -> int:
         obj["sentence_types"] = list(NMEA_SENTENCES)
     else:
         text = render([GeoTrack.from_trajectory(traj, frame, info["track"])], fmt)
-    if args.out.parent and not args.out.parent.exists():
-        raise GraphnavError("--out: the directory does not exist", where=str(args.out.parent))
     write_text_atomic(args.out, text)
     emit(args, obj, f"wrote {len(traj)} poses of {info['source']} ({info['track']}) as {fmt} to {args.out}")
     return 0
