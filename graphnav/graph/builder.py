@@ -100,6 +100,12 @@ def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any]) -> Any:
         r = match_points(src, tgt, icfg, init=init)
         return bool(r.ok), np.asarray(r.pose, dtype=float), np.asarray(r.cov, dtype=float), r.quality
 
+    from dataclasses import fields
+
+    known = {f.name for f in fields(LoopConfig)}
+    unknown = sorted(set(cfg.loop) - known)
+    if unknown:
+        raise ValueError(f"unknown loop option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
     closer = LoopCloser(LoopConfig(**cfg.loop), refine,
                         lambda c: proper_cov(cfg.icp_cov_scale * np.asarray(c, dtype=float), floor))
     closer.points = lambda scan: scan_points_of(scan, icfg)

@@ -247,3 +247,8 @@ def test_compound_and_propagate_against_closed_form():
     assert C[2, 2] == pytest.approx(2 * 0.05**2)
     w = LP.propagate(np.zeros((3, 3)), np.array([0.0, 0.0, math.pi / 2]), gtsam.Pose2(1.0, 0.0, 0.0), q)
     assert w[0, 0] == pytest.approx(0.04) and w[1, 1] == pytest.approx(0.01)  # body axes turned by 90 deg
+
+
+def test_unknown_loop_option_is_named():
+    with pytest.raises(ValueError, match="unknown loop option.*bogus"):
+        Navigator(scans=True, loop={"bogus": 1})
