@@ -114,7 +114,7 @@ def test_corridor_is_ambiguous():
     ref = _scan(segs, np.array([0.0, 0.0, 0.0]), 0)
     src = _scan(segs, np.array([1.0, 0.3, 0.05]), 1)
     r = C.correlative_match(src, [ref], None, window=3.0, yaw_window_deg=30.0, second_above=0.5)
-    assert r.second > 0.95 * r.score  # along the corridor every shift fits
+    assert r.second > 0.9 * r.score  # along the corridor every shift fits: the loop closer's ambiguity bound
 
 
 @settings(max_examples=12, deadline=None)
