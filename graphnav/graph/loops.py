@@ -12,15 +12,19 @@
      ``d^2 = dp^T (C_k + C_i)^-1 dp <= chi2_2(gate_prob)`` (the marginal covariances of both
      poses; nearest ``gate_neighbours`` by Euclidean distance from a k-d tree, then the gate);
    * appearance: the ``descriptor_neighbours`` nearest ring keys (k-d tree), kept when the Scan
-     Context distance is below ``descriptor_max``: the drift may be larger than the gate can
-     trust, but a place that looks the same is within a few metres.
-3. **Verification** of a candidate ``(i, k)``: the correlative matcher
-   (:mod:`graphnav.scan.correlative`) of keyframe ``k``'s scan on a submap of place ``i`` and its
-   ``submap`` neighbours, within ``window`` metres of the guess (the estimate, or the same spot
-   at the descriptor's yaw) and ``yaw_window_deg``; a match needs ``min_hits`` of its points on a
-   reference surface and no distinct second peak above ``max_ambiguity`` of its score (a
-   look-alike place). Then the weighted ICP (:func:`graphnav.scan.icp.match_points`) from the
-   correlative pose: it must converge, not be degenerate and stay within ``refine_agree`` /
+     Context distance is below ``descriptor_max`` and the estimate can have drifted that far
+     (the estimated offset within the gate of the relative covariance plus the search window).
+   A proximity candidate whose relative position is known to ``min_sigma`` already is skipped.
+3. **Verification** of a candidate ``(i, k)``: the relative covariance (:meth:`LoopCloser.relative_cov`:
+   the smaller of the two marginals and the compounded chain) sets the search: the correlative
+   matcher (:mod:`graphnav.scan.correlative`) of keyframe ``k``'s scan on a submap of place ``i``
+   and its ``submap`` neighbours, within 3 sigma (``window`` to ``max_window`` metres) of the guess
+   (the estimate, or the same spot at the descriptor's yaw) and 3 sigma of yaw plus
+   ``yaw_margin_deg``; a match needs ``min_hits`` of its points on a reference surface and no
+   distinct second peak above ``max_ambiguity`` of its score (a look-alike place), and must be
+   plausible against the estimate (``chi2_3(chain_prob)``). Then the weighted ICP
+   (:func:`graphnav.scan.icp.match_points`) from the correlative pose on the submap
+   (``refine_submap``): it must converge, not be degenerate and stay within ``refine_agree`` /
    ``refine_agree_deg`` of the correlative pose. Its covariance is the loop's.
 4. **Consistency** (pairwise, in the spirit of PCM, Mangelson et al. 2018): a verified loop is
    held until another verified loop within ``pair_span`` metres of path on both ends agrees
@@ -28,6 +32,8 @@
    of the sum of the two loops' covariances and the two short chain segments' (the motion factors'
    covariances compounded). Both then become ``BetweenFactorPose2`` with a robust kernel (Cauchy,
    ``kernel_k``), so even a wrong pair that passed cannot pull with more than bounded weight.
+
+docs/loops.md has what it does on the CARMEN logs and the harbour.
 
 Everything is bounded: one place per ``spacing`` metres, at most ``max_candidates`` verifications
 per place, k-d trees rebuilt when the unindexed tail exceeds a quarter of the database (amortised
