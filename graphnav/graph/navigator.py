@@ -47,7 +47,6 @@ from .builder import GraphBuilder, Matcher, Step
 from .config import SmootherConfig
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt, marginals
 
-
 BATCH_INIT_FIRST = 32  # batch_init="incremental": the first solve at this many keyframes
 
 
