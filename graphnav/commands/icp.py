@@ -16,7 +16,7 @@ from ..scan.icp import VARIANTS, IcpConfig
 from ..scan.icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
 from ..scan.motion_guess import INITS
 from ..scan.movement import movement_from_increments
-from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, parse_options
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, plain_options
 
 log_ = logging.getLogger("graphnav.icp")
 
@@ -40,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     out = OutDir(args.out, command="icp", overwrite=args.overwrite) if args.out else None
     log = load_log(args.log, lenient=args.lenient)
-    options = parse_options(args.option)
+    options = plain_options(args)
     if isinstance(options.get("cov_floor"), list):
         options["cov_floor"] = tuple(options["cov_floor"])
     cfg = IcpConfig(variant=args.variant, **options)

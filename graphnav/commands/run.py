@@ -13,7 +13,7 @@ from ..evaluation.evaluate import summarize
 from ..io import load_log
 from ..io.outputs import OutDir
 from ..io.tum import TrajectoryWriter, write_truth
-from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, jsonable, parse_options
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, jsonable, options_for
 
 log_ = logging.getLogger("graphnav.run")
 
@@ -21,20 +21,49 @@ log_ = logging.getLogger("graphnav.run")
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run one estimator on a log", description=__doc__)
     add_log_args(p)
-    p.add_argument("--estimator", "-e", required=True, help="one of: " + ", ".join(estimators.names()))
+    next(a for a in p._actions if a.dest == "log").nargs = "?"  # (not needed with --list-options)
+    p.add_argument("--estimator", "-e", help="one of: " + ", ".join(estimators.names()) + " (required)")
+    p.add_argument("--list-options", metavar="ESTIMATOR",
+                   help="print ESTIMATOR's -O options (default and meaning; one JSON object with --json) and exit")
     p.add_argument("--out", type=Path,
                    help="output directory (trajectory.tum, trajectory.csv, summary.json, truth.tum)")
     add_overwrite_flag(p)
-    p.add_argument("--option", "-O", action="append", metavar="KEY=VALUE",
-                   help="estimator option (value parsed as JSON when it can be); repeatable")
+    p.add_argument("--option", "-O", action="append", metavar="[ESTIMATOR.]KEY=VALUE",
+                   help="estimator option (VALUE parsed as JSON when it can be), e.g. -O lag=10; repeatable; "
+                        "--list-options ESTIMATOR lists them")
     add_json_flag(p)
     p.set_defaults(func=run)
 
 
+def list_options(args: argparse.Namespace) -> int:
+    from ..estimators.options import describe
+
+    opts = describe(args.list_options)
+    obj = {"estimator": args.list_options, "options": opts}
+    lines = [f"-O options of {args.list_options} (graphnav run LOG -e {args.list_options} -O KEY=VALUE):"]
+    group = None
+    for o in opts:
+        if o["group"] != group:
+            group = o["group"]
+            lines.append(f"  [{group}]")
+        lines.append(f"  {o['name']:32s} {json.dumps(jsonable(o['default']))}")
+        if o["meaning"]:
+            lines.append(f"      {o['meaning']}")
+    if not opts:
+        lines.append("  (none)")
+    emit(args, obj, "\n".join(lines))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.list_options:
+        return list_options(args)
+    missing = [n for n, v in (("LOG", args.log), ("--estimator", args.estimator)) if not v]
+    if missing:
+        raise ValueError(f"graphnav run: the following arguments are required: {', '.join(missing)}")
     out = OutDir(args.out, command="run", overwrite=args.overwrite) if args.out else None
     log = load_log(args.log, lenient=args.lenient)
-    options = parse_options(args.option)
+    options = options_for(args, args.estimator)
     writer = None
     if out is not None:
         out.file("online.cov")  # the writer's covariance sidecar, when the estimator gives covariances
