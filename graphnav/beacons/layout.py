@@ -30,6 +30,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import require
+
 
 @dataclass(frozen=True)
 class Fairway:
@@ -206,6 +208,7 @@ def _fast_kernel(backend: str, ch: Choices) -> Any:
         return importlib.import_module(f"{__package__}._fast")
     except ImportError:
         if backend == "numba":
+            require("numba", 'backend "numba"')
             raise
         return None
 

@@ -202,7 +202,7 @@ def config_defaults(parser: argparse.ArgumentParser, path: Path,
         raise GraphnavError(f"not valid TOML: {exc}", where=where) from None
     by_name: dict[str, argparse.Action] = {}
     for action in parser._actions:
-        if action.dest in ("help", "config") or isinstance(action, argparse._SubParsersAction):
+        if action.dest in ("help", "config", "option") or isinstance(action, argparse._SubParsersAction):
             continue
         longs = [o[2:] for o in action.option_strings if o.startswith("--")]
         for n in longs or ([] if action.option_strings else [action.dest]):

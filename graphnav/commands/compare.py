@@ -55,6 +55,7 @@ def _runnable(log, names: list[str] | None) -> int:  # noqa: ANN001
 
 
 def run(args: argparse.Namespace) -> int:
+    options = options_by_estimator(args)  # (a bad -O fails before --out is touched)
     out = getattr(args, "out_dir", None)  # (demo prepares its own)
     if out is None:
         out = OutDir(args.out, command="compare", overwrite=getattr(args, "overwrite", False))
@@ -62,7 +63,6 @@ def run(args: argparse.Namespace) -> int:
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     t0 = time.perf_counter()
     cache = MatchCache() if getattr(args, "icp_cache", True) else None  # (demo builds its own Namespace)
-    options = options_by_estimator(args)
     bar = progress_bar(args, total=_runnable(log, names), desc="compare", unit="estimator")
     started = []
 

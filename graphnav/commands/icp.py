@@ -84,10 +84,7 @@ def write_pairs_csv(path: Path, pr, ref, scored, per, ne) -> None:  # noqa: ANN0
 
 def write_plots(out: Path | OutDir, variant: str, per: dict) -> list[str]:
     """The paper's Figs. 12-15: SOG / dCOG difference series and their histograms."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # (no pyplot: the matplotlib backend is left as it is)
 
     s = per["scored"]
     k = np.flatnonzero(s)
@@ -97,7 +94,8 @@ def write_plots(out: Path | OutDir, variant: str, per: dict) -> list[str]:
         ("dtheta_err_deg", "dCOG_ICP - dCOG_R", "deg", "fig14_dcog_diff.png", "fig15_dcog_hist.png"),
     ):
         e = per[key][s]
-        fig, ax = plt.subplots(figsize=(8, 3))
+        fig = Figure(figsize=(8, 3))
+        ax = fig.add_subplot()
         ax.plot(k, e, ".-", lw=0.8, label=f"{variant}_ICP")
         ax.axhline(0, color="k", lw=0.5)
         ax.set_xlabel("scan pair")
@@ -106,14 +104,13 @@ def write_plots(out: Path | OutDir, variant: str, per: dict) -> list[str]:
         fig.tight_layout()
         with atomic_path(out / fig_series) as tmp:
             fig.savefig(tmp, dpi=120)
-        plt.close(fig)
-        fig, ax = plt.subplots(figsize=(5, 3))
+        fig = Figure(figsize=(5, 3))
+        ax = fig.add_subplot()
         ax.hist(e, bins=30)
         ax.set_xlabel(f"{label} [{unit}]")
         ax.set_ylabel("count")
         fig.tight_layout()
         with atomic_path(out / fig_hist) as tmp:
             fig.savefig(tmp, dpi=120)
-        plt.close(fig)
         files += [fig_series, fig_hist]
     return files

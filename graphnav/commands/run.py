@@ -13,7 +13,7 @@ from ..evaluation.evaluate import summarize
 from ..io import load_log
 from ..io.outputs import OutDir
 from ..io.tum import TrajectoryWriter, write_truth
-from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, jsonable, options_for
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, jsonable, options_for, progress_bar
 
 log_ = logging.getLogger("graphnav.run")
 
@@ -69,10 +69,25 @@ def run(args: argparse.Namespace) -> int:
         out.file("online.cov")  # the writer's covariance sidecar, when the estimator gives covariances
         writer = TrajectoryWriter(out.file("online.tum"))  # appended and flushed as estimates arrive
     log_.info("running %s on %s (%d records)", args.estimator, args.log, len(log))
+    span = max(float(log.t1 - log.t0), 0.0) if len(log) else 0.0
+    bar = progress_bar(args, total=round(span, 1), unit="s", desc=f"{args.estimator} (log time)",
+                       bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} s [{elapsed}<{remaining}]")
+
+    def on_estimate(t: float, pose, cov) -> None:  # noqa: ANN001
+        if writer is not None:
+            writer.write(t, pose, cov)
+        done = min(max(float(t - log.t0), 0.0), bar.total or 0.0)
+        if done > bar.n:
+            bar.update(done - bar.n)
+
     t0 = time.perf_counter()
     try:
-        result = estimators.run(args.estimator, log, on_estimate=writer.write if writer else None, **options)
+        result = estimators.run(args.estimator, log, on_estimate=on_estimate if writer or not bar.disable else None,
+                                **options)
+        if not bar.disable and bar.total and bar.n < bar.total:
+            bar.update(bar.total - bar.n)  # (the last estimate may precede the log's last record)
     finally:
+        bar.close()
         if writer:
             writer.close()
     runtime = time.perf_counter() - t0

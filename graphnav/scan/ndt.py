@@ -44,6 +44,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..errors import require
+
 _OFF3 = 1 << 20
 _OFF2 = 1 << 28
 
@@ -63,6 +65,7 @@ def resolve_backend(backend: str) -> str:
         _fast()
     except ImportError:
         if backend == "numba":
+            require("numba", 'NDT backend "numba"')
             raise
         return "numpy"
     return "numba"
