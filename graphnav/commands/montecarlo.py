@@ -13,6 +13,7 @@ import logging
 import time
 
 from .. import estimators
+from ..estimators.options import check as check_options
 from ..evaluation.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial
 from ._common import add_dashboard_flag, add_json_flag, emit, options_by_estimator, parse_options, progress_enabled
 
@@ -25,7 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     scen = p.add_subparsers(dest="mission", metavar="MISSION", required=True)
     s = scen.add_parser("solent", help="the fuzzy-adaptive-UKF paper's Solent mission", description=__doc__)
     s.add_argument("--scenario", type=int, choices=(1, 2, 3), default=2,
-                   help="the paper's scenario: 1 calm, 2 current, 3 current + GNSS degradation (default 2)")
+                   help="the paper's scenario: 1 datasheet noise (Table 3), 2 GNSS 20 m and compass 5 deg, "
+                        "3 the first then the second from step 300 (default 2)")
     s.add_argument("--runs", type=int, default=50, help="simulated missions (default 50)")
     s.add_argument("--seed", type=int, default=0, help="first seed: runs use SEED .. SEED+RUNS-1 (default 0)")
     s.add_argument("--scheduler", help="Dask scheduler address, or 'serial' (default: a local cluster)")
@@ -51,6 +53,9 @@ def run_solent(args: argparse.Namespace) -> int:
     if args.runs < 1:
         raise ValueError("--runs must be >= 1")
     opts = options_by_estimator(args)
+    for name, given in opts.items():
+        if name in known:
+            check_options(name, given)
     sim_opts = parse_options(args.sim, "--sim")
     tasks = [{"scenario": args.scenario, "seed": args.seed + i, "names": names, "options": opts,
               "sim_options": sim_opts} for i in range(args.runs)]

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from .. import estimators
+from ..estimators.options import check as check_options
 from ..evaluation.evaluate import summarize
 from ..io import load_log
 from ..io.outputs import OutDir
@@ -61,9 +62,11 @@ def run(args: argparse.Namespace) -> int:
     missing = [n for n, v in (("LOG", args.log), ("--estimator", args.estimator)) if not v]
     if missing:
         raise ValueError(f"graphnav run: the following arguments are required: {', '.join(missing)}")
+    options = options_for(args, args.estimator)
+    estimators.get(args.estimator)  # (an unknown name or option fails before --out is touched)
+    check_options(args.estimator, options)
     out = OutDir(args.out, command="run", overwrite=args.overwrite) if args.out else None
     log = load_log(args.log, lenient=args.lenient)
-    options = options_for(args, args.estimator)
     writer = None
     if out is not None:
         out.file("online.cov")  # the writer's covariance sidecar, when the estimator gives covariances

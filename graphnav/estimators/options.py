@@ -14,7 +14,7 @@ from typing import Any
 
 from ..config import plain_text
 
-__all__ = ["describe", "function_options", "dataclass_options", "Option"]
+__all__ = ["Option", "check", "dataclass_options", "describe", "function_options"]
 
 Option = dict[str, Any]  # {"name", "default", "meaning", "group"}
 
@@ -172,3 +172,24 @@ def describe(name: str) -> list[Option]:
                         "meaning": "true: the UKF with bias states (as fuzzy-ukf-bias)"})
         return own + _ukf_options("ukf")
     return function_options(spec.run, name)  # any other estimator: its run function's keyword arguments
+
+
+_DESCRIBED = ("isam2", "batch", "fixed-lag", "ekf", "ekf-slam", "icp-dr", "scan-to-map", "ukf", "ukf-bias",
+              "fuzzy-ukf", "fuzzy-ukf-bias", "dead-reckoning")
+
+
+def check(name: str, options: dict[str, Any]) -> None:
+    """A ``ValueError`` naming the unknown option(s) of estimator ``name`` and the known ones (when
+    its options are all known: the estimators described here, or a run function without ``**``)."""
+    from . import get
+
+    if not options:
+        return
+    if name not in _DESCRIBED and any(p.kind is p.VAR_KEYWORD
+                                      for p in inspect.signature(get(name).run).parameters.values()):
+        return
+    known = {o["name"] for o in describe(name)}
+    bad = sorted(set(options) - known)
+    if bad:
+        raise ValueError(f"unknown {name} option(s) {bad}; known: {', '.join(sorted(known)) or 'none'} "
+                         f"(graphnav run --list-options {name})")
