@@ -117,14 +117,16 @@ def _invoked(argv: list[str]) -> str:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser(_invoked(argv))
-    args = parser.parse_args(argv)
-    args.argv = list(argv)  # the command line as given, for reports' provenance
-    if getattr(args, "config", None):
+    if any(a == "--config" or a.startswith("--config=") for a in argv):
+        relaxed = _relax_required(parser)  # what the file may give is not required on the command line yet
+        args = parser.parse_args(argv)
         try:
-            args = _with_config(parser, argv, args)
+            args = _with_config(parser, argv, args, relaxed)
         except GraphnavError as err:
             return _fail(args, str(err), err.where, EXIT_INPUT, message=err.message)
-        args.argv = list(argv)
+    else:
+        args = parser.parse_args(argv)
+    args.argv = list(argv)  # the command line as given, for reports' provenance
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(levelname)s %(name)s: %(message)s",
@@ -165,19 +167,38 @@ def _leaf(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse
         parser = sub.choices[getattr(args, sub.dest)]
 
 
-def _with_config(parser: argparse.ArgumentParser, argv: list[str], args: argparse.Namespace) -> argparse.Namespace:
-    """``--config FILE.toml``: its values become the command's defaults, then the command line is parsed
-    again (so a flag given there wins). ``[options]`` goes to ``args.config_options``."""
+def _relax_required(parser: argparse.ArgumentParser) -> dict[argparse.Action, tuple[bool, object]]:
+    """Make every required option and positional of every command optional; returns what they were."""
+    relaxed: dict[argparse.Action, tuple[bool, object]] = {}
+    stack = [parser]
+    while stack:
+        p = stack.pop()
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                stack += list(dict.fromkeys(a.choices.values()))
+            elif a.required or (not a.option_strings and a.nargs is None):
+                relaxed[a] = (a.required, a.nargs)
+                a.required = False
+                if not a.option_strings:
+                    a.nargs = "?"
+    return relaxed
+
+
+def _with_config(parser: argparse.ArgumentParser, argv: list[str], args: argparse.Namespace,
+                 relaxed: dict[argparse.Action, tuple[bool, object]]) -> argparse.Namespace:
+    """``--config FILE.toml``: its values become the command's defaults; what it does not give and
+    the command needs is required again (``relaxed``); then the command line is parsed again (so a
+    flag given there wins). ``[options]`` goes to ``args.config_options``."""
     from .commands._common import config_defaults
 
     leaf = _leaf(parser, args)
     defaults, options = config_defaults(leaf, Path(args.config), args)
+    given = {action for action, _ in defaults}
     for action, value in defaults:
         action.default = value
-        if action.required:
-            action.required = False
-        if not action.option_strings and action.nargs is None:  # a positional given by the file
-            action.nargs = "?"
+    for action, (required, nargs) in relaxed.items():
+        if action not in given:
+            action.required, action.nargs = required, nargs
     new = parser.parse_args(argv)
     new.config_options = options
     return new

@@ -175,11 +175,12 @@ def test_config_file_errors_name_the_file_and_key(small_log, tmp_path, capsys, t
 def test_config_file_for_a_sub_sub_command(tmp_path, parser):
     cfg = tmp_path / "mc.toml"
     cfg.write_text('runs = 3\nseed = 7\nscenario = 1\nscheduler = "serial"\n[options.fuzzy-ukf]\nwindow = 40\n')
-    from graphnav.cli import _with_config
+    from graphnav.cli import _relax_required, _with_config
 
     argv = ["montecarlo", "solent", "--config", str(cfg), "--seed", "9"]
     p = build_parser("montecarlo")
-    args = _with_config(p, argv, p.parse_args(argv))
+    relaxed = _relax_required(p)
+    args = _with_config(p, argv, p.parse_args(argv), relaxed)
     assert (args.runs, args.seed, args.scenario, args.scheduler) == (3, 9, 1, "serial")
     assert options_by_estimator(args) == {"fuzzy-ukf": {"window": 40}}
 
@@ -231,3 +232,18 @@ def test_importing_graphnav_leaves_the_matplotlib_backend_alone():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True)
     backend, rc_backend, _ = r.stdout.split()
     assert backend == "svg" and rc_backend == "svg", r.stdout
+
+
+def test_config_file_gives_required_options(small_log, tmp_path, capsys):
+    cfg = tmp_path / "cmp.toml"
+    out = tmp_path / "cmp"
+    cfg.write_text(f'out = "{out}"\nestimators = "ekf,dead-reckoning"\nno-icp-cache = true\n'
+                   '[options.ekf]\ngate = 0.99\n')
+    assert main(["compare", str(small_log), "--config", str(cfg), "--json"]) == 0
+    obj = _json(capsys)
+    assert obj["icp_cache_hits"] is None and (out / "report.md").exists()
+    assert set(obj["estimators"]) == {"ekf", "dead-reckoning"} and obj["estimators"]["ekf"]["options"] == {"gate": 0.99}
+    (tmp_path / "empty.toml").write_text("")
+    with pytest.raises(SystemExit):  # --out is still required
+        main(["compare", str(small_log), "--config", str(tmp_path / "empty.toml")])
+    assert "required: --out" in capsys.readouterr().err
