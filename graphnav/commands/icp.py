@@ -16,7 +16,7 @@ from ..scan.icp import VARIANTS, IcpConfig
 from ..scan.icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
 from ..scan.motion_guess import INITS
 from ..scan.movement import movement_from_increments
-from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, plain_options
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, plain_options, progress_bar
 
 log_ = logging.getLogger("graphnav.icp")
 
@@ -47,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
     if len(log.of("scan")) < 2:
         raise SystemExit(f"{args.log}: needs at least two scans, has {len(log.of('scan'))}")
     log_.info("matching %d scan pairs with %s (init %s)", len(log.of("scan")) - 1, args.variant, args.init)
-    pr = run_pairs(log, cfg, init=args.init)
+    with progress_bar(args, total=len(log.of("scan")) - 1, desc=f"{args.variant} ICP", unit="pair") as bar:
+        pr = run_pairs(log, cfg, init=args.init, on_match=lambda k, res: bar.update(1))
     ref = reference_increments(log, pr.t0, pr.t1)
     scored = valid_reference_steps(ref)
     summary, per = score_pairs(pr, ref, scored)
