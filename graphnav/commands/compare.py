@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from .. import estimators
+from ..estimators.options import check as check_options
 from ..evaluation.compare import compare, ranked
 from ..evaluation.report import to_json, write_report
 from ..io import load_log
@@ -54,6 +55,20 @@ def _runnable(log, names: list[str] | None) -> int:  # noqa: ANN001
     return n
 
 
+def _check_scopes(options: dict[str, dict], names: list[str] | None) -> None:
+    """Every ``-O ESTIMATOR.KEY`` names an estimator (or label) this comparison runs, and a key it knows."""
+    labels = {}
+    for name in names if names is not None else estimators.names():
+        label, _, est = name.partition("=") if "=" in name else (name, "", name)
+        labels[label.strip()] = est.strip()
+    for scope, given in options.items():
+        if scope not in labels:
+            raise ValueError(f"-O {scope}.KEY=VALUE: {scope!r} is not one of the estimators compared "
+                             f"({', '.join(labels)})")
+        if labels[scope] in estimators.registry():
+            check_options(labels[scope], given)
+
+
 def run(args: argparse.Namespace) -> int:
     options = options_by_estimator(args)  # (a bad -O fails before --out is touched)
     out = getattr(args, "out_dir", None)  # (demo prepares its own)
@@ -61,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         out = OutDir(args.out, command="compare", overwrite=getattr(args, "overwrite", False))
     log = load_log(args.log, lenient=args.lenient)
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
+    _check_scopes(options, names)
     t0 = time.perf_counter()
     cache = MatchCache() if getattr(args, "icp_cache", True) else None  # (demo builds its own Namespace)
     bar = progress_bar(args, total=_runnable(log, names), desc="compare", unit="estimator")
