@@ -89,7 +89,8 @@ class MissingExtra(GraphnavError, ImportError):
 
 
 EXTRAS = {"open3d": ("open3d", "open3d"), "distributed": ("dask", "dask"), "dask": ("dask", "dask"),
-          "rosbags": ("rosbags", "ros"), "numba": ("numba", "fast")}
+          "rosbags": ("rosbags", "ros"), "numba": ("numba", "fast"), "pypcd4": ("pypcd4", "pcd"),
+          "kiss_icp": ("kiss-icp", "bench")}
 """Importable module -> (the distribution to install, the extra of pyproject.toml that installs it)."""
 
 
