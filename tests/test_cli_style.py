@@ -163,10 +163,12 @@ def test_config_file_gives_options_and_the_command_line_wins(small_log, tmp_path
     ("json = 3\n", r"--json: expected true or false"),
     ("out = [1]\n", r"--out: expected a single value"),
     ("max-speed = \n", r"not valid TOML"),
+    (None, r"[Nn]o such file"),
 ])
 def test_config_file_errors_name_the_file_and_key(small_log, tmp_path, capsys, text, match):
     cfg = tmp_path / "bad.toml"
-    cfg.write_text(text)
+    if text is not None:
+        cfg.write_text(text)
     assert main(["run", str(small_log), "-e", "ekf", "--config", str(cfg), "--json"]) == 2
     err = json.loads(capsys.readouterr().out)
     assert err["where"] == str(cfg) and re.search(match, err["error"]), err

@@ -200,6 +200,8 @@ def config_defaults(parser: argparse.ArgumentParser, path: Path,
             data = tomllib.load(fh)
     except tomllib.TOMLDecodeError as exc:
         raise GraphnavError(f"not valid TOML: {exc}", where=where) from None
+    except OSError as exc:
+        raise GraphnavError(exc.strerror or str(exc), where=where) from None
     by_name: dict[str, argparse.Action] = {}
     for action in parser._actions:
         if action.dest in ("help", "config", "option") or isinstance(action, argparse._SubParsersAction):
