@@ -18,6 +18,9 @@ def _block(monkeypatch: pytest.MonkeyPatch, *names: str) -> None:
         for mod in [m for m in sys.modules if m == name or m.startswith(name + ".")]:
             monkeypatch.delitem(sys.modules, mod)
         monkeypatch.setitem(sys.modules, name, None)
+        parent, _, child = name.rpartition(".")
+        if parent in sys.modules:  # ``from parent import child`` would find the attribute left by an earlier import
+            monkeypatch.delattr(sys.modules[parent], child, raising=False)
 
 
 def _one_line(err: BaseException, package: str, extra: str) -> None:
