@@ -103,14 +103,48 @@ def _doc_sentence(doc: str, name: str) -> str:
 
 
 def function_options(fn: Callable, group: str, skip: Iterable[str] = ("on_estimate",)) -> list[Option]:
-    """The keyword arguments with defaults of ``fn`` (meaning from its docstring)."""
-    doc = inspect.getdoc(fn) or ""
+    """The keyword arguments with defaults of ``fn`` (meaning from its docstring, else its module's)."""
+    docs = [inspect.getdoc(fn) or "", inspect.getdoc(inspect.getmodule(fn)) or ""]
     out = []
     for p in inspect.signature(fn).parameters.values():
         if p.default is inspect.Parameter.empty or p.name in skip or p.kind is p.VAR_KEYWORD:
             continue
-        out.append({"name": p.name, "default": p.default, "meaning": _doc_sentence(doc, p.name), "group": group})
+        meaning = next((m for m in (_doc_sentence(d, p.name) for d in docs) if m), "")
+        out.append({"name": p.name, "default": p.default, "meaning": meaning, "group": group})
     return out
+
+
+# Options whose meaning neither a field comment nor a docstring sentence gives (docs/ekf.md,
+# docs/fuzzy-ukf.md say more).
+_MEANINGS: dict[str, dict[str, str]] = {
+    "ekf": {"speed": "true: the state is [x, y, yaw, v] (v a random walk, the odometry speed a measurement of it)",
+            "use_gnss": "false: GNSS fixes are not used", "use_heading": "false: compass headings are not used",
+            "icp_inflate": "a failed ICP match re-uses the last increment with its covariance x this"},
+    "ekf-slam": {"paper": "true: the beacon paper's filter exactly (no gate, its init and sigmas, a slot per beacon)",
+                 "sigma_v": "[m/s] speed sigma when the record gives none (null: the mode's default)",
+                 "sigma_rot": "[rad/s] rate-of-turn sigma when the record gives none (null: the mode's default)",
+                 "sigma_range": "[m] range sigma when the record gives none (null: the mode's default)",
+                 "sigma_bearing": "[rad] bearing sigma when the record gives none (null: the mode's default)",
+                 "init": 'a beacon\'s first sighting: "inverse" (inverse observation, the default) or "paper"',
+                 "window": "innovations in the adaptive motion-noise scale's window",
+                 "fej": "first-estimates Jacobians (Huang et al. 2008; null: on unless paper=true)",
+                 "p0_cross": 'initial cross covariances: "zero" (a valid P0) or "paper" (eq. 14 as printed)',
+                 "w_second": 'second column of W (eq. 22): "rot" = dg/dROT or "theta" as printed',
+                 "use_known": "false: ignore the log's charted beacons (map every beacon)"},
+    "ukf": {"alpha": "sigma-point spread (Merwe weights)", "beta": "sigma-point weight of the prior (2: Gaussian)",
+            "kappa": "secondary sigma-point spread", "sigma_v0": "[m/s] prior 1-sigma of the initial velocity",
+            "sigma_bias_acc": "[m/s^2] ukf-bias: prior on the residual accelerometer bias",
+            "sigma_bias_gyro_deg": "[deg/s] ukf-bias: prior on the residual gyro bias",
+            "q_bias_acc": "[m/s^2/sqrt(s)] ukf-bias: accelerometer bias random walk",
+            "q_bias_gyro_deg": "[deg/s/sqrt(s)] ukf-bias: gyro bias random walk"},
+}
+
+
+def _fill(options: list[Option], table: str) -> list[Option]:
+    for o in options:
+        if not o["meaning"]:
+            o["meaning"] = _MEANINGS[table].get(o["name"], "")
+    return options
 
 
 def _ukf_options(group: str) -> list[Option]:
@@ -122,10 +156,10 @@ def _ukf_options(group: str) -> list[Option]:
         if m and _comment(line):
             comments[m.group(1)] = _comment(line)
     gate_doc = {o["name"]: o["meaning"] for o in function_options(gating.InnovationGate, "gate")}
-    return [{"name": k, "default": v, "group": group,
-             "meaning": comments.get(k) or gate_doc.get(k) or ("innovation gate (docs/ekf.md, Gating)"
-                                                               if k in gating.GATING_DEFAULTS else "")}
-            for k, v in ukf.DEFAULTS.items()]
+    return _fill([{"name": k, "default": v, "group": group,
+                   "meaning": comments.get(k) or gate_doc.get(k) or ("innovation gate (docs/ekf.md, Gating)"
+                                                                     if k in gating.GATING_DEFAULTS else "")}
+                  for k, v in ukf.DEFAULTS.items()], "ukf")
 
 
 def describe(name: str) -> list[Option]:
@@ -141,13 +175,18 @@ def describe(name: str) -> list[Option]:
         motion = {"name": "motion", "default": "auto", "group": "graph",
                   "meaning": f"which graph: {', '.join(MOTIONS)} (auto: the IMU graph when the log has IMU "
                              "records and GNSS, no scans and no beacons)"}
-        return ([motion] + dataclass_options(SmootherConfig, "odometry/ICP graph (SmootherConfig)", skip=("solver",))
-                + dataclass_options(ImuGraphConfig, "IMU graph (ImuGraphConfig, motion=imu)"))
+        odo = dataclass_options(SmootherConfig, "odometry/ICP graph (SmootherConfig)", skip=("solver",))
+        imu = dataclass_options(ImuGraphConfig, "IMU graph (ImuGraphConfig, motion=imu)")
+        same = {o["name"]: o["meaning"] for o in odo}
+        for o in imu:  # a field of the same name means the same
+            o["meaning"] = o["meaning"] or same.get(o["name"], "")
+        return [motion] + odo + imu
     if name == "ekf":
         from .ekf import run_ekf
         from .gating import InnovationGate
 
-        return function_options(run_ekf, "ekf") + function_options(InnovationGate, "innovation gate", skip=("gate",))
+        return _fill(function_options(run_ekf, "ekf"), "ekf") + function_options(InnovationGate, "innovation gate",
+                                                                                 skip=("gate",))
     if name == "icp-dr":
         from ..scan.icp import IcpConfig
         from .icp_odometry import run_icp_dr
@@ -160,6 +199,10 @@ def describe(name: str) -> list[Option]:
         return dataclass_options(ScanToMapConfig, "scan-to-map (ScanToMapConfig)")
     if name in ("ukf", "ukf-bias"):
         return _ukf_options(name)
+    if name == "ekf-slam":
+        from .ekf_slam import run_ekf_slam
+
+        return _fill(function_options(run_ekf_slam, "ekf-slam"), "ekf-slam")
     if name in ("fuzzy-ukf", "fuzzy-ukf-bias"):
         from . import fuzzy_ukf
 
