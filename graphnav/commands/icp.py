@@ -38,8 +38,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     log = load_log(args.log, lenient=args.lenient)
     options = parse_options(args.option)
-    if isinstance(options.get("cov_floor"), list):
-        options["cov_floor"] = tuple(options["cov_floor"])
     cfg = IcpConfig(variant=args.variant, **options)
     if len(log.of("scan")) < 2:
         raise SystemExit(f"{args.log}: needs at least two scans, has {len(log.of('scan'))}")

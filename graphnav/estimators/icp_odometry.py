@@ -1,13 +1,15 @@
 """Weighted-ICP dead reckoning: chain the scan matches from the start pose.
 
-Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.scan.icp.match_points`, constant-velocity
-initial guess) and the increment is composed onto the previous pose; the covariance is
-propagated to first order (``P' = Ad P Ad^T + Q`` in the body frame, GTSAM's convention) and
-reported in the world frame (the :class:`~graphnav.trajectory.Trajectory` convention).
+Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.scan.icp.match_points`; initial guess the
+odometry increment with its covariance when the log has odometry, else constant velocity) and the
+increment is composed onto the previous pose; the covariance is propagated to first order
+(``P' = Ad P Ad^T + Q`` in the body frame, GTSAM's convention) and reported in the world frame
+(the :class:`~graphnav.trajectory.Trajectory` convention).
 The start pose is the log's pose prior, else the first truth pose, else the origin
 (:func:`graphnav.estimators.dead_reckoning.start_pose`). Initial guesses come from
 :class:`~graphnav.scan.motion_guess.MotionGuess` (never from a flagged match). A flagged match (``ok``
-False: degenerate geometry, too few points or inliers) is bridged by the odometry increment with its
+False: degenerate geometry, too few points or inliers, not converged, or beyond the odometry guess's
+99.9 % bound) is bridged by the odometry increment with its
 covariance when the log has odometry, else by the constant-velocity guess with a wide covariance,
 and counted (``info["failed_matches"]``, ``info["bridged_odometry"]``, ``info["bridged_cv"]``).
 """
@@ -41,16 +43,15 @@ def _to_world(pose: np.ndarray, cov: np.ndarray) -> np.ndarray:
 
 
 def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: str = "HDL",
-               init: str = "cv", sigma_xy0: float = 0.0, sigma_yaw0: float = 0.0,
+               init: str = "odometry", sigma_xy0: float = 0.0, sigma_yaw0: float = 0.0,
                **options: Any) -> RunResult:
-    """Options: ``variant`` (K, H, HM, HD, HDL), ``init`` ("cv", "odometry" or "zero"), any :class:`IcpConfig`
-    field, and the start pose's 1-sigma (``sigma_xy0``, ``sigma_yaw0``; a pose prior's own sigmas
+    """Options: ``variant`` (K, H, HM, HD, HDL), ``init`` ("odometry": the odometry increment when the log
+    has odometry, else constant velocity; "cv" or "zero"; :class:`~graphnav.scan.motion_guess.MotionGuess`),
+    any :class:`IcpConfig` field, and the start pose's 1-sigma (``sigma_xy0``, ``sigma_yaw0``; a pose prior's own sigmas
     win)."""
     unknown = set(options) - _CONFIG_FIELDS
     if unknown:
         raise ValueError(f"unknown icp-dr options: {', '.join(sorted(unknown))}")
-    if isinstance(options.get("cov_floor"), list):
-        options["cov_floor"] = tuple(options["cov_floor"])
     cfg = IcpConfig(variant=variant, **options)
     pose, anchor = start_pose(log)
     prior = log.pose_prior()
@@ -79,7 +80,7 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
         pts = scan_points(scans[k], cfg)
         guess = guesser.guess(ta, tb)
         t0 = time.perf_counter()
-        res = icp_cache.match_points(pts, pts_prev, cfg, init=guess)  # = icp.match_points, shared in compare
+        res = icp_cache.match_points(pts, pts_prev, cfg, init=guess, init_cov=guesser.cov)  # shared in compare
         icp_ms.append((time.perf_counter() - t0) * 1e3)
         guesser.update(res, ta, tb)
         if res.ok:

@@ -58,9 +58,6 @@ class SmootherConfig:
     beacon_robust: str | None = "huber"
     unknown_beacons: bool = True  # SLAM on beacons missing from the chart
     use_icp: bool = True
-    icp_cov_scale: float = 20.0  # x the matcher's own inflation (HDL 50): x1000 in all (docs/smoother.md)
-    icp_sigma_floor_xy: float = 0.005  # [m] added in quadrature to the ICP covariance
-    icp_sigma_floor_yaw_deg: float = 0.05
     icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
     icp_max_step: float = 5.0  # [m] an ICP step farther than this from the prediction is rejected
     use_odometry: bool = True
@@ -306,14 +303,7 @@ class GraphBuilder:
                     and np.all(np.isfinite(mc))
                     and np.hypot(mp[0] - init[0], mp[1] - init[1]) <= cfg.icp_max_step
                 ):
-                    floor = np.diag(
-                        [cfg.icp_sigma_floor_xy**2] * 2 + [math.radians(cfg.icp_sigma_floor_yaw_deg) ** 2]
-                    )
-                    g.add(
-                        F.icp_between(
-                            F.X(k - 1), xk, mp, cfg.icp_cov_scale * mc + floor, robust=cfg.icp_robust
-                        )
-                    )
+                    g.add(F.icp_between(F.X(k - 1), xk, mp, mc, robust=cfg.icp_robust))  # the match's own cov
                     rel = gtsam.Pose2(*mp)
                 else:
                     self.n_icp_failed += 1

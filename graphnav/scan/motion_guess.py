@@ -40,6 +40,7 @@ class MotionGuess:
         self.odometry = odometry if odometry is not None and len(odometry) else None
         self._last: tuple[NDArray[np.float64], float, float] | None = None  # increment, dt, end time
         self.source = "none"  # where the last guess came from: cv, odometry, stale-cv, none
+        self.cov: NDArray[np.float64] | None = None  # the last guess's covariance (odometry only, else None)
 
     def _cv(self, t0: float, t1: float, fresh_only: bool) -> NDArray[np.float64] | None:
         if self._last is None or self._last[1] <= 0:
@@ -54,12 +55,16 @@ class MotionGuess:
 
     def _odo_guess(self, t0: float, t1: float) -> NDArray[np.float64] | None:
         odo = self._odo(t0, t1)
-        return None if odo is None else odo[0]
+        if odo is None:
+            return None
+        self.cov = odo[1]
+        return odo[0]
 
     def guess(self, t0: float, t1: float) -> NDArray[np.float64] | None:
         """Initial ``(dx, dy, dyaw)`` for the match of the scan at ``t1`` to the scan at ``t0``
-        (``None``: identity)."""
+        (``None``: identity); :attr:`cov` is then its covariance when it came from the odometry."""
         self.source = "none"
+        self.cov = None
         if self.mode == "zero":
             return None
         fresh = ("cv", lambda: self._cv(t0, t1, fresh_only=True))
