@@ -379,14 +379,13 @@ def _wrap(k, n):
 
 
 @njit(cache=True)
-def scan_order_normals(tx, ty, half, max_gap):
+def scan_order_normals(tx, ty, half, max_gap, res):
     """As :func:`graphnav.scan.icp.scan_order_normals` (PCA of beam-order windows; a gap wider than
-    ``max_gap`` resolutions, :func:`resolution`, the smaller of the two points', ends a surface)."""
+    ``max_gap`` resolutions ``res`` (:func:`resolution`), the smaller of the two points', ends a surface)."""
     n = tx.shape[0]
     order = np.argsort(np.arctan2(ty, tx), kind="mergesort")
     xs = tx[order]
     ys = ty[order]
-    res = resolution(tx, ty, half)
     gap = np.empty(n)
     lim = np.empty(n)
     for i in range(n):
@@ -719,8 +718,8 @@ def p2p_match(sx, sy, ssig, use_ssig, tx, ty, tsig, use_tsig, sigma_alpha, sigma
     last step's largest point displacement and the source's largest range."""
     sux, suy, sa2, sb2, sm2 = cloud_terms(sx, sy, ssig, use_ssig, sigma_alpha, sigma_r_rel)
     tux, tuy, ta2, tb2, tm2 = cloud_terms(tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel)
-    nrx, nry, fl = scan_order_normals(tx, ty, half, max_gap)
     res, scale, big_d = target_resolution(tx, ty, half, min_res, tm2)
+    nrx, nry, fl = scan_order_normals(tx, ty, half, max_gap, res)
     th, t_x, t_y, idx, it, converged, dmax, moved, src_r = p2p_loop(
         sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow, max_corr, tol,
         tol_step, max_iter, th, t0x, t0y, h, scale, big_d, gate0)
@@ -740,11 +739,11 @@ def hdl_match(sx, sy, ssig, use_ssig, tx, ty, tsig, use_tsig, sigma_alpha, sigma
     :func:`scan_order_normals`), :func:`hdl_loop`, the final pairs; returns as :func:`p2p_match`."""
     sux, suy, sa2, sb2, _ = cloud_terms(sx, sy, ssig, use_ssig, sigma_alpha, sigma_r_rel)
     tux, tuy, ta2, tb2, tm2 = cloud_terms(tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel)
+    res, scale, big_d = target_resolution(tx, ty, normal_k // 2, min_res, tm2)
     if knn:
         nrx, nry, fl = knn_line_normals(tx, ty, normal_k, h)
     else:
-        nrx, nry, fl = scan_order_normals(tx, ty, normal_k // 2, max_gap)
-    res, scale, big_d = target_resolution(tx, ty, normal_k // 2, min_res, tm2)
+        nrx, nry, fl = scan_order_normals(tx, ty, normal_k // 2, max_gap, res)
     th, t_x, t_y, idx, it, converged, dmax, moved, src_r = hdl_loop(
         sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr, tol, tol_step,
         max_iter, th, t0x, t0y, h, flat_pow, warmup, scale, big_d, gate0)

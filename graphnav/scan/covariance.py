@@ -114,7 +114,7 @@ class Between:
 
 def between(jac: NDArray, res: NDArray, w: NDArray, lidar: NDArray, spacing: NDArray, inlier: NDArray,
             line_rows: NDArray, flat: NDArray, radius: float, *, block: int, max_condition: float,
-            max_sigma: float) -> Between:
+            max_sigma: float, prior_cov: NDArray | None = None) -> Between:
     """The between factor's covariance of a match and its degeneracy analysis.
 
     ``jac`` (N, d, 3) Jacobians of the residuals ``res`` (N, d) of the final pairs (right
@@ -123,7 +123,8 @@ def between(jac: NDArray, res: NDArray, w: NDArray, lidar: NDArray, spacing: NDA
     resolution at each pair [m] (:func:`resolution`), ``inlier`` the pairs within the final gate.
     ``line_rows`` (N, 3) point-to-line rows ``n^T [R, J (p - t)]`` with the rotation column divided
     by ``radius`` and ``flat`` the line flatness: the geometry the degeneracy analysis looks at
-    (:func:`graphnav.scan.degeneracy.analyse`, thresholds ``max_condition`` and ``max_sigma`` [m]).
+    (:func:`graphnav.scan.degeneracy.analyse`, thresholds ``max_condition`` and ``max_sigma`` [m]; with
+    ``prior_cov``, the initial guess's covariance, also the directions the guess knows better).
     """
     k, n_inl = residual_scale(res, lidar, inlier)
     d = res.shape[1]
@@ -133,5 +134,5 @@ def between(jac: NDArray, res: NDArray, w: NDArray, lidar: NDArray, spacing: NDA
     rms = float(np.sqrt(np.sum(w * np.sum(res**2, axis=1)) / sw)) if sw > 0 else float("nan")
     use = (inlier * flat)[:, None]
     info = (line_rows * use).T @ line_rows
-    deg = degeneracy.analyse(info, radius, cov, max_condition=max_condition, max_sigma=max_sigma)
+    deg = degeneracy.analyse(info, radius, cov, max_condition=max_condition, max_sigma=max_sigma, prior_cov=prior_cov)
     return Between(cov, k, rms, n_inl, deg)

@@ -678,7 +678,8 @@ def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None):  
     scaled = rows * np.array([1.0, 1.0, 1.0 / fp.radius])
     big_d = float(np.median(fp.scale)) if len(fp.scale) else float("nan")
     bt = covariance.between(jac, res, fp.w, lidar, fp.res, use & inl, scaled, fp.flat, fp.radius,
-                            block=cfg.normal_k, max_condition=cfg.max_condition, max_sigma=cfg.max_sigma * big_d)
+                            block=cfg.normal_k, max_condition=cfg.max_condition, max_sigma=cfg.max_sigma * big_d,
+                            prior_cov=None if init is None else init_cov)
     inlier_fraction = float(inl.mean())
     cov = bt.cov
     deg = bt.degeneracy
@@ -688,7 +689,7 @@ def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None):  
     reasons = []
     failed = []  # the match as a whole is not to be trusted: the pose is the guess (when there is one)
     if not converged:  # a limit cycle within the estimate's own 1-sigma is as good as converged
-        sig = np.sqrt(cov[0, 0] + cov[1, 1]) + fp.src_range * np.sqrt(cov[2, 2])
+        sig = np.sqrt(np.maximum(cov[0, 0] + cov[1, 1], 0.0)) + fp.src_range * np.sqrt(np.maximum(cov[2, 2], 0.0))
         if not fp.moved <= sig:
             failed.append(f"not converged in {iters} iterations (last step {fp.moved:.3g} m > its 1-sigma {sig:.3g} m)")
     if inlier_fraction < cfg.min_inlier_fraction:

@@ -42,13 +42,14 @@ class PairRun:
 
 
 def run_pairs(log: NavLog, config: IcpConfig | None = None, init: str = "cv",
-              on_match: Any = None) -> PairRun:
+              on_match: Any = None, guess_cov: bool = True) -> PairRun:
     """Match every consecutive scan pair of ``log``.
 
     ``init`` (:class:`~graphnav.scan.motion_guess.MotionGuess`): ``"cv"`` constant velocity from the
     last good match (after a flagged one: the odometry increment when the log has odometry);
-    ``"odometry"`` the odometry increment; ``"zero"`` identity. ``on_match(k, result)`` is called
-    after each match (online use).
+    ``"odometry"`` the odometry increment; ``"zero"`` identity. With ``guess_cov`` an odometry guess
+    comes with its covariance (``match_points(init_cov=...)``: a match beyond it is flagged).
+    ``on_match(k, result)`` is called after each match (online use).
     """
     guesser = MotionGuess(init, odometry_samples(log))
     cfg = config or IcpConfig()
@@ -59,7 +60,7 @@ def run_pairs(log: NavLog, config: IcpConfig | None = None, init: str = "cv",
     for k in range(len(scans) - 1):
         guess = guesser.guess(scans[k].t, scans[k + 1].t)
         t = time.perf_counter()
-        res = match_points(pts[k + 1], pts[k], cfg, init=guess, init_cov=guesser.cov)
+        res = match_points(pts[k + 1], pts[k], cfg, init=guess, init_cov=guesser.cov if guess_cov else None)
         ms.append((time.perf_counter() - t) * 1e3)
         results.append(res)
         guesser.update(res, scans[k].t, scans[k + 1].t)
