@@ -251,12 +251,19 @@ def resolution(tx, ty, half):
     for i in range(n - 1):
         gaps[i] = srt[i + 1] - srt[i]
     gaps[n - 1] = srt[0] + 2.0 * np.pi - srt[n - 1]
-    win = np.empty(2 * half)
+    m = 2 * half
+    win = np.empty(m)
     for i in range(n):
-        for o in range(-half, half):
-            win[o + half] = gaps[(i + o) % n]
+        for o in range(m):  # insertion sort of the window's gaps
+            v = gaps[_wrap(i - half + o, n)]
+            k = o
+            while k > 0 and win[k - 1] > v:
+                win[k] = win[k - 1]
+                k -= 1
+            win[k] = v
+        med = win[m // 2] if m % 2 else 0.5 * (win[m // 2 - 1] + win[m // 2])  # as np.median
         j = order[i]
-        out[j] = math.hypot(tx[j], ty[j]) * np.median(win)
+        out[j] = math.hypot(tx[j], ty[j]) * med
     return out
 
 
@@ -274,7 +281,7 @@ def target_resolution(tx, ty, half, min_res, tm2):
 
 @njit(cache=True)
 def zhang_gate(d, idx, res, n, dmax):
-    """:func:`graphnav.scan.icp.zhang_gate` on the distances ``d / res[idx]`` (in resolutions)."""
+    """:func:`graphnav.scan.icp.zhang_gate` on the distances ``d / res[idx]`` (``res``: pair scales)."""
     u = np.empty(n)
     m = 0
     for i in range(n):
@@ -307,8 +314,18 @@ def p2p_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy,
         j = idx[i]
         if variant == 2:
             wi = (sm2[i] + tm2[j]) ** (-wpow)
-        elif variant == 3:
-            wi = _hd_weight(i, j, px[i], py[i], d[i], c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, wpow)
+        elif variant == 3:  # eq. 9, 11, 12 (inline: this is the hot loop)
+            if d[i] > 0:
+                bx = (tx[j] - px[i]) / d[i]
+                by = (ty[j] - py[i]) / d[i]
+            else:
+                bx, by = 1.0, 0.0
+            urx = c * sux[i] - s * suy[i]
+            ury = s * sux[i] + c * suy[i]
+            cs = urx * bx + ury * by
+            ct = tux[j] * bx + tuy[j] * by
+            g = sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)
+            wi = g ** (-wpow)
         else:
             wi = 1.0
         if variant != 0 and khu > 0 and d[i] > khu:
@@ -459,33 +476,25 @@ def final_pairs(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, th, t_x,
 
 
 @njit(cache=True)
-def _hd_weight(i, j, px, py, d, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, wpow):
-    """HD weight of pair (i, j) (eq. 9, 11, 12): ``beta`` the direction from the source point to its match."""
-    if d > 0:
-        bx = (tx[j] - px) / d
-        by = (ty[j] - py) / d
-    else:
-        bx, by = 1.0, 0.0
-    urx = c * sux[i] - s * suy[i]
-    ury = s * sux[i] + c * suy[i]
-    cs = urx * bx + ury * by
-    ct = tux[j] * bx + tuy[j] * by
-    g = sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)
-    return g ** (-wpow)
-
-
-@njit(cache=True)
 def hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
                 huber_c, wpow, max_corr, flat_pow, res, dmax, p2p, w):
     """Pair weights of :func:`graphnav.scan.icp._weights` for HDL into ``w`` (``p2p``: the HD weights
     of the point-to-point warm-up): directional error along the target normal (eq. 9, 11), Huber
-    on the point-to-line distance, x flatness^power, 0 outside Zhang's gate ``d / res[idx] <= dmax``."""
+    on the point-to-line distance, x flatness^power, 0 outside Zhang's gate ``d / res[idx] <= dmax``
+    (``res``: the target's pair scales, :func:`target_resolution`)."""
     n = px.shape[0]
     if p2p:
         khu = huber_c * np.median(d)
         for i in range(n):
-            wi = _hd_weight(i, idx[i], px[i], py[i], d[i], c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy,
-                            ta2, tb2, wpow)
+            j = idx[i]  # HD weight (eq. 9, 11, 12), inline as in p2p_weights
+            if d[i] > 0:
+                bx = (tx[j] - px[i]) / d[i]
+                by = (ty[j] - py[i]) / d[i]
+            else:
+                bx, by = 1.0, 0.0
+            cs = (c * sux[i] - s * suy[i]) * bx + (s * sux[i] + c * suy[i]) * by
+            ct = tux[j] * bx + tuy[j] * by
+            wi = (sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)) ** (-wpow)
             if khu > 0 and d[i] > khu:
                 wi *= khu / d[i]
             w[i] = wi if d[i] / res[idx[i]] <= dmax else 0.0

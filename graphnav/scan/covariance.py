@@ -91,8 +91,11 @@ def sandwich(jac: NDArray, w: NDArray, err_cov: NDArray) -> NDArray[np.float64]:
     (N, d, 3), weights ``w`` (N,) and residual error covariances ``err_cov`` (N, d, d); NaN when
     ``H`` is singular."""
     jw = jac * w[:, None, None]
-    h = np.einsum("nki,nkj->ij", jw, jac)
-    b = np.einsum("nki,nkl,nlj->ij", jw, err_cov, jw)
+    h = jw.reshape(-1, 3).T @ jac.reshape(-1, 3)
+    if jac.shape[1] == 1:
+        b = (jw[:, 0, :] * err_cov[:, 0, 0, None]).T @ jw[:, 0, :]
+    else:
+        b = jw.reshape(-1, 3).T @ np.matmul(err_cov, jw).reshape(-1, 3)
     try:
         hi = np.linalg.inv(h)
     except np.linalg.LinAlgError:
@@ -127,8 +130,10 @@ def between(jac: NDArray, res: NDArray, w: NDArray, lidar: NDArray, spacing: NDA
     ``prior_cov``, the initial guess's covariance, also the directions the guess knows better).
     """
     k, n_inl = residual_scale(res, lidar, inlier)
-    d = res.shape[1]
-    err = k * lidar + (block * SAMPLING_VARIANCE * spacing**2)[:, None, None] * np.eye(d)[None]
+    err = k * lidar
+    samp = (block * SAMPLING_VARIANCE) * spacing**2
+    for i in range(res.shape[1]):
+        err[:, i, i] += samp
     cov = sandwich(jac, w, err) if np.isfinite(k) else np.full((3, 3), np.nan)
     sw = float(w.sum())
     rms = float(np.sqrt(np.sum(w * np.sum(res**2, axis=1)) / sw)) if sw > 0 else float("nan")

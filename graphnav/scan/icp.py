@@ -47,9 +47,11 @@ _CHI2_3_999 = 16.266  # chi-square, 3 degrees of freedom, 99.9 % (scipy.stats.ch
 class IcpConfig:
     """Settings of :func:`match_points` / :func:`match_scans` (SI units, radians).
 
-    Lengths that depend on the scan are in units of its resolution (:func:`graphnav.scan.covariance.resolution`):
-    ``r da`` at a point (``da`` the scan's angular step), ``D`` the median of that over the target
-    scan. Marina ~0.2 m, harbour ~0.5 m, the CARMEN logs 0.014-0.12 m.
+    Lengths that depend on the scan are in units of the target scan: its resolution ``r da`` at a
+    point (:func:`graphnav.scan.covariance.resolution`, ``da`` the local angular step), the pair scale
+    ``sqrt((r da)^2 + 2 M^2)`` (:func:`pair_scale`: how far apart a correct pair can be) and ``D``, the
+    median pair scale (marina ~0.2 m, harbour ~0.5 m, the CARMEN logs ~0.02-0.12 m). No length here
+    was fitted on one dataset (docs/weighted-icp.md, "Lengths relative to the scan").
     """
 
     variant: str = "HDL"
@@ -674,7 +676,8 @@ def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None):  
         jac[:, 1, :2] = (s_, c)
         jac[:, :, 2] = c2
         res = e
-        lidar = np.stack([np.column_stack([sxx, sxy]), np.column_stack([sxy, syy])], axis=1)
+        lidar = np.empty((len(d), 2, 2))
+        lidar[:, 0, 0], lidar[:, 0, 1], lidar[:, 1, 0], lidar[:, 1, 1] = sxx, sxy, sxy, syy
     scaled = rows * np.array([1.0, 1.0, 1.0 / fp.radius])
     big_d = float(np.median(fp.scale)) if len(fp.scale) else float("nan")
     bt = covariance.between(jac, res, fp.w, lidar, fp.res, use & inl, scaled, fp.flat, fp.radius,
