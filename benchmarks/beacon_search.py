@@ -203,8 +203,8 @@ def main() -> None:
         from distributed import Client, LocalCluster
 
         t0 = time.perf_counter()
-        cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", silence_logs=logging.WARNING)
+        cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=logging.WARNING)
         client = Client(cluster)
         client.run(lambda: __import__("graphnav.beacons.layout"))  # warm the workers' imports
         startup = time.perf_counter() - t0

@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     print(markdown_table(entries))
     for e in entries:
         if not e.ok:
-            print(f"\n{e.name}: {e.error}")
+            print(f"\n{e.name}: " + (e.error if e.error is not None else f"not run: {e.skipped}"))
 
     # the targets: smoothers first
     ate = {e.name: e.summary["ate_rmse_m"] for e in ranked(entries) if e.ok}
@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{0.5 * ate['scan-to-map']:.3f} m: {'met' if ok else 'NOT met'}")
     if args.out is not None:
         files = write_report(entries, log, args.out, log_name=f"marina-degraded seed {args.seed}")
-        print(f"\nwrote {len(files)} files to {args.out} (report.md)")
+        print(f"\nwrote {len(files)} files to {args.out} (report.md, report.html)")
     return 0
 
 

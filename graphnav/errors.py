@@ -67,3 +67,11 @@ class LogError(GraphnavError, ValueError):
             line=self.line if self.line is not None else line,
             field=self.field,
         )
+
+
+class AddressError(GraphnavError, ValueError):
+    """A network address (``udp://HOST:PORT``, ``tcp://HOST:PORT``, a Dask scheduler) that cannot be
+    parsed, resolved, bound or reached; ``where`` is the address as the user wrote it."""
+
+    def __init__(self, address: str, message: str) -> None:
+        super().__init__(message, where=address)

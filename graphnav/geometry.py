@@ -126,7 +126,11 @@ def increment(samples: NDArray[np.float64], t0: float, t1: float, *,
               lateral: float = 0.05) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """Pose at ``t1`` in the frame of the pose at ``t0`` from odometry ``samples`` (N, 5) (see
     :func:`graphnav.log.odometry_samples`), and its covariance; ``None`` when no sample is at or
-    before ``t1`` or ``t1 < t0``. Before the first sample the first one is held."""
+    before ``t1`` or ``t1 < t0``. Before the first sample the first one is held.
+
+    The sigmas are per sample (each sample's error independent). An optional sixth column marks
+    rows whose sigmas are noise densities [per sqrt(s)] instead: over an arc of ``dt`` they count
+    as ``sigma / sqrt(dt)``, so the integrated variance is ``sigma^2 dt`` whatever the sample rate."""
     if len(samples) == 0 or t1 < t0 or samples[0, 0] > t1:
         return None
     i = max(int(np.searchsorted(samples[:, 0], t0, side="right")) - 1, 0)
@@ -135,7 +139,9 @@ def increment(samples: NDArray[np.float64], t0: float, t1: float, *,
     while t < t1 - 1e-12:
         t_next = samples[i + 1, 0] if i + 1 < len(samples) else math.inf
         te = min(t_next, t1)
-        _, v, w, sv, sw = samples[i]
+        _, v, w, sv, sw = samples[i, :5]
+        if samples.shape[1] > 5 and samples[i, 5] and te - t > 0:
+            sv, sw = sv / math.sqrt(te - t), sw / math.sqrt(te - t)
         d, q = arc(v, w, te - t, sv, sw, lateral)
         a = se2_adjoint_inv(d)
         cov = a @ cov @ a.T + q

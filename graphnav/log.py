@@ -349,6 +349,35 @@ class NavLog:
         """A copy without the records for which ``predicate(record)`` is true."""
         return NavLog([r for r in self.records if not predicate(r)], list(self.beacons_known), dict(self.meta))
 
+    # -- short summaries (the dataclass repr would print every record) ------------------------------
+    def _span(self) -> str:
+        return f"{self.t0:.1f}–{self.t1:.1f} s" if self.records else "empty"
+
+    def __repr__(self) -> str:
+        name = self.meta.get("name")
+        counts = ", ".join(f"{k} {v}" for k, v in self.counts().items())
+        head = f"NavLog {str(name)[:40]!r}" if name else "NavLog"
+        return f"<{head}: {len(self.records)} records, {self._span()}; {counts or 'no records'}>"
+
+    def _repr_html_(self) -> str:
+        """A small table for notebooks: records per type with their time span and rate."""
+        from html import escape
+
+        rows = []
+        for k, n in self.counts().items():
+            if k == "beacon_known":
+                rows.append(f"<tr><td>{k}</td><td>{n}</td><td colspan=2>(charted, not time-stamped)</td></tr>")
+                continue
+            t = np.array([r.t for r in self.records if r.kind == k])
+            rate = f"{(n - 1) / (t[-1] - t[0]):.3g} Hz" if n > 1 and t[-1] > t[0] else "–"
+            rows.append(f"<tr><td>{k}</td><td>{n}</td><td>{t[0]:.1f}–{t[-1]:.1f} s</td><td>{rate}</td></tr>")
+        meta = ", ".join(f"{escape(str(k))}: {escape(str(v))[:80]}" for k, v in self.meta.items()
+                         if k in ("name", "source", "origin"))
+        return (f"<b>NavLog</b> {len(self.records)} records, {self._span()}"
+                + (f" <small>({meta})</small>" if meta else "")
+                + "<table><tr><th>record</th><th>count</th><th>time span</th><th>rate</th></tr>"
+                + "".join(rows) + "</table>")
+
 
 def odometry_samples(log: NavLog, sigma_v: float = 0.1, sigma_w: float = math.radians(1.0)) -> NDArray[np.float64]:
     """The log's odometry records as an (N, 5) array ``t, v, w, sigma_v, sigma_w`` (the given

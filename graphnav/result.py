@@ -36,18 +36,58 @@ class RunResult:
     icp_ms: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     info: dict[str, Any] = field(default_factory=dict)
 
+    # -- short summaries (the dataclass repr would print every pose and the whole info) --------------
+    def _facts(self) -> dict[str, str]:
+        def med(a: NDArray) -> str:
+            return f"{float(np.median(a)):.3g} ms (median of {len(a)})" if len(a) else "–"
+
+        online = ("the trajectory" if self.online is self.trajectory else
+                  "none" if self.online is None else f"{len(self.online)} poses")
+        keys = list(self.info)
+        return {"trajectory": repr(self.trajectory), "online": online, "step": med(self.step_ms),
+                "scan match": med(self.icp_ms),
+                "info": ", ".join(keys[:12]) + (f", … ({len(keys)} keys)" if len(keys) > 12 else "")}
+
+    def __repr__(self) -> str:
+        f = self._facts()
+        return (f"<RunResult: {len(self.trajectory)} poses"
+                + (" with covariance" if self.trajectory.cov is not None else "")
+                + f"; online: {f['online']}; step {f['step']}; info keys: {len(self.info)}>")
+
+    def _repr_html_(self) -> str:
+        """A small table for notebooks."""
+        from html import escape
+
+        rows = "".join(f"<tr><th>{k}</th><td>{escape(v)}</td></tr>" for k, v in self._facts().items())
+        return f"<b>RunResult</b><table>{rows}</table>"
+
 
 @dataclass
 class Estimate:
-    """The navigation solution at time ``t``: pose (x, y, yaw), its 3x3 covariance (or None) and,
-    when known, speed over ground [m/s], course over ground [rad, CCW from east], yaw rate [rad/s]."""
+    """The navigation solution at time ``t``: ``vec`` = (x, y, yaw) (``pose`` gives it as a
+    ``gtsam.Pose2``), its 3x3 covariance in the world frame, order x, y, yaw (or None) and, when
+    known, speed over ground [m/s], course over ground [rad, CCW from east], yaw rate [rad/s].
+    ``vec`` may be given as a ``gtsam.Pose2``."""
 
     t: float
-    pose: NDArray[np.float64]
+    vec: NDArray[np.float64]
     cov: NDArray[np.float64] | None = None
     sog: float | None = None
     cog: float | None = None
     w: float | None = None
+
+    def __post_init__(self) -> None:
+        v = self.vec
+        if hasattr(v, "theta"):  # a gtsam.Pose2
+            v = (v.x(), v.y(), v.theta())
+        self.vec = np.asarray(v, dtype=float).reshape(3)
+
+    @property
+    def pose(self):  # -> gtsam.Pose2 (gtsam imported only when asked: the kernel stays light)
+        """The pose as a ``gtsam.Pose2``."""
+        import gtsam
+
+        return gtsam.Pose2(float(self.vec[0]), float(self.vec[1]), float(self.vec[2]))
 
 
 class OnlineEstimator(Protocol):

@@ -51,6 +51,31 @@ class Trajectory:
     def yaw(self) -> NDArray[np.float64]:
         return self.poses[:, 2]
 
+    # -- short summaries (the dataclass repr would print every pose) ------------------------------------
+    def _facts(self) -> dict[str, str]:
+        n = len(self)
+        out = {"poses": str(n), "time": f"{self.t[0]:.2f}–{self.t[-1]:.2f} s" if n else "empty"}
+        if n:
+            out["path length"] = f"{float(np.sum(np.hypot(np.diff(self.x), np.diff(self.y)))):.1f} m"
+            out["x range"] = f"{self.x.min():.1f} … {self.x.max():.1f} m"
+            out["y range"] = f"{self.y.min():.1f} … {self.y.max():.1f} m"
+        out["covariance"] = "yes" if self.cov is not None else "no"
+        return out
+
+    def __repr__(self) -> str:
+        f = self._facts()
+        name = f" {self.name[:40]!r}" if self.name else ""
+        cov = ", with covariance" if self.cov is not None else ""
+        length = f", {f['path length']}" if "path length" in f else ""
+        return f"<Trajectory{name}: {f['poses']} poses, {f['time']}{length}{cov}>"
+
+    def _repr_html_(self) -> str:
+        """A small table for notebooks."""
+        from html import escape
+
+        rows = "".join(f"<tr><th>{k}</th><td>{escape(v)}</td></tr>" for k, v in self._facts().items())
+        return f"<b>Trajectory</b> {escape(self.name)}<table>{rows}</table>"
+
     def interpolate(self, times: ArrayLike) -> NDArray[np.float64]:
         """Poses at ``times``: linear in x/y, shortest-arc linear in yaw; clamped at the ends."""
         times = np.asarray(times, dtype=float)
@@ -68,12 +93,15 @@ class Trajectory:
     # -- export / import -------------------------------------------------------------------------
     def to_tum(self, path: str | Path) -> None:
         """Write TUM format ``t x y z qx qy qz qw`` (z = 0, rotation about +z) — evo reads it."""
+        from .io.outputs import atomic_path
+
         half = 0.5 * self.yaw
         arr = np.column_stack(
             [self.t, self.x, self.y, np.zeros(len(self)), np.zeros(len(self)), np.zeros(len(self)),
              np.sin(half), np.cos(half)]
         )
-        np.savetxt(path, arr, fmt="%.9f", header="timestamp tx ty tz qx qy qz qw")
+        with atomic_path(path) as tmp:  # written whole or not at all
+            np.savetxt(tmp, arr, fmt="%.9f", header="timestamp tx ty tz qx qy qz qw")
 
     @classmethod
     def from_tum(cls, path: str | Path, name: str = "") -> Trajectory:
@@ -84,11 +112,13 @@ class Trajectory:
         return cls(arr[:, 0], np.column_stack([arr[:, 1], arr[:, 2], yaw]), name=name or Path(path).stem)
 
     def to_csv(self, path: str | Path) -> None:
-        """Write CSV ``t,x,y,yaw`` plus the 6 unique covariance entries when present."""
+        """Write CSV ``t,x,y,yaw`` plus the 6 unique covariance entries when present (atomically)."""
+        from .io.outputs import atomic_open
+
         cols = ["t", "x", "y", "yaw"]
         if self.cov is not None:
             cols += ["cov_xx", "cov_xy", "cov_xyaw", "cov_yy", "cov_yyaw", "cov_yawyaw"]
-        with open(path, "w", newline="") as fh:
+        with atomic_open(path, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(cols)
             for i in range(len(self)):

@@ -13,12 +13,12 @@ REPO = Path(__file__).resolve().parents[1]
 
 def start_live(out_dir: Path, *args: str, ready_s: float = 30.0) -> subprocess.Popen:
     """``python -m graphnav live --out OUT_DIR ARGS...`` (this checkout's code), returned once it
-    listens (its ``live.tum`` exists) or ``ready_s`` has passed."""
+    listens (its ``live-*.tum`` exists) or ``ready_s`` has passed."""
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     p = subprocess.Popen([sys.executable, "-m", "graphnav", "live", "--out", str(out_dir), *args],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=out_dir.parent)
     deadline = time.monotonic() + ready_s
-    while not (out_dir / "live.tum").exists() and time.monotonic() < deadline and p.poll() is None:
+    while not any(out_dir.glob("live-*.tum")) and time.monotonic() < deadline and p.poll() is None:
         time.sleep(0.05)
     time.sleep(0.2)
     return p

@@ -43,8 +43,10 @@ def test_run_dead_reckoning_writes_outputs(tmp_path):
     r = _cli("run", str(tmp_path / "l.npz"), "--estimator", "dead-reckoning", "--out", str(tmp_path / "o"), "--json")
     assert r.returncode == 0, r.stderr
     obj = json.loads(r.stdout)
-    for k in ("estimator", "steps", "ate_rmse_m", "ate_aligned_rmse_m", "rpe_rmse_m", "runtime_s", "step_ms_median"):
+    for k in ("estimator", "steps", "ate_rmse_m", "ate_aligned_rmse_m", "rpe_rmse_m", "runtime_s", "step_ms_median",
+              "heading_rmse_deg", "nees_mean"):
         assert k in obj
+    assert obj["heading_rmse_deg"] >= 0 and (obj["nees_mean"] is None or obj["nees_mean"] >= 0)
     assert obj["steps"] == 20 and obj["anchor"] == "pose_prior"
     online = (tmp_path / "o" / "online.tum").read_text().splitlines()
     assert len([ln for ln in online if not ln.startswith("#")]) == 20

@@ -16,6 +16,18 @@ def add_json_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
 
 
+def add_overwrite_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--overwrite", action="store_true",
+                   help="--out may be a non-empty directory: the files a previous graphnav run wrote there "
+                        "(listed in its .graphnav-outputs.json) are deleted first, other files are left alone")
+
+
+def add_dashboard_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dashboard", nargs="?", const="127.0.0.1:8787", default=None, metavar="HOST:PORT",
+                   help="serve the embedded Dask LocalCluster's dashboard (default off; bare --dashboard: "
+                        "127.0.0.1:8787, loopback only)")
+
+
 def add_log_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="log: marina directory, .jsonl[.gz], .npz, .nmea, a CARMEN .log[.gz], or a ROS bag")
     p.add_argument("--lenient", action="store_true",

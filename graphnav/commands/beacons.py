@@ -22,7 +22,7 @@ from ..beacons.layout import (
     summarize_search,
 )
 from ..evaluation.sweep import run_sweep
-from ._common import add_json_flag, emit
+from ._common import add_dashboard_flag, add_json_flag, emit
 
 log = logging.getLogger("graphnav.beacons")
 
@@ -44,9 +44,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="EKF criterion: compiled kernel (numba, optional dependency) or numpy; auto: numba "
                         "when importable and --linearize truth")
     s.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
+    add_dashboard_flag(s)
     s.add_argument("--chunk", type=int, default=None, help="configurations per sweep task")
     s.add_argument("--results", type=Path, default=None,
-                   help="JSON-lines file of finished chunks: an interrupted search resumes from it")
+                   help="JSON-lines file of finished chunks: an interrupted search resumes from it (a chunk "
+                        "is reused only if every parameter of it is the same; a file written by other "
+                        "code is refused)")
+    s.add_argument("--overwrite", action="store_true",
+                   help="discard what --results holds and start it afresh")
     s.add_argument("--limit", type=int, default=None, help="score only every k-th layout (quick looks)")
     s.add_argument("--linearize", choices=("truth", "estimate"), default="truth")
     s.add_argument("--beacon-init", choices=("first-sighting", "zero", "truth"), default="first-sighting")
@@ -83,7 +88,7 @@ def search(args: argparse.Namespace) -> int:
     report: dict[str, Any] = {}
     results = run_sweep(fn, tasks, out=args.results, scheduler=args.scheduler, workers=args.workers,
                         progress=not args.no_progress, desc=f"{args.beacons}-beacon {args.criterion}",
-                        task_cost_s=cost, report=report)
+                        task_cost_s=cost, report=report, dashboard=args.dashboard, overwrite=args.overwrite)
     pick = "scores" if args.criterion == "ekf" else f"scores_{args.marginals}"
     scores = np.concatenate([np.asarray(r[pick], dtype=float).reshape(-1, 3) for r in results])
     wall = time.perf_counter() - t0

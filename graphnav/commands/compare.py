@@ -1,10 +1,12 @@
 """``graphnav compare LOG --out DIR [--estimators a,b,...]``: every estimator the log can feed, side
-by side — DIR/report.md, PNG figures and DIR/<estimator>.tum."""
+by side — DIR/report.md, DIR/report.html (self-contained), PNG figures, DIR/<estimator>.tum and
+DIR/truth.tum."""
 
 from __future__ import annotations
 
 import argparse
 import logging
+import shlex
 import time
 from pathlib import Path
 
@@ -12,8 +14,9 @@ from .. import estimators
 from ..evaluation.compare import compare, ranked
 from ..evaluation.report import to_json, write_report
 from ..io import load_log
+from ..io.outputs import OutDir
 from ..scan.icp_cache import MatchCache
-from ._common import add_json_flag, add_log_args, emit, parse_options
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, parse_options
 
 log_ = logging.getLogger("graphnav.compare")
 
@@ -23,6 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description=__doc__)
     add_log_args(p)
     p.add_argument("--out", type=Path, required=True, help="output directory (report.md, *.png, *.tum)")
+    add_overwrite_flag(p)
     p.add_argument("--estimators", "-e", default=None,
                    help="comma-separated names, LABEL=NAME to run one estimator twice under another "
                         "label (default: every estimator the log can feed); known: "
@@ -51,6 +55,9 @@ def _options(pairs: list[str] | None) -> dict[str, dict]:
 
 
 def run(args: argparse.Namespace) -> int:
+    out = getattr(args, "out_dir", None)  # (demo prepares its own)
+    if out is None:
+        out = OutDir(args.out, command="compare", overwrite=getattr(args, "overwrite", False))
     log = load_log(args.log, lenient=args.lenient)
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     t0 = time.perf_counter()
@@ -58,11 +65,14 @@ def run(args: argparse.Namespace) -> int:
     entries = compare(log, names, options=_options(args.option),
                       progress=lambda n: log_.info("running %s on %s", n, args.log), workers=args.workers,
                       cache=cache)
-    files = write_report(entries, log, args.out, log_name=str(args.log))
+    command = shlex.join(["graphnav", *args.argv]) if hasattr(args, "argv") else None
+    files = write_report(entries, log, out, log_name=str(args.log), command=command)
     total = time.perf_counter() - t0
     for e in entries:
-        if not e.ok:
+        if e.error is not None:
             log_.warning("%s failed: %s", e.name, e.error)
+        elif e.skipped is not None:
+            log_.info("%s not run: %s", e.name, e.skipped)
     hits = sum((e.summary or {}).get("icp_cache_hits", 0) for e in entries) if cache is not None else None
     obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=args.workers,
                   icp_cache_hits=hits)
@@ -71,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
         s = e.summary or {}
         a, r, t = (f"{s[k]:.3f}" if isinstance(s.get(k), float) else "–"
                    for k in ("ate_rmse_m", "rpe_rmse_m", "runtime_s"))
-        lines.append(f"{e.name:16s} {a:>12s} {r:>9s} {t:>11s}  " + ("" if e.ok else f"failed: {e.error}"))
+        note = "" if e.ok else f"failed: {e.error}" if e.error is not None else f"not run: {e.skipped}"
+        lines.append(f"{e.name:16s} {a:>12s} {r:>9s} {t:>11s}  " + note)
     cached = f"; {hits} weighted-ICP matches shared between estimators" if hits else ""
     lines.append(f"wrote {len(files)} files to {args.out} (report.md) in {total:.1f} s{cached}")
     emit(args, obj, "\n".join(lines))

@@ -3,6 +3,11 @@
 Runs ``graphnav compare`` on the embedded harbour log (``data/harbour.npz``: seed 0 of
 ``graphnav simulate harbour``, every sensor, exact truth) and says where the report went. When the
 repository's ``data/`` is not beside the installed package, the same log is simulated first.
+
+Unlike ``compare``, the demo replaces its own previous output without ``--overwrite``: a directory
+that holds only files graphnav wrote (its ``.graphnav-outputs.json`` lists them; by default
+``out/demo``) is cleared of them and rewritten. A directory with any other file in it is refused
+unless ``--overwrite`` is given (and even then only graphnav's files are deleted).
 """
 
 from __future__ import annotations
@@ -11,7 +16,9 @@ import argparse
 import logging
 from pathlib import Path
 
+from ..io.outputs import OutDir, atomic_path
 from . import compare
+from ._common import add_overwrite_flag
 
 log_ = logging.getLogger("graphnav.demo")
 EMBEDDED = Path(__file__).resolve().parents[2] / "data" / "harbour.npz"
@@ -19,33 +26,36 @@ EMBEDDED = Path(__file__).resolve().parents[2] / "data" / "harbour.npz"
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="compare every estimator on the embedded harbour log", description=__doc__)
-    p.add_argument("--out", type=Path, default=Path("out/demo"), help="output directory (default out/demo)")
+    p.add_argument("--out", type=Path, default=Path("out/demo"),
+                   help="output directory (default out/demo; a previous demo's files there are replaced)")
+    add_overwrite_flag(p)
     p.add_argument("--log", type=Path, default=None, help="another log instead of the embedded one")
     p.add_argument("--workers", "-j", type=int, default=1, help="estimators run in parallel processes")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     p.set_defaults(func=run)
 
 
-def embedded_log(out_dir: Path) -> Path:
-    """The embedded harbour log, or a freshly simulated identical one when ``data/`` is absent."""
+def embedded_log(out_dir: OutDir) -> Path:
+    """The embedded harbour log, or a freshly simulated identical one (in ``out_dir``) when ``data/`` is absent."""
     if EMBEDDED.exists():
         return EMBEDDED
     from ..io import save_log
     from ..sim.harbour import simulate_harbour
 
-    path = out_dir / "harbour-seed0.npz"
-    if not path.exists():
-        log_.info("data/harbour.npz not found beside the package: simulating harbour seed 0 into %s", path)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        save_log(simulate_harbour(seed=0), path)
+    path = out_dir.file("harbour-seed0.npz")
+    log_.info("data/harbour.npz not found beside the package: simulating harbour seed 0 into %s", path)
+    with atomic_path(path) as tmp:
+        save_log(simulate_harbour(seed=0), tmp)
     return path
 
 
 def run(args: argparse.Namespace) -> int:
-    log_path = args.log or embedded_log(args.out)
+    out = OutDir(args.out, command="demo", overwrite=args.overwrite, own_ok=True)
+    log_path = args.log or embedded_log(out)
     log_.info("graphnav demo: comparing every estimator on %s", log_path)
-    cargs = argparse.Namespace(log=str(log_path), lenient=False, out=args.out, estimators=None, option=None,
-                               workers=args.workers, json=args.json)
+    cargs = argparse.Namespace(log=str(log_path), lenient=False, out=args.out, out_dir=out, estimators=None,
+                               option=None, workers=args.workers, json=args.json, overwrite=args.overwrite)
     rc = compare.run(cargs)
-    log_.info("report: %s", (args.out / "report.md").resolve())
+    log_.info("report: %s (self-contained, to send: %s)", (args.out / "report.md").resolve(),
+              (args.out / "report.html").resolve())
     return rc

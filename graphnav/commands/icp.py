@@ -11,11 +11,12 @@ from pathlib import Path
 import numpy as np
 
 from ..io import load_log
+from ..io.outputs import OutDir, atomic_open, atomic_path
 from ..scan.icp import VARIANTS, IcpConfig
 from ..scan.icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
 from ..scan.motion_guess import INITS
 from ..scan.movement import movement_from_increments
-from ._common import add_json_flag, add_log_args, emit, parse_options
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, parse_options
 
 log_ = logging.getLogger("graphnav.icp")
 
@@ -32,6 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="pairs scored: 'clean' the reference-only glitch rule (steady speed; meant for the "
                         "marina's RTK reference, docs/datasets.md), 'all' every pair with truth (default clean)")
     p.add_argument("--out", type=Path, help="directory for pairs.csv and the Figs. 12-15 style plots")
+    add_overwrite_flag(p)
     p.add_argument("--option", "-O", action="append", metavar="KEY=VALUE",
                    help="IcpConfig field, e.g. -O sigma_alpha=0.005 -O matching=delaunay; repeatable")
     add_json_flag(p)
@@ -39,6 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    out = OutDir(args.out, command="icp", overwrite=args.overwrite) if args.out else None
     log = load_log(args.log, lenient=args.lenient)
     options = parse_options(args.option)
     cfg = IcpConfig(variant=args.variant, **options)
@@ -53,10 +56,9 @@ def run(args: argparse.Namespace) -> int:
     summary["nees_mean"] = float(np.nanmean(ne)) if np.isfinite(ne).any() else float("nan")
     summary["nees_median"] = float(np.nanmedian(ne)) if np.isfinite(ne).any() else float("nan")
     summary["options"] = options
-    if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        write_pairs_csv(args.out / "pairs.csv", pr, ref, scored, per, ne)
-        summary["plots"] = write_plots(args.out, args.variant, per)
+    if out is not None:
+        write_pairs_csv(out.file("pairs.csv"), pr, ref, scored, per, ne)
+        summary["plots"] = write_plots(out, args.variant, per)
         summary["out"] = str(args.out)
     human = "\n".join(f"{k:26s} {v}" for k, v in summary.items())
     emit(args, summary, human)
@@ -67,7 +69,7 @@ def write_pairs_csv(path: Path, pr, ref, scored, per, ne) -> None:  # noqa: ANN0
     est = pr.poses
     dt = pr.t1 - pr.t0
     mv = movement_from_increments(est, dt)
-    with open(path, "w", newline="") as fh:
+    with atomic_open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["pair", "t0", "t1", "dx", "dy", "dyaw", "ref_dx", "ref_dy", "ref_dyaw", "sog", "rot",
                     "step_err_m", "dtheta_err_deg", "scored", "ok", "nees", "sigma_x", "sigma_y", "sigma_yaw",
@@ -81,7 +83,7 @@ def write_pairs_csv(path: Path, pr, ref, scored, per, ne) -> None:  # noqa: ANN0
                         q.get("residual"), q.get("condition_number"), q.get("iterations"), pr.ms[k]])
 
 
-def write_plots(out: Path, variant: str, per: dict) -> list[str]:
+def write_plots(out: Path | OutDir, variant: str, per: dict) -> list[str]:
     """The paper's Figs. 12-15: SOG / dCOG difference series and their histograms."""
     import matplotlib
 
@@ -103,14 +105,16 @@ def write_plots(out: Path, variant: str, per: dict) -> list[str]:
         ax.set_ylabel(f"{label} [{unit}]")
         ax.legend()
         fig.tight_layout()
-        fig.savefig(out / fig_series, dpi=120)
+        with atomic_path(out / fig_series) as tmp:
+            fig.savefig(tmp, dpi=120)
         plt.close(fig)
         fig, ax = plt.subplots(figsize=(5, 3))
         ax.hist(e, bins=30)
         ax.set_xlabel(f"{label} [{unit}]")
         ax.set_ylabel("count")
         fig.tight_layout()
-        fig.savefig(out / fig_hist, dpi=120)
+        with atomic_path(out / fig_hist) as tmp:
+            fig.savefig(tmp, dpi=120)
         plt.close(fig)
         files += [fig_series, fig_hist]
     return files

@@ -1,5 +1,6 @@
-"""``graphnav live --nmea udp://0.0.0.0:10110 --publish udp://HOST:PORT --out DIR``: online
-navigation from NMEA streams, the solution published as NMEA (GGA, HDT, VTG, ROT)."""
+"""``graphnav live --nmea udp://127.0.0.1:10110 --publish udp://127.0.0.1:10111 --out DIR``: online
+navigation from NMEA streams, the solution published as NMEA (GGA, HDT, VTG, ROT). Listen on
+loopback unless the sender is another machine (then bind that interface's address)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import json
 import logging
 
 from ..io import load_log
+from ..io.outputs import ensure_dir, write_text_atomic
 from ..online.live import LiveRunner
 from ..online.runner import ONLINE_ESTIMATORS, make_online
 from ._common import add_json_flag, emit, jsonable, parse_options
@@ -28,7 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"online estimator: {', '.join(sorted(ONLINE_ESTIMATORS))} (default fixed-lag)")
     p.add_argument("--option", "-O", action="append", metavar="KEY=VALUE", help="estimator option")
     p.add_argument("--publish", metavar="udp://HOST:PORT", help="send the solution as NMEA here")
-    p.add_argument("--out", metavar="DIR", help="write every estimate to DIR/live.tum (flushed)")
+    p.add_argument("--out", metavar="DIR", help="write every estimate to a new DIR/live-YYYYmmddTHHMMSSZ.tum "
+                   "(UTC start; flushed line by line), the summary beside it (.summary.json)")
     p.add_argument("--origin", metavar="LAT,LON", help="local frame origin (default: the first fix)")
     p.add_argument("--no-checksum-required", action="store_true",
                    help="accept sentences without a checksum (a wrong checksum is always rejected)")
@@ -39,16 +42,17 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    estimator = make_online(args.estimator, **parse_options(args.option))
+    if args.out:
+        ensure_dir(args.out)
+    options = parse_options(args.option)
+    estimator = make_online(args.estimator, **options)
     scans = load_log(args.scans_from) if args.scans_from else None
     runner = LiveRunner(args.nmea, estimator, publish=args.publish, out_dir=args.out, scans_from=scans,
                         origin=parse_origin(args.origin), require_checksum=not args.no_checksum_required,
-                        duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans)
-    log_.info("listening on %s; publishing to %s", ", ".join(args.nmea), args.publish or "-")
+                        duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans,
+                        restart=lambda: make_online(args.estimator, **options))
     summary = runner.run()
-    if args.out:
-        from pathlib import Path
-
-        (Path(args.out) / "summary.json").write_text(json.dumps(jsonable(summary), indent=2))
+    if args.out and runner.writer is not None:  # beside this run's own TUM file, written atomically
+        write_text_atomic(runner.writer.path.with_suffix(".summary.json"), json.dumps(jsonable(summary), indent=2))
     emit(args, summary)
     return 0

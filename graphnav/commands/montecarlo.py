@@ -14,7 +14,7 @@ import time
 
 from .. import estimators
 from ..evaluation.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial
-from ._common import add_json_flag, emit, parse_options
+from ._common import add_dashboard_flag, add_json_flag, emit, parse_options
 
 log_ = logging.getLogger("graphnav.montecarlo")
 
@@ -29,7 +29,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--seed0", type=int, default=0, help="first seed (runs use seed0 .. seed0+runs-1)")
     s.add_argument("--scheduler", help="Dask scheduler address, or 'serial' (default: a local cluster)")
     s.add_argument("--workers", type=int, default=2, help="local cluster processes (default 2)")
-    s.add_argument("--results", help="JSON-lines file of per-run results (makes the sweep resumable)")
+    add_dashboard_flag(s)
+    s.add_argument("--results", help="JSON-lines file of per-run results (makes the sweep resumable; a run is "
+                   "reused only if all its parameters are the same; a file written by other code is refused)")
+    s.add_argument("--overwrite", action="store_true", help="discard what --results holds and start it afresh")
     s.add_argument("--estimators", help="comma-separated names (default: " + ",".join(PAPER_ESTIMATORS) + ")")
     s.add_argument("--option", "-O", action="append", metavar="EST:KEY=VALUE",
                    help="estimator option, e.g. fuzzy-ukf:window=50; repeatable")
@@ -62,7 +65,8 @@ def run_solent(args: argparse.Namespace) -> int:
               "sim_options": sim_opts} for i in range(args.runs)]
     log_.info("montecarlo solent scenario %d: %d runs of %s", args.scenario, args.runs, names)
     t0 = time.perf_counter()
-    trials = map_trials(solent_trial, tasks, scheduler=args.scheduler, workers=args.workers, out=args.results)
+    trials = map_trials(solent_trial, tasks, scheduler=args.scheduler, workers=args.workers, out=args.results,
+                        dashboard=args.dashboard, overwrite=args.overwrite)
     est = aggregate(trials, names)
     out = {"scenario": args.scenario, "runs": args.runs, "estimators": est,
            "improvement_pct": improvement_pct(est)}

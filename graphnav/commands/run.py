@@ -11,8 +11,9 @@ from pathlib import Path
 from .. import estimators
 from ..evaluation.evaluate import summarize
 from ..io import load_log
-from ..io.tum import TrajectoryWriter
-from ._common import add_json_flag, add_log_args, emit, jsonable, parse_options
+from ..io.outputs import OutDir
+from ..io.tum import TrajectoryWriter, write_truth
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, jsonable, parse_options
 
 log_ = logging.getLogger("graphnav.run")
 
@@ -21,7 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run one estimator on a log", description=__doc__)
     add_log_args(p)
     p.add_argument("--estimator", "-e", required=True, help="one of: " + ", ".join(estimators.names()))
-    p.add_argument("--out", type=Path, help="output directory (trajectory.tum, trajectory.csv, summary.json)")
+    p.add_argument("--out", type=Path,
+                   help="output directory (trajectory.tum, trajectory.csv, summary.json, truth.tum)")
+    add_overwrite_flag(p)
     p.add_argument("--option", "-O", action="append", metavar="KEY=VALUE",
                    help="estimator option (value parsed as JSON when it can be); repeatable")
     add_json_flag(p)
@@ -29,12 +32,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    out = OutDir(args.out, command="run", overwrite=args.overwrite) if args.out else None
     log = load_log(args.log, lenient=args.lenient)
     options = parse_options(args.option)
     writer = None
-    if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        writer = TrajectoryWriter(args.out / "online.tum")  # appended and flushed as estimates arrive
+    if out is not None:
+        out.file("online.cov")  # the writer's covariance sidecar, when the estimator gives covariances
+        writer = TrajectoryWriter(out.file("online.tum"))  # appended and flushed as estimates arrive
     log_.info("running %s on %s (%d records)", args.estimator, args.log, len(log))
     t0 = time.perf_counter()
     try:
@@ -45,12 +49,13 @@ def run(args: argparse.Namespace) -> int:
     runtime = time.perf_counter() - t0
     summary = summarize(args.estimator, result, log, runtime_s=runtime)
     summary["options"] = options
-    if args.out:
-        result.trajectory.to_tum(args.out / "trajectory.tum")
-        result.trajectory.to_csv(args.out / "trajectory.csv")
+    if out is not None:  # each file atomically (temporary file + rename)
+        result.trajectory.to_tum(out.file("trajectory.tum"))
+        write_truth(log, out)  # truth.tum beside the estimate: evo_ape tum truth.tum trajectory.tum
+        result.trajectory.to_csv(out.file("trajectory.csv"))
         if result.online is not None and result.online is not result.trajectory:
-            result.online.to_tum(args.out / "online_final.tum")
-        (args.out / "summary.json").write_text(json.dumps(jsonable({**summary, "info": result.info}), indent=2))
+            result.online.to_tum(out.file("online_final.tum"))
+        out.write_text("summary.json", json.dumps(jsonable({**summary, "info": result.info}), indent=2))
         summary["out"] = str(args.out)
     human = "\n".join(f"{k:22s} {v}" for k, v in jsonable(summary).items())
     emit(args, summary, human)

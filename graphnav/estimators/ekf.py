@@ -3,10 +3,11 @@
 Motion input: odometry (speed + rate of turn, unicycle model as eq. 3 of the beacon paper), or,
 when a log has LiDAR scans but no odometry, ICP increments from :func:`graphnav.scan.icp.match_scans`
 (used only if that module is installed). Measurements: GNSS position and compass heading, each
-gated by a chi-square test on the normalised innovation squared (a GNSS jump is rejected, the
-estimate survives); after ``max_rejects`` consecutive rejections of one sensor the next
-measurement is accepted, with the covariance of the measured components inflated by the
-innovation, so the filter recovers from its own divergence (e.g. after a long outage).
+gated by a chi-square test on the normalised innovation squared (:class:`InnovationGate`: a GNSS
+jump is rejected, however long it lasts while the filter is tracking); the measured components
+are re-initialised only on sustained evidence -- ``reinit_n`` consecutive measurements that agree
+with each other and not with the estimate, when the filter was not confirmed by the sensor (a
+wrong prior, a long outage) or after ``reinit_after_s`` of such disagreement.
 Heading innovations are wrapped to [-pi, pi); the yaw state is kept wrapped.
 Updates use the Joseph form. With ``speed=True`` the state is [x, y, yaw, v]: v is a random walk
 (``sigma_acc``) and odometry speed becomes a measurement of it. See docs/ekf.md.
@@ -25,12 +26,12 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import gammaincinv
 
 from ..geometry import wrap_angle
 from ..log import Gnss, Heading, NavLog, Odometry, PosePrior, Record, Scan, Truth
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
+from .gating import GATING_DEFAULTS, InnovationGate, reinit_block
 
 
 def icp_available() -> bool:
@@ -42,23 +43,21 @@ def icp_available() -> bool:
 
 
 class PoseEkf:
-    """EKF on [x, y, yaw] or [x, y, yaw, v] with Joseph-form, chi-square-gated updates."""
+    """EKF on [x, y, yaw] or [x, y, yaw, v] with Joseph-form, chi-square-gated updates
+    (:class:`graphnav.estimators.gating.InnovationGate`; ``gating`` holds its options)."""
 
     def __init__(self, x0: NDArray[np.float64], P0: NDArray[np.float64], *, gate: float | None = 0.999,
-                 max_rejects: int = 10) -> None:
+                 **gating: Any) -> None:
         self.x = np.array(x0, dtype=float)
         self.P = np.array(P0, dtype=float)
         self.gate = gate
-        self.max_rejects = max_rejects
-        self.rejects: dict[str, int] = {}
-        self.counts = {"accepted": 0, "rejected": 0, "forced": 0}
-        self._limit: dict[int, float] = {}  # chi-square gate per degrees of freedom
+        self.gater = InnovationGate(gate, **gating)
+        self.counts = self.gater.counts  # accepted, rejected, reinit
+        self.n_updates = 0
 
     def gate_limit(self, dof: int) -> float:
         """``chi2.ppf(gate, dof)`` (the same expression as scipy.stats' ``chi2``), computed once per dof."""
-        if dof not in self._limit:
-            self._limit[dof] = float(2.0 * gammaincinv(dof / 2.0, self.gate))
-        return self._limit[dof]
+        return self.gater.limit(dof)
 
     @property
     def has_speed(self) -> bool:
@@ -105,44 +104,46 @@ class PoseEkf:
         self.P = G @ self.P @ G.T + V @ cov @ V.T
 
     # ------------------------------------------------------------------ corrections
-    def _update(self, sensor: str, nu: NDArray, H: NDArray, R: NDArray) -> bool:
-        S = H @ self.P @ H.T + R
-        if self.gate is not None:
-            d2 = float(nu @ np.linalg.solve(S, nu))
-            if d2 > self.gate_limit(len(nu)):
-                self.rejects[sensor] = self.rejects.get(sensor, 0) + 1
-                if self.rejects[sensor] <= self.max_rejects:
-                    self.counts["rejected"] += 1
-                    return False
-                # persistent disagreement: the filter, not the sensor, is wrong. Inflate the measured
-                # components by the innovation (H selects state entries) and accept.
-                self.counts["forced"] += 1
-                self.P = self.P + H.T @ np.outer(nu, nu) @ H
-                S = H @ self.P @ H.T + R
-        self.rejects[sensor] = 0
+    def _update(self, sensor: str, nu: NDArray, H: NDArray, R: NDArray, t: float | None = None,
+                angle: bool = False) -> bool:
+        """Gated Joseph update; ``t`` the measurement time [s] for the gate's time rules (default:
+        the number of updates so far). False if the measurement was rejected."""
+        self.n_updates += 1
+        HPH = H @ self.P @ H.T
+        S = HPH + R
+        verdict = self.gater.test(sensor, float(self.n_updates if t is None else t), nu, HPH, R, angle=angle)
+        if verdict == "reject":
+            return False
+        if verdict == "reinit":  # sustained evidence: the measured components restart at the measurement
+            idx = np.flatnonzero(H.any(axis=0))
+            z = self.x[idx] + nu
+            if angle:
+                z = wrap_angle(z)
+            reinit_block(self.x, self.P, idx, z, R * self.gater.scale(sensor))
+            return True
         K = self.P @ H.T @ np.linalg.inv(S)
         self.x = self.x + K @ nu
         self.x[2] = wrap_angle(self.x[2])
         A = np.eye(len(self.x)) - K @ H
         self.P = A @ self.P @ A.T + K @ R @ K.T
         self.P = 0.5 * (self.P + self.P.T)
-        self.counts["accepted"] += 1
         return True
 
-    def update_position(self, xy: tuple[float, float], sigma: float) -> bool:
+    def update_position(self, xy: tuple[float, float], sigma: float, t: float | None = None) -> bool:
         H = np.zeros((2, len(self.x)))
         H[0, 0] = H[1, 1] = 1.0
-        return self._update("gnss", np.asarray(xy) - self.x[:2], H, np.eye(2) * sigma**2)
+        return self._update("gnss", np.asarray(xy) - self.x[:2], H, np.eye(2) * sigma**2, t)
 
-    def update_heading(self, yaw: float, sigma: float) -> bool:
+    def update_heading(self, yaw: float, sigma: float, t: float | None = None) -> bool:
         H = np.zeros((1, len(self.x)))
         H[0, 2] = 1.0
-        return self._update("heading", np.array([wrap_angle(yaw - self.x[2])]), H, np.array([[sigma**2]]))
+        return self._update("heading", np.array([wrap_angle(yaw - self.x[2])]), H, np.array([[sigma**2]]), t,
+                            angle=True)
 
-    def update_speed(self, v: float, sigma: float) -> bool:
+    def update_speed(self, v: float, sigma: float, t: float | None = None) -> bool:
         H = np.zeros((1, 4))
         H[0, 3] = 1.0
-        return self._update("speed", np.array([v - self.x[3]]), H, np.array([[sigma**2]]))
+        return self._update("speed", np.array([v - self.x[3]]), H, np.array([[sigma**2]]), t)
 
 
 def initial_state(records: Iterable[Record], speed: bool) -> tuple[NDArray, NDArray, str]:
@@ -199,17 +200,20 @@ class EkfStepper:
     ``keep`` bounds the timing buffers (``None``: keep all)."""
 
     def __init__(self, x0: NDArray[np.float64], P0: NDArray[np.float64], *, motion: str = "odometry",
-                 gate: float | None = 0.999, max_rejects: int = 10, sigma_v: float = 0.5,
+                 gate: float | None = 0.999, sigma_v: float = 0.5,
                  sigma_w: float = math.radians(0.5), sigma_acc: float = 0.5, use_gnss: bool = True,
                  use_heading: bool = True, match: MatchFn | None = None,
-                 keep: int | None = None) -> None:
+                 keep: int | None = None, **gating: Any) -> None:
         if motion not in ("odometry", "icp"):
             raise ValueError(f"motion must be 'odometry' or 'icp', not {motion!r}")
         if motion == "icp" and match is None:
             if not icp_available():
                 raise ValueError("ICP motion needs graphnav.scan.icp (not installed in this build)")
             from ..scan.icp_cache import match_scans as match  # graphnav.scan.icp's, shared inside icp_cache.active()
-        self.f = PoseEkf(x0, P0, gate=gate, max_rejects=max_rejects)
+        unknown = set(gating) - set(GATING_DEFAULTS)
+        if unknown:
+            raise ValueError(f"unknown ekf option(s): {sorted(unknown)}")
+        self.f = PoseEkf(x0, P0, gate=gate, **gating)
         self.motion = motion
         self.kinds: tuple[type, ...] = (Gnss, Heading, Odometry) if motion == "odometry" else (Gnss, Heading, Scan)
         self.sigma_v, self.sigma_w, self.sigma_acc = sigma_v, sigma_w, sigma_acc
@@ -253,11 +257,11 @@ class EkfStepper:
         if isinstance(r, Odometry):
             self.u = r
             if f.has_speed:
-                f.update_speed(r.v, _sig(r.sigma_v, self.sigma_v))
+                f.update_speed(r.v, _sig(r.sigma_v, self.sigma_v), r.t)
         elif isinstance(r, Gnss) and self.use_gnss:
-            f.update_position((r.x, r.y), r.sigma)
+            f.update_position((r.x, r.y), r.sigma, r.t)
         elif isinstance(r, Heading) and self.use_heading:
-            f.update_heading(r.yaw, r.sigma)
+            f.update_heading(r.yaw, r.sigma, r.t)
         self.step_ms.append((time.perf_counter() - t0) * 1e3)
         return True
 
@@ -279,17 +283,20 @@ class EkfStepper:
 
 
 def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str = "auto", speed: bool = False,
-            gate: float | None = 0.999, max_rejects: int = 10, sigma_v: float = 0.5,
+            gate: float | None = 0.999, sigma_v: float = 0.5,
             sigma_w: float = math.radians(0.5), sigma_acc: float = 0.5, use_gnss: bool = True,
-            use_heading: bool = True) -> RunResult:
+            use_heading: bool = True, **gating: Any) -> RunResult:
     """EKF over a log. ``motion``: ``"odometry"``, ``"icp"`` or ``"auto"`` (odometry if the log has
-    it, else ICP on the scans). ``gate``: chi-square probability (``None`` disables gating).
+    it, else ICP on the scans). ``gate``: chi-square probability (``None`` disables gating);
+    ``gating``: the other options of :class:`~graphnav.estimators.gating.InnovationGate`
+    (``reinit_n``, ``confirm_n``, ``confirm_s``, ``reinit_after_s``, ``scale_window``).
     Sigmas in the records win over ``sigma_v``/``sigma_w``. One estimate per record time."""
     if motion == "auto":
         motion = "odometry" if len(log.of("odometry")) >= 2 else "icp"
     x0, P0, anchor = initial_state(log.records, speed)
-    st = EkfStepper(x0, P0, motion=motion, gate=gate, max_rejects=max_rejects, sigma_v=sigma_v,
-                    sigma_w=sigma_w, sigma_acc=sigma_acc, use_gnss=use_gnss, use_heading=use_heading)
+    st = EkfStepper(x0, P0, motion=motion, gate=gate, sigma_v=sigma_v,
+                    sigma_w=sigma_w, sigma_acc=sigma_acc, use_gnss=use_gnss, use_heading=use_heading,
+                    **gating)
     recs = [r for r in log.records if st.uses(r)]
     if not recs:
         raise ValueError("ekf: the log has no usable records")
@@ -303,8 +310,8 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
             if on_estimate is not None:
                 on_estimate(r.t, poses[-1], covs[-1])
     traj = Trajectory(np.array(ts), np.array(poses), np.array(covs), name="ekf")
-    info: dict[str, Any] = {"anchor": anchor, "motion": motion, "speed_state": speed, "gate": gate,
-                            **st.f.counts, "icp_failed": st.icp_failed}
+    info: dict[str, Any] = {"anchor": anchor, "motion": motion, "speed_state": speed,
+                            **st.f.gater.info(), "icp_failed": st.icp_failed}
     return RunResult(traj, traj, np.array(st.step_ms), np.array(st.icp_ms), info=info)
 
 

@@ -1,22 +1,29 @@
-"""Range-bearing EKF-SLAM exactly as the beacon paper's sections 3-5 (Marchel, Naus & Specht 2019).
+"""Range-bearing EKF-SLAM of the beacon paper's sections 3-5 (Marchel, Naus & Specht 2019), and a
+mode of it that holds on real beacon data.
 
 State [x, y, theta, x_1, y_1, ..., x_i, y_i]; motion eq. 3 with control (V, ROT); G eq. 19;
 W eq. 22 (second column dg/dROT); R = W M W^T eq. 20-23; range-bearing measurement eq. 6 with
 Jacobian H eq. 25; one beacon per correction (K is (3+2i) x 2, eq. 24); P0 eq. 14 (zero vessel
-block unless the log has a pose prior, beacon variances ``p0_beacon`` = 1e6 m^2).
-Every beacon seen in the log has a slot from the start (eq. 14-15); its mean is set at first
-sighting from the inverse observation. Charted beacons (``beacon_known`` records) start at their
-charted position with their charted variance. The correction uses the Joseph form, so P stays
-symmetric and positive semidefinite to round-off (``tests/estimators/test_ekf_slam.py`` runs it for 10,000 steps).
+block unless the log has a pose prior, beacon variances ``p0_beacon`` = 1e6 m^2). Charted beacons
+(``beacon_known`` records) start at their charted position with their charted variance. The
+correction uses the Joseph form, so P stays symmetric and positive semidefinite to round-off
+(``tests/estimators/test_ekf_slam.py`` runs it for 10,000 steps).
 
-Matrices here are dense, written as the paper writes them: this class is also the reference the
-batched search (:mod:`graphnav.beacons.layout`) is tested against.
+:class:`EkfSlam`'s keyword defaults are the paper's filter (a slot per beacon from the start, the
+first sighting corrected against the ``p0_beacon`` prior, no gate): it is the reference the batched
+search (:mod:`graphnav.beacons.layout`) is tested against, so those defaults do not change. The
+``ekf-slam`` estimator (:func:`run_ekf_slam`) defaults to the real-log mode (chi-square gate,
+textbook first sighting, slots added when first seen, first-estimates Jacobians, sensor-type
+default sigmas as noise densities, an innovation-based motion-noise scale); ``paper=True`` gives
+the paper's filter. docs/ekf.md compares the two on MRCLAM.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections import deque
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -28,21 +35,39 @@ from ..log import BeaconObs, NavLog, Odometry
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
 
-DEFAULT_SIGMA_V = 0.5                       # m/s, paper section 7
-DEFAULT_SIGMA_ROT = math.radians(0.1)       # rad/s
-DEFAULT_SIGMA_RANGE = 0.5                   # m
-DEFAULT_SIGMA_BEARING = math.radians(0.5)   # rad
+PAPER_SIGMAS = {                              # the paper's section 7, per record (white noise)
+    "sigma_v": 0.5,                           # m/s
+    "sigma_rot": math.radians(0.1),           # rad/s
+    "sigma_range": 0.5,                       # m
+    "sigma_bearing": math.radians(0.5),       # rad
+}
+SENSOR_DEFAULTS = {                           # real logs without sigmas (see run_ekf_slam, docs/ekf.md)
+    "sigma_v": 0.1,                           # m/s over 1 s (density): wheel or speed-log odometry
+    "sigma_rot": math.radians(5.0),           # rad/s over 1 s: odometry/commanded turn rate, slip
+    "sigma_range": 0.5,                       # m: the paper's radar/LiDAR value, generous for a camera
+    "sigma_bearing": math.radians(2.0),       # rad: camera or radar bearing
+}
+DEFAULT_GATE = 0.999
 
 
 class EkfSlam:
-    """Dense EKF-SLAM over ``n_beacons`` beacon slots.
+    """Dense EKF-SLAM over beacon slots (``n_beacons`` at the start, more by :meth:`add_beacon`).
 
-    ``p0_cross="paper"`` fills every entry outside the vessel block of P0 with ``p0_beacon`` as
-    eq. 14 is printed (an indefinite matrix: for studying the paper only).
+    The keyword defaults are the paper's filter, which :mod:`graphnav.beacons.layout` is tested
+    against: ``init="paper"`` gives an unseen slot its mean from the inverse observation and then
+    runs the ordinary correction against its ``p0_beacon`` prior. ``init="inverse"`` is the
+    textbook first sighting instead (:meth:`initialise`): the slot takes the inverse observation
+    and its covariance from the pose covariance and the measurement covariance, and that
+    measurement is spent on it. ``p0_cross="paper"`` fills every entry outside the vessel block of
+    P0 with ``p0_beacon`` as eq. 14 is printed (an indefinite matrix: for studying the paper only;
+    such a filter cannot add slots later).
     """
 
-    def __init__(self, pose0: NDArray[np.float64], n_beacons: int, *, pose_cov0: NDArray | None = None,
-                 p0_beacon: float = 1e6, p0_cross: str = "zero", w_second: str = "rot") -> None:
+    def __init__(self, pose0: NDArray[np.float64], n_beacons: int = 0, *, pose_cov0: NDArray | None = None,
+                 p0_beacon: float = 1e6, p0_cross: str = "zero", w_second: str = "rot",
+                 init: str = "paper", fej: bool = False) -> None:
+        if init not in ("paper", "inverse"):
+            raise ValueError(f"init must be 'paper' or 'inverse', not {init!r}")
         n = 3 + 2 * n_beacons
         self.x = np.zeros(n)
         self.x[:3] = pose0
@@ -55,11 +80,43 @@ class EkfSlam:
         if pose_cov0 is not None:
             self.P[:3, :3] = pose_cov0
         self.seen = np.zeros(n_beacons, dtype=bool)
-        self.w_second = w_second
+        self.p0_beacon, self.p0_cross, self.w_second, self.init = p0_beacon, p0_cross, w_second, init
+        self.last_nis = math.nan  # normalised innovation squared of the last correction (gated or not)
+        self.fej = fej
+        self.pose_pred = self.x[:3].copy()   # the pose predicted for the current time, before its corrections
+        self.first: dict[int, NDArray[np.float64]] = {}  # each beacon's first estimate (FEJ)
 
     @property
     def n(self) -> int:
         return len(self.x)
+
+    def add_beacon(self) -> int:
+        """A new slot (mean 0, variance ``p0_beacon``, uncorrelated, unseen); returns its index.
+
+        With zero cross terms an unseen slot never interacts with the rest of the state, so adding
+        it at first sighting gives the same filter as having it from the start."""
+        if self.p0_cross == "paper":
+            raise ValueError("p0_cross='paper' couples every slot from the start: give n_beacons instead")
+        n = self.n
+        x = np.zeros(n + 2)
+        x[:n] = self.x
+        P = np.zeros((n + 2, n + 2))
+        P[:n, :n] = self.P
+        P[n:, n:] = np.eye(2) * self.p0_beacon
+        self.x, self.P = x, P
+        self.seen = np.append(self.seen, False)
+        return len(self.seen) - 1
+
+    def forget(self, j: int) -> None:
+        """Slot ``j`` back to unseen: mean 0, variance ``p0_beacon``, no correlation (its next
+        sighting initialises it again)."""
+        b = 3 + 2 * j
+        self.x[b:b + 2] = 0.0
+        self.P[b:b + 2, :] = 0.0
+        self.P[:, b:b + 2] = 0.0
+        self.P[b:b + 2, b:b + 2] = np.eye(2) * self.p0_beacon
+        self.seen[j] = False
+        self.first.pop(j, None)
 
     def set_beacon(self, j: int, xy: tuple[float, float], var: float) -> None:
         """A charted beacon: mean ``xy``, variance ``var`` per axis, uncorrelated."""
@@ -69,57 +126,135 @@ class EkfSlam:
         self.P[:, b:b + 2] = 0.0
         self.P[b:b + 2, b:b + 2] = np.eye(2) * var
         self.seen[j] = True
+        self.first[j] = np.array(xy, dtype=float)
 
     def predict(self, v: float, rot: float, dt: float, sigma_v: float, sigma_rot: float) -> None:
-        """Eq. 18 (mean) and eq. 19-23 (covariance)."""
+        """Eq. 18 (mean) and eq. 19-23 (covariance).
+
+        G (eq. 19) is the identity outside the vessel block, so ``G P G^T`` is computed as the
+        vessel rows and columns times the 3x3 block of G (the same product, without the n^3).
+        With ``fej`` (first-estimates Jacobian, Huang, Mourikis & Roumeliotis 2008) G's heading
+        column is ``(-(y_k+1|k - y_k|k-1), x_k+1|k - x_k|k-1)``: the displacement from the pose
+        predicted for time k, not the corrected one, so that every Jacobian of one pose is taken
+        at one estimate (the EKF then gains no spurious heading information)."""
         th = self.x[2]
         c, s = math.cos(th), math.sin(th)
-        G = np.eye(self.n)                                   # eq. 19
-        G[0, 2] = -s * dt * v
-        G[1, 2] = c * dt * v
-        W = np.zeros((self.n, 2))                            # eq. 22
+        g = np.eye(3)                                        # eq. 19, vessel block
+        g[0, 2] = -s * dt * v
+        g[1, 2] = c * dt * v
+        if self.fej:
+            g[0, 2] = -(self.x[1] + v * dt * s - self.pose_pred[1])
+            g[1, 2] = self.x[0] + v * dt * c - self.pose_pred[0]
+        W = np.zeros((3, 2))                                 # eq. 22, vessel rows (the rest is 0)
         W[0, 0], W[1, 0] = c * dt, s * dt
         if self.w_second == "rot":
             W[2, 1] = dt
         else:                                                # eq. 22 as printed: dg/dtheta
-            W[0, 1], W[1, 1], W[2, 1] = G[0, 2], G[1, 2], 1.0
+            W[0, 1], W[1, 1], W[2, 1] = g[0, 2], g[1, 2], 1.0
         M = np.diag([sigma_v**2, sigma_rot**2])              # eq. 17
         self.x[0] += v * dt * c
         self.x[1] += v * dt * s
         self.x[2] = wrap_angle(th + rot * dt)
-        self.P = G @ self.P @ G.T + W @ M @ W.T              # eq. 23
+        self.pose_pred = self.x[:3].copy()
+        P = self.P                                           # eq. 23
+        P[:3, :] = g @ P[:3, :]
+        P[:, :3] = P[:, :3] @ g.T
+        P[:3, :3] += W @ M @ W.T
+
+    def inverse_observation(self, z_range: float, z_bearing: float) -> tuple[NDArray, NDArray, NDArray]:
+        """Beacon position ``g(x, z) = (x + r cos(theta + beta), y + r sin(theta + beta))`` and its
+        Jacobians ``Gx`` (2x3, w.r.t. the pose) and ``Gz`` (2x2, w.r.t. range and bearing)."""
+        a = self.x[2] + z_bearing
+        c, s = math.cos(a), math.sin(a)
+        xy = np.array([self.x[0] + z_range * c, self.x[1] + z_range * s])
+        gx = np.array([[1.0, 0.0, -z_range * s], [0.0, 1.0, z_range * c]])
+        gz = np.array([[c, -z_range * s], [s, z_range * c]])
+        return xy, gx, gz
+
+    def initialise(self, j: int, z_range: float, z_bearing: float, sigma_range: float,
+                   sigma_bearing: float) -> None:
+        """Textbook first sighting of slot ``j``: ``x_b = g(x, z)``,
+        ``P_bb = Gx Pxx Gx^T + Gz Q Gz^T``, ``P_b: = Gx P_x:`` (cross terms with the pose and
+        every other slot)."""
+        b = 3 + 2 * j
+        xy, gx, gz = self.inverse_observation(z_range, z_bearing)
+        Q = np.diag([sigma_range**2, sigma_bearing**2])
+        self.x[b:b + 2] = xy
+        cross = gx @ self.P[:3, :]                           # Gx P_x: (2 x n)
+        cross[:, b:b + 2] = 0.0
+        self.P[b:b + 2, :] = cross
+        self.P[:, b:b + 2] = cross.T
+        self.P[b:b + 2, b:b + 2] = gx @ self.P[:3, :3] @ gx.T + gz @ Q @ gz.T
+        self.seen[j] = True
+        self.first[j] = xy.copy()
 
     def update(self, j: int, z_range: float, z_bearing: float, sigma_range: float, sigma_bearing: float,
-               gate: float | None = None) -> bool:
-        """Eq. 24-27 for beacon slot ``j`` (initialised from this observation at first sighting).
+               gate: float | None = None, iterations: int = 1) -> bool:
+        """Eq. 24-27 for beacon slot ``j`` (an unseen slot is first initialised, see ``init``).
 
-        ``gate``: chi-square probability (e.g. 0.999) above which the innovation is rejected;
-        returns whether the measurement was used.
+        ``gate``: chi-square probability (e.g. 0.999) above which the innovation is rejected: the
+        squared Mahalanobis distance ``nu^T S^-1 nu`` with ``S = H P H^T + Q`` against
+        ``chi2.ppf(gate, 2)``. A first sighting cannot be gated (nothing predicts it). A return
+        with a range that is not positive or a non-finite value is rejected. ``iterations`` > 1
+        relinearises h at the updated estimate (iterated EKF, Bell & Cathey 1993:
+        ``x_i+1 = x^- + K_i (z - h(x_i) - H_i (x^- - x_i))``), the gate uses the first. Returns
+        whether the measurement was used.
         """
+        if not (z_range > 0.0 and math.isfinite(z_range) and math.isfinite(z_bearing)):
+            return False
         b = 3 + 2 * j
         if not self.seen[j]:
+            if self.init == "inverse":
+                self.initialise(j, z_range, z_bearing, sigma_range, sigma_bearing)
+                self.last_nis = math.nan
+                return True
             a = z_bearing + self.x[2]
             self.x[b] = self.x[0] + z_range * math.cos(a)
             self.x[b + 1] = self.x[1] + z_range * math.sin(a)
-        dx, dy = self.x[b] - self.x[0], self.x[b + 1] - self.x[1]
-        q = dx * dx + dy * dy
-        r = math.sqrt(q)
-        H = np.zeros((2, self.n))                            # eq. 25
-        H[0, [0, 1, b, b + 1]] = [-dx / r, -dy / r, dx / r, dy / r]
-        H[1, [0, 1, 2, b, b + 1]] = [dy / q, -dx / q, -1.0, -dy / q, dx / q]
+            self.first[j] = self.x[b:b + 2].copy()
         Q = np.diag([sigma_range**2, sigma_bearing**2])      # eq. 16
-        nu = np.array([z_range - r, wrap_angle(z_bearing - (math.atan2(dy, dx) - self.x[2]))])
-        S = H @ self.P @ H.T + Q
-        if gate is not None and self.seen[j] and float(nu @ np.linalg.solve(S, nu)) > chi2.ppf(gate, 2):
-            return False
-        K = self.P @ H.T @ np.linalg.inv(S)                  # eq. 24
-        self.x = self.x + K @ nu                             # eq. 27
+        x_prior = self.x
+        xi = x_prior
+        for it in range(max(1, iterations)):
+            dx, dy = xi[b] - xi[0], xi[b + 1] - xi[1]
+            q = dx * dx + dy * dy
+            r = math.sqrt(q)
+            if r == 0.0:
+                return False
+            nu = np.array([z_range - r, wrap_angle(z_bearing - (math.atan2(dy, dx) - xi[2]))])
+            if self.fej and j in self.first:                 # H at the predicted pose and first beacon estimate
+                dx, dy = self.first[j][0] - self.pose_pred[0], self.first[j][1] - self.pose_pred[1]
+                q = dx * dx + dy * dy
+                r = math.sqrt(q)
+                if r == 0.0:
+                    return False
+            H = np.zeros((2, self.n))                        # eq. 25
+            H[0, [0, 1, b, b + 1]] = [-dx / r, -dy / r, dx / r, dy / r]
+            H[1, [0, 1, 2, b, b + 1]] = [dy / q, -dx / q, -1.0, -dy / q, dx / q]
+            S = H @ self.P @ H.T + Q
+            if it == 0:
+                self.last_nis = float(nu @ np.linalg.solve(S, nu))
+                if gate is not None and self.seen[j] and self.last_nis > _gate_threshold(gate):
+                    return False
+            K = self.P @ H.T @ np.linalg.inv(S)              # eq. 24
+            if it == 0:
+                xi = x_prior + K @ nu                        # eq. 27
+            else:
+                d = x_prior - xi
+                d[2] = wrap_angle(d[2])
+                xi = x_prior + K @ (nu - H @ d)
+        self.x = xi
         self.x[2] = wrap_angle(self.x[2])
         A = np.eye(self.n) - K @ H
         self.P = A @ self.P @ A.T + K @ Q @ K.T              # eq. 26 in Joseph form
         self.P = 0.5 * (self.P + self.P.T)
         self.seen[j] = True
         return True
+
+
+@lru_cache(maxsize=32)
+def _gate_threshold(gate: float) -> float:
+    return float(chi2.ppf(gate, 2))
 
 
 def _start(log: NavLog) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
@@ -133,35 +268,112 @@ def _start(log: NavLog) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
     return np.zeros(3), np.zeros((3, 3)), "origin"
 
 
-def _sig(v: float, default: float) -> float:
-    return default if not math.isfinite(v) else v
+def _given(v: float) -> bool:
+    return math.isfinite(v) and v > 0.0
 
 
-def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, sigma_v: float = DEFAULT_SIGMA_V,
-                 sigma_rot: float = DEFAULT_SIGMA_ROT, sigma_range: float = DEFAULT_SIGMA_RANGE,
-                 sigma_bearing: float = DEFAULT_SIGMA_BEARING, p0_beacon: float = 1e6, p0_cross: str = "zero",
-                 w_second: str = "rot", gate: float | None = None, use_known: bool = True) -> RunResult:
+class _NisScale:
+    """Innovation-based scale of the motion noise (adaptive estimation from the innovation
+    sequence, after Mohamed & Schwarz 1999, reduced to one scalar): over the last ``window``
+    re-sightings, ``s = max(1, median(NIS) / median(chi2_2))``, each NIS capped at the gate
+    threshold so a gross outlier counts as one large value, not as its size. The motion noise is
+    multiplied by ``s``: a filter whose innovations are persistently larger than its covariance
+    says (too little motion noise, so the gate starts rejecting good returns) widens its
+    prediction until they agree again; it never shrinks the stated noise."""
+
+    MEDIAN_CHI2_2 = 2.0 * math.log(2.0)  # median of chi-square with 2 dof
+
+    def __init__(self, window: int, cap: float) -> None:
+        self.buf: deque[float] = deque(maxlen=window)
+        self.cap = cap
+        self.scale = 1.0
+        self.max_scale = 1.0
+
+    def add(self, nis: float) -> None:
+        if not math.isfinite(nis):
+            return
+        self.buf.append(min(nis, self.cap))
+        if len(self.buf) == self.buf.maxlen:
+            self.scale = max(1.0, float(np.median(self.buf)) / self.MEDIAN_CHI2_2)
+            self.max_scale = max(self.max_scale, self.scale)
+
+
+def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: bool = False,
+                 sigma_v: float | None = None, sigma_rot: float | None = None, sigma_range: float | None = None,
+                 sigma_bearing: float | None = None, gate: float | None | str = "default",
+                 init: str | None = None, adaptive: bool | None = None, window: int = 20,
+                 iterations: int = 1, fej: bool | None = None, reinit_after: int | None = 3,
+                 p0_beacon: float = 1e6, p0_cross: str = "zero", w_second: str = "rot",
+                 use_known: bool = True) -> RunResult:
     """EKF-SLAM over a log with odometry (V, ROT) and beacon range/bearing records.
 
-    Sigmas given in the records win over the defaults (paper section 7). The control of an
-    odometry record is held until the next one (as dead reckoning); each record time with a new
-    estimate is reported through ``on_estimate``.
+    Two modes (every option below can still be set on its own):
+
+    * default, for real logs: chi-square gate ``gate`` = 0.999 on the Mahalanobis distance with
+      ``S = H P H^T + Q``; textbook first sighting (``init="inverse"``: the beacon from the inverse
+      observation with ``P_bb = Gx Pxx Gx^T + Gz Q Gz^T``, ``P_bx = Gx P_x:``); a beacon gets its
+      slot when it is first seen; motion noise scaled up from the innovations (``adaptive``, see
+      :class:`_NisScale`); the defaults for sigmas the log does not give are :data:`SENSOR_DEFAULTS`.
+    * ``paper=True``: the beacon paper's filter exactly (what the layout study computes): no gate,
+      ``init="paper"``, every beacon id in the log has a slot from the start, no adaptation, and the
+      paper's section 7 sigmas (:data:`PAPER_SIGMAS`) as per-record white noise.
+
+    Sigmas in the records win over the defaults and are per-record white noise (as the simulators
+    draw them): the control's variance enters each prediction step as ``W M W^T`` (eq. 20-23).
+    The default motion sigmas of the real-log mode are instead noise densities, given as the error
+    of the speed (rate of turn) averaged over 1 s: the step variance is ``sigma^2 * 1 s * dt`` (so
+    the error of the integrated distance or heading grows as ``sigma sqrt(t)`` whatever the
+    odometry rate; as per-record white noise, 100 Hz odometry would average its own error away).
+    The control of an odometry record is held until the next one (as dead reckoning); each record
+    time with a new estimate is reported through ``on_estimate``. ``iterations`` > 1: iterated EKF
+    corrections (:meth:`EkfSlam.update`). ``reinit_after``: a beacon whose first sighting was
+    never confirmed (no re-sighting accepted yet) and whose next ``reinit_after`` re-sightings in a
+    row are all gated out was most likely initialised from a gross outlier (a first sighting
+    cannot be gated): it is forgotten and initialised again from the current sighting (``None``:
+    never; off in the paper's mode).
     """
+    defaults = PAPER_SIGMAS if paper else SENSOR_DEFAULTS
+    sv = defaults["sigma_v"] if sigma_v is None else sigma_v
+    sw = defaults["sigma_rot"] if sigma_rot is None else sigma_rot
+    sr = defaults["sigma_range"] if sigma_range is None else sigma_range
+    sb = defaults["sigma_bearing"] if sigma_bearing is None else sigma_bearing
+    if gate == "default":
+        gate = None if paper else DEFAULT_GATE
+    if gate is not None and not 0.0 < float(gate) < 1.0:
+        raise ValueError(f"gate must be a probability in (0, 1) or None, not {gate!r}")
+    init = init or ("paper" if paper else "inverse")
+    adaptive = (not paper) if adaptive is None else adaptive
+    density = not paper  # the defaults' meaning (see above); given sigmas are always per record
+    grow = p0_cross != "paper" and not paper
+    if paper:
+        reinit_after = None
+
     known = {b.id for b in log.beacons_known} if use_known else set()
-    ids = sorted({r.id for r in log.of("beacon")} | known)
-    slot = {i: j for j, i in enumerate(ids)}
+    slot: dict[str, int] = {}
+    if not grow:  # the paper's eq. 14-15: a slot per beacon of the log from the start
+        slot = {i: j for j, i in enumerate(sorted({r.id for r in log.of("beacon")} | known))}
     pose0, cov0, anchor = _start(log)
-    f = EkfSlam(pose0, len(ids), pose_cov0=cov0, p0_beacon=p0_beacon, p0_cross=p0_cross, w_second=w_second)
+    fej = (not paper and iterations <= 1) if fej is None else fej
+    if fej and iterations > 1:
+        raise ValueError("fej and iterations > 1 exclude each other (the iterated update relinearises)")
+    f = EkfSlam(pose0, len(slot), pose_cov0=cov0, p0_beacon=p0_beacon, p0_cross=p0_cross, w_second=w_second,
+                init=init, fej=fej)
     if use_known:
         for kb in log.beacons_known:
+            if kb.id not in slot:
+                slot[kb.id] = f.add_beacon()
             f.set_beacon(slot[kb.id], (kb.x, kb.y), kb.sigma**2)
     recs = [r for r in log.records if isinstance(r, Odometry | BeaconObs)]
     if not recs:
         raise ValueError("ekf-slam needs odometry records")
+    nis = _NisScale(window, _gate_threshold(gate) if gate is not None else math.inf) if adaptive else None
     t_cur = recs[0].t
     u: Odometry | None = None
     ts, poses, covs, step_ms = [], [], [], []
-    used = rejected = 0
+    used = rejected = invalid = reinitialised = 0
+    defaulted: set[str] = set()
+    confirmed: dict[int, bool] = {slot[kb.id]: True for kb in log.beacons_known} if use_known else {}
+    misses: dict[int, int] = {}
 
     def emit(t: float) -> None:
         ts.append(t)
@@ -174,22 +386,65 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, sigma_v:
         t0 = time.perf_counter()
         if r.t > t_cur:
             if u is not None:
-                f.predict(u.v, u.w, r.t - t_cur, _sig(u.sigma_v, sigma_v), _sig(u.sigma_w, sigma_rot))
+                dt = r.t - t_cur
+                k = nis.scale if nis is not None else 1.0
+                if _given(u.sigma_v):
+                    a = u.sigma_v
+                else:
+                    a = sv * math.sqrt(1.0 / dt) if density else sv
+                if _given(u.sigma_w):
+                    c = u.sigma_w
+                else:
+                    c = sw * math.sqrt(1.0 / dt) if density else sw
+                f.predict(u.v, u.w, dt, a * math.sqrt(k), c * math.sqrt(k))
             t_cur = r.t
         if isinstance(r, Odometry):
             u = r
+            if not (_given(r.sigma_v) and _given(r.sigma_w)):
+                defaulted.add("odometry")
         else:
-            ok = f.update(slot[r.id], r.range, r.bearing, _sig(r.sigma_range, sigma_range),
-                          _sig(r.sigma_bearing, sigma_bearing), gate)
-            used += ok
-            rejected += not ok
+            if not (r.range > 0.0 and math.isfinite(r.range) and math.isfinite(r.bearing)):
+                invalid += 1
+            else:
+                if r.id not in slot:
+                    slot[r.id] = f.add_beacon()
+                j = slot[r.id]
+                if not (_given(r.sigma_range) and _given(r.sigma_bearing)):
+                    defaulted.add("beacon")
+                zr = r.sigma_range if _given(r.sigma_range) else sr
+                zb = r.sigma_bearing if _given(r.sigma_bearing) else sb
+                resight = bool(f.seen[j])
+                ok = f.update(j, r.range, r.bearing, zr, zb, gate, iterations)
+                if nis is not None and resight:
+                    nis.add(f.last_nis)
+                if resight and ok:
+                    confirmed[j], misses[j] = True, 0
+                elif resight:
+                    misses[j] = misses.get(j, 0) + 1
+                    if reinit_after is not None and not confirmed.get(j, False) and misses[j] >= reinit_after:
+                        f.forget(j)
+                        ok = f.update(j, r.range, r.bearing, zr, zb, gate, iterations)
+                        misses[j] = 0
+                        reinitialised += 1
+                used += ok
+                rejected += not ok
+                if ok and not np.all(np.isfinite(f.x[:3])):
+                    raise ValueError(f"ekf-slam diverged (non-finite state) at the beacon record of t = {r.t}")
         step_ms.append((time.perf_counter() - t0) * 1e3)
         if i + 1 == len(recs) or recs[i + 1].t > r.t:
             emit(r.t)
     traj = Trajectory(np.array(ts), np.array(poses), np.array(covs), name="ekf-slam")
     beacons = {i: f.x[3 + 2 * j: 5 + 2 * j].tolist() for i, j in slot.items() if f.seen[j]}
     info: dict[str, Any] = {"anchor": anchor, "beacons": beacons, "updates": used, "rejected": rejected,
-                            "p0_beacon": p0_beacon, "p0_cross": p0_cross, "w_second": w_second}
+                            "invalid": invalid, "reinitialised": reinitialised,
+                            "mode": "paper" if paper else "robust", "gate": gate,
+                            "init": init, "fej": fej, "p0_beacon": p0_beacon, "p0_cross": p0_cross,
+                            "w_second": w_second,
+                            "defaults_used": sorted(defaulted),
+                            "sigmas": {"sigma_v": sv, "sigma_rot": sw, "sigma_range": sr, "sigma_bearing": sb,
+                                       "density": density}}
+    if nis is not None:
+        info.update({"noise_scale_final": nis.scale, "noise_scale_max": nis.max_scale})
     return RunResult(traj, traj, np.array(step_ms), info=info)
 
 
@@ -202,6 +457,6 @@ def _unmet(log: NavLog) -> str | None:
 
 
 ESTIMATORS = {
-    "ekf-slam": EstimatorSpec(run_ekf_slam, _unmet, "range-bearing EKF-SLAM (beacon paper, eq. 3-27)",
-                              "filter"),
+    "ekf-slam": EstimatorSpec(run_ekf_slam, _unmet, "range-bearing EKF-SLAM (beacon paper, eq. 3-27): gated, "
+                              "FEJ, for real logs; paper=true: the paper's filter", "filter"),
 }

@@ -53,6 +53,10 @@ class FuzzyCovarianceMatcher:
         self._rows = np.arange(3)
         self.hist = {k: np.full((n_steps, 3), np.nan) for k in ("r_hat", "c_a", "c_t", "dom", "alpha")}
 
+    def r_current(self, ch: NDArray | slice) -> NDArray:
+        """The R it holds now per channel (the last R_hat), for the filter's innovation gate."""
+        return self.r[ch].copy()
+
     def __call__(self, k: int, ch: NDArray | slice, eps: NDArray, HPH: NDArray, r0_rows: NDArray) -> NDArray:
         e2 = eps * eps
         cnt = self.count[ch]

@@ -13,7 +13,8 @@ False: degenerate geometry, too few points or inliers, not converged, or beyond 
 covariance when the log has odometry, else by the constant-velocity guess with a wide covariance,
 and counted (``info["failed_matches"]``, ``info["bridged_odometry"]``, ``info["bridged_cv"]``). A match
 flagged for degeneracy only, from an odometry guess, is chained as returned (the match across its weak
-directions, the guess along them) with the odometry's covariance (``info["constrained"]``).
+directions, the guess along them) with its covariance (the match's across, the odometry's along;
+``info["constrained"]``).
 """
 
 from __future__ import annotations
@@ -92,8 +93,8 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
             inc, q = res.pose, res.cov
         elif res.quality.get("inflated") and guesser.cov is not None:
             # degenerate only: the match across its weak directions, the odometry guess along them
-            # (keep_constrained); the odometry's covariance covers the composite
-            inc, q = res.pose, guesser.cov
+            # (keep_constrained), with the covariance of each where it is taken from
+            inc, q = res.pose, res.cov
             constrained += 1
         else:
             inc, q, how = guesser.bridge(ta, tb)

@@ -11,7 +11,11 @@ weights of the appendix (scaled: ``lambda = alpha^2 (n + kappa) - n``; alpha = 0
 kappa = 0 by default, the paper gives no values), additive process noise Q from Table 2's
 accelerometer / gyro noise (white acceleration over the step). The heading is wrapped in the
 sigma-point mean (weighted mean of wrapped differences to the central point) and in the innovation.
-Since H is linear the estimation step is the appendix's Kalman update.
+Since H is linear the estimation step is the appendix's Kalman update. Not in the paper: every
+GNSS and compass innovation is gated (:class:`graphnav.estimators.gating.InnovationGate`, the
+``ekf``'s rule: chi-square test on a robust innovation scale, re-initialisation only on sustained
+evidence; options ``gate`` (``null`` for the paper's ungated filter), ``reinit_n``, ``confirm_n``,
+``confirm_s``, ``reinit_after_s``, ``scale_window``), so a sustained GNSS jump is not followed.
 
 The numeric core is :class:`UnscentedNav` (pure numpy, a few dozen small array ops per step);
 :func:`run_nav_filter` drives it over a log and is shared with ``fuzzy-ukf``.
@@ -30,6 +34,7 @@ from numpy.typing import NDArray
 from ..log import NavLog
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
+from .gating import GATING_DEFAULTS, InnovationGate, reinit_block
 
 TWO_PI = 2.0 * math.pi
 
@@ -202,6 +207,7 @@ def initial_state(log: NavLog, tab: dict[str, NDArray], n_bias: int,
 
 DEFAULTS: dict[str, Any] = {
     **TABLE2, "alpha": 0.5, "beta": 2.0, "kappa": 0.0, "sigma_v0": 0.2,
+    **GATING_DEFAULTS,  # the innovation gate (gating.py)
     # ukf-bias only: prior on the residual bias after calibration, and its random walk
     "sigma_bias_acc": 0.01, "sigma_bias_gyro_deg": 0.1, "q_bias_acc": 1e-5, "q_bias_gyro_deg": 1e-4,
 }
@@ -220,6 +226,8 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapt
                      q_bias_acc=opts["q_bias_acc"], q_bias_gyro=math.radians(opts["q_bias_gyro_deg"]),
                      alpha=opts["alpha"], beta=opts["beta"], kappa=opts["kappa"])
     r0 = np.array([opts["r_gps_x"], opts["r_gps_y"], math.radians(opts["r_com_deg"])]) ** 2
+    gater = InnovationGate(**{k: opts[k] for k in GATING_DEFAULTS})
+    r_gate = getattr(adapter, "r_current", None)  # an adaptive R: gate with the one it holds now
     t, z = tab["t"], tab["z"]
     n = len(t)
     poses = np.empty((n, 3))
@@ -237,6 +245,8 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapt
         if k:
             f.predict(tab["ax"][k], tab["ay"][k], tab["wz"][k], t[k] - t[k - 1])
         m = has[k]
+        if m.any() and gater.gate is not None:
+            m = _gated(f, gater, float(t[k]), z[k], m, r_gate(np.flatnonzero(m)) if r_gate else r0[m])
         if m.any():
             key = (m[0], m[1], m[2])
             if key not in sel:
@@ -256,10 +266,35 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapt
             on_estimate(float(t[k]), poses[k].copy(), cov[k].copy())
     traj = Trajectory(t, poses, cov, name=name)
     info: dict[str, Any] = {"options": {k: opts[k] for k in sorted(opts)}, "state_final": f.x.tolist(),
-                            "r_used": r_used, "velocity": states[:, 2:4]}
+                            "r_used": r_used, "velocity": states[:, 2:4], **gater.info()}
     if bias:
         info["bias_final"] = f.x[5:].tolist()
     return RunResult(traj, traj, step_ms, info=info)
+
+
+_STATE = np.array([0, 1, 4])  # x, y, theta: the state entries of the GNSS x, GNSS y and compass channels
+
+
+def _gated(f: UnscentedNav, gater: InnovationGate, t: float, z: NDArray, m: NDArray, r_rows: NDArray) -> NDArray:
+    """Gate the GNSS (channels 0-1) and compass (2) measurements of one step separately; returns the
+    channels to update with. A re-initialised block is set here (not updated)."""
+    m = m.copy()
+    r = dict(zip(np.flatnonzero(m).tolist(), np.asarray(r_rows, dtype=float).tolist(), strict=True))
+    for sensor, ch, angle in (("gnss", [0, 1], False), ("heading", [2], True)):
+        if not m[ch].all():
+            continue
+        idx = _STATE[ch]
+        eps, HPH = f.innovation(idx, z[ch])
+        R = np.diag([r[c] for c in ch])
+        verdict = gater.test(sensor, t, eps, HPH, R, angle=angle)
+        if verdict != "accept":
+            m[ch] = False
+        if verdict == "reinit":
+            zz = z[ch].astype(float)
+            if angle:
+                zz = (zz + math.pi) % TWO_PI - math.pi
+            reinit_block(f.x, f.P, idx, zz, R * gater.scale(sensor))
+    return m
 
 
 def unmet(log: NavLog) -> str | None:

@@ -24,7 +24,8 @@ from .evaluate import summarize
 @dataclass
 class Entry:
     """One estimator's outcome: ``summary`` (the shared JSON keys of :func:`summarize`) and the
-    ``result``, or ``error`` when it could not run or failed."""
+    ``result``; or ``skipped`` (why the log cannot feed it: it was not run), or ``error`` (it failed,
+    or the name is unknown)."""
 
     name: str
     kind: str = ""
@@ -35,10 +36,11 @@ class Entry:
     error: str | None = None
     runtime_s: float = float("nan")
     traceback: str | None = None
+    skipped: str | None = None
 
     @property
     def ok(self) -> bool:
-        return self.error is None
+        return self.error is None and self.skipped is None
 
 
 def _run(entry: Entry, est: str, log: NavLog) -> Entry:
@@ -68,8 +70,9 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
             options: dict[str, dict[str, Any]] | None = None,
             progress: Callable[[str], None] | None = None, workers: int = 1,
             cache: icp_cache.MatchCache | None = None) -> list[Entry]:
-    """Run ``names`` (default: every estimator the log can feed, :func:`estimators.runnable`) on
-    ``log``; each with its own ``options[name]``. A failing estimator is recorded, not raised.
+    """Run ``names`` (default: every registered estimator) on ``log``; each with its own
+    ``options[name]``. An estimator the log cannot feed is not run but kept, with ``skipped`` saying
+    why (its ``unmet(log)``); a failing one is recorded with its ``error``, not raised.
 
     A name ``LABEL=ESTIMATOR`` runs ``ESTIMATOR`` under the label ``LABEL`` (options keyed by the
     label), so one estimator can appear twice, e.g. ``["scan-to-map", "s2m-gicp=scan-to-map"]``
@@ -84,7 +87,7 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
     ``icp_cache_hits``, and ``icp_ms_median`` is the matches' computation time (for a shared one,
     its first computation's). With ``workers > 1`` every process has its own copy.
     """
-    names = list(names) if names is not None else estimators.runnable(log)
+    names = list(names) if names is not None else estimators.names()
     options = options or {}
     out: list[Entry] = []
     todo: list[tuple[int, str]] = []
@@ -103,6 +106,10 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
         entry.kind, entry.description = spec.kind, spec.description
         if est != label:
             entry.description = f"{spec.description} (estimator {est!r})"
+        why = spec.unmet(log)
+        if why:
+            entry.skipped = why
+            continue
         todo.append((len(out) - 1, est))
     with icp_cache.active(cache):
         _run_all(out, todo, log, progress, workers)
@@ -130,9 +137,11 @@ def _run_all(out: list[Entry], todo: list[tuple[int, str]], log: NavLog,
 
 
 def ranked(entries: Sequence[Entry], key: str = "ate_rmse_m") -> list[Entry]:
-    """Successful entries by ``key`` (smallest first; missing values last), then the failures."""
+    """Successful entries by ``key`` (smallest first; missing values last), then the failures, then
+    the skipped ones."""
     def k(e: Entry) -> tuple[int, float]:
         v = (e.summary or {}).get(key)
         return (0, float(v)) if isinstance(v, int | float) and v == v else (1, 0.0)
 
-    return sorted((e for e in entries if e.ok), key=k) + [e for e in entries if not e.ok]
+    return (sorted((e for e in entries if e.ok), key=k) + [e for e in entries if e.error is not None]
+            + [e for e in entries if e.skipped is not None and e.error is None])

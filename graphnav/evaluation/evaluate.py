@@ -8,7 +8,7 @@ import numpy as np
 
 from ..log import NavLog
 from ..result import RunResult
-from .metrics import ate, heading_error, movement_errors, rpe
+from .metrics import ate, heading_error, movement_errors, nees_stats, rpe
 
 
 def _median(a: np.ndarray) -> float:
@@ -17,7 +17,9 @@ def _median(a: np.ndarray) -> float:
 
 def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
               rpe_delta: int = 10, max_dt: float = 0.02) -> dict[str, Any]:
-    """The standard summary: ``estimator``, ``steps``, ``ate_*``, ``rpe_*``, timing, movement errors.
+    """The standard summary: ``estimator``, ``steps``, ``ate_*``, ``rpe_*``, timing, movement errors,
+    ``heading_rmse_deg`` and ``nees_mean`` (position NEES of the estimate's own covariance, 2 dof:
+    about 2 when consistent; ``None`` when the estimator gives no covariance).
 
     ATE is unaligned (in the log's frame) unless the key says ``aligned``. Keys for truth-based
     figures are present only when the log has truth.
@@ -46,8 +48,13 @@ def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
         mv = movement_errors(traj, ref, max_dt=max_dt)
         out.update({"sog_rmse_mps": mv["sog"]["rmse"], "cog_rmse_deg": mv["cog"]["rmse"],
                     "rot_rmse_degps": mv["rot"]["rmse"]})
+        ns = nees_stats(traj, ref, max_dt=max_dt)
+        out["nees_mean"] = ns["mean"] if ns else None
+        out["nees_in95"] = ns["in95"] if ns else None
         if result.online is not None and result.online is not traj:
             out["online_ate_rmse_m"] = ate(result.online, ref, max_dt=max_dt)["rmse"]
+            ns = nees_stats(result.online, ref, max_dt=max_dt)
+            out["online_nees_mean"] = ns["mean"] if ns else None
     for k in ("anchor",):
         if k in result.info:
             out[k] = result.info[k]

@@ -1,10 +1,12 @@
-"""Trajectory metrics: ATE, RPE and the movement parameters (SOG, COG, ROT, heading).
+"""Trajectory metrics: ATE, RPE, position NEES and the movement parameters (SOG, COG, ROT, heading).
 
 Pure numerics on :class:`Trajectory` objects. ATE/RPE follow evo's definitions (translation
 part, planar poses) and are cross-checked against evo in the tests.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -77,6 +79,46 @@ def heading_error(est: Trajectory, ref: Trajectory, *, max_dt: float = 0.02) -> 
     """Absolute heading (yaw) error statistics in degrees."""
     ie, ir = associate(est, ref, max_dt)
     return _stats(np.degrees(np.abs(wrap_angle(est.yaw[ie] - ref.yaw[ir]))))
+
+
+def position_nees(est: Trajectory, ref: Trajectory, *, max_dt: float = 0.02) -> dict[str, Any] | None:
+    """Position NEES of the estimate's own covariance against the reference, per associated pair.
+
+    ``nees_k = e_k^T P_k^-1 e_k`` with ``e_k`` the (x, y) error and ``P_k`` the estimate's 2x2
+    position covariance (Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4); a consistent estimator has
+    ``E[nees] = 2`` (chi-square, 2 dof). The pairs are :func:`associate`'s, as for :func:`ate`.
+    ``None`` when the estimate carries no covariance. Pairs whose ``P_k`` is not positive definite
+    (or not finite) are dropped; ``dropped`` counts them. Returns ``t``, ``nees``, ``i_est``, ``dropped``.
+    """
+    if est.cov is None:
+        return None
+    ie, ir = associate(est, ref, max_dt)
+    c = est.cov[ie]
+    a, b, d = c[:, 0, 0], 0.5 * (c[:, 0, 1] + c[:, 1, 0]), c[:, 1, 1]
+    det = a * d - b * b
+    ok = np.isfinite(a) & np.isfinite(b) & np.isfinite(d) & (a > 0) & (det > 1e-12 * np.maximum(a * d, 1e-300))
+    ex = est.x[ie] - ref.x[ir]
+    ey = est.y[ie] - ref.y[ir]
+    # the 2x2 inverse in closed form: [d, -b; -b, a] / det
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
+    return {"t": est.t[ie][ok], "nees": n[ok], "i_est": ie[ok], "dropped": int(np.count_nonzero(~ok))}
+
+
+def nees_stats(est: Trajectory, ref: Trajectory, *, max_dt: float = 0.02) -> dict[str, float] | None:
+    """Statistics of :func:`position_nees` (``mean``, ``median``, ``max``, ``n``) plus ``in95``, the
+    fraction of samples inside the two-sided 95 % chi-square(2) interval; ``None`` without covariance."""
+    from scipy.stats import chi2
+
+    r = position_nees(est, ref, max_dt=max_dt)
+    if r is None:
+        return None
+    v = r["nees"]
+    lo, hi = chi2.ppf([0.025, 0.975], 2)
+    nan = float("nan")
+    return {"mean": float(np.mean(v)) if v.size else nan, "median": float(np.median(v)) if v.size else nan,
+            "max": float(np.max(v)) if v.size else nan, "n": int(v.size), "dropped": r["dropped"],
+            "in95": float(np.mean((v >= lo) & (v <= hi))) if v.size else nan}
 
 
 def rpe(

@@ -57,7 +57,8 @@ def _task_call(task: dict[str, Any]) -> Any:
 
 
 def map_trials(fn: Callable, kwargs_list: list[dict[str, Any]], *, scheduler: str | None = None,
-               workers: int = 2, out: str | None = None, progress: bool = False) -> list[Any]:
+               workers: int = 2, out: str | None = None, progress: bool = False,
+               dashboard: str | None = None, overwrite: bool = False) -> list[Any]:
     """Run ``fn(**kw)`` for every ``kw`` on the sweep runner (:func:`graphnav.evaluation.sweep.run_sweep`:
     an embedded Dask ``LocalCluster`` of ``workers`` processes, an existing cluster at
     ``scheduler``, or ``scheduler="serial"``); results in order. ``out`` makes the sweep resumable.
@@ -69,7 +70,7 @@ def map_trials(fn: Callable, kwargs_list: list[dict[str, Any]], *, scheduler: st
     tasks = [{"key": f"{fn.__name__}:{json.dumps(kw, sort_keys=True)}", "fn": fn, "kwargs": kw}
              for kw in kwargs_list]
     return run_sweep(_task_call, tasks, out=out, scheduler=scheduler, workers=workers, progress=progress,
-                     desc="montecarlo")
+                     desc="montecarlo", dashboard=dashboard, overwrite=overwrite)
 
 
 def aggregate(trials: list[dict[str, dict[str, float]]], names: Sequence[str]) -> dict[str, dict[str, Any]]:

@@ -1,5 +1,11 @@
-"""Comparison figures (matplotlib, Agg): trajectories, position error, error CDF, SOG/COG errors,
-covariance ellipses. Each function takes trajectories and writes one PNG; nothing else.
+"""Comparison figures: trajectories (overview and per-estimator panels), position and heading error,
+error CDF, SOG/COG errors, error with ±3σ bounds, NEES with its chi-square band, covariance ellipses.
+
+Every function builds on :class:`matplotlib.figure.Figure` objects, never on pyplot: importing this
+module selects no backend and touches no global state, so it is safe in a notebook (pass ``ax=`` or
+``fig=`` from ``plt.subplots()`` to draw inline) and needs no backend to write files (:func:`save`).
+Each ``plot_*`` function takes an optional ``ax`` (one-axes figures) or ``fig`` (multi-panel figures)
+and returns the Figure it drew on; the ``*_panel`` functions draw one estimator into given axes.
 
 Errors are taken at the estimate/reference pairs of :func:`graphnav.evaluation.metrics.associate` — the same
 pairs that the report's numbers use. SOG/COG errors follow the weighted-ICP paper's Figs. 12-15
@@ -12,27 +18,31 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import matplotlib as mpl
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Ellipse, Patch
+from matplotlib.ticker import FuncFormatter, MaxNLocator
+from scipy.stats import chi2
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Ellipse, Patch  # noqa: E402
-from matplotlib.ticker import FuncFormatter  # noqa: E402
-
-from ..geometry import wrap_angle  # noqa: E402
-from ..trajectory import Trajectory  # noqa: E402
-from .metrics import associate, movement  # noqa: E402
+from ..geometry import wrap_angle
+from ..io.outputs import atomic_path
+from ..trajectory import Trajectory
+from .metrics import associate, movement, position_nees
 
 # (face colour, hatch, label): light fills/hatches, so they do not read as an estimator's line colour
 EVENT_STYLE = {"gnss_outage": ("#f2d64b", "", "GNSS outage"), "gnss_jump": ("#e8a0a0", "xx", "GNSS jump")}
 MAX_DT = 0.02
 CDF_FLOOR = 1e-3
+NEES_BAND = tuple(float(v) for v in chi2.ppf([0.025, 0.975], 2))  # two-sided 95 %, 2 dof: (0.0506, 7.38)
 
 
 def colors(names: Sequence[str]) -> dict[str, Any]:
-    cmap = plt.get_cmap("tab10")
+    cmap = mpl.colormaps["tab10"]
     return {n: cmap(i % 10) for i, n in enumerate(names)}
 
 
@@ -43,15 +53,66 @@ def widths(names: Sequence[str], thick: float = 2.8, thin: float = 1.1) -> dict[
     return {name: thick - (thick - thin) * i / n for i, name in enumerate(names)}
 
 
+def save(fig: Figure, path: str | Path, dpi: int = 110) -> Path:
+    """Write ``fig`` (format from the suffix: .png, .svg, .pdf) without any pyplot backend, atomically
+    (a reader never sees half a file)."""
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
+    return Path(path)
+
+
+def _axes(ax: Axes | None, figsize: tuple[float, float]) -> tuple[Figure, Axes]:
+    if ax is not None:
+        return ax.figure, ax
+    fig = Figure(figsize=figsize, layout="constrained")
+    return fig, fig.add_subplot()
+
+
+def _panel_figure(width: float, height: float, nrow: int, ncol: int, *, left: float = 0.8, right: float = 0.25,
+                  top: float = 0.45, bottom: float = 0.55, hspace: float = 0.75, wspace: float = 0.9) -> Figure:
+    """A figure for a grid of panels with fixed margins and gaps in inches. No layout engine: on
+    grids of 6-18 panels constrained layout doubled the time to write the figure."""
+    fig = Figure(figsize=(width, height))
+    ph = (height - top - bottom - hspace * (nrow - 1)) / nrow
+    pw = (width - left - right - wspace * (ncol - 1)) / ncol
+    fig.subplots_adjust(left=left / width, right=1 - right / width, top=1 - top / height, bottom=bottom / height,
+                        hspace=hspace / max(ph, 1e-3), wspace=wspace / max(pw, 1e-3))
+    return fig
+
+
+def _grid(fig: Figure | None, n: int, ncol: int, panel: tuple[float, float], **kw: Any) -> tuple[Figure, np.ndarray]:
+    """``n`` panels in ``ncol`` columns on ``fig`` (a new Figure sized ``panel`` per panel if None);
+    the unused panels are switched off."""
+    ncol = max(1, min(n, ncol))
+    nrow = max(1, int(np.ceil(n / ncol)))
+    if fig is None:
+        fig = _panel_figure(panel[0] * ncol, panel[1] * nrow, nrow, ncol)
+    axes = np.asarray(fig.subplots(nrow, ncol, squeeze=False, **kw))
+    for ax in axes.ravel()[n:]:
+        ax.axis("off")
+    return fig, axes
+
+
+def _as_dict(trajs: dict[str, Trajectory] | Trajectory) -> dict[str, Trajectory]:
+    return {trajs.name or "estimate": trajs} if isinstance(trajs, Trajectory) else dict(trajs)
+
+
 def paired(est: Trajectory, ref: Trajectory, max_dt: float = MAX_DT) -> tuple[Trajectory, Trajectory]:
     ie, ir = associate(est, ref, max_dt)
-    return Trajectory(est.t[ie], est.poses[ie]), Trajectory(ref.t[ir], ref.poses[ir])
+    cov = None if est.cov is None else est.cov[ie]
+    return Trajectory(est.t[ie], est.poses[ie], cov), Trajectory(ref.t[ir], ref.poses[ir])
 
 
 def position_errors(est: Trajectory, ref: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     """Times and unaligned position errors [m] at the associated pairs."""
     e, r = paired(est, ref)
     return e.t, np.hypot(e.x - r.x, e.y - r.y)
+
+
+def heading_errors(est: Trajectory, ref: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """Times and signed heading errors [deg] (estimate minus reference, wrapped) at the associated pairs."""
+    e, r = paired(est, ref)
+    return e.t, np.degrees(wrap_angle(e.yaw - r.yaw))
 
 
 def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0.2) -> dict[str, np.ndarray]:
@@ -86,15 +147,23 @@ def _shade_events(ax, events: Sequence[dict], span: tuple[float, float] | None =
     return handles
 
 
-def _finish(fig, path: Path) -> Path:
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+def _span(truth: Trajectory | None) -> tuple[float, float] | None:
+    return (float(truth.t[0]), float(truth.t[-1])) if truth is not None and len(truth) else None
 
 
-def plot_trajectories(trajs: dict[str, Trajectory], truth: Trajectory | None, path: Path,
-                      gnss: np.ndarray | None = None, title: str = "") -> Path:
-    fig, ax = plt.subplots(figsize=(8, 7), layout="constrained")
+def _legend_right(ax: Axes, extra: Sequence[Any] = ()) -> None:
+    h, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=list(h) + list(extra), loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9,
+              frameon=False)
+
+
+# -- trajectories ---------------------------------------------------------------------------------
+
+def plot_trajectories(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory | None,
+                      gnss: np.ndarray | None = None, *, title: str = "", ax: Axes | None = None) -> Figure:
+    """Every trajectory over the truth (and the GNSS fixes), one axes."""
+    trajs = _as_dict(trajs)
+    fig, ax = _axes(ax, (8, 7))
     col = colors(list(trajs))
     if gnss is not None and len(gnss):
         ax.plot(gnss[:, 0], gnss[:, 1], ".", ms=2.5, color="0.6", label="GNSS fixes", zorder=1)
@@ -109,14 +178,110 @@ def plot_trajectories(trajs: dict[str, Trajectory], truth: Trajectory | None, pa
     ax.set_ylabel("y (north) [m]")
     ax.set_title(title or "Trajectories over the truth (start: black dot)")
     ax.grid(alpha=0.3)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
-    return _finish(fig, path)
+    _legend_right(ax)
+    return fig
 
 
-def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
-                        events: Sequence[dict] = (), online: dict[str, Trajectory] | None = None) -> Path:
+def _limits(xy: np.ndarray, margin: float = 0.06, floor: float = 1.0) -> tuple[tuple[float, float], ...]:
+    """Square-ish axis limits around the points ``xy`` (N, 2), with a relative margin."""
+    lo, hi = np.nanmin(xy, 0), np.nanmax(xy, 0)
+    c, half = 0.5 * (lo + hi), 0.5 * np.maximum(hi - lo, floor) * (1 + 2 * margin)
+    return (c[0] - half[0], c[0] + half[0]), (c[1] - half[1], c[1] + half[1])
+
+
+def trajectory_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory | None, *,
+                     zoom_ax: Axes | None = None, color: Any = "tab:red") -> Figure:
+    """One estimator over the truth, the track coloured by its position error; the view spans this
+    estimator's track and the truth over the same time (not every estimator's). ``zoom_ax``, when
+    given, shows the neighbourhood of the largest error, a few errors wide."""
+    fig = ax.figure
+    err = None
+    tr_xy = np.zeros((0, 2))
+    if truth is not None and len(truth):
+        e, r = paired(est, truth)
+        err = np.hypot(e.x - r.x, e.y - r.y) if len(e) else None
+        if len(est):
+            inside = (truth.t >= est.t[0] - MAX_DT) & (truth.t <= est.t[-1] + MAX_DT)
+            tr_xy = np.column_stack([truth.x[inside], truth.y[inside]])
+        ax.plot(truth.x, truth.y, "-", color="k", lw=0.8, label="truth", zorder=2)
+    if err is not None:
+        pts = np.column_stack([e.x, e.y])
+        segs = np.stack([pts[:-1], pts[1:]], axis=1)
+        norm = Normalize(0.0, max(float(np.percentile(err, 99)), 1e-6))
+        lc = LineCollection(segs, cmap="viridis", norm=norm, lw=2.0, zorder=3)
+        lc.set_array(0.5 * (err[:-1] + err[1:]))
+        ax.add_collection(lc)
+        fig.colorbar(lc, ax=ax, shrink=0.8, pad=0.01, label="position error [m]", extend="max")
+    else:
+        ax.plot(est.x, est.y, "-", lw=1.5, color=color, label=name, zorder=3)
+    xy = np.vstack([np.column_stack([est.x, est.y]), tr_xy]) if len(est) else tr_xy
+    if len(xy):
+        (x0, x1), (y0, y1) = _limits(xy)
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x (east) [m]")
+    ax.set_ylabel("y (north) [m]")
+    title = name
+    if err is not None:
+        title += f" — ATE RMSE {np.sqrt(np.mean(err**2)):.3g} m, max {err.max():.3g} m"
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    if zoom_ax is not None:
+        if err is None or not len(err):
+            zoom_ax.axis("off")
+            return fig
+        k = int(np.argmax(err))
+        half = max(4.0 * float(err[k]), 1.0)  # a window a few errors wide (at least 2 m)
+        cx, cy = 0.5 * (e.x[k] + r.x[k]), 0.5 * (e.y[k] + r.y[k])
+        zoom_ax.plot(truth.x, truth.y, "-", color="k", lw=1.2, label="truth")
+        zoom_ax.plot(e.x, e.y, ".-", color=color, lw=1.2, ms=3, label=name)
+        zoom_ax.plot([e.x[k], r.x[k]], [e.y[k], r.y[k]], "-", color="0.4", lw=0.8)
+        zoom_ax.set_xlim(cx - half, cx + half)
+        zoom_ax.set_ylim(cy - half, cy + half)
+        zoom_ax.set_aspect("equal", adjustable="box")
+        zoom_ax.tick_params(labelsize=7)
+        zoom_ax.xaxis.set_major_locator(MaxNLocator(4))
+        zoom_ax.yaxis.set_major_locator(MaxNLocator(5))
+        zoom_ax.set_title(f"largest error {err[k]:.3g} m at t = {e.t[k]:.1f} s", fontsize=9)
+        zoom_ax.grid(alpha=0.3)
+        zoom_ax.legend(fontsize=7, loc="best")
+        ax.plot([e.x[k]], [e.y[k]], "s", ms=9, mfc="none", mec="r", zorder=6)
+    return fig
+
+
+def plot_trajectory_panels(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory | None, *,
+                           fig: Figure | None = None, ncol: int = 2) -> Figure:
+    """One panel per estimator (:func:`trajectory_panel`), each zoomed to its own track, and beside it
+    (when there is a truth) a close-up of its largest error."""
+    trajs = _as_dict(trajs)
+    col = colors(list(trajs))
+    zoom = truth is not None and len(truth) > 0
+    per = 2 if zoom else 1
+    ncol = max(1, min(len(trajs), ncol))
+    nrow = int(np.ceil(len(trajs) / ncol))
+    if fig is None:
+        fig = _panel_figure((6.4 + 3.6 * (per - 1)) * ncol, 4.6 * nrow, nrow, ncol * per, wspace=0.85)
+    axes = np.asarray(fig.subplots(nrow, ncol * per, squeeze=False,
+                                   gridspec_kw={"width_ratios": ([2.0, 1.0] if zoom else [1.0]) * ncol}))
+    cells = [(axes[i // ncol, per * (i % ncol)], axes[i // ncol, per * (i % ncol) + 1] if zoom else None)
+             for i in range(nrow * ncol)]
+    for (ax, zax), (name, tr) in zip(cells, trajs.items(), strict=False):
+        trajectory_panel(ax, name, tr, truth, zoom_ax=zax, color=col[name])
+    for ax, zax in cells[len(trajs):]:
+        ax.axis("off")
+        if zax is not None:
+            zax.axis("off")
+    return fig
+
+
+# -- errors versus time -----------------------------------------------------------------------------
+
+def plot_position_error(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, events: Sequence[dict] = (),
+                        online: dict[str, Trajectory] | None = None, *, ax: Axes | None = None) -> Figure:
     """Position error versus time; ``online`` estimates (smoothers) dashed in the same colour."""
-    fig, ax = plt.subplots(figsize=(10, 4.5), layout="constrained")
+    trajs = _as_dict(trajs)
+    fig, ax = _axes(ax, (10, 4.5))
     col = colors(list(trajs))
     medians = []
     lw = widths(list(trajs))
@@ -128,7 +293,7 @@ def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: P
         if online and name in online:
             t, e = position_errors(online[name], truth)
             ax.plot(t, e, "--", lw=1.0, color=col[name], label=f"{name} (online)")
-    handles = _shade_events(ax, events, (float(truth.t[0]), float(truth.t[-1])) if len(truth) else None)
+    handles = _shade_events(ax, events, _span(truth))
     # errors spanning orders of magnitude (a diverged estimator beside a smoother): log scale,
     # so the good estimators stay readable
     wide = len(medians) > 1 and max(medians) > 30.0 * max(min(medians), CDF_FLOOR)
@@ -142,13 +307,50 @@ def plot_position_error(trajs: dict[str, Trajectory], truth: Trajectory, path: P
     else:
         ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
-    h, _ = ax.get_legend_handles_labels()
-    ax.legend(handles=h + handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
-    return _finish(fig, path)
+    _legend_right(ax, handles)
+    return fig
 
 
-def plot_error_cdf(trajs: dict[str, Trajectory], truth: Trajectory, path: Path) -> Path:
-    fig, ax = plt.subplots(figsize=(7.5, 4.5), layout="constrained")
+def plot_heading_error(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, events: Sequence[dict] = (),
+                       *, ax: Axes | None = None) -> Figure:
+    """Signed heading error (estimate minus truth, wrapped) versus time, the noisiest series drawn
+    underneath; a symmetric-log axis when the RMSEs span more than a factor 10, else a linear one
+    clipped at the 99th percentile of |error| (either stated on the axis)."""
+    trajs = _as_dict(trajs)
+    fig, ax = _axes(ax, (10, 4.5))
+    col = colors(list(trajs))
+    series = {n: heading_errors(tr, truth) for n, tr in trajs.items()}
+    rms = {n: float(np.sqrt(np.mean(e**2))) if len(e) else np.inf for n, (_, e) in series.items()}
+    for z, name in enumerate(sorted(series, key=lambda n: rms[n], reverse=True)):
+        t, e = series[name]
+        ax.plot(t, e, "-", lw=1.0, color=col[name], zorder=2 + z, label=f"{name} (RMSE {rms[name]:.3g}°)")
+    vals = np.concatenate([np.abs(e) for _, e in series.values()] or [np.zeros(0)])
+    handles = _shade_events(ax, events, _span(truth))
+    ax.axhline(0, color="k", lw=0.6)
+    ax.set_xlabel("time [s]")
+    finite = [v for v in rms.values() if np.isfinite(v) and v > 0]
+    if len(finite) > 1 and max(finite) > 10 * min(finite):
+        # a diverged estimator beside good ones: symmetric log, linear near zero, nothing clipped
+        lin = max(2.0 * min(finite), 0.01)
+        ax.set_yscale("symlog", linthresh=lin)
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        top = 1.3 * float(vals.max())
+        ax.set_ylim(-top, top)
+        ax.set_ylabel(f"heading error [deg] (symmetric log; linear within ±{lin:.2g})")
+    else:
+        lim = max(float(np.percentile(vals, 99)) if len(vals) else 1.0, 0.05)
+        clipped = len(vals) and float(vals.max()) > 1.1 * lim
+        ax.set_ylim(-1.1 * lim, 1.1 * lim)
+        ax.set_ylabel("heading error [deg]" + (f" (clipped at ±{1.1 * lim:.2g})" if clipped else ""))
+    ax.set_title("Heading error versus time (estimate − truth)")
+    ax.grid(alpha=0.3)
+    _legend_right(ax, handles)
+    return fig
+
+
+def plot_error_cdf(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, *, ax: Axes | None = None) -> Figure:
+    trajs = _as_dict(trajs)
+    fig, ax = _axes(ax, (7.5, 4.5))
     col = colors(list(trajs))
     lw = widths(list(trajs))
     for name, tr in trajs.items():
@@ -164,16 +366,18 @@ def plot_error_cdf(trajs: dict[str, Trajectory], truth: Trajectory, path: Path) 
     ax.set_ylim(0, 1.02)
     ax.set_title("Cumulative distribution of the position error")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
-    return _finish(fig, path)
+    _legend_right(ax)
+    return fig
 
 
-def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
-                 events: Sequence[dict] = ()) -> Path:
+def plot_sog_cog(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, events: Sequence[dict] = (), *,
+                 fig: Figure | None = None) -> Figure:
     """The weighted-ICP paper's Figs. 12-15: SOG, COG and ΔCOG differences versus time, and their
     histograms."""
-    fig, axes = plt.subplots(3, 2, figsize=(12, 10.5), gridspec_kw={"width_ratios": [2.2, 1]},
-                             layout="constrained")
+    trajs = _as_dict(trajs)
+    if fig is None:
+        fig = Figure(figsize=(12, 10.5), layout="constrained")
+    axes = fig.subplots(3, 2, gridspec_kw={"width_ratios": [2.2, 1]}, squeeze=False)
     col = colors(list(trajs))
     series = {n: movement_error_series(tr, truth) for n, tr in trajs.items()}
 
@@ -181,11 +385,13 @@ def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
         vals = np.concatenate([np.abs(s[key][np.isfinite(s[key])]) for s in series.values()] or [np.zeros(0)])
         return max(float(np.percentile(vals, 98)) if len(vals) else floor, floor)
 
+    shade: list[Patch] = []
     rows = [("sog", "t", "m/s", "SOG"), ("cog", "t_cog", "deg", "COG"), ("dcog", "t_dcog", "deg", "ΔCOG")]
     for row, (key, tkey, unit, label) in enumerate(rows):
         ax_t, ax_h = axes[row]
         lim = robust_range(key, 0.05 if key == "sog" else 0.2)
         bins = np.linspace(-lim, lim, 41)
+
         # the noisiest series first (underneath, faded), the most accurate on top
         def rms(n: str, key: str = key) -> float:
             v = series[n][key][np.isfinite(series[n][key])]
@@ -198,7 +404,7 @@ def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
             ax_t.plot(s[tkey], s[key], "-", lw=0.9, color=col[name], alpha=alpha, zorder=2 + z)
             v = s[key][np.isfinite(s[key])]
             ax_h.hist(np.clip(v, -lim, lim), bins=bins, histtype="step", lw=1.4, color=col[name])
-        shade = _shade_events(ax_t, events, (float(truth.t[0]), float(truth.t[-1])) if len(truth) else None)
+        shade = _shade_events(ax_t, events, _span(truth))
         ax_t.set_ylim(-1.1 * lim, 1.1 * lim)
         ax_t.axhline(0, color="k", lw=0.6)
         ax_t.set_xlabel("time [s]")
@@ -212,8 +418,123 @@ def plot_sog_cog(trajs: dict[str, Trajectory], truth: Trajectory, path: Path,
         ax_h.grid(alpha=0.3)
     handles = [Line2D([], [], color=col[n], lw=1.5, label=n) for n in trajs] + shade
     fig.legend(handles=handles, loc="outside right center", fontsize=9, frameon=False)
-    return _finish(fig, path)
+    return fig
 
+
+# -- consistency: ±3σ bounds and NEES --------------------------------------------------------------
+
+def error_bound_panels(axes: Sequence[Axes], name: str, est: Trajectory, truth: Trajectory, *,
+                       nsigma: float = 3.0, color: Any = "tab:blue", events: Sequence[dict] = ()) -> Figure:
+    """Errors in x [m], y [m] and yaw [deg] versus time, each inside its ±``nsigma``·σ bound from the
+    estimator's own covariance, on three given axes; each title gives the fraction inside (a
+    consistent Gaussian estimator: 99.7 % for 3σ)."""
+    e, r = paired(est, truth)
+    if e.cov is None:
+        raise ValueError(f"{name}: the trajectory has no covariance")
+    err = [e.x - r.x, e.y - r.y, np.degrees(wrap_angle(e.yaw - r.yaw))]
+    var = np.stack([e.cov[:, 0, 0], e.cov[:, 1, 1], e.cov[:, 2, 2]])
+    sig = np.sqrt(np.clip(var, 0, None)) * np.array([1.0, 1.0, np.degrees(1.0)])[:, None]
+    for ax, lab, unit, ei, si in zip(axes, ("x", "y", "yaw"), ("m", "m", "deg"), err, sig, strict=True):
+        ok = np.isfinite(si)
+        _shade_events(ax, events, _span(truth))
+        ax.fill_between(e.t, -nsigma * si, nsigma * si, where=ok, color=color, alpha=0.18, lw=0,
+                        label=f"±{nsigma:g}σ")
+        ax.plot(e.t, ei, "-", color=color, lw=0.9, label="error")
+        ax.axhline(0, color="k", lw=0.5)
+        inside = float(np.mean(np.abs(ei[ok]) <= nsigma * si[ok])) if ok.any() else float("nan")
+        ax.set_title(f"{name}: {lab} error, {100 * inside:.1f} % inside ±{nsigma:g}σ", fontsize=9)
+        ax.set_ylabel(f"{lab} error [{unit}]")
+        # the axis follows the errors and the typical bound, not the largest bound (an odometry
+        # estimator's bound grows without limit)
+        v = np.concatenate([np.abs(ei), nsigma * si[ok]]) if ok.any() else np.abs(ei)
+        lim = float(np.percentile(v, 99)) if len(v) else 1.0
+        ax.set_ylim(-1.15 * max(lim, 1e-6), 1.15 * max(lim, 1e-6))
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    return axes[0].figure
+
+
+def plot_error_bounds(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, events: Sequence[dict] = (),
+                      *, nsigma: float = 3.0, fig: Figure | None = None) -> Figure | None:
+    """One row per estimator with covariances: x, y and yaw error with ±3σ bounds
+    (:func:`error_bound_panels`); ``None`` when no trajectory carries covariances."""
+    trajs = _as_dict(trajs)
+    col = colors(list(trajs))
+    with_cov = {n: t for n, t in trajs.items() if t.cov is not None and len(t)}
+    if not with_cov:
+        return None
+    if fig is None:
+        fig = _panel_figure(13, 2.3 * len(with_cov) + 0.6, len(with_cov), 3, hspace=0.45, wspace=0.75)
+    axes = np.asarray(fig.subplots(len(with_cov), 3, squeeze=False, sharex=True))
+    for row, (name, tr) in zip(axes, with_cov.items(), strict=True):
+        error_bound_panels(row, name, tr, truth, nsigma=nsigma, color=col[name], events=events)
+    for ax in axes[:-1].ravel():
+        ax.set_xlabel("")
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    axes[0, -1].legend(fontsize=8, loc="upper right")
+    return fig
+
+
+def nees_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory, *, color: Any = "tab:blue",
+               window: int | None = None, events: Sequence[dict] = ()) -> Figure:
+    """Position NEES versus time (dots) with its running mean over ``window`` samples (line; default
+    2 % of the samples), the two-sided 95 % chi-square(2) band of one sample and the expected 2."""
+    r = position_nees(est, truth)
+    if r is None:
+        raise ValueError(f"{name}: the trajectory has no covariance")
+    t, v = r["t"], r["nees"]
+    _shade_events(ax, events, _span(truth))
+    ax.axhspan(*NEES_BAND, color="0.85", zorder=0, label="95 % band, χ²(2)")
+    ax.axhline(2.0, color="k", lw=0.8, ls="--", label="expected (2)")
+    if len(v):
+        floor = 1e-4
+        ax.plot(t, np.maximum(v, floor), ".", ms=1.5, color=color, alpha=0.35, zorder=2)
+        w = window or max(5, len(v) // 50)
+        if len(v) >= w:
+            run = np.convolve(v, np.ones(w) / w, mode="valid")
+            ax.plot(t[w // 2: w // 2 + len(run)], np.maximum(run, floor), "-", color=color, lw=1.5, zorder=3,
+                    label=f"running mean ({w} samples)")
+        inside = float(np.mean((v >= NEES_BAND[0]) & (v <= NEES_BAND[1])))
+        ax.set_title(f"{name}: NEES mean {np.mean(v):.3g}, {100 * inside:.1f} % of samples in the 95 % band"
+                     + (f" ({r['dropped']} without a usable covariance)" if r["dropped"] else ""), fontsize=9)
+        hi = max(float(np.percentile(v, 99.5)), NEES_BAND[1]) * 2
+        lo = max(min(float(np.percentile(v, 1)), NEES_BAND[0]) / 2, floor)
+        ax.set_ylim(lo, hi)
+    else:
+        ax.set_title(f"{name}: no NEES samples", fontsize=9)
+    ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f"{y:g}"))
+    ax.set_ylabel("NEES (log)")
+    ax.set_xlabel("time [s]")
+    ax.grid(alpha=0.3, which="both")
+    return ax.figure
+
+
+def plot_nees(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, events: Sequence[dict] = (), *,
+              fig: Figure | None = None, ax: Axes | None = None) -> Figure | None:
+    """Position NEES over time, one row per estimator with covariances (:func:`nees_panel`); with
+    ``ax``, the first such estimator on that axes. ``None`` when none carries covariances."""
+    trajs = _as_dict(trajs)
+    col = colors(list(trajs))
+    with_cov = {n: t for n, t in trajs.items() if t.cov is not None and len(t)}
+    if not with_cov:
+        return None
+    if ax is not None:
+        name, tr = next(iter(with_cov.items()))
+        return nees_panel(ax, name, tr, truth, color=col[name], events=events)
+    if fig is None:
+        fig = _panel_figure(11, 2.3 * len(with_cov) + 0.6, len(with_cov), 1, hspace=0.45)
+    axes = np.asarray(fig.subplots(len(with_cov), 1, squeeze=False, sharex=True)).ravel()
+    for a, (name, tr) in zip(axes, with_cov.items(), strict=True):
+        nees_panel(a, name, tr, truth, color=col[name], events=events)
+        if a is not axes[-1]:
+            a.set_xlabel("")
+    axes[0].legend(fontsize=8, loc="upper right", ncol=3)
+    return fig
+
+
+# -- covariance ellipses ------------------------------------------------------------------------------
 
 def _nice_magnification(m: float) -> float:
     """1 when ellipses are already visible, else the next 1/2/5 x 10^k at or below ``m``."""
@@ -223,47 +544,68 @@ def _nice_magnification(m: float) -> float:
     return float(max(s * k for s in (1, 2, 5) if s * k <= m))
 
 
-def plot_covariance(trajs: dict[str, Trajectory], truth: Trajectory | None, path: Path, *,
-                    n_ellipses: int = 25, nsigma: float = 2.0) -> Path | None:
-    """Position covariance ellipses (``nsigma``) at regular intervals, one panel per estimator with
-    covariances; ``None`` (no file) when no trajectory carries covariances."""
+def ellipse_magnification(tr: Trajectory, extent: float, *, n_ellipses: int = 25, nsigma: float = 2.0) -> float:
+    """The magnification of one panel's ellipses: the median one about 2 % of the track's ``extent``,
+    the largest at most 25 % of it; 1 (true scale) when they are already visible or larger."""
+    idx = np.unique(np.linspace(0, len(tr) - 1, n_ellipses).astype(int))
+    semi = np.array([np.sqrt(max(np.linalg.eigvalsh(c[:2, :2]).max(), 0.0)) for c in tr.cov[idx]
+                     if np.all(np.isfinite(c[:2, :2]))])
+    semi = semi[semi > 0]
+    if not len(semi):
+        return 1.0
+    m = 0.02 * extent / (nsigma * float(np.median(semi)))
+    m = min(m, 0.25 * extent / (nsigma * float(semi.max())))
+    return _nice_magnification(m)
+
+
+def covariance_panel(ax: Axes, name: str, tr: Trajectory, truth: Trajectory | None, *, n_ellipses: int = 25,
+                     nsigma: float = 2.0, color: Any = "tab:blue") -> Figure:
+    """``nsigma`` position ellipses at ``n_ellipses`` points along one trajectory, with this panel's
+    own magnification (stated in the title) and view (its track and the truth, not the ellipses:
+    ellipses larger than the track are clipped)."""
+    xy = np.column_stack([tr.x, tr.y])
+    if truth is not None and len(truth):
+        ax.plot(truth.x, truth.y, "-", color="k", lw=1.2, label="truth")
+        inside = (truth.t >= tr.t[0] - MAX_DT) & (truth.t <= tr.t[-1] + MAX_DT)
+        xy = np.vstack([xy, np.column_stack([truth.x[inside], truth.y[inside]])])
+    ax.plot(tr.x, tr.y, "-", color=color, lw=1.0, label=name)
+    (x0, x1), (y0, y1) = _limits(xy)
+    extent = max(x1 - x0, y1 - y0)
+    mag = ellipse_magnification(tr, extent, n_ellipses=n_ellipses, nsigma=nsigma)
+    idx = np.unique(np.linspace(0, len(tr) - 1, n_ellipses).astype(int))
+    largest = 0.0
+    for i in idx:
+        c = tr.cov[i, :2, :2]
+        if not np.all(np.isfinite(c)):
+            continue
+        w, v = np.linalg.eigh(0.5 * (c + c.T))
+        w = np.clip(w, 0, None)
+        largest = max(largest, nsigma * float(np.sqrt(w[1])))
+        ang = np.degrees(np.arctan2(v[1, 1], v[0, 1]))
+        a, b = 2 * mag * nsigma * np.sqrt(w[1]), 2 * mag * nsigma * np.sqrt(w[0])
+        ax.add_patch(Ellipse((tr.x[i], tr.y[i]), a, b, angle=ang, fill=False, color=color, lw=1.0))
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x (east) [m]")
+    ax.set_ylabel("y (north) [m]")
+    scale = f"magnified ×{mag:g}" if mag != 1 else "true scale"
+    ax.set_title(f"{name}: {nsigma:g}σ ellipses ({scale}; largest {largest:.3g} m)", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return ax.figure
+
+
+def plot_covariance(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory | None, *,
+                    n_ellipses: int = 25, nsigma: float = 2.0, fig: Figure | None = None) -> Figure | None:
+    """Position covariance ellipses, one panel per estimator with covariances, each with its own
+    magnification and view (:func:`covariance_panel`); ``None`` when no trajectory carries covariances."""
+    trajs = _as_dict(trajs)
+    col = colors(list(trajs))
     with_cov = {n: t for n, t in trajs.items() if t.cov is not None and len(t)}
     if not with_cov:
         return None
-    n = len(with_cov)
-    ncol = min(n, 3)
-    nrow = int(np.ceil(n / ncol))
-    fig, axes = plt.subplots(nrow, ncol, figsize=(5.5 * ncol, 5 * nrow), squeeze=False,
-                             layout="constrained")
-    col = colors(list(trajs))
-    allxy = np.vstack([np.column_stack([t.x, t.y]) for t in with_cov.values()])
-    extent = float(np.max(np.ptp(allxy, axis=0))) or 1.0
-    # one magnification for every panel (sizes stay comparable), chosen so the typical ellipse is
-    # visible at the scale of the track
-    semi = [np.sqrt(max(np.linalg.eigvalsh(c[:2, :2]).max(), 0.0)) for t in with_cov.values()
-            for c in t.cov[:: max(1, len(t) // n_ellipses)] if np.all(np.isfinite(c[:2, :2]))]
-    mag = _nice_magnification(0.02 * extent / max(nsigma * float(np.median(semi)) if semi else 1.0, 1e-9))
-    label = f" (magnified ×{mag:g})" if mag != 1 else ""
+    fig, axes = _grid(fig, len(with_cov), 3, (5.5, 5.0))
     for ax, (name, tr) in zip(axes.ravel(), with_cov.items(), strict=False):
-        if truth is not None and len(truth):
-            ax.plot(truth.x, truth.y, "-", color="k", lw=1.5, label="truth")
-        ax.plot(tr.x, tr.y, "-", color=col[name], lw=1.0, label=name)
-        idx = np.unique(np.linspace(0, len(tr) - 1, n_ellipses).astype(int))
-        for i in idx:
-            c = tr.cov[i, :2, :2]
-            if not np.all(np.isfinite(c)):
-                continue
-            w, v = np.linalg.eigh(0.5 * (c + c.T))
-            w = np.clip(w, 0, None)
-            ang = np.degrees(np.arctan2(v[1, 1], v[0, 1]))
-            a, b = 2 * mag * nsigma * np.sqrt(w[1]), 2 * mag * nsigma * np.sqrt(w[0])
-            ax.add_patch(Ellipse((tr.x[i], tr.y[i]), a, b, angle=ang, fill=False, color=col[name], lw=1.0))
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.set_xlabel("x (east) [m]")
-        ax.set_ylabel("y (north) [m]")
-        ax.set_title(f"{name}: {nsigma:g}σ position ellipses{label}")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="best")
-    for ax in axes.ravel()[n:]:
-        ax.axis("off")
-    return _finish(fig, path)
+        covariance_panel(ax, name, tr, truth, n_ellipses=n_ellipses, nsigma=nsigma, color=col[name])
+    return fig

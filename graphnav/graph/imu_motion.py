@@ -16,10 +16,13 @@ plus Huber-robust ``GPSFactor`` (GNSS, z = 0) and yaw-only ``PoseRotationPrior3D
 on the keyframe nearest to each record (:func:`graphnav.graph.keyframes.schedule`: causal online). The
 first pose and velocity get the log's ``pose_prior`` and ``meta["initial_velocity"]`` (as the UKFs).
 
-Drivers (same batches, same problem): :func:`run_isam2` (one ``ISAM2.update`` per keyframe; the
-online estimate is ``calculateEstimate`` of the newest pose, velocity and bias only),
+Drivers (same batches, same problem), all through the one solver wrapper of
+:mod:`graphnav.graph.solver` (the odometry/ICP graph's): :func:`run_isam2` (one ``ISAM2.update`` per
+keyframe; the online estimate is ``calculateEstimate`` of the newest pose, velocity and bias only),
 :func:`run_batch` (Levenberg-Marquardt over the whole log, initialised by the online predictions of
-the IMU from the prior) and :func:`run_fixed_lag` (``IncrementalFixedLagSmoother``).
+the IMU from the prior) and :func:`run_fixed_lag` (``IncrementalFixedLagSmoother``). The IMU graph
+stays a graph of its own (``Pose3`` + velocity + bias states, not the ``Pose2`` keyframes of
+:mod:`graphnav.graph.builder`); the estimators pick it for IMU logs (``motion`` option).
 """
 
 from __future__ import annotations
@@ -38,10 +41,12 @@ import factors as F
 from factors.imu import IB, V
 
 from ..config import config_from_options
+from ..errors import GraphnavError
 from ..log import NavLog
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .keyframes import schedule
+from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt
 
 
 @dataclass
@@ -200,84 +205,59 @@ def _bias_list(b: gtsam.imuBias.ConstantBias) -> list[float]:
     return [float(b.accelerometer()[0]), float(b.accelerometer()[1]), float(b.gyroscope()[2])]
 
 
-def _isam_params(cfg: ImuGraphConfig) -> gtsam.ISAM2Params:
-    p = gtsam.ISAM2Params()
-    th = gtsam.ISAM2ThresholdMap()
-    th.insert(("x", np.full(6, cfg.relinearize_threshold)))
-    th.insert(("v", np.full(3, cfg.relinearize_threshold)))
-    th.insert(("i", np.full(6, cfg.relinearize_threshold_bias)))
-    p.setRelinearizeThreshold(th)
-    p.relinearizeSkip = cfg.relinearize_skip
-    p.enablePartialRelinearizationCheck = True
-    return p
-
-
-class _Incremental:
-    """iSAM2 or the incremental fixed-lag smoother behind one interface."""
-
-    def __init__(self, cfg: ImuGraphConfig, fixed_lag: bool) -> None:
-        self.fixed_lag = fixed_lag
-        self.s = (gtsam.IncrementalFixedLagSmoother(cfg.lag, _isam_params(cfg)) if fixed_lag
-                  else gtsam.ISAM2(_isam_params(cfg)))
-
-    def update(self, st: ImuStep) -> None:
-        if self.fixed_lag:
-            stamps = gtsam.FixedLagSmootherKeyTimestampMap()
-            for key, ts in st.stamps.items():
-                stamps.insert((key, ts))
-            self.s.update(st.graph, st.values, stamps)
-        else:
-            self.s.update(st.graph, st.values)
+def _params(cfg: ImuGraphConfig) -> gtsam.ISAM2Params:
+    """iSAM2 parameters (:func:`graphnav.graph.solver.isam_params`): poses ``x`` and velocities ``v``
+    at ``relinearize_threshold``, biases ``i`` at ``relinearize_threshold_bias``."""
+    return isam_params({"x": [cfg.relinearize_threshold] * 6, "v": [cfg.relinearize_threshold] * 3,
+                        "i": [cfg.relinearize_threshold_bias] * 6}, skip=cfg.relinearize_skip,
+                       factorization="CHOLESKY", optimizer="gauss-newton")
 
 
 def _run_incremental(log: NavLog, name: str, fixed_lag: bool, on_estimate: OnEstimate | None,
                      options: dict[str, Any]) -> RunResult:
     cfg = ImuGraphConfig.from_options(options)
     b = ImuGraphBuilder(log, cfg)
-    inc = _Incremental(cfg, fixed_lag)
-    s = inc.s
+    solver = Solver("fixed-lag" if fixed_lag else "isam2", _params(cfg), lag=cfg.lag, keep_graph=False)
     n = len(b.kf_t)
     on_t, on_p, on_c, step_ms, step_cpu = [], [], [], [], []
+
+    def track(key: int) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+        p = solver.estimate(key, "Pose3")
+        return F.pose_xy_yaw(p), (F.world_cov_planar(p, solver.marginal(key)) if cfg.covariances else None)
+
+    prev = None
+    try:
+        for k in range(n):
+            st = b.step(k, prev)
+            c0, p0 = time.perf_counter(), time.process_time()
+            solver.update(st.graph, st.values, st.stamps, t=st.t, track=track, tracked=(F.X(k),))
+            pose = solver.estimate(F.X(k), "Pose3")  # the newest state only
+            vel = solver.estimate(V(k), "Vector")
+            bias = solver.estimate(IB(k), "ConstantBias")
+            cov = F.world_cov_planar(pose, solver.marginal(F.X(k))) if cfg.covariances else None
+            step_ms.append((time.perf_counter() - c0) * 1e3)
+            step_cpu.append((time.process_time() - p0) * 1e3)
+            prev = (gtsam.NavState(pose, vel), bias)
+            on_t.append(st.t)
+            on_p.append(F.pose_xy_yaw(pose))
+            on_c.append(cov)
+            if on_estimate is not None:
+                on_estimate(st.t, on_p[-1], cov)
+        if not fixed_lag:
+            solver.relinearize(cfg.final_updates)
+        est = solver.current()
+    except SolverError as exc:
+        raise GraphnavError(f"the IMU graph could not be solved: {exc}") from None
     final_p: list = [None] * n
     final_c: list = [None] * n
-    prev = None
-    oldest = 0
     for k in range(n):
-        st = b.step(k, prev)
-        c0, p0 = time.perf_counter(), time.process_time()
-        if fixed_lag:  # poses about to leave the window keep their last smoothed estimate
-            while oldest < k and b.kf_t[oldest] < st.t - cfg.lag:
-                p = s.calculateEstimatePose3(F.X(oldest))
-                final_p[oldest] = F.pose_xy_yaw(p)
-                if cfg.covariances:
-                    final_c[oldest] = F.world_cov_planar(p, s.marginalCovariance(F.X(oldest)))
-                oldest += 1
-        inc.update(st)
-        pose = s.calculateEstimatePose3(F.X(k))  # the newest state only
-        vel = s.calculateEstimateVector(V(k))
-        bias = s.calculateEstimateConstantBias(IB(k))
-        cov = F.world_cov_planar(pose, s.marginalCovariance(F.X(k))) if cfg.covariances else None
-        step_ms.append((time.perf_counter() - c0) * 1e3)
-        step_cpu.append((time.process_time() - p0) * 1e3)
-        prev = (gtsam.NavState(pose, vel), bias)
-        on_t.append(st.t)
-        on_p.append(F.pose_xy_yaw(pose))
-        on_c.append(cov)
-        if on_estimate is not None:
-            on_estimate(st.t, on_p[-1], cov)
-    if fixed_lag:
-        est = s.calculateEstimate()
-        keys = range(oldest, n)
-    else:
-        for _ in range(cfg.final_updates):
-            s.update()
-        est = s.calculateBestEstimate()
-        keys = range(n)
-    for k in keys:
+        if F.X(k) in solver.frozen:
+            final_p[k], final_c[k] = solver.frozen[F.X(k)]
+            continue
         p = est.atPose3(F.X(k))
         final_p[k] = F.pose_xy_yaw(p)
         if cfg.covariances:
-            final_c[k] = F.world_cov_planar(p, s.marginalCovariance(F.X(k)))
+            final_c[k] = F.world_cov_planar(p, solver.marginal(F.X(k)))
     traj = Trajectory(np.array(on_t), np.array(final_p), np.array(final_c) if cfg.covariances else None, name=name)
     online = Trajectory(np.array(on_t), np.array(on_p), np.array(on_c) if cfg.covariances else None,
                         name=f"{name}-online")
@@ -312,12 +292,10 @@ def run_batch(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: 
         prev = (gtsam.NavState(st.values.atPose3(F.X(k)), st.values.atVector(V(k))),
                 st.values.atConstantBias(IB(k)))
     c0, p0 = time.perf_counter(), time.process_time()
-    params = gtsam.LevenbergMarquardtParams()
-    params.setMaxIterations(cfg.lm_max_iterations)
-    params.setRelativeErrorTol(cfg.lm_tol)
-    params.setAbsoluteErrorTol(cfg.lm_tol)
-    opt = gtsam.LevenbergMarquardtOptimizer(graph, init, params)
-    result = opt.optimize()
+    try:
+        result, iterations = levenberg_marquardt(graph, init, LmSettings(cfg.lm_tol, cfg.lm_max_iterations))
+    except SolverError as exc:
+        raise GraphnavError(f"the IMU graph could not be solved: {exc}") from None
     solve_ms = (time.perf_counter() - c0) * 1e3
     solve_cpu_ms = (time.process_time() - p0) * 1e3
     poses = [F.pose_xy_yaw(result.atPose3(F.X(k))) for k in range(n)]
@@ -327,7 +305,7 @@ def run_batch(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: 
         covs = [F.world_cov_planar(result.atPose3(F.X(k)), m.marginalCovariance(F.X(k))) for k in range(n)]
     traj = Trajectory(b.kf_t.copy(), np.array(poses), np.array(covs) if covs else None, name="batch")
     info = b.info()
-    info.update(solve_ms=solve_ms, step_cpu_ms_median=solve_cpu_ms / n, lm_iterations=opt.iterations(),
+    info.update(solve_ms=solve_ms, step_cpu_ms_median=solve_cpu_ms / n, lm_iterations=iterations,
                 bias_final=_bias_list(result.atConstantBias(IB(n - 1))),
                 planar_residual=planar_residual(result, n).tolist())
     if on_estimate is not None:

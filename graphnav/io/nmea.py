@@ -136,8 +136,8 @@ def _zda_date(msg: pynmea2.NMEASentence) -> date | None:
         raise LogError(f"year {yy} out of range [1900, 2200]", field="year")
     try:
         return date(yy, mm, dd)
-    except ValueError:
-        raise LogError(f"date {dd}/{mm}/{yy} does not exist", field="day") from None
+    except (ValueError, OverflowError):  # OverflowError: a 40-digit day
+        raise LogError(f"date {str(dd)[:12]}/{str(mm)[:12]}/{yy} does not exist", field="day") from None
 
 
 def parse_time_of_day(raw: str) -> float | None:

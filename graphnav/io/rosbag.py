@@ -156,10 +156,33 @@ def bag_topics(path: str | Path) -> dict[str, dict[str, Any]]:
         return {c.topic: {"type": c.msgtype, "count": c.msgcount} for c in reader.connections}
 
 
+def check_ros1_lengths(path: Path) -> None:
+    """Walk a ROS 1 bag's top-level records (``header_len, header, data_len, data``) and refuse one
+    whose declared length runs past the end of the file: rosbags reads a declared length in one
+    call, which allocates that many bytes first (a damaged length of 0x06000000 cost 96 MiB)."""
+    if not path.is_file():
+        return
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        if f.read(13) != b"#ROSBAG V2.0\n":
+            return
+        pos = 13
+        while pos < size:
+            for part in ("header", "data"):
+                f.seek(pos)
+                raw = f.read(4)
+                n = int.from_bytes(raw, "little") if len(raw) == 4 else -1
+                if n < 0 or pos + 4 + n > size:
+                    raise LogError(f"damaged ROS bag: a record's {part} length runs past the end of the file "
+                                   f"(at byte {pos})", file=str(path), field=f"{part}_len")
+                pos += 4 + n
+
+
 @contextmanager
 def _open(path: Path) -> Iterator[Any]:
     from rosbags.highlevel import AnyReader
 
+    check_ros1_lengths(path)
     try:
         reader = AnyReader([path], default_typestore=typestore())
         reader.open()

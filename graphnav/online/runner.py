@@ -1,13 +1,14 @@
 """Record-by-record (online) estimation: estimators by name and the loop that feeds them.
 
-The interface (:class:`graphnav.result.OnlineEstimator`) is one method: ``add(record) -> Estimate | None``.
+The interface (:class:`graphnav.result.OnlineEstimator`) is one method: ``add(record) -> Estimate | None``
+(and optionally ``flush() -> Estimate | None`` at the end of the input, ``info() -> dict``).
 Records arrive in time order (late ones are the estimator's business); an
 :class:`~graphnav.result.Estimate` is returned whenever the navigation solution changed enough to be
 published. Estimators plug into live mode by implementing this protocol and registering a factory in
-:data:`ONLINE_ESTIMATORS`: ``fixed-lag`` and ``isam2``
-(:class:`graphnav.graph.graph_online.GraphOnline`), ``ekf``
-(:class:`graphnav.online.ekf_online.EkfOnline`, the batch ``ekf`` step for step); the full smoother
-of :mod:`graphnav.graph.smoother` has no adapter yet.
+:data:`ONLINE_ESTIMATORS`: ``fixed-lag`` and ``isam2`` (the navigation graph,
+:class:`graphnav.graph.navigator.Navigator`, the same one ``graphnav run -e isam2`` runs; options are
+the fields of :class:`graphnav.graph.config.SmootherConfig`), ``ekf``
+(:class:`graphnav.online.ekf_online.EkfOnline`, the batch ``ekf`` step for step).
 """
 
 from __future__ import annotations
@@ -17,19 +18,22 @@ from typing import Any
 
 import numpy as np
 
-from ..graph.graph_online import GraphOnline
 from ..log import NavLog
 from ..result import OnlineEstimator
 from ..trajectory import Trajectory
 
 
-def _graph_fixed_lag(**options: Any) -> GraphOnline:
-    return GraphOnline(**options)
+def _navigator(solver: str) -> Callable[..., OnlineEstimator]:
+    def make(**options: Any) -> OnlineEstimator:
+        from ..graph.navigator import Navigator
 
+        if options.get("solver", solver) != solver:
+            raise ValueError(f"option solver={options['solver']!r} contradicts the estimator ({solver!r})")
+        options["solver"] = solver
+        return Navigator(history=False, **options)
 
-def _graph_isam2(**options: Any) -> GraphOnline:
-    options["lag"] = None
-    return GraphOnline(**options)
+    make.__doc__ = f"The navigation graph with the {solver} solver (bounded memory: no history kept)."
+    return make
 
 
 def _ekf(**options: Any) -> OnlineEstimator:
@@ -38,10 +42,10 @@ def _ekf(**options: Any) -> OnlineEstimator:
     return EkfOnline(**options)
 
 
-#: name -> factory(**options). The full smoother adapter registers here when it lands.
+#: name -> factory(**options)
 ONLINE_ESTIMATORS: dict[str, Callable[..., OnlineEstimator]] = {
-    "fixed-lag": _graph_fixed_lag,
-    "isam2": _graph_isam2,
+    "fixed-lag": _navigator("fixed-lag"),
+    "isam2": _navigator("isam2"),
     "ekf": _ekf,
 }
 
@@ -59,11 +63,18 @@ def make_online(name: str, **options: Any) -> OnlineEstimator:
 
 
 def run_online(log: NavLog, estimator: OnlineEstimator) -> Trajectory:
-    """Feed a log's records in order; the trajectory of the estimates as they were produced."""
+    """Feed a log's records in order (then ``flush()``, when the estimator has it); the trajectory
+    of the estimates as they were produced."""
     t, poses = [], []
     for r in log.records:
         e = estimator.add(r)
         if e is not None:
             t.append(e.t)
-            poses.append(e.pose)
+            poses.append(e.vec)
+    flush = getattr(estimator, "flush", None)
+    if callable(flush):
+        e = flush()
+        if e is not None:
+            t.append(e.t)
+            poses.append(e.vec)
     return Trajectory(np.array(t), np.array(poses).reshape(-1, 3), name="online")

@@ -41,6 +41,9 @@ VARIANTS = ("K", "H", "HM", "HD", "HDL")
 _BIG_COV = np.diag([1e4, 1e4, 10.0])  # returned with ok=False when there is nothing to match
 _MIN_RES = 1e-9  # [m] floor of a point's resolution (a cloud on one bearing has none)
 _CHI2_3_999 = 16.266  # chi-square, 3 degrees of freedom, 99.9 % (scipy.stats.chi2.ppf(0.999, 3))
+# 1-sigma (x, y, yaw) of an initial guess that comes without a covariance: the stated sigma of the
+# constant-velocity motion model (graphnav.scan.motion_guess.CV_BRIDGE_SIGMA, the same numbers)
+GUESS_SIGMA = (1.0, 1.0, math.radians(10.0))
 
 
 @dataclass
@@ -717,11 +720,18 @@ def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None):  
         if deg.sigma_weak > cfg.max_sigma * big_d:
             why.append(f"weakest-direction 1-sigma {deg.sigma_weak:.3g} m > {cfg.max_sigma:g} x {big_d:.3g} m")
         reasons.append(f"degenerate geometry ({', '.join(why) or 'no residual scale'})")
-        if init is not None and not failed:  # without a guess the estimate is all there is: only inflate
+        # along the weak directions the pose is the guess's, and so is its error: the covariance there
+        # is the guess's (init_cov; without one the constant-velocity model's stated sigma, GUESS_SIGMA)
+        g = np.diag(np.square(GUESS_SIGMA)) if init_cov is None else np.asarray(init_cov, dtype=float)
+        proj = deg.projector()
+        if init is not None and not failed:
             th0, t0_ = _pose_parts(init)
             pose = degeneracy.keep_constrained(pose, np.array([t0_[0], t0_[1], th0]), deg)
-        if np.all(np.isfinite(cov)):  # nothing known along the weak directions within the scene's extent
-            cov = cov + deg.inflation(fp.radius)
+            if np.all(np.isfinite(cov)):
+                keep = np.eye(3) - proj
+                cov = keep @ cov @ keep.T + proj @ g @ proj.T
+        elif np.all(np.isfinite(cov)):  # no guess: the estimate is all there is, only inflate
+            cov = cov + proj @ g @ proj.T
     inflated = degenerate and not failed
     reasons += failed
     if failed:

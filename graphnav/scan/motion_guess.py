@@ -15,17 +15,16 @@ with its covariance, else the constant-velocity guess with a wide covariance.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry import increment
-from .icp import MatchResult
+from .icp import GUESS_SIGMA, MatchResult
 
 INITS = ("cv", "zero", "odometry")
-# 1-sigma of a constant-velocity bridge (no odometry): x, y [m], yaw [rad]
-CV_BRIDGE_SIGMA = (1.0, 1.0, math.radians(10.0))
+# 1-sigma of a constant-velocity bridge (no odometry): x, y [m], yaw [rad]; the matcher's guess
+# without a covariance has the same (graphnav.scan.icp.GUESS_SIGMA)
+CV_BRIDGE_SIGMA = GUESS_SIGMA
 
 
 class MotionGuess:

@@ -107,14 +107,17 @@ def test_gnss_jump_is_rejected_and_the_estimate_survives():
     assert pos_err(blind, log).max() > 20.0       # without the gate the jump drags the estimate
 
 
-def test_persistent_shift_is_accepted_after_max_rejects():
-    # the GNSS "jump" never ends: after max_rejects consecutive rejections the filter follows it
-    log = drive(3, T=80.0, jump=(30.0, 1e9, 60.0))
-    res = run_ekf(log, max_rejects=5)
-    assert res.info["forced"] >= 1
+def test_permanent_shift_is_believed_after_reinit_after_s():
+    # the GNSS "jump" never ends: rejected while it is younger than reinit_after_s, then believed
+    log = drive(3, T=200.0, jump=(30.0, 1e9, 60.0))
+    res = run_ekf(log, reinit_after_s=100.0)
+    assert res.info["reinit"] >= 1
     ref = log.truth()
-    end = res.trajectory.poses[-1, :2] - ref.poses[-1, :2]
-    assert abs(end[0] - 60.0) < 5.0
+    idx = np.searchsorted(ref.t, res.trajectory.t)
+    dx = res.trajectory.poses[:, 0] - ref.poses[idx, 0]
+    t = res.trajectory.t
+    assert np.abs(dx[t < 125.0]).max() < 5.0          # not followed for 95 s
+    assert abs(dx[-1] - 60.0) < 5.0                   # then followed
 
 
 def test_heading_wraps_across_pi():

@@ -42,6 +42,10 @@ FAKES = {
 }
 
 
+FIGURES = ("trajectories.png", "trajectory_panels.png", "position_error.png", "heading_error.png", "error_cdf.png",
+           "sog_cog.png", "error_bounds.png", "nees.png", "covariance.png")
+
+
 @pytest.fixture(scope="module")
 def log():
     return synthetic_log(30)
@@ -56,7 +60,10 @@ def fakes(monkeypatch):
 def test_compare_runs_every_runnable_estimator_once(log, fakes):
     entries = compare(log)
     names = [e.name for e in entries]
-    assert names == estimators.runnable(log)
+    assert names == estimators.names()  # every estimator has a row: run, or skipped saying why
+    assert [e.name for e in entries if e.skipped is None] == estimators.runnable(log)
+    assert all(e.skipped and e.result is None and e.error is None for e in entries if e.name not in
+               estimators.runnable(log))
     assert {"dead-reckoning", "scan-to-map", "fake-smoother", "zz-boom"} <= set(names)
     by = {e.name: e for e in entries}
     assert not by["zz-boom"].ok and "deliberate failure" in by["zz-boom"].error
@@ -68,7 +75,8 @@ def test_compare_runs_every_runnable_estimator_once(log, fakes):
     assert by["fake-smoother"].summary["online_ate_rmse_m"] == pytest.approx(0.6)
     order = ranked(entries)
     ates = [e.summary["ate_rmse_m"] for e in order if e.ok]
-    assert ates == sorted(ates) and order[-1].name == "zz-boom"
+    assert ates == sorted(ates)
+    assert [e.name for e in order if not e.ok][0] == "zz-boom" and order[-1].skipped  # failures, then skipped
 
 
 def test_compare_reports_unknown_and_unrunnable_names(log):
@@ -76,7 +84,8 @@ def test_compare_reports_unknown_and_unrunnable_names(log):
                       options={"dead-reckoning": {}})
     by = {e.name: e for e in entries}
     assert "unknown estimator" in by["nope"].error
-    assert "cannot run" in by["scan-to-map"].error
+    assert "needs at least two scans" in by["scan-to-map"].skipped and by["scan-to-map"].error is None
+    assert not by["scan-to-map"].ok
     assert by["dead-reckoning"].ok
 
 
@@ -133,6 +142,11 @@ def test_cli_json_is_one_object_with_the_issue_keys(cli_run):
             assert k in d, (name, k)
     assert "deliberate failure" in est["zz-boom"]["error"] and est["zz-boom"]["ate_rmse_m"] is None
     assert est["fake-smoother"]["ate_rmse_m"] == pytest.approx(0.3)
+    # error (0.3, 0) m against cov diag(0.04, 0.01): NEES 0.09/0.04; online (0, 0.6): 0.36/0.01
+    assert est["fake-smoother"]["nees_mean"] == pytest.approx(2.25)
+    assert est["fake-smoother"]["online_nees_mean"] == pytest.approx(36.0)
+    assert est["fake-smoother"]["heading_rmse_deg"] == pytest.approx(0.0, abs=1e-9)
+    assert "nees_mean" in est["scan-to-map"] and est["scan-to-map"]["nees_mean"] is None  # no covariance
     assert est["fake-smoother"]["options"] == {"lag": 7}
     assert est["scan-to-map"]["ate_rmse_m"] < 0.1
 
@@ -142,8 +156,7 @@ def test_cli_writes_report_figures_and_tum(cli_run):
 
     _, stdout, out, _ = cli_run
     est = json.loads(stdout)["estimators"]
-    for f in ("report.md", "trajectories.png", "position_error.png", "error_cdf.png", "sog_cog.png",
-              "covariance.png"):
+    for f in FIGURES + ("report.md",):
         assert (out / f).stat().st_size > 0, f
     ok = [n for n, d in est.items() if "error" not in d]
     for n in ok:
@@ -157,7 +170,7 @@ def test_cli_writes_report_figures_and_tum(cli_run):
     assert "deliberate failure" in report
     assert "online ATE RMSE" in report
     assert '"lag": 7' in report  # configuration section
-    for f in ("trajectories.png", "position_error.png", "error_cdf.png", "sog_cog.png", "covariance.png"):
+    for f in FIGURES:
         assert f"]({f})" in report
 
 
@@ -168,12 +181,11 @@ def test_cli_rejects_a_malformed_option(log, tmp_path):
 
 
 def test_event_shading_has_one_legend_entry_per_kind():
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
-    fig, ax = plt.subplots()
+    ax = Figure().add_subplot()
     ev = [("gnss_outage", 1, 2), ("gnss_outage", 5, 6), ("gnss_jump", 3, 4), ("other", 7, 8)]
     h = plots._shade_events(ax, [{"kind": k, "t0": a, "t1": b} for k, a, b in ev])
-    plt.close(fig)
     assert [p.get_label() for p in h] == ["GNSS outage", "GNSS jump", "other"]
     assert len(ax.patches) == 4
 
@@ -190,12 +202,11 @@ def test_one_estimator_twice_under_labels(log):
 
 
 def test_a_whole_log_condition_is_not_shaded_but_gnss_events_are():
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
-    fig, ax = plt.subplots()
+    ax = Figure().add_subplot()
     ev = [("compass_bias", 0, 100), ("gnss_outage", 0, 100), ("noise_increase", 50, 60)]
     h = plots._shade_events(ax, [{"kind": k, "t0": a, "t1": b} for k, a, b in ev], span=(0.0, 100.0))
-    plt.close(fig)
     assert [p.get_label() for p in h] == ["GNSS outage", "noise_increase"]
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from graphnav.beacons.layout import chunk_tasks, grid, score_chunk
-from graphnav.evaluation.sweep import CLUSTER_STARTUP_S, load_done, resolve_scheduler, run_sweep
+from graphnav.evaluation.sweep import CLUSTER_STARTUP_S, load_done, resolve_scheduler, run_sweep, task_key
 
 
 def record_call(task: dict) -> dict:
@@ -33,12 +33,11 @@ def test_local_cluster_equals_serial_exactly_and_resumes(tmp_path: Path):
     direct = np.concatenate([score_chunk(t)["scores"] for t in tasks])
     assert np.array_equal(np.concatenate([r["scores"] for r in serial]), direct)
     # two tasks are already on disk (an interrupted sweep): the cluster computes only the other three
-    out.write_text("".join(json.dumps({"key": t["key"], "result": r}) + "\n"
-                           for t, r in zip(tasks[:2], serial[:2], strict=True)))
+    run_sweep(score_chunk, tasks[:2], out=out, scheduler="serial", progress=False)
     dask = run_sweep(traced_score, tasks, out=out, workers=2, progress=False)
     assert dask == serial
     assert sorted(trace.read_text().split()) == sorted(t["key"] for t in tasks[2:])
-    assert load_done(out) == {t["key"]: r for t, r in zip(tasks, serial, strict=True)}
+    assert load_done(out) == {task_key(t): r for t, r in zip(tasks, serial, strict=True)}
 
 
 def test_resume_skips_finished_tasks(tmp_path: Path):
@@ -52,7 +51,7 @@ def test_resume_skips_finished_tasks(tmp_path: Path):
     assert calls == [f"t{n}" for n in range(5)] + ["t5", "t6", "t7"]
     assert full[:5] == first
     assert full == [{"square": n * n, "third": n / 3.0} for n in range(8)]
-    assert set(load_done(out)) == {f"t{n}" for n in range(8)}
+    assert set(load_done(out)) == {task_key(t) for t in tasks}
     # a third run computes nothing
     run_sweep(record_call, tasks, out=out, scheduler="serial", progress=False)
     assert trace.read_text().split() == calls

@@ -44,6 +44,7 @@ def square_runs(square):
         "relinearize_threshold_landmarks": 1e-7,
         "relinearize_threshold_bias_deg": 1e-7,
         "final_updates": 10,
+        "lm_tol": 1e-14,
     }
     return run_batch(square, **opts), run_isam2(square, **opts)
 

@@ -245,6 +245,25 @@ def test_fuzz_rosbag(tmp_path, bag_bytes, edits):
     _both(p)
 
 
+def test_rosbag_damaged_length_is_refused_before_allocating(tmp_path, bag_bytes):
+    """Every top-level record length of a ROS 1 bag set to 96 MiB (hypothesis found one): a LogError
+    naming the field, and no allocation of the declared size (rosbags read it in one call: 103 MiB)."""
+    raw0, pos, n = bytes(bag_bytes), 13, 0
+    while pos < len(raw0):
+        hl = int.from_bytes(raw0[pos:pos + 4], "little")
+        dpos = pos + 4 + hl
+        for at in (pos, dpos):
+            raw = bytearray(raw0)
+            raw[at:at + 4] = (96 << 20).to_bytes(4, "little")
+            p = tmp_path / "g.bag"
+            p.write_bytes(bytes(raw))
+            out = _read_bounded(lambda p=p: load_log(p))
+            assert isinstance(out, LogError)
+            n += 1
+        pos = dpos + 4 + int.from_bytes(raw0[dpos:dpos + 4], "little")
+    assert n >= 10
+
+
 # ----------------------------------------------------------------------------- CARMEN, MRCLAM
 
 carmen_line = st.one_of(

@@ -83,7 +83,7 @@ def test_one_estimate_per_fix_and_dead_reckoning_in_an_outage():
     e = estimates[-1]
     assert e.cov.shape == (3, 3) and e.sog == pytest.approx(1.5, abs=0.4) and e.w is not None
     tr = log.truth()
-    err = np.hypot(*(np.array([x.pose[:2] for x in estimates]) - tr.interpolate(t)[:, :2]).T)
+    err = np.hypot(*(np.array([x.vec[:2] for x in estimates]) - tr.interpolate(t)[:, :2]).T)
     assert np.sqrt(np.mean(err**2)) < 1.5  # GNSS sigma 1.5 m per axis, 15 s of dead reckoning
 
 
@@ -96,7 +96,7 @@ def test_without_gnss_updates_every_record_is_an_outage_from_the_start():
     assert len(t) and t[0] < log.t0 + 0.5
 
 
-def test_late_records_are_counted_and_ignored():
+def test_late_are_counted_and_ignored():
     log = harbour_trial(duration=5.0, rate=5.0)
     est = EkfOnline()
     run_online(log, est)

@@ -26,7 +26,8 @@ from tests._scan_sim import noisy_scan, room
 
 REPO = Path(__file__).resolve().parents[2]
 AS_LIMIT = 8 << 30  # 8 GiB of address space: numba/LLVM map ~1-2 GiB; a 1e5 m beam used to ask for ~80 GB
-RSS_LIMIT_MB = 700  # a 360-point match after importing numpy, scipy and numba peaks at ~250-350 MB
+RSS_LIMIT_MB = 1500  # whole process, numba's first compile of the kernels included (~800 MB peak seen)
+GROWTH_LIMIT_MB = 200  # peak RSS a hostile match may add over a clean one (the 1e5 m beam asked for ~80 GB)
 HOSTILE = [1e5, 1e308, math.nan, math.inf, -math.inf, -3.0, 0.0]
 
 numba = pytest.importorskip("numba")
@@ -106,7 +107,10 @@ def test_far_beam_is_bounded_in_memory(value):
         from graphnav.scan.icp import IcpConfig, match_scans
         from graphnav.log import Scan
         from tests.scan.test_bounded_scans import _pair
+        import resource
         src, tgt = _pair()
+        match_scans(src, tgt, IcpConfig(backend="numba"))  # imports and (on a fresh clone) compiles
+        out["warm_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         r = src.ranges.copy(); r[7] = {value}
         res = match_scans(Scan(0.0, r, src.angles), tgt, IcpConfig(backend="numba"))
         out["ok"] = bool(res.ok)
@@ -114,7 +118,7 @@ def test_far_beam_is_bounded_in_memory(value):
     """)
     assert "error" not in out, out
     assert out["ok"] and np.all(np.isfinite(out["pose"]))
-    assert out["rss_mb"] < RSS_LIMIT_MB, out
+    assert out["rss_mb"] - out["warm_mb"] < GROWTH_LIMIT_MB, out  # the compile's own peak is not the match's
 
 
 def test_grid_has_o_n_cells_and_exact_nearest():

@@ -11,7 +11,7 @@ from graphnav.estimators.icp_odometry import run_icp_dr
 from graphnav.geometry import increment, se2_compose
 from graphnav.log import NavLog, Odometry, PosePrior, Scan, Truth, odometry_samples
 from graphnav.scan import degeneracy
-from graphnav.scan.icp import VARIANTS, IcpConfig, MatchResult, match_points
+from graphnav.scan.icp import GUESS_SIGMA, VARIANTS, IcpConfig, MatchResult, match_points
 from graphnav.scan.motion_guess import MotionGuess
 
 
@@ -39,10 +39,15 @@ def test_single_wall_flagged_weak_along_wall_and_inflated(variant):
     # along the wall the estimate is the guess's; across it (y) and in yaw the wall's
     assert res.pose[0] == pytest.approx(guess[0], abs=0.02)
     assert res.pose[1] == pytest.approx(true[1], abs=0.03)
-    # the covariance is inflated along the wall by the scene's extent (the source's RMS radius), far
-    # above the across-wall one
-    assert res.cov[0, 0] >= 0.99 * degeneracy.rms_radius(src) ** 2
+    # along the wall the pose is the guess's and so is the variance: a guess without a covariance has
+    # the constant-velocity model's stated sigma (GUESS_SIGMA, 1 m), far above the across-wall one
+    assert res.cov[0, 0] == pytest.approx(GUESS_SIGMA[0] ** 2, rel=0.05)
     assert res.cov[0, 0] > 100 * res.cov[1, 1]
+    # with the guess's own covariance (e.g. the odometry's), that one
+    odo = np.diag([0.05**2, 0.02**2, np.radians(0.5) ** 2])
+    res2 = match_points(src, tgt, cfg, init=guess, init_cov=odo)
+    assert res2.quality["degenerate"] and res2.pose[0] == pytest.approx(guess[0], abs=0.02)
+    assert res2.cov[0, 0] == pytest.approx(0.05**2, rel=0.05)
 
 
 def test_without_a_guess_the_estimate_is_kept_and_only_the_covariance_inflated():
@@ -52,8 +57,8 @@ def test_without_a_guess_the_estimate_is_kept_and_only_the_covariance_inflated()
     raw = match_points(src, tgt, IcpConfig(variant="HDL", max_condition=1e12, max_sigma=1e12))
     assert not res.ok and res.quality["degenerate"] and raw.ok
     assert np.allclose(res.pose, raw.pose)
-    lsq = degeneracy.rms_radius(src) ** 2
-    assert np.allclose(res.cov - raw.cov, lsq * np.outer([1, 0, 0], [1, 0, 0]), atol=0.02 * lsq)
+    g = GUESS_SIGMA[0] ** 2  # nothing known along the wall but the constant-velocity model's sigma
+    assert np.allclose(res.cov - raw.cov, g * np.outer([1, 0, 0], [1, 0, 0]), atol=0.02 * g)
 
 
 def test_corridor_flagged_and_weak_along_it():

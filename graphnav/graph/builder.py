@@ -1,0 +1,667 @@
+"""The navigation graph, built record by record: every sensor of a log as native GTSAM factors on
+``Pose2`` keyframes, one factor batch per keyframe for the solver (:mod:`graphnav.graph.solver`).
+
+:class:`GraphBuilder` is fed records in time order (:meth:`~GraphBuilder.push`) and decides online
+
+* **the anchor**: records are held until it can be chosen (a ``pose_prior``; or a GNSS fix and a
+  compass reading; or two charted beacons sighted together; else, ``anchor_wait`` seconds of log
+  time after the first record, the first GNSS fix, one charted sighting, the first truth pose or
+  the origin -- the same priority as a look at the whole log), then the held records are replayed;
+* **the keyframes**: one per scan (every ``scan_stride``-th) once scans arrive, else a
+  ``keyframe_period`` grid from the first record (:mod:`graphnav.graph.keyframes`) -- where no
+  record came for ``grid_gap`` seconds (a GNSS outage of a GNSS-only log) the slots inside the
+  gap are skipped: no input, no pose (the motion factor spans the gap);
+* **the attachment**: a measurement between two keyframes waits for the later one, joins the
+  nearer of the two (ties: the earlier) and is added with the later keyframe's batch, exactly as
+  :func:`graphnav.graph.keyframes.schedule` does on a whole log; a keyframe's batch is ready when a
+  record later than it arrives (or at :meth:`~GraphBuilder.finish`), so every record stamped at
+  or before the keyframe is in it and none after it (causal).
+
+Per keyframe ``k`` (:meth:`~GraphBuilder.step`): a **motion factor** ``X(k-1) -> X(k)`` always --
+the odometry integrated over the interval (beacon paper eq. 3-5), else a constant-velocity
+prediction from the last measured motion or a random walk, with a sigma that grows with ``dt``
+and a floor that keeps ``dt = 0`` proper --; the weighted-ICP match of the keyframe's scan to the
+previous one with the matcher's covariance (a degenerate match is kept: its covariance is inflated
+along the directions it does not observe); and the measurements due: robust GNSS
+(``PoseTranslationPrior2D``, gated online by the Mahalanobis distance to the prediction), compass
+through an estimated bias frame, ``BearingRangeFactor2D`` beacons (charted ones with a chart
+prior, unknown ones initialised from their first sighting) and later ``pose_prior`` records. Each
+factor carries its sensor group (:data:`GROUPS`), which the noise estimation uses.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import time
+from collections import deque
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+import factors as F
+
+from ..geometry import increment
+from ..log import BeaconObs, Gnss, Heading, KnownBeacon, Odometry, PosePrior, Record, Scan, Truth
+from .config import SmootherConfig
+from .keyframes import DEFAULT_PERIOD
+
+Matcher = Callable[
+    [Scan, Scan, NDArray[np.float64] | None], tuple[bool, NDArray[np.float64], NDArray[np.float64]]
+]
+
+#: sensor groups of the factors (the noise estimation scales ``SCALABLE`` ones)
+GROUPS = ("anchor", "odometry", "motion", "icp", "gnss", "compass", "bias", "beacon", "chart", "pose_prior")
+SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon")
+EPS = 1e-9  # [s] times closer than this are equal (as keyframes.schedule)
+MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior")
+
+
+def default_matcher(options: dict[str, Any]) -> Matcher | None:
+    """The weighted-ICP matcher of :mod:`graphnav.scan.icp`, or ``None`` when it is not available.
+    A match is usable when it converged, or when it was flagged degenerate only (its covariance is
+    then inflated along the unobserved directions, which the factor keeps weak)."""
+    try:
+        from ..scan.icp import IcpConfig, scan_points
+        from ..scan.icp_cache import match_points  # shared between estimators inside icp_cache.active()
+    except ImportError:
+        return None
+    cfg = IcpConfig(**options)
+    last: list[Any] = [None, None]  # the previous call's current scan and its points
+
+    def match(cur: Scan, prev: Scan, init: NDArray[np.float64] | None):
+        prev_xy = last[1] if prev is last[0] else scan_points(prev, cfg)  # consecutive pairs: each scan once
+        cur_xy = scan_points(cur, cfg)
+        last[:] = [cur, cur_xy]
+        r = match_points(cur_xy, prev_xy, cfg, init=init)
+        usable = bool(r.ok) or bool(r.quality.get("inflated", False))
+        return usable, np.asarray(r.pose, dtype=float), np.asarray(r.cov, dtype=float)
+
+    return match
+
+
+def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
+    return np.array([p.x(), p.y(), p.theta()])
+
+
+def proper_cov(cov: NDArray[np.float64], floor: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """A symmetric positive-definite covariance: ``cov`` symmetrised plus ``diag(floor^2)``; ``None``
+    when it is not finite or not positive semi-definite (beyond rounding)."""
+    c = np.asarray(cov, dtype=float)
+    if c.shape != (3, 3) or not np.all(np.isfinite(c)):
+        return None
+    c = 0.5 * (c + c.T)
+    ev = np.linalg.eigvalsh(c)
+    if ev[0] < -1e-9 * max(1.0, ev[-1]):
+        return None
+    return c + np.diag(np.square(floor))
+
+
+@dataclass
+class Step:
+    """New factors/values of keyframe ``k`` (time ``t``), the keys' timestamps (fixed-lag) and
+    each factor's sensor group (parallel to ``graph``)."""
+
+    k: int
+    t: float
+    graph: gtsam.NonlinearFactorGraph
+    values: gtsam.Values
+    stamps: dict[int, float]
+    groups: list[str] = field(default_factory=list)
+    icp_ms: float | None = None
+    new_keyframe: bool = True  # False: late measurements after the last keyframe (finish)
+
+    def add(self, factor: gtsam.NonlinearFactor, group: str) -> None:
+        self.graph.add(factor)
+        self.groups.append(group)
+
+
+class GraphBuilder:
+    """Records in, per-keyframe factor batches out (see the module docstring).
+
+    ``chart``: charted beacons; ``lidar``: the log's LiDAR error model (``sigma_r_rel``,
+    ``sigma_alpha``); ``scans``: whether the log has scans (``None``: decided by the first scan --
+    a grid until then); ``matcher``: replaces the weighted ICP (tests).
+    """
+
+    def __init__(self, cfg: SmootherConfig, *, matcher: Matcher | None = None,
+                 chart: Iterable[KnownBeacon] = (), lidar: dict[str, Any] | None = None,
+                 scans: bool | None = None) -> None:
+        self.cfg = cfg
+        self.charted = {b.id: b for b in chart}
+        icp_opts = dict(cfg.icp)
+        for k in ("sigma_r_rel", "sigma_alpha"):  # the log's LiDAR error model, when it states one
+            if lidar and k in lidar and k not in icp_opts:
+                icp_opts[k] = float(lidar[k])
+        self._matcher_given = matcher
+        self._icp_opts = icp_opts
+        self.matcher: Matcher | None = None
+        # keyframe policy: "grid" (fixed period) or "scan"; with keyframe_period set always the grid
+        self.grid_only = cfg.keyframe_period is not None
+        self.period = cfg.keyframe_period if cfg.keyframe_period is not None else DEFAULT_PERIOD
+        self.mode = "scan" if (scans and not self.grid_only) else "grid"
+        if self.mode == "scan":
+            self._want_matcher()
+        self.kf_t: list[float] = []
+        self.stepped = 0  # keyframes [0, stepped) have their batch
+        self.grid_t0: float | None = None
+        self.grid_i = 0  # the next grid slot
+        self.kf_scan: dict[int, Scan] = {}
+        self.n_scans = 0
+        self.pending: list[Record] = []  # measurements after the newest keyframe
+        self.due: dict[int, list[tuple[int, Record]]] = {}  # step -> (attach, record)
+        self.late: list[tuple[int, Record]] = []  # after the last keyframe's batch (finish)
+        self.odo_t: list[float] = []
+        self.odo_rows: list[tuple[float, float, float, float, float, float]] = []  # t, v, w, sv, sw, density
+        self.held: list[Record] | None = []  # before the anchor is chosen
+        self.t_last: float | None = None
+        self.t_data: float | None = None
+        self.finished = False
+        # state carried between keyframes
+        self.last_rel = gtsam.Pose2()  # relative motion of the newest interval
+        self.last_gap = 0.0
+        self.twist: NDArray[np.float64] | None = None  # [m/s, m/s, rad/s] of the last measured motion
+        self.twist_t: float | None = None  # ... and its time
+        self.fixes: deque[tuple[float, float, float, float]] = deque(maxlen=256)  # recent GNSS (t, x, y, sigma)
+        self.gnss_twist: tuple[float, NDArray[np.float64], float] | None = None  # (t, twist, speed sigma)
+        self.after_outage: set[int] = set()  # ids of the first fixes after a GNSS outage
+        self.beacon_ids: dict[str, int] = {}
+        self.beacon_init: dict[str, NDArray[np.float64]] = {}
+        self.bias_key: int | None = None
+        self.anchor_pose: NDArray[np.float64] | None = None
+        self.anchor_sigmas: NDArray[np.float64] | None = None
+        self.anchor: str | None = None
+        self.counts = {"records": 0, "late": 0, "ignored": 0, "motion_fallback": 0}
+        self.n_rejected = 0
+        self.consecutive_rejects = 0
+        self.n_icp = self.n_icp_failed = self.n_icp_degenerate = self.n_icp_gated = 0
+        self.defaulted: set[str] = set()  # groups whose sigmas came from the configuration
+
+    # -- records in ------------------------------------------------------------------------------
+    @property
+    def started(self) -> bool:
+        return self.held is None
+
+    def push(self, rec: Record | KnownBeacon) -> None:
+        """Take one record (time-ordered; one older than the newest is counted and dropped)."""
+        if isinstance(rec, KnownBeacon):
+            self.charted[rec.id] = rec
+            return
+        self.counts["records"] += 1
+        if self.held is not None:  # the anchor is chosen once the records of a time stamp are all in
+            if self.held and rec.t > self.held[-1].t + EPS and self._anchor_ready(rec.t):
+                self._start()
+            else:
+                self.held.append(rec)
+                if isinstance(rec, PosePrior):
+                    self._start()
+                return
+        self._ingest(rec)
+
+    def finish(self) -> None:
+        """End of the records: every keyframe becomes ready; measurements after the last keyframe
+        join it (in a batch of their own when its batch is already out)."""
+        if self.finished:
+            return
+        if self.held is not None:
+            self._start()
+        self.finished = True
+        if not self.kf_t:
+            return
+        last = len(self.kf_t) - 1
+        for r in self.pending:
+            if self.stepped > last:
+                self.late.append((last, r))
+            else:
+                self.due.setdefault(last, []).append((last, r))
+        self.pending = []
+
+    def ready(self) -> list[int]:
+        """Keyframes whose batch can be built now (in order)."""
+        if self.finished:
+            return list(range(self.stepped, len(self.kf_t)))
+        if self.t_last is None:
+            return []
+        return [k for k in range(self.stepped, len(self.kf_t)) if self.kf_t[k] < self.t_last - EPS]
+
+    def _ingest(self, rec: Record) -> None:
+        """One record. Records may come a little out of order (two sockets): a record is late, and
+        dropped, only when its keyframe's batch is already out (a scan: when it is older than the
+        newest keyframe)."""
+        t = rec.t
+        kind = rec.kind
+        behind_batch = self.stepped > 0 and t < self.kf_t[self.stepped - 1] - EPS
+        behind_scan = kind == "scan" and self.mode == "scan" and bool(self.kf_t) and t < self.kf_t[-1] - EPS
+        if behind_batch or behind_scan:
+            self.counts["late"] += 1
+            return
+        prev_t = self.t_data  # the last record with data (truth is a reference, not an input)
+        if kind != "truth":
+            self.t_data = t if self.t_data is None else max(self.t_data, t)
+        self.t_last = t if self.t_last is None else max(self.t_last, t)
+        self.counts[rec.kind] = self.counts.get(rec.kind, 0) + 1
+        if self.mode == "grid":
+            if self.grid_t0 is None:
+                self.grid_t0 = t
+            gap = prev_t is not None and kind != "truth" and t - prev_t > self.cfg.grid_gap
+            while (kind != "truth" or prev_t is None or t - prev_t <= self.cfg.grid_gap) and (
+                    ts := self.grid_t0 + self.period * self.grid_i) <= t + EPS * self.period:
+                self.grid_i += 1
+                # no record for grid_gap seconds: the slots more than a period from both sides are skipped
+                if not gap or ts <= prev_t + self.period + EPS or ts >= t - self.period - EPS:
+                    self._new_keyframe(ts, None)
+        if kind == "scan":
+            if self.mode == "grid" and not self.grid_only:  # the first scan: one keyframe per scan from now on
+                self.mode = "scan"
+                self._want_matcher()
+            if self.mode == "scan":
+                if self.n_scans % self.cfg.scan_stride == 0:
+                    self._new_keyframe(t, rec)
+                self.n_scans += 1
+        elif kind == "odometry":
+            if self.cfg.use_odometry:
+                self._odometry_sample(rec)
+        elif kind in MEASUREMENTS:
+            if isinstance(rec, Gnss):
+                if self.fixes and t - self.fixes[-1][0] > self.cfg.gnss_gate_outage:
+                    self.after_outage.add(id(rec))  # the first fix after an outage is not gated
+                self.fixes.append((rec.t, rec.x, rec.y, rec.sigma))
+            if self.kf_t and t <= self.kf_t[-1] + EPS:  # at (or, late, before) the newest keyframe
+                j = bisect.bisect_left(self.kf_t, t - EPS)  # the first keyframe at or after it: added there
+                if j < self.stepped:
+                    self.counts["late"] += 1
+                    return
+                a = j - 1 if j > 0 and t - self.kf_t[j - 1] <= self.kf_t[j] - t else j
+                self.due.setdefault(j, []).append((a, rec))
+            else:
+                self.pending.append(rec)
+        else:  # truth (a reference, not a measurement), imu (the IMU graph's)
+            self.counts["ignored"] += 1
+
+    def _want_matcher(self) -> None:
+        if self.matcher is None and self.cfg.use_icp:
+            self.matcher = (self._matcher_given if self._matcher_given is not None
+                            else default_matcher(self._icp_opts))
+
+    def _new_keyframe(self, t: float, scan: Scan | None) -> None:
+        k = len(self.kf_t)
+        self.kf_t.append(t)
+        if scan is not None:
+            self.kf_scan[k] = scan
+        for r in self.pending:  # they all lie in (t_{k-1}, t_k]: join the nearer keyframe, added now
+            a = k - 1 if k > 0 and r.t - self.kf_t[k - 1] <= t - r.t else k
+            self.due.setdefault(k, []).append((a, r))
+        self.pending = []
+
+    def _odometry_sample(self, r: Odometry) -> None:
+        cfg = self.cfg
+        sv, sw = r.sigma_v, r.sigma_w
+        if math.isfinite(sv) and math.isfinite(sw):
+            row = (r.t, r.v, r.w, sv, sw, 0.0)
+        else:  # the defaults: noise densities, relative to the speed and turn rate plus a floor
+            self.defaulted.add("odometry")
+            w_floor = math.radians(cfg.odo_sigma_w_deg)
+            row = (r.t, r.v, r.w,
+                   sv if math.isfinite(sv) else math.hypot(cfg.odo_sigma_v, cfg.odo_sigma_v_rel * r.v),
+                   sw if math.isfinite(sw) else math.hypot(w_floor, cfg.odo_sigma_w_rel * r.w), 1.0)
+        if self.odo_t and r.t == self.odo_t[-1]:
+            self.odo_rows[-1] = row  # the newest sample at a time holds (as searchsorted right does)
+        elif self.odo_t and r.t < self.odo_t[-1]:  # a little late: in its place
+            i = bisect.bisect_left(self.odo_t, r.t)
+            if self.odo_t[i] == r.t:
+                self.odo_rows[i] = row
+            else:
+                self.odo_t.insert(i, r.t)
+                self.odo_rows.insert(i, row)
+        else:
+            self.odo_t.append(r.t)
+            self.odo_rows.append(row)
+
+    def _prune_odometry(self, t: float) -> None:
+        """Drop samples no later interval can need (all before the last one at or before ``t``)."""
+        i = bisect.bisect_right(self.odo_t, t) - 1
+        if i > 256:
+            del self.odo_t[:i]
+            del self.odo_rows[:i]
+
+    # -- anchor ----------------------------------------------------------------------------------
+    def _anchor_ready(self, t_next: float) -> bool:
+        held = self.held
+        assert held is not None
+        kinds = {r.kind for r in held}
+        if "pose_prior" in kinds or ("gnss" in kinds and "heading" in kinds):
+            return True
+        charted = [r for r in held if r.kind == "beacon" and r.id in self.charted]
+        if charted and len({r.id for r in charted if abs(r.t - charted[0].t) <= 1e-6}) >= 2:
+            return True
+        return t_next - held[0].t > self.cfg.anchor_wait
+
+    def _choose_anchor(self, held: list[Record]) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
+        cfg = self.cfg
+        for r in held:
+            if isinstance(r, PosePrior):
+                return np.array([r.x, r.y, r.yaw]), np.array([r.sigma_xy, r.sigma_xy, r.sigma_yaw]), "pose_prior"
+        yaw_sig = math.radians(cfg.anchor_sigma_yaw_deg)
+        yaw_unknown = math.radians(cfg.anchor_sigma_yaw_unknown_deg)
+        gnss = [r for r in held if isinstance(r, Gnss)]
+        head = [r for r in held if isinstance(r, Heading)]
+        if gnss:
+            g = gnss[0]
+            yaw = head[0].yaw if head else 0.0
+            sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 3.0 * g.sigma
+            return (np.array([g.x, g.y, yaw]), np.array([sxy, sxy, yaw_sig if head else yaw_unknown]),
+                    "first GNSS+compass" if head else "first GNSS")
+        obs = [r for r in held if isinstance(r, BeaconObs) and r.id in self.charted]
+        if obs:
+            t0 = obs[0].t
+            first: dict[str, BeaconObs] = {}
+            for r in obs:
+                if r.t > t0 + 1e-6:
+                    break
+                first.setdefault(r.id, r)
+            sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 10.0
+            if len(first) >= 2:
+                a, b = list(first.values())[:2]
+                ca, cb = self.charted[a.id], self.charted[b.id]
+                pose = F.pose_from_two_beacons((ca.x, ca.y), (a.range, a.bearing), (cb.x, cb.y), (b.range, b.bearing))
+                return pose, np.array([sxy, sxy, yaw_sig]), "charted beacons"
+            a = obs[0]
+            yaw = head[0].yaw if head else 0.0
+            ca = self.charted[a.id]
+            pos = np.array([ca.x, ca.y]) - a.range * np.array([math.cos(yaw + a.bearing), math.sin(yaw + a.bearing)])
+            return (np.array([pos[0], pos[1], yaw]), np.array([sxy, sxy, yaw_sig if head else yaw_unknown]),
+                    "charted beacons")
+        for r in held:
+            if isinstance(r, Truth):  # nothing absolute in the log: the frame is the reference's start
+                return np.array([r.x, r.y, r.yaw]), np.array([1e-3, 1e-3, 1e-4]), "truth (first pose)"
+        return np.zeros(3), np.array([1e-3, 1e-3, 1e-4]), "origin"
+
+    def _start(self) -> None:
+        held, self.held = sorted(self.held or [], key=lambda r: r.t), None
+        self.anchor_pose, self.anchor_sigmas, self.anchor = self._choose_anchor(held)
+        if held:  # the grid starts at the first record, whatever it is (as keyframes.keyframe_times)
+            self.grid_t0 = held[0].t
+        first_prior = next((r for r in held if isinstance(r, PosePrior)), None)
+        for r in held:
+            if r is first_prior:  # it is the anchor
+                continue
+            self._ingest(r)
+
+    # -- relative motion -------------------------------------------------------------------------
+    def _odometry(self, t0: float, t1: float) -> tuple[gtsam.Pose2, NDArray[np.float64]] | None:
+        """The odometry (zero-order hold of the latest sample) composed over ``[t0, t1]``; ``None``
+        before the first sample."""
+        if not self.odo_t or (self.odo_t[0] > t0 + 1e-9 and self.odo_t[0] >= t1):
+            return None
+        lo = max(bisect.bisect_right(self.odo_t, max(t0, self.odo_t[0])) - 1, 0)
+        hi = bisect.bisect_right(self.odo_t, t1)
+        samples = np.array(self.odo_rows[lo:max(hi, lo + 1)], dtype=float)
+        inc = increment(samples, max(t0, self.odo_t[0]), t1, lateral=self.cfg.odo_lateral)
+        if inc is None:
+            return None
+        return gtsam.Pose2(*inc[0]), inc[1]
+
+    def _offset_motion(self, a: int, t: float, k: int) -> gtsam.Pose2 | None:
+        """Motion from keyframe ``a`` to time ``t`` (``None`` when they coincide): odometry when the
+        log has it, else the newest relative motion scaled to the time offset (constant velocity)."""
+        ta = self.kf_t[a]
+        if abs(t - ta) < 1e-6:
+            return None
+        if self.odo_t:
+            if t > ta:
+                odo = self._odometry(ta, t)
+                return None if odo is None else odo[0]
+            odo = self._odometry(t, ta)
+            return None if odo is None else odo[0].inverse()
+        if k == 0:
+            return None
+        gap = self.kf_t[k] - self.kf_t[k - 1]
+        return gtsam.Pose2.Expmap(gtsam.Pose2.Logmap(self.last_rel) * ((t - ta) / gap)) if gap > 0 else None
+
+    def motion_prior(self, dt: float, t: float | None = None) -> tuple[gtsam.Pose2, NDArray[np.float64], str]:
+        """The fallback motion over ``dt`` (ending at ``t``) when no odometry covers it.
+
+        * constant velocity: the twist of the last measured relative motion (odometry, ICP) when it
+          is at most ``cv_max_age`` old, else the GNSS velocity (:meth:`gnss_velocity`: forward
+          at the speed over ground, the unicycle of a vessel or robot); sigma
+          ``sqrt(cv_sigma^2 + sigma_speed^2 + (cv_accel age)^2) dt``, ``age`` the time since that
+          motion was measured (the velocity is less certain the longer it is extrapolated);
+        * random walk (no motion known, or ``motion_model="random-walk"``): identity, sigma
+          ``rw_sigma dt``;
+
+        both with the floor in quadrature (``dt = 0`` stays proper). Returns the mean, its
+        covariance and the model's name."""
+        cfg = self.cfg
+        dt = max(dt, 0.0)
+        floor = np.array([cfg.motion_floor_xy, cfg.motion_floor_xy, math.radians(cfg.motion_floor_yaw_deg)])
+        twist, extra, age = None, 0.0, 0.0
+        if cfg.motion_model == "constant-velocity":
+            if self.twist is not None and (t is None or self.twist_t is None or t - self.twist_t <= cfg.cv_max_age):
+                twist = self.twist
+                age = 0.0 if t is None or self.twist_t is None else max(t - dt - self.twist_t, 0.0)
+            elif t is not None:
+                g = self.gnss_velocity(t)
+                if g is not None:
+                    twist, extra, age = g
+        if twist is not None:
+            mean = gtsam.Pose2.Expmap(twist * dt)
+            sv = math.sqrt(cfg.cv_sigma_v**2 + extra**2 + (cfg.cv_accel * age) ** 2)
+            rate = np.array([sv, sv, math.radians(cfg.cv_sigma_w_deg)])
+            name = "constant-velocity"
+        else:
+            mean = gtsam.Pose2()
+            rate = np.array([cfg.rw_sigma_v, cfg.rw_sigma_v, math.radians(cfg.rw_sigma_w_deg)])
+            name = "random-walk"
+        return mean, np.diag(np.square(floor) + np.square(rate * dt)), name
+
+    def gnss_velocity(self, t: float) -> tuple[NDArray[np.float64], float, float] | None:
+        """Forward motion at the GNSS speed over ground: the least-squares velocity of the fixes of
+        the last ``cv_gnss_window`` seconds before ``t`` (at least 3, spanning a third of it) as a
+        body-frame twist ``(speed, 0, 0)``, and the speed's 1-sigma ``sigma / sqrt(sum (t_i -
+        mean t)^2)`` and its age [s]; zero speed when it is below 3 sigma (direction unknown). A fit
+        whose speed sigma exceeds ``cv_sigma_v`` (few fixes) is not used: through an outage the last
+        good velocity is kept for ``cv_max_age`` seconds."""
+        cfg = self.cfg
+        w = [f for f in self.fixes if t - cfg.cv_gnss_window <= f[0] <= t + EPS]
+        if len(w) >= 3 and w[-1][0] - w[0][0] >= cfg.cv_gnss_window / 3:
+            a = np.array(w)
+            tc = a[:, 0] - a[:, 0].mean()
+            ss = float(tc @ tc)
+            vx, vy = float(tc @ a[:, 1]) / ss, float(tc @ a[:, 2]) / ss
+            sv = float(np.sqrt(np.mean(a[:, 3] ** 2) / ss))
+            speed = math.hypot(vx, vy)
+            if sv <= cfg.cv_sigma_v:  # a fit worth having (else the last one is kept)
+                # below 3 sigma the direction is unknown: no motion, with the speed's sigma
+                self.gnss_twist = (w[-1][0], np.array([speed if speed > 3 * sv else 0.0, 0.0, 0.0]), sv)
+        if self.gnss_twist is None or t - self.gnss_twist[0] > cfg.cv_max_age:
+            return None
+        return self.gnss_twist[1], self.gnss_twist[2], max(t - self.gnss_twist[0], 0.0)
+
+    # -- one keyframe ----------------------------------------------------------------------------
+    def step(self, k: int, prev: gtsam.Pose2 | None, prev_cov: NDArray[np.float64] | None = None) -> Step:
+        """Factors and new values of keyframe ``k`` (the next one, in order). ``prev`` is the current
+        estimate of pose ``k-1``, ``prev_cov`` its world covariance (the online GNSS gate; ``None``
+        turns the gate off)."""
+        if k != self.stepped:
+            raise ValueError(f"keyframe {k} stepped out of order (next is {self.stepped})")
+        cfg = self.cfg
+        t = self.kf_t[k]
+        s = Step(k, t, gtsam.NonlinearFactorGraph(), gtsam.Values(), {F.X(k): t})
+        xk = F.X(k)
+        floor = np.array([cfg.motion_floor_xy, cfg.motion_floor_xy, math.radians(cfg.motion_floor_yaw_deg)])
+        if k == 0:
+            assert self.anchor_pose is not None and self.anchor_sigmas is not None
+            pose_k = gtsam.Pose2(*self.anchor_pose)
+            s.add(gtsam.PriorFactorPose2(xk, pose_k, gtsam.noiseModel.Diagonal.Sigmas(self.anchor_sigmas)), "anchor")
+        else:
+            assert prev is not None
+            t_prev = self.kf_t[k - 1]
+            dt = t - t_prev
+            odo = self._odometry(t_prev, t)
+            rel: gtsam.Pose2 | None = None
+            odo_cov = None
+            if odo is not None:
+                odo_cov = proper_cov(odo[1], floor)
+                if odo_cov is not None:
+                    s.add(F.odometry_between(F.X(k - 1), xk, odo[0], odo_cov), "odometry")
+                    rel = odo[0]
+            icp_rel = self._icp(s, k, rel, odo_cov)
+            if rel is None and icp_rel is None:  # nothing measured: the motion model ties the pose
+                mean, cov, _ = self.motion_prior(dt, t)
+                s.add(gtsam.BetweenFactorPose2(F.X(k - 1), xk, mean, gtsam.noiseModel.Gaussian.Covariance(cov)),
+                      "motion")
+                self.counts["motion_fallback"] += 1
+                rel = mean
+            else:
+                rel = icp_rel if icp_rel is not None else rel
+                if dt > 1e-6:
+                    self.twist = np.asarray(gtsam.Pose2.Logmap(rel)) / dt
+                    self.twist_t = t
+            self.last_rel, self.last_gap = rel, dt
+            pose_k = prev.compose(rel)
+        s.values.insert(xk, pose_k)
+        if self.bias_key is not None:
+            s.stamps[self.bias_key] = t
+        self._measurements(s, k, self.due.pop(k, []), pose_k, prev_cov, prev if k > 0 else None)
+        for i in self.beacon_ids.values():
+            s.stamps[F.L(i)] = t
+        self.stepped = k + 1
+        self.kf_scan.pop(k - 1, None)
+        self._prune_odometry(self.kf_t[k])
+        return s
+
+    def step_late(self, est: Callable[[int], gtsam.Pose2], prev_cov: NDArray[np.float64] | None = None) -> Step | None:
+        """After :meth:`finish`: the measurements that came after the last keyframe's batch, as a
+        batch of their own (``None`` when there are none)."""
+        if not self.late:
+            return None
+        k = len(self.kf_t) - 1
+        s = Step(k, self.kf_t[k], gtsam.NonlinearFactorGraph(), gtsam.Values(), {}, new_keyframe=False)
+        late, self.late = self.late, []
+        self._measurements(s, k, late, est(k), prev_cov, None, est=est)
+        for i in self.beacon_ids.values():
+            s.stamps[F.L(i)] = self.kf_t[k]
+        return s
+
+    def _icp(self, s: Step, k: int, odo_rel: gtsam.Pose2 | None, odo_cov: NDArray[np.float64] | None
+             ) -> gtsam.Pose2 | None:
+        """The weighted-ICP factor of keyframe ``k``'s scan against ``k-1``'s (``None`` when there is
+        no usable match)."""
+        cfg = self.cfg
+        if self.matcher is None or k not in self.kf_scan or (k - 1) not in self.kf_scan:
+            return None
+        init = _vec(odo_rel if odo_rel is not None else self.last_rel)
+        c0 = time.perf_counter()
+        ok, mp, mc = self.matcher(self.kf_scan[k], self.kf_scan[k - 1], init)
+        s.icp_ms = (time.perf_counter() - c0) * 1e3
+        self.n_icp += 1
+        cov = proper_cov(np.asarray(mc, dtype=float), np.zeros(3)) if ok else None  # the match's own, as is
+        if (not ok or cov is None or not np.all(np.isfinite(mp))
+                or np.hypot(mp[0] - init[0], mp[1] - init[1]) > cfg.icp_max_step):
+            self.n_icp_failed += 1
+            return None
+        rel = gtsam.Pose2(*mp)
+        if cfg.icp_gate is not None and odo_rel is not None and odo_cov is not None:
+            d = np.asarray(gtsam.Pose2.Logmap(odo_rel.between(rel)))
+            if float(d @ np.linalg.solve(odo_cov + cov, d)) > cfg.icp_gate**2:
+                self.n_icp_gated += 1
+                return None
+        s.add(F.icp_between(F.X(k - 1), F.X(k), mp, cov, robust=cfg.icp_robust), "icp")
+        return rel
+
+    def _measurements(self, s: Step, k: int, due: list[tuple[int, Record]], pose_k: gtsam.Pose2,
+                      prev_cov: NDArray[np.float64] | None, prev: gtsam.Pose2 | None,
+                      est: Callable[[int], gtsam.Pose2] | None = None) -> None:
+        cfg = self.cfg
+
+        def at(a: int) -> gtsam.Pose2:
+            if est is not None:
+                return est(a)
+            return pose_k if a == k else prev  # a is k or k-1
+
+        for a, r in due:
+            xa = F.X(a)
+            delta = self._offset_motion(a, r.t, k) if cfg.compensate_attachment else None
+            if isinstance(r, Gnss):
+                rx, ry = r.x, r.y
+                if delta is not None:  # the fix is of the pose at r.t = X_a * delta: move it back to X_a
+                    c, sn = math.cos(at(a).theta()), math.sin(at(a).theta())
+                    rx -= c * delta.x() - sn * delta.y()
+                    ry -= sn * delta.x() + c * delta.y()
+                if cfg.gnss_gate is not None and prev_cov is not None and id(r) not in self.after_outage:
+                    pa = at(a)
+                    d = np.array([rx - pa.x(), ry - pa.y()])
+                    S = prev_cov[:2, :2] + (r.sigma**2) * np.eye(2)
+                    if (float(d @ np.linalg.solve(S, d)) > cfg.gnss_gate**2
+                            and self.consecutive_rejects < cfg.gnss_gate_max_rejects):
+                        self.n_rejected += 1
+                        self.consecutive_rejects += 1
+                        continue
+                self.consecutive_rejects = 0
+                self.after_outage.discard(id(r))
+                s.add(F.gnss_factor(xa, rx, ry, r.sigma, robust=cfg.gnss_robust, k=cfg.gnss_k), "gnss")
+            elif isinstance(r, Heading):
+                sig = r.sigma * cfg.compass_sigma_scale
+                yaw = r.yaw - (delta.theta() if delta is not None else 0.0)
+                if cfg.compass_bias and self.bias_key is None:  # the bias frame, with the first reading
+                    self.bias_key = F.B(0)
+                    s.values.insert(self.bias_key, gtsam.Pose2())
+                    s.stamps[self.bias_key] = s.t
+                    s.add(F.compass_bias_prior(self.bias_key, math.radians(cfg.compass_bias_sigma_deg)), "bias")
+                if self.bias_key is not None:
+                    s.add(F.biased_compass_factor(self.bias_key, xa, yaw, sig, robust=cfg.compass_robust), "compass")
+                else:
+                    s.add(F.compass_factor(xa, yaw, sig, robust=cfg.compass_robust), "compass")
+            elif isinstance(r, BeaconObs):
+                self._beacon(s, xa, at(a), r, delta)
+            elif isinstance(r, PosePrior):
+                s.add(gtsam.PriorFactorPose2(xa, gtsam.Pose2(r.x, r.y, r.yaw), gtsam.noiseModel.Diagonal.Sigmas(
+                    np.array([r.sigma_xy, r.sigma_xy, r.sigma_yaw]))), "pose_prior")
+
+    def _beacon(self, s: Step, xa: int, pa: gtsam.Pose2, r: BeaconObs, delta: gtsam.Pose2 | None) -> None:
+        cfg = self.cfg
+        charted = self.charted.get(r.id)
+        if charted is None and not cfg.unknown_beacons:
+            return
+        rng_, brg = r.range, r.bearing
+        if delta is not None:  # the sighting from X_a * delta, as seen from X_a
+            ba = delta.transformFrom(np.array([rng_ * math.cos(brg), rng_ * math.sin(brg)]))
+            rng_, brg = float(np.hypot(ba[0], ba[1])), math.atan2(ba[1], ba[0])
+        if r.id not in self.beacon_ids:
+            i = len(self.beacon_ids)
+            self.beacon_ids[r.id] = i
+            lk = F.L(i)
+            if charted is not None:
+                p0 = np.array([charted.x, charted.y])
+                s.add(F.beacon_prior(lk, charted.x, charted.y, charted.sigma), "chart")
+            else:
+                p0 = F.init_from_sighting(_vec(pa), rng_, brg)
+            self.beacon_init[r.id] = p0
+            s.values.insert(lk, p0)
+        if not (math.isfinite(r.sigma_range) and math.isfinite(r.sigma_bearing)):
+            self.defaulted.add("beacon")
+        sr = r.sigma_range if math.isfinite(r.sigma_range) else math.hypot(cfg.beacon_sigma_range,
+                                                                           cfg.beacon_sigma_range_rel * r.range)
+        sb = r.sigma_bearing if math.isfinite(r.sigma_bearing) else math.radians(cfg.beacon_sigma_bearing_deg)
+        s.add(F.beacon_factor(xa, F.L(self.beacon_ids[r.id]), rng_, brg, sr, sb, robust=cfg.beacon_robust,
+                              k=cfg.beacon_k), "beacon")
+
+    def info(self) -> dict[str, Any]:
+        return {
+            "anchor": self.anchor,
+            "keyframes": len(self.kf_t),
+            "keyframe_policy": "scan" if self.mode == "scan" else f"grid {self.period:g} s",
+            "gnss_rejected": self.n_rejected,
+            "icp_pairs": self.n_icp,
+            "icp_failed": self.n_icp_failed,
+            "icp_gated": self.n_icp_gated,
+            "icp": self.matcher is not None,
+            "beacons": sorted(self.beacon_ids),
+            "compass_bias_estimated": self.bias_key is not None,
+            "defaulted_sigmas": sorted(self.defaulted),
+            **self.counts,
+        }

@@ -1,0 +1,127 @@
+"""The one configuration of the navigation graph (:class:`SmootherConfig`): keyframes, sensors,
+motion model, robust kernels, solver, noise estimation. ``-O key=value`` on ``graphnav run`` /
+``graphnav live`` and ``Navigator(config)`` / ``**options`` in Python set its fields; an unknown
+key is an error naming the known ones. docs/smoother.md explains each group."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..config import config_from_options
+
+MOTION_MODELS = ("constant-velocity", "random-walk")
+CONVERGE = ("lm", "updates", "none")
+NOISE_ESTIMATION = ("off", "defaulted", "all")
+
+
+@dataclass
+class SmootherConfig:
+    """Every tunable of the navigation graph (settable as ``-O key=value``).
+
+    Units: metres, seconds; angles in degrees where the name says ``_deg``, else radians.
+    """
+
+    # -- solver ------------------------------------------------------------------------------
+    solver: str = "isam2"  # "isam2" | "fixed-lag" | "batch" (set by the estimator's name on the CLI)
+    lag: float = 20.0  # fixed-lag window [s]
+    rebase_every: int | None = 6000  # live mode (no history kept): re-anchor the fixed-lag smoother every N keyframes
+    relinearize_threshold: float = 0.05  # poses: tangent-space change that triggers relinearization
+    relinearize_threshold_landmarks: float = 0.5  # [m] beacons (many factors each: relinearize rarely)
+    relinearize_threshold_bias_deg: float = 2.0  # compass-bias frame (one factor per compass reading)
+    relinearize_skip: int = 1
+    isam_extra_updates: int = 0  # extra ISAM2.update() calls per keyframe
+    final_updates: int = 2  # extra ISAM2.update() calls after the last keyframe
+    converge: str = "lm"  # the smoothed isam2 result: "lm" closing Levenberg-Marquardt from the iSAM2
+    #                       estimate (= batch), "updates" (final_updates only), "none"
+    wildfire_threshold: float = 0.001  # iSAM2 back-substitution stops where the change is below this
+    partial_relinearization_check: bool = True
+    isam_factorization: str = "QR"  # iSAM2 clique factorization: "QR" (robust) or "CHOLESKY" (fails on long chains)
+    isam_optimizer: str = "gauss-newton"  # iSAM2 step: "gauss-newton" or "dogleg" (a trust region; 2-20x the time)
+    lm_tol: float = 1e-10  # LM relative/absolute decrease tolerance (1e-14: MRCLAM r1 3.8x the time, same ATE)
+    lm_max_iterations: int = 1000  # (stops at lm_tol first; MRCLAM batch from dead reckoning needs ~300)
+    covariances: bool = True  # per-pose marginal covariances on the final trajectory
+
+    # -- keyframes and attachment ---------------------------------------------------------------
+    keyframe_period: float | None = None  # None: one pose per scan (a 0.5 s grid without scans)
+    scan_stride: int = 1  # with scans: a keyframe (and an ICP match) every N-th scan
+    grid_gap: float = 5.0  # [s] grid slots inside a gap without any record longer than this are skipped
+    compensate_attachment: bool = True  # move each measurement to its keyframe's time by the motion between
+    anchor_wait: float = 2.0  # [s] records are held this long (log time) to choose the anchor
+
+    # -- motion: every new pose is tied to the previous one -------------------------------------
+    use_odometry: bool = True
+    # when the log gives no odometry sigmas: noise densities [per sqrt(s)], so the integrated error
+    # does not depend on the sample rate, hypot(floor, rel * |v|) and hypot(floor, rel * |w|)
+    odo_sigma_v: float = 0.02  # [m/s sqrt(s)] floor
+    odo_sigma_v_rel: float = 0.1  # x |v|
+    odo_sigma_w_deg: float = 1.0  # [deg/s sqrt(s)] floor
+    odo_sigma_w_rel: float = 0.1  # x |w|
+    odo_lateral: float = 0.05  # lateral (sway) 1-sigma as a fraction of the distance run
+    motion_model: str = "constant-velocity"  # without odometry: "constant-velocity" | "random-walk"
+    cv_sigma_v: float = 0.5  # [m/s] constant velocity: 1-sigma velocity change -> sigma_xy = cv_sigma_v dt
+    cv_sigma_w_deg: float = 10.0  # [deg/s] its yaw counterpart
+    cv_accel: float = 0.3  # [m/s^2] the velocity's 1-sigma grows by this per second since it was measured
+    cv_max_age: float = 60.0  # [s] the last measured motion (or GNSS velocity) is kept this long
+    cv_gnss_window: float = 10.0  # [s] GNSS fixes fitted for the speed over ground (no odometry, no scans)
+    rw_sigma_v: float = 2.0  # [m/s] random walk (no motion known): sigma_xy = rw_sigma_v dt
+    rw_sigma_w_deg: float = 30.0  # [deg/s]
+    motion_floor_xy: float = 1e-3  # [m] added in quadrature to every motion factor (dt = 0 stays proper)
+    motion_floor_yaw_deg: float = 0.01
+
+    # -- scans (weighted ICP) --------------------------------------------------------------------
+    use_icp: bool = True
+    icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
+    icp_max_step: float = 5.0  # [m] an ICP step farther than this from the prediction is rejected
+    icp_gate: float | None = 4.0  # reject a match whose Mahalanobis distance to the odometry exceeds it
+    icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.icp.IcpConfig
+
+    # -- GNSS ------------------------------------------------------------------------------------
+    gnss_robust: str | None = "huber"  # gross outliers are gated (online) or dropped (batch)
+    gnss_k: float | None = None
+    gnss_gate: float | None = 4.0  # reject fixes whose Mahalanobis distance to the online prediction exceeds it
+    gnss_gate_max_rejects: int = 15  # ...unless this many in a row were rejected (re-acquire after drift)
+    gnss_gate_outage: float = 5.0  # [s] ...and the first fix after a gap this long is not gated (outage)
+
+    # -- compass ---------------------------------------------------------------------------------
+    compass_robust: str | None = "huber"
+    compass_bias: bool = True  # estimate a constant compass bias (a bias-frame variable)
+    compass_bias_sigma_deg: float = 10.0
+    compass_sigma_scale: float = 1.0
+
+    # -- beacons ---------------------------------------------------------------------------------
+    beacon_robust: str | None = "huber"
+    beacon_k: float | None = None
+    unknown_beacons: bool = True  # SLAM on beacons missing from the chart
+    beacon_sigma_range: float = 0.1  # [m] when the record gives none: hypot(this, rel * range)
+    beacon_sigma_range_rel: float = 0.03
+    beacon_sigma_bearing_deg: float = 1.0  # [deg] when the record gives none
+
+    # -- anchor ----------------------------------------------------------------------------------
+    anchor_sigma_xy: float | None = None  # prior on the first pose when there is no pose_prior record
+    anchor_sigma_yaw_deg: float = 30.0  # ... its yaw sigma at the first compass reading
+    anchor_sigma_yaw_unknown_deg: float = 60.0  # ... at yaw 0 without one: 1 rad, not pi, or iSAM2's
+    #  Gauss-Newton step diverges where nothing else observes the yaw (a GNSS-only log); odometry and
+    #  GNSS recover a start 180 deg off (square loop: online 0.80 m against 0.68 m with pi)
+
+    # -- noise the log does not give --------------------------------------------------------------
+    noise_estimation: str = "defaulted"  # variance scale per sensor group after the batch solution:
+    #  "defaulted" (the groups whose sigmas came from the defaults above), "all", "off"
+    noise_iterations: int = 3  # re-solves of the variance-component estimation
+
+    def __post_init__(self) -> None:
+        from .solver import KINDS
+
+        for name, val, allowed in (("solver", self.solver, KINDS), ("motion_model", self.motion_model, MOTION_MODELS),
+                                   ("converge", self.converge, CONVERGE),
+                                   ("noise_estimation", self.noise_estimation, NOISE_ESTIMATION)):
+            if val not in allowed:
+                raise ValueError(f"{name} must be one of {', '.join(allowed)}; got {val!r}")
+        if self.scan_stride < 1:
+            raise ValueError(f"scan_stride must be >= 1, got {self.scan_stride}")
+        if self.keyframe_period is not None and not self.keyframe_period > 0:
+            raise ValueError(f"keyframe period must be > 0, got {self.keyframe_period}")
+
+    @classmethod
+    def from_options(cls, options: dict[str, Any]) -> SmootherConfig:
+        return config_from_options(cls, options, "smoother")

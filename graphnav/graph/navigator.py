@@ -1,0 +1,371 @@
+"""The navigator: records in, the navigation solution out, online and smoothed.
+
+::
+
+    log = graphnav.load_log(path)
+    nav = graphnav.Navigator(config=None)   # iSAM2 by default; SmootherConfig(solver="fixed-lag"), ...
+    for rec in log:
+        est = nav.add(rec)                  # Estimate | None: est.t, est.pose (gtsam.Pose2), est.cov (3x3, world)
+    traj = nav.smoothed()                   # the smoothed Trajectory with per-pose covariances
+
+:class:`Navigator` couples the record-by-record :class:`~graphnav.graph.builder.GraphBuilder` with a
+:class:`~graphnav.graph.solver.Solver`. After every keyframe's batch the online estimate of the
+newest pose and its marginal covariance (rotated to the world frame) are returned (iSAM2,
+fixed-lag; batch returns nothing online). :meth:`Navigator.smoothed` ends the run: iSAM2's
+estimate after ``final_updates`` relinearisations and, with ``converge="lm"`` (default), a closing
+Levenberg-Marquardt step from it over the whole graph -- the same problem batch solves, so the two
+agree --; batch LM from the chained initial guess; fixed-lag each pose as it left the window. The
+batch solutions drop gross GNSS outliers by their residual and re-solve, and estimate a noise scale
+per sensor group when ``noise_estimation`` asks (:mod:`graphnav.graph.noise`).
+
+``graphnav run -e isam2|batch|fixed-lag`` (:mod:`graphnav.graph.smoother`) and ``graphnav live``
+(:mod:`graphnav.online.runner`) are loops over it. A failure of GTSAM is a
+:class:`~graphnav.errors.GraphnavError` naming the record and time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterable
+from dataclasses import asdict, replace
+from typing import Any
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+import factors as F
+
+from ..errors import GraphnavError
+from ..geometry import wrap_angle
+from ..log import KnownBeacon, NavLog, Record
+from ..result import Estimate, OnEstimate, RunResult
+from ..trajectory import Trajectory
+from . import noise
+from .builder import GraphBuilder, Matcher, Step
+from .config import SmootherConfig
+from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt, marginals
+
+
+def world_cov(pose: gtsam.Pose2, cov: NDArray[np.float64]) -> NDArray[np.float64]:
+    """GTSAM's body-tangent Pose2 covariance -> (x, y, yaw) covariance in the world frame."""
+    c, s = math.cos(pose.theta()), math.sin(pose.theta())
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return R @ cov @ R.T
+
+
+def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
+    return np.array([p.x(), p.y(), p.theta()])
+
+
+def graph_params(cfg: SmootherConfig) -> gtsam.ISAM2Params:
+    """The iSAM2 parameters of the odometry/ICP graph: thresholds per variable type (poses ``x``,
+    beacons ``l``, compass-bias frame ``b``)."""
+    return isam_params({"x": [cfg.relinearize_threshold] * 3, "l": [cfg.relinearize_threshold_landmarks] * 2,
+                        "b": [1.0, 1.0, math.radians(cfg.relinearize_threshold_bias_deg)]},
+                       skip=cfg.relinearize_skip, partial_check=cfg.partial_relinearization_check,
+                       wildfire=cfg.wildfire_threshold, factorization=cfg.isam_factorization,
+                       optimizer=cfg.isam_optimizer)
+
+
+class Navigator:
+    """Record-by-record navigation on one factor graph (see the module docstring).
+
+    ``config``: a :class:`SmootherConfig` (``None``: defaults; ``**options`` override its fields).
+    ``chart``: charted beacons (``KnownBeacon``; they may also be passed to :meth:`add`);
+    ``lidar``: the log's LiDAR error model (``meta["lidar"]``); ``scans``: whether scans will
+    come (``None``: a keyframe grid until the first scan); ``matcher``: replaces the weighted ICP;
+    ``on_estimate(t, pose_vec, cov)``: called with every online estimate. ``history=False`` (live
+    mode, unbounded runs) keeps neither the online trajectory nor, with fixed-lag, the poses that
+    left the window: memory stays bounded (the smoothed trajectory is then the window only).
+    :meth:`for_log` fills these from a :class:`NavLog`.
+    """
+
+    def __init__(self, config: SmootherConfig | None = None, *, chart: Iterable[KnownBeacon] = (),
+                 lidar: dict[str, Any] | None = None, scans: bool | None = None, matcher: Matcher | None = None,
+                 on_estimate: OnEstimate | None = None, history: bool = True, **options: Any) -> None:
+        if config is None:
+            cfg = SmootherConfig.from_options(options)
+        else:
+            SmootherConfig.from_options(options)  # unknown keys are an error
+            cfg = replace(config, **options)
+        self.cfg = cfg
+        self.builder = GraphBuilder(cfg, matcher=matcher, chart=chart, lidar=lidar, scans=scans)
+        self.solver = Solver(cfg.solver, graph_params(cfg), lag=cfg.lag,
+                             lm=LmSettings(cfg.lm_tol, cfg.lm_max_iterations))
+        self.groups: list[str] = []  # sensor group of every factor in solver.graph
+        self.on_estimate = on_estimate
+        self.history = history
+        self.on_t: list[float] = []
+        self.on_p: list[NDArray[np.float64]] = []
+        self.on_c: list[NDArray[np.float64] | None] = []
+        self.step_ms: list[float] = []
+        self.step_cpu: list[float] = []
+        self.icp_ms: list[float] = []
+        self.last_pose: gtsam.Pose2 | None = None
+        self.last_cov: NDArray[np.float64] | None = None
+        self._prev: tuple[float | None, NDArray[np.float64] | None] = (None, None)
+        self._base = 0  # the keyframe the fixed-lag smoother was last re-anchored at
+        self.n_records = 0
+        self._rec: Record | None = None
+        self._result: RunResult | None = None
+        self._final: gtsam.Values | None = None
+        self.extra: dict[str, Any] = {}
+
+    @classmethod
+    def for_log(cls, log: NavLog, config: SmootherConfig | None = None, **kw: Any) -> Navigator:
+        """A navigator for ``log``: its chart, LiDAR model and whether it has scans."""
+        lidar = log.meta.get("lidar") if isinstance(log.meta.get("lidar"), dict) else None
+        return cls(config, chart=log.beacons_known, lidar=lidar, scans=bool(log.of("scan")), **kw)
+
+    # -- online ----------------------------------------------------------------------------------
+    def add(self, rec: Record | KnownBeacon) -> Estimate | None:
+        """Take one record; the newest online estimate when a keyframe was solved, else ``None``."""
+        if self._result is not None:
+            raise RuntimeError("the navigator has finished (smoothed() was called)")
+        self.n_records += 1
+        self._rec = rec if not isinstance(rec, KnownBeacon) else self._rec
+        self.builder.push(rec)
+        return self._advance()
+
+    def flush(self) -> Estimate | None:
+        """End of input: solve the keyframes still waiting for a later record."""
+        if self.builder.finished:
+            return None
+        self.builder.finish()
+        est = self._advance()
+        late = self.builder.step_late(self._estimate_of, self.last_cov if self.solver.online else None)
+        if late is not None:
+            self._update(late)
+        return est
+
+    def _advance(self) -> Estimate | None:
+        est = None
+        for k in self.builder.ready():
+            est = self._step(k) or est
+        return est
+
+    def _estimate_of(self, k: int) -> gtsam.Pose2:
+        return self.solver.estimate(F.X(k))
+
+    def _fail(self, exc: SolverError, t: float) -> GraphnavError:
+        r = self._rec
+        where = f"record {self.n_records}" + (f" ({r.kind} at t = {r.t:.6g} s)" if r is not None else "")
+        return GraphnavError(f"the navigation graph could not be solved at the keyframe of t = {t:.6g} s: {exc}",
+                             where=where)
+
+    def _update(self, s: Step) -> None:
+        try:
+            self.solver.update(s.graph, s.values, s.stamps, t=s.t, track=self._freeze if self.history else None,
+                               tracked=(F.X(s.k),) if s.new_keyframe else ())
+            self.solver.relinearize(self.cfg.isam_extra_updates)
+        except SolverError as exc:
+            raise self._fail(exc, s.t) from None
+        if self.solver.keep:
+            self.groups.extend(s.groups)
+
+    def _freeze(self, key: int) -> tuple[gtsam.Pose2, NDArray[np.float64] | None]:
+        p = self.solver.estimate(key)
+        return p, (world_cov(p, self.solver.marginal(key)) if self.cfg.covariances else None)
+
+    def _step(self, k: int) -> Estimate | None:
+        s = self.builder.step(k, self.last_pose, self.last_cov if self.solver.online else None)
+        if s.icp_ms is not None:
+            self.icp_ms.append(s.icp_ms)
+        c0, p0 = time.perf_counter(), time.process_time()
+        self._update(s)
+        if not self.solver.online:
+            self.last_pose = s.values.atPose2(F.X(k))
+            return None
+        try:
+            pose = self.solver.estimate(F.X(k))
+            cov = world_cov(pose, self.solver.marginal(F.X(k)))
+        except SolverError as exc:
+            raise self._fail(exc, s.t) from None
+        self.step_ms.append((time.perf_counter() - c0) * 1e3)
+        self.step_cpu.append((time.process_time() - p0) * 1e3)
+        prev_t, prev_p = self._prev
+        self.last_pose, self.last_cov = pose, cov
+        vec = _vec(pose)
+        self._prev = (s.t, vec)
+        if self.history:
+            self.on_t.append(s.t)
+            self.on_p.append(vec)
+            self.on_c.append(cov)
+        else:  # bounded: the last 10 000 step times only, and the fixed-lag smoother re-anchored
+            del self.step_ms[:-10_000], self.step_cpu[:-10_000], self.icp_ms[:-10_000]
+            if (self.cfg.solver == "fixed-lag" and self.cfg.rebase_every
+                    and k - self._base >= self.cfg.rebase_every):
+                self._rebase(k, s.t)
+        if self.on_estimate is not None:
+            self.on_estimate(s.t, vec, cov)
+        return Estimate(s.t, vec, cov, *self._kinematics(s.t, vec, prev_t, prev_p))
+
+    def _rebase(self, k: int, t: float) -> None:
+        """A fresh fixed-lag smoother with priors carrying the current marginals of the variables
+        still in use: the newest pose, the compass-bias frame and the beacons (live mode)."""
+        g, v, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
+        keys = [F.X(k)] + ([self.builder.bias_key] if self.builder.bias_key is not None else [])
+        keys += [F.L(i) for i in self.builder.beacon_ids.values()]
+        try:
+            for key in keys:
+                cov = self.solver.marginal(key)
+                if gtsam.Symbol(key).chr() == ord("l"):
+                    p = self.solver.estimate(key, "Point2")
+                    g.add(gtsam.PriorFactorPoint2(key, p, gtsam.noiseModel.Gaussian.Covariance(cov)))
+                else:
+                    p = self.solver.estimate(key)
+                    g.add(F.pose_prior(key, _vec(p), cov))
+                v.insert(key, p)
+                stamps[key] = t
+            self.solver.rebase(g, v, stamps)
+        except SolverError as exc:
+            raise self._fail(exc, t) from None
+        self._base = k
+        self.extra["rebases"] = self.extra.get("rebases", 0) + 1
+
+    def _kinematics(self, t: float, p: NDArray[np.float64], prev_t: float | None,
+                    prev_p: NDArray[np.float64] | None) -> tuple[float | None, float | None, float | None]:
+        """Speed over ground, course, yaw rate: from the latest odometry sample when recent, else
+        differenced from the previous keyframe."""
+        sog = cog = w = None
+        if prev_t is not None and prev_p is not None and t > prev_t:
+            dt = t - prev_t
+            dx, dy = p[0] - prev_p[0], p[1] - prev_p[1]
+            sog, cog = math.hypot(dx, dy) / dt, math.atan2(dy, dx)
+            w = float(wrap_angle(p[2] - prev_p[2])) / dt
+        b = self.builder
+        if b.odo_t and t - b.odo_t[-1] <= 2.0:
+            _, v, wr = b.odo_rows[-1][:3]
+            sog, w = abs(v), wr
+        return sog, cog, w
+
+    def info(self) -> dict[str, Any]:
+        """Counts and timings so far (live mode's summary)."""
+        s = np.asarray(self.step_ms)
+        icp = np.asarray(self.icp_ms)
+        return {"estimator": f"navigator ({self.cfg.solver})", **self.builder.info(), **self.extra,
+                "keyframes_solved": self.builder.stepped,
+                "icp_ms_median": float(np.median(icp)) if icp.size else None,
+                "step_ms_median": float(np.median(s)) if s.size else None,
+                "step_ms_p99": float(np.percentile(s, 99)) if s.size else None}
+
+    def online(self) -> Trajectory | None:
+        """The online estimates so far (``None`` for batch)."""
+        if not self.solver.online:
+            return None
+        cov = np.array(self.on_c) if self.on_c else None
+        return Trajectory(np.array(self.on_t), np.array(self.on_p).reshape(-1, 3), cov,
+                          name=f"{self.cfg.solver}-online")
+
+    # -- the end ---------------------------------------------------------------------------------
+    def smoothed(self) -> Trajectory:
+        """Finish (:meth:`flush`) and return the smoothed trajectory with per-pose covariances."""
+        return self.result().trajectory
+
+    def result(self) -> RunResult:
+        """Finish and return everything: smoothed and online trajectories, timings, info."""
+        if self._result is None:
+            self.flush()
+            self._result = self._finish()
+        return self._result
+
+    def _finish(self) -> RunResult:
+        cfg, b = self.cfg, self.builder
+        n = len(b.kf_t)
+        info = b.info()
+        info["config"] = asdict(cfg)
+        info["solver"] = cfg.solver
+        t = np.array(b.kf_t)
+        if n == 0:
+            empty = Trajectory(np.zeros(0), np.zeros((0, 3)), name=cfg.solver)
+            return RunResult(empty, self.online(), np.zeros(0), np.array(self.icp_ms), info)
+        covs: list[NDArray[np.float64]] | None = None
+        c0, p0 = time.perf_counter(), time.process_time()
+        try:
+            if cfg.solver == "fixed-lag":
+                values = self.solver.current()
+                poses, covs = [], []
+                for k in range(n):
+                    fr = self.solver.frozen.get(F.X(k))
+                    if fr is None:
+                        p = values.atPose2(F.X(k))
+                        c = world_cov(p, self.solver.marginal(F.X(k))) if cfg.covariances else None
+                    else:
+                        p, c = fr
+                    poses.append(_vec(p))
+                    covs.append(c)
+                if not cfg.covariances:
+                    covs = None
+            else:
+                if cfg.solver == "isam2":
+                    self.solver.relinearize(cfg.final_updates)
+                    values = self.solver.current()
+                    if cfg.converge == "lm":
+                        values = self._batch(values, info)
+                else:
+                    values = self._batch(self.solver.initial, info)
+                poses = [_vec(values.atPose2(F.X(k))) for k in range(n)]
+                if cfg.covariances:
+                    if cfg.solver == "isam2" and cfg.converge != "lm":
+                        covs = [world_cov(values.atPose2(F.X(k)), self.solver.marginal(F.X(k))) for k in range(n)]
+                    else:
+                        m = marginals(self.solver.graph, values)
+                        covs = [world_cov(values.atPose2(F.X(k)), m(F.X(k))) for k in range(n)]
+        except SolverError as exc:
+            raise GraphnavError(f"the navigation graph could not be solved at the end of the log: {exc}",
+                                where=f"record {self.n_records}") from None
+        final_ms = (time.perf_counter() - c0) * 1e3
+        final_cpu = (time.process_time() - p0) * 1e3
+        self._final = values
+        traj = Trajectory(t, np.array(poses).reshape(-1, 3), np.array(covs) if covs is not None else None,
+                          name=cfg.solver)
+        info["final_ms"] = final_ms
+        if b.bias_key is not None and values.exists(b.bias_key):
+            info["compass_bias_deg"] = math.degrees(F.compass_bias(values.atPose2(b.bias_key)))
+        info["beacon_init"] = {bid: p.tolist() for bid, p in b.beacon_init.items()}
+        info["beacon_estimates"] = {bid: values.atPoint2(F.L(i)).tolist() for bid, i in b.beacon_ids.items()
+                                    if values.exists(F.L(i))}
+        info.update(self.extra)
+        if self.solver.online:
+            info["step_cpu_ms_median"] = float(np.median(self.step_cpu)) if self.step_cpu else None
+            step_ms = np.array(self.step_ms)
+        else:
+            info["solve_ms"] = final_ms
+            info["step_cpu_ms_median"] = final_cpu / n
+            step_ms = np.full(n, final_ms / n)
+            if self.on_estimate is not None:
+                for k in range(n):
+                    self.on_estimate(float(t[k]), traj.poses[k], None if traj.cov is None else traj.cov[k])
+        return RunResult(traj, self.online(), step_ms, np.array(self.icp_ms), info)
+
+    def _batch(self, init: gtsam.Values, info: dict[str, Any]) -> gtsam.Values:
+        """LM over the whole graph from ``init``; gross GNSS outliers (residual beyond ``gnss_gate``
+        sigmas) dropped and LM re-run (up to 3 times); then the noise estimation when configured."""
+        cfg = self.cfg
+        c0 = time.perf_counter()
+        graph = self.solver.graph
+        values, iters = levenberg_marquardt(graph, init, self.solver.lm)
+        dropped = 0
+        for _ in range(3 if cfg.gnss_gate is not None else 0):
+            keep = [i for i in range(graph.size()) if not (
+                self.groups[i] == "gnss" and noise.whitened_norm(graph.at(i), values, robust=False) > cfg.gnss_gate)]
+            if len(keep) == graph.size():
+                break
+            dropped += graph.size() - len(keep)
+            graph = noise.subgraph(graph, keep)
+            self.groups = [self.groups[i] for i in keep]
+            values, it = levenberg_marquardt(graph, values, self.solver.lm)
+            iters += it
+        info["gnss_dropped_after_lm"] = dropped
+        if cfg.noise_estimation != "off":
+            scalable = noise.SCALABLE if cfg.noise_estimation == "all" else tuple(
+                g for g in noise.SCALABLE if g in self.builder.defaulted)
+            graph, values, vce = noise.estimate_scales(graph, values, self.groups, scalable, cfg.noise_iterations,
+                                                       self.solver.lm)
+            info["noise_scale"] = vce
+        self.solver.graph = graph
+        info["lm_iterations"] = iters
+        info["converge_ms"] = (time.perf_counter() - c0) * 1e3
+        return values

@@ -1,0 +1,164 @@
+"""Noise the log does not give: a variance scale per sensor group, estimated from the residuals
+of a batch solution (variance-component estimation, Förstner 1979; Koch, *Parameter Estimation
+and Hypothesis Testing in Linear Models*, 1999, sec. 3.6.3).
+
+For a Gauss-Markov model with groups of observations ``g`` whose covariances are known up to a
+factor, ``Sigma_g = s_g Sigma_g0``, the iterated estimate is
+
+    s_g <- s_g * (e_g^T W_g e_g) / r_g,        r_g = m_g - tr(A_g N^-1 A_g^T)
+
+with ``e_g`` the residuals at the solution, ``W_g`` the current weights, ``m_g`` the group's
+number of (effective) observations, ``A_g`` its whitened Jacobian rows and ``N = A^T A`` the
+normal matrix of the whole problem: ``r_g`` is the group's redundancy (its share of the degrees of
+freedom), so ``e^T W e / r`` is an unbiased variance factor. Each iteration rescales the group's
+noise models by ``sqrt(s_g)`` and re-solves with Levenberg-Marquardt.
+
+Here the linearised, whitened system comes from GTSAM (``linearize`` -> ``sparseJacobian_``; robust
+kernels enter as their IRLS weights, so outliers count with the weight the solution gives them),
+and the trace is estimated with Hutchinson's estimator (Rademacher probes, one sparse LU of
+``N`` and one multi-column solve per iteration): the relative error of ``r_g`` is about
+``sqrt(2 / (probes * tr))``, below 1 % for the hundreds of observations of a sensor group.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import gtsam
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .builder import SCALABLE
+from .solver import LmSettings, levenberg_marquardt
+
+__all__ = ["SCALABLE", "estimate_scales", "group_statistics", "scaled", "subgraph", "whitened_norm"]
+
+
+def whitened_norm(f: gtsam.NonlinearFactor, values: gtsam.Values, *, robust: bool = True) -> float:
+    """The factor's Mahalanobis residual norm (``robust=False``: of its Gaussian part)."""
+    nm = f.noiseModel()
+    base = nm.noise() if hasattr(nm, "noise") and not robust else nm
+    e = f.unwhitenedError(values)
+    return float(np.sqrt(base.squaredMahalanobisDistance(e)))
+
+
+def subgraph(graph: gtsam.NonlinearFactorGraph, keep: Sequence[int]) -> gtsam.NonlinearFactorGraph:
+    """The factors ``keep`` of ``graph``, in order."""
+    out = gtsam.NonlinearFactorGraph()
+    for i in keep:
+        out.add(graph.at(i))
+    return out
+
+
+def scaled(f: gtsam.NonlinearFactor, s: float) -> gtsam.NonlinearFactor:
+    """``f`` with its covariance multiplied by ``s`` (robust kernel kept)."""
+    nm = f.noiseModel()
+    robust = nm.robust() if hasattr(nm, "robust") else None
+    base = nm.noise() if robust is not None else nm
+    new = gtsam.noiseModel.Gaussian.SqrtInformation(np.asarray(base.R()) / np.sqrt(s))
+    if robust is not None:
+        new = gtsam.noiseModel.Robust.Create(robust, new)
+    return f.cloneWithNewNoiseModel(new)
+
+
+def _residual_rows(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, idx: Sequence[int]) -> np.ndarray:
+    """The whitened residuals of the factors ``idx`` (their Gaussian part, no robust weight), row by
+    row; rows with zero precision (a yaw-only compass) are left out."""
+    out = []
+    for i in idx:
+        f = graph.at(i)
+        nm = f.noiseModel()
+        base = nm.noise() if hasattr(nm, "robust") else nm
+        e = np.asarray(base.whiten(f.unwhitenedError(values)))
+        R = np.asarray(base.R())
+        out.append(e[np.any(R != 0.0, axis=1)])
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: Sequence[str],
+                     which: Sequence[str], *, probes: int = 16, seed: int = 0) -> dict[str, dict[str, float]]:
+    """Per group of ``which``: ``chi2`` (IRLS-weighted squared residuals), ``m`` (effective
+    observations), ``redundancy`` (``m - tr(A_g N^-1 A_g^T)``, Hutchinson, on the IRLS-weighted
+    Jacobian) and ``median_e2`` (median squared whitened residual, unweighted) at ``values``."""
+    lin = graph.linearize(values)
+    sj = np.asarray(lin.sparseJacobian_())
+    rows, cols, vals = sj[0].astype(np.int64) - 1, sj[1].astype(np.int64) - 1, sj[2]
+    n_cols = int(cols.max()) if cols.size else 0  # the last column is b
+    is_b = cols == n_cols
+    m_rows = int(rows.max()) + 1 if rows.size else 0
+    b = np.zeros(m_rows)
+    b[rows[is_b]] = vals[is_b]
+    A = sp.csr_matrix((vals[~is_b], (rows[~is_b], cols[~is_b])), shape=(m_rows, n_cols))
+    # rows of each factor: factors in order, each its noise model's dimension
+    dims = [graph.at(i).dim() for i in range(graph.size())]
+    starts = np.concatenate([[0], np.cumsum(dims)])
+    row_group = np.empty(int(starts[-1]), dtype=object)
+    for i, g in enumerate(groups):
+        row_group[starts[i]:starts[i + 1]] = g
+    row_group = row_group[:m_rows]
+    active = np.asarray(np.abs(A).sum(axis=1)).ravel() > 0  # zero-precision rows observe nothing
+    N = (A.T @ A).tocsc()
+    lu = spla.splu(N + sp.identity(n_cols, format="csc") * 1e-12 * max(1.0, float(N.diagonal().max())),
+                   permc_spec="MMD_AT_PLUS_A")
+    rng = np.random.default_rng(seed)
+    out: dict[str, dict[str, float]] = {}
+    for g in which:
+        sel = np.flatnonzero((row_group == g) & active)
+        if sel.size == 0:
+            continue
+        AZ = np.asarray(A[sel].T @ rng.choice([-1.0, 1.0], size=(sel.size, probes)))
+        tr = float(np.einsum("ij,ij->", AZ, lu.solve(AZ))) / probes
+        e = _residual_rows(graph, values, [i for i, gi in enumerate(groups) if gi == g])
+        out[g] = {"chi2": float(b[sel] @ b[sel]), "m": float(sel.size), "redundancy": float(sel.size - tr),
+                  "median_e2": float(np.median(e**2)) if e.size else float("nan")}
+    return out
+
+
+MEDIAN_CHI2_1 = 0.454936423119572  # median of a chi-square variable with one degree of freedom
+
+
+def estimate_scales(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: Sequence[str],
+                    which: Sequence[str], iterations: int, lm: LmSettings | None = None,
+                    *, robust: bool = True, min_redundancy: float = 5.0, bounds: tuple[float, float] = (1e-4, 1e4)
+                    ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values, dict[str, Any]]:
+    """Iterated variance-component estimation (module docstring) for the groups ``which``;
+    returns the rescaled graph, its solution and per group the total variance scale (the
+    sigmas were multiplied by its square root), the last estimate and the redundancy.
+
+    ``robust`` (default): the group's scale is ``median(e^2) / median(chi2_1) * m / r`` (the
+    median squared whitened residual, each row's expectation ``s (1 - h_i)`` approximated by the
+    group's mean ``s r / m``) instead of ``e^T W e / r``: real logs have outliers (MRCLAM's camera:
+    1-2 % gross), which inflate the chi-square, and robust kernels, which deflate it."""
+    total = {g: 1.0 for g in which}
+    report: dict[str, Any] = {}
+    lm_vce = LmSettings(max(lm.tol if lm else 0.0, 1e-8), lm.max_iterations if lm else 100)
+    for _ in range(max(iterations, 0)):
+        stats = group_statistics(graph, values, groups, which)
+        step = {}
+        for g, st in stats.items():
+            if st["redundancy"] < min_redundancy:
+                continue
+            if robust:
+                est = st["median_e2"] / MEDIAN_CHI2_1 * st["m"] / st["redundancy"]
+            else:
+                est = st["chi2"] / st["redundancy"]
+            s = float(np.clip(total[g] * est, *bounds)) / total[g]
+            if abs(s - 1.0) > 0.02:
+                step[g] = s
+            report[g] = {"scale": total[g] * s, "sigma_factor": float(np.sqrt(total[g] * s)),
+                         "last_estimate": est, "redundancy": st["redundancy"], "m": st["m"]}
+        if not step:
+            break
+        new = gtsam.NonlinearFactorGraph()
+        for i in range(graph.size()):
+            f = graph.at(i)
+            new.add(scaled(f, step[groups[i]]) if groups[i] in step else f)
+        for g, s in step.items():
+            total[g] *= s
+        graph = new
+        values, _ = levenberg_marquardt(graph, values, lm_vce)
+    if report:
+        values, _ = levenberg_marquardt(graph, values, lm)
+    return graph, values, report

@@ -1,0 +1,229 @@
+"""One solver wrapper for every factor graph of graphnav: batch Levenberg-Marquardt, iSAM2 or the
+incremental fixed-lag smoother, behind the same three calls.
+
+* :func:`isam_params` builds the ``ISAM2Params`` (relinearisation thresholds per variable type,
+  skip, partial check, wildfire) -- the one place they are written; the odometry/ICP graph
+  (:mod:`graphnav.graph.builder`) and the IMU graph (:mod:`graphnav.graph.imu_motion`) pass their
+  own thresholds.
+* :class:`Solver` takes per-keyframe factor batches (``update``), answers the online estimate of a
+  variable and its marginal (iSAM2 / fixed-lag; batch answers the initial guess and ``None``) and,
+  at the end, the smoothed values (:meth:`Solver.smoothed`). iSAM2 and batch keep the whole graph
+  (``graph``, ``initial``) so that the closing Levenberg-Marquardt step and the noise estimation
+  (:mod:`graphnav.graph.noise`) can run on it; the fixed-lag smoother keeps nothing beyond its
+  window, and the estimate (and marginal) of each tracked variable is frozen as it leaves the window.
+* Failures of GTSAM (an indeterminate system) are raised as :class:`SolverError` with the message;
+  the caller names the record and time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import gtsam
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+KINDS = ("isam2", "fixed-lag", "batch")
+
+
+class SolverError(RuntimeError):
+    """GTSAM could not solve the graph (e.g. an indeterminate linear system)."""
+
+
+def isam_params(thresholds: Mapping[str, ArrayLike] | float, *, skip: int = 1, partial_check: bool = True,
+                wildfire: float | None = None, factorization: str = "QR",
+                optimizer: str = "gauss-newton") -> gtsam.ISAM2Params:
+    """``ISAM2Params`` with relinearisation ``thresholds`` per variable type (the symbol's character,
+    e.g. ``{"x": [0.05]*3, "l": [0.5]*2}``) or one scalar, ``relinearizeSkip`` ``skip``,
+    ``enablePartialRelinearizationCheck``, the wildfire threshold, the clique ``factorization``
+    and the ``optimizer`` of each update.
+
+    ``factorization``: ``"QR"`` (default) or ``"CHOLESKY"``. Cholesky squares the condition number
+    and fails ("indeterminate linear system") on long odometry chains from a tight anchor (7 of the
+    9 CARMEN logs); QR does not. ``optimizer``: ``"gauss-newton"`` (default) or ``"dogleg"``
+    (Powell's dog leg, a trust region: 1.3x the time on the harbour log, 20x on MRCLAM). An
+    undamped Gauss-Newton step diverges where a variable is barely observable (the yaw of a
+    GNSS-only log anchored with a yaw sigma of pi: the online yaw oscillated by +-2 rad and the
+    track trailed the fixes by 50 m); the builder keeps such priors at 1 rad instead."""
+    if optimizer not in ("dogleg", "gauss-newton"):
+        raise ValueError(f"optimizer must be 'dogleg' or 'gauss-newton', not {optimizer!r}")
+    p = gtsam.ISAM2Params()
+    p.setFactorization(factorization)
+    if isinstance(thresholds, Mapping):
+        th = gtsam.ISAM2ThresholdMap()
+        for ch, v in thresholds.items():
+            th.insert((ch, np.asarray(v, dtype=float)))
+        p.setRelinearizeThreshold(th)
+    else:
+        p.setRelinearizeThreshold(float(thresholds))
+    p.relinearizeSkip = int(skip)
+    p.enablePartialRelinearizationCheck = bool(partial_check)
+    opt = gtsam.ISAM2DoglegParams() if optimizer == "dogleg" else gtsam.ISAM2GaussNewtonParams()
+    if wildfire is not None:
+        opt.setWildfireThreshold(float(wildfire))
+    p.setOptimizationParams(opt)
+    return p
+
+
+@dataclass
+class LmSettings:
+    """Levenberg-Marquardt stopping rule."""
+
+    tol: float = 1e-14  # relative and absolute error-decrease tolerance
+    max_iterations: int = 100
+
+
+def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, init: gtsam.Values,
+                        lm: LmSettings | None = None) -> tuple[gtsam.Values, int]:
+    """``LevenbergMarquardtOptimizer(graph, init).optimize()``; returns the values and the iterations."""
+    lm = lm or LmSettings()
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(lm.max_iterations)
+    params.setRelativeErrorTol(lm.tol)
+    params.setAbsoluteErrorTol(lm.tol)
+    try:
+        opt = gtsam.LevenbergMarquardtOptimizer(graph, init, params)
+        return opt.optimize(), int(opt.iterations())
+    except RuntimeError as exc:
+        raise SolverError(_gtsam_message(exc)) from None
+
+
+def _gtsam_message(exc: BaseException) -> str:
+    """GTSAM's message on one line (its indeterminate-system text spans a paragraph)."""
+    text = " ".join(str(exc).split())
+    if "Indeterminate linear system" in text:
+        return "indeterminate linear system: " + text.split("Indeterminate linear system detected", 1)[1].split(
+            ". ", 1)[0].strip()
+    return text[:300]
+
+
+class Solver:
+    """Batch LM, iSAM2 or fixed-lag behind ``update`` / ``estimate`` / ``marginal`` / ``smoothed``.
+
+    ``kind``: one of :data:`KINDS`. ``params``: ``ISAM2Params`` (iSAM2 and fixed-lag). ``lag`` [s]:
+    the fixed-lag window. ``value_type``: the GTSAM type name of tracked variables (``"Pose2"``,
+    ``"Pose3"``) for the typed ``calculateEstimate*`` calls. ``keep_graph`` (iSAM2): also keep
+    the whole graph (closing LM step, noise estimation, batch marginals).
+    """
+
+    def __init__(self, kind: str, params: gtsam.ISAM2Params | None = None, *, lag: float = 20.0,
+                 lm: LmSettings | None = None, keep_graph: bool = True) -> None:
+        if kind not in KINDS:
+            raise ValueError(f"solver must be one of {KINDS}, not {kind!r}")
+        self.kind = kind
+        self.lm = lm or LmSettings()
+        self.lag = float(lag)
+        self.params = params if params is not None else isam_params(0.1)
+        self.keep = kind == "batch" or (kind == "isam2" and keep_graph)
+        self.graph = gtsam.NonlinearFactorGraph()  # everything (batch, and iSAM2 with keep_graph)
+        self.initial = gtsam.Values()
+        self.frozen: dict[int, tuple[Any, NDArray[np.float64] | None]] = {}  # fixed-lag: left the window
+        self._stamps: dict[int, float] = {}  # fixed-lag: tracked key -> time
+        self.updates = 0
+        if kind == "isam2":
+            self.s = gtsam.ISAM2(self.params)
+        elif kind == "fixed-lag":
+            self.s = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        else:
+            self.s = None
+
+    @property
+    def online(self) -> bool:
+        """Whether the solver has an online estimate after every update."""
+        return self.kind != "batch"
+
+    def update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+               stamps: Mapping[int, float] | None = None, *, t: float | None = None,
+               track: Callable[[int], tuple[Any, NDArray[np.float64] | None]] | None = None,
+               tracked: tuple[int, ...] = ()) -> None:
+        """Add new factors and variables. Fixed-lag: ``stamps`` are the keys' times, ``t`` the
+        newest time; before the update, each key of ``tracked`` (registered in earlier updates) older
+        than ``t - lag`` is frozen with ``track(key)`` (its last estimate and marginal)."""
+        if self.keep:
+            self.graph.push_back(graph)
+            self.initial.insert(values)
+        try:
+            if self.kind == "isam2":
+                self.s.update(graph, values)
+            elif self.kind == "fixed-lag":
+                if t is not None and track is not None:
+                    for key, ts in list(self._stamps.items()):
+                        if ts < t - self.lag:
+                            self.frozen[key] = track(key)
+                            del self._stamps[key]
+                for key in tracked:
+                    self._stamps[key] = (stamps or {})[key]
+                m = gtsam.FixedLagSmootherKeyTimestampMap()
+                for key, ts in (stamps or {}).items():
+                    m.insert((key, ts))
+                self.s.update(graph, values, m)
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
+        self.updates += 1
+
+    def rebase(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, stamps: Mapping[int, float]) -> None:
+        """Fixed-lag only: replace the smoother by a fresh one holding ``graph``/``values`` (priors
+        carrying the marginals of the variables still in use). GTSAM's smoothers keep an empty slot
+        for every factor ever removed (~220 bytes each); starting afresh keeps memory flat at the
+        cost of the correlations between those variables."""
+        if self.kind != "fixed-lag":
+            raise ValueError("only the fixed-lag smoother is rebased")
+        self.s = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        self._stamps = {k: v for k, v in self._stamps.items() if values.exists(k)}
+        m = gtsam.FixedLagSmootherKeyTimestampMap()
+        for key, ts in stamps.items():
+            m.insert((key, ts))
+        try:
+            self.s.update(graph, values, m)
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
+
+    def relinearize(self, n: int) -> None:
+        """``n`` extra ``update()`` calls without new factors (iSAM2 / fixed-lag relinearisation)."""
+        if self.kind == "batch":
+            return
+        try:
+            for _ in range(n):
+                self.s.update()
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
+
+    def estimate(self, key: int, type_name: str = "Pose2") -> Any:
+        """The current estimate of ``key`` (iSAM2: partial back-substitution, cheap for the newest
+        variables; batch: the initial guess)."""
+        if self.kind == "batch":
+            return getattr(self.initial, f"at{type_name}")(key)
+        try:
+            return getattr(self.s, f"calculateEstimate{type_name}")(key)
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
+
+    def marginal(self, key: int) -> NDArray[np.float64] | None:
+        """Marginal covariance of ``key`` in GTSAM's tangent space (``None`` for batch)."""
+        if self.kind == "batch":
+            return None
+        try:
+            return np.asarray(self.s.marginalCovariance(key))
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
+
+    def current(self) -> gtsam.Values:
+        """Every variable's current estimate: iSAM2 ``calculateBestEstimate`` (full back-substitution),
+        fixed-lag ``calculateEstimate`` (the window), batch the initial guess."""
+        if self.kind == "batch":
+            return gtsam.Values(self.initial)
+        try:
+            return self.s.calculateBestEstimate() if self.kind == "isam2" else self.s.calculateEstimate()
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
+
+
+def marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> Callable[[int], NDArray[np.float64]]:
+    """``key -> marginal covariance`` of a batch solution (``gtsam.Marginals``)."""
+    try:
+        m = gtsam.Marginals(graph, values)
+    except RuntimeError as exc:
+        raise SolverError(_gtsam_message(exc)) from None
+    return lambda key: np.asarray(m.marginalCovariance(key))

@@ -1,0 +1,163 @@
+"""Output files and directories: atomic writes, and output directories that never mix two runs.
+
+* :func:`atomic_path` / :func:`atomic_open` / :func:`write_text_atomic`: a file is written under a
+  temporary name in its own directory (``.tmp-PID-NAME``, so the suffix -- and the format that
+  numpy/matplotlib infer from it -- is kept), flushed to disk and renamed onto the final name with
+  :func:`os.replace` (atomic on POSIX and Windows): a reader sees the old file or the new one,
+  never half of one, and a crash leaves at most a ``.tmp-*`` file behind.
+* :class:`OutDir`: the ``--out DIR`` of a command. Every file a command writes there is first
+  recorded in ``DIR/.graphnav-outputs.json`` (the manifest: this directory's files that graphnav
+  wrote). A directory that is not empty is refused unless ``--overwrite`` is given; then the
+  files the manifest lists (and ``.tmp-*`` leftovers) are deleted before the run, and nothing
+  else: files graphnav did not write stay, sub-directories are never touched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from typing import IO, Any
+
+from ..errors import GraphnavError
+
+log = logging.getLogger("graphnav.outputs")
+MANIFEST = ".graphnav-outputs.json"
+TMP_PREFIX = ".tmp-"
+
+
+def ensure_dir(path: str | Path, flag: str = "--out") -> Path:
+    """Create the directory ``path`` (and its parents) and return it. A path that exists and is not a
+    directory, or cannot be created, is a :class:`GraphnavError` naming it and the flag."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise GraphnavError(f"{flag}: exists and is not a directory", where=str(p))
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a parent is a file, no permission, read-only file system...
+        raise GraphnavError(f"{flag}: cannot create the directory ({exc.strerror or exc})", where=str(p)) from None
+    return p
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path beside ``path`` (same name ending); when the block ends normally the
+    file there is synced and renamed onto ``path``; on an exception it is removed."""
+    path = Path(path)
+    tmp = path.with_name(f"{TMP_PREFIX}{os.getpid()}-{path.name}")
+    try:
+        yield tmp
+        _fsync(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+@contextlib.contextmanager
+def atomic_open(path: str | Path, mode: str = "w", **kwargs: Any) -> Iterator[IO[Any]]:
+    """``open(path, mode)`` that replaces ``path`` atomically when the block ends normally."""
+    if not mode.startswith("w"):
+        raise ValueError(f"atomic_open writes a whole file: mode {mode!r} must start with 'w'")
+    with atomic_path(path) as tmp, open(tmp, mode, **kwargs) as fh:
+        yield fh
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    with atomic_open(path, "w", encoding="utf-8") as fh:
+        fh.write(text)
+    return Path(path)
+
+
+class OutDir:
+    """The output directory of one command run (see the module docstring).
+
+    ``overwrite``: replace what graphnav wrote there before (``--overwrite``); without it a
+    non-empty directory is an error. ``own_ok``: a directory that holds only files the manifest
+    lists (a previous run's, nothing of the user's) is replaced without ``--overwrite``
+    (``graphnav demo`` uses this for its own ``out/demo``). ``file(name)`` records ``name`` in the
+    manifest and returns its path; ``write_text(name, text)`` also writes it atomically.
+    """
+
+    def __init__(self, path: str | Path, *, command: str, overwrite: bool = False, own_ok: bool = False,
+                 flag: str = "--out") -> None:
+        self.path = ensure_dir(path, flag)
+        self.command = command
+        self.files: list[str] = []
+        previous = self._read_manifest()
+        present = sorted(e.name for e in self.path.iterdir() if e.name != MANIFEST)
+        if present:
+            ours = set(previous)
+            foreign = [n for n in present if n not in ours and not n.startswith(TMP_PREFIX)]
+            if not overwrite and (foreign or not own_ok):
+                listed = ", ".join(present[:5]) + (f", ... ({len(present)} entries)" if len(present) > 5 else "")
+                raise GraphnavError(
+                    f"{flag}: the directory is not empty ({listed}); pass --overwrite to replace the files "
+                    "graphnav wrote there (other files are left alone), or choose another directory",
+                    where=str(self.path))
+            removed = self._clear(previous)
+            if removed:
+                log.info("%s: removed %d file(s) of the previous run (%s)", self.path, len(removed),
+                         ", ".join(removed[:5]) + (" ..." if len(removed) > 5 else ""))
+        self._write_manifest()
+
+    def _read_manifest(self) -> list[str]:
+        p = self.path / MANIFEST
+        try:
+            obj = json.loads(p.read_text(encoding="utf-8"))
+            names = obj.get("files", []) if isinstance(obj, dict) else []
+        except (OSError, ValueError):
+            return []
+        return [n for n in names if isinstance(n, str) and _plain(n)]
+
+    def _clear(self, previous: list[str]) -> list[str]:
+        """Delete the manifest's files and ``.tmp-*`` leftovers (regular files directly in the directory)."""
+        removed = []
+        tmp = [e.name for e in self.path.iterdir() if e.name.startswith(TMP_PREFIX)]
+        for name in [*previous, *tmp]:
+            p = self.path / name
+            if p.is_file() or p.is_symlink():
+                p.unlink()
+                removed.append(name)
+        return removed
+
+    def _write_manifest(self) -> None:
+        write_text_atomic(self.path / MANIFEST, json.dumps({"command": self.command, "files": self.files}, indent=1))
+
+    def file(self, name: str) -> Path:
+        """The path of ``name`` in the directory, recorded in the manifest first (so that a run that
+        dies while writing it still owns it)."""
+        if not _plain(name):
+            raise ValueError(f"output file name {name!r} must be a plain file name")
+        if name not in self.files:
+            self.files.append(name)
+            self._write_manifest()
+        return self.path / name
+
+    def write_text(self, name: str, text: str) -> Path:
+        return write_text_atomic(self.file(name), text)
+
+    def __truediv__(self, name: str) -> Path:
+        return self.file(name)
+
+    def __fspath__(self) -> str:
+        return str(self.path)
+
+    def __str__(self) -> str:
+        return str(self.path)
+
+
+def _plain(name: str) -> bool:
+    return bool(name) and name not in (".", "..") and "/" not in name and "\\" not in name and name != MANIFEST
