@@ -250,10 +250,14 @@ class GraphBuilder:
             gap = prev_t is not None and kind != "truth" and t - prev_t > self.cfg.grid_gap
             while (kind != "truth" or prev_t is None or t - prev_t <= self.cfg.grid_gap) and (
                     ts := self.grid_t0 + self.period * self.grid_i) <= t + EPS * self.period:
+                # no record for grid_gap seconds: the slots more than a period from both sides are skipped,
+                # by index arithmetic (a jump of days must not walk its slots one by one)
+                if gap and prev_t + self.period + EPS < ts < t - self.period - EPS:
+                    self.grid_i = max(self.grid_i + 1,
+                                      math.ceil((t - self.period - EPS - self.grid_t0) / self.period))
+                    continue
                 self.grid_i += 1
-                # no record for grid_gap seconds: the slots more than a period from both sides are skipped
-                if not gap or ts <= prev_t + self.period + EPS or ts >= t - self.period - EPS:
-                    self._new_keyframe(ts, None)
+                self._new_keyframe(ts, None)
         if kind == "scan":
             if self.mode == "grid" and not self.grid_only:  # the first scan: one keyframe per scan from now on
                 self.mode = "scan"
