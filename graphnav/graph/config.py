@@ -57,7 +57,7 @@ class SmootherConfig:
     odo_sigma_v_rel: float = 0.1  # x |v|
     odo_sigma_w_deg: float = 1.0  # [deg/s sqrt(s)] floor
     odo_sigma_w_rel: float = 0.1  # x |w|
-    odo_lateral: float = 0.05  # lateral (sway) 1-sigma as a fraction of the distance run
+    odo_lateral: float = 0.1  # lateral (sway, crab, wheel slip) 1-sigma as a fraction of the distance run
     motion_model: str = "constant-velocity"  # without odometry: "constant-velocity" | "random-walk"
     cv_sigma_v: float = 0.5  # [m/s] constant velocity: 1-sigma velocity change -> sigma_xy = cv_sigma_v dt
     cv_sigma_w_deg: float = 10.0  # [deg/s] its yaw counterpart

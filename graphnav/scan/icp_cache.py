@@ -1,7 +1,7 @@
 """A shared weighted-ICP match cache: estimators that match the same scan pairs compute each once.
 
 ``graphnav compare`` runs several estimators on one log; isam2, batch and fixed-lag (one shared
-:class:`~graphnav.graph.smoother.GraphBuilder` sequence), the EKF with ICP increments and ``icp-dr``
+:class:`~graphnav.graph.builder.GraphBuilder` sequence), the EKF with ICP increments and ``icp-dr``
 all call :func:`graphnav.scan.icp.match_points` on the same consecutive scans. Inside
 ``with active(MatchCache()):`` the call sites that go through :func:`match_points` /
 :func:`match_scans` of this module look the match up first. The key is the exact content of
