@@ -755,6 +755,7 @@ def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None):  
         "sigma_weak": deg.sigma_weak,
         "weak_direction": [float(x) for x in deg.weakest],
         "weak_dims": int(deg.weak.sum()),
+        "weak_projector": deg.projector().tolist() if degenerate else None,  # P: the weak directions' part of xi
         "inflated": bool(inflated),  # flagged for degeneracy only: covariance inflated along the weak directions
         "icp_pose": [float(x) for x in icp_pose],
         "guess_mahalanobis": maha,  # the estimate before a flag replaced any of it by the guess

@@ -125,7 +125,7 @@ def test_icp_between_factors_carry_the_chain():
     rng = np.random.default_rng(0)
     cov = np.diag([0.02**2, 0.02**2, math.radians(0.2) ** 2])
 
-    def matcher(cur, prev, init):
+    def matcher(cur, prev, init, *_):
         rel = se2_between(ref.interpolate([prev.t])[0], ref.interpolate([cur.t])[0])
         return True, rel + rng.multivariate_normal(np.zeros(3), cov), cov
 
