@@ -5,6 +5,7 @@
 # Also: ./dev.sh lint | bench | lock | shell CMD...   (PYTHON=python3.12 ./dev.sh ... picks another interpreter)
 # Installs are locked: requirements.lock pins every package with its hashes (what CI tested);
 # `./dev.sh lock` re-resolves it from pyproject.toml (uv, universal markers) after a dependency change.
+# The lock holds graphnav[all] (open3d, dask, ros, fast) and the dev tools: both commands install all of it.
 set -euo pipefail
 cd "$(dirname "$0")"
 PYTHON=${PYTHON:-python3}
@@ -47,9 +48,9 @@ case "$cmd" in
   demo)  setup; exec "$VENV/bin/graphnav" demo --out "$OUT" "$@" ;;
   test)  setup; exec "$VENV/bin/python" -m pytest -q -p no:cacheprovider "$@" ;;
   lint)  setup; exec "$VENV/bin/ruff" check graphnav factors tests benchmarks examples ;;
-  lock)  setup
+  lock)  [ -x "$VENV/bin/python" ] || "$PYTHON" -m venv "$VENV"   # no setup: the old lock may not satisfy pyproject
          "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check 'uv>=0.9'
-         exec "$VENV/bin/uv" pip compile pyproject.toml --extra dev --universal --python-version 3.11 \
+         exec "$VENV/bin/uv" pip compile pyproject.toml --extra all --extra dev --universal --python-version 3.11 \
            --generate-hashes --custom-compile-command './dev.sh lock' --quiet -o requirements.lock ;;
   bench) setup; for b in benchmarks/*.py; do "$VENV/bin/python" "$b"; done ;;
   shell) setup; exec "$VENV/bin/$1" "${@:2}" ;;
