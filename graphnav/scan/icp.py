@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ..errors import require
 from ..geometry import se2_between
 from ..log import MAX_STATED_RANGE
 from . import covariance, degeneracy
@@ -420,6 +421,7 @@ def _fast_kernels(cfg: IcpConfig) -> Any:
     kernels = _compiled()
     if isinstance(kernels, ImportError):
         if cfg.backend == "numba":
+            require("numba", 'ICP backend "numba"')
             raise kernels.with_traceback(None)
         return None
     return kernels[1] if cfg.variant == "HDL" else kernels[0]
