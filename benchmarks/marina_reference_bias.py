@@ -41,7 +41,7 @@ def se2_exp_apply(xi: np.ndarray, pts: np.ndarray) -> np.ndarray:
     small = np.abs(th) < 1e-9
     ths = np.where(small, 1.0, th)
     a = np.where(small, 1.0, np.sin(ths) / ths)
-    b = np.where(small, 0.0, (1.0 - np.cos(ths)) / ths)
+    b = np.where(small, 0.0, 2.0 * np.sin(0.5 * ths) ** 2 / ths)  # (1 - cos th) / th without cancellation
     tx, ty = a * vx - b * vy, b * vx + a * vy
     c, s = np.cos(th), np.sin(th)
     return np.column_stack([c * pts[:, 0] - s * pts[:, 1] + tx, s * pts[:, 0] + c * pts[:, 1] + ty])

@@ -34,7 +34,8 @@ def test_exp_apply_is_gtsam_expmap(vx, vy, w, px, py):
     got = BENCH.se2_exp_apply(xi, pts)
     for i in range(3):
         want = gtsam.Pose2.Expmap(xi[i]).transformFrom(pts[i])
-        np.testing.assert_allclose(got[i], want, atol=1e-9)
+        # GTSAM's Expmap computes (1 - cos w) / w directly: ~1e-8 m of cancellation error at w ~ 1e-8
+        np.testing.assert_allclose(got[i], want, atol=1e-7)
 
 
 def test_deskew_undoes_a_constant_twist_sweep():
