@@ -76,9 +76,6 @@ class SmootherConfig:
 
     # -- scans (weighted ICP) --------------------------------------------------------------------
     use_icp: bool = True  # false: no weighted-ICP factors between scans
-    icp_cov_scale: float = 20.0  # x the matcher's own inflation (HDL 50): x1000 in all (docs/smoother.md)
-    icp_sigma_floor_xy: float = 0.005  # [m] added in quadrature to the ICP covariance
-    icp_sigma_floor_yaw_deg: float = 0.05  # [deg] its yaw counterpart
     icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
     icp_max_step: float = 5.0  # [m] an ICP step farther than this from the prediction is rejected
     icp_gate: float | None = 4.0  # reject a match whose Mahalanobis distance to the odometry exceeds it

@@ -92,14 +92,13 @@ def test_constant_velocity_bridges_a_failed_match_exactly():
     recs = [PosePrior(0.0, 0.0, 0.0, 0.0, 1e-6, 1e-6)] + scans
     cov = np.diag([1e-4, 1e-4, 1e-6])
 
-    def matcher(cur, prev, init):
+    def matcher(cur, prev, init, *_):
         if cur.t == 6.0:
             return False, np.zeros(3), np.eye(3)
         return True, se2_between(truth[prev.t], truth[cur.t]), cov
 
     for run in RUNS:
-        r = run(NavLog(recs), matcher=matcher, icp_cov_scale=1.0, icp_sigma_floor_xy=0.0,
-                icp_sigma_floor_yaw_deg=0.0, covariances=False)
+        r = run(NavLog(recs), matcher=matcher, covariances=False)
         assert r.info["motion_fallback"] == 1 and r.info["icp_failed"] == 1, run.__name__
         np.testing.assert_allclose(r.trajectory.poses, np.array(poses), atol=1e-6, err_msg=run.__name__)
 
@@ -233,7 +232,48 @@ def test_degenerate_corridor_in_the_middle_of_a_log(odometry):
             sig.append(_sigmas(g.at(i)))
     sig = np.array(sig)
     assert len(sig) >= 30  # the corridor's matches are used, degenerate or not
-    assert np.median(sig[:, 0]) > 0.5 and np.median(sig[:, 1]) < 0.05  # weak along, firm across
+    assert np.median(sig[:, 1]) < 0.05  # firm across
+    if odometry:  # along: the odometry factor's alone, not repeated by the match (100 m measured)
+        assert np.median(sig[:, 0]) > 10.0
+    else:  # along: the constant-velocity model's sigma, 0.5 m/s x 1 s, which the match took there
+        assert 0.45 < np.median(sig[:, 0]) < 0.6
+
+
+def test_the_matcher_gets_the_motion_guess_and_its_covariance():
+    """The builder hands the matcher the guess's covariance (``init_cov``): the odometry factor's
+    with odometry (then ``guess_in_graph``), else the constant-velocity model's (0.5 m/s, 10 deg/s
+    x dt, floor in quadrature) once a motion was measured, a random walk before."""
+    for odometry in (True, False):
+        log = _corridor_log(odometry)
+        seen: list = []
+
+        def matcher(cur, prev, init, init_cov, in_graph, seen=seen):
+            seen.append((cur.t - prev.t, np.array(init), np.array(init_cov), in_graph))
+            return True, np.array([1.0, 0.0, 0.0]), np.diag([1e-4, 1e-4, 1e-6])
+
+        nav = Navigator.for_log(log, matcher=matcher, solver="batch")
+        for rec in log:
+            nav.add(rec)
+        nav.flush()
+        assert len(seen) == 96
+        odo_covs = [f.noiseModel().covariance() for f, g in zip(_factors(nav.solver.graph), nav.groups, strict=True)
+                    if g == "odometry"]
+        for i, (dt, init, cov, in_graph) in enumerate(seen):
+            assert in_graph == odometry
+            if odometry:
+                np.testing.assert_allclose(cov, odo_covs[i], rtol=1e-9)
+                assert abs(init[0] - 1.0) < 0.2
+            elif i == 0:  # nothing measured yet: the random walk (2 m/s, 30 deg/s)
+                np.testing.assert_allclose(np.sqrt(np.diag(cov)), [2.0, 2.0, math.radians(30.0)], rtol=1e-3)
+                np.testing.assert_allclose(init, 0.0)
+            else:  # constant velocity: the previous match's twist, its stated sigma
+                np.testing.assert_allclose(np.sqrt(np.diag(cov)), [0.5, 0.5, math.radians(10.0)], rtol=1e-3)
+                np.testing.assert_allclose(init, [1.0, 0.0, 0.0], atol=1e-12)
+            assert dt == 1.0
+
+
+def _factors(g: gtsam.NonlinearFactorGraph) -> list:
+    return [g.at(i) for i in range(g.size())]
 
 
 # -- a failure of the solver is the user's error message, not a traceback -------------------------

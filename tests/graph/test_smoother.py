@@ -126,11 +126,11 @@ def test_icp_between_factors_carry_the_chain():
     rng = np.random.default_rng(0)
     cov = np.diag([0.02**2, 0.02**2, math.radians(0.2) ** 2])
 
-    def matcher(cur, prev, init):
+    def matcher(cur, prev, init, *_):
         rel = se2_between(ref.interpolate([prev.t])[0], ref.interpolate([cur.t])[0])
         return True, rel + rng.multivariate_normal(np.zeros(3), cov), cov
 
-    r = run_isam2(log, matcher=matcher, icp_cov_scale=1.0, **FAST)
+    r = run_isam2(log, matcher=matcher, **FAST)
     assert r.info["icp_pairs"] == len(times) - 1 and r.info["icp_failed"] == 0
     assert len(r.icp_ms) == len(times) - 1
     assert _ate(r, log) < 0.5
