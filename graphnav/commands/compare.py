@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import shlex
 import time
 from pathlib import Path
@@ -33,9 +34,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         + ", ".join(estimators.names()))
     p.add_argument("--option", "-O", action="append", metavar="NAME.KEY=VALUE",
                    help="option for one estimator (or label), e.g. scan-to-map.backend=gicp; repeatable")
-    p.add_argument("--workers", "-j", type=int, default=1,
-                   help="run this many estimators at once in separate processes (runtimes then include "
-                        "contention; default 1)")
+    p.add_argument("--workers", "-j", type=int, default=0,
+                   help="processes for the estimators and the figures (the smoothers share one, with their "
+                        "weighted-ICP matches; runtimes then include contention); default 0: one per core, "
+                        "1: everything in this process")
     p.add_argument("--no-icp-cache", dest="icp_cache", action="store_false",
                    help="every estimator computes its own weighted-ICP matches (default: a match shared by "
                         "several estimators is computed once; their runtimes then exclude it)")
@@ -61,12 +63,13 @@ def run(args: argparse.Namespace) -> int:
     log = load_log(args.log, lenient=args.lenient)
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     t0 = time.perf_counter()
+    workers = args.workers if args.workers > 0 else (os.cpu_count() or 1)
     cache = MatchCache() if getattr(args, "icp_cache", True) else None  # (demo builds its own Namespace)
     entries = compare(log, names, options=_options(args.option),
-                      progress=lambda n: log_.info("running %s on %s", n, args.log), workers=args.workers,
+                      progress=lambda n: log_.info("running %s on %s", n, args.log), workers=workers,
                       cache=cache)
     command = shlex.join(["graphnav", *args.argv]) if hasattr(args, "argv") else None
-    files = write_report(entries, log, out, log_name=str(args.log), command=command)
+    files = write_report(entries, log, out, log_name=str(args.log), command=command, workers=workers)
     total = time.perf_counter() - t0
     for e in entries:
         if e.error is not None:
@@ -74,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
         elif e.skipped is not None:
             log_.info("%s not run: %s", e.name, e.skipped)
     hits = sum((e.summary or {}).get("icp_cache_hits", 0) for e in entries) if cache is not None else None
-    obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=args.workers,
+    obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=workers,
                   icp_cache_hits=hits)
     lines = [f"{'estimator':16s} {'ATE RMSE [m]':>12s} {'RPE [m]':>9s} {'runtime [s]':>11s}  note"]
     for e in ranked(entries):

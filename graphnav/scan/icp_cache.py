@@ -17,7 +17,6 @@ import copy
 import hashlib
 import time
 from collections.abc import Iterator
-from dataclasses import astuple
 from typing import Any
 
 import numpy as np
@@ -55,7 +54,7 @@ class MatchCache:
 
     @staticmethod
     def key(src_xy: ArrayLike, tgt_xy: ArrayLike, cfg: icp.IcpConfig, init: ArrayLike | None) -> tuple:
-        return (_digest(src_xy), _digest(tgt_xy), repr(astuple(cfg)), _digest(init))
+        return (_digest(src_xy), _digest(tgt_xy), repr(cfg), _digest(init))  # repr: every field, no deepcopy
 
     def match_points(self, src_xy: ArrayLike, tgt_xy: ArrayLike, cfg: icp.IcpConfig | None = None,
                      init: ArrayLike | None = None) -> icp.MatchResult:
