@@ -173,11 +173,11 @@ def test_imu_records_noise_model_and_origin(short):
     from graphnav.sim.harbour import MARINA_GDYNIA, ORIGIN, imu_truth, vessel_track
 
     cfg = HarbourConfig()
-    log = simulate_harbour(0, duration=300.0, cfg=HarbourConfig(lidar_hz=0.0))
+    log = simulate_harbour(0, duration=300.5, cfg=HarbourConfig(lidar_hz=0.0, imu_hz=10.0))
     imu = log.columns("imu")
-    assert len(imu["t"]) == pytest.approx(3000, abs=1) and imu["t"][0] == pytest.approx(0.1)
-    t, p, ctl = vessel_track(cfg, np.random.default_rng(np.random.SeedSequence(0).spawn(5)[0]), t_max=300.0)
-    keep = t <= 300.0
+    assert len(imu["t"]) == pytest.approx(3005, abs=1) and imu["t"][0] == pytest.approx(0.1)  # 10 Hz: statistics
+    t, p, ctl = vessel_track(cfg, np.random.default_rng(np.random.SeedSequence(0).spawn(5)[0]), t_max=300.5)
+    keep = t <= 300.5
     ii, acc, rate = imu_truth(t[keep], p[keep], ctl[keep], 5, cfg.dt)
     np.testing.assert_allclose(imu["t"], t[ii])
     m = log.meta["imu"]
@@ -194,6 +194,7 @@ def test_imu_records_noise_model_and_origin(short):
         assert none.of(kind) == short.of(kind), kind
     np.testing.assert_array_equal(none.of("scan")[-1].ranges, short.of("scan")[-1].ranges)
     assert log.meta["initial_velocity"] == pytest.approx([ctl[0, 0] * np.cos(p[0, 2]), ctl[0, 0] * np.sin(p[0, 2])])
+    assert short.counts()["imu"] == 20 and short.meta["imu"]["hz"] == 1.0  # the default: 1 Hz, from t = 1 s
     assert short.meta["origin"] == ORIGIN
     x, y = LocalFrame(ORIGIN["lat"], ORIGIN["lon"], ORIGIN["h"]).to_local(*MARINA_GDYNIA)
     assert (float(x), float(y)) == pytest.approx((150.0, 100.0), abs=0.1)  # the basin's centre on the marina
