@@ -29,6 +29,7 @@ import numpy as np
 
 import factors as F
 from graphnav.evaluation.metrics import ate
+from graphnav.geometry import cov_to_world
 from graphnav.io.marina import is_marina_dir, read_marina
 from graphnav.scan.icp import IcpConfig, match_scans
 from graphnav.trajectory import Trajectory
@@ -105,9 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     dr = Trajectory([s.t for s in scans], [[initial.atPose2(X(k)).x(), initial.atPose2(X(k)).y(),
                                             initial.atPose2(X(k)).theta()] for k in range(n)])
     cov_body = gtsam.Marginals(graph, result).marginalCovariance(X(n - 1))  # GTSAM: body-frame tangent
-    th = result.atPose2(X(n - 1)).theta()
-    rot = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0.0, 0.0, 1.0]])
-    cov = rot @ cov_body @ rot.T  # (x, y, yaw) in the world frame
+    cov = cov_to_world(result.atPose2(X(n - 1)).theta(), cov_body)  # (x, y, yaw) in the world frame
     a, a_dr = ate(est, ref), ate(dr, ref)
 
     out = {"scans": n, "factors": graph.size(), "icp_failed": failed, "gnss": not args.no_gnss,

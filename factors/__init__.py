@@ -31,7 +31,6 @@ from .imu import (
     planar_pose,
     pose_xy_yaw,
     preintegrate,
-    world_cov_planar,
 )
 from .prior import pose_prior
 from .robust import robustify
@@ -84,5 +83,4 @@ __all__ = [
     "pose_xy_yaw",
     "preintegrate",
     "robustify",
-    "world_cov_planar",
 ]

@@ -60,4 +60,4 @@ def pose_from_two_beacons(
     c, s = np.cos(yaw), np.sin(yaw)
     R = np.array([[c, -s], [s, c]])
     pos = 0.5 * ((p1 - R @ b1) + (p2 - R @ b2))
-    return np.array([pos[0], pos[1], (yaw + np.pi) % (2 * np.pi) - np.pi])
+    return np.array([pos[0], pos[1], gtsam.Rot2.fromAngle(float(yaw)).theta()])  # wrapped to [-pi, pi]

@@ -123,15 +123,6 @@ def pose_xy_yaw(p: gtsam.Pose3) -> NDArray[np.float64]:
     return np.array([t[0], t[1], p.rotation().yaw()])
 
 
-def world_cov_planar(p: gtsam.Pose3, cov6: NDArray[np.float64]) -> NDArray[np.float64]:
-    """GTSAM's Pose3 tangent covariance (rotation, translation; body frame) -> world (x, y, yaw)."""
-    sel = [3, 4, 2]
-    c = np.asarray(cov6)[np.ix_(sel, sel)]
-    th = p.rotation().yaw()
-    R = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0.0, 0.0, 1.0]])
-    return R @ c @ R.T
-
-
 def initial_state_factors(
     k: int,
     pose: tuple[float, float, float],

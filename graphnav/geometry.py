@@ -17,9 +17,22 @@ TWO_PI = 2.0 * np.pi
 
 
 def wrap_angle(a: ArrayLike) -> NDArray[np.float64] | float:
-    """Wrap angles to [-pi, pi)."""
+    """Wrap angles to [-pi, pi) (the one angle wrap of the project; scalars take a math fast path)."""
+    if isinstance(a, (float, int)):
+        return (a + math.pi) % (2.0 * math.pi) - math.pi
     w = (np.asarray(a, dtype=float) + np.pi) % TWO_PI - np.pi
     return float(w) if np.ndim(w) == 0 else w
+
+
+def cov_to_world(yaw: float, cov: ArrayLike) -> NDArray[np.float64]:
+    """A body-frame (x, y, yaw) covariance -> the world frame: ``R cov R^T`` with ``R = diag(R(yaw), 1)``.
+
+    GTSAM's ``Pose2`` marginals are in the body tangent (right perturbation); this is the one
+    place the project rotates a planar covariance to the world (x, y, yaw) axes.
+    """
+    c, s = math.cos(yaw), math.sin(yaw)
+    r = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return r @ np.asarray(cov, dtype=float) @ r.T
 
 
 def yaw_to_heading_deg(yaw: ArrayLike) -> NDArray[np.float64] | float:

@@ -1,9 +1,13 @@
+import math
+
+import gtsam
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
 from graphnav.geometry import (
     accumulate,
+    cov_to_world,
     heading_deg_to_yaw,
     se2_between,
     se2_compose,
@@ -24,6 +28,32 @@ def test_wrap_range_and_equivalence(a):
     w = wrap_angle(a)
     assert -np.pi <= w < np.pi
     assert np.isclose(np.cos(w), np.cos(a), atol=1e-9) and np.isclose(np.sin(w), np.sin(a), atol=1e-9)
+
+
+@given(st.lists(st.floats(-1e4, 1e4, allow_nan=False), min_size=1, max_size=20))
+def test_wrap_scalar_path_equals_the_array_path(a):
+    arr = wrap_angle(np.array(a))
+    assert [wrap_angle(x) for x in a] == list(arr)  # bit-identical: one formula, two code paths
+
+
+@given(st.floats(-4.0, 4.0), st.integers(0, 2**31 - 1))
+def test_cov_to_world_matches_sampled_gtsam_retractions(yaw, seed):
+    # body-tangent covariance (what GTSAM's marginals give) pushed through Pose2.retract, measured in
+    # the world (x, y, yaw) axes: R C R^T to first order (here exactly, the samples are small)
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(3, 3)) * np.array([0.02, 0.02, 0.002])[:, None]
+    c_body = a @ a.T + np.diag([1e-6, 1e-6, 1e-8])
+    p = gtsam.Pose2(1.0, -2.0, yaw)
+    xi = rng.multivariate_normal(np.zeros(3), c_body, size=4000)
+    d = np.array([[q.x() - p.x(), q.y() - p.y(), wrap_angle(q.theta() - p.theta())]
+                  for q in (p.retract(v) for v in xi)])
+    c_emp = np.cov(d.T)
+    c = cov_to_world(yaw, c_body)
+    assert np.allclose(c, c.T)
+    # the same samples' body covariance rotated exactly: only the retraction's second order differs
+    r = np.array([[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+    np.testing.assert_allclose(c_emp, r @ np.cov(xi.T) @ r.T, atol=5e-6)
+    np.testing.assert_allclose(cov_to_world(yaw, np.cov(xi.T)), r @ np.cov(xi.T) @ r.T, atol=1e-15)
 
 
 def test_heading_conventions_known_points():

@@ -30,6 +30,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..geometry import wrap_angle
+
 
 @dataclass(frozen=True)
 class Fairway:
@@ -153,10 +155,6 @@ def initial_covariance(n_beacons: int, ch: Choices) -> NDArray[np.float64]:
         p0 = np.zeros((n, n))
         p0[3:, 3:] = np.eye(n - 3) * ch.p0_beacon
     return p0
-
-
-def _wrap(a: NDArray) -> NDArray:
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def propagate(layouts: NDArray[np.float64], fw: Fairway = Fairway(), ch: Choices = Choices(),
@@ -294,14 +292,14 @@ def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices, kee
         if est:
             x[0] += v * dt * c
             x[1] += v * dt * s
-            x[2] = _wrap(x[2] + drot[k - 1] * dt)
+            x[2] = wrap_angle(x[2] + drot[k - 1] * dt)
         # ---- corrections, eq. 24-27, one beacon at a time
         for j in range(B):
             b = 3 + 2 * j
             if est:
                 tdx, tdy = bx[j] - track[k, 0], by[j] - track[k, 1]
                 z_r = np.hypot(tdx, tdy) + dr[k - 1, j]
-                z_b = _wrap(np.arctan2(tdy, tdx) - track[k, 2] + db[k - 1, j])
+                z_b = wrap_angle(np.arctan2(tdy, tdx) - track[k, 2] + db[k - 1, j])
                 if not seen[j] and ch.beacon_init == "first-sighting":
                     x[b] = x[0] + z_r * np.cos(z_b + x[2])
                     x[b + 1] = x[1] + z_r * np.sin(z_b + x[2])
@@ -335,9 +333,9 @@ def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices, kee
             P -= tmp
             if est:
                 nu0 = z_r - r
-                nu1 = _wrap(z_b - (np.arctan2(dy, dx) - pth))
+                nu1 = wrap_angle(z_b - (np.arctan2(dy, dx) - pth))
                 x += K0 * nu0 + K1 * nu1
-                x[2] = _wrap(x[2])
+                x[2] = wrap_angle(x[2])
             seen[j] = True
         mx[k - 1] = np.sqrt(np.maximum(P[0, 0], 0.0))
         my[k - 1] = np.sqrt(np.maximum(P[1, 1], 0.0))

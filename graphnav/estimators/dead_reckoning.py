@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 
+from ..geometry import wrap_angle
 from ..log import NavLog, Odometry
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
@@ -23,7 +24,7 @@ def unicycle_step(pose: np.ndarray, v: float, w: float, dt: float) -> np.ndarray
     th2 = th + w * dt
     r = v / w
     return np.array([x + r * (np.sin(th2) - np.sin(th)), y - r * (np.cos(th2) - np.cos(th)),
-                     (th2 + np.pi) % (2 * np.pi) - np.pi])
+                     wrap_angle(th2)])
 
 
 def start_pose(log: NavLog) -> tuple[np.ndarray, str]:

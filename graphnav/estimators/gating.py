@@ -44,6 +44,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import gammaincinv
 
+from ..geometry import wrap_angle
+
 GATING_DEFAULTS: dict[str, Any] = {"gate": 0.999, "reinit_n": 5, "confirm_n": 3, "confirm_s": 30.0,
                                    "reinit_after_s": 300.0, "scale_window": 50}
 """The gate's options (estimator options of the same names), documented in docs/ekf.md."""
@@ -197,7 +199,7 @@ class InnovationGate:
         nus = np.array([r[1] for r in recent])
         ref = recent[-1]
         if angle:  # median of the wrapped differences to the last one
-            d = (nus - ref[1] + math.pi) % (2.0 * math.pi) - math.pi
+            d = wrap_angle(nus - ref[1])
             med = ref[1] + np.median(d, axis=0)
         else:
             med = np.median(nus, axis=0)
@@ -207,7 +209,7 @@ class InnovationGate:
         """Whether two rejected measurements agree with each other within their sigmas."""
         d = a[1] - b[1]
         if angle:
-            d = (d + math.pi) % (2.0 * math.pi) - math.pi
+            d = wrap_angle(d)
         grow = a[3] - b[3]
         w, v = np.linalg.eigh(0.5 * (grow + grow.T))
         C = a[2] + b[2] + (v * np.maximum(w, 0.0)) @ v.T

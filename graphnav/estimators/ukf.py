@@ -31,12 +31,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..geometry import wrap_angle
 from ..log import NavLog
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
 from .gating import GATING_DEFAULTS, InnovationGate, reinit_block
-
-TWO_PI = 2.0 * math.pi
 
 # Table 2: the filters' a-priori noise (1-sigma)
 TABLE2 = {
@@ -70,8 +69,8 @@ def wrapped_mean(X: NDArray, wm: NDArray, angle_idx: int) -> NDArray:
     """Weighted sigma-point mean with the angle averaged as wrapped differences to the central point."""
     m = wm @ X
     ref = X[0, angle_idx]
-    d = (X[:, angle_idx] - ref + math.pi) % TWO_PI - math.pi
-    m[angle_idx] = (ref + wm @ d + math.pi) % TWO_PI - math.pi
+    d = wrap_angle(X[:, angle_idx] - ref)
+    m[angle_idx] = wrap_angle(ref + wm @ d)
     return m
 
 
@@ -125,10 +124,10 @@ class UnscentedNav:
         Y[:, 1] += T * X[:, 3] + 0.5 * T * T * any_
         Y[:, 2] += T * anx
         Y[:, 3] += T * any_
-        Y[:, 4] = (th + T * w + math.pi) % TWO_PI - math.pi
+        Y[:, 4] = wrap_angle(th + T * w)
         m = wrapped_mean(Y, self.wm, 4)
         D = Y - m
-        D[:, 4] = (D[:, 4] + math.pi) % TWO_PI - math.pi
+        D[:, 4] = wrap_angle(D[:, 4])
         self.x = m
         self.P = (D.T * self.wc) @ D + self._Q(T)
         self.P_pred = self.P
@@ -138,7 +137,7 @@ class UnscentedNav:
         (``ix`` = ``np.ix_(idx, idx)``, precomputed by callers in a loop)."""
         eps = z - self.x[idx]
         if idx[-1] == 4:
-            eps[-1] = (eps[-1] + math.pi) % TWO_PI - math.pi
+            eps[-1] = wrap_angle(eps[-1])
         return eps, self.P[ix if ix is not None else np.ix_(idx, idx)]
 
     def update(self, idx: NDArray, eps: NDArray, HPH: NDArray, R: NDArray) -> None:
@@ -147,7 +146,7 @@ class UnscentedNav:
         PHt = self.P[:, idx]
         K = PHt @ np.linalg.inv(S)
         self.x = self.x + K @ eps
-        self.x[4] = (self.x[4] + math.pi) % TWO_PI - math.pi
+        self.x[4] = wrap_angle(self.x[4])
         P = self.P - K @ PHt.T
         self.P = 0.5 * (P + P.T)
 
@@ -292,7 +291,7 @@ def _gated(f: UnscentedNav, gater: InnovationGate, t: float, z: NDArray, m: NDAr
         if verdict == "reinit":
             zz = z[ch].astype(float)
             if angle:
-                zz = (zz + math.pi) % TWO_PI - math.pi
+                zz = wrap_angle(zz)
             reinit_block(f.x, f.P, idx, zz, R * gater.scale(sensor))
     return m
 

@@ -42,6 +42,7 @@ from factors.imu import IB, V
 
 from ..config import config_from_options
 from ..errors import GraphnavError
+from ..geometry import cov_to_world
 from ..log import NavLog
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
@@ -200,6 +201,13 @@ class ImuGraphBuilder:
         return {"motion": "imu", "anchor": self.anchor, "keyframes": len(self.kf_t), "config": asdict(self.cfg)}
 
 
+def world_cov_planar(p: gtsam.Pose3, cov6: NDArray[np.float64]) -> NDArray[np.float64]:
+    """GTSAM's Pose3 tangent covariance (rotation, translation; body frame) -> world (x, y, yaw)."""
+    sel = [3, 4, 2]
+    c = np.asarray(cov6)[np.ix_(sel, sel)]
+    return cov_to_world(p.rotation().yaw(), c)
+
+
 def _bias_list(b: gtsam.imuBias.ConstantBias) -> list[float]:
     """Planar bias ``[b_ax, b_ay, b_gz]`` (m/s^2, m/s^2, rad/s)."""
     return [float(b.accelerometer()[0]), float(b.accelerometer()[1]), float(b.gyroscope()[2])]
@@ -223,7 +231,7 @@ def _run_incremental(log: NavLog, name: str, fixed_lag: bool, on_estimate: OnEst
 
     def track(key: int) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
         p = solver.estimate(key, "Pose3")
-        return F.pose_xy_yaw(p), (F.world_cov_planar(p, solver.marginal(key)) if cfg.covariances else None)
+        return F.pose_xy_yaw(p), (world_cov_planar(p, solver.marginal(key)) if cfg.covariances else None)
 
     prev = None
     try:
@@ -234,7 +242,7 @@ def _run_incremental(log: NavLog, name: str, fixed_lag: bool, on_estimate: OnEst
             pose = solver.estimate(F.X(k), "Pose3")  # the newest state only
             vel = solver.estimate(V(k), "Vector")
             bias = solver.estimate(IB(k), "ConstantBias")
-            cov = F.world_cov_planar(pose, solver.marginal(F.X(k))) if cfg.covariances else None
+            cov = world_cov_planar(pose, solver.marginal(F.X(k))) if cfg.covariances else None
             step_ms.append((time.perf_counter() - c0) * 1e3)
             step_cpu.append((time.process_time() - p0) * 1e3)
             prev = (gtsam.NavState(pose, vel), bias)
@@ -257,7 +265,7 @@ def _run_incremental(log: NavLog, name: str, fixed_lag: bool, on_estimate: OnEst
         p = est.atPose3(F.X(k))
         final_p[k] = F.pose_xy_yaw(p)
         if cfg.covariances:
-            final_c[k] = F.world_cov_planar(p, solver.marginal(F.X(k)))
+            final_c[k] = world_cov_planar(p, solver.marginal(F.X(k)))
     traj = Trajectory(np.array(on_t), np.array(final_p), np.array(final_c) if cfg.covariances else None, name=name)
     online = Trajectory(np.array(on_t), np.array(on_p), np.array(on_c) if cfg.covariances else None,
                         name=f"{name}-online")
@@ -302,7 +310,7 @@ def run_batch(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: 
     covs = None
     if cfg.covariances:
         m = gtsam.Marginals(graph, result)
-        covs = [F.world_cov_planar(result.atPose3(F.X(k)), m.marginalCovariance(F.X(k))) for k in range(n)]
+        covs = [world_cov_planar(result.atPose3(F.X(k)), m.marginalCovariance(F.X(k))) for k in range(n)]
     traj = Trajectory(b.kf_t.copy(), np.array(poses), np.array(covs) if covs else None, name="batch")
     info = b.info()
     info.update(solve_ms=solve_ms, step_cpu_ms_median=solve_cpu_ms / n, lm_iterations=iterations,

@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..errors import GraphnavError
-from ..geometry import wrap_angle
+from ..geometry import cov_to_world, wrap_angle
 from ..log import KnownBeacon, NavLog, Record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
@@ -50,9 +50,7 @@ from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marq
 
 def world_cov(pose: gtsam.Pose2, cov: NDArray[np.float64]) -> NDArray[np.float64]:
     """GTSAM's body-tangent Pose2 covariance -> (x, y, yaw) covariance in the world frame."""
-    c, s = math.cos(pose.theta()), math.sin(pose.theta())
-    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return R @ cov @ R.T
+    return cov_to_world(pose.theta(), cov)
 
 
 def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:

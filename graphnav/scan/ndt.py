@@ -44,6 +44,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..geometry import wrap_angle
+
 _OFF3 = 1 << 20
 _OFF2 = 1 << 28
 
@@ -582,6 +584,6 @@ def ndt2d(source: ArrayLike, target: ArrayLike | VoxelMap, init: ArrayLike = (0.
     B = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # dp -> body-frame tangent (R^T dt, dphi)
     Bi = np.linalg.inv(B)
     cov = _congruent(B, _laplace_cov(ev.H, ev.sem, ev.se, 2, 1.0))
-    p[2] = (p[2] + np.pi) % (2 * np.pi) - np.pi
+    p[2] = wrap_angle(p[2])
     return Ndt2Result(p, 0.5 * (cov + cov.T), Bi.T @ ev.H @ Bi, -ev.f, ev.hits, it, conv,
                       (time.perf_counter() - t0) * 1e3)

@@ -35,6 +35,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry import wrap_angle
 from ..log import DEFAULT_MAX_RANGE
+from .lidar import polar_to_points
 
 METHODS = (
     "small_gicp:VGICP",
@@ -106,11 +107,8 @@ class Aligned:
 def scan_points(ranges: ArrayLike, angles: ArrayLike, *, min_range: float = 0.0,
                 max_range: float = DEFAULT_MAX_RANGE) -> NDArray[np.float64]:
     """Polar scan -> (N, 2) body-frame points; missing returns (NaN, inf, <= 0, beyond
-    ``max_range``) dropped."""
-    r = np.asarray(ranges, dtype=float)
-    a = np.asarray(angles, dtype=float)
-    ok = np.isfinite(r) & (r > max(min_range, 0.0)) & (r <= max_range) & np.isfinite(a)
-    return np.column_stack([r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok])])
+    ``max_range``) dropped (:func:`graphnav.scan.lidar.polar_to_points`, the one conversion)."""
+    return polar_to_points(ranges, angles, min_range=min_range, max_range=max_range)[0]
 
 
 def transform2(pose: ArrayLike, xy: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -203,7 +203,7 @@ def degrade(base: NavLog, cfg: DegradeConfig, seed: int = 0) -> NavLog:
             recs.append(Gnss(t, float(gx), float(gy), cfg.gnss_sigma))
         if i in c_pos:
             h = yaw + cfg.compass_bias + noise_c[c_pos[i]]
-            recs.append(Heading(t, float((h + math.pi) % (2 * math.pi) - math.pi), cfg.compass_sigma))
+            recs.append(Heading(t, float(wrap_angle(h)), cfg.compass_sigma))
     meta = dict(base.meta)
     if o is not None:
         odo, info = simulate_odometry(tr.t, tr.poses, o, rng)

@@ -120,7 +120,7 @@ def _truth(cfg: SolentConfig) -> dict[str, np.ndarray]:
         abx = aby = dpsi = 0.0
         for _ in range(cfg.substeps):
             tx, ty = WAYPOINTS[wp]
-            err = (math.atan2(ty - py, tx - px) - psi + math.pi) % (2 * math.pi) - math.pi
+            err = wrap_angle(math.atan2(ty - py, tx - px) - psi)
             r_cmd = min(rmax, max(-rmax, cfg.heading_gain * err))
             r += (r_cmd - r) * h / cfg.rate_tau
             psi_new = psi + r * h

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from ..geometry import wrap_angle
 from ..log import BeaconObs, Gnss, Heading, KnownBeacon, NavLog, Odometry, PosePrior, Truth
 
 
@@ -37,7 +38,7 @@ def square_path(
             t.append(t[-1] + dt)
     ctl.append(ctl[-1])
     p = np.array(poses)
-    p[:, 2] = (p[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    p[:, 2] = wrap_angle(p[:, 2])
     return np.array(t), p, np.array(ctl)
 
 
@@ -97,7 +98,7 @@ def square_loop(
             )
         if compass:
             yaw = p[i, 2] + compass_bias + rng.normal(0, sigma_compass)
-            recs.append(Heading(ti, float((yaw + math.pi) % (2 * math.pi) - math.pi), sigma_compass))
+            recs.append(Heading(ti, float(wrap_angle(yaw)), sigma_compass))
         for bid, (bx, by) in (beacons or {}).items():
             dx, dy = bx - p[i, 0], by - p[i, 1]
             r = math.hypot(dx, dy)
@@ -108,7 +109,7 @@ def square_loop(
                         ti,
                         bid,
                         float(r + rng.normal(0, sigma_range)),
-                        float((b + math.pi) % (2 * math.pi) - math.pi),
+                        float(wrap_angle(b)),
                         sigma_range,
                         sigma_bearing,
                     )
