@@ -148,8 +148,9 @@ def _run_all(out: list[Entry], todo: list[tuple[int, str]], log: NavLog,
             futures = [(u, pool.submit(_run_group, [out[i] for i, _ in u], [est for _, est in u], log))
                        for u in units]
             for u, fut in futures:
-                if progress:
-                    progress(", ".join(out[i].name for i, _ in u))
+                for i, _ in u:
+                    if progress:
+                        progress(out[i].name)
                 for (i, _), entry in zip(u, fut.result(), strict=True):
                     out[i] = entry
     else:
