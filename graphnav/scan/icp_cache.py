@@ -17,7 +17,6 @@ import copy
 import hashlib
 import time
 from collections.abc import Iterator
-from dataclasses import astuple
 from typing import Any
 
 import numpy as np
@@ -56,7 +55,8 @@ class MatchCache:
     @staticmethod
     def key(src_xy: ArrayLike, tgt_xy: ArrayLike, cfg: icp.IcpConfig, init: ArrayLike | None,
             init_cov: ArrayLike | None = None) -> tuple:
-        return (_digest(src_xy), _digest(tgt_xy), repr(astuple(cfg)), _digest(init), _digest(init_cov))
+        # repr(cfg): every field, without astuple's deep copy on each lookup
+        return (_digest(src_xy), _digest(tgt_xy), repr(cfg), _digest(init), _digest(init_cov))
 
     def match_points(self, src_xy: ArrayLike, tgt_xy: ArrayLike, cfg: icp.IcpConfig | None = None,
                      init: ArrayLike | None = None, init_cov: ArrayLike | None = None) -> icp.MatchResult:
