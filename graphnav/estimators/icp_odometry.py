@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry import se2_adjoint_inv, se2_compose
+from ..geometry import cov_to_world, se2_adjoint_inv, se2_compose
 from ..log import NavLog, odometry_samples
 from ..scan import icp_cache
 from ..scan.icp import IcpConfig, scan_points
@@ -40,9 +40,7 @@ _CONFIG_FIELDS = {f.name for f in fields(IcpConfig)}
 
 def _to_world(pose: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """Body-frame (right-perturbation) covariance -> the trajectory's world-frame (x, y, yaw)."""
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    a = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return a @ cov @ a.T
+    return cov_to_world(float(pose[2]), cov)
 
 
 def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: str = "HDL",

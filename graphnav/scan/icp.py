@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from ..errors import require
-from ..geometry import se2_between
+from ..geometry import cov_to_world, se2_between, wrap_angle
 from ..log import MAX_STATED_RANGE
 from . import covariance, degeneracy
 from .lidar import SIGMA_ALPHA, SIGMA_R_REL, polar_to_points
@@ -128,9 +128,7 @@ class MatchResult:
     @property
     def cov_target(self) -> NDArray[np.float64]:
         """Covariance of additive errors of ``(dx, dy, dyaw)`` in the target frame (first order)."""
-        c, s = np.cos(self.pose[2]), np.sin(self.pose[2])
-        a = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        return a @ self.cov @ a.T
+        return cov_to_world(float(self.pose[2]), self.cov)
 
 
 # ----------------------------------------------------------------------------- small numerics
@@ -660,7 +658,7 @@ def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None):  
     (GTSAM's Pose2 tangent space): ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1],
     [1, 0]]``; HDL: the point-to-line residual ``n . (p - q)``, its row ``n^T [R, J (p - t)]``.
     """
-    pose[2] = np.arctan2(np.sin(pose[2]), np.cos(pose[2]))
+    pose[2] = wrap_angle(float(pose[2]))
     c, s_ = np.cos(pose[2]), np.sin(pose[2])
     e = fp.p - fp.q
     d = np.hypot(e[:, 0], e[:, 1])

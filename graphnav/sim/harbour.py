@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..geometry import wrap_angle
 from ..log import BeaconObs, Gnss, Heading, Imu, KnownBeacon, NavLog, Odometry, PosePrior, Scan, Truth
 from .solent import imu_measurements
 
@@ -238,7 +239,7 @@ def vessel_track(cfg: HarbourConfig, rng: np.random.Generator, *, laps: int = 1,
             wp += 1  # reached (or unreachable within the turn radius: go on)
             t_wp = t
             continue
-        err = (math.atan2(to[1], to[0]) - yaw + math.pi) % (2 * math.pi) - math.pi
+        err = wrap_angle(math.atan2(to[1], to[0]) - yaw)
         w = float(np.clip(0.8 * err, -cfg.max_rot, cfg.max_rot))
         v_slow = 0.995 * v_slow + 0.005 * rng.normal(0.0, 1.0)
         v = cfg.speed * (1.0 - 0.25 * min(abs(err), 1.0)) + 0.1 * v_slow
@@ -251,7 +252,7 @@ def vessel_track(cfg: HarbourConfig, rng: np.random.Generator, *, laps: int = 1,
             pos = pos + (v / w) * np.array(
                 [math.sin(yaw + w * cfg.dt) - math.sin(yaw), -math.cos(yaw + w * cfg.dt) + math.cos(yaw)]
             )
-        yaw = (yaw + w * cfg.dt + math.pi) % (2 * math.pi) - math.pi
+        yaw = wrap_angle(yaw + w * cfg.dt)
         t += cfg.dt
     return np.array(t_l), np.array(p_l), np.array(c_l)
 
@@ -348,7 +349,7 @@ def simulate_harbour(
             gx, gy = p[i, :2] + amp[j] * away[j] + noise
             recs.append(Gnss(ti, float(gx), float(gy), cfg.gnss_sigma))
         hd = p[i, 2] + rng_misc.normal(0.0, cfg.compass_sigma)
-        recs.append(Heading(ti, float((hd + math.pi) % (2 * math.pi) - math.pi), cfg.compass_sigma))
+        recs.append(Heading(ti, float(wrap_angle(hd)), cfg.compass_sigma))
         for bid, (bx, by) in BEACONS.items() if i % beacon_every == 0 else ():
             dx, dy = bx - p[i, 0], by - p[i, 1]
             rng_ = math.hypot(dx, dy)
@@ -359,7 +360,7 @@ def simulate_harbour(
                         ti,
                         bid,
                         float(rng_ + rng_misc.normal(0.0, cfg.beacon_sigma_r)),
-                        float((br + math.pi) % (2 * math.pi) - math.pi),
+                        float(wrap_angle(br)),
                         cfg.beacon_sigma_r,
                         cfg.beacon_sigma_b,
                     )
