@@ -30,7 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output directory (default out/demo; a previous demo's files there are replaced)")
     add_overwrite_flag(p)
     p.add_argument("--log", type=Path, default=None, help="another log instead of the embedded one")
-    p.add_argument("--workers", "-j", type=int, default=1, help="estimators run in parallel processes")
+    p.add_argument("--workers", "-j", type=int, default=0,
+                   help="processes for the estimators and figures (default 0: one per core; 1: none)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     p.set_defaults(func=run)
 
@@ -54,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
     log_path = args.log or embedded_log(out)
     log_.info("graphnav demo: comparing every estimator on %s", log_path)
     cargs = argparse.Namespace(log=str(log_path), lenient=False, out=args.out, out_dir=out, estimators=None,
-                               option=None, workers=args.workers, json=args.json, overwrite=args.overwrite)
+                               option=None, workers=args.workers, json=args.json, overwrite=args.overwrite,
+                               quiet=getattr(args, "quiet", False))
     rc = compare.run(cargs)
     log_.info("report: %s (self-contained, to send: %s)", (args.out / "report.md").resolve(),
               (args.out / "report.html").resolve())

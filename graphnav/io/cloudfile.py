@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import LogError
+from ..errors import LogError, require
 
 FORMATS = (".ply", ".pcd", ".bin")
 _PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
@@ -51,8 +51,7 @@ def read_cloud(path: str | os.PathLike) -> NDArray[np.float64]:
 
 
 def _open3d_read(path: Path) -> NDArray[np.float64]:
-    import open3d as o3d
-
+    o3d = require("open3d", f"reading {path.suffix or 'this'} point-cloud files")
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
         pc = o3d.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
     return np.asarray(pc.points, dtype=float).reshape(-1, 3)

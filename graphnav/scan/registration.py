@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ..errors import require
 from ..geometry import wrap_angle
 from ..log import DEFAULT_MAX_RANGE
 from .lidar import polar_to_points
@@ -136,10 +137,11 @@ def matrix4_to_pose(m: ArrayLike) -> NDArray[np.float64]:
 def se2_exp(d: ArrayLike) -> NDArray[np.float64]:
     """SE(2) exponential of the twist (v_x, v_y, ω) as a pose (x, y, yaw)."""
     vx, vy, w = np.asarray(d, dtype=float)
-    if abs(w) < 1e-9:
-        return np.array([vx, vy, w])
-    s, c = np.sin(w), np.cos(w)
-    a, b = s / w, (1.0 - c) / w
+    if abs(w) < 1e-4:  # series: (1 - cos w) / w cancels catastrophically for small w
+        a, b = 1.0 - w * w / 6.0, 0.5 * w * (1.0 - w * w / 12.0)
+    else:
+        s, c = np.sin(w), np.cos(w)
+        a, b = s / w, (1.0 - c) / w
     return np.array([a * vx - b * vy, b * vx + a * vy, w])
 
 
@@ -219,8 +221,7 @@ def _o3d_cloud(xy: NDArray[np.float64], p: Params, normals: bool, covs: bool):
     """open3d cloud of 2D points at z = 0 with in-plane normals / GICP covariances from 2D PCA over
     neighbours within ``p.normal_radius``. With ``normals`` the points without a defined normal
     (isolated returns) are left out: a made-up normal would pull the solution."""
-    import open3d as o3d
-
+    o3d = require("open3d", "the open3d scan-matching backends")
     nrm = ok = None
     if normals or covs:
         nrm, ev = local_frames_2d(xy, p.neighbors, p.normal_radius)
@@ -336,8 +337,7 @@ class Target:
                                covs=self.kind == "gicp")
 
     def _align_open3d(self, src, init: NDArray[np.float64]):
-        import open3d as o3d
-
+        o3d = require("open3d", "the open3d scan-matching backends")
         reg = o3d.pipelines.registration
         p = self.params
 
