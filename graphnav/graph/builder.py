@@ -105,7 +105,8 @@ def default_matcher(options: dict[str, Any]) -> Matcher | None:
 
 def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any]) -> Any:
     """The loop closer of :mod:`graphnav.graph.loops` with the weighted ICP as its refinement and the
-    graph's ICP covariance treatment (``icp_cov_scale``, floor); ``None`` without the matcher."""
+    graph's ICP covariance treatment (the match's own, as the consecutive factors; the loop closer
+    adds its floor); ``None`` without the matcher."""
     try:
         from ..scan.icp import IcpConfig, match_points
     except ImportError:
@@ -113,7 +114,6 @@ def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any]) -> Any:
     from .loops import LoopCloser, LoopConfig
 
     icfg = IcpConfig(**icp_opts)
-    floor = np.array([cfg.icp_sigma_floor_xy] * 2 + [math.radians(cfg.icp_sigma_floor_yaw_deg)])
 
     def refine(src: NDArray[np.float64], tgt: NDArray[np.float64], init: NDArray[np.float64]):
         r = match_points(src, tgt, icfg, init=init)
@@ -126,7 +126,7 @@ def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any]) -> Any:
     if unknown:
         raise ValueError(f"unknown loop option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
     closer = LoopCloser(LoopConfig(**cfg.loop), refine,
-                        lambda c: proper_cov(cfg.icp_cov_scale * np.asarray(c, dtype=float), floor))
+                        lambda c: proper_cov(np.asarray(c, dtype=float), np.zeros(3)))
     closer.points = lambda scan: scan_points_of(scan, icfg)
     return closer
 
