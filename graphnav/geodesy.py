@@ -1,74 +1,82 @@
-"""Geodetic latitude/longitude <-> the local metric frame (east-north tangent plane, WGS84)."""
+"""Geodetic latitude/longitude <-> the local metric frame (east-north tangent plane, WGS84).
+
+A thin layer over pymap3d (``geodetic2ecef``, ``ecef2geodetic``: You 2000, non-iterative;
+``geodetic2enu``, ``enu2geodetic``): graphnav's conventions only (degrees in and out, the local
+frame is east-north, heights dropped for a surface vessel). tests/test_geodesy.py cross-checks it
+against the closed-form WGS84 equations.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+import pymap3d
 from numpy.typing import ArrayLike, NDArray
 
 WGS84_A = 6378137.0
 WGS84_F = 1.0 / 298.257223563
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+_WGS84 = pymap3d.Ellipsoid.from_name("wgs84")
+
+
+def _arr(v: ArrayLike) -> NDArray[np.float64]:
+    return np.asarray(v, dtype=float)
 
 
 def geodetic_to_ecef(lat_deg: ArrayLike, lon_deg: ArrayLike, h: ArrayLike = 0.0) -> NDArray[np.float64]:
     """WGS84 geodetic (deg, deg, m) -> ECEF (m), shape (..., 3)."""
-    lat, lon = np.radians(lat_deg), np.radians(lon_deg)
-    n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
-    x = (n + h) * np.cos(lat) * np.cos(lon)
-    y = (n + h) * np.cos(lat) * np.sin(lon)
-    z = (n * (1.0 - WGS84_E2) + h) * np.sin(lat)
-    return np.stack(np.broadcast_arrays(x, y, z), axis=-1)
+    lat, lon, h = np.broadcast_arrays(_arr(lat_deg), _arr(lon_deg), _arr(h))
+    x, y, z = pymap3d.geodetic2ecef(lat, lon, h, ell=_WGS84, deg=True)
+    return np.stack(np.broadcast_arrays(x, y, z), axis=-1).astype(float)
 
 
 def ecef_to_geodetic(p: ArrayLike) -> NDArray[np.float64]:
-    """ECEF (m) -> WGS84 (lat deg, lon deg, h m), Bowring's iteration (sub-mm near the surface)."""
-    p = np.asarray(p, dtype=float)
-    x, y, z = p[..., 0], p[..., 1], p[..., 2]
-    lon = np.arctan2(y, x)
-    rho = np.hypot(x, y)
-    lat = np.arctan2(z, rho * (1.0 - WGS84_E2))
-    for _ in range(5):
-        n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
-        h = rho / np.cos(lat) - n
-        lat = np.arctan2(z, rho * (1.0 - WGS84_E2 * n / (n + h)))
-    n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
-    h = rho / np.cos(lat) - n
-    return np.stack([np.degrees(lat), np.degrees(lon), h], axis=-1)
+    """ECEF (m), shape (..., 3) -> WGS84 (lat deg, lon deg, h m), same shape."""
+    p = _arr(p)
+    lat, lon, h = pymap3d.ecef2geodetic(p[..., 0], p[..., 1], p[..., 2], ell=_WGS84, deg=True)
+    return np.stack(np.broadcast_arrays(lat, lon, h), axis=-1).astype(float)
 
 
 @dataclass(frozen=True)
 class LocalFrame:
     """A local east-north-up tangent frame at the origin (``lat0``, ``lon0`` in degrees, ``h0`` m).
 
-    ``x`` is east and ``y`` north in metres; heights are ignored (a surface vessel).
+    ``x`` is east and ``y`` north in metres; heights are ignored (a surface vessel): a point is
+    taken at the origin's height ``h0`` going in, on the tangent plane (up = 0) coming out.
     """
 
     lat0: float
     lon0: float
     h0: float = 0.0
 
-    def _rot(self) -> NDArray[np.float64]:
-        la, lo = np.radians(self.lat0), np.radians(self.lon0)
-        return np.array(
-            [
-                [-np.sin(lo), np.cos(lo), 0.0],
-                [-np.sin(la) * np.cos(lo), -np.sin(la) * np.sin(lo), np.cos(la)],
-                [np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)],
-            ]
-        )
-
     def to_local(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> tuple[NDArray, NDArray]:
         """(lat, lon) in degrees -> (x east, y north) in metres."""
-        d = geodetic_to_ecef(lat_deg, lon_deg, self.h0) - geodetic_to_ecef(self.lat0, self.lon0, self.h0)
-        enu = d @ self._rot().T
-        return enu[..., 0], enu[..., 1]
+        lat, lon = np.broadcast_arrays(_arr(lat_deg), _arr(lon_deg))
+        e, n, _u = pymap3d.geodetic2enu(lat, lon, np.full(lat.shape, self.h0), self.lat0, self.lon0, self.h0,
+                                        ell=_WGS84, deg=True)
+        return _arr(e), _arr(n)
 
     def to_geodetic(self, x: ArrayLike, y: ArrayLike) -> tuple[NDArray, NDArray]:
         """(x east, y north) in metres on the tangent plane -> (lat, lon) in degrees."""
-        x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
-        enu = np.stack([x, y, np.zeros_like(x)], axis=-1)
-        p = geodetic_to_ecef(self.lat0, self.lon0, self.h0) + enu @ self._rot()
-        g = ecef_to_geodetic(p)
-        return g[..., 0], g[..., 1]
+        x, y = np.broadcast_arrays(_arr(x), _arr(y))
+        lat, lon, _h = pymap3d.enu2geodetic(x, y, np.zeros(x.shape), self.lat0, self.lon0, self.h0,
+                                            ell=_WGS84, deg=True)
+        return _arr(lat), _arr(lon)
+
+
+def origin_frame(meta: dict) -> tuple[LocalFrame | None, str | None]:
+    """The geodetic origin a log records (``meta["origin"] = {"lat", "lon", "h"}``, degrees and m) as
+    a :class:`LocalFrame`, and ``None``; or ``None`` and the reason there is none (absent, or not
+    finite numbers in range). Never a default: a log without an origin has no WGS84 position."""
+    o = meta.get("origin") if isinstance(meta, dict) else None
+    if o is None:
+        return None, "the log has no geodetic origin (meta['origin'] = {lat, lon, h})"
+    try:
+        lat, lon = float(o["lat"]), float(o["lon"])
+        h = float(o.get("h", 0.0) or 0.0)
+    except (TypeError, ValueError, KeyError, AttributeError):
+        return None, f"the log's meta['origin'] is not {{lat, lon, h}} numbers: {str(o)[:60]}"
+    if not (np.isfinite([lat, lon, h]).all() and -90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        return None, f"the log's meta['origin'] is out of range: lat {lat}, lon {lon}, h {h}"
+    return LocalFrame(lat, lon, h), None

@@ -92,24 +92,21 @@ class Trajectory:
 
     # -- export / import -------------------------------------------------------------------------
     def to_tum(self, path: str | Path) -> None:
-        """Write TUM format ``t x y z qx qy qz qw`` (z = 0, rotation about +z) — evo reads it."""
+        """Write TUM format ``t x y z qx qy qz qw`` (z = 0, rotation about +z; the quaternion by
+        :class:`scipy.spatial.transform.Rotation`, scalar last) — evo reads it."""
         from .io.outputs import atomic_path
 
-        half = 0.5 * self.yaw
-        arr = np.column_stack(
-            [self.t, self.x, self.y, np.zeros(len(self)), np.zeros(len(self)), np.zeros(len(self)),
-             np.sin(half), np.cos(half)]
-        )
+        arr = np.column_stack([self.t, self.x, self.y, np.zeros(len(self)), yaw_to_quat(self.yaw)])
         with atomic_path(path) as tmp:  # written whole or not at all
             np.savetxt(tmp, arr, fmt="%.9f", header="timestamp tx ty tz qx qy qz qw")
 
     @classmethod
     def from_tum(cls, path: str | Path, name: str = "") -> Trajectory:
-        """Read a TUM file written by :meth:`to_tum` (or any planar TUM trajectory)."""
+        """Read a TUM file written by :meth:`to_tum` (or any TUM trajectory: its yaw, the rotation's
+        first intrinsic Z-Y'-X'' angle)."""
         arr = np.loadtxt(path, comments="#", ndmin=2)
-        qx, qy, qz, qw = arr[:, 4], arr[:, 5], arr[:, 6], arr[:, 7]
-        yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-        return cls(arr[:, 0], np.column_stack([arr[:, 1], arr[:, 2], yaw]), name=name or Path(path).stem)
+        return cls(arr[:, 0], np.column_stack([arr[:, 1], arr[:, 2], quat_to_yaw(arr[:, 4:8])]),
+                   name=name or Path(path).stem)
 
     def to_csv(self, path: str | Path) -> None:
         """Write CSV ``t,x,y,yaw`` plus the 6 unique covariance entries when present (atomically)."""
@@ -141,3 +138,25 @@ class Trajectory:
             cov = np.stack([np.stack([xx, xy, xa], -1), np.stack([xy, yy, ya], -1),
                             np.stack([xa, ya, aa], -1)], axis=1)
         return cls(body[:, 0], body[:, 1:4], cov, name=name or Path(path).stem)
+
+
+def yaw_to_quat(yaw: ArrayLike) -> NDArray[np.float64]:
+    """Yaw [rad] -> unit quaternions ``(qx, qy, qz, qw)`` of the rotation about +z, shape (N, 4)."""
+    from scipy.spatial.transform import Rotation
+
+    yaw = np.atleast_1d(np.asarray(yaw, dtype=float))
+    if yaw.size == 0:
+        return np.empty((0, 4))
+    return Rotation.from_euler("z", yaw.reshape(-1, 1)).as_quat()
+
+
+def quat_to_yaw(q: ArrayLike) -> NDArray[np.float64]:
+    """Quaternions ``(qx, qy, qz, qw)`` (N, 4) -> yaw [rad]: the first angle of the intrinsic Z-Y'-X''
+    decomposition (for a planar rotation, the rotation angle about +z). A zero quaternion raises
+    ValueError (scipy)."""
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(q, dtype=float).reshape(-1, 4)
+    if q.shape[0] == 0:
+        return np.empty(0)
+    return Rotation.from_quat(q).as_euler("ZYX")[:, 0]

@@ -1,6 +1,7 @@
 """``graphnav compare LOG --out DIR [--estimators a,b,...]``: every estimator the log can feed, side
 by side — DIR/report.md, DIR/report.html (self-contained), PNG figures, DIR/<estimator>.tum and
-DIR/truth.tum."""
+DIR/truth.tum, DIR/map.html (the tracks, self-contained), and when the log has a geodetic origin every
+track in WGS84: DIR/trajectory.geojson, .gpx, .kml."""
 
 from __future__ import annotations
 
@@ -13,7 +14,9 @@ from pathlib import Path
 from .. import estimators
 from ..evaluation.compare import compare, ranked
 from ..evaluation.report import to_json, write_report
+from ..evaluation.trackmap import write_track_map
 from ..io import load_log
+from ..io.geo_out import write_wgs84
 from ..io.outputs import OutDir
 from ..scan.icp_cache import MatchCache
 from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, parse_options
@@ -39,6 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-icp-cache", dest="icp_cache", action="store_false",
                    help="every estimator computes its own weighted-ICP matches (default: a match shared by "
                         "several estimators is computed once; their runtimes then exclude it)")
+    p.add_argument("--tiles", metavar="URL", default=None,
+                   help="map.html draws map tiles from this {z}/{x}/{y} URL template under the tracks (loaded "
+                        "over the network when the page is opened; default: none, the page is self-contained)")
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -67,6 +73,12 @@ def run(args: argparse.Namespace) -> int:
                       cache=cache)
     command = shlex.join(["graphnav", *args.argv]) if hasattr(args, "argv") else None
     files = write_report(entries, log, out, log_name=str(args.log), command=command)
+    tracks = {**({"truth": log.truth()} if log.has_truth else {}),
+              **{e.name: e.result.trajectory for e in entries if e.ok and e.result is not None}}
+    geo = write_wgs84(out, tracks, log.meta)  # WGS84 tracks, or "wgs84": None and why
+    files.update({n: out.path / n for n in (geo["wgs84"] or {}).get("files", [])})
+    files["map.html"] = write_track_map(out.file("map.html"), tracks, log.meta, title=f"Tracks: {args.log}",
+                                        tiles=getattr(args, "tiles", None))
     total = time.perf_counter() - t0
     for e in entries:
         if e.error is not None:
@@ -75,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
             log_.info("%s not run: %s", e.name, e.skipped)
     hits = sum((e.summary or {}).get("icp_cache_hits", 0) for e in entries) if cache is not None else None
     obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=args.workers,
-                  icp_cache_hits=hits)
+                  icp_cache_hits=hits, map="map.html", **geo)
     lines = [f"{'estimator':16s} {'ATE RMSE [m]':>12s} {'RPE [m]':>9s} {'runtime [s]':>11s}  note"]
     for e in ranked(entries):
         s = e.summary or {}

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import calendar
 import math
+import re
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -108,8 +109,7 @@ def _num(msg: pynmea2.NMEASentence, name: str, *, lo: float = -math.inf, hi: flo
 
 def _tod(msg: pynmea2.NMEASentence) -> float | None:
     """Seconds since midnight from the sentence's time field (GGA, RMC, ZDA: the first), by
-    :func:`parse_time_of_day`: pynmea2's ``timestamp`` accepts ``" 9"`` as seconds and has no leap
-    second, so its raw text is checked here."""
+    :func:`parse_time_of_day`."""
     return parse_time_of_day(_field(msg, 0))
 
 
@@ -140,50 +140,67 @@ def _zda_date(msg: pynmea2.NMEASentence) -> date | None:
         raise LogError(f"date {str(dd)[:12]}/{str(mm)[:12]}/{yy} does not exist", field="day") from None
 
 
+_TIME = re.compile(r"^([0-9]{2})([0-9]{2})([0-9]{2})(\.[0-9]+)?$")
+_DDMM = {True: re.compile(r"^[0-9]{2}([0-9]{2}(?:\.[0-9]*)?)$"),  # ddmm[.mmm]: the minutes' group
+         False: re.compile(r"^[0-9]{3}([0-9]{2}(?:\.[0-9]*)?)$")}  # dddmm[.mmm]
+
+
 def parse_time_of_day(raw: str) -> float | None:
-    """``hhmmss[.sss]`` -> seconds since midnight (None when empty)."""
+    """``hhmmss[.sss]`` -> seconds since midnight (None when empty).
+
+    The value is pynmea2's (``nmea_utils.timestamp``, what ``msg.timestamp`` gives) once the text is
+    checked here, field by field: pynmea2 alone takes ``" 9"`` or ``"+9"`` as a number and gives no
+    message naming the field. A leap second (``ss`` = 60, which :class:`datetime.time` cannot hold)
+    is the 60th second of its minute."""
     raw = raw.strip()
     if raw == "":
         return None
-    if len(raw) < 6 or not raw[:6].isdigit() or (len(raw) > 6 and (raw[6] != "." or not raw[7:].isdigit())):
+    m = _TIME.match(raw)
+    if m is None:
         raise LogError(f"time {raw[:20]!r} is not hhmmss[.sss]", field="timestamp")
-    h, m, s = int(raw[:2]), int(raw[2:4]), float(raw[4:])
-    if h > 23 or m > 59 or s >= 61.0:
+    h, mi, s = int(m[1]), int(m[2]), int(m[3])
+    if h > 23 or mi > 59 or s > 60:
         raise LogError(f"time {raw[:20]!r} out of range", field="timestamp")
-    return h * 3600.0 + m * 60.0 + s
+    if s == 60:
+        return h * 3600.0 + mi * 60.0 + float(raw[4:])
+    ts = pynmea2.nmea_utils.timestamp(raw)
+    return ts.hour * 3600.0 + ts.minute * 60.0 + ts.second + ts.microsecond * 1e-6
 
 
 def parse_latlon(val: str, hemi: str, *, lat: bool) -> float | None:
-    """``ddmm.mmmm``/``dddmm.mmmm`` + N/S/E/W -> signed degrees (None when both empty)."""
+    """``ddmm.mmmm``/``dddmm.mmmm`` + N/S/E/W -> signed degrees (None when both empty).
+
+    The value is pynmea2's (``nmea_utils.dm_to_sd``, what ``msg.latitude``/``msg.longitude`` give)
+    once the text is checked here: pynmea2 alone reads an empty field or a missing hemisphere as 0 deg,
+    and accepts minutes >= 60 and latitudes beyond 90 deg. ``ddmm`` without decimals is accepted."""
     name = "lat" if lat else "lon"
     if val.strip() == "" and hemi.strip() == "":
         return None
     if hemi not in (("N", "S") if lat else ("E", "W")):
         raise LogError(f"hemisphere {hemi[:5]!r} is not {'N/S' if lat else 'E/W'}", field=name + "_dir")
-    nd = 2 if lat else 3
-    head = val.split(".")[0]
-    if len(head) < nd + 2 or not head.isdigit():
+    m = _DDMM[lat].match(val)
+    if m is None:
         raise LogError(f"{val[:20]!r} is not {'dd' if lat else 'ddd'}mm.mmmm", field=name)
-    deg = int(val[:nd])
-    minutes = _float(val[nd:], name, lo=0.0, hi=60.0)
+    minutes = float(m[1])
     if minutes >= 60.0:
         raise LogError(f"minutes {minutes} >= 60", field=name)
-    d = deg + minutes / 60.0
+    d = pynmea2.nmea_utils.dm_to_sd(val + ("0" if val.endswith(".") else "" if "." in val else ".0"))
     if d > (90.0 if lat else 180.0):
         raise LogError(f"{d:.6f} deg out of range", field=name)
     return -d if hemi in ("S", "W") else d
 
 
 def parse_date(raw: str, name: str = "datestamp") -> date | None:
-    """RMC ``ddmmyy`` (years 70-99 -> 19xx, 00-69 -> 20xx)."""
+    """RMC ``ddmmyy`` -> a date by pynmea2 (``nmea_utils.datestamp``, what ``msg.datestamp`` gives:
+    ``strptime``'s years 69-99 -> 19xx, 00-68 -> 20xx) once the text is checked to be six digits
+    (``strptime`` alone also takes ``"1199"`` or ``" 11199"``)."""
     raw = raw.strip()
     if raw == "":
         return None
     if len(raw) != 6 or not raw.isdigit():
         raise LogError(f"date {raw[:20]!r} is not ddmmyy", field=name)
-    dd, mm, yy = int(raw[:2]), int(raw[2:4]), int(raw[4:])
     try:
-        return date(1900 + yy if yy >= 70 else 2000 + yy, mm, dd)
+        return pynmea2.nmea_utils.datestamp(raw)
     except ValueError:
         raise LogError(f"date {raw!r} does not exist", field=name) from None
 
@@ -501,7 +518,7 @@ def _first_date_day0(lines: Iterable[bytes]) -> float | None:
             elif kind == "ZDA":
                 probe._zda(msg)
             else:
-                probe._stamp(parse_time_of_day(_field(msg, 0)))
+                probe._stamp(_tod(msg))
         except (LogError, AttributeError):
             continue
         if probe.day0 is not None:

@@ -1,4 +1,5 @@
-"""NMEA 0183 output: pure functions that format sentences with valid checksums.
+"""NMEA 0183 output: pure functions that build sentences with pynmea2 (which renders them and
+computes their checksums); this module only formats the field values.
 
 Internal quantities (SI, yaw CCW from east) are converted at this edge: headings/courses to
 degrees clockwise from north, speed to knots, rate of turn to degrees per minute positive to
@@ -9,10 +10,11 @@ POSIX maps ``t = 0`` to 1970-01-01 00:00:00, which :func:`graphnav.io.nmea.read_
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from datetime import UTC, datetime
 
 import numpy as np
+import pynmea2
 
 from ..geodesy import LocalFrame
 from ..geometry import wrap_angle, yaw_to_heading_deg
@@ -24,16 +26,18 @@ DEFAULT_ORIGIN = (43.5, 16.4)
 
 
 def checksum(body: str) -> str:
-    """XOR of the characters between ``$`` and ``*``, two upper-case hex digits."""
-    c = 0
-    for ch in body:
-        c ^= ord(ch)
-    return f"{c:02X}"
+    """XOR of the characters between ``$`` and ``*`` (pynmea2's), two upper-case hex digits."""
+    return f"{pynmea2.NMEASentence.checksum(body):02X}"
 
 
 def sentence(body: str) -> str:
-    """``$BODY*CS`` (no line terminator)."""
+    """``$BODY*CS`` (no line terminator) for any comma-separated body (tests build odd ones)."""
     return f"${body}*{checksum(body)}"
+
+
+def _render(talker: str, kind: str, fields: Sequence[str]) -> str:
+    """One sentence built and rendered by pynmea2 (``$TTKKK,fields*CS``)."""
+    return pynmea2.TalkerSentence.sentence_types[kind](talker, kind, list(fields)).render()
 
 
 def _utc(t: float) -> datetime:
@@ -56,13 +60,17 @@ def _ddmm(value: float, lat: bool, decimals: int = 7) -> tuple[str, str]:
     return f"{deg:0{nd}d}{minutes:0{3 + decimals}.{decimals}f}", hemi
 
 
+def _opt(v: float | None, fmt: str) -> str:
+    return "" if v is None or not math.isfinite(v) else format(v, fmt)
+
+
 def gga(t: float, lat: float, lon: float, *, quality: int = 1, sats: int = 10, hdop: float = 1.0,
         alt: float = 0.0, talker: str = "GN") -> str:
     """GGA fix: time, position (0.1 mm precision), quality, satellites, HDOP, altitude."""
     la, ns = _ddmm(lat, True)
     lo, ew = _ddmm(lon, False)
-    return sentence(f"{talker}GGA,{_hhmmss(t)},{la},{ns},{lo},{ew},{quality:d},{sats:02d},{hdop:.2f},"
-                    f"{alt:.1f},M,0.0,M,,")
+    return _render(talker, "GGA", [_hhmmss(t), la, ns, lo, ew, f"{quality:d}", f"{sats:02d}", f"{hdop:.2f}",
+                                   f"{alt:.1f}", "M", "0.0", "M", "", ""])
 
 
 def rmc(t: float, lat: float, lon: float, sog: float | None = None, cog_yaw: float | None = None, *,
@@ -70,32 +78,33 @@ def rmc(t: float, lat: float, lon: float, sog: float | None = None, cog_yaw: flo
     """RMC: time, status A, position, SOG [m/s -> kn], COG [yaw -> deg true], date, mode."""
     la, ns = _ddmm(lat, True)
     lo, ew = _ddmm(lon, False)
-    d = _utc(t)
-    s = "" if sog is None else f"{sog / KNOT:.3f}"
-    c = "" if cog_yaw is None else f"{yaw_to_heading_deg(cog_yaw):.2f}"
-    return sentence(f"{talker}RMC,{_hhmmss(t)},A,{la},{ns},{lo},{ew},{s},{c},{d:%d%m%y},,,{mode}")
+    c = None if cog_yaw is None else yaw_to_heading_deg(cog_yaw)
+    s = None if sog is None else sog / KNOT
+    return _render(talker, "RMC", [_hhmmss(t), "A", la, ns, lo, ew, _opt(s, ".3f"), _opt(c, ".2f"),
+                                   f"{_utc(t):%d%m%y}", "", "", mode])
 
 
 def zda(t: float, talker: str = "GN") -> str:
     """ZDA: UTC time and date (local zone 00:00)."""
     d = _utc(t)
-    return sentence(f"{talker}ZDA,{_hhmmss(t)},{d.day:02d},{d.month:02d},{d.year:04d},00,00")
+    return _render(talker, "ZDA", [_hhmmss(t), f"{d.day:02d}", f"{d.month:02d}", f"{d.year:04d}", "00", "00"])
 
 
 def hdt(yaw: float, talker: str = "HE") -> str:
     """HDT true heading [yaw rad -> deg clockwise from north, 0.01 deg]."""
-    return sentence(f"{talker}HDT,{yaw_to_heading_deg(yaw):.2f},T")
+    return _render(talker, "HDT", [f"{yaw_to_heading_deg(yaw):.2f}", "T"])
 
 
 def vtg(sog: float, cog_yaw: float | None = None, talker: str = "GN") -> str:
     """VTG: course over ground (true) and speed in knots and km/h; mode A."""
-    c = "" if cog_yaw is None else f"{yaw_to_heading_deg(cog_yaw):.2f}"
-    return sentence(f"{talker}VTG,{c},T,,M,{sog / KNOT:.3f},N,{sog * 3.6:.3f},K,A")
+    c = None if cog_yaw is None else yaw_to_heading_deg(cog_yaw)
+    return _render(talker, "VTG", [_opt(c, ".2f"), "T", "", "M", f"{sog / KNOT:.3f}", "N", f"{sog * 3.6:.3f}",
+                                   "K", "A"])
 
 
 def rot(w: float, talker: str = "TI") -> str:
     """ROT: rate of turn [rad/s CCW -> deg/min, positive to starboard], status A."""
-    return sentence(f"{talker}ROT,{-math.degrees(w) * 60.0:.3f},A")
+    return _render(talker, "ROT", [f"{-math.degrees(w) * 60.0:.3f}", "A"])
 
 
 def frame_of(log: NavLog, origin: tuple[float, float] | None = None) -> LocalFrame:
@@ -123,6 +132,10 @@ def log_to_nmea(log: NavLog, *, origin: tuple[float, float] | None = None, quali
     receivers do; the reader keeps one fix per epoch).
     """
     frame = frame_of(log, origin)
+    fixes = [r for r in log.records if isinstance(r, Gnss)]
+    lats, lons = frame.to_geodetic(np.array([r.x for r in fixes]), np.array([r.y for r in fixes]))  # all at once
+    geo = {id(r): (float(la), float(lo)) for r, la, lo in zip(fixes, np.atleast_1d(lats), np.atleast_1d(lons),
+                                                               strict=True)}
     last_t = None
     for r in log.records:
         if not isinstance(r, Gnss | Heading | Odometry):
@@ -131,10 +144,10 @@ def log_to_nmea(log: NavLog, *, origin: tuple[float, float] | None = None, quali
             yield r.t, zda(r.t)
             last_t = r.t
         if isinstance(r, Gnss):
-            lat, lon = frame.to_geodetic(r.x, r.y)
-            yield r.t, gga(r.t, float(lat), float(lon), quality=quality, hdop=hdop_of(r.sigma, quality))
+            lat, lon = geo[id(r)]
+            yield r.t, gga(r.t, lat, lon, quality=quality, hdop=hdop_of(r.sigma, quality))
             if with_rmc:
-                yield r.t, rmc(r.t, float(lat), float(lon))
+                yield r.t, rmc(r.t, lat, lon)
         elif isinstance(r, Heading):
             yield r.t, hdt(r.yaw)
         else:
@@ -155,18 +168,56 @@ def solution_sentences(t: float, pose: np.ndarray, frame: LocalFrame, *, sog: fl
     return out
 
 
-def trajectory_to_nmea(t: np.ndarray, poses: np.ndarray, frame: LocalFrame) -> Iterator[tuple[float, str]]:
-    """Sentences for a trajectory: ZDA + GGA + HDT per pose, VTG/ROT from the step to the next pose."""
+#: The sentences :func:`trajectory_to_nmea` writes per pose by default (replay, tests).
+TRAJECTORY_SENTENCES = ("ZDA", "GGA", "HDT", "VTG", "ROT")
+
+
+def trajectory_rates(t: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """SOG [m/s], COG [yaw rad] and yaw rate [rad/s] at each pose from the step to the next pose
+    (the last pose: from the step before it); NaN where the step has no duration or no heading."""
+    t = np.asarray(t, float)
+    poses = np.asarray(poses, float).reshape(-1, 3)
     n = len(t)
-    for i in range(n):
-        j0, j1 = (i, i + 1) if i + 1 < n else (i - 1, i)
-        sog = cog = w = None
-        if 0 <= j0 and j1 < n and t[j1] > t[j0]:
-            d = poses[j1] - poses[j0]
-            dt = t[j1] - t[j0]
-            sog = float(np.hypot(d[0], d[1]) / dt)
-            cog = float(np.arctan2(d[1], d[0]))
-            w = float(wrap_angle(d[2]) / dt)
-        yield float(t[i]), zda(float(t[i]))
-        for s in solution_sentences(float(t[i]), poses[i], frame, sog=sog, cog_yaw=cog, w=w):
-            yield float(t[i]), s
+    sog, cog, w = (np.full(n, np.nan) for _ in range(3))
+    if n < 2:
+        return sog, cog, w
+    d = np.diff(poses, axis=0)
+    dt = np.diff(t)
+    ok = dt > 0
+    step_sog = np.where(ok, np.hypot(d[:, 0], d[:, 1]) / np.where(ok, dt, 1.0), np.nan)
+    step_cog = np.where(ok, np.arctan2(d[:, 1], d[:, 0]), np.nan)
+    step_w = np.where(ok, wrap_angle(d[:, 2]) / np.where(ok, dt, 1.0), np.nan)
+    idx = np.minimum(np.arange(n), n - 2)  # pose i -> step (i, i+1); the last pose -> the last step
+    return step_sog[idx], step_cog[idx], step_w[idx]
+
+
+def trajectory_to_nmea(t: np.ndarray, poses: np.ndarray, frame: LocalFrame, *,
+                       kinds: Sequence[str] = TRAJECTORY_SENTENCES) -> Iterator[tuple[float, str]]:
+    """Sentences for a trajectory, per pose those of ``kinds`` in that order (ZDA, GGA, RMC, HDT, VTG,
+    ROT): SOG/COG (RMC, VTG) and the rate of turn (ROT) from the step to the next pose
+    (:func:`trajectory_rates`); a pose without a heading (NaN yaw) gets no HDT, one without a rate no
+    VTG/ROT (RMC then leaves SOG/COG empty)."""
+    unknown = set(kinds) - {"ZDA", "GGA", "RMC", "HDT", "VTG", "ROT"}
+    if unknown:
+        raise ValueError(f"unknown NMEA sentence type(s) {sorted(unknown)}: ZDA, GGA, RMC, HDT, VTG, ROT")
+    t = np.asarray(t, float)
+    poses = np.asarray(poses, float).reshape(-1, 3)
+    lat, lon = frame.to_geodetic(poses[:, 0], poses[:, 1])  # every pose at once
+    sog, cog, w = trajectory_rates(t, poses)
+    for i in range(len(t)):
+        ti, la, lo = float(t[i]), float(lat[i]), float(lon[i])
+        s_i = None if np.isnan(sog[i]) else float(sog[i])
+        c_i = None if np.isnan(cog[i]) or s_i is None else float(cog[i])
+        for k in kinds:
+            if k == "ZDA":
+                yield ti, zda(ti)
+            elif k == "GGA":
+                yield ti, gga(ti, la, lo)
+            elif k == "RMC":
+                yield ti, rmc(ti, la, lo, s_i, c_i)
+            elif k == "HDT" and np.isfinite(poses[i, 2]):
+                yield ti, hdt(float(poses[i, 2]))
+            elif k == "VTG" and s_i is not None:
+                yield ti, vtg(s_i, c_i)
+            elif k == "ROT" and np.isfinite(w[i]):
+                yield ti, rot(float(w[i]))

@@ -11,7 +11,10 @@ from __future__ import annotations
 import calendar
 from pathlib import Path
 
+import pynmea2
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from graphnav.errors import LogError
 from graphnav.io.nmea import parse_nmea, read_nmea
@@ -147,3 +150,63 @@ def test_real_receivers():
     log = read_nmea(CORPUS / "ac12.log")
     t = [r.t for r in log.of("gnss")]
     assert len(t) >= 7 and all(b - a == pytest.approx(1.0) for a, b in zip(t, t[1:], strict=False))
+
+
+# -- the field parsers: pynmea2's conversions behind graphnav's checks, against the closed form
+@given(st.integers(0, 89), st.integers(0, 59), st.integers(0, 9999), st.sampled_from("NS"))
+def test_latitude_is_pynmea2s_and_the_closed_form(deg, minute, frac, hemi):
+    from graphnav.io.nmea import parse_latlon
+
+    raw = f"{deg:02d}{minute:02d}.{frac:04d}"
+    v = parse_latlon(raw, hemi, lat=True)
+    expected = (deg + (minute + frac / 1e4) / 60.0) * (1 if hemi == "N" else -1)
+    assert abs(v - expected) < 1e-12
+    msg = pynmea2.parse(s(f"GPGGA,123519,{raw},{hemi},01131.000,E,1,08,0.9,0,M,0,M,,"))
+    assert v == msg.latitude
+
+
+@given(st.integers(0, 179), st.integers(0, 59), st.integers(0, 99999), st.sampled_from("EW"))
+def test_longitude_is_pynmea2s_and_the_closed_form(deg, minute, frac, hemi):
+    from graphnav.io.nmea import parse_latlon
+
+    raw = f"{deg:03d}{minute:02d}.{frac:05d}"
+    v = parse_latlon(raw, hemi, lat=False)
+    assert abs(v - (deg + (minute + frac / 1e5) / 60.0) * (1 if hemi == "E" else -1)) < 1e-12
+    assert parse_latlon(raw.split(".")[0], hemi, lat=False) == pytest.approx(
+        (deg + minute / 60.0) * (1 if hemi == "E" else -1), abs=1e-12)  # no decimals: accepted
+
+
+@given(st.integers(0, 23), st.integers(0, 59), st.integers(0, 59), st.integers(0, 999))
+def test_time_of_day_is_pynmea2s_and_the_closed_form(hh, mm, ss, ms):
+    from graphnav.io.nmea import parse_time_of_day
+
+    raw = f"{hh:02d}{mm:02d}{ss:02d}.{ms:03d}"
+    assert abs(parse_time_of_day(raw) - (hh * 3600 + mm * 60 + ss + ms / 1000)) < 1e-6
+    msg = pynmea2.parse(s(f"GPGGA,{raw},4807.038,N,01131.000,E,1,08,0.9,0,M,0,M,,"))
+    ts = msg.timestamp
+    assert parse_time_of_day(raw) == ts.hour * 3600.0 + ts.minute * 60.0 + ts.second + ts.microsecond * 1e-6
+
+
+@pytest.mark.parametrize(("parse", "raw", "field"), [
+    ("time", " 9", "timestamp"), ("time", "+12345", "timestamp"), ("time", "246000", "timestamp"),
+    ("time", "123561", "timestamp"), ("lat", "4860.0", "lat"), ("lat", "9100.0", "lat"), ("lat", "48007.5", "lat"),
+    ("lat", "", "lat"), ("lon", "18100.0", "lon"), ("lon", "1131.000", "lon"), ("date", "1199", "datestamp"),
+    ("date", "310299", "datestamp"),
+])
+def test_what_pynmea2_would_accept_is_still_a_named_error(parse, raw, field):
+    """pynmea2 alone reads these (" 9" s, minutes >= 60, an empty latitude as 0 deg, a 4-digit longitude,
+    strptime's "1199"); graphnav names the field instead."""
+    from graphnav.io.nmea import parse_date, parse_latlon, parse_time_of_day
+
+    f = {"time": parse_time_of_day, "date": parse_date,
+         "lat": lambda r: parse_latlon(r, "N", lat=True), "lon": lambda r: parse_latlon(r, "E", lat=False)}[parse]
+    with pytest.raises(LogError) as ei:
+        f(raw)
+    assert ei.value.field == field
+
+
+def test_leap_second_and_the_date_pivot():
+    from graphnav.io.nmea import parse_date, parse_time_of_day
+
+    assert parse_time_of_day("235960.5") == 86400.5  # datetime.time has no 60th second: graphnav keeps it
+    assert str(parse_date("010170")) == "1970-01-01" and str(parse_date("010168")) == "2068-01-01"

@@ -1,0 +1,164 @@
+"""Tracks in WGS84 for GIS and chart plotters: GeoJSON (RFC 7946), GPX 1.1 (gpxpy), KML (simplekml).
+
+A track is a :class:`~graphnav.trajectory.Trajectory` in the local frame converted with the log's
+geodetic origin (:func:`graphnav.geodesy.origin_frame`; without one nothing is written -- an origin
+is never invented). Times are the log's seconds read as POSIX (UTC): a log whose times are not POSIX
+(a simulation from ``t = 0``) starts on 1970-01-01, as :mod:`graphnav.io.nmea_out` does; the raw
+``t`` is kept in GeoJSON's properties. Headings are degrees clockwise from true north.
+
+* GeoJSON: a FeatureCollection with, per track, a ``LineString`` (``kind: "track"``) and one
+  ``Point`` per pose (``kind: "pose"``, properties ``t``, ``time``, ``heading_deg``); coordinates
+  ``[lon, lat]`` (RFC 7946 section 3.1.1) to 1e-8 deg (~1 mm), no ``crs`` member (WGS84 by definition).
+* GPX 1.1: one ``<trk>`` per track, ``<trkpt lat lon><time>`` per pose (GPX 1.1 has no heading).
+* KML 2.2: one ``Placemark`` with a ``LineString`` and a ``TimeSpan`` per track.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geodesy import LocalFrame, origin_frame
+from ..geometry import yaw_to_heading_deg
+from ..trajectory import Trajectory
+from .outputs import OutDir, write_text_atomic
+
+FORMATS = ("geojson", "gpx", "kml")
+#: KML colours (aabbggrr) for successive tracks; the truth is drawn black.
+_KML_COLOURS = ("ff0000ff", "ffff0000", "ff00a000", "ff00a5ff", "ffff00ff", "ffa0a000", "ff808080", "ff004080")
+
+
+@dataclass
+class GeoTrack:
+    """One track in WGS84: times [s], latitude and longitude [deg], heading [deg from north] (NaN: unknown)."""
+
+    name: str
+    t: NDArray[np.float64]
+    lat: NDArray[np.float64]
+    lon: NDArray[np.float64]
+    heading_deg: NDArray[np.float64]
+
+    @classmethod
+    def from_trajectory(cls, traj: Trajectory, frame: LocalFrame, name: str | None = None) -> GeoTrack:
+        """The trajectory's poses converted by ``frame`` (poses with a non-finite position are left out)."""
+        ok = np.isfinite(traj.t) & np.isfinite(traj.x) & np.isfinite(traj.y)
+        lat, lon = frame.to_geodetic(traj.x[ok], traj.y[ok])
+        yaw = traj.yaw[ok]
+        heading = np.where(np.isfinite(yaw), yaw_to_heading_deg(np.nan_to_num(yaw)), np.nan)
+        return cls(name if name is not None else traj.name, traj.t[ok], np.atleast_1d(lat), np.atleast_1d(lon),
+                   np.atleast_1d(heading))
+
+    def times(self) -> list[datetime]:
+        return [datetime.fromtimestamp(round(float(t), 6), UTC) for t in self.t]
+
+
+def _iso(d: datetime) -> str:
+    return d.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def _c(v: float) -> float:
+    return round(float(v), 8)
+
+
+def geojson(tracks: list[GeoTrack]) -> dict[str, Any]:
+    """An RFC 7946 FeatureCollection (see the module docstring)."""
+    features: list[dict[str, Any]] = []
+    for tr in tracks:
+        times = [_iso(d) for d in tr.times()]
+        coords = [[_c(lo), _c(la)] for la, lo in zip(tr.lat, tr.lon, strict=True)]
+        if len(coords) >= 2:
+            features.append({"type": "Feature", "geometry": {"type": "LineString", "coordinates": coords},
+                             "properties": {"name": tr.name, "kind": "track", "poses": len(coords),
+                                            "start": times[0], "end": times[-1]}})
+        for i, c in enumerate(coords):
+            h = tr.heading_deg[i]
+            props: dict[str, Any] = {"name": tr.name, "kind": "pose", "t": float(tr.t[i]), "time": times[i]}
+            if math.isfinite(h):
+                props["heading_deg"] = round(float(h), 3)
+            features.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": c}, "properties": props})
+    out: dict[str, Any] = {"type": "FeatureCollection", "features": features}
+    lats = np.concatenate([tr.lat for tr in tracks]) if tracks else np.empty(0)
+    lons = np.concatenate([tr.lon for tr in tracks]) if tracks else np.empty(0)
+    if lats.size:
+        out["bbox"] = [_c(lons.min()), _c(lats.min()), _c(lons.max()), _c(lats.max())]
+    return out
+
+
+def gpx_text(tracks: list[GeoTrack]) -> str:
+    """GPX 1.1 (gpxpy): one track per :class:`GeoTrack`, with times."""
+    import gpxpy.gpx
+
+    g = gpxpy.gpx.GPX()
+    g.creator = "graphnav"
+    for tr in tracks:
+        trk = gpxpy.gpx.GPXTrack(name=tr.name)
+        seg = gpxpy.gpx.GPXTrackSegment()
+        seg.points = [gpxpy.gpx.GPXTrackPoint(float(la), float(lo), time=d)
+                      for la, lo, d in zip(tr.lat, tr.lon, tr.times(), strict=True)]
+        trk.segments.append(seg)
+        g.tracks.append(trk)
+    return g.to_xml(version="1.1")
+
+
+def kml_text(tracks: list[GeoTrack]) -> str:
+    """KML 2.2 (simplekml): one LineString placemark per track, with its time span."""
+    import simplekml
+
+    k = simplekml.Kml(name="graphnav")
+    for i, tr in enumerate(tracks):
+        ls = k.newlinestring(name=tr.name, coords=[(float(lo), float(la)) for la, lo in zip(tr.lat, tr.lon,
+                                                                                               strict=True)])
+        ls.style.linestyle.color = "ff000000" if tr.name == "truth" else _KML_COLOURS[i % len(_KML_COLOURS)]
+        ls.style.linestyle.width = 2
+        if len(tr.t):
+            times = tr.times()
+            ls.timespan.begin, ls.timespan.end = _iso(times[0]), _iso(times[-1])
+    return k.kml()
+
+
+def render(tracks: list[GeoTrack], fmt: str) -> str:
+    """The text of ``fmt`` (one of :data:`FORMATS`)."""
+    if fmt == "geojson":
+        return json.dumps(geojson(tracks), allow_nan=False, separators=(",", ":")) + "\n"
+    if fmt == "gpx":
+        return gpx_text(tracks)
+    if fmt == "kml":
+        return kml_text(tracks)
+    raise ValueError(f"unknown track format {fmt!r}: one of {', '.join(FORMATS)}")
+
+
+def write_wgs84(out: OutDir | str | Path, trajectories: Mapping[str, Trajectory], meta: dict, *,
+                stem: str = "trajectory") -> dict[str, Any]:
+    """Write ``stem.geojson``, ``stem.gpx`` and ``stem.kml`` (atomically; an :class:`OutDir` records
+    them in its manifest) when ``meta`` has a geodetic origin. Returns the summary entry:
+    ``{"wgs84": {"origin": {...}, "files": [...], "tracks": [...]}}``, or ``{"wgs84": None,
+    "wgs84_reason": why}`` when nothing was written."""
+    frame, reason = origin_frame(meta)
+    if frame is None:
+        return {"wgs84": None, "wgs84_reason": f"{reason}: no GeoJSON/GPX/KML written"}
+    tracks = [GeoTrack.from_trajectory(tr, frame, name) for name, tr in trajectories.items() if len(tr)]
+    files = []
+    for fmt in FORMATS:
+        name = f"{stem}.{fmt}"
+        path = out.file(name) if isinstance(out, OutDir) else Path(out) / name
+        write_text_atomic(path, render(tracks, fmt))
+        files.append(name)
+    return {"wgs84": {"origin": origin_dict(frame), "files": files, "tracks": [t.name for t in tracks]}}
+
+
+def origin_dict(frame: LocalFrame) -> dict[str, float]:
+    return {"lat": frame.lat0, "lon": frame.lon0, "h": frame.h0}
+
+
+def record_origin(meta: dict) -> dict[str, float] | None:
+    """The log's geodetic origin as ``{"lat", "lon", "h"}`` for a summary (None when it has none)."""
+    frame, _ = origin_frame(meta)
+    return None if frame is None else origin_dict(frame)
