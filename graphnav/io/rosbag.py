@@ -111,6 +111,38 @@ def yaw_of_quaternion(x: float, y: float, z: float, w: float) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
+def roll_pitch_of_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, float]:
+    """Roll and pitch (ZYX Euler angles, REP-103) of a quaternion, radians."""
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    return roll, pitch
+
+
+#: An IMU orientation at most this far in time from a cloud [s] gives the cloud's roll and pitch.
+ATTITUDE_MAX_DT = 0.05
+
+
+def attach_attitude(records: list[Record], attitude: list[tuple[float, float, float]],
+                    max_dt: float = ATTITUDE_MAX_DT) -> int:
+    """Give each cloud without an attitude the roll/pitch of the nearest IMU orientation within
+    ``max_dt`` (the IMU taken as mounted like the LiDAR); returns how many clouds got one."""
+    if not attitude:
+        return 0
+    a = np.array(sorted(attitude))
+    n = 0
+    for i, r in enumerate(records):
+        if isinstance(r, Cloud) and math.isnan(r.roll) and math.isnan(r.pitch):
+            j = int(np.clip(np.searchsorted(a[:, 0], r.t), 1, len(a) - 1)) if len(a) > 1 else 0
+            if len(a) > 1 and abs(a[j - 1, 0] - r.t) <= abs(a[j, 0] - r.t):
+                j -= 1
+            if abs(a[j, 0] - r.t) <= max_dt:
+                records[i] = replace(r, roll=float(a[j, 1]), pitch=float(a[j, 2]))
+                n += 1
+    return n
+
+
 class _Converter:
     def __init__(self, origin: tuple[float, float] | None, imu_heading_hz: float | None,
                  limits: Limits | None = None) -> None:
@@ -119,6 +151,7 @@ class _Converter:
         self.last_imu_heading: dict[str, float] = {}
         self.nmea = NmeaDecoder(self.frame, keep=False, limits=limits)
         self.counts: dict[str, int] = {}
+        self.attitude: list[tuple[float, float, float]] = []  # (t, roll, pitch) of IMU orientations
 
     def count(self, k: str) -> None:
         self.counts[k] = self.counts.get(k, 0) + 1
@@ -154,6 +187,7 @@ class _Converter:
                            float(m.angular_velocity.z)))
         q = m.orientation
         if m.orientation_covariance[0] != -1 and (q.x or q.y or q.z or q.w):
+            self.attitude.append((t, *roll_pitch_of_quaternion(q.x, q.y, q.z, q.w)))
             if t - self.last_imu_heading.get(topic, -math.inf) >= 0.999 * self.imu_heading_dt:
                 c = m.orientation_covariance[8]
                 sigma = math.sqrt(c) if c > 0 else math.radians(DEFAULT_IMU_HEADING_SIGMA_DEG)
@@ -374,6 +408,8 @@ def read_bag(path: str | Path, topics: dict[str, str] | None = None, *,
         meta["origin"] = {"lat": conv.frame.lat0, "lon": conv.frame.lon0, "h": conv.frame.h0}
     if conv.counts:
         meta.update(conv.counts)
+    if any(isinstance(r, Cloud) for r in records):
+        meta["clouds_with_imu_attitude"] = attach_attitude(records, conv.attitude)
     if lenient:
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]

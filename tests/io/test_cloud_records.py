@@ -265,3 +265,25 @@ def test_bag_of_a_3d_harbour_runs_isam2(tmp_path):
     res = run_isam2(back, anchor_sigma_xy=5.0)
     assert res.info["cloud_pairs"] >= 20 and res.info["cloud_failed"] == 0
     assert len(res.trajectory.t) == len(log.of("cloud"))
+
+
+def test_bag_clouds_take_roll_pitch_from_the_nearest_imu_orientation(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    from graphnav.io.rosbag import attach_attitude, roll_pitch_of_quaternion
+    from graphnav.log import Heading
+
+    rng = np.random.default_rng(5)
+    for _ in range(50):  # against scipy's ZYX Euler angles
+        yaw, pitch, roll = rng.uniform(-3, 3), rng.uniform(-1.4, 1.4), rng.uniform(-3, 3)
+        x, y, z, w = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat()
+        assert roll_pitch_of_quaternion(x, y, z, w) == pytest.approx((roll, pitch), abs=1e-9)
+    recs = [make_cloud(t, np.ones((2, 3))) for t in (0.0, 1.0, 2.0)]
+    n = attach_attitude(recs, [(0.96, 0.1, -0.2), (0.02, 0.3, 0.4), (1.5, 0.5, 0.5)])
+    assert n == 2 and (recs[0].roll, recs[0].pitch) == (0.3, 0.4) and (recs[1].roll, recs[1].pitch) == (0.1, -0.2)
+    assert math.isnan(recs[2].roll)  # nothing within 50 ms
+    # end to end: the writer's heading messages are Imu orientations (roll = pitch = 0)
+    log = NavLog([make_cloud(1.0, np.ones((3, 3))), Heading(1.01, 0.5, 0.02), make_cloud(2.0, np.ones((3, 3)))])
+    back = read_bag(write_bag(log, tmp_path / "a.bag", origin=(ORIGIN["lat"], ORIGIN["lon"])))
+    c = back.of("cloud")
+    assert back.meta["clouds_with_imu_attitude"] == 1 and c[0].roll == 0.0 and math.isnan(c[1].roll)
