@@ -1,14 +1,16 @@
 """Fuzzy adaptive UKF vs UKF vs the smoothers on the Solent missions (Liu, Liu & Bucknall 2019).
 
 Produces, for scenarios 1-3:
-* ``docs/img/solent_rhat_s{1,2,3}.png``: the diagonal of the adapted R_hat of fuzzy-ukf against the
+* ``OUT/solent_rhat_s{1,2,3}.png``: the diagonal of the adapted R_hat of fuzzy-ukf against the
   true R_a (eq. 31: window mean of the true measurement noise v = z - H x_a, eq. 32) and the fixed
   R of Table 2 (the paper's Figs. 9, 13, 17);
-* ``docs/img/solent_track_s{1,2,3}.png``: truth, GNSS and the estimates of one run;
+* ``OUT/solent_track_s{1,2,3}.png``: truth, GNSS and the estimates of one run;
 * a markdown table per scenario of the Monte Carlo means (``--runs``, default 10) on stdout.
 
-Usage: ``python examples/solent_filters_vs_smoothers.py [--runs 50] [--seed 0] [--out docs/img]``;
+Usage: ``python examples/solent_filters_vs_smoothers.py [--runs 50] [--seed 0] [--out DIR] [--quiet]``
+(OUT: ``--out``, default ``out/solent``; ``--out docs/img`` refreshes the documentation's figures);
 ``--quick`` (one run of the first 150 steps of each mission, serially) checks that it all runs.
+Progress (tqdm) on stderr unless ``--quiet``.
 """
 
 from __future__ import annotations
@@ -17,16 +19,14 @@ import argparse
 import math
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure  # (no pyplot: the matplotlib backend is left as it is)
+from tqdm import tqdm
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from graphnav import estimators  # noqa: E402
-from graphnav.evaluation.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial  # noqa: E402
-from graphnav.geometry import wrap_angle  # noqa: E402
-from graphnav.sim.solent import simulate_solent  # noqa: E402
+from graphnav import estimators
+from graphnav.evaluation.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial
+from graphnav.geometry import wrap_angle
+from graphnav.sim.solent import simulate_solent
 
 QUICK_RUNS, QUICK_STEPS = 1, 150
 
@@ -48,7 +48,8 @@ def plot_r(log, res, path: Path, scenario: int, window: int) -> None:
     r_hat = res.info["r_hat"][1:]
     r0 = res.info["r0"]
     t = res.trajectory.t[1:]
-    fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+    fig = Figure(figsize=(8, 8))
+    axes = fig.subplots(3, 1, sharex=True)
     labels = ["GNSS x variance [m^2]", "GNSS y variance [m^2]", "compass variance [deg^2]"]
     for j, ax in enumerate(axes):
         s = 1.0 if j < 2 else (180 / math.pi) ** 2
@@ -63,13 +64,13 @@ def plot_r(log, res, path: Path, scenario: int, window: int) -> None:
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_track(log, results: dict, path: Path, scenario: int) -> None:
     tr = log.truth()
     g = log.columns("gnss")
-    fig, ax = plt.subplots(figsize=(7, 6))
+    fig = Figure(figsize=(7, 6))
+    ax = fig.add_subplot()
     ax.plot(g["x"], g["y"], ".", color="0.6", ms=2, label="GNSS")
     ax.plot(tr.poses[:, 0], tr.poses[:, 1], "k", lw=1.5, label="truth")
     for name, res in results.items():
@@ -81,15 +82,16 @@ def plot_track(log, results: dict, path: Path, scenario: int) -> None:
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--runs", type=int, default=10)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=Path("docs/img"))
-    ap.add_argument("--scheduler")
+    ap.add_argument("--runs", type=int, default=10, help="Monte Carlo runs per scenario (default 10)")
+    ap.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    ap.add_argument("--out", type=Path, default=Path("out/solent"),
+                    help="directory for the figures (default out/solent; docs/img: the documentation's)")
+    ap.add_argument("--scheduler", help="Dask scheduler address, or 'serial' (default: a local cluster)")
+    ap.add_argument("--quiet", action="store_true", help="no progress bars")
     ap.add_argument("--quick", action="store_true",
                     help=f"{QUICK_RUNS} runs of the first {QUICK_STEPS} steps of each mission (a smoke run)")
     args = ap.parse_args(argv)
@@ -101,14 +103,20 @@ def main(argv: list[str] | None = None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     names = [n for n in PAPER_ESTIMATORS if n in estimators.names()]
     window = 30
+    bar = tqdm(total=3 * (len(names) + args.runs), desc="solent", unit="step", disable=args.quiet)
     for sc in (1, 2, 3):
+        bar.set_postfix_str(f"scenario {sc}")
         log = simulate_solent(scenario=sc, seed=args.seed, **sim)
-        res = {n: estimators.run(n, log) for n in names}
+        res = {}
+        for n in names:
+            res[n] = estimators.run(n, log)
+            bar.update(1)
         plot_r(log, res["fuzzy-ukf"], args.out / f"solent_rhat_s{sc}.png", sc, window)
         plot_track(log, res, args.out / f"solent_track_s{sc}.png", sc)
         trials = map_trials(solent_trial, [{"scenario": sc, "seed": args.seed + i, "names": names,
                                             "sim_options": sim} for i in range(args.runs)],
-                            scheduler=args.scheduler)
+                            scheduler=args.scheduler, progress=not args.quiet)
+        bar.update(args.runs)
         est = aggregate(trials, names)
         runs = f"{args.runs} runs, seeds {args.seed}..{args.seed + args.runs - 1}" if args.runs > 1 else \
             f"1 run, seed {args.seed}"
@@ -119,6 +127,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"| {n} | {d['pos_rmse_m']:.2f} | {d['pos_rmse_median_m']:.2f} | {d['hdg_rmse_deg']:.2f} "
                   f"| {d['step_ms_median']:.3f} |")
         print(f"\nfuzzy-ukf vs ukf position improvement: {improvement_pct(est):.1f} %")
+    bar.close()
 
 
 if __name__ == "__main__":

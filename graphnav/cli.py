@@ -7,6 +7,10 @@ read from the source without importing it. ``graphnav --help`` therefore imports
 
 Contract: with ``--json`` a command prints exactly one JSON object on stdout; logs and
 progress go to stderr.
+
+Every command (each leaf parser) also gets, here in one place, ``--config FILE.toml`` (its long
+options as top-level keys, ``[options]`` / ``[options.ESTIMATOR]`` tables for ``-O``; the command
+line wins) and ``--quiet``; all help text is rendered as plain text (reST markup stripped).
 """
 
 from __future__ import annotations
@@ -60,7 +64,51 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
             importlib.import_module(f"{commands.__name__}.{name.replace('-', '_')}").register(sub)
         else:
             sub.add_parser(name, help=command_help(name))
+    for leaf in leaf_parsers(parser):
+        if leaf is not parser and (command is None or leaf.prog.split()[1:2] == [command]):
+            _add_common_flags(leaf)
+    _plain_help(parser)
     return parser
+
+
+def leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """The parsers without sub-commands under ``parser`` (every command a user can run)."""
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not subs:
+        return [parser]
+    return [leaf for a in subs for p in dict.fromkeys(a.choices.values()) for leaf in leaf_parsers(p)]
+
+
+def _add_common_flags(p: argparse.ArgumentParser) -> None:
+    if "--config" not in p._option_string_actions:
+        p.add_argument("--config", metavar="FILE.toml",
+                       help="read options from a TOML file: top-level keys are this command's long options "
+                            "(out = \"D\", runs = 5), [options] and [options.ESTIMATOR] tables give -O values; "
+                            "the command line wins")
+    if "--quiet" not in p._option_string_actions:
+        flags = ["--quiet"] + ([] if "-q" in p._option_string_actions else ["-q"])
+        p.add_argument(*flags, action="store_true", help="no progress bars (also off with --json)")
+
+
+def plain(text: str | None) -> str | None:
+    """reST inline markup -> plain text (:func:`graphnav.config.plain_text`)."""
+    from .config import plain_text
+
+    return plain_text(text) if text else text
+
+
+def _plain_help(parser: argparse.ArgumentParser) -> None:
+    """Strip reST markup from every description, help and sub-command help under ``parser``."""
+    parser.description = plain(parser.description)
+    parser.epilog = plain(parser.epilog)
+    for action in parser._actions:
+        if isinstance(action.help, str):
+            action.help = plain(action.help)
+        if isinstance(action, argparse._SubParsersAction):
+            for choice in action._choices_actions:
+                choice.help = plain(choice.help)
+            for sub in dict.fromkeys(action.choices.values()):
+                _plain_help(sub)
 
 
 def _invoked(argv: list[str]) -> str:
@@ -71,7 +119,15 @@ def _invoked(argv: list[str]) -> str:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser(_invoked(argv))
-    args = parser.parse_args(argv)
+    if any(a == "--config" or a.startswith("--config=") for a in argv):
+        relaxed = _relax_required(parser)  # what the file may give is not required on the command line yet
+        args = parser.parse_args(argv)
+        try:
+            args = _with_config(parser, argv, args, relaxed)
+        except GraphnavError as err:
+            return _fail(args, str(err), err.where, EXIT_INPUT, message=err.message)
+    else:
+        args = parser.parse_args(argv)
     args.argv = list(argv)  # the command line as given, for reports' provenance
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
@@ -102,6 +158,52 @@ def main(argv: list[str] | None = None) -> int:
         logging.getLogger("graphnav").debug("internal error", exc_info=True)
         return _fail(args, f"internal error ({type(err).__name__}: {err}); run with -v for the traceback",
                      None, EXIT_BUG)
+
+
+def _leaf(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
+    """The (sub-)sub-command parser ``args`` came from."""
+    while True:
+        sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+        if sub is None:
+            return parser
+        parser = sub.choices[getattr(args, sub.dest)]
+
+
+def _relax_required(parser: argparse.ArgumentParser) -> dict[argparse.Action, tuple[bool, object]]:
+    """Make every required option and positional of every command optional; returns what they were."""
+    relaxed: dict[argparse.Action, tuple[bool, object]] = {}
+    stack = [parser]
+    while stack:
+        p = stack.pop()
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                stack += list(dict.fromkeys(a.choices.values()))
+            elif a.required or (not a.option_strings and a.nargs is None):
+                relaxed[a] = (a.required, a.nargs)
+                a.required = False
+                if not a.option_strings:
+                    a.nargs = "?"
+    return relaxed
+
+
+def _with_config(parser: argparse.ArgumentParser, argv: list[str], args: argparse.Namespace,
+                 relaxed: dict[argparse.Action, tuple[bool, object]]) -> argparse.Namespace:
+    """``--config FILE.toml``: its values become the command's defaults; what it does not give and
+    the command needs is required again (``relaxed``); then the command line is parsed again (so a
+    flag given there wins). ``[options]`` goes to ``args.config_options``."""
+    from .commands._common import config_defaults
+
+    leaf = _leaf(parser, args)
+    defaults, options = config_defaults(leaf, Path(args.config), args)
+    given = {action for action, _ in defaults}
+    for action, value in defaults:
+        action.default = value
+    for action, (required, nargs) in relaxed.items():
+        if action not in given:
+            action.required, action.nargs = required, nargs
+    new = parser.parse_args(argv)
+    new.config_options = options
+    return new
 
 
 def _fail(args: argparse.Namespace, text: str, where: str | None, code: int, *, message: str | None = None) -> int:

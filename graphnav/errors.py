@@ -7,6 +7,8 @@ its subclass :class:`LogError`); the CLI prints it as ``graphnav: error: ...`` a
 
 from __future__ import annotations
 
+from typing import Any
+
 EXIT_OK = 0
 EXIT_BUG = 1          # an internal error: a bug in graphnav
 EXIT_INPUT = 2        # bad input, bad arguments or environment (file, address, option): the message says where
@@ -75,3 +77,32 @@ class AddressError(GraphnavError, ValueError):
 
     def __init__(self, address: str, message: str) -> None:
         super().__init__(message, where=address)
+
+
+class MissingExtra(GraphnavError, ImportError):
+    """An optional dependency is not installed: one line naming it and the extra that installs it."""
+
+    def __init__(self, feature: str, package: str, extra: str) -> None:
+        GraphnavError.__init__(self, f"{feature} needs the optional dependency {package}: "
+                                     f"pip install 'graphnav[{extra}]'")
+        self.package, self.extra = package, extra
+
+
+EXTRAS = {"open3d": ("open3d", "open3d"), "distributed": ("dask", "dask"), "dask": ("dask", "dask"),
+          "rosbags": ("rosbags", "ros"), "numba": ("numba", "fast"), "pypcd4": ("pypcd4", "pcd"),
+          "kiss_icp": ("kiss-icp", "bench")}
+"""Importable module -> (the distribution to install, the extra of pyproject.toml that installs it)."""
+
+
+def require(module: str, feature: str) -> Any:
+    """``import module`` (an optional dependency, a key of :data:`EXTRAS`), or :class:`MissingExtra`:
+    ``"FEATURE needs the optional dependency open3d: pip install 'graphnav[open3d]'"``. The one
+    helper every optional import site uses (numba's sites fall back to numpy when it is absent and
+    call this only when numba was asked for by name)."""
+    import importlib
+
+    package, extra = EXTRAS[module.partition(".")[0]]
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise MissingExtra(feature, package, extra) from None

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import require
 from ..geometry import wrap_angle
 
 
@@ -204,6 +205,7 @@ def _fast_kernel(backend: str, ch: Choices) -> Any:
         return importlib.import_module(f"{__package__}._fast")
     except ImportError:
         if backend == "numba":
+            require("numba", 'backend "numba"')
             raise
         return None
 

@@ -5,11 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import Any
 
+from ..errors import GraphnavError
 from ..io.jsonsafe import jsonable
 
-__all__ = ["add_json_flag", "add_log_args", "emit", "jsonable", "parse_options"]
+__all__ = ["OPTION_FORM", "add_json_flag", "add_log_args", "emit", "jsonable", "options_by_estimator", "options_for",
+           "parse_option", "parse_options", "plain_options", "progress_enabled", "scoped_options"]
 
 
 def add_json_flag(p: argparse.ArgumentParser) -> None:
@@ -45,15 +48,197 @@ def emit(args: argparse.Namespace, obj: dict[str, Any], human: str | None = None
     sys.stdout.flush()
 
 
-def parse_options(pairs: list[str] | None) -> dict[str, Any]:
-    """``["lag=10", "robust=\\"huber\\"", "keyframe_dt=0.5"]`` -> dict (values parsed as JSON when possible)."""
-    out: dict[str, Any] = {}
-    for item in pairs or []:
-        if "=" not in item:
-            raise ValueError(f"option {item!r} is not KEY=VALUE")
-        k, v = item.split("=", 1)
-        try:
-            out[k.strip().replace("-", "_")] = json.loads(v)
-        except json.JSONDecodeError:
-            out[k.strip().replace("-", "_")] = v
+OPTION_FORM = "[ESTIMATOR.]KEY=VALUE"
+
+
+def _value(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def parse_option(item: str) -> tuple[str | None, str, Any]:
+    """The one ``-O`` grammar, ``[ESTIMATOR.]KEY=VALUE``: ``"fuzzy-ukf.window=50"`` ->
+    ``("fuzzy-ukf", "window", 50)``, ``"lag=10"`` -> ``(None, "lag", 10)``. VALUE is parsed as JSON when
+    it can be (``true``, ``null``, ``0.5``, ``'{"tol": 1e-3}'``), else kept as text; dashes in KEY
+    become underscores. The old ``ESTIMATOR:KEY=VALUE`` form is an error naming the new one."""
+    head, sep, value = item.partition("=")
+    head = head.strip()
+    if ":" in head:
+        scope, _, key = head.partition(":")
+        raise ValueError(f"option {item!r}: the ESTIMATOR:KEY form is gone; write "
+                         f"{scope.strip()}.{key.strip()}={value} ({OPTION_FORM})")
+    scope, dot, key = head.rpartition(".")
+    key = key.strip().replace("-", "_")
+    if not sep or not key or (dot and not scope.strip()) or not key.isidentifier():
+        raise ValueError(f"option {item!r} is not {OPTION_FORM}")
+    return (scope.strip() or None), key, _value(value)
+
+
+def scoped_options(items: list[str] | None) -> dict[str | None, dict[str, Any]]:
+    """``-O`` items -> ``{ESTIMATOR or None: {KEY: VALUE}}`` (later items win)."""
+    out: dict[str | None, dict[str, Any]] = {}
+    for item in items or []:
+        scope, key, value = parse_option(item)
+        out.setdefault(scope, {})[key] = value
     return out
+
+
+def _file_options(args: argparse.Namespace) -> dict[str | None, dict[str, Any]]:
+    return getattr(args, "config_options", None) or {}
+
+
+def options_for(args: argparse.Namespace, name: str) -> dict[str, Any]:
+    """The options of a one-estimator command (``run -e NAME``, ``live``): ``KEY=VALUE`` and
+    ``NAME.KEY=VALUE``. A ``-O`` scoped to another estimator is an error; a ``--config`` file's
+    ``[options.OTHER]`` tables are ignored (one file can serve several commands)."""
+    given = scoped_options(getattr(args, "option", None))
+    other = sorted(s for s in given if s not in (None, name))
+    if other:
+        raise ValueError(f"-O {other[0]}.KEY=VALUE: this command runs {name!r}; write KEY=VALUE or "
+                         f"{name}.KEY=VALUE")
+    files = _file_options(args)
+    out: dict[str, Any] = {}
+    for src in (files.get(None, {}), files.get(name, {}), given.get(None, {}), given.get(name, {})):
+        out.update(src)
+    return out
+
+
+def options_by_estimator(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+    """The options of a several-estimator command (``compare``, ``montecarlo``): ``ESTIMATOR.KEY=VALUE``
+    only (a bare ``KEY=VALUE`` would not say which estimator it is for)."""
+    out: dict[str, dict[str, Any]] = {}
+    for src, what in ((_file_options(args), "--config [options]"), (scoped_options(getattr(args, "option", None)),
+                                                                     "-O")):
+        if src.get(None):
+            key, value = next(iter(src[None].items()))
+            raise ValueError(f"{what} {key}={json.dumps(value)}: this command runs several estimators; "
+                             f"name one: ESTIMATOR.{key}=... ({OPTION_FORM})")
+        for scope, opts in src.items():
+            out.setdefault(str(scope), {}).update(opts)
+    return out
+
+
+def parse_options(pairs: list[str] | None, what: str = "option") -> dict[str, Any]:
+    """Plain ``KEY=VALUE`` items (no estimator to name: ``icp``, ``register``, ``--sim``) -> dict."""
+    opts = scoped_options(pairs)
+    scoped = sorted(str(s) for s in opts if s is not None)
+    if scoped:
+        raise ValueError(f"{what} {scoped[0]}.KEY=VALUE: no estimator to name here; write KEY=VALUE")
+    return opts.get(None, {})
+
+
+def plain_options(args: argparse.Namespace, what: str = "-O") -> dict[str, Any]:
+    """``parse_options`` of ``args.option`` after a ``--config`` file's ``[options]`` table."""
+    files = _file_options(args)
+    scoped = sorted(str(s) for s in files if s is not None)
+    if scoped:
+        raise ValueError(f"{getattr(args, 'config', '--config')}: [options.{scoped[0]}]: no estimator to name "
+                         "here; use [options]")
+    return {**files.get(None, {}), **parse_options(getattr(args, "option", None), what)}
+
+
+def progress_enabled(args: argparse.Namespace) -> bool:
+    """Progress bars (tqdm, stderr) unless ``--json``, ``--quiet`` (or ``--no-progress``)."""
+    return not (getattr(args, "json", False) or getattr(args, "quiet", False) or getattr(args, "no_progress", False))
+
+
+def progress_bar(args: argparse.Namespace, **kwargs: Any) -> Any:
+    """A tqdm bar on stderr, disabled by :func:`progress_enabled`."""
+    from tqdm import tqdm
+
+    return tqdm(file=sys.stderr, disable=not progress_enabled(args), dynamic_ncols=True, **kwargs)
+
+
+def _config_value(action: argparse.Action, value: Any, where: str) -> Any:
+    """A TOML value for ``action`` -> what the command line would have given (type, choices checked)."""
+    name = action.option_strings[-1] if action.option_strings else action.dest
+
+    def bad(expected: str) -> GraphnavError:
+        return GraphnavError(f"{name}: expected {expected}, got {value!r}", where=where)
+
+    if isinstance(action, argparse._StoreConstAction | argparse._StoreTrueAction | argparse._StoreFalseAction):
+        if not isinstance(value, bool):
+            raise bad("true or false")
+        return action.const if value else action.default
+    if isinstance(action, argparse._AppendAction):
+        items = value if isinstance(value, list) else [value]
+        return [_config_value(argparse.Action([], action.dest, type=action.type, choices=action.choices), v, where)
+                for v in items]
+    if action.nargs == "?" and action.const is not None and value is True:  # e.g. a bare --dashboard
+        return action.const
+    if isinstance(value, dict | list) or (isinstance(value, bool) and action.type is not None):
+        raise bad("a single value")
+    typ = action.type
+    try:
+        if typ is not None and not (typ is float and isinstance(value, int | float)) and not (
+                typ is int and isinstance(value, int)):
+            value = typ(str(value))
+        elif typ is float:
+            value = float(value)
+    except (ValueError, TypeError, argparse.ArgumentTypeError) as exc:
+        raise GraphnavError(f"{name}: {exc}", where=where) from None
+    if action.choices is not None and value not in action.choices:
+        raise bad("one of " + ", ".join(map(str, action.choices)))
+    return value
+
+
+def config_defaults(parser: argparse.ArgumentParser, path: Path,
+                    args: argparse.Namespace) -> tuple[list[tuple[argparse.Action, Any]], dict[str | None, dict]]:
+    """Read ``--config FILE.toml`` for the command ``parser``: top-level keys are its long options
+    (``out``, ``no-icp-cache``; ``_`` or ``-``) or positionals (``log``), each with the value the
+    command line would give; ``[options]`` holds ``-O`` values (``lag = 10``) and
+    ``[options.ESTIMATOR]`` tables the options of one estimator. Returns the (action, value) pairs
+    and ``{ESTIMATOR or None: {KEY: VALUE}}``. An unknown key is a :class:`GraphnavError` naming the
+    file and the key."""
+    import tomllib
+
+    where = str(path)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise GraphnavError(f"not valid TOML: {exc}", where=where) from None
+    except OSError as exc:
+        raise GraphnavError(exc.strerror or str(exc), where=where) from None
+    by_name: dict[str, argparse.Action] = {}
+    for action in parser._actions:
+        if action.dest in ("help", "config", "option") or isinstance(action, argparse._SubParsersAction):
+            continue
+        longs = [o[2:] for o in action.option_strings if o.startswith("--")]
+        for n in longs or ([] if action.option_strings else [action.dest]):
+            by_name[n.replace("_", "-")] = action
+    known_opts = "option" in {a.dest for a in parser._actions}
+    pairs: list[tuple[argparse.Action, Any]] = []
+    options: dict[str | None, dict[str, Any]] = {}
+    for key, value in data.items():
+        if key == "options" and known_opts:
+            if not isinstance(value, dict):
+                raise GraphnavError("options: expected a table ([options])", where=where)
+            scopes = _option_scopes(args)
+            for k, v in value.items():
+                if isinstance(v, dict) and k in scopes:
+                    options.setdefault(k, {}).update({kk.replace("-", "_"): vv for kk, vv in v.items()})
+                else:
+                    options.setdefault(None, {})[k.replace("-", "_")] = v
+            continue
+        action = by_name.get(key.replace("_", "-"))
+        if action is None:
+            known = sorted(by_name) + (["options"] if known_opts else [])
+            raise GraphnavError(f"unknown key {key!r} for 'graphnav {' '.join(parser.prog.split()[1:])}'; "
+                                f"known: {', '.join(known)}", where=where)
+        pairs.append((action, _config_value(action, value, where)))
+    return pairs, options
+
+
+def _option_scopes(args: argparse.Namespace) -> set[str]:
+    """Names an ``[options.NAME]`` table may scope: the estimators, and ``compare``'s labels."""
+    from .. import estimators
+
+    scopes = set(estimators.names())
+    for item in str(getattr(args, "estimators", None) or "").split(","):
+        scopes.add(item.partition("=")[0].strip())
+    if getattr(args, "estimator", None):
+        scopes.add(args.estimator)
+    return scopes

@@ -22,7 +22,7 @@ from ..beacons.layout import (
     summarize_search,
 )
 from ..evaluation.sweep import run_sweep
-from ._common import add_dashboard_flag, add_json_flag, emit
+from ._common import add_dashboard_flag, add_json_flag, emit, progress_enabled
 
 log = logging.getLogger("graphnav.beacons")
 
@@ -53,13 +53,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--overwrite", action="store_true",
                    help="discard what --results holds and start it afresh")
     s.add_argument("--limit", type=int, default=None, help="score only every k-th layout (quick looks)")
-    s.add_argument("--linearize", choices=("truth", "estimate"), default="truth")
-    s.add_argument("--beacon-init", choices=("first-sighting", "zero", "truth"), default="first-sighting")
-    s.add_argument("--p0-cross", choices=("zero", "paper"), default="zero")
+    s.add_argument("--linearize", choices=("truth", "estimate"), default="truth",
+                   help="truth (default): G, W, H on the true track and beacons (no noise draw); estimate: run "
+                        "the filter on simulated noisy data and linearise at its estimate")
+    s.add_argument("--beacon-init", choices=("first-sighting", "zero", "truth"), default="first-sighting",
+                   help="a beacon's mean before its first update (matters with --linearize estimate): inverse "
+                        "observation (default), eq. 15 literally (0, 0), or the truth")
+    s.add_argument("--p0-cross", choices=("zero", "paper"), default="zero",
+                   help="initial cross covariances: zero (default, a valid P0) or paper (eq. 14 as printed, "
+                        "indefinite)")
     s.add_argument("--p0-beacon", type=float, default=1e6, help="beacon prior variance [m^2] (eq. 14)")
-    s.add_argument("--w-second", choices=("rot", "theta"), default="rot")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--no-progress", action="store_true")
+    s.add_argument("--w-second", choices=("rot", "theta"), default="rot",
+                   help="second column of W (eq. 22): rot = dg/dROT (default) or theta = dg/dtheta as printed")
+    s.add_argument("--seed", type=int, default=0, help="noise seed for --linearize estimate (default 0)")
+    s.add_argument("--no-progress", action="store_true", help="no progress bar (as --quiet)")
     add_json_flag(s)
     s.set_defaults(func=search)
 
@@ -87,7 +94,7 @@ def search(args: argparse.Namespace) -> int:
         cost = len(layouts) * 0.08 * args.beacons / len(tasks)  # iSAM2, both marginals: ~0.08 s per 1-beacon layout
     report: dict[str, Any] = {}
     results = run_sweep(fn, tasks, out=args.results, scheduler=args.scheduler, workers=args.workers,
-                        progress=not args.no_progress, desc=f"{args.beacons}-beacon {args.criterion}",
+                        progress=progress_enabled(args), desc=f"{args.beacons}-beacon {args.criterion}",
                         task_cost_s=cost, report=report, dashboard=args.dashboard, overwrite=args.overwrite)
     pick = "scores" if args.criterion == "ekf" else f"scores_{args.marginals}"
     scores = np.concatenate([np.asarray(r[pick], dtype=float).reshape(-1, 3) for r in results])

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from .. import estimators
+from ..estimators.options import check as check_options
 from ..evaluation.compare import compare, ranked
 from ..evaluation.report import to_json, write_report
 from ..evaluation.trackmap import write_track_map
@@ -19,7 +20,7 @@ from ..io import load_log
 from ..io.geo_out import write_wgs84
 from ..io.outputs import OutDir
 from ..scan.icp_cache import MatchCache
-from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, parse_options
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, options_by_estimator, progress_bar
 
 log_ = logging.getLogger("graphnav.compare")
 
@@ -34,8 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="comma-separated names, LABEL=NAME to run one estimator twice under another "
                         "label (default: every estimator the log can feed); known: "
                         + ", ".join(estimators.names()))
-    p.add_argument("--option", "-O", action="append", metavar="NAME.KEY=VALUE",
-                   help="option for one estimator (or label), e.g. scan-to-map.backend=gicp; repeatable")
+    p.add_argument("--option", "-O", action="append", metavar="ESTIMATOR.KEY=VALUE",
+                   help="option for one estimator (or label), e.g. -O scan-to-map.backend=gicp; repeatable")
     p.add_argument("--workers", "-j", type=int, default=1,
                    help="run this many estimators at once in separate processes (runtimes then include "
                         "contention; default 1)")
@@ -49,28 +50,58 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _options(pairs: list[str] | None) -> dict[str, dict]:
-    out: dict[str, dict] = {}
-    for item in pairs or []:
-        head, sep, _ = item.partition("=")
-        name, dot, key = head.partition(".")
-        if not sep or not dot or not key:
-            raise ValueError(f"option {item!r} is not NAME.KEY=VALUE")
-        out.setdefault(name, {}).update(parse_options([item[len(name) + 1:]]))
-    return out
+def _runnable(log, names: list[str] | None) -> int:  # noqa: ANN001
+    """How many of ``names`` (``LABEL=NAME`` allowed) the log can feed: the progress bar's total."""
+    n = 0
+    for name in names if names is not None else estimators.names():
+        try:
+            n += estimators.get(name.partition("=")[2] or name).unmet(log) is None
+        except KeyError:
+            pass
+    return n
+
+
+def _check_scopes(options: dict[str, dict], names: list[str] | None) -> None:
+    """Every ``-O ESTIMATOR.KEY`` names an estimator (or label) this comparison runs, and a key it knows."""
+    labels = {}
+    for name in names if names is not None else estimators.names():
+        label, _, est = name.partition("=") if "=" in name else (name, "", name)
+        labels[label.strip()] = est.strip()
+    for scope, given in options.items():
+        if scope not in labels:
+            raise ValueError(f"-O {scope}.KEY=VALUE: {scope!r} is not one of the estimators compared "
+                             f"({', '.join(labels)})")
+        if labels[scope] in estimators.registry():
+            check_options(labels[scope], given)
 
 
 def run(args: argparse.Namespace) -> int:
+    options = options_by_estimator(args)  # (a bad -O fails before --out is touched)
     out = getattr(args, "out_dir", None)  # (demo prepares its own)
     if out is None:
         out = OutDir(args.out, command="compare", overwrite=getattr(args, "overwrite", False))
     log = load_log(args.log, lenient=args.lenient)
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
+    _check_scopes(options, names)
     t0 = time.perf_counter()
     cache = MatchCache() if getattr(args, "icp_cache", True) else None  # (demo builds its own Namespace)
-    entries = compare(log, names, options=_options(args.option),
-                      progress=lambda n: log_.info("running %s on %s", n, args.log), workers=args.workers,
-                      cache=cache)
+    bar = progress_bar(args, total=_runnable(log, names), desc="compare", unit="estimator")
+    started = []
+
+    def progress(name: str) -> None:  # called as each estimator starts
+        if started:
+            bar.update(1)
+        started.append(name)
+        bar.set_postfix_str(name)
+        if bar.disable:
+            log_.info("running %s on %s", name, args.log)
+
+    try:
+        entries = compare(log, names, options=options, progress=progress, workers=args.workers, cache=cache)
+        if started:
+            bar.update(1)
+    finally:
+        bar.close()
     command = shlex.join(["graphnav", *args.argv]) if hasattr(args, "argv") else None
     files = write_report(entries, log, out, log_name=str(args.log), command=command)
     tracks = {**({"truth": log.truth()} if log.has_truth else {}),

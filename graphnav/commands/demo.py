@@ -54,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
     log_path = args.log or embedded_log(out)
     log_.info("graphnav demo: comparing every estimator on %s", log_path)
     cargs = argparse.Namespace(log=str(log_path), lenient=False, out=args.out, out_dir=out, estimators=None,
-                               option=None, workers=args.workers, json=args.json, overwrite=args.overwrite)
+                               option=None, workers=args.workers, json=args.json, overwrite=args.overwrite,
+                               quiet=getattr(args, "quiet", False))
     rc = compare.run(cargs)
     log_.info("report: %s (self-contained, to send: %s)", (args.out / "report.md").resolve(),
               (args.out / "report.html").resolve())

@@ -16,7 +16,7 @@ from ..scan.icp import VARIANTS, IcpConfig
 from ..scan.icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
 from ..scan.motion_guess import INITS
 from ..scan.movement import movement_from_increments
-from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, parse_options
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, plain_options, progress_bar
 
 log_ = logging.getLogger("graphnav.icp")
 
@@ -40,14 +40,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     out = OutDir(args.out, command="icp", overwrite=args.overwrite) if args.out else None
     log = load_log(args.log, lenient=args.lenient)
-    options = parse_options(args.option)
+    options = plain_options(args)
     if isinstance(options.get("cov_floor"), list):
         options["cov_floor"] = tuple(options["cov_floor"])
     cfg = IcpConfig(variant=args.variant, **options)
     if len(log.of("scan")) < 2:
         raise SystemExit(f"{args.log}: needs at least two scans, has {len(log.of('scan'))}")
     log_.info("matching %d scan pairs with %s (init %s)", len(log.of("scan")) - 1, args.variant, args.init)
-    pr = run_pairs(log, cfg, init=args.init)
+    with progress_bar(args, total=len(log.of("scan")) - 1, desc=f"{args.variant} ICP", unit="pair") as bar:
+        pr = run_pairs(log, cfg, init=args.init, on_match=lambda k, res: bar.update(1))
     ref = reference_increments(log, pr.t0, pr.t1)
     scored = valid_reference_steps(ref)
     summary, per = score_pairs(pr, ref, scored)
@@ -84,10 +85,7 @@ def write_pairs_csv(path: Path, pr, ref, scored, per, ne) -> None:  # noqa: ANN0
 
 def write_plots(out: Path | OutDir, variant: str, per: dict) -> list[str]:
     """The paper's Figs. 12-15: SOG / dCOG difference series and their histograms."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # (no pyplot: the matplotlib backend is left as it is)
 
     s = per["scored"]
     k = np.flatnonzero(s)
@@ -97,7 +95,8 @@ def write_plots(out: Path | OutDir, variant: str, per: dict) -> list[str]:
         ("dtheta_err_deg", "dCOG_ICP - dCOG_R", "deg", "fig14_dcog_diff.png", "fig15_dcog_hist.png"),
     ):
         e = per[key][s]
-        fig, ax = plt.subplots(figsize=(8, 3))
+        fig = Figure(figsize=(8, 3))
+        ax = fig.add_subplot()
         ax.plot(k, e, ".-", lw=0.8, label=f"{variant}_ICP")
         ax.axhline(0, color="k", lw=0.5)
         ax.set_xlabel("scan pair")
@@ -106,14 +105,13 @@ def write_plots(out: Path | OutDir, variant: str, per: dict) -> list[str]:
         fig.tight_layout()
         with atomic_path(out / fig_series) as tmp:
             fig.savefig(tmp, dpi=120)
-        plt.close(fig)
-        fig, ax = plt.subplots(figsize=(5, 3))
+        fig = Figure(figsize=(5, 3))
+        ax = fig.add_subplot()
         ax.hist(e, bins=30)
         ax.set_xlabel(f"{label} [{unit}]")
         ax.set_ylabel("count")
         fig.tight_layout()
         with atomic_path(out / fig_hist) as tmp:
             fig.savefig(tmp, dpi=120)
-        plt.close(fig)
         files += [fig_series, fig_hist]
     return files

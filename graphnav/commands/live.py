@@ -12,7 +12,7 @@ from ..io import load_log
 from ..io.outputs import ensure_dir, write_text_atomic
 from ..online.live import LiveRunner
 from ..online.runner import ONLINE_ESTIMATORS, make_online
-from ._common import add_json_flag, emit, jsonable, parse_options
+from ._common import add_json_flag, emit, jsonable, options_for
 from .replay import parse_origin
 
 log_ = logging.getLogger("graphnav.live")
@@ -28,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "the run ends with the last scan")
     p.add_argument("--estimator", "-e", default="fixed-lag",
                    help=f"online estimator: {', '.join(sorted(ONLINE_ESTIMATORS))} (default fixed-lag)")
-    p.add_argument("--option", "-O", action="append", metavar="KEY=VALUE", help="estimator option")
+    p.add_argument("--option", "-O", action="append", metavar="[ESTIMATOR.]KEY=VALUE",
+                   help="estimator option (VALUE parsed as JSON when it can be); repeatable")
     p.add_argument("--publish", metavar="udp://HOST:PORT", help="send the solution as NMEA here")
     p.add_argument("--out", metavar="DIR", help="write every estimate to a new DIR/live-YYYYmmddTHHMMSSZ.tum "
                    "(UTC start; flushed line by line), the summary beside it (.summary.json)")
@@ -44,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.out:
         ensure_dir(args.out)
-    options = parse_options(args.option)
+    options = options_for(args, args.estimator)
     estimator = make_online(args.estimator, **options)
     scans = load_log(args.scans_from) if args.scans_from else None
     runner = LiveRunner(args.nmea, estimator, publish=args.publish, out_dir=args.out, scans_from=scans,

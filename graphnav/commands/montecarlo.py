@@ -1,9 +1,9 @@
-"""``graphnav montecarlo solent --scenario {1,2,3} --runs N [--scheduler ADDR] --json``.
+"""graphnav montecarlo solent [--scenario {1,2,3}] [--runs N] [--seed S] [--scheduler ADDR] [--json]
 
-Simulates N Solent missions (seeds seed0 .. seed0+N-1) and runs every estimator on each; prints
-the mean position and heading RMSE per estimator (smoothers: of the smoothed trajectory, and
-``online_pos_rmse_m`` of their online estimate) and the position improvement of fuzzy-ukf over
-ukf [%]. Estimators that do not exist in this installation are listed under ``skipped``.
+Simulates N Solent missions (seeds S .. S+N-1; scenario 2 unless --scenario says otherwise) and
+runs every estimator on each; prints the mean position and heading RMSE per estimator (smoothers:
+of the smoothed trajectory, and online_pos_rmse_m of their online estimate) and the position
+improvement of fuzzy-ukf over ukf [%]. Estimators that do not exist in this installation are listed under "skipped".
 """
 
 from __future__ import annotations
@@ -13,8 +13,9 @@ import logging
 import time
 
 from .. import estimators
+from ..estimators.options import check as check_options
 from ..evaluation.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial
-from ._common import add_dashboard_flag, add_json_flag, emit, parse_options
+from ._common import add_dashboard_flag, add_json_flag, emit, options_by_estimator, parse_options, progress_enabled
 
 log_ = logging.getLogger("graphnav.montecarlo")
 
@@ -24,9 +25,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description=__doc__)
     scen = p.add_subparsers(dest="mission", metavar="MISSION", required=True)
     s = scen.add_parser("solent", help="the fuzzy-adaptive-UKF paper's Solent mission", description=__doc__)
-    s.add_argument("--scenario", type=int, choices=(1, 2, 3), required=True)
-    s.add_argument("--runs", type=int, default=50)
-    s.add_argument("--seed0", type=int, default=0, help="first seed (runs use seed0 .. seed0+runs-1)")
+    s.add_argument("--scenario", type=int, choices=(1, 2, 3), default=2,
+                   help="the paper's scenario: 1 datasheet noise (Table 3), 2 GNSS 20 m and compass 5 deg, "
+                        "3 the first then the second from step 300 (default 2)")
+    s.add_argument("--runs", type=int, default=50, help="simulated missions (default 50)")
+    s.add_argument("--seed", type=int, default=0, help="first seed: runs use SEED .. SEED+RUNS-1 (default 0)")
     s.add_argument("--scheduler", help="Dask scheduler address, or 'serial' (default: a local cluster)")
     s.add_argument("--workers", type=int, default=2, help="local cluster processes (default 2)")
     add_dashboard_flag(s)
@@ -34,22 +37,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "reused only if all its parameters are the same; a file written by other code is refused)")
     s.add_argument("--overwrite", action="store_true", help="discard what --results holds and start it afresh")
     s.add_argument("--estimators", help="comma-separated names (default: " + ",".join(PAPER_ESTIMATORS) + ")")
-    s.add_argument("--option", "-O", action="append", metavar="EST:KEY=VALUE",
-                   help="estimator option, e.g. fuzzy-ukf:window=50; repeatable")
+    s.add_argument("--option", "-O", action="append", metavar="ESTIMATOR.KEY=VALUE",
+                   help="estimator option, e.g. -O fuzzy-ukf.window=50; repeatable")
     s.add_argument("--sim", action="append", metavar="KEY=VALUE",
                    help="simulator option, e.g. calib_residual=0.0; repeatable")
     add_json_flag(s)
     s.set_defaults(func=run_solent)
-
-
-def _est_options(items: list[str] | None) -> dict[str, dict]:
-    out: dict[str, dict] = {}
-    for it in items or []:
-        name, _, kv = it.partition(":")
-        if not kv:
-            raise ValueError(f"option {it!r} is not EST:KEY=VALUE")
-        out.setdefault(name, {}).update(parse_options([kv]))
-    return out
 
 
 def run_solent(args: argparse.Namespace) -> int:
@@ -59,14 +52,18 @@ def run_solent(args: argparse.Namespace) -> int:
     skipped = [n for n in wanted if n not in known]
     if args.runs < 1:
         raise ValueError("--runs must be >= 1")
-    opts = _est_options(args.option)
-    sim_opts = parse_options(args.sim)
-    tasks = [{"scenario": args.scenario, "seed": args.seed0 + i, "names": names, "options": opts,
+    opts = options_by_estimator(args)
+    for name, given in opts.items():
+        if name in known:
+            check_options(name, given)
+    sim_opts = parse_options(args.sim, "--sim")
+    tasks = [{"scenario": args.scenario, "seed": args.seed + i, "names": names, "options": opts,
               "sim_options": sim_opts} for i in range(args.runs)]
     log_.info("montecarlo solent scenario %d: %d runs of %s", args.scenario, args.runs, names)
     t0 = time.perf_counter()
     trials = map_trials(solent_trial, tasks, scheduler=args.scheduler, workers=args.workers, out=args.results,
-                        dashboard=args.dashboard, overwrite=args.overwrite)
+                        dashboard=args.dashboard, overwrite=args.overwrite,
+                        progress=progress_enabled(args))
     est = aggregate(trials, names)
     out = {"scenario": args.scenario, "runs": args.runs, "estimators": est,
            "improvement_pct": improvement_pct(est)}

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import add_json_flag, emit, parse_options
+from ._common import add_json_flag, emit, plain_options
 
 
 def _init(text: str) -> list[float]:
@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from ..scan.register3d import pose_error, xyzrpy_matrix
     from ..scan.register3d import register as register_clouds
 
-    params = parse_options(args.option)
+    params = plain_options(args)
     if args.voxel is not None:
         if not args.voxel >= 0:
             raise ValueError(f"--voxel must be >= 0, got {args.voxel}")

@@ -32,7 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(default: the log's meta origin, else 43.5,16.4)")
     p.add_argument("--corrupt", type=float, default=0.0, metavar="FRACTION",
                    help="damage this fraction of sentences (checksum/robustness tests)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of --corrupt's damage (default 0)")
     add_json_flag(p)
     p.set_defaults(func=run)
 

@@ -9,12 +9,13 @@ import time
 from pathlib import Path
 
 from .. import estimators
+from ..estimators.options import check as check_options
 from ..evaluation.evaluate import summarize
 from ..io import load_log
 from ..io.geo_out import record_origin, write_wgs84
 from ..io.outputs import OutDir
 from ..io.tum import TrajectoryWriter, write_truth
-from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, jsonable, parse_options
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, jsonable, options_for, progress_bar
 
 log_ = logging.getLogger("graphnav.run")
 
@@ -22,30 +23,76 @@ log_ = logging.getLogger("graphnav.run")
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run one estimator on a log", description=__doc__)
     add_log_args(p)
-    p.add_argument("--estimator", "-e", required=True, help="one of: " + ", ".join(estimators.names()))
+    next(a for a in p._actions if a.dest == "log").nargs = "?"  # (not needed with --list-options)
+    p.add_argument("--estimator", "-e", help="one of: " + ", ".join(estimators.names()) + " (required)")
+    p.add_argument("--list-options", metavar="ESTIMATOR",
+                   help="print ESTIMATOR's -O options (default and meaning; one JSON object with --json) and exit")
     p.add_argument("--out", type=Path,
                    help="output directory (trajectory.tum, trajectory.csv, summary.json, truth.tum; "
                         "trajectory.geojson/.gpx/.kml in WGS84 when the log has a geodetic origin)")
     add_overwrite_flag(p)
-    p.add_argument("--option", "-O", action="append", metavar="KEY=VALUE",
-                   help="estimator option (value parsed as JSON when it can be); repeatable")
+    p.add_argument("--option", "-O", action="append", metavar="[ESTIMATOR.]KEY=VALUE",
+                   help="estimator option (VALUE parsed as JSON when it can be), e.g. -O lag=10; repeatable; "
+                        "--list-options ESTIMATOR lists them")
     add_json_flag(p)
     p.set_defaults(func=run)
 
 
+def list_options(args: argparse.Namespace) -> int:
+    from ..estimators.options import describe
+
+    opts = describe(args.list_options)
+    obj = {"estimator": args.list_options, "options": opts}
+    lines = [f"-O options of {args.list_options} (graphnav run LOG -e {args.list_options} -O KEY=VALUE):"]
+    group = None
+    for o in opts:
+        if o["group"] != group:
+            group = o["group"]
+            lines.append(f"  [{group}]")
+        lines.append(f"  {o['name']:32s} {json.dumps(jsonable(o['default']))}")
+        if o["meaning"]:
+            lines.append(f"      {o['meaning']}")
+    if not opts:
+        lines.append("  (none)")
+    emit(args, obj, "\n".join(lines))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.list_options:
+        return list_options(args)
+    missing = [n for n, v in (("LOG", args.log), ("--estimator", args.estimator)) if not v]
+    if missing:
+        raise ValueError(f"graphnav run: the following arguments are required: {', '.join(missing)}")
+    options = options_for(args, args.estimator)
+    estimators.get(args.estimator)  # (an unknown name or option fails before --out is touched)
+    check_options(args.estimator, options)
     out = OutDir(args.out, command="run", overwrite=args.overwrite) if args.out else None
     log = load_log(args.log, lenient=args.lenient)
-    options = parse_options(args.option)
     writer = None
     if out is not None:
         out.file("online.cov")  # the writer's covariance sidecar, when the estimator gives covariances
         writer = TrajectoryWriter(out.file("online.tum"))  # appended and flushed as estimates arrive
     log_.info("running %s on %s (%d records)", args.estimator, args.log, len(log))
+    span = max(float(log.t1 - log.t0), 0.0) if len(log) else 0.0
+    bar = progress_bar(args, total=round(span, 1), unit="s", desc=f"{args.estimator} (log time)",
+                       bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} s [{elapsed}<{remaining}]")
+
+    def on_estimate(t: float, pose, cov) -> None:  # noqa: ANN001
+        if writer is not None:
+            writer.write(t, pose, cov)
+        done = min(max(float(t - log.t0), 0.0), bar.total or 0.0)
+        if done > bar.n:
+            bar.update(done - bar.n)
+
     t0 = time.perf_counter()
     try:
-        result = estimators.run(args.estimator, log, on_estimate=writer.write if writer else None, **options)
+        result = estimators.run(args.estimator, log, on_estimate=on_estimate if writer or not bar.disable else None,
+                                **options)
+        if not bar.disable and bar.total and bar.n < bar.total:
+            bar.update(bar.total - bar.n)  # (the last estimate may precede the log's last record)
     finally:
+        bar.close()
         if writer:
             writer.close()
     runtime = time.perf_counter() - t0

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ._common import add_json_flag, emit, parse_options
+from ._common import add_json_flag, emit, plain_options
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--frames must be >= 2, got {args.frames}")
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
     log = load_log(args.log)
-    res = compare(log, args.frames, methods, parse_options(args.option))
+    res = compare(log, args.frames, methods, plain_options(args))
     out = {"log": str(args.log), **res}
     lines = [f"{res['frames']} frames ({res['points_per_frame']:.0f} points each after the filter)",
              f"{'method':<10} {'1-frame m':>10} {'deg':>8} {'ms':>8} | {'ATE m':>8} {'ms/frame':>9}"]

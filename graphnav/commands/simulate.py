@@ -28,7 +28,7 @@ def _register_fairway(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fairway", help="the beacon paper's fairway passage: odometry + beacon range/bearing",
                        description=fairway.__doc__)
     p.add_argument("--beacons", required=True, help='beacon positions "x1,y1;x2,y2;..." [m]')
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--out", required=True, help="output log (.jsonl, .jsonl.gz or .npz)")
     p.set_defaults(func=_fairway)
 
@@ -46,7 +46,7 @@ def _register_harbour(sub: argparse._SubParsersAction) -> None:
         description=harbour.__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--duration", type=float, default=None,
                    help="length of the run [s] (shorter: truncated; longer: the route repeats)")
     p.add_argument("--laps", type=int, default=None, help="times round the route (default 1, or what --duration needs)")
@@ -97,7 +97,7 @@ def _register_marina_degraded(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--marina", type=Path, required=True, help="the icp_data_marina directory")
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--seed", type=int, default=1, help="random seed of the simulated noise (default 1)")
     p.add_argument("--jump-m", type=float, default=20.0, help="GNSS jump size [m] (0: none, same noise)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
@@ -124,9 +124,12 @@ def _marina_degraded(args: argparse.Namespace) -> int:
 def _register_solent(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("solent", help="the fuzzy-adaptive-UKF paper's Solent waypoint mission (3 scenarios)",
                        description=solent.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenario", type=int, choices=(1, 2, 3), default=1)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--current-speed", type=float, default=solent.SolentConfig.current_speed)
+    p.add_argument("--scenario", type=int, choices=(1, 2, 3), default=1,
+                   help="the paper's scenario: 1 datasheet noise (Table 3), 2 GNSS 20 m and compass 5 deg, "
+                        "3 the first then the second from step 300 (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
+    p.add_argument("--current-speed", type=float, default=solent.SolentConfig.current_speed,
+                   help=f"sea current [m/s] (default {solent.SolentConfig.current_speed:g})")
     p.add_argument("--calib-residual", type=float, default=solent.SolentConfig.calib_residual,
                    help="residual IMU bias after calibration, fraction of Table 3's bias (default 0.1)")
     p.add_argument("--no-calibration", action="store_true", help="leave Table 3's IMU biases in the log")
@@ -214,7 +217,7 @@ def _register_degrade(sub: argparse._SubParsersAction) -> None:
                    help="no GNSS for DURATION s from START (s after the first truth, or A%%..B%%); repeatable")
     p.add_argument("--gnss-jump", action="append", metavar="START,DURATION,METRES",
                    help="GNSS off by METRES (direction from the seed) for DURATION s from START; repeatable")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--lenient", action="store_true", help="skip malformed input records (and count them)")
     add_json_flag(p)

@@ -49,30 +49,30 @@ from .dead_reckoning import start_pose
 class ScanToMapConfig:
     """Scan-to-map settings (metres, degrees where the name says so)."""
 
-    backend: str = "small_gicp:VGICP"
-    keyframes: int = 10
-    keyframe_dist: float = 1.0
-    keyframe_angle_deg: float = 10.0
-    map_voxel: float = 0.25
-    scan_voxel: float = 0.25
-    min_range: float = 1.0
-    max_range: float = 100.0
-    max_corr: float = 2.0
-    voxel: float = 1.0
-    neighbors: int = 10
-    max_iter: int = 30
-    planar: str = "constrain"
-    min_points: int = 20
-    min_fitness: float = 0.3
-    max_correction: float = 5.0
-    threads: int = 1
+    backend: str = "small_gicp:VGICP"  # registration: small_gicp:VGICP|GICP, open3d:point_to_point|point_to_plane|gicp
+    keyframes: int = 10  # the local map: the last N keyframe scans
+    keyframe_dist: float = 1.0  # [m] a scan becomes a keyframe after the vessel moved this far ...
+    keyframe_angle_deg: float = 10.0  # ... or turned this much since the last keyframe
+    map_voxel: float = 0.25  # [m] voxel of the local map's downsampling
+    scan_voxel: float = 0.25  # [m] voxel of each scan's downsampling
+    min_range: float = 1.0  # [m] returns closer than this are dropped
+    max_range: float = 100.0  # [m] returns farther than this (or the scan's own maximum) are dropped
+    max_corr: float = 2.0  # [m] correspondence distance of the registration
+    voxel: float = 1.0  # [m] VGICP voxel size
+    neighbors: int = 10  # neighbours for the local covariances / normals
+    max_iter: int = 30  # registration iterations
+    planar: str = "constrain"  # "constrain": solve in SE(2); "project": 6-DoF, projected onto SE(2)
+    min_points: int = 20  # a scan with fewer points is not registered (the prediction is kept)
+    min_fitness: float = 0.3  # a registration below this inlier fraction is rejected
+    max_correction: float = 5.0  # [m] a registration farther than this from the prediction is rejected
+    threads: int = 1  # registration threads
     # degeneracy of each registration (graphnav.scan.degeneracy; docs/weighted-icp.md): point-to-line
     # information of the scan against the map's local lines within inlier_dist; thresholds measured
     # on the harbour log (lower than the pair matcher's 200 / 0.5 m)
     max_condition: float = 40.0
     max_sigma: float = 0.25  # [m] predicted 1-sigma (x line_scale) along the weakest direction
     line_scale: float = 50.0  # covariance inflation of the prediction (HDL's, graphnav.scan.icp.COV_SCALE)
-    inlier_dist: float = 0.5
+    inlier_dist: float = 0.5  # [m] a scan point this close to a map line counts for the degeneracy check
     # a degenerate registration: "constrained" keeps it across the weak directions and takes the
     # prediction along them; "predict" takes the prediction (either way the scan may join the map)
     degenerate: str = "constrained"

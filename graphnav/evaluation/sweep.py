@@ -53,7 +53,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..errors import AddressError, GraphnavError
+from ..errors import AddressError, GraphnavError, require
 from ..io.outputs import write_text_atomic
 
 log = logging.getLogger("graphnav.sweep")
@@ -220,6 +220,10 @@ def run_sweep(fn: Callable[[dict[str, Any]], Any], tasks: Sequence[dict[str, Any
             log.warning("%s also holds %d result(s) computed with other parameters: not used (kept in the file)",
                         out, other)
     chosen = resolve_scheduler(scheduler, len(pending), task_cost_s, workers)
+    if scheduler in (None, "auto") and chosen == "local" and importlib.util.find_spec("distributed") is None:
+        log.info("Dask is not installed (pip install 'graphnav[dask]'): running the %d tasks in this process",
+                 len(pending))
+        chosen = "serial"
     if scheduler == "auto":
         log.info("scheduler auto: %s (%d tasks, estimated %s s CPU)", chosen, len(pending),
                  "?" if task_cost_s is None else f"{len(pending) * task_cost_s:.1f}")
@@ -295,6 +299,7 @@ def _workers_ignore_sigint() -> Iterator[None]:
 def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: Any, workers: int,
               finish: Callable[[str, Any], None], *, dashboard: str | None = None,
               report: dict[str, Any] | None = None) -> None:
+    require("distributed", "a Dask cluster (--scheduler local or an address)")
     from distributed import Client, LocalCluster, as_completed
 
     for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.core",

@@ -29,13 +29,13 @@ class SmootherConfig:
     relinearize_threshold: float = 0.05  # poses: tangent-space change that triggers relinearization
     relinearize_threshold_landmarks: float = 0.5  # [m] beacons (many factors each: relinearize rarely)
     relinearize_threshold_bias_deg: float = 2.0  # compass-bias frame (one factor per compass reading)
-    relinearize_skip: int = 1
+    relinearize_skip: int = 1  # iSAM2 checks for relinearization every N updates
     isam_extra_updates: int = 0  # extra ISAM2.update() calls per keyframe
     final_updates: int = 2  # extra ISAM2.update() calls after the last keyframe
     converge: str = "lm"  # the smoothed isam2 result: "lm" closing Levenberg-Marquardt from the iSAM2
     #                       estimate (= batch), "updates" (final_updates only), "none"
     wildfire_threshold: float = 0.001  # iSAM2 back-substitution stops where the change is below this
-    partial_relinearization_check: bool = True
+    partial_relinearization_check: bool = True  # iSAM2 checks only the cliques the update touched
     isam_factorization: str = "QR"  # iSAM2 clique factorization: "QR" (robust) or "CHOLESKY" (fails on long chains)
     isam_optimizer: str = "gauss-newton"  # iSAM2 step: "gauss-newton" or "dogleg" (a trust region; 2-20x the time)
     lm_tol: float = 1e-10  # LM relative/absolute decrease tolerance (1e-14: MRCLAM r1 3.8x the time, same ATE)
@@ -50,7 +50,7 @@ class SmootherConfig:
     anchor_wait: float = 2.0  # [s] records are held this long (log time) to choose the anchor
 
     # -- motion: every new pose is tied to the previous one -------------------------------------
-    use_odometry: bool = True
+    use_odometry: bool = True  # false: odometry records are not used (the motion model ties the poses)
     # when the log gives no odometry sigmas: noise densities [per sqrt(s)], so the integrated error
     # does not depend on the sample rate, hypot(floor, rel * |v|) and hypot(floor, rel * |w|)
     odo_sigma_v: float = 0.02  # [m/s sqrt(s)] floor
@@ -67,13 +67,13 @@ class SmootherConfig:
     rw_sigma_v: float = 2.0  # [m/s] random walk (no motion known): sigma_xy = rw_sigma_v dt
     rw_sigma_w_deg: float = 30.0  # [deg/s]
     motion_floor_xy: float = 1e-3  # [m] added in quadrature to every motion factor (dt = 0 stays proper)
-    motion_floor_yaw_deg: float = 0.01
+    motion_floor_yaw_deg: float = 0.01  # [deg] its yaw counterpart
 
     # -- scans (weighted ICP) --------------------------------------------------------------------
-    use_icp: bool = True
+    use_icp: bool = True  # false: no weighted-ICP factors between scans
     icp_cov_scale: float = 20.0  # x the matcher's own inflation (HDL 50): x1000 in all (docs/smoother.md)
     icp_sigma_floor_xy: float = 0.005  # [m] added in quadrature to the ICP covariance
-    icp_sigma_floor_yaw_deg: float = 0.05
+    icp_sigma_floor_yaw_deg: float = 0.05  # [deg] its yaw counterpart
     icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
     icp_max_step: float = 5.0  # [m] an ICP step farther than this from the prediction is rejected
     icp_gate: float | None = 4.0  # reject a match whose Mahalanobis distance to the odometry exceeds it
@@ -88,23 +88,23 @@ class SmootherConfig:
 
     # -- GNSS ------------------------------------------------------------------------------------
     gnss_robust: str | None = "huber"  # gross outliers are gated (online) or dropped (batch)
-    gnss_k: float | None = None
+    gnss_k: float | None = None  # the robust kernel's threshold [sigmas] (None: huber 1.345, cauchy 2.3849)
     gnss_gate: float | None = 4.0  # reject fixes whose Mahalanobis distance to the online prediction exceeds it
     gnss_gate_max_rejects: int = 15  # ...unless this many in a row were rejected (re-acquire after drift)
     gnss_gate_outage: float = 5.0  # [s] ...and the first fix after a gap this long is not gated (outage)
 
     # -- compass ---------------------------------------------------------------------------------
-    compass_robust: str | None = "huber"
+    compass_robust: str | None = "huber"  # robust kernel on compass factors (None, "huber", "cauchy")
     compass_bias: bool = True  # estimate a constant compass bias (a bias-frame variable)
-    compass_bias_sigma_deg: float = 10.0
-    compass_sigma_scale: float = 1.0
+    compass_bias_sigma_deg: float = 10.0  # [deg] prior 1-sigma of that bias
+    compass_sigma_scale: float = 1.0  # x every compass sigma
 
     # -- beacons ---------------------------------------------------------------------------------
-    beacon_robust: str | None = "huber"
-    beacon_k: float | None = None
+    beacon_robust: str | None = "huber"  # robust kernel on beacon range/bearing factors
+    beacon_k: float | None = None  # its threshold [sigmas] (None: huber 1.345, cauchy 2.3849)
     unknown_beacons: bool = True  # SLAM on beacons missing from the chart
     beacon_sigma_range: float = 0.1  # [m] when the record gives none: hypot(this, rel * range)
-    beacon_sigma_range_rel: float = 0.03
+    beacon_sigma_range_rel: float = 0.03  # x the range
     beacon_sigma_bearing_deg: float = 1.0  # [deg] when the record gives none
 
     # -- anchor ----------------------------------------------------------------------------------

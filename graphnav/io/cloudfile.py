@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import LogError
+from ..errors import LogError, require
 from ..log import Cloud, Limits, NavLog, check_record, make_cloud
 
 FORMATS = (".ply", ".pcd", ".bin")
@@ -79,10 +79,7 @@ def _read(path: Path) -> tuple[NDArray[np.float64], NDArray | None, NDArray | No
 
 def _pcd_read(path: Path) -> tuple[NDArray[np.float64], NDArray | None, NDArray | None]:
     """x, y, z (and intensity, ring when present) of a PCD through pypcd4 (the header already checked)."""
-    try:
-        from pypcd4 import PointCloud
-    except ImportError:
-        raise LogError("reading PCD needs pypcd4 (pip install 'graphnav[pcd]')", file=str(path)) from None
+    PointCloud = require("pypcd4", "reading PCD point-cloud files").PointCloud
     try:
         pc = PointCloud.from_path(path)
         pts = pc.numpy(("x", "y", "z")).astype(float)
@@ -151,8 +148,7 @@ def is_cloud_dir(path: Path) -> bool:
 
 
 def _open3d_read(path: Path) -> NDArray[np.float64]:
-    import open3d as o3d
-
+    o3d = require("open3d", f"reading {path.suffix or 'this'} point-cloud files")
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
         pc = o3d.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
     return np.asarray(pc.points, dtype=float).reshape(-1, 3)

@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import LogError
+from ..errors import LogError, require
 from ..geodesy import LocalFrame
 from ..geometry import wrap_angle
 from ..log import (
@@ -80,6 +80,7 @@ NMEA_SENTENCE_MSG = "std_msgs/Header header\nstring sentence\n"
 
 def typestore(ros1: bool = False):
     """A rosbags typestore (ROS 1 Noetic or ROS 2 Humble) that also knows ``nmea_msgs/msg/Sentence``."""
+    require("rosbags", "reading and writing ROS bags")
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
@@ -308,6 +309,7 @@ def check_ros1_lengths(path: Path) -> None:
 
 @contextmanager
 def _open(path: Path) -> Iterator[Any]:
+    require("rosbags", "reading ROS bags")
     from rosbags.highlevel import AnyReader
 
     check_ros1_lengths(path)

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ..errors import require
 from ..log import MAX_STATED_RANGE
 from . import degeneracy
 from .lidar import SIGMA_ALPHA, SIGMA_R_REL, polar_to_points
@@ -370,6 +371,7 @@ def _fast_kernels(cfg: IcpConfig) -> Any:
     kernels = _compiled()
     if isinstance(kernels, ImportError):
         if cfg.backend == "numba":
+            require("numba", 'ICP backend "numba"')
             raise kernels.with_traceback(None)
         return None
     return kernels[1] if cfg.variant == "HDL" else kernels[0]

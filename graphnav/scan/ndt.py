@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..errors import require
 from ..geometry import wrap_angle
 
 _OFF3 = 1 << 20
@@ -65,6 +66,7 @@ def resolve_backend(backend: str) -> str:
         _fast()
     except ImportError:
         if backend == "numba":
+            require("numba", 'NDT backend "numba"')
             raise
         return "numpy"
     return "numba"

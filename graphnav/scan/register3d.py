@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ..errors import require
 from .ndt import NdtParams, build_voxels3, ndt3d, skew, warm_up
 
 METHODS = ("icp", "p2plane", "gicp", "vgicp", "ndt", "o3d-icp", "o3d-p2plane", "o3d-gicp")
@@ -230,8 +231,7 @@ def _small_gicp(method: str, src: NDArray, tgt: NDArray, T0: NDArray, p: Reg3Par
 
 
 def _open3d(method: str, src: NDArray, tgt: NDArray, T0: NDArray, p: Reg3Params) -> dict[str, Any]:
-    import open3d as o3d
-
+    o3d = require("open3d", f"registration method {method!r}")
     reg = o3d.pipelines.registration
     t0 = time.perf_counter()
     s = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(src))

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ..errors import require
 from ..geometry import wrap_angle
 from ..log import DEFAULT_MAX_RANGE
 from .lidar import polar_to_points
@@ -219,8 +220,7 @@ def _o3d_cloud(xy: NDArray[np.float64], p: Params, normals: bool, covs: bool):
     """open3d cloud of 2D points at z = 0 with in-plane normals / GICP covariances from 2D PCA over
     neighbours within ``p.normal_radius``. With ``normals`` the points without a defined normal
     (isolated returns) are left out: a made-up normal would pull the solution."""
-    import open3d as o3d
-
+    o3d = require("open3d", "the open3d scan-matching backends")
     nrm = ok = None
     if normals or covs:
         nrm, ev = local_frames_2d(xy, p.neighbors, p.normal_radius)
@@ -336,8 +336,7 @@ class Target:
                                covs=self.kind == "gicp")
 
     def _align_open3d(self, src, init: NDArray[np.float64]):
-        import open3d as o3d
-
+        o3d = require("open3d", "the open3d scan-matching backends")
         reg = o3d.pipelines.registration
         p = self.params
 

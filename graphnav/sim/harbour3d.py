@@ -133,8 +133,9 @@ class Lidar3d:
     """The ray-casting sensor: :meth:`cloud` gives one frame's sensor-frame points, intensity, ring."""
 
     def __init__(self, cfg: Lidar3dConfig) -> None:
-        import open3d as o3d
+        from ..errors import require
 
+        o3d = require("open3d", "the 3D harbour's ray casting (simulate harbour --lidar 3d)")
         self.cfg = cfg
         v, tr, self.tri_class = scene_mesh()
         self.scene = o3d.t.geometry.RaycastingScene()

@@ -1,0 +1,238 @@
+"""Every estimator's options (``-O KEY=VALUE``) with their defaults and meanings, read from the code
+that defines them: the config dataclasses' field comments (``SmootherConfig``, ``ImuGraphConfig``,
+``IcpConfig``, ``ScanToMapConfig``), the run functions' keyword arguments (meaning: the sentence of
+their docstring that names them) and the UKF's option table. ``graphnav run --list-options NAME``
+prints them."""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import re
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from ..config import plain_text
+
+__all__ = ["Option", "check", "dataclass_options", "describe", "function_options"]
+
+Option = dict[str, Any]  # {"name", "default", "meaning", "group"}
+
+
+def _comment(line: str) -> str:
+    """The comment of a source line (``#`` outside a string literal; '' if none)."""
+    quote = None
+    for i, ch in enumerate(line):
+        if quote:
+            if ch == quote:
+                quote = None
+        elif ch in "\"'":
+            quote = ch
+        elif ch == "#":
+            return line[i + 1:].strip()
+    return ""
+
+
+def _field_comments(cls: type) -> dict[str, str]:
+    """Field name -> its comments: the comment block just above it (not a ``# --`` section header),
+    the comment on its line and the continuation lines below it (``#`` followed by two spaces or more)."""
+    try:
+        lines = inspect.getsource(cls).splitlines()
+    except (OSError, TypeError):
+        return {}
+    names = {f.name for f in dataclasses.fields(cls)}
+    out: dict[str, str] = {}
+    for i, line in enumerate(lines):
+        m = re.match(r"\s+(\w+)\s*:", line)
+        if not m or m.group(1) not in names:
+            continue
+        above: list[str] = []
+        j = i - 1
+        while j >= 0 and lines[j].strip().startswith("#") and not lines[j].strip().startswith("# --") \
+                and not lines[j].strip().startswith("#  "):
+            above.insert(0, lines[j].strip()[1:].strip())
+            j -= 1
+        parts = above + [_comment(line)]
+        j = i + 1
+        while j < len(lines) and lines[j].strip().startswith("#  "):
+            parts.append(lines[j].strip()[1:].strip())
+            j += 1
+        out[m.group(1)] = " ".join(p for p in parts if p)
+    return out
+
+
+def _default(f: dataclasses.Field) -> Any:
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    return None
+
+
+def dataclass_options(cls: type, group: str, skip: Iterable[str] = ()) -> list[Option]:
+    """The fields of a config dataclass: default, and meaning (``metadata["help"]`` or its comments)."""
+    comments = _field_comments(cls)
+    return [{"name": f.name, "default": _default(f), "group": group,
+             "meaning": plain_text(f.metadata.get("help") or comments.get(f.name, ""))}
+            for f in dataclasses.fields(cls) if f.name not in skip]
+
+
+def _doc_sentence(doc: str, name: str) -> str:
+    """The sentence (or ``;``-clause) of ``doc`` that names ``name`` in double backticks, narrowed to
+    its comma-separated part naming it when it lists several options ('' if none); plain text."""
+    text = " ".join(doc.split())
+    k = text.find(f"``{name}``")
+    if k < 0:
+        return ""
+    start = max([text.rfind(sep, 0, k) + 2 for sep in (". ", "; ", ": ") if text.rfind(sep, 0, k) >= 0]
+                + [0])
+    ends = [e for e in (text.find(". ", k), text.find("; ", k)) if e >= 0]
+    sentence = text[start:min(ends) if ends else len(text)].strip()
+    if len(re.findall(r"``\w+``", sentence)) > 2:  # a list of options: the part about this one
+        parts, depth, cur = [], 0, ""
+        for ch in sentence:
+            depth += (ch == "(") - (ch == ")")
+            if ch == "," and depth == 0:
+                parts.append(cur)
+                cur = ""
+            else:
+                cur += ch
+        parts.append(cur)
+        sentence = next((p.strip() for p in parts if f"``{name}``" in p), sentence)
+    return plain_text(sentence)
+
+
+def function_options(fn: Callable, group: str, skip: Iterable[str] = ("on_estimate",)) -> list[Option]:
+    """The keyword arguments with defaults of ``fn`` (meaning from its docstring, else its module's)."""
+    docs = [inspect.getdoc(fn) or "", inspect.getdoc(inspect.getmodule(fn)) or ""]
+    out = []
+    for p in inspect.signature(fn).parameters.values():
+        if p.default is inspect.Parameter.empty or p.name in skip or p.kind is p.VAR_KEYWORD:
+            continue
+        meaning = next((m for m in (_doc_sentence(d, p.name) for d in docs) if m), "")
+        out.append({"name": p.name, "default": p.default, "meaning": meaning, "group": group})
+    return out
+
+
+# Options whose meaning neither a field comment nor a docstring sentence gives (docs/ekf.md,
+# docs/fuzzy-ukf.md say more).
+_MEANINGS: dict[str, dict[str, str]] = {
+    "ekf": {"speed": "true: the state is [x, y, yaw, v] (v a random walk, the odometry speed a measurement of it)",
+            "use_gnss": "false: GNSS fixes are not used", "use_heading": "false: compass headings are not used",
+            "icp_inflate": "a failed ICP match re-uses the last increment with its covariance x this"},
+    "ekf-slam": {"paper": "true: the beacon paper's filter exactly (no gate, its init and sigmas, a slot per beacon)",
+                 "sigma_v": "[m/s] speed sigma when the record gives none (null: the mode's default)",
+                 "sigma_rot": "[rad/s] rate-of-turn sigma when the record gives none (null: the mode's default)",
+                 "sigma_range": "[m] range sigma when the record gives none (null: the mode's default)",
+                 "sigma_bearing": "[rad] bearing sigma when the record gives none (null: the mode's default)",
+                 "init": 'a beacon\'s first sighting: "inverse" (inverse observation, the default) or "paper"',
+                 "window": "innovations in the adaptive motion-noise scale's window",
+                 "fej": "first-estimates Jacobians (Huang et al. 2008; null: on unless paper=true)",
+                 "p0_cross": 'initial cross covariances: "zero" (a valid P0) or "paper" (eq. 14 as printed)',
+                 "w_second": 'second column of W (eq. 22): "rot" = dg/dROT or "theta" as printed',
+                 "use_known": "false: ignore the log's charted beacons (map every beacon)"},
+    "ukf": {"alpha": "sigma-point spread (Merwe weights)", "beta": "sigma-point weight of the prior (2: Gaussian)",
+            "kappa": "secondary sigma-point spread", "sigma_v0": "[m/s] prior 1-sigma of the initial velocity",
+            "sigma_bias_acc": "[m/s^2] ukf-bias: prior on the residual accelerometer bias",
+            "sigma_bias_gyro_deg": "[deg/s] ukf-bias: prior on the residual gyro bias",
+            "q_bias_acc": "[m/s^2/sqrt(s)] ukf-bias: accelerometer bias random walk",
+            "q_bias_gyro_deg": "[deg/s/sqrt(s)] ukf-bias: gyro bias random walk"},
+}
+
+
+def _fill(options: list[Option], table: str) -> list[Option]:
+    for o in options:
+        if not o["meaning"]:
+            o["meaning"] = _MEANINGS[table].get(o["name"], "")
+    return options
+
+
+def _ukf_options(group: str) -> list[Option]:
+    from . import gating, ukf
+
+    comments: dict[str, str] = {}  # the comments on the option tables' lines in ukf.py
+    for line in inspect.getsource(ukf).splitlines():
+        m = re.match(r'\s*"(\w+)":', line)
+        if m and _comment(line):
+            comments[m.group(1)] = _comment(line)
+    gate_doc = {o["name"]: o["meaning"] for o in function_options(gating.InnovationGate, "gate")}
+    return _fill([{"name": k, "default": v, "group": group,
+                   "meaning": comments.get(k) or gate_doc.get(k) or ("innovation gate (docs/ekf.md, Gating)"
+                                                                     if k in gating.GATING_DEFAULTS else "")}
+                  for k, v in ukf.DEFAULTS.items()], "ukf")
+
+
+def describe(name: str) -> list[Option]:
+    """The options estimator ``name`` accepts, each ``{"name", "default", "meaning", "group"}``."""
+    from . import get
+
+    spec = get(name)  # KeyError naming the known ones
+    if name in ("isam2", "batch", "fixed-lag"):
+        from ..graph.config import SmootherConfig
+        from ..graph.imu_motion import ImuGraphConfig
+        from .smoother import MOTIONS
+
+        motion = {"name": "motion", "default": "auto", "group": "graph",
+                  "meaning": f"which graph: {', '.join(MOTIONS)} (auto: the IMU graph when the log has IMU "
+                             "records and GNSS, no scans and no beacons)"}
+        odo = dataclass_options(SmootherConfig, "odometry/ICP graph (SmootherConfig)", skip=("solver",))
+        imu = dataclass_options(ImuGraphConfig, "IMU graph (ImuGraphConfig, motion=imu)")
+        same = {o["name"]: o["meaning"] for o in odo}
+        for o in imu:  # a field of the same name means the same
+            o["meaning"] = o["meaning"] or same.get(o["name"], "")
+        return [motion] + odo + imu
+    if name == "ekf":
+        from .ekf import run_ekf
+        from .gating import InnovationGate
+
+        return _fill(function_options(run_ekf, "ekf"), "ekf") + function_options(InnovationGate, "innovation gate",
+                                                                                 skip=("gate",))
+    if name == "icp-dr":
+        from ..scan.icp import IcpConfig
+        from .icp_odometry import run_icp_dr
+
+        return function_options(run_icp_dr, "icp-dr") + dataclass_options(IcpConfig, "ICP (IcpConfig)",
+                                                                          skip=("variant",))
+    if name == "scan-to-map":
+        from .scan_to_map import ScanToMapConfig
+
+        return dataclass_options(ScanToMapConfig, "scan-to-map (ScanToMapConfig)")
+    if name in ("ukf", "ukf-bias"):
+        return _ukf_options(name)
+    if name == "ekf-slam":
+        from .ekf_slam import run_ekf_slam
+
+        return _fill(function_options(run_ekf_slam, "ekf-slam"), "ekf-slam")
+    if name in ("fuzzy-ukf", "fuzzy-ukf-bias"):
+        from . import fuzzy_ukf
+
+        doc = inspect.getdoc(fuzzy_ukf) or ""
+        own = [{"name": "window", "default": 30, "group": "fuzzy", "meaning": _doc_sentence(doc, "window")},
+               {"name": "r_update", "default": "compound", "group": "fuzzy",
+                "meaning": "compound (R(k) adapts recursively) or scale_prior (alpha scales R_0)"}]
+        if name == "fuzzy-ukf":
+            own.append({"name": "bias", "default": False, "group": "fuzzy",
+                        "meaning": "true: the UKF with bias states (as fuzzy-ukf-bias)"})
+        return own + _ukf_options("ukf")
+    return function_options(spec.run, name)  # any other estimator: its run function's keyword arguments
+
+
+_DESCRIBED = ("isam2", "batch", "fixed-lag", "ekf", "ekf-slam", "icp-dr", "scan-to-map", "ukf", "ukf-bias",
+              "fuzzy-ukf", "fuzzy-ukf-bias", "dead-reckoning")
+
+
+def check(name: str, options: dict[str, Any]) -> None:
+    """A ``ValueError`` naming the unknown option(s) of estimator ``name`` and the known ones (when
+    its options are all known: the estimators described here, or a run function without ``**``)."""
+    from . import get
+
+    if not options:
+        return
+    if name not in _DESCRIBED and any(p.kind is p.VAR_KEYWORD
+                                      for p in inspect.signature(get(name).run).parameters.values()):
+        return
+    known = {o["name"] for o in describe(name)}
+    bad = sorted(set(options) - known)
+    if bad:
+        raise ValueError(f"unknown {name} option(s) {bad}; known: {', '.join(sorted(known)) or 'none'} "
+                         f"(graphnav run --list-options {name})")
