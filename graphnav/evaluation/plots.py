@@ -189,12 +189,32 @@ def _limits(xy: np.ndarray, margin: float = 0.06, floor: float = 1.0) -> tuple[t
     return (c[0] - half[0], c[0] + half[0]), (c[1] - half[1], c[1] + half[1])
 
 
+def loop_segments(est: Trajectory, edge_times: Sequence[Sequence[float]]) -> np.ndarray:
+    """(M, 2, 2) segments joining the estimate's poses at each loop edge's two times (the nearest pose
+    of each; edges outside the track are left out)."""
+    if not len(est) or not len(edge_times):
+        return np.zeros((0, 2, 2))
+    te = np.asarray(edge_times, dtype=float).reshape(-1, 2)
+    keep = (te >= est.t[0] - MAX_DT).all(axis=1) & (te <= est.t[-1] + MAX_DT).all(axis=1)
+    idx = np.clip(np.searchsorted(est.t, te[keep]), 0, len(est) - 1)
+    prev = np.clip(idx - 1, 0, len(est) - 1)
+    idx = np.where(np.abs(est.t[prev] - te[keep]) < np.abs(est.t[idx] - te[keep]), prev, idx)
+    xy = np.column_stack([est.x, est.y])
+    return xy[idx]
+
+
 def trajectory_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory | None, *,
-                     zoom_ax: Axes | None = None, color: Any = "tab:red") -> Figure:
+                     zoom_ax: Axes | None = None, color: Any = "tab:red",
+                     loops: Sequence[Sequence[float]] = ()) -> Figure:
     """One estimator over the truth, the track coloured by its position error; the view spans this
     estimator's track and the truth over the same time (not every estimator's). ``zoom_ax``, when
-    given, shows the neighbourhood of the largest error, a few errors wide."""
+    given, shows the neighbourhood of the largest error, a few errors wide. ``loops``: accepted loop
+    closures as (older, newer) times (``RunResult.info["loop_edge_times"]``), drawn as thin edges."""
     fig = ax.figure
+    segs_loop = loop_segments(est, loops)
+    if len(segs_loop):
+        ax.add_collection(LineCollection(segs_loop, colors="tab:orange", lw=0.7, alpha=0.8, zorder=4,
+                                         label=f"loop closures ({len(segs_loop)})"))
     err = None
     tr_xy = np.zeros((0, 2))
     if truth is not None and len(truth):
@@ -251,9 +271,11 @@ def trajectory_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory | N
 
 
 def plot_trajectory_panels(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory | None, *,
-                           fig: Figure | None = None, ncol: int = 2) -> Figure:
+                           fig: Figure | None = None, ncol: int = 2,
+                           loops: dict[str, Sequence[Sequence[float]]] | None = None) -> Figure:
     """One panel per estimator (:func:`trajectory_panel`), each zoomed to its own track, and beside it
-    (when there is a truth) a close-up of its largest error."""
+    (when there is a truth) a close-up of its largest error; ``loops`` (per estimator name) marks
+    the accepted loop closures."""
     trajs = _as_dict(trajs)
     col = colors(list(trajs))
     zoom = truth is not None and len(truth) > 0
@@ -267,7 +289,7 @@ def plot_trajectory_panels(trajs: dict[str, Trajectory] | Trajectory, truth: Tra
     cells = [(axes[i // ncol, per * (i % ncol)], axes[i // ncol, per * (i % ncol) + 1] if zoom else None)
              for i in range(nrow * ncol)]
     for (ax, zax), (name, tr) in zip(cells, trajs.items(), strict=False):
-        trajectory_panel(ax, name, tr, truth, zoom_ax=zax, color=col[name])
+        trajectory_panel(ax, name, tr, truth, zoom_ax=zax, color=col[name], loops=(loops or {}).get(name, ()))
     for ax, zax in cells[len(trajs):]:
         ax.axis("off")
         if zax is not None:

@@ -491,8 +491,10 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path | OutDir, *, l
     if trajs:
         title = f"Trajectories over the truth — {Path(log_name).name or log_name}"
         put(plots.plot_trajectories, (trajs, truth, gnss), "trajectories.png", "Trajectories", title=title)
+        loops = {e.name: e.result.info["loop_edge_times"] for e in ok if e.result.info.get("loop_edge_times")}
         put(plots.plot_trajectory_panels, (trajs, truth), "trajectory_panels.png",
-            "Each estimator over the truth (coloured by position error) and its largest error close up")
+            "Each estimator over the truth (coloured by position error) and its largest error close up"
+            + (" (orange: accepted loop closures)" if loops else ""), loops=loops)
         if truth is not None:
             online = {e.name: e.result.online for e in ok
                       if e.result.online is not None and e.result.online is not e.result.trajectory}

@@ -356,6 +356,8 @@ class Navigator:
         traj = Trajectory(t, np.array(poses).reshape(-1, 3), np.array(covs) if covs is not None else None,
                           name=cfg.solver)
         info["final_ms"] = final_ms
+        if info.get("loop_edges"):  # the accepted loops as (older, newer) keyframe times, for plots
+            info["loop_edge_times"] = [[float(t[i]), float(t[k])] for i, k in info["loop_edges"]]
         if b.bias_key is not None and values.exists(b.bias_key):
             info["compass_bias_deg"] = math.degrees(F.compass_bias(values.atPose2(b.bias_key)))
         info["beacon_init"] = {bid: p.tolist() for bid, p in b.beacon_init.items()}

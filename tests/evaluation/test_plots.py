@@ -139,3 +139,18 @@ def test_error_bounds_state_the_fraction_inside_three_sigma(trajs):
     assert [t.split(":")[1].split(" error")[0].strip() for t in titles] == ["x", "y", "yaw"]
     fracs = [float(t.split(",")[1].split("%")[0]) for t in titles]
     assert all(f >= 98.0 for f in fracs)  # errors drawn from the covariance: 99.7 % expected, n = 300
+
+
+def test_loop_closures_are_drawn_between_the_estimate_poses_at_their_times():
+    t = np.arange(0.0, 10.0, 0.5)
+    est = Trajectory(t, np.column_stack([np.cos(t), np.sin(t), t]), name="isam2")
+    edges = [[0.5, 7.0], [1.0, 9.5], [2.0, 99.0]]  # the last is outside the track: left out
+    segs = plots.loop_segments(est, edges)
+    assert segs.shape == (2, 2, 2)
+    np.testing.assert_allclose(segs[0], [[np.cos(0.5), np.sin(0.5)], [np.cos(7.0), np.sin(7.0)]])
+    np.testing.assert_allclose(segs[1, 1], [np.cos(9.5), np.sin(9.5)])
+    fig = plots.plot_trajectory_panels({"isam2": est}, est, loops={"isam2": edges})
+    labels = [c.get_label() for ax in fig.axes for c in ax.collections]
+    assert "loop closures (2)" in labels
+    fig = plots.plot_trajectory_panels({"isam2": est}, est)
+    assert not any(str(c.get_label()).startswith("loop closures") for ax in fig.axes for c in ax.collections)

@@ -76,6 +76,8 @@ def test_synthetic_loop_is_closed_with_bounded_error():
         z = gtsam.Pose2(*truth[i]).between(gtsam.Pose2(*truth[k]))
         e = gtsam.Pose2(*on.trajectory.poses[i]).between(gtsam.Pose2(*on.trajectory.poses[k]))
         assert math.hypot(z.x() - e.x(), z.y() - e.y()) < 0.3
+    t = on.trajectory.t  # the edges' times (what the report's plot marks) are those keyframes' times
+    assert on.info["loop_edge_times"] == [[t[i], t[k]] for i, k in on.info["loop_edges"]]
     a_on, a_off = _ate(on, truth), _ate(off, truth)
     assert a_off > 0.8  # the drift is real
     assert a_on < 0.35 * a_off and a_on < 0.6
