@@ -6,6 +6,13 @@ update, per measurement channel j (GNSS x, GNSS y, compass):
 * innovation ``eps = z - H x^-`` (eq. 14), theoretical covariance ``C_T = H P^- H^T + R`` (eq. 15),
 * actual covariance ``C_A`` = mean of ``eps eps^T`` over the last N innovations (eq. 17), kept
   recursively (eq. 18: add the newest, drop the one that leaves the window),
+* with ``c_a="centered"`` (default, not in the paper) C_A is the window's sample covariance of eps
+  about its window mean (``n - 1`` normalisation) instead of eq. 17's second moment. Eq. 7-8 model
+  the GNSS / compass noise as zero-mean white noise, so a persistent innovation mean is state /
+  model error (e.g. the drift of a residual IMU bias), not sensor noise. Eq. 17 books it into C_A,
+  eq. 21 raises R, the filter follows the measurements less, the drift and the innovation mean grow:
+  a positive feedback that took the GNSS R_hat to ~19x the true noise and the position error to
+  ~400 m (Solent scenario 2, seed 3). ``c_a="raw"`` is eq. 17 as printed,
 * ``DoM_j = C_A,jj / C_T,jj`` (eq. 20), ``alpha_j`` from the fuzzy system of Table 1 / eq. 22-28
   (:mod:`graphnav.estimators.fuzzy`, thresholds of Table 2),
 * ``R_hat = alpha R`` (eq. 21). With ``r_update="compound"`` (default) R(k) in eq. 21 and eq. 15 is
@@ -14,7 +21,7 @@ update, per measurement channel j (GNSS x, GNSS y, compass):
   fixed prior R of Table 2 in both (R_hat can then grow by at most the largest centroid, ~3.7).
 
 The adaptation starts once the window holds N innovations of a channel (before that R = R_0).
-Options: ``window`` (N, default 30; the paper does not state it), ``r_update``, ``bias`` (true: run
+Options: ``window`` (N, default 30; the paper does not state it), ``r_update``, ``c_a``, ``bias`` (true: run
 the adaptation on the bias-augmented ``ukf-bias`` state, our extension), and every option of ``ukf``.
 ``info`` holds per-step ``r_hat``, ``c_a``, ``c_t``, ``dom`` and ``alpha`` (arrays (n, 3)).
 """
@@ -36,17 +43,22 @@ class FuzzyCovarianceMatcher:
     """Per-channel covariance matching with the fuzzy coefficient; call it as the UKF's adapter."""
 
     def __init__(self, r0: NDArray, n_steps: int, window: int = 30, r_update: str = "compound",
-                 th: Thresholds | None = None) -> None:
+                 th: Thresholds | None = None, c_a: str = "centered") -> None:
         if r_update not in ("compound", "scale_prior"):
             raise ValueError(f"r_update must be 'compound' or 'scale_prior', not {r_update!r}")
-        if window < 1:
-            raise ValueError("window must be >= 1")
+        if c_a not in ("centered", "raw"):
+            raise ValueError(f"c_a must be 'centered' or 'raw', not {c_a!r}")
+        if window < 1 or (c_a == "centered" and window < 2):
+            raise ValueError("window must be >= 1 (>= 2 with c_a='centered')")
+        self.centered = c_a == "centered"
         self.r0 = np.asarray(r0, dtype=float)
         self.r = self.r0.copy()
         self.N = int(window)
         self.compound = r_update == "compound"
         self.fuzzy = FuzzyAlpha(th or Thresholds())
-        self.buf = np.zeros((3, self.N))
+        self.buf = np.zeros((3, self.N))  # eps^2 of the window (eq. 17)
+        self.buf_e = np.zeros((3, self.N))  # eps of the window (its mean, for c_a="centered")
+        self.s_e = np.zeros(3)  # running sum of buf_e (eq. 18's recursion applied to eps)
         self.count = np.zeros(3, dtype=int)
         self.c_a = np.zeros(3)
         self.r_floor = 1e-6 * self.r0
@@ -63,15 +75,24 @@ class FuzzyCovarianceMatcher:
         slot = cnt % self.N
         rows = self._rows[ch]
         old = self.buf[rows, slot]
+        old_e = self.buf_e[rows, slot]
         self.buf[rows, slot] = e2
+        self.buf_e[rows, slot] = eps
         cnt = cnt + 1
         self.count[ch] = cnt
         if cnt.min() > self.N:  # eq. 18: add the newest, drop the one leaving the window
             c_a = self.c_a[ch] + (e2 - old) / self.N
+            s_e = self.s_e[ch] + (eps - old_e)
         else:  # filling the window (eq. 17 over what is there)
             c_a = self.c_a[ch] + (e2 - self.c_a[ch]) / np.minimum(cnt, self.N)
             c_a = np.where(cnt > self.N, self.c_a[ch] + (e2 - old) / self.N, c_a)
-        self.c_a[ch] = c_a
+            s_e = self.s_e[ch] + eps - np.where(cnt > self.N, old_e, 0.0)
+        self.c_a[ch] = c_a  # eq. 17: the window's second moment of eps
+        self.s_e[ch] = s_e
+        if self.centered:  # the window's covariance of eps about its mean (unbiased, n - 1)
+            m = np.minimum(cnt, self.N)
+            mean = s_e / m
+            c_a = np.maximum(c_a - mean * mean, 0.0) * m / np.maximum(m - 1, 1)
         r_prev = self.r[ch]
         c_t = HPH.diagonal() + r_prev  # eq. 15
         dom = c_a / c_t  # eq. 20
@@ -91,15 +112,16 @@ def run_fuzzy_ukf(log: NavLog, *, on_estimate: OnEstimate | None = None, **optio
     options = dict(options)
     window = int(options.pop("window", 30))
     r_update = str(options.pop("r_update", "compound"))
+    c_a = str(options.pop("c_a", "centered"))
     bias = bool(options.pop("bias", False))
 
     o = {**DEFAULTS, **options}
     r0 = np.array([o["r_gps_x"], o["r_gps_y"], np.radians(o["r_com_deg"])]) ** 2
     n = len(measurement_table(log)["t"])
-    matcher = FuzzyCovarianceMatcher(r0, n, window=window, r_update=r_update)
+    matcher = FuzzyCovarianceMatcher(r0, n, window=window, r_update=r_update, c_a=c_a)
     res = run_nav_filter(log, "fuzzy-ukf-bias" if bias else "fuzzy-ukf", bias=bias, adapter=matcher,
                          on_estimate=on_estimate, options=options)
-    res.info["options"].update(window=window, r_update=r_update, bias=bias)
+    res.info["options"].update(window=window, r_update=r_update, bias=bias, c_a=c_a)
     res.info.update(matcher.hist)
     res.info["r0"] = r0
     return res
