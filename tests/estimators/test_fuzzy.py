@@ -141,6 +141,29 @@ def test_matched_noise_leaves_r_nearly_unchanged():
     assert np.all((ratio > 0.5) & (ratio < 2.0))
 
 
+def test_inflation_fires_on_a_significant_innovation_mean_only():
+    """White innovations matching C_T: lambda = 1 except at about the test's false-alarm rate; a
+    constant offset of 3 C_T^(1/2) / sqrt(N) and more: lambda makes H P^- H^T cover mu^2."""
+    rng = np.random.default_rng(6)
+    r0 = np.array([36.0, 49.0, 1e-4])
+    hph = 0.1 * r0
+    n, N = 3000, 30
+    m = FuzzyCovarianceMatcher(r0, n, window=N, r_update="scale_prior", mean_test=0.95)
+    fired = 0
+    for k in range(n):
+        lam = m.inflation(np.arange(3), hph)
+        fired += int(np.any(lam > 1.0)) if k >= N else 0
+        m(k, np.arange(3), rng.normal(0.0, np.sqrt(hph + r0)), np.diag(hph), r0)
+    assert fired / (n - N) < 0.2  # three channels at 5 %, serially correlated window means
+    off = 3.0 * np.sqrt((hph + r0) / N) * np.array([1.5, -2.0, 3.0])
+    m2 = FuzzyCovarianceMatcher(r0, n, window=N, r_update="scale_prior", mean_test=0.95)
+    for k in range(N):
+        m2(k, np.arange(3), off, np.diag(hph), r0)
+    lam = m2.inflation(np.arange(3), hph)
+    np.testing.assert_allclose(lam * hph, off ** 2)
+    assert np.all(FuzzyCovarianceMatcher(r0, n, window=N, mean_test=None).inflation(np.arange(3), hph) == 1.0)
+
+
 def test_bad_options_are_rejected():
     with pytest.raises(ValueError, match="r_update"):
         FuzzyCovarianceMatcher(np.ones(3), 10, r_update="sometimes")
@@ -151,3 +174,5 @@ def test_bad_options_are_rejected():
     FuzzyCovarianceMatcher(np.ones(3), 10, window=1, c_a="raw")
     with pytest.raises(ValueError, match="c_a"):
         FuzzyCovarianceMatcher(np.ones(3), 10, c_a="sometimes")
+    with pytest.raises(ValueError, match="mean_test"):
+        FuzzyCovarianceMatcher(np.ones(3), 10, mean_test=1.5)
