@@ -34,9 +34,6 @@ from graphnav.io.marina import is_marina_dir, read_marina
 from graphnav.scan.icp import IcpConfig, match_scans
 from graphnav.trajectory import Trajectory
 
-ICP_COV_SCALE = 20.0  # the smoother's default inflation of the matcher's covariance (docs/smoother.md)
-ICP_FLOOR = np.diag([0.005**2, 0.005**2, math.radians(0.05) ** 2])  # 1-sigma floors added in quadrature
-
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -78,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
         m = match_scans(scans[k], scans[k - 1], cfg, init=last)  # pose of scan k in scan k-1's frame
         if m.ok:
             last = m.pose
-            graph.add(F.icp_between(X(k - 1), X(k), m.pose, ICP_COV_SCALE * m.cov + ICP_FLOOR))
+            graph.add(F.icp_between(X(k - 1), X(k), m.pose, m.cov))  # the match's own covariance, unscaled
         else:  # no usable match: a weak constant-velocity factor keeps the chain connected
             failed += 1
             noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([2.0, 2.0, math.radians(20.0)]))

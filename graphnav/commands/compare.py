@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import shlex
 import time
 from pathlib import Path
@@ -37,9 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         + ", ".join(estimators.names()))
     p.add_argument("--option", "-O", action="append", metavar="ESTIMATOR.KEY=VALUE",
                    help="option for one estimator (or label), e.g. -O scan-to-map.backend=gicp; repeatable")
-    p.add_argument("--workers", "-j", type=int, default=1,
-                   help="run this many estimators at once in separate processes (runtimes then include "
-                        "contention; default 1)")
+    p.add_argument("--workers", "-j", type=int, default=0,
+                   help="processes for the estimators and the figures (the smoothers share one, with their "
+                        "weighted-ICP matches; runtimes then include contention); default 0: one per core, "
+                        "1: everything in this process")
     p.add_argument("--no-icp-cache", dest="icp_cache", action="store_false",
                    help="every estimator computes its own weighted-ICP matches (default: a match shared by "
                         "several estimators is computed once; their runtimes then exclude it)")
@@ -84,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     _check_scopes(options, names)
     t0 = time.perf_counter()
+    workers = args.workers if args.workers > 0 else (os.cpu_count() or 1)
     cache = MatchCache() if getattr(args, "icp_cache", True) else None  # (demo builds its own Namespace)
     bar = progress_bar(args, total=_runnable(log, names), desc="compare", unit="estimator")
     started = []
@@ -97,13 +100,13 @@ def run(args: argparse.Namespace) -> int:
             log_.info("running %s on %s", name, args.log)
 
     try:
-        entries = compare(log, names, options=options, progress=progress, workers=args.workers, cache=cache)
+        entries = compare(log, names, options=options, progress=progress, workers=workers, cache=cache)
         if started:
             bar.update(1)
     finally:
         bar.close()
     command = shlex.join(["graphnav", *args.argv]) if hasattr(args, "argv") else None
-    files = write_report(entries, log, out, log_name=str(args.log), command=command)
+    files = write_report(entries, log, out, log_name=str(args.log), command=command, workers=workers)
     tracks = {**({"truth": log.truth()} if log.has_truth else {}),
               **{e.name: e.result.trajectory for e in entries if e.ok and e.result is not None}}
     geo = write_wgs84(out, tracks, log.meta)  # WGS84 tracks, or "wgs84": None and why
@@ -117,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         elif e.skipped is not None:
             log_.info("%s not run: %s", e.name, e.skipped)
     hits = sum((e.summary or {}).get("icp_cache_hits", 0) for e in entries) if cache is not None else None
-    obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=args.workers,
+    obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=workers,
                   icp_cache_hits=hits, map="map.html", **geo)
     lines = [f"{'estimator':16s} {'ATE RMSE [m]':>12s} {'RPE [m]':>9s} {'runtime [s]':>11s}  note"]
     for e in ranked(entries):

@@ -30,7 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output directory (default out/demo; a previous demo's files there are replaced)")
     add_overwrite_flag(p)
     p.add_argument("--log", type=Path, default=None, help="another log instead of the embedded one")
-    p.add_argument("--workers", "-j", type=int, default=1, help="estimators run in parallel processes")
+    p.add_argument("--workers", "-j", type=int, default=0,
+                   help="processes for the estimators and figures (default 0: one per core; 1: none)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     p.set_defaults(func=run)
 

@@ -202,7 +202,7 @@ class EkfStepper:
     def __init__(self, x0: NDArray[np.float64], P0: NDArray[np.float64], *, motion: str = "odometry",
                  gate: float | None = 0.999, sigma_v: float = 0.5,
                  sigma_w: float = math.radians(0.5), sigma_acc: float = 0.5, use_gnss: bool = True,
-                 use_heading: bool = True, icp_inflate: float = 100.0, match: MatchFn | None = None,
+                 use_heading: bool = True, match: MatchFn | None = None,
                  keep: int | None = None, **gating: Any) -> None:
         if motion not in ("odometry", "icp"):
             raise ValueError(f"motion must be 'odometry' or 'icp', not {motion!r}")
@@ -218,7 +218,6 @@ class EkfStepper:
         self.kinds: tuple[type, ...] = (Gnss, Heading, Odometry) if motion == "odometry" else (Gnss, Heading, Scan)
         self.sigma_v, self.sigma_w, self.sigma_acc = sigma_v, sigma_w, sigma_acc
         self.use_gnss, self.use_heading = use_gnss, use_heading
-        self.icp_inflate = icp_inflate
         self.match = match
         self.t: float | None = None  # time of the latest record taken (the state is reported at it)
         self.u: Odometry | None = None  # the held control
@@ -268,7 +267,9 @@ class EkfStepper:
 
     def _icp_increment(self, scan: Scan, prev: Scan) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Body-frame increment prev -> scan and its covariance (a failed match re-uses the last
-        increment, covariance x ``icp_inflate``). The one place the EKF matches scans."""
+        increment as a constant-velocity step with the stated sigma of that motion model,
+        :data:`graphnav.scan.motion_guess.CV_BRIDGE_SIGMA`, as icp-dr does without odometry). The one
+        place the EKF matches scans."""
         t0 = time.perf_counter()
         res = self.match(scan, prev, init=self.last_inc)
         self.icp_ms.append((time.perf_counter() - t0) * 1e3)
@@ -276,13 +277,15 @@ class EkfStepper:
             self.last_inc, self.last_cov = np.asarray(res.pose, float), np.asarray(res.cov_target, float)
             return self.last_inc, self.last_cov
         self.icp_failed += 1
-        return self.last_inc, self.last_cov * self.icp_inflate
+        from ..scan.motion_guess import CV_BRIDGE_SIGMA
+
+        return self.last_inc, np.diag(np.square(CV_BRIDGE_SIGMA))
 
 
 def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str = "auto", speed: bool = False,
             gate: float | None = 0.999, sigma_v: float = 0.5,
             sigma_w: float = math.radians(0.5), sigma_acc: float = 0.5, use_gnss: bool = True,
-            use_heading: bool = True, icp_inflate: float = 100.0, **gating: Any) -> RunResult:
+            use_heading: bool = True, **gating: Any) -> RunResult:
     """EKF over a log. ``motion``: ``"odometry"``, ``"icp"`` or ``"auto"`` (odometry if the log has
     it, else ICP on the scans). ``gate``: chi-square probability (``None`` disables gating);
     ``gating``: the other options of :class:`~graphnav.estimators.gating.InnovationGate`
@@ -293,7 +296,7 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
     x0, P0, anchor = initial_state(log.records, speed)
     st = EkfStepper(x0, P0, motion=motion, gate=gate, sigma_v=sigma_v,
                     sigma_w=sigma_w, sigma_acc=sigma_acc, use_gnss=use_gnss, use_heading=use_heading,
-                    icp_inflate=icp_inflate, **gating)
+                    **gating)
     recs = [r for r in log.records if st.uses(r)]
     if not recs:
         raise ValueError("ekf: the log has no usable records")

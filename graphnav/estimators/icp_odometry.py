@@ -1,15 +1,20 @@
 """Weighted-ICP dead reckoning: chain the scan matches from the start pose.
 
-Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.scan.icp.match_points`, constant-velocity
-initial guess) and the increment is composed onto the previous pose; the covariance is
-propagated to first order (``P' = Ad P Ad^T + Q`` in the body frame, GTSAM's convention) and
-reported in the world frame (the :class:`~graphnav.trajectory.Trajectory` convention).
+Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.scan.icp.match_points`; initial guess the
+odometry increment with its covariance when the log has odometry, else constant velocity) and the
+increment is composed onto the previous pose; the covariance is propagated to first order
+(``P' = Ad P Ad^T + Q`` in the body frame, GTSAM's convention) and reported in the world frame
+(the :class:`~graphnav.trajectory.Trajectory` convention).
 The start pose is the log's pose prior, else the first truth pose, else the origin
 (:func:`graphnav.estimators.dead_reckoning.start_pose`). Initial guesses come from
 :class:`~graphnav.scan.motion_guess.MotionGuess` (never from a flagged match). A flagged match (``ok``
-False: degenerate geometry, too few points or inliers) is bridged by the odometry increment with its
+False: degenerate geometry, too few points or inliers, not converged, or beyond the odometry guess's
+99.9 % bound) is bridged by the odometry increment with its
 covariance when the log has odometry, else by the constant-velocity guess with a wide covariance,
-and counted (``info["failed_matches"]``, ``info["bridged_odometry"]``, ``info["bridged_cv"]``).
+and counted (``info["failed_matches"]``, ``info["bridged_odometry"]``, ``info["bridged_cv"]``). A match
+flagged for degeneracy only, from an odometry guess, is chained as returned (the match across its weak
+directions, the guess along them) with its covariance (the match's across, the odometry's along;
+``info["constrained"]``).
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry import se2_adjoint_inv, se2_compose
+from ..geometry import cov_to_world, se2_adjoint_inv, se2_compose
 from ..log import NavLog, odometry_samples
 from ..scan import icp_cache
 from ..scan.icp import IcpConfig, scan_points
@@ -35,22 +40,20 @@ _CONFIG_FIELDS = {f.name for f in fields(IcpConfig)}
 
 def _to_world(pose: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """Body-frame (right-perturbation) covariance -> the trajectory's world-frame (x, y, yaw)."""
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    a = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return a @ cov @ a.T
+    return cov_to_world(float(pose[2]), cov)
 
 
 def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: str = "HDL",
-               init: str = "cv", sigma_xy0: float = 0.0, sigma_yaw0: float = 0.0,
+               init: str = "odometry", sigma_xy0: float = 0.0, sigma_yaw0: float = 0.0, guess_cov: bool = True,
                **options: Any) -> RunResult:
-    """Options: ``variant`` (K, H, HM, HD, HDL), ``init`` ("cv", "odometry" or "zero"), any :class:`IcpConfig`
-    field, and the start pose's 1-sigma (``sigma_xy0``, ``sigma_yaw0``; a pose prior's own sigmas
-    win)."""
+    """Options: ``variant`` (K, H, HM, HD, HDL), ``init`` ("odometry": the odometry increment when the log
+    has odometry, else constant velocity; "cv" or "zero"; :class:`~graphnav.scan.motion_guess.MotionGuess`),
+    any :class:`IcpConfig` field, ``guess_cov`` (False: the odometry guess goes without its covariance,
+    so a match is not tested against it), and the start pose's 1-sigma (``sigma_xy0``, ``sigma_yaw0``;
+    a pose prior's own sigmas win)."""
     unknown = set(options) - _CONFIG_FIELDS
     if unknown:
         raise ValueError(f"unknown icp-dr options: {', '.join(sorted(unknown))}")
-    if isinstance(options.get("cov_floor"), list):
-        options["cov_floor"] = tuple(options["cov_floor"])
     cfg = IcpConfig(variant=variant, **options)
     pose, anchor = start_pose(log)
     prior = log.pose_prior()
@@ -73,17 +76,24 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
     pts_prev = scan_points(scans[0], cfg)
     icp_ms = []
     bridged = {"odometry": 0, "cv": 0}
+    constrained = 0
     guesser = MotionGuess(init, odometry_samples(log))
     for k in range(1, len(scans)):
         ta, tb = scans[k - 1].t, scans[k].t
         pts = scan_points(scans[k], cfg)
         guess = guesser.guess(ta, tb)
         t0 = time.perf_counter()
-        res = icp_cache.match_points(pts, pts_prev, cfg, init=guess)  # = icp.match_points, shared in compare
+        res = icp_cache.match_points(pts, pts_prev, cfg, init=guess,  # shared in compare
+                                     init_cov=guesser.cov if guess_cov else None)
         icp_ms.append((time.perf_counter() - t0) * 1e3)
         guesser.update(res, ta, tb)
         if res.ok:
             inc, q = res.pose, res.cov
+        elif res.quality.get("inflated") and guesser.cov is not None:
+            # degenerate only: the match across its weak directions, the odometry guess along them
+            # (keep_constrained), with the covariance of each where it is taken from
+            inc, q = res.pose, res.cov
+            constrained += 1
         else:
             inc, q, how = guesser.bridge(ta, tb)
             bridged[how] += 1
@@ -98,7 +108,8 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
         pts_prev = pts
     traj = Trajectory(np.array(t), np.array(poses), np.array(covs), name="icp-dr")
     info = {"anchor": anchor, "variant": variant, "init": init, "failed_matches": sum(bridged.values()),
-            "bridged_odometry": bridged["odometry"], "bridged_cv": bridged["cv"], "matches": len(scans) - 1}
+            "bridged_odometry": bridged["odometry"], "bridged_cv": bridged["cv"], "constrained": constrained,
+            "matches": len(scans) - 1}
     return RunResult(traj, traj, np.zeros(0), np.array(icp_ms), info=info)
 
 

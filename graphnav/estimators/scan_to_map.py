@@ -7,7 +7,9 @@ guess is the odometry increment when the log has odometry (``predict="odometry"`
 constant-velocity prediction; the result is the pose in SE(2) (see :mod:`graphnav.scan.registration`
 for how each backend is kept planar). A registration whose point-to-line information against the
 map's local lines is degenerate (:mod:`graphnav.scan.degeneracy`: condition number above
-``max_condition`` or predicted 1-sigma along the weakest direction above ``max_sigma``) takes the
+``max_condition``, or the registration's 1-sigma along the weakest direction — the sandwich of
+:mod:`graphnav.scan.covariance` over the point-to-line pairs, with the map's voxel as the sampling
+resolution — above ``max_sigma`` voxels) takes the
 prediction along its weak directions and is counted (``info["degenerate_registrations"]``). The
 trajectory is the chain of registered poses — odometry, so it drifts, as in the paper's Table 2.
 
@@ -29,6 +31,7 @@ import numpy as np
 from ..config import config_from_options
 from ..geometry import increment, se2_between, se2_compose, wrap_angle
 from ..log import NavLog, Scan, odometry_samples
+from ..scan.covariance import SAMPLING_VARIANCE, sandwich
 from ..scan.degeneracy import analyse, flatness, keep_constrained, line_information
 from ..scan.registration import (
     Params,
@@ -67,12 +70,11 @@ class ScanToMapConfig:
     max_correction: float = 5.0  # [m] a registration farther than this from the prediction is rejected
     threads: int = 1  # registration threads
     # degeneracy of each registration (graphnav.scan.degeneracy; docs/weighted-icp.md): point-to-line
-    # information of the scan against the map's local lines within inlier_dist; thresholds measured
-    # on the harbour log (lower than the pair matcher's 200 / 0.5 m)
+    # pairs of the scan against the map's local lines within inlier_dist map voxels; the condition
+    # number is unit-free (measured on the harbour log, lower than the pair matcher's 200)
     max_condition: float = 40.0
-    max_sigma: float = 0.25  # [m] predicted 1-sigma (x line_scale) along the weakest direction
-    line_scale: float = 50.0  # covariance inflation of the prediction (HDL's, graphnav.scan.icp.COV_SCALE)
-    inlier_dist: float = 0.5  # [m] a scan point this close to a map line counts for the degeneracy check
+    max_sigma: float = 1.0  # the registration's 1-sigma along the weakest direction above this x map_voxel
+    inlier_dist: float = 2.0  # [map voxels]
     # a degenerate registration: "constrained" keeps it across the weak directions and takes the
     # prediction along them; "predict" takes the prediction (either way the scan may join the map)
     degenerate: str = "constrained"
@@ -101,6 +103,24 @@ def predict_constant_velocity(p_prev2: np.ndarray, p_prev: np.ndarray, dt_prev: 
     d = se2_between(p_prev2, p_prev)
     s = dt / dt_prev if dt_prev > 0 else 1.0
     return se2_compose(p_prev, d * s)
+
+
+def _degeneracy(xy: np.ndarray, pose: np.ndarray, target: Target, map_lines: Any, cfg: ScanToMapConfig,
+                pred_cov: np.ndarray | None) -> Any:
+    """Degeneracy of a registration (:func:`graphnav.scan.degeneracy.analyse`) with its covariance from
+    :func:`graphnav.scan.covariance.sandwich` over the point-to-line pairs: flatness as weights, the
+    residual variance along the normals plus the sampling term of the map's resolution (one point
+    per ``map_voxel``, shared by the ``neighbors`` points a map line is fitted on). A direction is
+    weak where the registration knows it less well than the prediction (``pred_cov``, the odometry
+    increment's covariance; None without odometry) or by the condition / ``max_sigma`` tests."""
+    lp = line_information(xy, pose, target.xy, *map_lines, target.tree2, cfg.inlier_dist * cfg.map_voxel)
+    if len(lp.res) == 0 or not np.isfinite(lp.s2):
+        cov = np.full((3, 3), np.nan)
+    else:
+        var = lp.s2 + cfg.neighbors * SAMPLING_VARIANCE * cfg.map_voxel**2
+        cov = sandwich(lp.rows[:, None, :], lp.flat, np.full((len(lp.res), 1, 1), var))
+    return analyse(lp.info, lp.radius, cov, max_condition=cfg.max_condition, max_sigma=cfg.max_sigma * cfg.map_voxel,
+                   prior_cov=pred_cov)
 
 
 def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
@@ -144,8 +164,10 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
             pose = np.array(pose0, dtype=float)
         else:
             inc = increment(odo, ts[-1], scan.t) if len(odo) else None
+            pred_cov = None
             if inc is not None:
                 pred = se2_compose(poses[-1], inc[0])
+                pred_cov = inc[1]
             elif len(poses) >= 2:
                 pred = predict_constant_velocity(poses[-2], poses[-1], ts[-1] - ts[-2], scan.t - ts[-1])
             else:
@@ -163,10 +185,7 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
                 jump = np.hypot(*(res.pose[:2] - pred[:2]))
                 ok = np.all(np.isfinite(res.pose)) and jump <= cfg.max_correction
                 if ok and res.fitness >= cfg.min_fitness:
-                    info_, s2, radius = line_information(xy, res.pose, target.xy, *map_lines, target.tree2,
-                                                         cfg.inlier_dist)
-                    deg = analyse(info_, s2, radius, scale=cfg.line_scale, max_condition=cfg.max_condition,
-                                  max_sigma=cfg.max_sigma)
+                    deg = _degeneracy(xy, res.pose, target, map_lines, cfg, pred_cov)
                     conds.append(deg.condition)
                     if not deg.degenerate:
                         pose = res.pose

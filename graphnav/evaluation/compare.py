@@ -6,6 +6,7 @@ Pure: no files, no printing. :mod:`graphnav.evaluation.report` turns the result 
 
 from __future__ import annotations
 
+import os
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -80,6 +81,10 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
 
     ``workers > 1`` runs the estimators in that many processes at once (results in the same
     order); each ``runtime_s`` is then measured while the others run, so it includes contention.
+    The estimators that share weighted-ICP matches through ``cache`` (the factor-graph smoothers,
+    ``kind == "smoother"``: one builder, the same matches) run one after another in one process,
+    so the sharing holds in parallel too; the others take the remaining processes.
+    ``workers=0``: one process per core (``os.cpu_count()``).
 
     ``cache`` (:class:`graphnav.scan.icp_cache.MatchCache`) shares weighted-ICP matches between the
     estimators: a match already computed by an earlier estimator (same scans, config and initial
@@ -111,24 +116,43 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
             entry.skipped = why
             continue
         todo.append((len(out) - 1, est))
+    if workers <= 0:
+        workers = os.cpu_count() or 1
     with icp_cache.active(cache):
         _run_all(out, todo, log, progress, workers)
     return out
 
 
+def _run_group(entries: list[Entry], ests: list[str], log: NavLog) -> list[Entry]:
+    """Run several estimators one after another (in one worker process: they share its cache)."""
+    return [_run(e, est, log) for e, est in zip(entries, ests, strict=True)]
+
+
+def groups(todo: Sequence[tuple[int, str]]) -> list[list[tuple[int, str]]]:
+    """The parallel work units: every smoother in one (they share their weighted-ICP matches through
+    the cache, so they run in one process, in order), every other estimator alone; the smoothers first
+    (the longest unit on a log with scans)."""
+    shared = [(i, est) for i, est in todo if estimators.get(est).kind == "smoother"]
+    return ([shared] if shared else []) + [[(i, est)] for i, est in todo if (i, est) not in shared]
+
+
 def _run_all(out: list[Entry], todo: list[tuple[int, str]], log: NavLog,
              progress: Callable[[str], None] | None, workers: int) -> None:
-    if workers > 1 and len(todo) > 1:
+    units = groups(todo)
+    if workers > 1 and len(units) > 1:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
         ctx = multiprocessing.get_context("fork")  # children inherit the registry as it is here
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-            futures = [(i, pool.submit(_run, out[i], est, log)) for i, est in todo]
-            for i, fut in futures:
-                if progress:
-                    progress(out[i].name)
-                out[i] = fut.result()
+        with ProcessPoolExecutor(max_workers=min(workers, len(units)), mp_context=ctx) as pool:
+            futures = [(u, pool.submit(_run_group, [out[i] for i, _ in u], [est for _, est in u], log))
+                       for u in units]
+            for u, fut in futures:
+                for i, _ in u:
+                    if progress:
+                        progress(out[i].name)
+                for (i, _), entry in zip(u, fut.result(), strict=True):
+                    out[i] = entry
     else:
         for i, est in todo:
             if progress:

@@ -15,6 +15,7 @@ import hashlib
 import html
 import json
 import math
+import os
 import re
 import shlex
 import subprocess
@@ -416,12 +417,47 @@ def render_html(blocks: Sequence[tuple], images: dict[str, bytes]) -> str:
             + "\n".join(body) + "\n</body></html>\n")
 
 
+_FIG_JOBS: list[tuple[Any, tuple, dict, Path]] = []  # what forked figure workers render (set before forking)
+
+
+def _render(i: int) -> bool:
+    """Draw and save figure ``i`` of :data:`_FIG_JOBS`; whether there was one to save."""
+    fn, args, kw, path = _FIG_JOBS[i]
+    fig = fn(*args, **kw)
+    if fig is None:
+        return False
+    plots.save(fig, path)
+    return True
+
+
+def render_figures(jobs: Sequence[tuple[Any, tuple, dict, str, str]], directory: Path, workers: int = 1) -> list[bool]:
+    """Draw and save each ``(plot function, args, kwargs, file name, title)`` into ``directory``;
+    ``workers > 1`` draws them in that many forked processes (the figures are independent; the
+    PNGs are the same). Returns, per job, whether a figure was written."""
+    global _FIG_JOBS
+    _FIG_JOBS = [(fn, args, kw, directory / fname) for fn, args, kw, fname, _ in jobs]
+    try:
+        if workers > 1 and len(jobs) > 1:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            with ProcessPoolExecutor(max_workers=min(workers, len(jobs)),
+                                     mp_context=multiprocessing.get_context("fork")) as pool:
+                return list(pool.map(_render, range(len(jobs))))
+        return [_render(i) for i in range(len(jobs))]
+    finally:
+        _FIG_JOBS = []
+
+
 def write_report(entries: Sequence[Entry], log: NavLog, out: Path | OutDir, *, log_name: str = "",
-                 command: str | None = None, log_path: str | Path | None = None) -> dict[str, Path]:
+                 command: str | None = None, log_path: str | Path | None = None, workers: int = 1) -> dict[str, Path]:
     """Write report.md, report.html, the PNGs, one TUM file per estimator and truth.tum into ``out``
     (each atomically; an :class:`~graphnav.io.outputs.OutDir` records every name in its manifest
-    before writing it); returns the paths. ``command`` (the command line) and ``log_path`` (default
-    ``log_name`` when it names a file) go into the provenance header."""
+    before writing it, a figure once it is written); returns the paths. ``command`` (the command
+    line) and ``log_path`` (default ``log_name`` when it names a file) go into the provenance
+    header. ``workers > 1`` draws the figures in that many processes (0: one per core)."""
+    if workers <= 0:
+        workers = os.cpu_count() or 1
     log_name = log_name or str(log.meta.get("name", "log"))
     if not isinstance(out, OutDir):
         out = Path(out)
@@ -447,32 +483,36 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path | OutDir, *, l
     if log.of("gnss"):
         c = log.columns("gnss")
         gnss = np.column_stack([c["x"], c["y"]])
-    figs: list[tuple[str, str]] = []
+    jobs: list[tuple[Any, tuple, dict, str, str]] = []  # (plot function, args, kwargs, file name, title)
 
-    def put(fig, fname: str, title: str) -> None:
-        if fig is not None:
-            files[fname] = plots.save(fig, out / fname)
-            figs.append((title, fname))
+    def put(fn: Any, args: tuple, fname: str, caption: str, **kw: Any) -> None:
+        jobs.append((fn, args, kw, fname, caption))
 
     if trajs:
         title = f"Trajectories over the truth — {Path(log_name).name or log_name}"
-        put(plots.plot_trajectories(trajs, truth, gnss, title=title), "trajectories.png", "Trajectories")
-        put(plots.plot_trajectory_panels(trajs, truth), "trajectory_panels.png",
+        put(plots.plot_trajectories, (trajs, truth, gnss), "trajectories.png", "Trajectories", title=title)
+        put(plots.plot_trajectory_panels, (trajs, truth), "trajectory_panels.png",
             "Each estimator over the truth (coloured by position error) and its largest error close up")
         if truth is not None:
             online = {e.name: e.result.online for e in ok
                       if e.result.online is not None and e.result.online is not e.result.trajectory}
-            put(plots.plot_position_error(trajs, truth, events, online), "position_error.png",
+            put(plots.plot_position_error, (trajs, truth, events, online), "position_error.png",
                 "Position error versus time (smoothers: online estimate dashed)")
-            put(plots.plot_heading_error(trajs, truth, events), "heading_error.png", "Heading error versus time")
-            put(plots.plot_error_cdf(trajs, truth), "error_cdf.png", "Error CDF")
-            put(plots.plot_sog_cog(trajs, truth, events), "sog_cog.png",
+            put(plots.plot_heading_error, (trajs, truth, events), "heading_error.png", "Heading error versus time")
+            put(plots.plot_error_cdf, (trajs, truth), "error_cdf.png", "Error CDF")
+            put(plots.plot_sog_cog, (trajs, truth, events), "sog_cog.png",
                 "SOG, COG and ΔCOG errors (weighted-ICP paper, Figs. 12-15 style)")
-            put(plots.plot_error_bounds(trajs, truth, events), "error_bounds.png",
+            put(plots.plot_error_bounds, (trajs, truth, events), "error_bounds.png",
                 "Errors in x, y and yaw with the estimators' own ±3σ bounds")
-            put(plots.plot_nees(trajs, truth, events), "nees.png",
+            put(plots.plot_nees, (trajs, truth, events), "nees.png",
                 "Position NEES over time with its 95 % chi-square band (2 dof)")
-        put(plots.plot_covariance(trajs, truth), "covariance.png", "Covariance ellipses (2σ, each panel its own scale)")
+        put(plots.plot_covariance, (trajs, truth), "covariance.png",
+            "Covariance ellipses (2σ, each panel its own scale)")
+    figs: list[tuple[str, str]] = []
+    for (_, _, _, fname, title), written in zip(jobs, render_figures(jobs, Path(str(out)), workers), strict=True):
+        if written:
+            files[fname] = out / fname  # (recorded in the manifest once written)
+            figs.append((title, fname))
 
     if log_path is None and log_name and Path(log_name).exists():
         log_path = log_name

@@ -50,9 +50,17 @@ from ..log import BeaconObs, Gnss, Heading, KnownBeacon, Odometry, PosePrior, Re
 from .config import SmootherConfig
 from .keyframes import DEFAULT_PERIOD
 
+#: ``matcher(cur, prev, init, init_cov, guess_in_graph) -> (usable, pose, cov)``: ``init`` the motion
+#: guess prev -> cur and ``init_cov`` its covariance (the odometry integrated, else the motion
+#: model's); ``guess_in_graph``: that guess is a factor of its own (odometry), so the match's factor
+#: must not repeat it along the directions it does not observe
 Matcher = Callable[
-    [Scan, Scan, NDArray[np.float64] | None], tuple[bool, NDArray[np.float64], NDArray[np.float64]]
+    [Scan, Scan, NDArray[np.float64] | None, NDArray[np.float64] | None, bool],
+    tuple[bool, NDArray[np.float64], NDArray[np.float64]],
 ]
+#: [m^2, m^2, rad^2] the factor's covariance added along a degenerate match's weak directions when the
+#: guess there is already in the graph: the factor then says nothing there (the matcher's failure value)
+UNOBSERVED_COV = np.diag([1e4, 1e4, 10.0])
 
 #: sensor groups of the factors (the noise estimation scales ``SCALABLE`` ones)
 GROUPS = ("anchor", "odometry", "motion", "icp", "gnss", "compass", "bias", "beacon", "chart", "pose_prior")
@@ -64,7 +72,13 @@ MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior")
 def default_matcher(options: dict[str, Any]) -> Matcher | None:
     """The weighted-ICP matcher of :mod:`graphnav.scan.icp`, or ``None`` when it is not available.
     A match is usable when it converged, or when it was flagged degenerate only (its covariance is
-    then inflated along the unobserved directions, which the factor keeps weak)."""
+    then inflated along the unobserved directions, which the factor keeps weak).
+
+    The guess's covariance goes to the matcher as ``init_cov``: a match beyond the 99.9 % bound of
+    both covariances from the guess fails (another minimum), and a direction the guess knows better
+    is weak. Along weak directions the matcher returns the guess with the guess's covariance; when
+    the guess is a factor of the graph already (``guess_in_graph``: the odometry) the match's
+    factor gets :data:`UNOBSERVED_COV` there instead, so the odometry is not counted twice."""
     try:
         from ..scan.icp import IcpConfig, scan_points
         from ..scan.icp_cache import match_points  # shared between estimators inside icp_cache.active()
@@ -73,13 +87,18 @@ def default_matcher(options: dict[str, Any]) -> Matcher | None:
     cfg = IcpConfig(**options)
     last: list[Any] = [None, None]  # the previous call's current scan and its points
 
-    def match(cur: Scan, prev: Scan, init: NDArray[np.float64] | None):
+    def match(cur: Scan, prev: Scan, init: NDArray[np.float64] | None,
+              init_cov: NDArray[np.float64] | None = None, guess_in_graph: bool = False):
         prev_xy = last[1] if prev is last[0] else scan_points(prev, cfg)  # consecutive pairs: each scan once
         cur_xy = scan_points(cur, cfg)
         last[:] = [cur, cur_xy]
-        r = match_points(cur_xy, prev_xy, cfg, init=init)
-        usable = bool(r.ok) or bool(r.quality.get("inflated", False))
-        return usable, np.asarray(r.pose, dtype=float), np.asarray(r.cov, dtype=float)
+        r = match_points(cur_xy, prev_xy, cfg, init=init, init_cov=init_cov)
+        inflated = bool(r.quality.get("inflated", False))
+        cov = np.asarray(r.cov, dtype=float)
+        if inflated and guess_in_graph and r.quality.get("weak_projector") is not None:
+            p = np.asarray(r.quality["weak_projector"], dtype=float)
+            cov = cov + p @ UNOBSERVED_COV @ p.T
+        return bool(r.ok) or inflated, np.asarray(r.pose, dtype=float), cov
 
     return match
 
@@ -558,13 +577,16 @@ class GraphBuilder:
         cfg = self.cfg
         if self.matcher is None or k not in self.kf_scan or (k - 1) not in self.kf_scan:
             return None
-        init = _vec(odo_rel if odo_rel is not None else self.last_rel)
+        if odo_rel is not None and odo_cov is not None:  # the guess and its covariance: the odometry ...
+            init, init_cov, in_graph = _vec(odo_rel), odo_cov, True
+        else:  # ... else the motion model's (constant velocity from the last measured motion, random walk)
+            mean, init_cov, _ = self.motion_prior(self.kf_t[k] - self.kf_t[k - 1], self.kf_t[k])
+            init, in_graph = _vec(mean), False
         c0 = time.perf_counter()
-        ok, mp, mc = self.matcher(self.kf_scan[k], self.kf_scan[k - 1], init)
+        ok, mp, mc = self.matcher(self.kf_scan[k], self.kf_scan[k - 1], init, init_cov, in_graph)
         s.icp_ms = (time.perf_counter() - c0) * 1e3
         self.n_icp += 1
-        floor = np.array([cfg.icp_sigma_floor_xy] * 2 + [math.radians(cfg.icp_sigma_floor_yaw_deg)])
-        cov = proper_cov(cfg.icp_cov_scale * np.asarray(mc, dtype=float), floor) if ok else None
+        cov = proper_cov(np.asarray(mc, dtype=float), np.zeros(3)) if ok else None  # the match's own, as is
         if (not ok or cov is None or not np.all(np.isfinite(mp))
                 or np.hypot(mp[0] - init[0], mp[1] - init[1]) > cfg.icp_max_step):
             self.n_icp_failed += 1

@@ -13,6 +13,7 @@ from ..config import config_from_options
 MOTION_MODELS = ("constant-velocity", "random-walk")
 CONVERGE = ("lm", "updates", "none")
 NOISE_ESTIMATION = ("off", "defaulted", "all")
+BATCH_INIT = ("incremental", "chained")
 
 
 @dataclass
@@ -27,7 +28,8 @@ class SmootherConfig:
     lag: float = 20.0  # fixed-lag window [s]
     rebase_every: int | None = 6000  # live mode (no history kept): re-anchor the fixed-lag smoother every N keyframes
     relinearize_threshold: float = 0.05  # poses: tangent-space change that triggers relinearization
-    relinearize_threshold_landmarks: float = 0.5  # [m] beacons (many factors each: relinearize rarely)
+    relinearize_threshold_landmarks: float = 0.05  # [m] beacons: as the poses (0.5 m, 5-10 sigma of a beacon
+    #  sighting at 3-6 m, left the online MRCLAM estimate on stale linearisations: online 0.46 -> 0.42 m on r2)
     relinearize_threshold_bias_deg: float = 2.0  # compass-bias frame (one factor per compass reading)
     relinearize_skip: int = 1  # iSAM2 checks for relinearization every N updates
     isam_extra_updates: int = 0  # extra ISAM2.update() calls per keyframe
@@ -41,6 +43,9 @@ class SmootherConfig:
     lm_tol: float = 1e-10  # LM relative/absolute decrease tolerance (1e-14: MRCLAM r1 3.8x the time, same ATE)
     lm_max_iterations: int = 1000  # (stops at lm_tol first; MRCLAM batch from dead reckoning needs ~300)
     covariances: bool = True  # per-pose marginal covariances on the final trajectory
+    batch_init: str = "incremental"  # batch's initial guess: "incremental" (LM on the graph so far each time
+    #  it has grown by batch_init_growth, later poses chained from that solution) or "chained" (dead reckoning)
+    batch_init_growth: float = 1.5  # ... the graph is re-solved at 32, 48, 72, ... keyframes
 
     # -- keyframes and attachment ---------------------------------------------------------------
     keyframe_period: float | None = None  # None: one pose per scan (a 0.5 s grid without scans)
@@ -71,9 +76,6 @@ class SmootherConfig:
 
     # -- scans (weighted ICP) --------------------------------------------------------------------
     use_icp: bool = True  # false: no weighted-ICP factors between scans
-    icp_cov_scale: float = 20.0  # x the matcher's own inflation (HDL 50): x1000 in all (docs/smoother.md)
-    icp_sigma_floor_xy: float = 0.005  # [m] added in quadrature to the ICP covariance
-    icp_sigma_floor_yaw_deg: float = 0.05  # [deg] its yaw counterpart
     icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
     icp_max_step: float = 5.0  # [m] an ICP step farther than this from the prediction is rejected
     icp_gate: float | None = 4.0  # reject a match whose Mahalanobis distance to the odometry exceeds it
@@ -117,9 +119,12 @@ class SmootherConfig:
 
         for name, val, allowed in (("solver", self.solver, KINDS), ("motion_model", self.motion_model, MOTION_MODELS),
                                    ("converge", self.converge, CONVERGE),
-                                   ("noise_estimation", self.noise_estimation, NOISE_ESTIMATION)):
+                                   ("noise_estimation", self.noise_estimation, NOISE_ESTIMATION),
+                                   ("batch_init", self.batch_init, BATCH_INIT)):
             if val not in allowed:
                 raise ValueError(f"{name} must be one of {', '.join(allowed)}; got {val!r}")
+        if not self.batch_init_growth > 1.0:
+            raise ValueError(f"batch_init_growth must be > 1, got {self.batch_init_growth}")
         if self.scan_stride < 1:
             raise ValueError(f"scan_stride must be >= 1, got {self.scan_stride}")
         if self.keyframe_period is not None and not self.keyframe_period > 0:

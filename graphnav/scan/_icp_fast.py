@@ -237,57 +237,140 @@ def step_pose(th, t_x, t_y, dth, dtx, dty):
 
 
 @njit(cache=True)
+def resolution(tx, ty, half):
+    """As :func:`graphnav.scan.covariance.resolution`: ``r da`` per point, ``da`` the median of the
+    ``2 half`` bearing gaps around it (bearing order, circular)."""
+    n = tx.shape[0]
+    out = np.zeros(n)
+    if n < 2:
+        return out
+    a = np.arctan2(ty, tx)
+    order = np.argsort(a, kind="mergesort")
+    srt = a[order]
+    gaps = np.empty(n)
+    for i in range(n - 1):
+        gaps[i] = srt[i + 1] - srt[i]
+    gaps[n - 1] = srt[0] + 2.0 * np.pi - srt[n - 1]
+    m = 2 * half
+    win = np.empty(m)
+    for i in range(n):
+        for o in range(m):  # insertion sort of the window's gaps
+            v = gaps[_wrap(i - half + o, n)]
+            k = o
+            while k > 0 and win[k - 1] > v:
+                win[k] = win[k - 1]
+                k -= 1
+            win[k] = v
+        med = win[m // 2] if m % 2 else 0.5 * (win[m // 2 - 1] + win[m // 2])  # as np.median
+        j = order[i]
+        out[j] = math.hypot(tx[j], ty[j]) * med
+    return out
+
+
+@njit(cache=True)
+def target_resolution(tx, ty, half, min_res, tm2):
+    """:func:`resolution` of the target, the distance a correct pair can have at each target point
+    (:func:`graphnav.scan.icp.pair_scale`: ``sqrt(res^2 + 2 M^2)`` floored at ``min_res``) and its
+    median ``D``."""
+    res = resolution(tx, ty, half)
+    scale = np.empty(res.shape[0])
+    for i in range(res.shape[0]):
+        scale[i] = max(math.sqrt(res[i] ** 2 + 2.0 * tm2[i]), min_res)
+    return res, scale, np.median(scale)
+
+
+@njit(cache=True)
+def zhang_gate(d, idx, res, n, dmax):
+    """:func:`graphnav.scan.icp.zhang_gate` on the distances ``d / res[idx]`` (``res``: pair scales)."""
+    u = np.empty(n)
+    m = 0
+    for i in range(n):
+        ui = d[i] / res[idx[i]]
+        if ui <= dmax:
+            u[m] = ui
+            m += 1
+    if m < 3:
+        return dmax
+    sel = u[:m]
+    mu = np.mean(sel)
+    sd = math.sqrt(np.mean((sel - mu) ** 2))
+    if mu < 1.0:
+        return mu + 3.0 * sd
+    if mu < 3.0:
+        return mu + 2.0 * sd
+    if mu < 6.0:
+        return mu + sd
+    return np.median(sel)
+
+
+@njit(cache=True)
+def p2p_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c,
+                wpow, max_corr, w):
+    """Pair weights of :func:`graphnav.scan.icp._weights` for K/H/HM/HD into ``w`` (eq. 11-13, Huber)."""
+    n = px.shape[0]
+    khu = huber_c * np.median(d)
+    anyw = False
+    for i in range(n):
+        j = idx[i]
+        if variant == 2:
+            wi = (sm2[i] + tm2[j]) ** (-wpow)
+        elif variant == 3:  # eq. 9, 11, 12 (inline: this is the hot loop)
+            if d[i] > 0:
+                bx = (tx[j] - px[i]) / d[i]
+                by = (ty[j] - py[i]) / d[i]
+            else:
+                bx, by = 1.0, 0.0
+            urx = c * sux[i] - s * suy[i]
+            ury = s * sux[i] + c * suy[i]
+            cs = urx * bx + ury * by
+            ct = tux[j] * bx + tuy[j] * by
+            g = sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)
+            wi = g ** (-wpow)
+        else:
+            wi = 1.0
+        if variant != 0 and khu > 0 and d[i] > khu:
+            wi *= khu / d[i]
+        if d[i] > max_corr:
+            wi = 0.0
+        w[i] = wi
+        if wi > 0:
+            anyw = True
+    if not anyw:
+        for i in range(n):
+            w[i] = 1.0
+
+
+@njit(cache=True)
 def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow,
-             max_corr, tol, tol_step, max_iter, th, t0x, t0y, h):
-    """Algorithm 1 for variant 0=K, 1=H, 2=HM, 3=HD. Returns (theta, tx, ty, idx, iterations,
-    converged)."""
+             max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, res, big_d, gate0):
+    """Algorithm 1 for variant 0=K, 1=H, 2=HM, 3=HD (tolerances in units of ``big_d``; Zhang's gate
+    tracked from ``gate0`` for the inlier test, not applied to the weights). Returns (theta, tx, ty,
+    idx, iterations, converged, gate)."""
     n = sx.shape[0]
     xmin, ymin, h, nx, ny, start, items, d, idx, w, px, py, src_r = loop_start(sx, sy, tx, ty, h)
     t_x, t_y = t0x, t0y
     old_res = -1.0
     converged = False
     it = 0
+    dmax = gate0
+    moved = np.inf
     for it in range(1, max_iter + 1):  # noqa: B007
         c, s = math.cos(th), math.sin(th)
         move_and_match(sx, sy, c, s, t_x, t_y, it == 1, tx, ty, xmin, ymin, h, nx, ny, start, items, px, py, d, idx)
-        khu = huber_c * np.median(d)
+        dmax = zhang_gate(d, idx, res, n, dmax)
+        p2p_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant,
+                    huber_c, wpow, max_corr, w)
         sw = 0.0
         for i in range(n):
-            j = idx[i]
-            if variant == 2:
-                wi = (sm2[i] + tm2[j]) ** (-wpow)
-            elif variant == 3:
-                if d[i] > 0:
-                    bx = (tx[j] - px[i]) / d[i]
-                    by = (ty[j] - py[i]) / d[i]
-                else:
-                    bx, by = 1.0, 0.0
-                urx = c * sux[i] - s * suy[i]
-                ury = s * sux[i] + c * suy[i]
-                cs = urx * bx + ury * by
-                ct = tux[j] * bx + tuy[j] * by
-                g = sa2[i] - (sa2[i] - sb2[i]) * cs * cs + ta2[j] - (ta2[j] - tb2[j]) * ct * ct
-                wi = g ** (-wpow)
-            else:
-                wi = 1.0
-            if variant != 0 and khu > 0 and d[i] > khu:
-                wi *= khu / d[i]
-            if d[i] > max_corr:
-                wi = 0.0
-            w[i] = wi
-            sw += wi
-        if not sw > 0:
-            for i in range(n):
-                w[i] = 1.0
-            sw = n
+            sw += w[i]
         dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)  # eq. 15-20
         th, t_x, t_y = step_pose(th, t_x, t_y, dth, dtx, dty)
         new_res, moved = residual_and_move(d, n, dth, dtx, dty, src_r)
-        if old_res >= 0 and abs(new_res - old_res) < tol and moved < tol_step:
+        if old_res >= 0 and abs(new_res - old_res) < tol * big_d and moved < tol_step * big_d:
             converged = True
             break
         old_res = new_res
-    return th, t_x, t_y, idx, it, converged
+    return th, t_x, t_y, idx, it, converged, dmax, moved, src_r
 
 
 @njit(cache=True)
@@ -313,16 +396,19 @@ def _wrap(k, n):
 
 
 @njit(cache=True)
-def scan_order_normals(tx, ty, half, max_gap):
-    """As :func:`graphnav.scan.icp.scan_order_normals` (PCA of beam-order windows, gap check)."""
+def scan_order_normals(tx, ty, half, max_gap, res):
+    """As :func:`graphnav.scan.icp.scan_order_normals` (PCA of beam-order windows; a gap wider than
+    ``max_gap`` resolutions ``res`` (:func:`resolution`), the smaller of the two points', ends a surface)."""
     n = tx.shape[0]
     order = np.argsort(np.arctan2(ty, tx), kind="mergesort")
     xs = tx[order]
     ys = ty[order]
     gap = np.empty(n)
+    lim = np.empty(n)
     for i in range(n):
         k = (i + 1) % n
         gap[i] = math.sqrt((xs[k] - xs[i]) ** 2 + (ys[k] - ys[i]) ** 2)
+        lim[i] = max_gap * min(res[order[i]], res[order[k]])
     nx_ = np.empty(n)
     ny_ = np.empty(n)
     fl = np.empty(n)
@@ -334,7 +420,7 @@ def scan_order_normals(tx, ty, half, max_gap):
             k = _wrap(i + o, n)
             mx += xs[k]
             my += ys[k]
-            if o < half and gap[k] > max_gap:
+            if o < half and gap[k] > lim[k]:
                 wide = True
         mx /= m
         my /= m
@@ -371,146 +457,53 @@ def pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2):
 
 
 @njit(cache=True)
-def p2p_stats(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow,
-              max_corr, th, t_x, t_y, idx, half, max_gap, inlier_dist):
-    """The terms of :func:`graphnav.scan.icp._finish` for K/H/HM/HD: ``H``, ``B``, the residual scale's
-    numerator and dof, the weighted RMS residual, the point-to-line information (degeneracy), the
-    flatness-weighted residual variance along the normals, the number of pairs used and of inliers,
-    the source's RMS radius."""
+def final_pairs(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, th, t_x, t_y, idx, model):
+    """The pairs at the solution for :func:`graphnav.scan.icp._report`: moved source points and the
+    eq. 8 pair covariance entries (``model`` False: identity, the unweighted variants)."""
     n = sx.shape[0]
     c, s = math.cos(th), math.sin(th)
     px, py, d = moved_pairs(sx, sy, tx, ty, idx, c, s, t_x, t_y, n)
-    khu = huber_c * np.median(d)
-    nx_, ny_, fl = scan_order_normals(tx, ty, half, max_gap)
-    lsc = rms_radius(sx, sy, n)
-    h = np.zeros((3, 3))
-    b = np.zeros((3, 3))
-    info = np.zeros((3, 3))
-    a = np.empty((2, 3))
-    sa = np.empty((2, 3))
-    jl = np.empty(3)
-    ksum = 0.0
-    n_sel = 0
-    n_use = 0
-    n_inl = 0
-    sw = 0.0
-    swe = 0.0
-    sf = sfr = 0.0
-    ws = np.empty(n)
-    for i in range(n):
-        j = idx[i]
-        ex, ey = px[i] - tx[j], py[i] - ty[j]
-        if variant == 2:
-            wi = (sm2[i] + tm2[j]) ** (-wpow)
-        elif variant == 3:
-            if d[i] > 0:
-                bx, by = -ex / d[i], -ey / d[i]
-            else:
-                bx, by = 1.0, 0.0
-            urx = c * sux[i] - s * suy[i]
-            ury = s * sux[i] + c * suy[i]
-            cs = urx * bx + ury * by
-            ct = tux[j] * bx + tuy[j] * by
-            g = sa2[i] - (sa2[i] - sb2[i]) * cs * cs + ta2[j] - (ta2[j] - tb2[j]) * ct * ct
-            wi = g ** (-wpow)
-        else:
-            wi = 1.0
-        if variant != 0 and khu > 0 and d[i] > khu:
-            wi *= khu / d[i]
-        if d[i] > max_corr:
-            wi = 0.0
-        ws[i] = wi
-    tot = 0.0
-    for i in range(n):
-        tot += ws[i]
-    if not tot > 0:
+    sxx = np.ones(n)
+    sxy = np.zeros(n)
+    syy = np.ones(n)
+    if model:
         for i in range(n):
-            ws[i] = 1.0
-    for i in range(n):
-        j = idx[i]
-        wi = ws[i]
-        ex, ey = px[i] - tx[j], py[i] - ty[j]
-        if variant >= 2:  # eq. 8 pair covariance: source rotated + target
-            sxx, sxy, syy = pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2)
-        else:
-            sxx, sxy, syy = 1.0, 0.0, 1.0
-        c2x, c2y = -(py[i] - t_y), px[i] - t_x
-        a[0, 0], a[0, 1], a[0, 2] = c, -s, c2x
-        a[1, 0], a[1, 1], a[1, 2] = s, c, c2y
-        for k in range(3):
-            sa[0, k] = sxx * a[0, k] + sxy * a[1, k]
-            sa[1, k] = sxy * a[0, k] + syy * a[1, k]
-        for r_ in range(3):
-            for q_ in range(3):
-                h[r_, q_] += wi * (a[0, r_] * a[0, q_] + a[1, r_] * a[1, q_])
-                b[r_, q_] += wi * wi * (a[0, r_] * sa[0, q_] + a[1, r_] * sa[1, q_])
-        inl = d[i] <= inlier_dist
-        use = wi > 0
-        n_inl += inl
-        n_use += use
-        sw += wi
-        swe += wi * (ex * ex + ey * ey)
-        if inl and use:
-            n_sel += 1
-            det = sxx * syy - sxy * sxy
-            ksum += (syy * ex * ex - 2 * sxy * ex * ey + sxx * ey * ey) / det
-            # point-to-line row n^T [R, J (p - t)], rotation scaled by lsc
-            nxj, nyj = nx_[j], ny_[j]
-            jl[0] = nxj * c + nyj * s
-            jl[1] = -nxj * s + nyj * c
-            jl[2] = (nxj * c2x + nyj * c2y) / lsc
-            for r_ in range(3):
-                for q_ in range(3):
-                    info[r_, q_] += fl[j] * jl[r_] * jl[q_]
-            rn = ex * nxj + ey * nyj  # residual along the normal (graphnav.scan.degeneracy.residual_var)
-            sf += fl[j]
-            sfr += fl[j] * rn * rn
-    res_rms = math.sqrt(swe / sw) if sw > 0 else np.nan
-    s2 = sfr / (sf - 3.0) if sf > 3.0 else np.nan
-    return h, b, ksum, max(2 * n_sel - 3, 1), n_sel, res_rms, info, s2, n_use, n_inl, lsc
+            sxx[i], sxy[i], syy[i] = pair_cov(i, idx[i], c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2)
+    return c, s, px, py, d, sxx, sxy, syy
 
 
 # ----------------------------------------------------------------------------- HDL (point-to-line)
 
 
 @njit(cache=True)
-def _hd_weight(i, j, px, py, d, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, wpow):
-    """HD weight of pair (i, j) (eq. 9, 11, 12): ``beta`` the direction from the source point to its match."""
-    if d > 0:
-        bx = (tx[j] - px) / d
-        by = (ty[j] - py) / d
-    else:
-        bx, by = 1.0, 0.0
-    urx = c * sux[i] - s * suy[i]
-    ury = s * sux[i] + c * suy[i]
-    cs = urx * bx + ury * by
-    ct = tux[j] * bx + tuy[j] * by
-    g = sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)
-    return g ** (-wpow)
-
-
-@njit(cache=True)
 def hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
-                huber_c, wpow, max_corr, flat_pow, line_max_dist, p2p, w):
+                huber_c, wpow, max_corr, flat_pow, res, dmax, p2p, w):
     """Pair weights of :func:`graphnav.scan.icp._weights` for HDL into ``w`` (``p2p``: the HD weights
     of the point-to-point warm-up): directional error along the target normal (eq. 9, 11), Huber
-    on the point-to-line distance, x flatness^power, gated by the pair distance."""
+    on the point-to-line distance, x flatness^power, 0 outside Zhang's gate ``d / res[idx] <= dmax``
+    (``res``: the target's pair scales, :func:`target_resolution`)."""
     n = px.shape[0]
     if p2p:
         khu = huber_c * np.median(d)
         for i in range(n):
-            wi = _hd_weight(i, idx[i], px[i], py[i], d[i], c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy,
-                            ta2, tb2, wpow)
+            j = idx[i]  # HD weight (eq. 9, 11, 12), inline as in p2p_weights
+            if d[i] > 0:
+                bx = (tx[j] - px[i]) / d[i]
+                by = (ty[j] - py[i]) / d[i]
+            else:
+                bx, by = 1.0, 0.0
+            cs = (c * sux[i] - s * suy[i]) * bx + (s * sux[i] + c * suy[i]) * by
+            ct = tux[j] * bx + tuy[j] * by
+            wi = (sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)) ** (-wpow)
             if khu > 0 and d[i] > khu:
                 wi *= khu / d[i]
-            w[i] = wi
+            w[i] = wi if d[i] / res[idx[i]] <= dmax else 0.0
     else:
         dist = np.empty(n)
         for i in range(n):
             j = idx[i]
             dist[i] = abs((px[i] - tx[j]) * nrx[j] + (py[i] - ty[j]) * nry[j])
         khu = huber_c * np.median(dist)
-        gate = max(line_max_dist, huber_c * np.median(d))
         for i in range(n):
             j = idx[i]
             bx, by = nrx[j], nry[j]
@@ -521,7 +514,7 @@ def hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2,
             if khu > 0 and dist[i] > khu:
                 wi *= khu / dist[i]
             wi = wi * fl[j] ** flat_pow
-            w[i] = wi if d[i] <= gate else 0.0
+            w[i] = wi if d[i] / res[j] <= dmax else 0.0
     anyw = False
     for i in range(n):
         if d[i] > max_corr:
@@ -550,10 +543,11 @@ def _solve3(h, b):
 
 @njit(cache=True)
 def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr,
-             tol, tol_step, max_iter, th, t0x, t0y, h, flat_pow, warmup, line_max_dist):
+             tol, tol_step, max_iter, th, t0x, t0y, h, flat_pow, warmup, res, big_d, gate0):
     """Algorithm 1 for HDL: HD point-to-point steps (eq. 15-20) while a step moves a point more than
-    ``warmup``, then Gauss-Newton steps of the point-to-line cost. Returns (theta, tx, ty, idx,
-    iterations, converged), as :func:`p2p_loop`."""
+    ``warmup`` x ``big_d``, then Gauss-Newton steps of the point-to-line cost, both within Zhang's
+    gate (:func:`zhang_gate`, from ``gate0``). Returns (theta, tx, ty, idx, iterations, converged,
+    gate), as :func:`p2p_loop`."""
     n = sx.shape[0]
     xmin, ymin, h, nx, ny, start, items, d, idx, w, px, py, src_r = loop_start(sx, sy, tx, ty, h)
     t_x, t_y = t0x, t0y
@@ -561,13 +555,16 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
     converged = False
     warm = warmup > 0
     it = 0
+    dmax = gate0
+    moved = np.inf
     hm = np.empty((3, 3))
     bv = np.empty(3)
     for it in range(1, max_iter + 1):  # noqa: B007
         c, s = math.cos(th), math.sin(th)
         move_and_match(sx, sy, c, s, t_x, t_y, it == 1, tx, ty, xmin, ymin, h, nx, ny, start, items, px, py, d, idx)
+        dmax = zhang_gate(d, idx, res, n, dmax)
         hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
-                    huber_c, wpow, max_corr, flat_pow, line_max_dist, warm, w)
+                    huber_c, wpow, max_corr, flat_pow, res, dmax, warm, w)
         if warm:  # eq. 15-20, 2D closed form
             sw = 0.0
             for i in range(n):
@@ -597,75 +594,14 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
         th, t_x, t_y = step_pose(th, t_x, t_y, dth, dtx, dty)
         new_res, moved = residual_and_move(d, n, dth, dtx, dty, src_r)
         if warm:
-            warm = moved > warmup
+            warm = moved > warmup * big_d
             old_res = -1.0
             continue
-        if old_res >= 0 and abs(new_res - old_res) < tol and moved < tol_step:
+        if old_res >= 0 and abs(new_res - old_res) < tol * big_d and moved < tol_step * big_d:
             converged = True
             break
         old_res = new_res
-    return th, t_x, t_y, idx, it, converged
-
-
-@njit(cache=True)
-def hdl_stats(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr,
-              flat_pow, line_max_dist, th, t_x, t_y, idx, inlier_dist):
-    """The terms of :func:`graphnav.scan.icp._finish` for HDL (``_terms_numpy``): ``H``, ``B``, the
-    residual scale's numerator and dof, the weighted RMS residual, the point-to-line information,
-    the flatness-weighted residual variance along the normals, pairs used and inliers, the source's
-    RMS radius."""
-    n = sx.shape[0]
-    c, s = math.cos(th), math.sin(th)
-    px, py, d = moved_pairs(sx, sy, tx, ty, idx, c, s, t_x, t_y, n)
-    w = np.empty(n)
-    hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
-                huber_c, wpow, max_corr, flat_pow, line_max_dist, False, w)
-    lsc = rms_radius(sx, sy, n)
-    h = np.zeros((3, 3))
-    b = np.zeros((3, 3))
-    info = np.zeros((3, 3))
-    jl = np.empty(3)
-    ksum = 0.0
-    n_sel = 0
-    n_use = 0
-    n_inl = 0
-    sw = swr = 0.0
-    sf = sfr = 0.0
-    for i in range(n):
-        j = idx[i]
-        wi = w[i]
-        ex, ey = px[i] - tx[j], py[i] - ty[j]
-        nxj, nyj = nrx[j], nry[j]
-        # eq. 8 pair covariance (source rotated + target), projected on the normal
-        sxx, sxy, syy = pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2)
-        vi = sxx * nxj * nxj + 2 * sxy * nxj * nyj + syy * nyj * nyj
-        res = ex * nxj + ey * nyj
-        jl[0] = nxj * c + nyj * s
-        jl[1] = -nxj * s + nyj * c
-        jl[2] = nxj * -(py[i] - t_y) + nyj * (px[i] - t_x)
-        for r_ in range(3):
-            for q_ in range(3):
-                h[r_, q_] += wi * jl[r_] * jl[q_]
-                b[r_, q_] += wi * wi * vi * jl[r_] * jl[q_]
-        inl = d[i] <= inlier_dist
-        use = wi > 0
-        n_inl += inl
-        n_use += use
-        sw += wi
-        swr += wi * res * res
-        if inl and use:
-            n_sel += 1
-            ksum += res * res / vi
-            jl[2] /= lsc
-            f = fl[j]
-            for r_ in range(3):
-                for q_ in range(3):
-                    info[r_, q_] += f * jl[r_] * jl[q_]
-            sf += f
-            sfr += f * res * res
-    res_rms = math.sqrt(swr / sw)
-    s2 = sfr / (sf - 3.0) if sf > 3.0 else np.nan
-    return h, b, ksum, max(n_sel - 3, 1), n_sel, res_rms, info, s2, n_use, n_inl, lsc
+    return th, t_x, t_y, idx, it, converged, dmax, moved, src_r
 
 
 @njit(cache=True)
@@ -782,60 +718,48 @@ def cloud_terms(x, y, sig, use_sig, sigma_alpha, sigma_r_rel):
 
 
 @njit(cache=True)
-def sandwich(h, b, k):
-    """``k H^-1 B H^-T`` (:func:`graphnav.scan.icp._finish`); ``ok`` False when ``H`` is singular."""
-    try:
-        hi = np.linalg.inv(h)
-    except Exception:  # noqa: BLE001
-        return np.full((3, 3), np.nan), False
-    m = np.zeros((3, 3))
-    for r_ in range(3):
-        for q_ in range(3):
-            for k_ in range(3):
-                m[r_, q_] += k * hi[r_, k_] * b[k_, q_]
-    out = np.zeros((3, 3))
-    for r_ in range(3):
-        for q_ in range(3):
-            for k_ in range(3):
-                out[r_, q_] += m[r_, k_] * hi[q_, k_]
-    return out, True
-
-
-@njit(cache=True)
 def p2p_match(sx, sy, ssig, use_ssig, tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel, variant, huber_c, wpow,
-              max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, half, max_gap, inlier_dist):
-    """One K/H/HM/HD match (:func:`p2p_loop` then :func:`p2p_stats`): ``(theta, tx, ty, iterations,
-    converged, cov, cov_ok, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, radius)`` with
-    ``cov = k H^-1 B H^-T`` before scaling, ``k = ksum / dof``."""
+              max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, half, max_gap, gate0, min_res):
+    """One K/H/HM/HD match (:func:`p2p_loop`), then its final pairs for the shared covariance and
+    report (:func:`graphnav.scan.icp._report`): ``(theta, tx, ty, iterations, converged, idx, px,
+    py, w, sxx, sxy, syy, nrx, nry, flat, res, gate, radius, last_moved, src_range)``, the normals
+    and flatness (beam order, :func:`scan_order_normals`) and resolution per target point, the
+    last step's largest point displacement and the source's largest range."""
     sux, suy, sa2, sb2, sm2 = cloud_terms(sx, sy, ssig, use_ssig, sigma_alpha, sigma_r_rel)
     tux, tuy, ta2, tb2, tm2 = cloud_terms(tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel)
-    th, t_x, t_y, idx, it, converged = p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2,
-                                                variant, huber_c, wpow, max_corr, tol, tol_step, max_iter, th,
-                                                t0x, t0y, h)
-    hm, bm, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, lsc = p2p_stats(
-        sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow, max_corr,
-        th, t_x, t_y, idx, half, max_gap, inlier_dist)
-    cov, ok = sandwich(hm, bm, ksum / dof if n_sel else np.nan)
-    return th, t_x, t_y, it, converged, cov, ok, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, lsc
+    res, scale, big_d = target_resolution(tx, ty, half, min_res, tm2)
+    nrx, nry, fl = scan_order_normals(tx, ty, half, max_gap, res)
+    th, t_x, t_y, idx, it, converged, dmax, moved, src_r = p2p_loop(
+        sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow, max_corr, tol,
+        tol_step, max_iter, th, t0x, t0y, h, scale, big_d, gate0)
+    c, s, px, py, d, sxx, sxy, syy = final_pairs(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, th, t_x,
+                                                 t_y, idx, variant >= 2)
+    w = np.empty(sx.shape[0])
+    p2p_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c,
+                wpow, max_corr, w)
+    return (th, t_x, t_y, it, converged, idx, px, py, w, sxx, sxy, syy, nrx, nry, fl, res, scale, dmax,
+            rms_radius(sx, sy, sx.shape[0]), moved, src_r)
 
 
 @njit(cache=True)
 def hdl_match(sx, sy, ssig, use_ssig, tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel, knn, normal_k, max_gap,
-              huber_c, wpow, max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, flat_pow, warmup, line_max_dist,
-              inlier_dist):
+              huber_c, wpow, max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, flat_pow, warmup, gate0, min_res):
     """One HDL match: the target's lines (``knn``: :func:`knn_line_normals`, else beam order,
-    :func:`scan_order_normals`), :func:`hdl_loop`, :func:`hdl_stats`; returns as :func:`p2p_match`."""
+    :func:`scan_order_normals`), :func:`hdl_loop`, the final pairs; returns as :func:`p2p_match`."""
     sux, suy, sa2, sb2, _ = cloud_terms(sx, sy, ssig, use_ssig, sigma_alpha, sigma_r_rel)
-    tux, tuy, ta2, tb2, _ = cloud_terms(tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel)
+    tux, tuy, ta2, tb2, tm2 = cloud_terms(tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel)
+    res, scale, big_d = target_resolution(tx, ty, normal_k // 2, min_res, tm2)
     if knn:
         nrx, nry, fl = knn_line_normals(tx, ty, normal_k, h)
     else:
-        nrx, nry, fl = scan_order_normals(tx, ty, normal_k // 2, max_gap)
-    th, t_x, t_y, idx, it, converged = hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry,
-                                                fl, huber_c, wpow, max_corr, tol, tol_step, max_iter, th, t0x,
-                                                t0y, h, flat_pow, warmup, line_max_dist)
-    hm, bm, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, lsc = hdl_stats(
-        sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr, flat_pow,
-        line_max_dist, th, t_x, t_y, idx, inlier_dist)
-    cov, ok = sandwich(hm, bm, ksum / dof if n_sel else np.nan)
-    return th, t_x, t_y, it, converged, cov, ok, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, lsc
+        nrx, nry, fl = scan_order_normals(tx, ty, normal_k // 2, max_gap, res)
+    th, t_x, t_y, idx, it, converged, dmax, moved, src_r = hdl_loop(
+        sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr, tol, tol_step,
+        max_iter, th, t0x, t0y, h, flat_pow, warmup, scale, big_d, gate0)
+    c, s, px, py, d, sxx, sxy, syy = final_pairs(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, th, t_x,
+                                                 t_y, idx, True)
+    w = np.empty(sx.shape[0])
+    hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow,
+                max_corr, flat_pow, scale, dmax, False, w)
+    return (th, t_x, t_y, it, converged, idx, px, py, w, sxx, sxy, syy, nrx, nry, fl, res, scale, dmax,
+            rms_radius(sx, sy, sx.shape[0]), moved, src_r)

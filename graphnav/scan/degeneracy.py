@@ -4,13 +4,13 @@ A match constrains the pose only across the lines (walls) it sees: each pair con
 ``j = n^T [R, J (p - t)]`` (Censi's point-to-line Jacobian with respect to the right perturbation
 ``pose ∘ Exp(xi)``, GTSAM's Pose2 tangent space, order x, y, theta), with the rotation column
 divided by the source cloud's RMS radius ``L`` so that all three coordinates are metres and the
-eigenvalues are comparable (unit-free condition number). With ``info = sum f j j^T`` (``f`` the
-line's flatness) and ``s2`` the variance of the residuals along the normals, the predicted
-covariance of the estimate is ``scale * s2 * info^-1``: an eigenvector ``v_i`` of ``info`` is
-*weak* when its predicted 1-sigma ``sqrt(scale * s2 / lambda_i)`` exceeds ``max_sigma`` or when
-``lambda_max / lambda_i > max_condition`` (a single straight quay, a corridor, nearly empty water).
+eigenvalues are comparable (unit-free condition number). ``info = sum f j j^T`` (``f`` the line's
+flatness) says which directions the geometry constrains; the match's covariance
+(:mod:`graphnav.scan.covariance`) says how well: an eigenvector ``v_i`` of ``info`` is *weak* when
+the covariance's 1-sigma along it exceeds ``max_sigma`` or when ``lambda_max / lambda_i >
+max_condition`` (a single straight quay, a corridor, nearly empty water).
 
-Pure numerics; used by :mod:`graphnav.scan.icp` and the scan-to-map estimator.
+Pure numerics; used by :mod:`graphnav.scan.covariance` (every ICP match) and the scan-to-map estimator.
 """
 
 from __future__ import annotations
@@ -84,19 +84,27 @@ def line_rows(p: NDArray[np.float64], t: NDArray[np.float64], rot: NDArray[np.fl
     return rows
 
 
-def analyse(info: NDArray[np.float64], s2: float, radius: float, *, scale: float = 1.0,
-            max_condition: float = 200.0, max_sigma: float = np.inf) -> Degeneracy:
-    """Weak directions of ``info`` (3, 3, scaled coordinates) given the residual variance ``s2``
-    [m^2] along the normals and the covariance inflation ``scale``."""
+def analyse(info: NDArray[np.float64], radius: float, cov: NDArray[np.float64], *,
+            max_condition: float = 200.0, max_sigma: float = np.inf,
+            prior_cov: NDArray[np.float64] | None = None) -> Degeneracy:
+    """Weak directions of ``info`` (3, 3, scaled coordinates x, y, ``radius`` theta) given the
+    match's covariance ``cov`` (3, 3, unscaled tangent coordinates; non-finite: every direction
+    is weak): the 1-sigma along each eigenvector is ``sqrt(v^T T cov T v)``, ``T = diag(1, 1, L)``.
+    With ``prior_cov`` (the initial guess's covariance, same convention) a direction is also weak
+    where the match knows it less well than the guess does."""
     ev, vec = np.linalg.eigh(0.5 * (info + info.T))
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
     pos = ev > 0
     var = np.full(3, np.inf)
-    if np.isfinite(s2):
-        var[pos] = scale * max(s2, 0.0) / ev[pos]
-    sig = np.sqrt(var)
+    finite = bool(np.all(np.isfinite(cov)))
+    tm = np.diag([1.0, 1.0, float(radius)])
+    if finite:
+        var = np.einsum("ji,jk,ki->i", vec, tm @ cov @ tm, vec)
+    sig = np.sqrt(np.maximum(var, 0.0))
     weak = ~pos | (ev * max_condition < ev[-1]) | (sig > max_sigma)
-    if not np.isfinite(s2):
+    if prior_cov is not None and np.all(np.isfinite(prior_cov)):
+        weak |= var > np.einsum("ji,jk,ki->i", vec, tm @ np.asarray(prior_cov, dtype=float) @ tm, vec)
+    if not finite:
         weak[:] = True
     return Degeneracy(cond, sig, vec, weak, float(radius))
 
@@ -111,10 +119,22 @@ def keep_constrained(pose: NDArray[np.float64], guess: NDArray[np.float64],
     return se2_compose(pose, deg.projector() @ xi)
 
 
+@dataclass
+class LinePairs:
+    """Point-to-line pairs of a registered scan against target lines (:func:`line_information`)."""
+
+    info: NDArray[np.float64]  # (3, 3) sum f j j^T, rotation scaled by ``radius``
+    s2: float  # flatness-weighted residual variance along the normals [m^2] (NaN: too few pairs)
+    radius: float  # L [m]
+    rows: NDArray[np.float64]  # (N, 3) unscaled rows n^T [R, J (p - t)]
+    res: NDArray[np.float64]  # (N,) residuals along the normals [m]
+    flat: NDArray[np.float64]  # (N,) flatness of the target lines
+
+
 def line_information(src_xy: NDArray[np.float64], pose: NDArray[np.float64], tgt_xy: NDArray[np.float64],
                      tgt_normals: NDArray[np.float64], tgt_flat: NDArray[np.float64], tree: cKDTree,
-                     inlier_dist: float) -> tuple[NDArray[np.float64], float, float]:
-    """``(info, s2, L)`` of body-frame source points registered at ``pose`` against target points
+                     inlier_dist: float) -> LinePairs:
+    """Point-to-line pairs of body-frame source points registered at ``pose`` against target points
     with normals and flatness (``tree``: a k-d tree of ``tgt_xy``): pairs with the nearest target
     point within ``inlier_dist``, weighted by flatness (NaN flatness counts as 0)."""
     radius = rms_radius(src_xy)
@@ -124,13 +144,15 @@ def line_information(src_xy: NDArray[np.float64], pose: NDArray[np.float64], tgt
     d, idx = tree.query(p, distance_upper_bound=inlier_dist)
     ok = np.isfinite(d)
     if not ok.any():
-        return np.zeros((3, 3)), float("nan"), radius
+        return LinePairs(np.zeros((3, 3)), float("nan"), radius, np.zeros((0, 3)), np.zeros(0), np.zeros(0))
     p, idx = p[ok], idx[ok]
     n = tgt_normals[idx]
     f = np.nan_to_num(tgt_flat[idx])
-    rows = line_rows(p, pose[:2], rot, n, radius)
-    info = (rows * f[:, None]).T @ rows
-    return info, residual_var(p - tgt_xy[idx], n, f), radius
+    rows = line_rows(p, pose[:2], rot, n, 1.0)
+    scaled = rows * np.array([1.0, 1.0, 1.0 / radius])
+    info = (scaled * f[:, None]).T @ scaled
+    rn = np.einsum("ij,ij->i", p - tgt_xy[idx], n)
+    return LinePairs(info, residual_var(p - tgt_xy[idx], n, f), radius, rows, rn, f)
 
 
 def residual_var(e: NDArray[np.float64], normals: NDArray[np.float64], f: NDArray[np.float64]) -> float:

@@ -33,35 +33,49 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from ..errors import require
+from ..geometry import cov_to_world, se2_between, wrap_angle
 from ..log import MAX_STATED_RANGE
-from . import degeneracy
+from . import covariance, degeneracy
 from .lidar import SIGMA_ALPHA, SIGMA_R_REL, polar_to_points
 
 VARIANTS = ("K", "H", "HM", "HD", "HDL")
-# default covariance inflation per variant: mean NEES ~3 against the RTK reference on the 160 clean
-# marina pairs (benchmarks/icp_marina.py prints the NEES; docs/weighted-icp.md)
-COV_SCALE = {"K": 300.0, "H": 120.0, "HM": 120.0, "HD": 120.0, "HDL": 50.0}
 _BIG_COV = np.diag([1e4, 1e4, 10.0])  # returned with ok=False when there is nothing to match
+_MIN_RES = 1e-9  # [m] floor of a point's resolution (a cloud on one bearing has none)
+_CHI2_3_999 = 16.266  # chi-square, 3 degrees of freedom, 99.9 % (scipy.stats.chi2.ppf(0.999, 3))
+# 1-sigma (x, y, yaw) of an initial guess that comes without a covariance: the stated sigma of the
+# constant-velocity motion model (graphnav.scan.motion_guess.CV_BRIDGE_SIGMA, the same numbers)
+GUESS_SIGMA = (1.0, 1.0, math.radians(10.0))
 
 
 @dataclass
 class IcpConfig:
-    """Settings of :func:`match_points` / :func:`match_scans` (SI units, radians)."""
+    """Settings of :func:`match_points` / :func:`match_scans` (SI units, radians).
+
+    Lengths that depend on the scan are in units of the target scan: its resolution ``r da`` at a
+    point (:func:`graphnav.scan.covariance.resolution`, ``da`` the local angular step), the pair scale
+    ``sqrt((r da)^2 + 2 M^2)`` (:func:`pair_scale`: how far apart a correct pair can be) and ``D``, the
+    median pair scale (marina ~0.2 m, harbour ~0.5 m, the CARMEN logs ~0.02-0.12 m). No length here
+    was fitted on one dataset (docs/weighted-icp.md, "Lengths relative to the scan").
+    """
 
     variant: str = "HDL"
     max_iter: int = 50
-    tol: float = 1e-4  # stop when |change of mean pair distance| < tol [m] (Algorithm 1) ...
-    tol_step: float = 3e-3  # ... and the last increment moved no point more than this [m]
+    tol: float = 5e-4  # stop when |change of mean pair distance| < tol D (Algorithm 1) ...
+    tol_step: float = 0.015  # ... and the last increment moved no point more than tol_step D
     huber_c: float = 2.0138  # kHu = huber_c * median pair distance (Algorithm 1)
+    # the LiDAR's error model (eq. 5-8), a property of the sensor; default the paper's Scanse Sweep figure
+    # (sigma_r = 0.004258 r) and 0.2 deg (the paper gives none, see docs/weighted-icp.md)
     sigma_r_rel: float = SIGMA_R_REL  # sigma_r = sigma_r_rel * r (eq. 7)
     sigma_alpha: float = SIGMA_ALPHA  # angular 1-sigma [rad] (eq. 6)
     max_range: float | None = None  # range gate [m]
     min_range: float = 0.0
-    max_corr_dist: float | None = None  # pairs farther apart get weight 0 (None: keep all, as the paper)
-    line_max_gap: float = 1.0  # beam neighbours farther apart are not on one line (scan-order normals) [m]
+    max_corr_dist: float | None = None  # pairs farther apart get weight 0 [m] (None: no fixed gate)
+    # HDL: Zhang's adaptive distance gate (Zhang 1994, sect. 4.3), initial value D_max^0 = gate0 resolutions;
+    # the pair distances are taken in units of the target's resolution at the match
+    gate0: float = 20.0
+    line_max_gap: float = 8.0  # beam neighbours more than this many resolutions apart are not one surface
     line_flat_power: float = 4.0  # HDL: weight x flatness^power of the target's local line (0..1)
-    line_warmup: float = 0.05  # HDL: point-to-point steps until a step moves no point more [m] (0: off)
-    line_max_dist: float = 0.5  # HDL only: a point farther than this from its match has no line there [m]
+    line_warmup: float = 1.0  # HDL: point-to-point steps until a step moves no point more than this x D (0: off)
     matching: str = "kdtree"  # "kdtree" (cKDTree) or "delaunay" (the paper's nearest triangle apex)
     equalize: bool = False  # randomly thin the larger cloud to the smaller's size (the paper)
     seed: int = 0  # for equalize
@@ -69,16 +83,9 @@ class IcpConfig:
     normal_k: int = 12  # neighbours of a target point for its line normal (HDL, degeneracy check)
     normals: str = "knn"  # HDL normals: "knn" (PCA of the k nearest) or "scan" (k neighbours in beam order)
     min_points: int = 20  # fewer valid points in either scan -> ok=False
-    inlier_dist: float = 0.3  # a pair is an inlier when its final distance is below this [m]
-    min_inlier_fraction: float = 0.3  # below -> ok=False
+    min_inlier_fraction: float = 0.3  # pairs within the final gate; below -> ok=False
     max_condition: float = 200.0  # condition number of the point-to-line information above -> degenerate
-    max_sigma: float = 0.5  # predicted 1-sigma along the weakest direction above -> degenerate [m]
-    weak_sigma: float = 1.0  # 1-sigma added along the weak directions of a degenerate match [m]
-    # inflation for correlated, unmodelled error (sampling, motion distortion); None = the value
-    # measured on the marina data for the variant (COV_SCALE, docs/weighted-icp.md); 1.0 = the pure
-    # least-squares model (independent errors, synthetic scans)
-    cov_scale: float | None = None
-    cov_floor: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 1-sigma floor (x, y, yaw) added in quadrature
+    max_sigma: float = 1.0  # covariance's 1-sigma along the weakest direction above this x D -> degenerate
     workers: int = 1  # cKDTree query threads
     # "numba" = compiled loop with exact grid matching, the numpy loop's results to ~1e-12 (every variant,
     # k-d tree matching; optional dependency, the first call compiles for 10-50 s, cached afterwards);
@@ -121,9 +128,7 @@ class MatchResult:
     @property
     def cov_target(self) -> NDArray[np.float64]:
         """Covariance of additive errors of ``(dx, dy, dyaw)`` in the target frame (first order)."""
-        c, s = np.cos(self.pose[2]), np.sin(self.pose[2])
-        a = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        return a @ self.cov @ a.T
+        return cov_to_world(float(self.pose[2]), self.cov)
 
 
 # ----------------------------------------------------------------------------- small numerics
@@ -249,6 +254,7 @@ def match_points(
     init: ArrayLike | None = None,
     src_sigma: Any = None,
     tgt_sigma: Any = None,
+    init_cov: ArrayLike | None = None,
 ) -> MatchResult:
     """Align ``src_xy`` (N, 2), the current scan's points in its sensor frame, to ``tgt_xy`` (M, 2),
     the previous scan's (Algorithm 1). ``init`` is the initial ``(dx, dy, dyaw)`` (e.g. the
@@ -257,7 +263,10 @@ def match_points(
     LiDAR error model needs the range and beam direction, eq. 5-9). ``src_sigma``/``tgt_sigma``
     (scalar or one per point, metres) replace that model by an isotropic 1-sigma per point (e.g. for
     points that are not raw LiDAR returns); by default the model of eq. 5-9 with the config's
-    sigma_r_rel, sigma_alpha.
+    sigma_r_rel, sigma_alpha. ``init_cov`` (3, 3), the guess's own covariance in the same
+    right-perturbation convention (e.g. the odometry increment's), makes the match answer for its
+    distance from the guess: beyond the 99.9 % chi-square bound of both covariances it found
+    another minimum, and it is flagged (``quality["guess_mahalanobis"]``).
     """
     cfg = config or IcpConfig()
     t0 = time.perf_counter()
@@ -281,21 +290,27 @@ def match_points(
             tgt_xy, tgt_sigma = tgt_xy[keep], None if tgt_sigma is None else tgt_sigma[keep]
     fast = _fast_kernels(cfg)
     if fast is not None:
-        return _match_compiled(fast, cfg, src_xy, tgt_xy, src_sigma, tgt_sigma, init, t0, ns, nt)
+        return _match_compiled(fast, cfg, src_xy, tgt_xy, src_sigma, tgt_sigma, init, t0, ns, nt, init_cov)
 
     src, tgt = _Cloud(src_xy, cfg, src_sigma), _Cloud(tgt_xy, cfg, tgt_sigma)
     nnm = _NearestNeighbours(tgt.xy, cfg)
     p2l = cfg.variant == "HDL"
-    normals = flat = None
     if p2l:
         normals, flat = _target_lines(tgt.xy, cfg, nnm.tree)
+    else:  # the degeneracy check needs the target's local lines
+        normals, flat = scan_order_normals(tgt.xy, cfg.normal_k // 2, cfg.line_max_gap)
 
     th, t = _pose_parts(init)
     old_res = None
     converged = False
     it = 0
+    moved = np.inf
     src_r = src.r.max()
     idx = np.zeros(0, dtype=int)
+    res_t = covariance.resolution(tgt.xy, cfg.normal_k // 2)
+    scale = pair_scale(res_t, tgt.m2)
+    big_d = float(np.median(scale))
+    dmax = cfg.gate0
     # HDL: point-to-point (HD) steps while far from the solution; point-to-line has a narrow basin
     warm = p2l and cfg.line_warmup > 0
     for it in range(1, cfg.max_iter + 1):  # noqa: B007
@@ -303,7 +318,9 @@ def match_points(
         p = src.xy @ r.T + t
         d, idx = nnm.match(p)
         q = tgt.xy[idx]
-        w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=warm)
+        u = d / scale[idx]
+        dmax = zhang_gate(u, dmax)
+        w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=warm, gate=u <= dmax)
         if p2l and not warm:
             dth, dt = _p2l_step(p, q, normals[idx], w)
         else:
@@ -315,16 +332,47 @@ def match_points(
         new_res = float(d.mean())
         moved = abs(dth) * src_r + np.hypot(dt[0], dt[1])  # largest displacement of a point
         if warm:
-            warm = moved > cfg.line_warmup
+            warm = moved > cfg.line_warmup * big_d
             old_res = None
             continue
-        if old_res is not None and abs(new_res - old_res) < cfg.tol and moved < cfg.tol_step:
+        if old_res is not None and abs(new_res - old_res) < cfg.tol * big_d and moved < cfg.tol_step * big_d:
             converged = True
             break
         old_res = new_res
 
     pose = np.array([t[0], t[1], th])
-    return _finish(cfg, src, tgt, idx, pose, normals, flat, it, converged, t0, ns, nt, init)
+    return _finish(cfg, src, tgt, idx, pose, normals, flat, res_t, scale, dmax, moved, it, converged, t0, ns, nt,
+                   init, init_cov)
+
+
+def pair_scale(res: NDArray, m2: NDArray) -> NDArray:
+    """The distance a correct pair can have at each target point, ``sqrt(res^2 + 2 M^2)``: the
+    scan's resolution there (:func:`graphnav.scan.covariance.resolution`) and the mean error of
+    both points (eq. 5, the target's for both), floored at a nanometre. The unit of
+    :func:`zhang_gate`'s distances; its median ``D`` is that of the matcher's tolerances."""
+    return np.maximum(np.sqrt(res**2 + 2.0 * m2), _MIN_RES)
+
+
+def zhang_gate(u: NDArray, dmax: float) -> float:
+    """Zhang's adaptive distance gate (Z. Zhang, *Iterative point matching for registration of
+    free-form curves and surfaces*, IJCV 13(2), 1994, sect. 4.3; the weighted-ICP paper's ref. [14]),
+    with the distances ``u`` in units of the data's resolution (his ``D``; here the distance a correct
+    pair can have at each match, :func:`pair_scale`): from the mean ``mu`` and
+    standard deviation ``sd`` of the distances within the previous gate ``dmax``, the next gate is
+    ``mu + 3 sd`` when ``mu < 1`` (registered), ``mu + 2 sd`` when ``mu < 3``, ``mu + sd`` when
+    ``mu < 6``, else the median (Zhang: the valley of the histogram). Fewer than 3 pairs: unchanged."""
+    sel = u[u <= dmax]
+    if len(sel) < 3:
+        return dmax
+    mu = float(sel.mean())
+    sd = float(np.sqrt(np.mean((sel - mu) ** 2)))
+    if mu < 1.0:
+        return mu + 3.0 * sd
+    if mu < 3.0:
+        return mu + 2.0 * sd
+    if mu < 6.0:
+        return mu + sd
+    return _median(sel)
 
 
 _VARIANT_CODE = {"K": 0, "H": 1, "HM": 2, "HD": 3}
@@ -378,7 +426,8 @@ def _fast_kernels(cfg: IcpConfig) -> Any:
 
 
 def _match_compiled(kernel: Any, cfg: IcpConfig, src_xy: NDArray, tgt_xy: NDArray, src_sigma: NDArray | None,
-                    tgt_sigma: NDArray | None, init: ArrayLike | None, t0: float, ns: int, nt: int) -> MatchResult:
+                    tgt_sigma: NDArray | None, init: ArrayLike | None, t0: float, ns: int, nt: int,
+                    init_cov: ArrayLike | None = None) -> MatchResult:
     """:func:`match_points` by one call of the compiled ``p2p_match`` / ``hdl_match`` (the same
     numbers as the numpy loop and :func:`_finish`), then the shared report :func:`_report`."""
     th0, g = _pose_parts(init)
@@ -390,16 +439,17 @@ def _match_compiled(kernel: Any, cfg: IcpConfig, src_xy: NDArray, tgt_xy: NDArra
     if cfg.variant == "HDL":
         out = kernel(*clouds, cfg.normals == "knn", cfg.normal_k, cfg.line_max_gap, cfg.huber_c,
                      cfg.weight_power, big, cfg.tol, cfg.tol_step, cfg.max_iter, th0, g[0], g[1], _GRID_CELL,
-                     cfg.line_flat_power, cfg.line_warmup, cfg.line_max_dist, cfg.inlier_dist)
+                     cfg.line_flat_power, cfg.line_warmup, cfg.gate0, _MIN_RES)
     else:
         out = kernel(*clouds, _VARIANT_CODE[cfg.variant], cfg.huber_c, cfg.weight_power, big, cfg.tol,
                      cfg.tol_step, cfg.max_iter, th0, g[0], g[1], _GRID_CELL, cfg.normal_k // 2,
-                     cfg.line_max_gap, cfg.inlier_dist)
-    th, tx, ty, it, converged, cov, cov_ok, ksum, dof, n_sel, res_rms, info, s2, n_use, n_inl, radius = out
-    kscale = ksum / dof if n_sel else float("nan")
+                     cfg.line_max_gap, cfg.gate0, _MIN_RES)
+    th, tx, ty, it, converged, idx, px, py, w, sxx, sxy, syy, nrx, nry, fl, res_t, sc, dmax, radius, moved, src_r = out
     pose = np.array([tx, ty, th])
-    return _report(cfg, pose, cov if cov_ok else None, kscale, res_rms, info, s2, radius, n_use, n_inl / s.shape[1],
-                   it, converged, t0, ns, nt, init)
+    final = _FinalPairs(np.column_stack([px, py]), tgt_xy[idx], w, np.column_stack([sxx, sxy, syy]),
+                        np.column_stack([nrx[idx], nry[idx]]), fl[idx], res_t[idx], sc[idx], dmax, radius, moved,
+                        src_r)
+    return _report(cfg, pose, final, it, converged, t0, ns, nt, init, init_cov)
 
 
 def _target_lines(tgt_xy: NDArray, cfg: IcpConfig, tree: cKDTree | None = None) -> tuple[NDArray, NDArray]:
@@ -442,17 +492,21 @@ class _NearestNeighbours:
         return d, idx
 
 
-def scan_order_normals(pts: NDArray, half: int = 2, max_gap: float = 1.0) -> tuple[NDArray, NDArray]:
+def scan_order_normals(pts: NDArray, half: int = 2, max_gap: float = 8.0) -> tuple[NDArray, NDArray]:
     """Normals and flatness of each point from its ``2 half + 1`` neighbours in beam order
-    (sorted by bearing; no neighbour search), by PCA. A window with a gap wider than ``max_gap``
-    between beam neighbours spans two surfaces: its flatness is 0."""
+    (sorted by bearing; no neighbour search), by PCA. A window with a gap between beam neighbours
+    wider than ``max_gap`` resolutions (``r da``, the smaller of the two,
+    :func:`graphnav.scan.covariance.resolution`) spans two surfaces: its flatness is 0. (A surface
+    seen at incidence ``i`` has gaps of ``r da / cos i``: 8 resolutions is ``i`` > 83 deg.)"""
     n = len(pts)
     order = np.argsort(np.arctan2(pts[:, 1], pts[:, 0]), kind="stable")
     ps = pts[order]
     win = (np.arange(n)[:, None] + np.arange(-half, half + 1)[None, :]) % n
     nrm, flat = _pca_normals(ps[win])
     gap = np.hypot(*(np.roll(ps, -1, axis=0) - ps).T)  # gap[i]: between sorted points i and i+1
-    wide = (gap[win[:, :-1]] > max_gap).any(axis=1)
+    res = covariance.resolution(pts, half)[order]
+    near = np.minimum(res, np.roll(res, -1))
+    wide = (gap[win[:, :-1]] > max_gap * near[win[:, :-1]]).any(axis=1)
     flat = np.where(wide, 0.0, flat)
     out_n = np.empty_like(nrm)
     out_f = np.empty_like(flat)
@@ -477,9 +531,10 @@ def _pca_normals(pts: NDArray) -> tuple[NDArray, NDArray]:
     return n, flat
 
 
-def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=False):  # noqa: ANN001, ANN202
+def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=False, gate=None):  # noqa: ANN001, ANN202
     """Pair weights of Algorithm 1 (eq. 11-13 x Huber) and the pair variances they come from
-    (``p2p``: HD weights during HDL's point-to-point warm-up)."""
+    (``p2p``: HD weights during HDL's point-to-point warm-up). HDL: 0 outside the ``gate`` (mask,
+    :func:`zhang_gate`) and x the line's flatness."""
     v = "HD" if p2p else cfg.variant
     n = len(d)
     if v == "K":
@@ -510,8 +565,10 @@ def _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, p2p=False):  # noqa:
         if khu > 0 and np.any(big):
             w = w.copy()
             w[big] *= khu / dist[big]
-        if v == "HDL":  # no line where the match is far (the gate widens while far from convergence)
-            w = w * flat[idx] ** cfg.line_flat_power * (d <= max(cfg.line_max_dist, cfg.huber_c * _median(d)))
+        if v == "HDL":
+            w = w * flat[idx] ** cfg.line_flat_power
+    if cfg.variant == "HDL" and gate is not None:  # warm-up steps too
+        w = np.where(gate, w, 0.0)
     if cfg.max_corr_dist is not None:
         w = np.where(d <= cfg.max_corr_dist, w, 0.0)
     if not np.any(w > 0):
@@ -557,133 +614,140 @@ def _pair_cov(src: _Cloud, tgt: _Cloud, idx: NDArray, r: NDArray) -> tuple[NDArr
     return sxx, sxy, syy
 
 
-def _terms_numpy(cfg, src, tgt, idx, pose, normals, flat):  # noqa: ANN001, ANN202
-    """``H``, ``B``, residual scale, RMS residual, point-to-line information, pairs used,
-    inlier fraction, residual variance along the normals and the source's RMS radius at the
-    solution (see :func:`_finish`)."""
+@dataclass
+class _FinalPairs:
+    """The pairs at the solution, as both matcher paths give them to :func:`_report`."""
+
+    p: NDArray  # (N, 2) source points moved by the pose (target frame)
+    q: NDArray  # (N, 2) their matched target points
+    w: NDArray  # (N,) the matcher's weights
+    s: NDArray  # (N, 3) eq. 8 pair covariance (sxx, sxy, syy)
+    n: NDArray  # (N, 2) target normal at the match (HDL: its lines; else beam-order normals)
+    flat: NDArray  # (N,) flatness of that line
+    res: NDArray  # (N,) the target's resolution at the match [m]
+    scale: NDArray  # (N,) the distance a correct pair can have there (pair_scale) [m]
+    gate: float  # the final gate [scales]
+    radius: float  # the source's RMS radius [m]
+    moved: float  # the last step's largest point displacement [m]
+    src_range: float  # the source's largest range [m]
+
+
+def _finish(cfg, src, tgt, idx, pose, normals, flat, res_t, scale, dmax, moved, iters, converged, t0, ns, nt,  # noqa: ANN001, ANN202, PLR0913
+            init=None, init_cov=None):
+    """The numpy loop's final pairs (as the compiled matcher's), then :func:`_report`."""
     r = _rot(pose[2])
     p = src.xy @ r.T + pose[:2]
     q = tgt.xy[idx]  # the last iteration's pairs (the last increment moved no point > tol_step)
     e = p - q
     d = np.hypot(e[:, 0], e[:, 1])
-    if normals is None:  # the degeneracy check needs the target's local lines
-        normals, flat = scan_order_normals(tgt.xy, cfg.normal_k // 2, cfg.line_max_gap)
-    w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat)
-    n, fl = normals[idx], flat[idx]
-    jp = p - pose[:2]
-    c2 = np.column_stack([-jp[:, 1], jp[:, 0]])  # J (p - t) = R J p_s
-    inl = d <= cfg.inlier_dist
-    use = w > 0
-    sel = use & inl
-    model = cfg.variant in ("HM", "HD", "HDL")
-    if model:
-        sxx, sxy, syy = _pair_cov(src, tgt, idx, r)
+    w, _ = _weights(cfg, src, tgt, r, p, q, d, idx, normals, flat, gate=d / scale[idx] <= dmax)
+    if cfg.variant in ("HM", "HD", "HDL"):
+        s = np.column_stack(_pair_cov(src, tgt, idx, r))
     else:
-        sxx, sxy, syy = np.ones(len(d)), np.zeros(len(d)), np.ones(len(d))
-    # point-to-line rows n^T [R, J (p - t)]: the HDL Jacobian and the degeneracy check
-    nr = n @ r
-    jl = np.column_stack([nr, np.einsum("ij,ij->i", n, c2)])
-    if cfg.variant == "HDL":
-        res = np.einsum("ij,ij->i", e, n)
-        vi = sxx * n[:, 0] ** 2 + 2 * sxy * n[:, 0] * n[:, 1] + syy * n[:, 1] ** 2
-        h = (jl * w[:, None]).T @ jl
-        bmat = (jl * (w * w * vi)[:, None]).T @ jl
-        dof = max(int(sel.sum()) - 3, 1)
-        kscale = float(np.sum(res[sel] ** 2 / vi[sel]) / dof) if sel.any() else float("nan")
-        res_rms = float(np.sqrt(np.sum(w * res**2) / np.sum(w)))
-    else:
-        a = np.empty((len(d), 2, 3))
-        a[:, :, 0] = r[:, 0]
-        a[:, :, 1] = r[:, 1]
-        a[:, :, 2] = c2
-        sa = np.empty_like(a)
-        sa[:, 0, :] = sxx[:, None] * a[:, 0, :] + sxy[:, None] * a[:, 1, :]
-        sa[:, 1, :] = sxy[:, None] * a[:, 0, :] + syy[:, None] * a[:, 1, :]
-        h = (a * w[:, None, None]).reshape(-1, 3).T @ a.reshape(-1, 3)
-        bmat = (a * (w * w)[:, None, None]).reshape(-1, 3).T @ sa.reshape(-1, 3)
-        dof = max(2 * int(sel.sum()) - 3, 1)
-        det = sxx * syy - sxy**2
-        m = (syy * e[:, 0] ** 2 - 2 * sxy * e[:, 0] * e[:, 1] + sxx * e[:, 1] ** 2) / det
-        kscale = float(m[sel].sum() / dof) if sel.any() else float("nan")
-        res_rms = float(np.sqrt(np.sum(w * np.sum(e**2, 1)) / np.sum(w)))
-    # degeneracy: the point-to-line information (what the geometry constrains), rotation scaled by
-    # the cloud's RMS radius so that the condition number is unit-free
-    lsc = degeneracy.rms_radius(src.xy)
-    jl[:, 2] /= lsc
-    info = (jl * (sel * fl)[:, None]).T @ jl
-    s2 = degeneracy.residual_var(e, n, sel * fl)
-    return h, bmat, kscale, res_rms, info, int(use.sum()), float(inl.mean()), s2, lsc
+        s = np.column_stack([np.ones(len(d)), np.zeros(len(d)), np.ones(len(d))])
+    final = _FinalPairs(p, q, w, s, normals[idx], flat[idx], res_t[idx], scale[idx], dmax,
+                        degeneracy.rms_radius(src.xy), float(moved), float(src.r.max()))
+    return _report(cfg, pose, final, iters, converged, t0, ns, nt, init, init_cov)
 
 
-def _finish(cfg, src, tgt, idx, pose, normals, flat, iters, converged, t0, ns, nt, init=None):  # noqa: ANN001, ANN202
-    """Quality report and covariance at the solution.
+def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None):  # noqa: ANN001, ANN202, PLR0913
+    """Covariance and degeneracy (:func:`graphnav.scan.covariance.between`, the one place), the weak
+    directions take ``init``'s pose, and the quality report. Shared by both matcher paths.
 
-    The covariance is the sandwich ``k H^-1 B H^-1`` of the weighted least-squares problem at
-    convergence: ``H = sum w J^T J``, ``B = sum w^2 J^T S J`` with ``S`` the pair's error covariance
-    from the LiDAR model (eq. 8; identity for K and H) and ``k`` its scale estimated from the
-    inlier residuals (``k = sum e^T S^-1 e / dof``). ``J`` is the Jacobian of the residual with
-    respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)`` (GTSAM's Pose2 tangent space):
-    ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1], [1, 0]]``.
-
-    Degeneracy (:mod:`graphnav.scan.degeneracy`, every variant): weak directions of the point-to-line
-    information; there the pose is replaced by ``init``'s and ``weak_sigma^2`` is added to ``cov``.
+    Residuals and their Jacobians with respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)``
+    (GTSAM's Pose2 tangent space): ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1],
+    [1, 0]]``; HDL: the point-to-line residual ``n . (p - q)``, its row ``n^T [R, J (p - t)]``.
     """
-    h, bmat, kscale, res_rms, info, n_use, inlier_fraction, s2, radius = _terms_numpy(
-        cfg, src, tgt, idx, pose, normals, flat)
-    try:
-        hinv = np.linalg.inv(h)
-        cov = kscale * hinv @ bmat @ hinv.T
-    except np.linalg.LinAlgError:
-        cov = None
-    return _report(cfg, pose, cov, kscale, res_rms, info, s2, radius, n_use,
-                   inlier_fraction, iters, converged, t0, ns, nt, init)
-
-
-def _report(cfg, pose, cov, kscale, res_rms, info, s2, radius, n_use, inlier_fraction, iters, converged, t0,  # noqa: ANN001, ANN202, PLR0913
-            ns, nt, init):
-    """The part of :func:`_finish` shared with the compiled matcher: covariance scaling (``cov``
-    None: ``H`` was singular), degeneracy (the weak directions take ``init``'s pose), the report."""
-    pose[2] = np.arctan2(np.sin(pose[2]), np.cos(pose[2]))
-    if cov is None:
-        cov = _BIG_COV.copy()
-    scale = COV_SCALE[cfg.variant] if cfg.cov_scale is None else cfg.cov_scale
-    cov = 0.5 * (cov + cov.T) * scale + np.diag(np.square(cfg.cov_floor))
-    # degeneracy (docs/weighted-icp.md): the point-to-line information's weak directions, whatever
-    # the variant's metric, its predicted covariance inflated as HDL's (the point-to-line scale);
-    # along weak directions the pose is the initial guess's and the covariance is inflated
-    line_scale = COV_SCALE["HDL"] if cfg.cov_scale is None else cfg.cov_scale
-    deg = degeneracy.analyse(info, s2, radius, scale=line_scale,
-                             max_condition=cfg.max_condition, max_sigma=cfg.max_sigma)
+    pose[2] = wrap_angle(float(pose[2]))
+    c, s_ = np.cos(pose[2]), np.sin(pose[2])
+    e = fp.p - fp.q
+    d = np.hypot(e[:, 0], e[:, 1])
+    jp = fp.p - pose[:2]
+    c2 = np.column_stack([-jp[:, 1], jp[:, 0]])  # J (p - t) = R J p_s
+    n = fp.n
+    rows = np.column_stack([n[:, 0] * c + n[:, 1] * s_, -n[:, 0] * s_ + n[:, 1] * c, np.einsum("ij,ij->i", n, c2)])
+    inl = d / fp.scale <= fp.gate
+    use = fp.w > 0
+    sxx, sxy, syy = fp.s.T
+    if cfg.variant == "HDL":
+        jac = rows[:, None, :]
+        res = np.einsum("ij,ij->i", e, n)[:, None]
+        lidar = (sxx * n[:, 0] ** 2 + 2 * sxy * n[:, 0] * n[:, 1] + syy * n[:, 1] ** 2)[:, None, None]
+    else:
+        jac = np.empty((len(d), 2, 3))
+        jac[:, 0, :2] = (c, -s_)
+        jac[:, 1, :2] = (s_, c)
+        jac[:, :, 2] = c2
+        res = e
+        lidar = np.empty((len(d), 2, 2))
+        lidar[:, 0, 0], lidar[:, 0, 1], lidar[:, 1, 0], lidar[:, 1, 1] = sxx, sxy, sxy, syy
+    scaled = rows * np.array([1.0, 1.0, 1.0 / fp.radius])
+    big_d = float(np.median(fp.scale)) if len(fp.scale) else float("nan")
+    bt = covariance.between(jac, res, fp.w, lidar, fp.res, use & inl, scaled, fp.flat, fp.radius,
+                            block=cfg.normal_k, max_condition=cfg.max_condition, max_sigma=cfg.max_sigma * big_d,
+                            prior_cov=None if init is None else init_cov)
+    inlier_fraction = float(inl.mean())
+    cov = bt.cov
+    deg = bt.degeneracy
     cond = deg.condition
     degenerate = deg.degenerate
+    icp_pose = pose.copy()
     reasons = []
+    failed = []  # the match as a whole is not to be trusted: the pose is the guess (when there is one)
+    if not converged:  # a limit cycle within the estimate's own 1-sigma is as good as converged
+        sig = np.sqrt(np.maximum(cov[0, 0] + cov[1, 1], 0.0)) + fp.src_range * np.sqrt(np.maximum(cov[2, 2], 0.0))
+        if not fp.moved <= sig:
+            failed.append(f"not converged in {iters} iterations (last step {fp.moved:.3g} m > its 1-sigma {sig:.3g} m)")
+    if inlier_fraction < cfg.min_inlier_fraction:
+        failed.append(f"inlier fraction {inlier_fraction:.2f} < {cfg.min_inlier_fraction}")
+    if not np.all(np.isfinite(cov)):
+        failed.append("non-finite covariance")
+    maha = float("nan")
+    if init is not None and init_cov is not None and not failed:
+        th0, t0_ = _pose_parts(init)
+        xi = se2_between(pose, np.array([t0_[0], t0_[1], th0]))
+        both = cov + np.asarray(init_cov, dtype=float) + (deg.inflation(fp.radius) if degenerate else 0.0)
+        try:
+            maha = float(xi @ np.linalg.solve(both, xi))
+        except np.linalg.LinAlgError:
+            maha = float("inf")
+        if not maha <= _CHI2_3_999:
+            failed.append(f"inconsistent with the guess (Mahalanobis {maha:.3g} > {_CHI2_3_999:.2f})")
     if degenerate:
         why = []
         if not np.isfinite(cond) or cond > cfg.max_condition:
             why.append(f"condition number {cond:.3g} > {cfg.max_condition:g}")
-        if deg.sigma_weak > cfg.max_sigma:
-            why.append(f"weakest-direction 1-sigma {deg.sigma_weak:.3g} m > {cfg.max_sigma:g} m")
+        if deg.sigma_weak > cfg.max_sigma * big_d:
+            why.append(f"weakest-direction 1-sigma {deg.sigma_weak:.3g} m > {cfg.max_sigma:g} x {big_d:.3g} m")
         reasons.append(f"degenerate geometry ({', '.join(why) or 'no residual scale'})")
-        if init is not None:  # without a guess the estimate is all there is: only inflate
+        # along the weak directions the pose is the guess's, and so is its error: the covariance there
+        # is the guess's (init_cov; without one the constant-velocity model's stated sigma, GUESS_SIGMA)
+        g = np.diag(np.square(GUESS_SIGMA)) if init_cov is None else np.asarray(init_cov, dtype=float)
+        proj = deg.projector()
+        if init is not None and not failed:
             th0, t0_ = _pose_parts(init)
             pose = degeneracy.keep_constrained(pose, np.array([t0_[0], t0_[1], th0]), deg)
-        if np.all(np.isfinite(cov)):
-            cov = cov + deg.inflation(cfg.weak_sigma)
-    inflated = degenerate
-    if inlier_fraction < cfg.min_inlier_fraction:
-        reasons.append(f"inlier fraction {inlier_fraction:.2f} < {cfg.min_inlier_fraction}")
-        inflated = False
-    if not np.all(np.isfinite(cov)):
-        reasons.append("non-finite covariance")
+            if np.all(np.isfinite(cov)):
+                keep = np.eye(3) - proj
+                cov = keep @ cov @ keep.T + proj @ g @ proj.T
+        elif np.all(np.isfinite(cov)):  # no guess: the estimate is all there is, only inflate
+            cov = cov + proj @ g @ proj.T
+    inflated = degenerate and not failed
+    reasons += failed
+    if failed:
         cov = _BIG_COV.copy()
-        inflated = False
+        if init is not None:
+            th0, t0_ = _pose_parts(init)
+            pose = np.array([t0_[0], t0_[1], th0])
     quality = {
-        "points_used": int(n_use),
+        "points_used": int(use.sum()),
         "points_source": ns,
         "points_target": nt,
         "inlier_fraction": inlier_fraction,
-        "residual": res_rms,
-        "residual_scale": kscale,
+        "residual": bt.residual_rms,
+        "residual_scale": bt.residual_scale,
+        "resolution": big_d,
+        "gate": float(fp.gate),
         "condition_number": cond,
         "iterations": int(iters),
         "converged": bool(converged),
@@ -691,7 +755,10 @@ def _report(cfg, pose, cov, kscale, res_rms, info, s2, radius, n_use, inlier_fra
         "sigma_weak": deg.sigma_weak,
         "weak_direction": [float(x) for x in deg.weakest],
         "weak_dims": int(deg.weak.sum()),
+        "weak_projector": deg.projector().tolist() if degenerate else None,  # P: the weak directions' part of xi
         "inflated": bool(inflated),  # flagged for degeneracy only: covariance inflated along the weak directions
+        "icp_pose": [float(x) for x in icp_pose],
+        "guess_mahalanobis": maha,  # the estimate before a flag replaced any of it by the guess
         "reason": "; ".join(reasons),
         "ms": (time.perf_counter() - t0) * 1e3,
     }

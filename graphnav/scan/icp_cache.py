@@ -17,7 +17,6 @@ import copy
 import hashlib
 import time
 from collections.abc import Iterator
-from dataclasses import astuple
 from typing import Any
 
 import numpy as np
@@ -54,19 +53,21 @@ class MatchCache:
         return len(self._store)
 
     @staticmethod
-    def key(src_xy: ArrayLike, tgt_xy: ArrayLike, cfg: icp.IcpConfig, init: ArrayLike | None) -> tuple:
-        return (_digest(src_xy), _digest(tgt_xy), repr(astuple(cfg)), _digest(init))
+    def key(src_xy: ArrayLike, tgt_xy: ArrayLike, cfg: icp.IcpConfig, init: ArrayLike | None,
+            init_cov: ArrayLike | None = None) -> tuple:
+        # repr(cfg): every field, without astuple's deep copy on each lookup
+        return (_digest(src_xy), _digest(tgt_xy), repr(cfg), _digest(init), _digest(init_cov))
 
     def match_points(self, src_xy: ArrayLike, tgt_xy: ArrayLike, cfg: icp.IcpConfig | None = None,
-                     init: ArrayLike | None = None) -> icp.MatchResult:
+                     init: ArrayLike | None = None, init_cov: ArrayLike | None = None) -> icp.MatchResult:
         """:func:`graphnav.scan.icp.match_points`, computed once per key (a copy is returned)."""
         cfg = cfg or icp.IcpConfig()
-        k = self.key(src_xy, tgt_xy, cfg, init)
+        k = self.key(src_xy, tgt_xy, cfg, init, init_cov)
         got = self._store.get(k)
         if got is None:
             self.misses += 1
             t0 = time.perf_counter()
-            hit = icp.match_points(src_xy, tgt_xy, cfg, init)
+            hit = icp.match_points(src_xy, tgt_xy, cfg, init, init_cov=init_cov)
             got = (hit, (time.perf_counter() - t0) * 1e3)
             if len(self._store) >= self.max_entries:
                 self._store.pop(next(iter(self._store)))
@@ -98,12 +99,12 @@ def current() -> MatchCache | None:
 
 
 def match_points(src_xy: ArrayLike, tgt_xy: ArrayLike, config: icp.IcpConfig | None = None,
-                 init: ArrayLike | None = None) -> icp.MatchResult:
+                 init: ArrayLike | None = None, init_cov: ArrayLike | None = None) -> icp.MatchResult:
     """:func:`graphnav.scan.icp.match_points` through the active cache (plain call when none is active)."""
     cache = _active
     if cache is None:
-        return icp.match_points(src_xy, tgt_xy, config, init)
-    return cache.match_points(src_xy, tgt_xy, config, init)
+        return icp.match_points(src_xy, tgt_xy, config, init, init_cov=init_cov)
+    return cache.match_points(src_xy, tgt_xy, config, init, init_cov)
 
 
 def match_scans(source: Any, target: Any, config: icp.IcpConfig | None = None,

@@ -42,13 +42,14 @@ class PairRun:
 
 
 def run_pairs(log: NavLog, config: IcpConfig | None = None, init: str = "cv",
-              on_match: Any = None) -> PairRun:
+              on_match: Any = None, guess_cov: bool = True) -> PairRun:
     """Match every consecutive scan pair of ``log``.
 
     ``init`` (:class:`~graphnav.scan.motion_guess.MotionGuess`): ``"cv"`` constant velocity from the
     last good match (after a flagged one: the odometry increment when the log has odometry);
-    ``"odometry"`` the odometry increment; ``"zero"`` identity. ``on_match(k, result)`` is called
-    after each match (online use).
+    ``"odometry"`` the odometry increment; ``"zero"`` identity. With ``guess_cov`` an odometry guess
+    comes with its covariance (``match_points(init_cov=...)``: a match beyond it is flagged).
+    ``on_match(k, result)`` is called after each match (online use).
     """
     guesser = MotionGuess(init, odometry_samples(log))
     cfg = config or IcpConfig()
@@ -59,7 +60,7 @@ def run_pairs(log: NavLog, config: IcpConfig | None = None, init: str = "cv",
     for k in range(len(scans) - 1):
         guess = guesser.guess(scans[k].t, scans[k + 1].t)
         t = time.perf_counter()
-        res = match_points(pts[k + 1], pts[k], cfg, init=guess)
+        res = match_points(pts[k + 1], pts[k], cfg, init=guess, init_cov=guesser.cov if guess_cov else None)
         ms.append((time.perf_counter() - t) * 1e3)
         results.append(res)
         guesser.update(res, scans[k].t, scans[k + 1].t)
@@ -181,17 +182,19 @@ def score_pairs(run: PairRun, ref: NDArray, scored: NDArray) -> tuple[dict[str, 
     return summary, {"step_err_m": step_err, "dtheta_err_deg": dth_err, "scored": s}
 
 
-def nees(run: PairRun, ref: NDArray, scored: NDArray) -> NDArray[np.float64]:
-    """Normalised squared error of each scored pair's increment under its covariance, with the
-    error taken in GTSAM's convention (``xi = Log(est^-1 ref)``, first order)."""
+def nees(run: PairRun, ref: NDArray, scored: NDArray, ref_cov: NDArray | None = None) -> NDArray[np.float64]:
+    """Normalised squared error of each scored, unflagged pair's increment under its covariance, with
+    the error taken in GTSAM's convention (``xi = Log(est^-1 ref)``, first order). ``ref_cov`` (3, 3):
+    the reference increments' own covariance, added to each match's (a reference that is not exact)."""
     out = np.full(len(run.results), np.nan)
+    extra = np.zeros((3, 3)) if ref_cov is None else np.asarray(ref_cov, dtype=float)
     for k in np.flatnonzero(scored):
         r = run.results[k]
         if not r.ok or not np.all(np.isfinite(ref[k])):
             continue
         xi = se2_between(r.pose, ref[k])
         try:
-            out[k] = float(xi @ np.linalg.solve(r.cov, xi))
+            out[k] = float(xi @ np.linalg.solve(r.cov + extra, xi))
         except np.linalg.LinAlgError:
             pass
     return out

@@ -15,17 +15,16 @@ with its covariance, else the constant-velocity guess with a wide covariance.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry import increment
-from .icp import MatchResult
+from .icp import GUESS_SIGMA, MatchResult
 
 INITS = ("cv", "zero", "odometry")
-# 1-sigma of a constant-velocity bridge (no odometry): x, y [m], yaw [rad]
-CV_BRIDGE_SIGMA = (1.0, 1.0, math.radians(10.0))
+# 1-sigma of a constant-velocity bridge (no odometry): x, y [m], yaw [rad]; the matcher's guess
+# without a covariance has the same (graphnav.scan.icp.GUESS_SIGMA)
+CV_BRIDGE_SIGMA = GUESS_SIGMA
 
 
 class MotionGuess:
@@ -40,6 +39,7 @@ class MotionGuess:
         self.odometry = odometry if odometry is not None and len(odometry) else None
         self._last: tuple[NDArray[np.float64], float, float] | None = None  # increment, dt, end time
         self.source = "none"  # where the last guess came from: cv, odometry, stale-cv, none
+        self.cov: NDArray[np.float64] | None = None  # the last guess's covariance (odometry only, else None)
 
     def _cv(self, t0: float, t1: float, fresh_only: bool) -> NDArray[np.float64] | None:
         if self._last is None or self._last[1] <= 0:
@@ -54,12 +54,16 @@ class MotionGuess:
 
     def _odo_guess(self, t0: float, t1: float) -> NDArray[np.float64] | None:
         odo = self._odo(t0, t1)
-        return None if odo is None else odo[0]
+        if odo is None:
+            return None
+        self.cov = odo[1]
+        return odo[0]
 
     def guess(self, t0: float, t1: float) -> NDArray[np.float64] | None:
         """Initial ``(dx, dy, dyaw)`` for the match of the scan at ``t1`` to the scan at ``t0``
-        (``None``: identity)."""
+        (``None``: identity); :attr:`cov` is then its covariance when it came from the odometry."""
         self.source = "none"
+        self.cov = None
         if self.mode == "zero":
             return None
         fresh = ("cv", lambda: self._cv(t0, t1, fresh_only=True))

@@ -137,10 +137,11 @@ def matrix4_to_pose(m: ArrayLike) -> NDArray[np.float64]:
 def se2_exp(d: ArrayLike) -> NDArray[np.float64]:
     """SE(2) exponential of the twist (v_x, v_y, ω) as a pose (x, y, yaw)."""
     vx, vy, w = np.asarray(d, dtype=float)
-    if abs(w) < 1e-9:
-        return np.array([vx, vy, w])
-    s, c = np.sin(w), np.cos(w)
-    a, b = s / w, (1.0 - c) / w
+    if abs(w) < 1e-4:  # series: (1 - cos w) / w cancels catastrophically for small w
+        a, b = 1.0 - w * w / 6.0, 0.5 * w * (1.0 - w * w / 12.0)
+    else:
+        s, c = np.sin(w), np.cos(w)
+        a, b = s / w, (1.0 - c) / w
     return np.array([a * vx - b * vy, b * vx + a * vy, w])
 
 

@@ -15,9 +15,26 @@ Sensors (all deterministic per seed):
 * GNSS at 1 Hz (``fix_hz``), sigma 3 m per axis, plus a multipath bias near the quays (up to 4 m, pointing
   away from the nearest wall, fading out 15 m from it) and one 30 s outage.
 * compass at the GNSS rate, sigma 2 deg; odometry (SOG/ROT) at 10 Hz, sigma 0.05 m/s and 0.3 deg/s.
+* IMU at 1 Hz (``imu_hz``; 0: none), the ``solent`` scenario's records: body-frame acceleration
+  ``ax`` (forward), ``ay`` (left) and yaw rate ``wz``, each the exact mean over (t_{k-1}, t_k] of
+  the simulated motion (the speed changes along the bow, the centripetal ``v w`` to port, the turn
+  rate), with its noise model (:func:`graphnav.sim.solent.imu_measurements`: Table 3's biases and
+  white noise, calibrated to a 10 % residual bias; ``meta["imu"]``). 1 Hz is the sample time
+  T = 1 s the fuzzy-UKF paper's filters are tuned for: their process noise is per step, so at
+  10 Hz it is 10x smaller per second and the plain UKF cannot follow the residual bias (harbour
+  ATE 7.4 m at 10 Hz, 4.9 m at 1 Hz; ukf-bias 1.0 / 1.7 m). The known initial velocity is
+  ``meta["initial_velocity"]`` (as in ``solent``). The IMU has its own random stream, so every
+  other sensor's draws are those of the log without it.
 * 4 charted beacons (chart sigma 0.2 m), range/bearing at 1 Hz within 150 m, sigma 0.5 m / 0.5 deg.
 * truth at 10 Hz, a pose prior at the start, and ``meta["events"]`` for the outage and the
   multipath intervals. Times start at ``t0`` (0; a POSIX time makes NMEA-ready logs).
+
+Geodetic origin (``meta["origin"]``, the convention of :mod:`graphnav.io.nmea`): the local frame
+(x east, y north) is the east-north tangent plane whose origin, the basin's south-west corner, lies
+150 m west and 100 m south of Marina Gdynia (54 deg 30.98' N, 18 deg 33.22' E, WGS84), so the
+basin's centre sits on the marina: the yacht basin where the weighted-ICP paper's real LiDAR data
+(``icp_data_marina``) was recorded. Only the position is real; the quays, piers and hulls are
+schematic, not Gdynia's (a chart overlay shows the track in the right place, not along its walls).
 """
 
 from __future__ import annotations
@@ -28,7 +45,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..log import BeaconObs, Gnss, Heading, KnownBeacon, NavLog, Odometry, PosePrior, Scan, Truth
+from ..geometry import wrap_angle
+from ..log import BeaconObs, Gnss, Heading, Imu, KnownBeacon, NavLog, Odometry, PosePrior, Scan, Truth
+from .solent import imu_measurements
 
 SIGMA_R_REL = 0.004258
 
@@ -164,6 +183,10 @@ ROUTE = np.array(
     dtype=float,
 )
 BEACONS = {"B1": (100.0, 5.0), "B2": (250.0, 110.0), "B3": (20.0, 190.0), "B4": (190.0, 60.0)}
+MARINA_GDYNIA = (54.0 + 30.98 / 60.0, 18.0 + 33.22 / 60.0)  # lat, lon [deg]: South Coast Baltic marina guide
+ORIGIN = {"lat": 54.515435, "lon": 18.551351, "h": 0.0}
+"""WGS84 position of the local frame's (0, 0): 150 m west, 100 m south of :data:`MARINA_GDYNIA`
+(the tangent-plane offset, rounded to 1e-6 deg; ``h`` [m] ellipsoidal, unused by a surface vessel)."""
 
 
 @dataclass
@@ -191,6 +214,9 @@ class HarbourConfig:
     prior_sigma_xy: float = 0.3
     prior_sigma_yaw: float = math.radians(1.0)
     fix_hz: float = 1.0  # GNSS and compass rate (beacons stay at 1 Hz)
+    imu_hz: float = 1.0  # IMU rate (1/imu_hz a multiple of dt; 0: no IMU): the solent scenario's T = 1 s
+    imu_calibrate: bool = True  # log raw - bias estimate (solent's calibration); False: the raw IMU
+    imu_calib_residual: float = 0.1  # residual bias after calibration, as a fraction of the bias
     t0: float = 0.0  # time of the first record [s]
 
 
@@ -213,7 +239,7 @@ def vessel_track(cfg: HarbourConfig, rng: np.random.Generator, *, laps: int = 1,
             wp += 1  # reached (or unreachable within the turn radius: go on)
             t_wp = t
             continue
-        err = (math.atan2(to[1], to[0]) - yaw + math.pi) % (2 * math.pi) - math.pi
+        err = wrap_angle(math.atan2(to[1], to[0]) - yaw)
         w = float(np.clip(0.8 * err, -cfg.max_rot, cfg.max_rot))
         v_slow = 0.995 * v_slow + 0.005 * rng.normal(0.0, 1.0)
         v = cfg.speed * (1.0 - 0.25 * min(abs(err), 1.0)) + 0.1 * v_slow
@@ -226,9 +252,26 @@ def vessel_track(cfg: HarbourConfig, rng: np.random.Generator, *, laps: int = 1,
             pos = pos + (v / w) * np.array(
                 [math.sin(yaw + w * cfg.dt) - math.sin(yaw), -math.cos(yaw + w * cfg.dt) + math.cos(yaw)]
             )
-        yaw = (yaw + w * cfg.dt + math.pi) % (2 * math.pi) - math.pi
+        yaw = wrap_angle(yaw + w * cfg.dt)
         t += cfg.dt
     return np.array(t_l), np.array(p_l), np.array(c_l)
+
+
+def imu_truth(t: NDArray, p: NDArray, ctl: NDArray, every: int, dt: float) -> tuple[NDArray, NDArray, NDArray]:
+    """Exact IMU truth of :func:`vessel_track`'s motion: for the samples ``i = every, 2 every, ...``
+    the mean body-frame acceleration (m, 2) and yaw rate (m,) over (t_{i-every}, t_i]. Step ``j``
+    runs the arc of constant ``(v_j, w_j)`` over ``[t_j, t_j + dt)``: along it the body acceleration
+    is ``(0, v_j w_j)`` (centripetal, to port for ``w > 0``); at its start the speed jumps from
+    ``v_{j-1}`` to ``v_j`` along the bow (``v_{-1} = v_0``). Returns the sample indices too."""
+    v, w = ctl[:, 0], ctl[:, 1]
+    jump = np.diff(v, prepend=v[0])  # at the start of step j
+    ii = np.arange(every, len(t), every)
+    cx = np.concatenate([[0.0], np.cumsum(jump)])  # cumulative sums over steps [0, j)
+    cy = np.concatenate([[0.0], np.cumsum(v * w * dt)])
+    cw = np.concatenate([[0.0], np.cumsum(w * dt)])
+    T = every * dt
+    acc_b = np.column_stack([(cx[ii] - cx[ii - every]) / T, (cy[ii] - cy[ii - every]) / T])
+    return ii, acc_b, (cw[ii] - cw[ii - every]) / T
 
 
 def simulate_harbour(
@@ -237,8 +280,9 @@ def simulate_harbour(
     """The harbour log: ``laps`` of the route (default 1, or as many as ``duration`` needs),
     truncated to ``duration`` [s] if given."""
     cfg = cfg or HarbourConfig()
-    rng_track, rng_lidar, rng_gnss, rng_misc = (
-        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)
+    # spawn(5)'s first four children are spawn(4)'s: the IMU stream leaves the other sensors' draws as they were
+    rng_track, rng_lidar, rng_gnss, rng_misc, rng_imu = (
+        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(5)
     )
     if laps is None:
         laps = 1 if duration is None else 1 + int(duration // 300.0)  # a lap takes > 600 s
@@ -262,6 +306,14 @@ def simulate_harbour(
                 cfg.odo_sigma_w,
             )
         )
+
+    imu_meta = None
+    if cfg.imu_hz > 0:
+        ii, acc_b, rate = imu_truth(t, p, ctl, step(cfg.imu_hz), cfg.dt)
+        acc, gyr, imu_meta = imu_measurements(rng_imu, acc_b, rate, calibrate=cfg.imu_calibrate,
+                                              calib_residual=cfg.imu_calib_residual)
+        imu_meta["hz"] = cfg.imu_hz
+        recs += [Imu(float(ts[i]), float(a[0]), float(a[1]), float(g)) for i, a, g in zip(ii, acc, gyr, strict=True)]
 
     nb = int(round(360.0 / cfg.beam_deg))
     angles = np.radians(np.arange(nb) * cfg.beam_deg) - math.pi
@@ -297,7 +349,7 @@ def simulate_harbour(
             gx, gy = p[i, :2] + amp[j] * away[j] + noise
             recs.append(Gnss(ti, float(gx), float(gy), cfg.gnss_sigma))
         hd = p[i, 2] + rng_misc.normal(0.0, cfg.compass_sigma)
-        recs.append(Heading(ti, float((hd + math.pi) % (2 * math.pi) - math.pi), cfg.compass_sigma))
+        recs.append(Heading(ti, float(wrap_angle(hd)), cfg.compass_sigma))
         for bid, (bx, by) in BEACONS.items() if i % beacon_every == 0 else ():
             dx, dy = bx - p[i, 0], by - p[i, 1]
             rng_ = math.hypot(dx, dy)
@@ -308,7 +360,7 @@ def simulate_harbour(
                         ti,
                         bid,
                         float(rng_ + rng_misc.normal(0.0, cfg.beacon_sigma_r)),
-                        float((br + math.pi) % (2 * math.pi) - math.pi),
+                        float(wrap_angle(br)),
                         cfg.beacon_sigma_r,
                         cfg.beacon_sigma_b,
                     )
@@ -331,6 +383,10 @@ def simulate_harbour(
             "hz": cfg.lidar_hz,
             "beam_deg": cfg.beam_deg,
         },
-        "frame": "local harbour frame: x east, y north, origin at the basin's south-west corner",
+        "frame": "local harbour frame: x east, y north, origin at the basin's south-west corner (meta.origin)",
+        "origin": dict(ORIGIN),
+        "initial_velocity": [float(ctl[0, 0] * math.cos(p[0, 2])), float(ctl[0, 0] * math.sin(p[0, 2]))],
     }
+    if imu_meta is not None:
+        meta["imu"] = imu_meta
     return NavLog.from_unsorted(recs, known, meta)

@@ -162,22 +162,39 @@ def noise_sigmas(scenario: int, n: int, switch_step: int) -> np.ndarray:
     return out
 
 
+def imu_measurements(rng: np.random.Generator, acc_b: np.ndarray, rate: np.ndarray, *, calibrate: bool = True,
+                     calib_residual: float = 0.1) -> tuple[np.ndarray, np.ndarray, dict]:
+    """IMU records from the true body acceleration ``acc_b`` (m, 2) and yaw rate ``rate`` (m,): eq. 5-6
+    with Table 3's biases and white noise, then the calibration (the module docstring). Returns the
+    logged ``(acc (m, 2), gyro (m,), meta["imu"])``. Draws, in this order: the calibration residual
+    (3, only when ``calibrate``), the accelerometer noise (m, 2), the gyro noise (m). Shared by every
+    simulator with an IMU (``solent``, ``harbour``), so they have one noise model."""
+    m = len(rate)
+    b_acc = np.array(TABLE3_ACC_BIAS)
+    b_gyr = math.radians(TABLE3_GYRO_BIAS_DEG)
+    bias = np.array([*b_acc, b_gyr])
+    frac = calib_residual if calibrate else 1.0
+    resid = rng.normal(0.0, 1.0, 3) * frac * np.abs(bias) if calibrate else bias.copy()
+    b_hat = bias - resid if calibrate else np.zeros(3)
+    acc = acc_b + b_acc + rng.normal(0.0, TABLE3_ACC_STD, (m, 2)) - b_hat[:2]
+    gyr = rate + b_gyr + rng.normal(0.0, math.radians(TABLE3_GYRO_STD_DEG), m) - b_hat[2]
+    meta = {
+        "record_semantics": "mean over (t_{k-1}, t_k], stamped t_k; calibrated (bias estimate removed)",
+        "bias_true": bias.tolist(), "bias_estimate": b_hat.tolist(),
+        "bias_residual": resid.tolist(), "calib_residual_frac": frac,
+        "acc_std": TABLE3_ACC_STD, "gyro_std": math.radians(TABLE3_GYRO_STD_DEG),
+    }
+    return acc, gyr, meta
+
+
 def simulate_solent(cfg: SolentConfig | None = None, **kw) -> NavLog:
     """Simulate one Solent mission (section V) and return its log (see the module docstring)."""
     cfg = cfg or SolentConfig(**kw)
     rng = np.random.default_rng(cfg.seed)
     tr = _truth(cfg)
     t, n = tr["t"], len(tr["t"])
-    # IMU, eq. 5-6, then calibration
-    b_acc = np.array(TABLE3_ACC_BIAS)
-    b_gyr = math.radians(TABLE3_GYRO_BIAS_DEG)
-    bias = np.array([*b_acc, b_gyr])
-    frac = cfg.calib_residual if cfg.calibrate else 1.0
-    resid = rng.normal(0.0, 1.0, 3) * frac * np.abs(bias) if cfg.calibrate else bias.copy()
-    b_hat = bias - resid if cfg.calibrate else np.zeros(3)
-    m = n - 1
-    acc = tr["acc_b"] + b_acc + rng.normal(0.0, TABLE3_ACC_STD, (m, 2)) - b_hat[:2]
-    gyr = tr["rate"] + b_gyr + rng.normal(0.0, math.radians(TABLE3_GYRO_STD_DEG), m) - b_hat[2]
+    acc, gyr, imu_meta = imu_measurements(rng, tr["acc_b"], tr["rate"], calibrate=cfg.calibrate,
+                                          calib_residual=cfg.calib_residual)
     # GNSS / compass, eq. 7-8
     sig = noise_sigmas(cfg.scenario, n, cfg.switch_step)
     gx = tr["p"][:, 0] + rng.normal(0.0, 1.0, n) * sig[:, 0]
@@ -212,12 +229,7 @@ def simulate_solent(cfg: SolentConfig | None = None, **kw) -> NavLog:
         "paper": "Liu, Liu, Bucknall, IEEE Access 7 (2019) 46071-46083, section V",
         "scenario": cfg.scenario,
         "config": asdict(cfg),
-        "imu": {
-            "record_semantics": "mean over (t_{k-1}, t_k], stamped t_k; calibrated (bias estimate removed)",
-            "bias_true": bias.tolist(), "bias_estimate": b_hat.tolist(),
-            "bias_residual": resid.tolist(), "calib_residual_frac": frac,
-            "acc_std": TABLE3_ACC_STD, "gyro_std": math.radians(TABLE3_GYRO_STD_DEG),
-        },
+        "imu": imu_meta,
         "noise": {"gnss_x": sig[:, 0].tolist(), "gnss_y": sig[:, 1].tolist(), "compass": sig[:, 2].tolist()},
         "initial_velocity": tr["v"][0].tolist(),
         "waypoints_reached": int(tr["wp"][-1]),

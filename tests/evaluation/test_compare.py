@@ -244,3 +244,24 @@ def test_report_configuration_summarises_long_arrays():
                                                                 "short": [1, 2]})
     cfg = _config(Entry("x", options={"lag": 2}, result=res))
     assert cfg == {"options": {"lag": 2}, "k": 3, "nested": {"a": "<500 values>"}, "short": [1, 2]}
+
+
+def test_parallel_smoothers_share_their_matches_in_one_process():
+    """With workers the smoothers form one work unit (one process, in order), so the second one
+    still takes every weighted-ICP match from the first; the table equals the sequential one."""
+    from _polyworld import synthetic_log
+
+    from graphnav.evaluation.compare import groups
+    from graphnav.scan import icp_cache
+
+    assert groups([(0, "batch"), (1, "ekf"), (2, "isam2"), (3, "ukf")]) == [
+        [(0, "batch"), (2, "isam2")], [(1, "ekf")], [(3, "ukf")]]
+    log = synthetic_log(12)
+    names = ["batch", "dead-reckoning", "isam2"]
+    seq = compare(log, names, cache=icp_cache.MatchCache())
+    par = compare(log, names, cache=icp_cache.MatchCache(), workers=2)
+    n_pairs = len(log.of("scan")) - 1
+    for a, b in zip(seq, par, strict=True):
+        assert a.ok and b.ok
+        np.testing.assert_array_equal(a.result.trajectory.poses, b.result.trajectory.poses)
+    assert [e.summary.get("icp_cache_hits") for e in par] == [0, 0, n_pairs]

@@ -92,14 +92,13 @@ def test_constant_velocity_bridges_a_failed_match_exactly():
     recs = [PosePrior(0.0, 0.0, 0.0, 0.0, 1e-6, 1e-6)] + scans
     cov = np.diag([1e-4, 1e-4, 1e-6])
 
-    def matcher(cur, prev, init):
+    def matcher(cur, prev, init, *_):
         if cur.t == 6.0:
             return False, np.zeros(3), np.eye(3)
         return True, se2_between(truth[prev.t], truth[cur.t]), cov
 
     for run in RUNS:
-        r = run(NavLog(recs), matcher=matcher, icp_cov_scale=1.0, icp_sigma_floor_xy=0.0,
-                icp_sigma_floor_yaw_deg=0.0, covariances=False)
+        r = run(NavLog(recs), matcher=matcher, covariances=False)
         assert r.info["motion_fallback"] == 1 and r.info["icp_failed"] == 1, run.__name__
         np.testing.assert_allclose(r.trajectory.poses, np.array(poses), atol=1e-6, err_msg=run.__name__)
 
@@ -233,7 +232,48 @@ def test_degenerate_corridor_in_the_middle_of_a_log(odometry):
             sig.append(_sigmas(g.at(i)))
     sig = np.array(sig)
     assert len(sig) >= 30  # the corridor's matches are used, degenerate or not
-    assert np.median(sig[:, 0]) > 0.5 and np.median(sig[:, 1]) < 0.05  # weak along, firm across
+    assert np.median(sig[:, 1]) < 0.05  # firm across
+    if odometry:  # along: the odometry factor's alone, not repeated by the match (100 m measured)
+        assert np.median(sig[:, 0]) > 10.0
+    else:  # along: the constant-velocity model's sigma, 0.5 m/s x 1 s, which the match took there
+        assert 0.45 < np.median(sig[:, 0]) < 0.6
+
+
+def test_the_matcher_gets_the_motion_guess_and_its_covariance():
+    """The builder hands the matcher the guess's covariance (``init_cov``): the odometry factor's
+    with odometry (then ``guess_in_graph``), else the constant-velocity model's (0.5 m/s, 10 deg/s
+    x dt, floor in quadrature) once a motion was measured, a random walk before."""
+    for odometry in (True, False):
+        log = _corridor_log(odometry)
+        seen: list = []
+
+        def matcher(cur, prev, init, init_cov, in_graph, seen=seen):
+            seen.append((cur.t - prev.t, np.array(init), np.array(init_cov), in_graph))
+            return True, np.array([1.0, 0.0, 0.0]), np.diag([1e-4, 1e-4, 1e-6])
+
+        nav = Navigator.for_log(log, matcher=matcher, solver="batch")
+        for rec in log:
+            nav.add(rec)
+        nav.flush()
+        assert len(seen) == 96
+        odo_covs = [f.noiseModel().covariance() for f, g in zip(_factors(nav.solver.graph), nav.groups, strict=True)
+                    if g == "odometry"]
+        for i, (dt, init, cov, in_graph) in enumerate(seen):
+            assert in_graph == odometry
+            if odometry:
+                np.testing.assert_allclose(cov, odo_covs[i], rtol=1e-9)
+                assert abs(init[0] - 1.0) < 0.2
+            elif i == 0:  # nothing measured yet: the random walk (2 m/s, 30 deg/s)
+                np.testing.assert_allclose(np.sqrt(np.diag(cov)), [2.0, 2.0, math.radians(30.0)], rtol=1e-3)
+                np.testing.assert_allclose(init, 0.0)
+            else:  # constant velocity: the previous match's twist, its stated sigma
+                np.testing.assert_allclose(np.sqrt(np.diag(cov)), [0.5, 0.5, math.radians(10.0)], rtol=1e-3)
+                np.testing.assert_allclose(init, [1.0, 0.0, 0.0], atol=1e-12)
+            assert dt == 1.0
+
+
+def _factors(g: gtsam.NonlinearFactorGraph) -> list:
+    return [g.at(i) for i in range(g.size())]
 
 
 # -- a failure of the solver is the user's error message, not a traceback -------------------------
@@ -255,3 +295,95 @@ def test_solver_failure_names_the_record_and_time(monkeypatch):
         run_isam2(log)
     assert "record" in e.value.where and "t = " in e.value.where
     assert "could not be solved at the keyframe of t = 14.5 s" in str(e.value)
+
+
+# -- the GNSS speed-over-ground fallback and the odometry over an interval: closed forms ------------
+def _fixes_along(b: GraphBuilder, ts: np.ndarray, vel: np.ndarray, sigma: float) -> None:
+    for t in ts:
+        b.fixes.append((float(t), float(vel[0] * t), float(vel[1] * t), sigma))
+
+
+def test_gnss_speed_over_ground_constant_velocity_fallback():
+    """No odometry, no scans: the constant-velocity factor moves forward at the least-squares speed
+    of the fixes of the last cv_gnss_window seconds; its sigma is the closed form
+    sqrt(cv_sigma_v^2 + sigma_speed^2 + (cv_accel age)^2) dt with sigma_speed = sigma / sqrt(sum (t_i -
+    mean t)^2)."""
+    cfg = SmootherConfig()
+    b = GraphBuilder(cfg)
+    ts = np.arange(0.0, 10.0 + 1e-9, 1.0)  # 11 fixes, 1 Hz, over the 10 s window
+    _fixes_along(b, ts, np.array([1.2, 1.6]), 2.0)  # 2 m/s along a 53 deg course
+    speed_sigma = 2.0 / math.sqrt(float(np.sum((ts - ts.mean()) ** 2)))
+    twist, sv, age = b.gnss_velocity(10.0)
+    np.testing.assert_allclose(twist, [2.0, 0.0, 0.0], atol=1e-12)
+    assert sv == pytest.approx(speed_sigma, rel=1e-12) and age == 0.0
+    # 3 s after the last fix (an outage): refitted on the 8 fixes left in the window [3, 13] s,
+    # 3 s old (the time since the last fix)
+    dt = 0.5
+    mean, cov, name = b.motion_prior(dt, 13.0)
+    assert name == "constant-velocity"
+    np.testing.assert_allclose(gtsam.Pose2.Logmap(mean), [2.0 * dt, 0.0, 0.0], atol=1e-12)
+    age, tw = 3.0, ts[3:]
+    speed_sigma = 2.0 / math.sqrt(float(np.sum((tw - tw.mean()) ** 2)))
+    sxy = math.sqrt(cfg.cv_sigma_v**2 + speed_sigma**2 + (cfg.cv_accel * age) ** 2) * dt
+    floor = np.array([cfg.motion_floor_xy] * 2 + [math.radians(cfg.motion_floor_yaw_deg)])
+    np.testing.assert_allclose(cov, np.diag(floor**2 + np.array([sxy, sxy, math.radians(cfg.cv_sigma_w_deg) * dt])
+                                            ** 2), rtol=1e-12)
+    # older than cv_max_age: nothing known, the random walk
+    assert b.motion_prior(dt, 10.0 + cfg.cv_max_age + 1.0)[2] == "random-walk"
+
+
+def test_gnss_speed_below_three_sigma_is_no_motion_and_few_fixes_are_not_used():
+    cfg = SmootherConfig()
+    b = GraphBuilder(cfg)
+    ts = np.arange(0.0, 10.0 + 1e-9, 1.0)
+    _fixes_along(b, ts, np.array([0.05, 0.0]), 2.0)  # 0.05 m/s with a 0.19 m/s speed sigma
+    twist, sv, _ = b.gnss_velocity(10.0)
+    assert 0.05 < 3 * sv and np.all(twist == 0.0)  # direction unknown: standing, with the speed's sigma
+    few = GraphBuilder(cfg)
+    _fixes_along(few, np.array([0.0, 1.0]), np.array([2.0, 0.0]), 2.0)  # two fixes: no fit
+    assert few.gnss_velocity(1.0) is None and few.motion_prior(0.5, 1.0)[2] == "random-walk"
+
+
+@pytest.mark.parametrize("rate", [10.0, 100.0])
+def test_odometry_over_an_interval_closed_form_and_rate_independent(rate):
+    """Odometry records without sigmas (the defaults are noise densities), constant (v, w) on an
+    arc: the builder's motion between two times is the arc x = v/w sin(w T), y = v/w (1 - cos(w T)),
+    yaw = w T, and on a straight line the along-track and yaw variances are the densities times T
+    (plus the 1e-4 m floor of each sub-arc), whatever the sample rate."""
+    cfg = SmootherConfig()
+    v, w = 1.5, 0.2
+    for turn in (w, 0.0):
+        b = GraphBuilder(cfg)
+        for t in np.arange(0.0, 10.0, 1.0 / rate):
+            b._odometry_sample(Odometry(float(t), v, turn, math.nan, math.nan))
+        t0, t1 = 2.03, 6.53  # not on the samples: the first and last sub-arcs are partial
+        pose, cov = b._odometry(t0, t1)
+        T = t1 - t0
+        if turn:
+            np.testing.assert_allclose([pose.x(), pose.y(), pose.theta()],
+                                       [v / w * math.sin(w * T), v / w * (1 - math.cos(w * T)), w * T], atol=1e-9)
+        else:
+            np.testing.assert_allclose([pose.x(), pose.y(), pose.theta()], [v * T, 0.0, 0.0], atol=1e-12)
+            n = len([s for s in np.arange(0.0, 10.0, 1.0 / rate) if t0 < s < t1 - 1e-12]) + 1  # sub-arcs
+            sv = math.hypot(cfg.odo_sigma_v, cfg.odo_sigma_v_rel * v)
+            sw = math.radians(cfg.odo_sigma_w_deg)
+            assert cov[0, 0] == pytest.approx(sv**2 * T + n * 1e-8, rel=1e-9)
+            assert cov[2, 2] == pytest.approx(sw**2 * T + n * 1e-8, rel=1e-9)
+
+
+def test_odometry_chain_in_the_graph_is_the_closed_form_arc():
+    """A pose prior and constant (v, w) odometry only: every keyframe of the 0.5 s grid lies on the
+    arc (batch and iSAM2), the anchor's frame composed with the closed-form increment."""
+    v, w = 1.0, 0.3
+    x0 = np.array([2.0, -1.0, 0.4])
+    recs = [PosePrior(0.0, *x0, 1e-4, 1e-5)] + [Odometry(float(t), v, w, math.nan, math.nan)
+                                                  for t in np.arange(0.0, 6.0 + 1e-9, 0.05)]
+    for run in (run_isam2, run_batch):
+        r = run(NavLog(recs), covariances=False)
+        tr = r.trajectory
+        assert r.info["motion_fallback"] == 0
+        for t, p in zip(tr.t, tr.poses, strict=True):
+            d = gtsam.Pose2(v / w * math.sin(w * t), v / w * (1 - math.cos(w * t)), w * t)
+            want = gtsam.Pose2(*x0).compose(d)
+            np.testing.assert_allclose(p[:2], [want.x(), want.y()], atol=1e-6, err_msg=run.__name__)
+            assert math.remainder(p[2] - want.theta(), 2 * math.pi) == pytest.approx(0, abs=1e-7)

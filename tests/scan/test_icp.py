@@ -9,7 +9,7 @@ from pathlib import Path
 import gtsam
 import numpy as np
 import pytest
-from _scan_sim import corridor, even_points, noisy_scan, observe, raycast, room, to_frame
+from _scan_sim import corridor, even_points, noisy_scan, observe, points, raycast, room, to_frame
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -112,23 +112,41 @@ def test_match_scans_drops_missing_returns_and_uses_sensor_frames():
 # ----------------------------------------------------------------------------- covariance
 
 
-@pytest.mark.parametrize("variant", ["HD", "HDL"])
-def test_covariance_is_consistent_nees_near_3(variant):
-    """Mean NEES over many noisy trials ~ 3 (chi-square, 3 dof), error in GTSAM's convention."""
+@pytest.mark.parametrize("beams", [180, 360])
+def test_hdl_covariance_on_ray_cast_scans_is_not_overconfident(beams):
+    """HDL on ray-cast scans of the room (1 and 0.5 deg beams, random beam offsets, range noise): the
+    covariance (LiDAR noise + sampling, graphnav.scan.covariance) covers the error, error in GTSAM's
+    convention. The room's walls are perfect lines, so the sampling term is generous here: mean NEES
+    0.1-0.4 (the simulated harbour, with piles and hulls, is consistent: test_harbour_nees)."""
     rng = np.random.default_rng(11)
-    world = even_points(room(), 0.4)
-    s_rel, s_a = 0.004258, np.radians(0.2)
-    cfg = IcpConfig(variant=variant, sigma_r_rel=s_rel, sigma_alpha=s_a, cov_scale=1.0)
     nees = []
-    for _ in range(100):
+    for _ in range(60):
         true = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3), np.radians(rng.uniform(-5, 5))])
         p0 = np.array([rng.uniform(-3, 3), rng.uniform(-2, 2), rng.uniform(-np.pi, np.pi)])
-        tgt = observe(world, p0, rng, s_rel, s_a)
-        src = observe(world, se2_compose(p0, true), rng, s_rel, s_a)
-        res = match_points(src, tgt, cfg, init=true + [0.05, -0.05, 0.01])
+        tgt = points(*noisy_scan(room(), p0, rng, n_beams=beams))
+        src = points(*noisy_scan(room(), se2_compose(p0, true), rng, n_beams=beams))
+        res = match_points(src, tgt, IcpConfig(variant="HDL"), init=true + [0.05, -0.05, 0.01])
+        assert res.ok, res.quality["reason"]
         xi = gtsam_error(res.pose, true)
         nees.append(xi @ np.linalg.solve(res.cov, xi))
-    assert 2.0 < np.mean(nees) < 4.2, np.mean(nees)
+    assert 0.02 < np.mean(nees) < 3.0, np.mean(nees)
+
+
+def test_harbour_nees():
+    """On the simulated harbour (exact truth; quays, piles, hulls, 1 deg beams to 40 m) the HDL
+    covariance is consistent: mean NEES of the unflagged increments in [0.5, 3] (3 dof: 3 is exact)."""
+    from graphnav.io import load_log
+    from graphnav.scan.icp_pairs import reference_increments, run_pairs
+
+    log = load_log(Path(__file__).resolve().parents[2] / "data" / "harbour.npz")
+    scans = log.of("scan")[:600]
+    log = NavLog([r for r in log.records if r.t <= scans[-1].t], log.beacons_known, log.meta)
+    pr = run_pairs(log, IcpConfig(variant="HDL"), init="odometry", guess_cov=False)  # the matcher's own flags
+    ref = reference_increments(log, pr.t0, pr.t1)
+    nees = [gtsam_error(r.pose, f) @ np.linalg.solve(r.cov, gtsam_error(r.pose, f))
+            for r, f in zip(pr.results, ref, strict=True) if r.ok]
+    assert len(nees) > 200
+    assert 0.5 < np.mean(nees) < 3.0, np.mean(nees)
 
 
 def test_covariance_convention_is_gtsam_tangent_not_target_additive():
@@ -139,7 +157,7 @@ def test_covariance_convention_is_gtsam_tangent_not_target_additive():
     segs = np.vstack([corridor(40.0, 2.0), [[-20, -2, -20, 2], [20, -2, 20, 2]]])
     world = even_points(segs, 0.25)
     s_rel, s_a = 0.004258, np.radians(0.2)
-    cfg = IcpConfig(variant="HDL", sigma_r_rel=s_rel, sigma_alpha=s_a, max_condition=1e6, cov_scale=1.0)
+    cfg = IcpConfig(variant="HDL", sigma_r_rel=s_rel, sigma_alpha=s_a, max_condition=1e6, max_sigma=1e6)
     n_gtsam, n_wrong, n_target = [], [], []
     for _ in range(60):
         true = np.array([0.3 + rng.normal(0, 0.05), rng.normal(0, 0.05), np.pi / 2 + rng.normal(0, 0.01)])
@@ -152,8 +170,9 @@ def test_covariance_convention_is_gtsam_tangent_not_target_additive():
         n_gtsam.append(xi @ np.linalg.solve(res.cov, xi))
         n_wrong.append(add @ np.linalg.solve(res.cov, add))
         n_target.append(add @ np.linalg.solve(res.cov_target, add))
-    assert 1.5 < np.mean(n_gtsam) < 5.0
-    assert 1.5 < np.mean(n_target) < 5.0
+    # the sampling term makes the covariance generous on these perfect walls (NEES < 3); what matters
+    # is that the right convention fits and the wrong one is off by far more
+    assert np.mean(n_gtsam) < 5.0 and 0.5 < np.mean(n_target) / np.mean(n_gtsam) < 2.0
     assert np.mean(n_wrong) > 5 * np.mean(n_gtsam)
 
 

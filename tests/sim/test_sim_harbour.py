@@ -137,6 +137,80 @@ def test_live_options_rates_time_base_and_laps(short):
     assert more.t1 == pytest.approx(t1[-1] + 60.0, abs=0.2)
 
 
+def test_imu_truth_closed_form():
+    """The exact IMU means against the track's own kinematics: the yaw-rate sum is the yaw change,
+    the forward-acceleration sum the speed change (no sway), and ay = v w on a steady turn."""
+    from graphnav.sim.harbour import imu_truth, vessel_track
+
+    cfg = HarbourConfig()
+    t, p, ctl = vessel_track(cfg, np.random.default_rng(0), t_max=240.0)
+    ii, acc, rate = imu_truth(t, p, ctl, 5, cfg.dt)
+    T = 5 * cfg.dt
+    yaw = np.unwrap(p[:, 2])
+    np.testing.assert_allclose(np.cumsum(rate) * T, yaw[ii] - yaw[0], atol=1e-9)
+    np.testing.assert_allclose(np.cumsum(acc[:, 0]) * T, ctl[ii - 1, 0] - ctl[0, 0], atol=1e-9)
+    turning = np.abs(rate) > np.radians(3.0)
+    assert turning.sum() > 50
+    speed = np.hypot(*np.diff(p[:, :2], axis=0).T) / cfg.dt  # chord speed of each step
+    v_mean = np.array([speed[i - 5:i].mean() for i in ii])
+    np.testing.assert_allclose(acc[turning, 1], v_mean[turning] * rate[turning], rtol=0.02)  # centripetal v w
+    # dead reckoning on the exact means (the UKF's eq. 1-3 with the interval's mid yaw) stays on the track
+    pos, vel = p[0, :2].copy(), ctl[0, 0] * np.array([np.cos(p[0, 2]), np.sin(p[0, 2])])
+    th = p[0, 2]
+    for k in range(len(ii)):
+        mid = th + 0.5 * T * rate[k]
+        c, s_ = np.cos(mid), np.sin(mid)
+        an = np.array([c * acc[k, 0] - s_ * acc[k, 1], s_ * acc[k, 0] + c * acc[k, 1]])
+        pos, vel, th = pos + T * vel + 0.5 * T * T * an, vel + T * an, th + T * rate[k]
+    assert np.hypot(*(pos - p[ii[-1], :2])) < 1.0  # after 240 s and ~350 m
+
+
+def test_imu_records_noise_model_and_origin(short):
+    """IMU records = exact means + the solent scenario's calibrated bias residual + Table 3 noise;
+    its own random stream (every other record as without it); the geodetic origin in meta."""
+    from graphnav.geodesy import LocalFrame
+    from graphnav.sim import solent
+    from graphnav.sim.harbour import MARINA_GDYNIA, ORIGIN, imu_truth, vessel_track
+
+    cfg = HarbourConfig()
+    log = simulate_harbour(0, duration=300.5, cfg=HarbourConfig(lidar_hz=0.0, imu_hz=10.0))
+    imu = log.columns("imu")
+    assert len(imu["t"]) == pytest.approx(3005, abs=1) and imu["t"][0] == pytest.approx(0.1)  # 10 Hz: statistics
+    t, p, ctl = vessel_track(cfg, np.random.default_rng(np.random.SeedSequence(0).spawn(5)[0]), t_max=300.5)
+    keep = t <= 300.5
+    ii, acc, rate = imu_truth(t[keep], p[keep], ctl[keep], 5, cfg.dt)
+    np.testing.assert_allclose(imu["t"], t[ii])
+    m = log.meta["imu"]
+    resid = np.array(m["bias_residual"])
+    assert np.all(np.abs(resid) <= 4 * 0.1 * np.abs(m["bias_true"]))
+    err = np.column_stack([imu["ax"] - acc[:, 0], imu["ay"] - acc[:, 1], imu["wz"] - rate])
+    tol = 4 * np.array([m["acc_std"], m["acc_std"], m["gyro_std"]]) / np.sqrt(len(err))  # 4 sigma of the mean
+    assert np.all(np.abs(err.mean(axis=0) - resid) < tol)
+    np.testing.assert_allclose(err.std(axis=0), [solent.TABLE3_ACC_STD] * 2 + [np.radians(solent.TABLE3_GYRO_STD_DEG)],
+                               rtol=0.05)
+    none = simulate_harbour(0, HarbourConfig(imu_hz=0.0), duration=20.0)
+    assert "imu" not in none.counts() and "imu" not in none.meta
+    for kind in ("gnss", "heading", "odometry", "beacon", "truth", "pose_prior"):
+        assert none.of(kind) == short.of(kind), kind
+    np.testing.assert_array_equal(none.of("scan")[-1].ranges, short.of("scan")[-1].ranges)
+    assert log.meta["initial_velocity"] == pytest.approx([ctl[0, 0] * np.cos(p[0, 2]), ctl[0, 0] * np.sin(p[0, 2])])
+    assert short.counts()["imu"] == 20 and short.meta["imu"]["hz"] == 1.0  # the default: 1 Hz, from t = 1 s
+    assert short.meta["origin"] == ORIGIN
+    x, y = LocalFrame(ORIGIN["lat"], ORIGIN["lon"], ORIGIN["h"]).to_local(*MARINA_GDYNIA)
+    assert (float(x), float(y)) == pytest.approx((150.0, 100.0), abs=0.1)  # the basin's centre on the marina
+
+
+def test_ukfs_run_on_the_harbour_imu():
+    """The IMU-driven filters run on a harbour slice and stay within the GNSS noise of the truth."""
+    from graphnav import estimators
+    from graphnav.evaluation.metrics import ate
+
+    log = simulate_harbour(0, HarbourConfig(lidar_hz=0.0), duration=120.0)
+    for name in ("ukf", "fuzzy-ukf"):
+        r = estimators.run(name, log)
+        assert ate(r.trajectory, log.truth(), max_dt=0.06)["rmse"] < HarbourConfig().gnss_sigma
+
+
 @pytest.mark.skipif(not DATA.exists(), reason="data/harbour.npz not generated")
 def test_embedded_log_is_seed0():
     log = load_log(DATA)
