@@ -28,15 +28,17 @@ from .errors import EXIT_BUG, EXIT_INPUT, EXIT_INTERRUPTED, GraphnavError
 
 
 def command_names() -> list[str]:
-    """The sub-commands: the public modules of :mod:`graphnav.commands`."""
-    return sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
+    """The sub-commands: the public modules of :mod:`graphnav.commands` (``_`` in a module's name is
+    ``-`` in the command's: ``scan_matching.py`` is ``graphnav scan-matching``)."""
+    return sorted(m.name.replace("_", "-") for m in pkgutil.iter_modules(commands.__path__)
+                  if not m.name.startswith("_"))
 
 
 def command_help(name: str) -> str | None:
     """The ``help=`` string of the command's ``add_parser`` call (else its docstring's first line),
     read from the module source without importing it."""
     try:
-        tree = ast.parse(Path(commands.__path__[0], f"{name}.py").read_text(encoding="utf-8"))
+        tree = ast.parse(Path(commands.__path__[0], f"{name.replace('-', '_')}.py").read_text(encoding="utf-8"))
     except (OSError, SyntaxError):
         return None
     for node in ast.walk(tree):
@@ -59,7 +61,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in command_names():
         if command is None or name == command:
-            importlib.import_module(f"{commands.__name__}.{name}").register(sub)
+            importlib.import_module(f"{commands.__name__}.{name.replace('-', '_')}").register(sub)
         else:
             sub.add_parser(name, help=command_help(name))
     for leaf in leaf_parsers(parser):

@@ -55,6 +55,52 @@ class Scan:
             return np.isfinite(r) & (r > 0.0) & (r <= self.max_range)
 
 
+#: Most points a ``cloud`` record may hold: above an Ouster OS2-128 frame (262 144 points) and a
+#: Velodyne HDL-64 frame (~130 000) with room to spare; bounds what a reader allocates per record.
+MAX_CLOUD_POINTS = 2_000_000
+#: Largest ``ring`` (laser channel) index of a cloud point (the largest sensors have 128 channels).
+MAX_RING = 1023
+
+
+@dataclass(frozen=True, slots=True)
+class Cloud:
+    """A 3D LiDAR point cloud in the **sensor frame** (docs/conventions.md, "3D point clouds").
+
+    ``points`` (N, 3) float32 [m]: x forward, y left, z up of the sensor as mounted, i.e. tilted
+    with the vessel's roll and pitch (nothing is levelled in the record); only real returns (finite).
+    ``intensity`` (N,) float32 (the sensor's unit) and ``ring`` (N,) uint16 (laser channel, 0 = the
+    lowest beam) are optional (``None``). ``roll``, ``pitch`` [rad] are the sensor's attitude at ``t``
+    (an AHRS's, REP-103: roll right-handed about x, pitch about y, bow down positive) when known, else
+    NaN; the 3D matcher levels the cloud with them.
+    """
+
+    t: float
+    points: NDArray[np.float32]
+    intensity: NDArray[np.float32] | None = None
+    ring: NDArray[np.uint16] | None = None
+    roll: float = math.nan
+    pitch: float = math.nan
+    kind: ClassVar[str] = "cloud"
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+
+def make_cloud(t: float, points, intensity=None, ring=None, roll: float = math.nan,
+               pitch: float = math.nan) -> Cloud:
+    """A :class:`Cloud` with its arrays converted to the record's dtypes (float32 / uint16)."""
+    with np.errstate(over="ignore"):  # beyond float32: inf, which check_record refuses
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
+        inten = None if intensity is None else np.ascontiguousarray(np.asarray(intensity, dtype=np.float32).ravel())
+    rg = None
+    if ring is not None:
+        r = np.asarray(ring).ravel()
+        if r.size and (not np.issubdtype(r.dtype, np.integer) or r.min() < 0 or r.max() > MAX_RING):
+            raise LogError(f"ring must hold integers in [0, {MAX_RING}]", field="ring")
+        rg = np.ascontiguousarray(r.astype(np.uint16))
+    return Cloud(float(t), pts, inten, rg, float(roll), float(pitch))
+
+
 @dataclass(frozen=True, slots=True)
 class Gnss:
     """A GNSS position fix in the local frame [m], ``sigma`` the 1-sigma error per axis [m]."""
@@ -153,12 +199,13 @@ class KnownBeacon:
     kind: ClassVar[str] = "beacon_known"
 
 
-Record = Scan | Gnss | Heading | Odometry | Imu | BeaconObs | Truth | PosePrior
-RECORD_TYPES: dict[str, type] = {
-    c.kind: c for c in (Scan, Gnss, Heading, Odometry, Imu, BeaconObs, Truth, PosePrior)
+Record = Scan | Gnss | Heading | Odometry | Imu | BeaconObs | Truth | PosePrior | Cloud
+RECORD_TYPES: dict[str, type] = {  # new types go last: the npz format stores their index
+    c.kind: c for c in (Scan, Gnss, Heading, Odometry, Imu, BeaconObs, Truth, PosePrior, Cloud)
 }
+ARRAY_FIELDS = ("ranges", "angles", "points", "intensity", "ring")
 SCALAR_FIELDS: dict[str, tuple[str, ...]] = {
-    k: tuple(f.name for f in fields(c) if f.name not in ("ranges", "angles"))
+    k: tuple(f.name for f in fields(c) if f.name not in ARRAY_FIELDS)
     for k, c in RECORD_TYPES.items()
 }
 
@@ -214,12 +261,15 @@ def check_record(rec: Record | KnownBeacon, limits: Limits | None = None) -> Non
         if f.name == "id":
             if not isinstance(v, str) or not v:
                 raise LogError("beacon id must be a non-empty string", field="id")
-        elif f.name in ("ranges", "angles"):
+        elif f.name in ARRAY_FIELDS:
             continue
         elif not isinstance(v, float):
             raise LogError(f"expected a number, got {type(v).__name__}", field=f.name)
         elif f.name == "t" and not math.isfinite(v):
             raise LogError("timestamp must be finite", field="t")
+        elif f.name in ("roll", "pitch"):
+            if not (math.isnan(v) or abs(v) <= math.pi / 2):
+                raise LogError(f"{f.name} must be in [-pi/2, pi/2] rad (or absent)", field=f.name)
         elif f.name == "range_max":
             if not (math.isnan(v) or 0.0 < v <= MAX_STATED_RANGE):
                 raise LogError(f"range_max must be in (0, {MAX_STATED_RANGE:g}] m (or absent)", field="range_max")
@@ -252,6 +302,35 @@ def check_record(rec: Record | KnownBeacon, limits: Limits | None = None) -> Non
             )
         if not np.all(np.isfinite(rec.angles[rec.valid()])):
             raise LogError("every beam with a return needs a finite angle", field="angles")
+    elif isinstance(rec, Cloud):
+        _check_cloud(rec)
+
+
+def _check_cloud(rec: Cloud) -> None:
+    """A cloud's arrays: (N, 3) float32 points, N <= MAX_CLOUD_POINTS, finite and within
+    MAX_STATED_RANGE of the sensor; intensity (N,) finite float32; ring (N,) uint16 <= MAX_RING."""
+    p = rec.points
+    if not isinstance(p, np.ndarray) or p.ndim != 2 or p.shape[1] != 3 or p.dtype != np.float32:
+        raise LogError("points must be an (N, 3) float32 array", field="points")
+    n = p.shape[0]
+    if n > MAX_CLOUD_POINTS:
+        raise LogError(f"{n} points, more than {MAX_CLOUD_POINTS}", field="points")
+    if not np.all(np.isfinite(p)):
+        raise LogError("every point must be finite (store real returns only)", field="points")
+    if n and float(np.abs(p).max()) > MAX_STATED_RANGE:
+        raise LogError(f"a point lies beyond {MAX_STATED_RANGE:g} m of the sensor", field="points")
+    if rec.intensity is not None:
+        a = rec.intensity
+        if not isinstance(a, np.ndarray) or a.shape != (n,) or a.dtype != np.float32:
+            raise LogError(f"intensity must be an ({n},) float32 array", field="intensity")
+        if not np.all(np.isfinite(a)):
+            raise LogError("intensity must be finite", field="intensity")
+    if rec.ring is not None:
+        a = rec.ring
+        if not isinstance(a, np.ndarray) or a.shape != (n,) or a.dtype != np.uint16:
+            raise LogError(f"ring must be an ({n},) uint16 array", field="ring")
+        if n and int(a.max()) > MAX_RING:
+            raise LogError(f"ring index beyond {MAX_RING}", field="ring")
 
 
 @dataclass

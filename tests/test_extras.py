@@ -51,12 +51,37 @@ def test_open3d_sites(monkeypatch, tmp_path):
     with pytest.raises(MissingExtra) as exc:
         registration.Target(pts[:, :2], "open3d:point_to_point")
     _one_line(exc.value, "open3d", "open3d")
+    ply = tmp_path / "c.ply"
+    ply.write_text("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                   "property float z\nend_header\n1 2 3\n")
+    with pytest.raises(MissingExtra) as exc:  # PLY through open3d
+        read_cloud(ply)
+    _one_line(exc.value, "open3d", "open3d")
+    pcd = tmp_path / "c.pcd"
+    pcd.write_text("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+                   "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n")
+    assert np.allclose(read_cloud(pcd), [[1, 2, 3]])  # PCD through pypcd4: no open3d needed
+    from graphnav.sim.harbour3d import Lidar3d, Lidar3dConfig
+
+    with pytest.raises(MissingExtra) as exc:
+        Lidar3d(Lidar3dConfig())
+    _one_line(exc.value, "open3d", "open3d")
+
+
+def test_pypcd4_and_kiss_icp_sites(monkeypatch, tmp_path):
+    from graphnav.evaluation import scan_matching3d
+    from graphnav.io.cloudfile import read_cloud
+
+    _block(monkeypatch, "pypcd4", "kiss_icp")
     pcd = tmp_path / "c.pcd"
     pcd.write_text("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
                    "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n")
     with pytest.raises(MissingExtra) as exc:
         read_cloud(pcd)
-    _one_line(exc.value, "open3d", "open3d")
+    _one_line(exc.value, "pypcd4", "pcd")
+    with pytest.raises(MissingExtra) as exc:
+        scan_matching3d._kiss([np.zeros((10, 3))], 100.0)
+    _one_line(exc.value, "kiss-icp", "bench")
 
 
 def test_rosbags_site(monkeypatch):

@@ -51,7 +51,11 @@ def _register_harbour(sub: argparse._SubParsersAction) -> None:
                    help="length of the run [s] (shorter: truncated; longer: the route repeats)")
     p.add_argument("--laps", type=int, default=None, help="times round the route (default 1, or what --duration needs)")
     p.add_argument("--fix-hz", type=float, default=1.0, help="GNSS and compass rate [Hz] (default 1)")
-    p.add_argument("--lidar-hz", type=float, default=5.0, help="LiDAR scan rate [Hz] (default 5; 0: no scans)")
+    p.add_argument("--lidar-hz", type=float, default=None,
+                   help="LiDAR rate [Hz] (default 5 for 2d, 10 for 3d; 0: no scans)")
+    p.add_argument("--lidar", choices=("2d", "3d"), default="2d",
+                   help="2d: 360-beam scans (default); 3d: a 16-beam VLP-16-like cloud ray-cast against the "
+                        "extruded harbour, with wave roll/pitch, water returns and spray (graphnav.sim.harbour3d)")
     p.add_argument("--t0", type=float, default=0.0, help="time of the first record [s] (e.g. a POSIX time)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
@@ -59,14 +63,22 @@ def _register_harbour(sub: argparse._SubParsersAction) -> None:
 
 
 def _harbour(args: argparse.Namespace) -> int:
-    cfg = harbour.HarbourConfig(fix_hz=args.fix_hz, lidar_hz=args.lidar_hz, t0=args.t0)
-    log = harbour.simulate_harbour(args.seed, cfg, duration=args.duration, laps=args.laps)
+    hz = args.lidar_hz if args.lidar_hz is not None else (10.0 if args.lidar == "3d" else 5.0)
+    cfg = harbour.HarbourConfig(fix_hz=args.fix_hz, lidar_hz=hz, t0=args.t0)
+    if args.lidar == "3d":
+        from ..sim.harbour3d import Lidar3dConfig, simulate_harbour3d
+
+        if not 0.0 < hz <= 10.0:
+            raise ValueError("--lidar 3d needs 0 < --lidar-hz <= 10 (the truth poses are at 10 Hz)")
+        log = simulate_harbour3d(args.seed, cfg, Lidar3dConfig(hz=hz), duration=args.duration, laps=args.laps)
+    else:
+        log = harbour.simulate_harbour(args.seed, cfg, duration=args.duration, laps=args.laps)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_log(log, args.out)
     emit(
         args,
         {
-            "scenario": "harbour",
+            "scenario": "harbour" if args.lidar == "2d" else "harbour3d",
             "seed": args.seed,
             "out": str(args.out),
             "records": log.counts(),

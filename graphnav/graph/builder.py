@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..geometry import increment
-from ..log import BeaconObs, Gnss, Heading, KnownBeacon, Odometry, PosePrior, Record, Scan, Truth
+from ..log import BeaconObs, Cloud, Gnss, Heading, KnownBeacon, Odometry, PosePrior, Record, Scan, Truth
 from .config import SmootherConfig
 from .keyframes import DEFAULT_PERIOD
 
@@ -63,8 +63,8 @@ Matcher = Callable[
 UNOBSERVED_COV = np.diag([1e4, 1e4, 10.0])
 
 #: sensor groups of the factors (the noise estimation scales ``SCALABLE`` ones)
-GROUPS = ("anchor", "odometry", "motion", "icp", "gnss", "compass", "bias", "beacon", "chart", "pose_prior")
-SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon")
+GROUPS = ("anchor", "odometry", "motion", "icp", "gnss", "compass", "bias", "beacon", "chart", "pose_prior", "cloud")
+SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon", "cloud")
 EPS = 1e-9  # [s] times closer than this are equal (as keyframes.schedule)
 MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior")
 
@@ -101,6 +101,62 @@ def default_matcher(options: dict[str, Any]) -> Matcher | None:
         return bool(r.ok) or inflated, np.asarray(r.pose, dtype=float), cov
 
     return match
+
+
+class _CloudPath:
+    """The 3D path of the builder: consecutive keyframe clouds -> GICP in levelled frames -> an SE(2)
+    between factor (group ``cloud``) with the marginal (x, y, yaw) covariance times
+    ``cloud_cov_scale`` plus a floor; gated against the odometry like the 2D matches (``icp_gate``,
+    ``icp_max_step``); z/roll/pitch of each match kept as diagnostics (docs/scan-matching-3d.md)."""
+
+    def __init__(self, cfg: SmootherConfig, lidar3d: dict[str, Any] | None) -> None:
+        self.cfg = cfg
+        self.height = float(lidar3d["mast"]) if lidar3d and "mast" in lidar3d else None
+        self.matcher: Any = None
+        self.n = self.failed = self.gated = 0
+        self.diag: list[tuple[float, float, float]] = []  # z, roll, pitch of each used match
+
+    def factor(self, b: GraphBuilder, s: Step, k: int, odo_rel: gtsam.Pose2 | None,
+               odo_cov: NDArray[np.float64] | None) -> gtsam.Pose2 | None:
+        cfg = self.cfg
+        prev = b.kf_scan.get(k - 1)
+        if not isinstance(prev, Cloud):
+            return None
+        if self.matcher is None:
+            from ..scan.cloud_match import CloudMatchConfig, CloudMatcher
+
+            self.matcher = CloudMatcher(CloudMatchConfig.from_options(dict(cfg.cloud)), self.height)
+        init = _vec(odo_rel if odo_rel is not None else b.last_rel)
+        c0 = time.perf_counter()
+        ok, mp, mc = self.matcher(b.kf_scan[k], prev, init)
+        s.icp_ms = (time.perf_counter() - c0) * 1e3
+        self.n += 1
+        floor = np.array([cfg.cloud_sigma_floor_xy] * 2 + [math.radians(cfg.cloud_sigma_floor_yaw_deg)])
+        cov = proper_cov(cfg.cloud_cov_scale * np.asarray(mc, dtype=float), floor) if ok else None
+        if (not ok or cov is None or not np.all(np.isfinite(mp))
+                or np.hypot(mp[0] - init[0], mp[1] - init[1]) > cfg.icp_max_step):
+            self.failed += 1
+            return None
+        rel = gtsam.Pose2(*mp)
+        if cfg.icp_gate is not None and odo_rel is not None and odo_cov is not None:
+            d = np.asarray(gtsam.Pose2.Logmap(odo_rel.between(rel)))
+            if float(d @ np.linalg.solve(odo_cov + cov, d)) > cfg.icp_gate**2:
+                self.gated += 1
+                return None
+        last = self.matcher.last
+        self.diag.append((last["z"], last["roll"], last["pitch"]))
+        s.add(F.icp_between(F.X(k - 1), F.X(k), mp, cov, robust=cfg.icp_robust), "cloud")
+        return rel
+
+    def info(self) -> dict[str, Any]:
+        if self.matcher is None:
+            return {}
+        d = np.array(self.diag).reshape(-1, 3)
+        rms = np.sqrt(np.mean(d**2, axis=0)) if len(d) else np.full(3, np.nan)
+        return {"cloud_pairs": self.n, "cloud_failed": self.failed, "cloud_gated": self.gated,
+                "cloud_sensor_height": self.height,
+                "cloud_dropped_rms": {"z_m": float(rms[0]), "roll_deg": float(np.degrees(rms[1])),
+                                      "pitch_deg": float(np.degrees(rms[2]))}}
 
 
 def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
@@ -149,8 +205,9 @@ class GraphBuilder:
 
     def __init__(self, cfg: SmootherConfig, *, matcher: Matcher | None = None,
                  chart: Iterable[KnownBeacon] = (), lidar: dict[str, Any] | None = None,
-                 scans: bool | None = None) -> None:
+                 scans: bool | None = None, lidar3d: dict[str, Any] | None = None) -> None:
         self.cfg = cfg
+        self.cloud3d = _CloudPath(cfg, lidar3d)  # the 3D path (clouds): graphnav.scan.cloud_match
         self.charted = {b.id: b for b in chart}
         icp_opts = dict(cfg.icp)
         for k in ("sigma_r_rel", "sigma_alpha"):  # the log's LiDAR error model, when it states one
@@ -277,7 +334,7 @@ class GraphBuilder:
                     continue
                 self.grid_i += 1
                 self._new_keyframe(ts, None)
-        if kind == "scan":
+        if kind == "scan" or (kind == "cloud" and self.cfg.use_cloud):
             if self.mode == "grid" and not self.grid_only:  # the first scan: one keyframe per scan from now on
                 self.mode = "scan"
                 self._want_matcher()
@@ -573,7 +630,9 @@ class GraphBuilder:
     def _icp(self, s: Step, k: int, odo_rel: gtsam.Pose2 | None, odo_cov: NDArray[np.float64] | None
              ) -> gtsam.Pose2 | None:
         """The weighted-ICP factor of keyframe ``k``'s scan against ``k-1``'s (``None`` when there is
-        no usable match)."""
+        no usable match); a cloud's GICP factor for clouds (:class:`_CloudPath`)."""
+        if isinstance(self.kf_scan.get(k), Cloud):
+            return self.cloud3d.factor(self, s, k, odo_rel, odo_cov)
         cfg = self.cfg
         if self.matcher is None or k not in self.kf_scan or (k - 1) not in self.kf_scan:
             return None
@@ -688,6 +747,7 @@ class GraphBuilder:
             "icp_gated": self.n_icp_gated,
             "icp": self.matcher is not None,
             "beacons": sorted(self.beacon_ids),
+            **self.cloud3d.info(),
             "compass_bias_estimated": self.bias_key is not None,
             "defaulted_sigmas": sorted(self.defaulted),
             **self.counts,

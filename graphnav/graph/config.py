@@ -81,6 +81,13 @@ class SmootherConfig:
     icp_gate: float | None = 4.0  # reject a match whose Mahalanobis distance to the odometry exceeds it
     icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.icp.IcpConfig
 
+    # -- 3D clouds (GICP, projected to SE(2); docs/scan-matching-3d.md "3D in the graph") ---------
+    use_cloud: bool = True  # one keyframe per cloud (every scan_stride-th) and a GICP factor to the previous
+    cloud_cov_scale: float = 50.0  # x GICP's Hessian covariance (harbour3d: NEES median 144, mean 218 over 3 dof)
+    cloud_sigma_floor_xy: float = 0.005  # [m] added in quadrature
+    cloud_sigma_floor_yaw_deg: float = 0.02
+    cloud: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.cloud_match.CloudMatchConfig
+
     # -- GNSS ------------------------------------------------------------------------------------
     gnss_robust: str | None = "huber"  # gross outliers are gated (online) or dropped (batch)
     gnss_k: float | None = None  # the robust kernel's threshold [sigmas] (None: huber 1.345, cauchy 2.3849)

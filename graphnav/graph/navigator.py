@@ -84,6 +84,7 @@ class Navigator:
 
     def __init__(self, config: SmootherConfig | None = None, *, chart: Iterable[KnownBeacon] = (),
                  lidar: dict[str, Any] | None = None, scans: bool | None = None, matcher: Matcher | None = None,
+                 lidar3d: dict[str, Any] | None = None,
                  on_estimate: OnEstimate | None = None, history: bool = True, **options: Any) -> None:
         if config is None:
             cfg = SmootherConfig.from_options(options)
@@ -91,7 +92,7 @@ class Navigator:
             SmootherConfig.from_options(options)  # unknown keys are an error
             cfg = replace(config, **options)
         self.cfg = cfg
-        self.builder = GraphBuilder(cfg, matcher=matcher, chart=chart, lidar=lidar, scans=scans)
+        self.builder = GraphBuilder(cfg, matcher=matcher, chart=chart, lidar=lidar, scans=scans, lidar3d=lidar3d)
         self.solver = Solver(cfg.solver, graph_params(cfg), lag=cfg.lag,
                              lm=LmSettings(cfg.lm_tol, cfg.lm_max_iterations))
         self.groups: list[str] = []  # sensor group of every factor in solver.graph
@@ -118,7 +119,10 @@ class Navigator:
     def for_log(cls, log: NavLog, config: SmootherConfig | None = None, **kw: Any) -> Navigator:
         """A navigator for ``log``: its chart, LiDAR model and whether it has scans."""
         lidar = log.meta.get("lidar") if isinstance(log.meta.get("lidar"), dict) else None
-        return cls(config, chart=log.beacons_known, lidar=lidar, scans=bool(log.of("scan")), **kw)
+        lidar3d = log.meta.get("lidar3d") if isinstance(log.meta.get("lidar3d"), dict) else None
+        scans = bool(log.of("scan")) or (bool(log.of("cloud")) and (config is None or config.use_cloud)
+                                         and kw.get("use_cloud", True))
+        return cls(config, chart=log.beacons_known, lidar=lidar, scans=scans, lidar3d=lidar3d, **kw)
 
     # -- online ----------------------------------------------------------------------------------
     def add(self, rec: Record | KnownBeacon) -> Estimate | None:

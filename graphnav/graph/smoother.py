@@ -57,6 +57,6 @@ def unmet(log: NavLog) -> str | None:
     if not len(log):
         return "the log is empty"
     kinds = log.counts()
-    if not any(kinds.get(k) for k in ("scan", "odometry", "gnss", "beacon")):
-        return "needs scans, odometry, GNSS or beacon observations"
+    if not any(kinds.get(k) for k in ("scan", "cloud", "odometry", "gnss", "beacon")):
+        return "needs scans, clouds, odometry, GNSS or beacon observations"
     return None

@@ -1,5 +1,8 @@
-"""One point cloud from one file: PLY and PCD through open3d, KITTI Velodyne ``.bin`` (float32 x, y, z,
-intensity). Returns (N, 3) float64 points; non-finite points are dropped.
+"""One point cloud from one file: PLY through open3d, PCD through pypcd4 (the ``[pcd]`` extra), KITTI
+Velodyne ``.bin`` (float32 x, y, z, intensity). Returns (N, 3) float64 points; non-finite points are
+dropped. :func:`read_cloud_record` also returns the intensity (and ``ring`` of a PCD that has one) as a
+:class:`~graphnav.log.Cloud`; :func:`read_cloud_dir` reads a folder of them (KITTI ``velodyne/``) as a
+log, one cloud per file.
 
 open3d reads leniently (a truncated binary PLY comes back full length with a warning on stdout; a
 PLY without y/z properties reads as zeros), so the header is checked here first (x, y, z present;
@@ -12,6 +15,7 @@ for the one JSON object).
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -19,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import LogError, require
+from ..log import Cloud, Limits, NavLog, check_record, make_cloud
 
 FORMATS = (".ply", ".pcd", ".bin")
 _PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
@@ -29,7 +34,17 @@ MAX_POINTS = 50_000_000  # a declared count beyond this is refused before anythi
 
 def read_cloud(path: str | os.PathLike) -> NDArray[np.float64]:
     """(N, 3) points of a ``.ply``, ``.pcd`` or KITTI ``.bin`` file (see the module doc)."""
-    path = Path(path)
+    return _read(Path(path))[0]
+
+
+def read_cloud_record(path: str | os.PathLike, t: float = 0.0) -> Cloud:
+    """One file as a :class:`~graphnav.log.Cloud` at time ``t`` (intensity from a KITTI ``.bin`` or a
+    PCD ``intensity`` field, ``ring`` from a PCD ``ring`` field; PLY: points only)."""
+    pts, inten, ring = _read(Path(path))
+    return make_cloud(t, pts, inten, ring)
+
+
+def _read(path: Path) -> tuple[NDArray[np.float64], NDArray | None, NDArray | None]:
     ext = path.suffix.lower()
     if ext not in FORMATS:
         raise LogError(f"unknown point-cloud format {path.suffix!r} (known: {', '.join(FORMATS)})", file=str(path))
@@ -38,16 +53,98 @@ def read_cloud(path: str | os.PathLike) -> NDArray[np.float64]:
         if size == 0 or size % 16:
             raise LogError(f"not a KITTI Velodyne scan: {size} bytes is not a positive multiple of 16 "
                            "(float32 x, y, z, intensity)", file=str(path))
-        pts = np.fromfile(path, dtype="<f4").reshape(-1, 4)[:, :3].astype(float)
-    else:
-        declared = _ply_count(path, size) if ext == ".ply" else _pcd_count(path, size)
-        pts = _open3d_read(path)
+        if size // 16 > MAX_POINTS:
+            raise LogError(f"{size // 16} points, more than {MAX_POINTS}", file=str(path))
+        raw = np.fromfile(path, dtype="<f4").reshape(-1, 4)
+        pts, inten, ring = raw[:, :3].astype(float), raw[:, 3], None
+    elif ext == ".ply":
+        declared = _ply_count(path, size)
+        pts, inten, ring = _open3d_read(path), None, None
         if len(pts) != declared:
             raise LogError(f"header declares {declared} points, {len(pts)} could be read", file=str(path))
-    pts = pts[np.all(np.isfinite(pts), axis=1)]
-    if len(pts) == 0:
+    else:
+        declared = _pcd_count(path, size)
+        pts, inten, ring = _pcd_read(path)
+        if len(pts) != declared:
+            raise LogError(f"header declares {declared} points, {len(pts)} could be read", file=str(path))
+    keep = np.all(np.isfinite(pts), axis=1)
+    if inten is not None:
+        inten = inten[keep]
+        if not np.all(np.isfinite(inten)):
+            inten = None  # an intensity the file does not give for every point is not kept
+    if len(pts) == 0 or not keep.any():
         raise LogError("no finite points", file=str(path))
-    return pts
+    return pts[keep], inten, None if ring is None else ring[keep]
+
+
+def _pcd_read(path: Path) -> tuple[NDArray[np.float64], NDArray | None, NDArray | None]:
+    """x, y, z (and intensity, ring when present) of a PCD through pypcd4 (the header already checked)."""
+    PointCloud = require("pypcd4", "reading PCD point-cloud files").PointCloud
+    try:
+        pc = PointCloud.from_path(path)
+        pts = pc.numpy(("x", "y", "z")).astype(float)
+        inten = pc.numpy(("intensity",))[:, 0].astype(np.float32) if "intensity" in pc.fields else None
+        ring = pc.numpy(("ring",))[:, 0] if "ring" in pc.fields else None
+    except Exception as exc:  # noqa: BLE001 - pypcd4 raises many types for a damaged file
+        raise LogError(f"cannot read PCD: {exc.__class__.__name__}: {str(exc)[:160]}", file=str(path)) from None
+    if ring is not None:
+        if not np.all(np.isfinite(ring)) or np.any(ring < 0) or np.any(ring != np.round(ring)):
+            raise LogError("ring field is not non-negative integers", file=str(path))
+        ring = ring.astype(np.int64)
+    return pts.reshape(-1, 3), inten, ring
+
+
+def read_cloud_dir(path: str | os.PathLike, *, hz: float = 10.0, limits: Limits | None = None,
+                   max_files: int = 1_000_000) -> NavLog:
+    """A folder of clouds as a log (a KITTI odometry sequence: ``velodyne/*.bin`` and ``times.txt``):
+    one ``cloud`` record per ``.bin``/``.pcd``/``.ply`` file in name order. Times come from a
+    ``times.txt`` (one number per line, one line per file) in the folder or its parent when there is
+    one, else ``i / hz`` (``meta["times"]`` says which)."""
+    path = Path(path)
+    d = path / "velodyne" if (path / "velodyne").is_dir() else path
+    files = sorted(f for f in d.iterdir() if f.suffix.lower() in FORMATS and f.is_file())
+    if not files:
+        raise LogError("no .bin, .pcd or .ply point-cloud files", file=str(d))
+    if len(files) > max_files:
+        raise LogError(f"{len(files)} files, more than {max_files}", file=str(d))
+    tfile = next((p for p in (d / "times.txt", d.parent / "times.txt", path / "times.txt") if p.is_file()), None)
+    if tfile is not None:
+        times = []
+        for i, line in enumerate(tfile.read_text(encoding="utf-8").splitlines()[: len(files) + 1], start=1):
+            if not line.strip():
+                continue
+            try:
+                v = float(line.split()[0])
+            except ValueError:
+                raise LogError(f"not a number: {line[:40]!r}", file=str(tfile), line=i, field="t") from None
+            if not math.isfinite(v):
+                raise LogError("time must be finite", file=str(tfile), line=i, field="t")
+            times.append(v)
+        if len(times) < len(files):
+            raise LogError(f"{len(times)} times for {len(files)} cloud files", file=str(tfile))
+        source = str(tfile)
+    else:
+        times = [i / hz for i in range(len(files))]
+        source = f"{hz:g} Hz (no times.txt)"
+    recs = []
+    for f, t in zip(files, times, strict=False):
+        c = read_cloud_record(f, t)
+        try:
+            check_record(c, limits)
+        except LogError as err:
+            raise err.located(file=str(f)) from None
+        recs.append(c)
+    try:
+        return NavLog(recs, [], {"source": str(path), "format": "cloud folder", "times": source,
+                                 "frame": "sensor frame (docs/conventions.md)"})
+    except LogError as err:
+        raise err.located(file=str(tfile or d)) from None
+
+
+def is_cloud_dir(path: Path) -> bool:
+    """A folder (or its ``velodyne/`` subfolder) holding point-cloud files."""
+    d = path / "velodyne" if (path / "velodyne").is_dir() else path
+    return d.is_dir() and any(f.suffix.lower() in FORMATS for f in d.iterdir())
 
 
 def _open3d_read(path: Path) -> NDArray[np.float64]:

@@ -40,8 +40,13 @@ def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None =
             from .rosbag import read_bag
 
             return read_bag(p, lenient=lenient, limits=limits, **options)
+        from .cloudfile import is_cloud_dir, read_cloud_dir
+
+        if is_cloud_dir(p):
+            return read_cloud_dir(p, limits=limits, **options)
         raise LogError("directory is neither a marina dataset (ranges.mat, angles.mat, gps.mat), an MRCLAM "
-                       "dataset (Barcodes.dat, Landmark_Groundtruth.dat) nor a ROS 2 bag (metadata.yaml)", file=str(p))
+                       "dataset (Barcodes.dat, Landmark_Groundtruth.dat), a ROS 2 bag (metadata.yaml) nor a "
+                       "folder of point clouds (.bin, .pcd, .ply; KITTI velodyne/)", file=str(p))
     if name.endswith(JSONL_SUFFIXES):
         from .jsonl import read_jsonl
 

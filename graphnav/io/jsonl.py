@@ -13,7 +13,20 @@ import numpy as np
 
 from ..errors import LogError
 from ..geodesy import LocalFrame
-from ..log import RECORD_TYPES, BeaconObs, Gnss, KnownBeacon, Limits, NavLog, Record, Scan, check_record
+from ..log import (
+    MAX_CLOUD_POINTS,
+    RECORD_TYPES,
+    BeaconObs,
+    Cloud,
+    Gnss,
+    KnownBeacon,
+    Limits,
+    NavLog,
+    Record,
+    Scan,
+    check_record,
+    make_cloud,
+)
 from .textlines import Lines, note_truncation
 
 REQUIRED: dict[str, tuple[str, ...]] = {
@@ -26,9 +39,11 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "truth": ("t", "x", "y", "yaw"),
     "pose_prior": ("t", "x", "y", "yaw", "sigma_xy", "sigma_yaw"),
     "beacon_known": ("id", "x", "y", "sigma"),
+    "cloud": ("t", "points"),
 }
 OPTIONAL: dict[str, tuple[str, ...]] = {
     "scan": ("range_max",),
+    "cloud": ("intensity", "ring", "roll", "pitch"),
     "odometry": ("sigma_v", "sigma_w"),
     "beacon": ("sigma_range", "sigma_bearing"),
 }
@@ -84,6 +99,41 @@ def _array(obj: dict, name: str) -> np.ndarray:
     return out
 
 
+def _points(obj: dict) -> np.ndarray:
+    """A cloud's ``points``: a list of ``[x, y, z]`` number triples (count bounded before converting)."""
+    v = obj.get("points")
+    if not isinstance(v, list):
+        raise LogError("expected a list of [x, y, z] triples", field="points")
+    if len(v) > MAX_CLOUD_POINTS:
+        raise LogError(f"{len(v)} points, more than {MAX_CLOUD_POINTS}", field="points")
+    for i, p in enumerate(v):
+        if not (isinstance(p, list) and len(p) == 3
+                and all(isinstance(x, int | float) and not isinstance(x, bool) for x in p)):
+            raise LogError(f"point {i} is not an [x, y, z] triple of numbers", field="points")
+    try:
+        return np.array(v, dtype=np.float64).reshape(-1, 3)
+    except OverflowError:
+        raise LogError("a coordinate is out of range", field="points") from None
+
+
+def _cloud(obj: dict) -> Cloud:
+    pts = _points(obj)
+    n = pts.shape[0]
+    inten = ring = None
+    if obj.get("intensity") is not None:
+        inten = _array(obj, "intensity")
+        if inten.size != n:
+            raise LogError(f"{inten.size} values for {n} points", field="intensity")
+    if obj.get("ring") is not None:
+        rv = obj["ring"]
+        if not isinstance(rv, list) or len(rv) != n or not all(
+                isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in rv):
+            raise LogError(f"expected {n} non-negative integers", field="ring")
+        ring = np.array(rv, dtype=np.int64) if rv else np.zeros(0, dtype=np.int64)
+    att = [_num(obj, k) if obj.get(k) is not None else math.nan for k in ("roll", "pitch")]
+    return make_cloud(_num(obj, "t"), pts, inten, ring, *att)
+
+
 def parse_record(obj: Any, frame: LocalFrame | None = None, limits: Limits | None = None
                  ) -> Record | KnownBeacon | dict:
     """Turn one decoded JSON object into a record (a ``meta`` object is returned as a dict).
@@ -111,6 +161,8 @@ def parse_record(obj: Any, frame: LocalFrame | None = None, limits: Limits | Non
             raise LogError("a scan needs 'angles' (or 'angle_min' and 'angle_increment')", field="angles")
         rmax = _num(obj, "range_max") if obj.get("range_max") is not None else math.nan
         rec: Record | KnownBeacon = Scan(_num(obj, "t"), ranges, angles, rmax)
+    elif kind == "cloud":
+        rec = _cloud(obj)
     elif kind == "gnss":
         if "x" in obj and "y" in obj:
             x, y = _num(obj, "x"), _num(obj, "y")
@@ -236,6 +288,16 @@ def record_to_obj(rec: Record | KnownBeacon) -> dict[str, Any]:
         if math.isfinite(rec.range_max):
             obj["range_max"] = rec.range_max
         return obj
+    if isinstance(rec, Cloud):
+        obj["points"] = rec.points.astype(float).tolist()
+        if rec.intensity is not None:
+            obj["intensity"] = rec.intensity.astype(float).tolist()
+        if rec.ring is not None:
+            obj["ring"] = rec.ring.tolist()
+        for k in ("roll", "pitch"):
+            if math.isfinite(getattr(rec, k)):
+                obj[k] = getattr(rec, k)
+        return obj
     for name in REQUIRED[rec.kind] + OPTIONAL.get(rec.kind, ()):
         if name == "t":
             continue
@@ -252,7 +314,8 @@ def write_jsonl(log: NavLog, path: str | Path, *, scan_decimals: int = 4) -> Non
     """Write a log as JSON Lines (gzipped when the name ends in ``.gz``).
 
     A ``meta`` line comes first, then charted beacons, then the records in time order.
-    Scan ranges/angles are rounded to ``scan_decimals`` (0.1 mm / 0.1 mrad by default).
+    Scan ranges/angles and cloud points/intensities are rounded to ``scan_decimals`` (0.1 mm /
+    0.1 mrad by default).
     """
     path = Path(path)
     with _open_text(path, "w") as fh:
@@ -270,4 +333,8 @@ def _write(log: NavLog, fh: TextIO, scan_decimals: int) -> None:
         if isinstance(rec, Scan):
             obj["ranges"] = [None if r is None else round(r, scan_decimals) for r in obj["ranges"]]
             obj["angles"] = [None if a is None else round(a, scan_decimals) for a in obj["angles"]]
+        elif isinstance(rec, Cloud):  # float32 values: 4 decimals (0.1 mm) say all they hold at < 100 m
+            obj["points"] = np.round(rec.points.astype(float), scan_decimals).tolist()
+            if rec.intensity is not None:
+                obj["intensity"] = np.round(rec.intensity.astype(float), scan_decimals).tolist()
         fh.write(json.dumps(obj, allow_nan=False, separators=(",", ":")) + "\n")

@@ -1,7 +1,10 @@
 """A compact binary log form: one ``.npz`` of column arrays, written with ``allow_pickle=False``.
 
 Layout: ``<kind>/<field>`` arrays per record type (scan beams concatenated, with
-``scan/offsets``), ``order`` (kind code of every record, in log order) so that ties in time
+``scan/offsets``; cloud points concatenated as one flat float32 ``cloud/xyz`` split by
+``cloud/offsets`` (in points), ``cloud/intensity`` float32 and ``cloud/ring`` uint16 over the same
+points, ``cloud/flags`` per cloud: bit 0 intensity given, bit 1 ring given),
+``order`` (kind code of every record, in log order) so that ties in time
 round-trip exactly, ``beacon_known/<field>``, and ``meta`` (a JSON string).
 """
 
@@ -16,13 +19,14 @@ import numpy as np
 from numpy.lib import format as npformat
 
 from ..errors import LogError
-from ..log import RECORD_TYPES, SCALAR_FIELDS, KnownBeacon, Limits, NavLog, Record, Scan, check_record
+from ..log import RECORD_TYPES, SCALAR_FIELDS, Cloud, KnownBeacon, Limits, NavLog, Record, Scan, check_record
 
 KINDS = list(RECORD_TYPES)
 FORMAT_VERSION = 1
-OPTIONAL_COLUMNS = ("range_max",)  # added after version 1 files were written: NaN when absent
+OPTIONAL_COLUMNS = ("range_max", "roll", "pitch")  # added after version 1 files were written: NaN when absent
 KNOWN_MEMBERS = frozenset(
     ["version", "order", "meta", "scan/offsets", "scan/ranges", "scan/angles"]
+    + ["cloud/offsets", "cloud/xyz", "cloud/intensity", "cloud/ring", "cloud/flags"]
     + [f"{k}/{f}" for k in KINDS for f in SCALAR_FIELDS[k]]
     + [f"beacon_known/{f}" for f in ("id", "x", "y", "sigma")])
 #: Default bound on the decoded size of the arrays a log declares [bytes]: 4 GiB, a day of 10 Hz
@@ -47,6 +51,8 @@ def write_npz(log: NavLog, path: str | Path) -> None:
             arrays["scan/offsets"] = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
             arrays["scan/ranges"] = np.concatenate([r.ranges for r in recs]).astype(np.float32)
             arrays["scan/angles"] = np.concatenate([r.angles for r in recs]).astype(np.float32)
+        if kind == "cloud":
+            _write_clouds(recs, arrays)
     if log.beacons_known:
         for name in ("id", "x", "y", "sigma"):
             vals = [getattr(b, name) for b in log.beacons_known]
@@ -55,6 +61,43 @@ def write_npz(log: NavLog, path: str | Path) -> None:
     arrays["meta"] = np.array(json.dumps(meta))
     with open(path, "wb") as fh:
         np.savez_compressed(fh, **arrays)
+
+
+def _write_clouds(recs: list[Cloud], arrays: dict[str, np.ndarray]) -> None:
+    lens = np.array([len(r) for r in recs], dtype=np.int64)
+    arrays["cloud/offsets"] = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
+    arrays["cloud/xyz"] = np.concatenate([r.points.ravel() for r in recs]).astype(np.float32)
+    flags = np.array([(r.intensity is not None) | ((r.ring is not None) << 1) for r in recs], dtype=np.int8)
+    arrays["cloud/flags"] = flags
+    if np.any(flags & 1):
+        arrays["cloud/intensity"] = np.concatenate(
+            [r.intensity if r.intensity is not None else np.zeros(len(r), np.float32) for r in recs])
+    if np.any(flags & 2):
+        arrays["cloud/ring"] = np.concatenate(
+            [r.ring if r.ring is not None else np.zeros(len(r), np.uint16) for r in recs]).astype(np.uint16)
+
+
+def _read_clouds(data: _Archive, path: Path, ts: list[float], roll: list[float], pitch: list[float]
+                 ) -> list[Record | None]:
+    """The clouds: offsets checked (rising from 0) and every array's length checked against them from
+    its header before its data is read."""
+    n = len(ts)
+    off = _get(data, "cloud/offsets", path, integer=True, length=n + 1)
+    if (off[0] != 0 or np.any(np.diff(off) < 0)):
+        raise LogError("offsets must rise from 0 to the number of points", file=str(path), field="cloud/offsets")
+    m = int(off[-1])
+    xyz = _get(data, "cloud/xyz", path, length=3 * m).astype(np.float32, copy=False).reshape(-1, 3)
+    flags = _get(data, "cloud/flags", path, integer=True, length=n)
+    inten = _get(data, "cloud/intensity", path, length=m).astype(np.float32, copy=False) if np.any(flags & 1) else None
+    ring = _get(data, "cloud/ring", path, integer=True, length=m) if np.any(flags & 2) else None
+    if ring is not None and (ring.dtype != np.uint16):
+        raise LogError(f"expected uint16, got {ring.dtype}", file=str(path), field="cloud/ring")
+    out: list[Record | None] = []
+    for i in range(n):
+        a, b = int(off[i]), int(off[i + 1])
+        out.append(Cloud(float(ts[i]), xyz[a:b], inten[a:b] if inten is not None and flags[i] & 1 else None,
+                         ring[a:b] if ring is not None and flags[i] & 2 else None, float(roll[i]), float(pitch[i])))
+    return out
 
 
 class _Archive:
@@ -176,6 +219,8 @@ def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> N
             for i in range(n):
                 recs.append(Scan(float(cols["t"][i]), rng[off[i]:off[i + 1]], ang[off[i]:off[i + 1]],
                                  float(cols["range_max"][i])))
+        elif kind == "cloud":
+            recs = _read_clouds(data, path, cols["t"], cols["roll"], cols["pitch"])
         else:
             cls = RECORD_TYPES[kind]
             for i in range(n):

@@ -16,6 +16,10 @@ Message types and what they become (details and conventions in docs/live.md, "RO
                             ``imu_heading_hz`` per topic
 ``nav_msgs/Odometry``       ``odometry``: ``v = twist.linear.x`` (forward), ``w = twist.angular.z``,
                             sigmas from the twist covariance when positive
+``sensor_msgs/PointCloud2`` ``cloud`` (sensor frame, :mod:`graphnav.log` ``Cloud``): fields ``x``,
+                            ``y``, ``z`` (any numeric type), ``intensity`` and ``ring`` when present;
+                            non-finite points dropped; a ``data`` shorter than ``height * row_step``
+                            or fields past ``point_step`` are refused before anything is read
 ``nmea_msgs/Sentence``      the NMEA decoder (:mod:`graphnav.io.nmea`), records stamped with the
                             message header time (as nmea_navsat_driver does)
 ==========================  =================================================================
@@ -42,7 +46,21 @@ import numpy as np
 from ..errors import LogError, require
 from ..geodesy import LocalFrame
 from ..geometry import wrap_angle
-from ..log import MAX_STATED_RANGE, Gnss, Heading, Imu, Limits, NavLog, Odometry, Record, Scan, check_record
+from ..log import (
+    MAX_CLOUD_POINTS,
+    MAX_STATED_RANGE,
+    Cloud,
+    Gnss,
+    Heading,
+    Imu,
+    Limits,
+    NavLog,
+    Odometry,
+    Record,
+    Scan,
+    check_record,
+    make_cloud,
+)
 from .nmea import NmeaDecoder, parse_sentence
 
 DEFAULT_GNSS_SIGMA = 3.0  # [m] NavSatFix with COVARIANCE_TYPE_UNKNOWN
@@ -53,7 +71,10 @@ KINDS = {
     "sensor_msgs/msg/Imu": "imu",
     "nav_msgs/msg/Odometry": "odometry",
     "nmea_msgs/msg/Sentence": "nmea",
+    "sensor_msgs/msg/PointCloud2": "cloud",
 }
+#: PointField datatype codes -> numpy (little-endian; ``is_bigendian`` swaps)
+POINTFIELD_DTYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
 NMEA_SENTENCE_MSG = "std_msgs/Header header\nstring sentence\n"
 
 
@@ -91,6 +112,38 @@ def yaw_of_quaternion(x: float, y: float, z: float, w: float) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
+def roll_pitch_of_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, float]:
+    """Roll and pitch (ZYX Euler angles, REP-103) of a quaternion, radians."""
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    return roll, pitch
+
+
+#: An IMU orientation at most this far in time from a cloud [s] gives the cloud's roll and pitch.
+ATTITUDE_MAX_DT = 0.05
+
+
+def attach_attitude(records: list[Record], attitude: list[tuple[float, float, float]],
+                    max_dt: float = ATTITUDE_MAX_DT) -> int:
+    """Give each cloud without an attitude the roll/pitch of the nearest IMU orientation within
+    ``max_dt`` (the IMU taken as mounted like the LiDAR); returns how many clouds got one."""
+    if not attitude:
+        return 0
+    a = np.array(sorted(attitude))
+    n = 0
+    for i, r in enumerate(records):
+        if isinstance(r, Cloud) and math.isnan(r.roll) and math.isnan(r.pitch):
+            j = int(np.clip(np.searchsorted(a[:, 0], r.t), 1, len(a) - 1)) if len(a) > 1 else 0
+            if len(a) > 1 and abs(a[j - 1, 0] - r.t) <= abs(a[j, 0] - r.t):
+                j -= 1
+            if abs(a[j, 0] - r.t) <= max_dt:
+                records[i] = replace(r, roll=float(a[j, 1]), pitch=float(a[j, 2]))
+                n += 1
+    return n
+
+
 class _Converter:
     def __init__(self, origin: tuple[float, float] | None, imu_heading_hz: float | None,
                  limits: Limits | None = None) -> None:
@@ -99,6 +152,7 @@ class _Converter:
         self.last_imu_heading: dict[str, float] = {}
         self.nmea = NmeaDecoder(self.frame, keep=False, limits=limits)
         self.counts: dict[str, int] = {}
+        self.attitude: list[tuple[float, float, float]] = []  # (t, roll, pitch) of IMU orientations
 
     def count(self, k: str) -> None:
         self.counts[k] = self.counts.get(k, 0) + 1
@@ -109,6 +163,9 @@ class _Converter:
         a = m.angle_min + m.angle_increment * np.arange(r.size)
         top = float(m.range_max)  # the sensor's stated range, when it is one a log may state
         return [Scan(t, r, a, top if 0.0 < top <= MAX_STATED_RANGE else math.nan)]
+
+    def cloud(self, m, t: float, topic: str) -> list[Record]:
+        return [pointcloud2_to_cloud(m, t)]
 
     def gnss(self, m, t: float, topic: str) -> list[Record]:
         if m.status.status < 0 or not (math.isfinite(m.latitude) and math.isfinite(m.longitude)):
@@ -131,6 +188,7 @@ class _Converter:
                            float(m.angular_velocity.z)))
         q = m.orientation
         if m.orientation_covariance[0] != -1 and (q.x or q.y or q.z or q.w):
+            self.attitude.append((t, *roll_pitch_of_quaternion(q.x, q.y, q.z, q.w)))
             if t - self.last_imu_heading.get(topic, -math.inf) >= 0.999 * self.imu_heading_dt:
                 c = m.orientation_covariance[8]
                 sigma = math.sqrt(c) if c > 0 else math.radians(DEFAULT_IMU_HEADING_SIGMA_DEG)
@@ -149,6 +207,76 @@ class _Converter:
         if self.frame is None and self.nmea.frame is not None:
             self.frame = self.nmea.frame
         return [replace(r, t=t) for r in recs]
+
+
+def pointcloud2_to_cloud(m: Any, t: float) -> Cloud:
+    """A ``sensor_msgs/PointCloud2`` as a :class:`~graphnav.log.Cloud` (see the module doc)."""
+    n = int(m.height) * int(m.width)
+    step = int(m.point_step)
+    if n > MAX_CLOUD_POINTS:
+        raise LogError(f"{n} points, more than {MAX_CLOUD_POINTS}", field="width")
+    data = np.asarray(m.data, dtype=np.uint8)
+    if n and (step <= 0 or int(m.row_step) < step * int(m.width) or data.size < int(m.row_step) * int(m.height)):
+        raise LogError(f"data holds {data.size} bytes, less than height x row_step = {int(m.height)} x "
+                       f"{int(m.row_step)} (point_step {step}, width {int(m.width)})", field="data")
+    by_name = {f.name: f for f in m.fields}
+    missing = [c for c in "xyz" if c not in by_name]
+    if missing:
+        raise LogError(f"PointCloud2 has no {', '.join(missing)} field", field="fields")
+    end = ">" if m.is_bigendian else "<"
+    names, formats, offsets = [], [], []
+    for name in ("x", "y", "z", "intensity", "ring"):
+        f = by_name.get(name)
+        if f is None:
+            continue
+        code = POINTFIELD_DTYPES.get(int(f.datatype))
+        if code is None:
+            raise LogError(f"field {name!r} has unknown datatype {f.datatype}", field="fields")
+        if int(f.offset) + np.dtype(code).itemsize > step:
+            raise LogError(f"field {name!r} at offset {f.offset} runs past point_step {step}", field="fields")
+        names.append(name)
+        formats.append(end + code)
+        offsets.append(int(f.offset))
+    dt = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": step})
+    rows = [np.frombuffer(data[r * int(m.row_step): r * int(m.row_step) + step * int(m.width)].tobytes(), dt)
+            for r in range(int(m.height))] if n else [np.zeros(0, dt)]
+    a = np.concatenate(rows)
+    pts = np.column_stack([a["x"], a["y"], a["z"]]).astype(np.float64)
+    keep = np.all(np.isfinite(pts), axis=1)
+    inten = a["intensity"][keep] if "intensity" in names else None
+    if inten is not None and not np.all(np.isfinite(inten)):
+        raise LogError("non-finite intensity of a finite point", field="intensity")
+    ring = a["ring"][keep] if "ring" in names else None
+    if ring is not None and not np.issubdtype(ring.dtype, np.integer):
+        raise LogError(f"ring must be an integer field, got {ring.dtype}", field="ring")
+    return make_cloud(t, pts[keep], inten, ring)
+
+
+def cloud_to_pointcloud2(ts: Any, c: Cloud, header: Any) -> Any:
+    """A :class:`~graphnav.log.Cloud` as an unorganised (height 1) little-endian ``PointCloud2``:
+    x, y, z float32, then intensity float32 and ring uint16 when the cloud has them."""
+    T = ts.types
+    PF = T["sensor_msgs/msg/PointField"]
+    names, formats, fields = ["x", "y", "z"], ["<f4"] * 3, []
+    if c.intensity is not None:
+        names.append("intensity")
+        formats.append("<f4")
+    if c.ring is not None:
+        names.append("ring")
+        formats.append("<u2")
+    dt = np.dtype({"names": names, "formats": formats})
+    codes = {"<f4": 7, "<u2": 4}
+    for name, fmt in zip(names, formats, strict=True):
+        fields.append(PF(name=name, offset=dt.fields[name][1], datatype=codes[fmt], count=1))
+    a = np.zeros(len(c), dt)
+    a["x"], a["y"], a["z"] = c.points[:, 0], c.points[:, 1], c.points[:, 2]
+    if c.intensity is not None:
+        a["intensity"] = c.intensity
+    if c.ring is not None:
+        a["ring"] = c.ring
+    return T["sensor_msgs/msg/PointCloud2"](
+        header=header, height=1, width=len(c), fields=fields, is_bigendian=False, point_step=dt.itemsize,
+        row_step=dt.itemsize * len(c), data=np.frombuffer(a.tobytes(), np.uint8), is_dense=True)
 
 
 def bag_topics(path: str | Path) -> dict[str, dict[str, Any]]:
@@ -231,7 +359,7 @@ def read_bag(path: str | Path, topics: dict[str, str] | None = None, *,
              imu_heading_hz: float | None = 10.0, lenient: bool = False, limits: Limits | None = None) -> NavLog:
     """Read a ROS 1/ROS 2 bag into a :class:`NavLog` (see the module docstring).
 
-    ``topics`` maps a kind (``scan``, ``gnss``, ``imu``, ``heading``, ``odometry``, ``nmea``) to a
+    ``topics`` maps a kind (``scan``, ``cloud``, ``gnss``, ``imu``, ``heading``, ``odometry``, ``nmea``) to a
     topic name. A damaged bag raises :class:`LogError` naming the file; with ``lenient`` a message
     that cannot be decoded, or gives a physically invalid record (:func:`graphnav.log.check_record`,
     ``limits``), is skipped and counted in ``meta["skipped"]``.
@@ -244,7 +372,7 @@ def read_bag(path: str | Path, topics: dict[str, str] | None = None, *,
         conns = [(c.topic, c.msgtype, c.msgcount) for c in reader.connections]
         chosen = choose_topics(conns, topics)
         handlers = {"scan": conv.scan, "gnss": conv.gnss, "imu": conv.imu, "heading": conv.imu,
-                    "odometry": conv.odometry, "nmea": conv.nmea_}
+                    "odometry": conv.odometry, "nmea": conv.nmea_, "cloud": conv.cloud}
         wanted = [c for c in reader.connections if c.topic in chosen]
         try:
             for i, (conn, ns, raw) in enumerate(reader.messages(connections=wanted)):
@@ -282,6 +410,8 @@ def read_bag(path: str | Path, topics: dict[str, str] | None = None, *,
         meta["origin"] = {"lat": conv.frame.lat0, "lon": conv.frame.lon0, "h": conv.frame.h0}
     if conv.counts:
         meta.update(conv.counts)
+    if any(isinstance(r, Cloud) for r in records):
+        meta["clouds_with_imu_attitude"] = attach_attitude(records, conv.attitude)
     if lenient:
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
@@ -303,6 +433,7 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
               nmea_sentences: list[tuple[float, str]] | None = None) -> Path:
     """Write a log as a bag: ``*.bag`` -> ROS 1, anything else -> a ROS 2 bag directory
     (``storage`` ``"sqlite3"`` or ``"mcap"``). scan -> ``/scan`` LaserScan (uniform beams needed),
+    cloud -> ``/points`` PointCloud2,
     gnss -> ``/fix`` NavSatFix, imu -> ``/imu`` Imu, heading -> ``/heading`` Imu with orientation
     only, odometry -> ``/odom`` Odometry, ``nmea_sentences`` -> ``/nmea_sentence``. For tests,
     demos and converting logs for ROS tools."""
@@ -359,6 +490,9 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
                     angle_max=float(a[-1]) if a.size else 0.0, angle_increment=inc, time_increment=0.0,
                     scan_time=0.0, range_min=0.0, range_max=float(r.max_range), ranges=ranges,
                     intensities=np.zeros(0, dtype=np.float32)))
+            elif isinstance(r, Cloud):
+                put("/points", "sensor_msgs/msg/PointCloud2", r.t,
+                    cloud_to_pointcloud2(ts, r, _header(ts, r.t, "lidar", ros1)))
             elif isinstance(r, Gnss):
                 lat, lon = frame.to_geodetic(r.x, r.y)
                 put("/fix", "sensor_msgs/msg/NavSatFix", r.t, T["sensor_msgs/msg/NavSatFix"](
