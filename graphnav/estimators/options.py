@@ -209,7 +209,13 @@ def describe(name: str) -> list[Option]:
         doc = inspect.getdoc(fuzzy_ukf) or ""
         own = [{"name": "window", "default": 30, "group": "fuzzy", "meaning": _doc_sentence(doc, "window")},
                {"name": "r_update", "default": "compound", "group": "fuzzy",
-                "meaning": "compound (R(k) adapts recursively) or scale_prior (alpha scales R_0)"}]
+                "meaning": "compound (R(k) adapts recursively) or scale_prior (alpha scales R_0)"},
+               {"name": "c_a", "default": "centered", "group": "fuzzy",
+                "meaning": "centered (C_A = the window's innovation covariance about its mean) or raw "
+                           "(eq. 17's second moment, which also books model error as sensor noise)"},
+               {"name": "mean_test", "default": 0.95 if name == "fuzzy-ukf" else None, "group": "fuzzy",
+                "meaning": "confidence level of the test of the innovations' window mean; when significant "
+                           "the predicted covariance is inflated to cover it (null: off)"}]
         if name == "fuzzy-ukf":
             own.append({"name": "bias", "default": False, "group": "fuzzy",
                         "meaning": "true: the UKF with bias states (as fuzzy-ukf-bias)"})

@@ -154,7 +154,24 @@ class UnscentedNav:
 # --- driving a filter over a log --------------------------------------------------------------
 
 Adapter = Callable[[int, NDArray, NDArray, NDArray, NDArray], NDArray]
-"""``adapter(k, idx, eps, HPH, R0_rows) -> R`` returns the measurement covariance to use."""
+"""``adapter(k, idx, eps, HPH, R0_rows) -> R`` returns the measurement covariance to use. An adapter
+may also have ``inflation(ch, HPH_diag) -> lambda`` (per channel, >= 1): the predicted covariance's
+position/velocity block is then scaled by the larger GNSS lambda and the heading by the compass one
+(:func:`inflate`) before the gate and the update."""
+
+_BLOCKS = ((np.array([0, 1]), np.array([0, 1, 2, 3])), (np.array([2]), np.array([4])))
+"""(measurement channels, the state entries they observe directly or through the dynamics)."""
+
+
+def inflate(P: NDArray, lam: NDArray) -> NDArray:
+    """``S P S`` with ``S = diag(sqrt(lambda_i))``: ``lambda`` of the GNSS channels (max of x, y) on
+    ``px, py, vx, vy``, of the compass on ``theta``, 1 on the bias states. A congruence: P stays
+    symmetric positive definite, its correlations unchanged (a fading-memory / strong-tracking
+    factor per block)."""
+    s = np.ones(P.shape[0])
+    for chans, states in _BLOCKS:
+        s[states] = math.sqrt(float(np.max(lam[chans])))
+    return P * np.outer(s, s)
 
 
 def measurement_table(log: NavLog) -> dict[str, NDArray]:
@@ -227,6 +244,7 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapt
     r0 = np.array([opts["r_gps_x"], opts["r_gps_y"], math.radians(opts["r_com_deg"])]) ** 2
     gater = InnovationGate(**{k: opts[k] for k in GATING_DEFAULTS})
     r_gate = getattr(adapter, "r_current", None)  # an adaptive R: gate with the one it holds now
+    inflation = getattr(adapter, "inflation", None)
     t, z = tab["t"], tab["z"]
     n = len(t)
     poses = np.empty((n, 3))
@@ -244,6 +262,11 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapt
         if k:
             f.predict(tab["ax"][k], tab["ay"][k], tab["wz"][k], t[k] - t[k - 1])
         m = has[k]
+        if inflation is not None and m.any():
+            lam = np.ones(3)
+            lam[m] = inflation(np.flatnonzero(m), f.P[pidx, pidx][m])
+            if np.any(lam > 1.0):
+                f.P = inflate(f.P, lam)
         if m.any() and gater.gate is not None:
             m = _gated(f, gater, float(t[k]), z[k], m, r_gate(np.flatnonzero(m)) if r_gate else r0[m])
         if m.any():

@@ -82,14 +82,36 @@ def test_table_interpolation_is_close_to_direct_evaluation():
 def test_window_covariance_is_the_recursive_mean_of_eq_17_18():
     rng = np.random.default_rng(1)
     N = 7
-    m = FuzzyCovarianceMatcher(np.ones(3), 40, window=N, r_update="scale_prior")
+    m = FuzzyCovarianceMatcher(np.ones(3), 40, window=N, r_update="scale_prior", c_a="raw")
+    mc = FuzzyCovarianceMatcher(np.ones(3), 40, window=N, r_update="scale_prior")  # c_a="centered"
     eps_hist = []
     for k in range(40):
-        eps = rng.normal(0, 2.0, 3)
+        eps = rng.normal(0.5, 2.0, 3)
         eps_hist.append(eps)
         m(k, np.arange(3), eps, np.zeros((3, 3)), np.ones(3))
+        mc(k, np.arange(3), eps, np.zeros((3, 3)), np.ones(3))
         window = np.array(eps_hist[-N:])
         np.testing.assert_allclose(m.hist["c_a"][k], np.mean(window ** 2, axis=0), rtol=1e-9)
+        if len(window) > 1:  # the sample covariance about the window mean
+            np.testing.assert_allclose(mc.hist["c_a"][k], np.var(window, axis=0, ddof=1), rtol=1e-9)
+
+
+def test_a_systematic_innovation_is_not_booked_as_sensor_noise():
+    """A slowly growing innovation mean (model error, e.g. a residual IMU bias) inflates eq. 17's
+    second moment and, through eq. 20-21, R without bound; the centred C_A keeps R at the noise."""
+    rng = np.random.default_rng(4)
+    r0 = np.array([36.0, 49.0, 1e-4])
+    n = 1500
+    raw = FuzzyCovarianceMatcher(r0, n, window=30, c_a="raw")
+    cen = FuzzyCovarianceMatcher(r0, n, window=30)
+    for k in range(n):
+        eps = rng.normal(0.0, np.sqrt(r0)) + np.array([0.05, -0.05, 5e-4]) * k  # a ramp: drift
+        raw(k, np.arange(3), eps, np.zeros((3, 3)), r0)
+        cen(k, np.arange(3), eps, np.zeros((3, 3)), r0)
+    late = slice(n // 2, None)
+    assert np.all(np.median(raw.hist["r_hat"][late] / r0, axis=0) > 10.0)
+    ratio = np.median(cen.hist["r_hat"][late] / r0, axis=0)
+    assert np.all((ratio > 0.5) & (ratio < 2.0))
 
 
 def test_compound_update_converges_to_the_true_noise_and_scale_prior_is_bounded():
@@ -119,8 +141,38 @@ def test_matched_noise_leaves_r_nearly_unchanged():
     assert np.all((ratio > 0.5) & (ratio < 2.0))
 
 
+def test_inflation_fires_on_a_significant_innovation_mean_only():
+    """White innovations matching C_T: lambda = 1 except at about the test's false-alarm rate; a
+    constant offset of 3 C_T^(1/2) / sqrt(N) and more: lambda makes H P^- H^T cover mu^2."""
+    rng = np.random.default_rng(6)
+    r0 = np.array([36.0, 49.0, 1e-4])
+    hph = 0.1 * r0
+    n, N = 3000, 30
+    m = FuzzyCovarianceMatcher(r0, n, window=N, r_update="scale_prior", mean_test=0.95)
+    fired = 0
+    for k in range(n):
+        lam = m.inflation(np.arange(3), hph)
+        fired += int(np.any(lam > 1.0)) if k >= N else 0
+        m(k, np.arange(3), rng.normal(0.0, np.sqrt(hph + r0)), np.diag(hph), r0)
+    assert fired / (n - N) < 0.2  # three channels at 5 %, serially correlated window means
+    off = 3.0 * np.sqrt((hph + r0) / N) * np.array([1.5, -2.0, 3.0])
+    m2 = FuzzyCovarianceMatcher(r0, n, window=N, r_update="scale_prior", mean_test=0.95)
+    for k in range(N):
+        m2(k, np.arange(3), off, np.diag(hph), r0)
+    lam = m2.inflation(np.arange(3), hph)
+    np.testing.assert_allclose(lam * hph, off ** 2)
+    assert np.all(FuzzyCovarianceMatcher(r0, n, window=N, mean_test=None).inflation(np.arange(3), hph) == 1.0)
+
+
 def test_bad_options_are_rejected():
     with pytest.raises(ValueError, match="r_update"):
         FuzzyCovarianceMatcher(np.ones(3), 10, r_update="sometimes")
     with pytest.raises(ValueError, match="window"):
         FuzzyCovarianceMatcher(np.ones(3), 10, window=0)
+    with pytest.raises(ValueError, match="window"):
+        FuzzyCovarianceMatcher(np.ones(3), 10, window=1)  # no covariance about the mean of one
+    FuzzyCovarianceMatcher(np.ones(3), 10, window=1, c_a="raw")
+    with pytest.raises(ValueError, match="c_a"):
+        FuzzyCovarianceMatcher(np.ones(3), 10, c_a="sometimes")
+    with pytest.raises(ValueError, match="mean_test"):
+        FuzzyCovarianceMatcher(np.ones(3), 10, mean_test=1.5)
