@@ -114,6 +114,10 @@ class Navigator:
         self._result: RunResult | None = None
         self._final: gtsam.Values | None = None
         self.extra: dict[str, Any] = {}
+        # batch with loop closures: an iSAM2 front end makes the loop decisions (candidates, gates,
+        # verification against the current estimate) exactly as the `isam2` run does, so both solve
+        # the same graph; its online estimates are also batch's incremental initial guess
+        self.front: Solver | None = None
 
     @classmethod
     def for_log(cls, log: NavLog, config: SmootherConfig | None = None, **kw: Any) -> Navigator:
@@ -175,7 +179,7 @@ class Navigator:
         return p, (world_cov(p, self.solver.marginal(key)) if self.cfg.covariances else None)
 
     def _step(self, k: int) -> Estimate | None:
-        s = self.builder.step(k, self.last_pose, self.last_cov if self.solver.online else None)
+        s = self.builder.step(k, self.last_pose, self.last_cov if self.solver.online or self.front else None)
         if s.icp_ms is not None:
             self.icp_ms.append(s.icp_ms)
         c0, p0 = time.perf_counter(), time.process_time()
@@ -184,8 +188,8 @@ class Navigator:
         if not self.solver.online:
             self.last_pose = s.values.atPose2(F.X(k))
             if loops is not None:
-                loops.stale = False  # batch: the places keep the chained guess
-            if self.cfg.batch_init == "incremental" and k + 1 >= self._next_init:
+                self._front_step(s, k, loops)
+            elif self.cfg.batch_init == "incremental" and k + 1 >= self._next_init:
                 self._initialise(k, s.t)
             return None
         try:
@@ -216,6 +220,27 @@ class Navigator:
         if self.on_estimate is not None:
             self.on_estimate(s.t, vec, cov)
         return Estimate(s.t, vec, cov, *self._kinematics(s.t, vec, prev_t, prev_p))
+
+    def _front_step(self, s: Step, k: int, loops: Any) -> None:
+        """Batch with loops: the iSAM2 front end takes the step (started with everything batch holds
+        when the first scan brings the loop closer), and the loop closer observes its estimate."""
+        try:
+            if self.front is None:
+                self.front = Solver("isam2", graph_params(self.cfg), keep_graph=False)
+                self.front.update(self.solver.graph, self.solver.initial)
+            else:
+                self.front.update(s.graph, s.values)
+            self.front.relinearize(self.cfg.isam_extra_updates)
+            if loops.stale:
+                values = self.front.current()
+                loops.refresh(lambda j: _vec(values.atPose2(F.X(j))) if values.exists(F.X(j)) else None)
+            pose = self.front.estimate(F.X(k))
+            cov = world_cov(pose, self.front.marginal(F.X(k)))
+        except SolverError as exc:
+            raise self._fail(exc, s.t) from None
+        loops.observe(k, _vec(pose), cov)
+        self.last_pose, self.last_cov = pose, cov
+        self.extra["loop_front_end"] = "isam2"
 
     def _initialise(self, k: int, t: float) -> None:
         """Batch's incremental initial guess: LM over the graph so far from the current guess; the

@@ -66,6 +66,16 @@ def _ate(res, truth: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((p[:, :2] - truth[:, :2]) ** 2, axis=1))))
 
 
+def test_batch_solves_the_graph_isam2_closes():
+    # one front end: batch's loop decisions come from the same iSAM2 estimates as the isam2 run's,
+    # so both solve the same graph and reach the same optimum
+    log, truth = _loop_log(seed=1)
+    on = _run(log, use_icp=False)
+    ba = _run(log, use_icp=False, solver="batch")
+    assert ba.info["loop_edges"] == on.info["loop_edges"] and len(on.info["loop_edges"]) >= 5
+    np.testing.assert_allclose(ba.trajectory.poses, on.trajectory.poses, atol=1e-4)
+
+
 def test_synthetic_loop_is_closed_with_bounded_error():
     log, truth = _loop_log(seed=1)
     on = _run(log, use_icp=False)  # odometry only: the drift is the loops' to remove
