@@ -182,7 +182,7 @@ class _CloudPath:
         last = self.matcher.last
         self.diag.append((last["z"], last["roll"], last["pitch"]))
         s.add(F.icp_between(F.X(k - 1), F.X(k), mp, cov, robust=cfg.icp_robust), "cloud")
-        b._icp_cov = cov  # the motion's fused covariance (step) uses it, as for a 2D match
+        b._icp_cov = cov  # the newest accepted match's covariance (the step's fused motion covariance)
         return rel
 
     def info(self) -> dict[str, Any]:

@@ -12,8 +12,9 @@ the graph").
    is a point on the sea surface: it moves with the waves and is no landmark.
 3. **GICP** (small_gicp, as :func:`graphnav.scan.register3d.register` runs it: voxel-downsampled
    points, ``knn`` covariances; each cloud is preprocessed once and kept as the next target) from
-   the prediction (odometry, as a planar 4x4), giving ``T_prev_cur`` (levelled frames) and the 6x6
-   covariance ``s^2 H^-1`` (register3d's convention: delta = (omega, v) in the current, source,
+   the prediction (odometry, as a planar 4x4), giving ``T_prev_cur`` (levelled frames); the 6x6
+   covariance from the match's own residuals (:func:`match_covariance`: a cluster-robust sandwich
+   plus the voxel quantisation; register3d's convention: delta = (omega, v) in the current, source,
    frame, right perturbation -- the tangent of a Pose3 between factor).
 4. **SE(2) projection**: ``(x, y, yaw)`` of ``T`` (translation and the rotation's heading) and the
    marginal covariance of ``(v_x, v_y, omega_z)`` -- the sub-block of the 6x6 covariance, which is
