@@ -140,9 +140,10 @@ def scan_points_of(scan: Scan, icfg: Any) -> NDArray[np.float64]:
 
 class _CloudPath:
     """The 3D path of the builder: consecutive keyframe clouds -> GICP in levelled frames -> an SE(2)
-    between factor (group ``cloud``) with the marginal (x, y, yaw) covariance times
-    ``cloud_cov_scale`` plus a floor; gated against the odometry like the 2D matches (``icp_gate``,
-    ``icp_max_step``); z/roll/pitch of each match kept as diagnostics (docs/scan-matching-3d.md)."""
+    between factor (group ``cloud``) with the marginal (x, y, yaw) of the match's own sandwich
+    covariance (:func:`graphnav.scan.cloud_match.match_covariance`, not scaled) plus a floor; gated
+    against the odometry like the 2D matches (``icp_gate``, ``icp_max_step``); z/roll/pitch of each
+    match kept as diagnostics (docs/scan-matching-3d.md)."""
 
     def __init__(self, cfg: SmootherConfig, lidar3d: dict[str, Any] | None) -> None:
         self.cfg = cfg
@@ -167,7 +168,7 @@ class _CloudPath:
         s.icp_ms = (time.perf_counter() - c0) * 1e3
         self.n += 1
         floor = np.array([cfg.cloud_sigma_floor_xy] * 2 + [math.radians(cfg.cloud_sigma_floor_yaw_deg)])
-        cov = proper_cov(cfg.cloud_cov_scale * np.asarray(mc, dtype=float), floor) if ok else None
+        cov = proper_cov(np.asarray(mc, dtype=float), floor) if ok else None
         if (not ok or cov is None or not np.all(np.isfinite(mp))
                 or np.hypot(mp[0] - init[0], mp[1] - init[1]) > cfg.icp_max_step):
             self.failed += 1

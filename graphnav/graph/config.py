@@ -87,7 +87,7 @@ class SmootherConfig:
 
     # -- 3D clouds (GICP, projected to SE(2); docs/scan-matching-3d.md "3D in the graph") ---------
     use_cloud: bool = True  # one keyframe per cloud (every scan_stride-th) and a GICP factor to the previous
-    cloud_cov_scale: float = 50.0  # x GICP's Hessian covariance (harbour3d: NEES median 144, mean 218 over 3 dof)
+    # the cloud factor's covariance is the match's own (cloud_match.match_covariance), not scaled
     cloud_sigma_floor_xy: float = 0.005  # [m] added in quadrature
     cloud_sigma_floor_yaw_deg: float = 0.02
     cloud: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.cloud_match.CloudMatchConfig

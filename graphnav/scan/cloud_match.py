@@ -12,8 +12,9 @@ the graph").
    is a point on the sea surface: it moves with the waves and is no landmark.
 3. **GICP** (small_gicp, as :func:`graphnav.scan.register3d.register` runs it: voxel-downsampled
    points, ``knn`` covariances; each cloud is preprocessed once and kept as the next target) from
-   the prediction (odometry, as a planar 4x4), giving ``T_prev_cur`` (levelled frames) and the 6x6
-   covariance ``s^2 H^-1`` (register3d's convention: delta = (omega, v) in the current, source,
+   the prediction (odometry, as a planar 4x4), giving ``T_prev_cur`` (levelled frames); the 6x6
+   covariance from the match's own residuals (:func:`match_covariance`: a cluster-robust sandwich
+   plus the voxel quantisation; register3d's convention: delta = (omega, v) in the current, source,
    frame, right perturbation -- the tangent of a Pose3 between factor).
 4. **SE(2) projection**: ``(x, y, yaw)`` of ``T`` (translation and the rotation's heading) and the
    marginal covariance of ``(v_x, v_y, omega_z)`` -- the sub-block of the 6x6 covariance, which is
@@ -31,9 +32,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from ..log import Cloud
-from .register3d import lsq_covariance
+from .register3d import gicp_terms, sandwich_covariance
 
 IDX_SE2 = [3, 4, 2]  # (v_x, v_y, omega_z) in register3d's delta = (omega, v)
 
@@ -60,6 +62,8 @@ class CloudMatchConfig:
     threads: int = 1
     min_points: int = 100
     min_inliers: float = 0.3
+    cov_cluster: float | None = None  # cell [m] of the sandwich's clusters (None: the knn neighbourhood's)
+    cov_quantisation: bool = True  # the voxel quantisation term of the covariance
 
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> CloudMatchConfig:
@@ -119,6 +123,43 @@ def project_se2(T: NDArray[np.float64], cov6: NDArray[np.float64]
     return np.array([T[0, 3], T[1, 3], yaw]), 0.5 * (cov + cov.T), {"z": float(T[2, 3]), "roll": roll, "pitch": pitch}
 
 
+def match_covariance(s_pc: Any, t_pc: Any, t_kd: cKDTree, T: NDArray[np.float64], max_corr: float,
+                     voxel: float, cell: float, quantisation: bool = True) -> NDArray[np.float64]:
+    """The 6x6 covariance of a GICP match from the match itself (docs/scan-matching-3d.md, "Covariance"):
+    the source's points paired with their nearest target point within ``max_corr`` at ``T`` (GICP's
+    correspondences), GICP's residuals, Jacobians and weights
+    (:func:`graphnav.scan.register3d.gicp_terms`), and the sandwich
+    (:func:`graphnav.scan.register3d.sandwich_covariance`)::
+
+        cov = H^-1 B H^-1,  H = sum J' M J,  B = sum_c g_c g_c' + sum J' M (2 voxel^2 / 12 I) M J
+
+    ``g_c`` the residual score of the source points in a cell of side ``cell``
+    (:func:`neighbourhood_cell`: pairs whose target covariances share neighbours are one cluster); the
+    second term the voxel downsampling's quantisation: each point of
+    either cloud is the centroid of the returns in its voxel, an error of up to half a voxel either way
+    that the residuals of one match do not show (uniform, variance ``voxel^2 / 12`` per axis and cloud;
+    Widrow & Kollar 2008, ch. 4), independent from voxel to voxel -- the 3D counterpart of the 2D
+    matcher's sampling term (:mod:`graphnav.scan.covariance`)."""
+    sp = np.asarray(s_pc.points())[:, :3]
+    tp = np.asarray(t_pc.points())[:, :3]
+    d, idx = t_kd.query(sp @ T[:3, :3].T + T[:3, 3], distance_upper_bound=max_corr)
+    ok = np.isfinite(d)
+    if ok.sum() <= 6:
+        return np.diag(np.full(6, np.inf))
+    cs, ct = np.asarray(s_pc.covs())[ok, :3, :3], np.asarray(t_pc.covs())[idx[ok], :3, :3]
+    r, J, M = gicp_terms(sp[ok], tp[idx[ok]], T, cs, ct)
+    cells = np.floor(sp[ok] / cell).astype(np.int64)
+    groups = np.unique(cells, axis=0, return_inverse=True)[1].ravel()
+    q = np.broadcast_to(2.0 * voxel**2 / 12.0 * np.eye(3), r.shape + (3,)) if quantisation else None
+    return sandwich_covariance(J, M, r, groups, q)
+
+
+def neighbourhood_cell(kd: cKDTree, knn: int) -> float:
+    """The median diameter of a cloud's ``knn`` neighbourhoods (twice the distance to the knn-th
+    neighbour): the extent over which GICP's local covariances, and so the residuals, are shared."""
+    return 2.0 * float(np.median(kd.query(kd.data, k=[knn])[0]))
+
+
 class CloudMatcher:
     """``match(cur, prev, init) -> (usable, (x, y, yaw), 3x3 cov)``, the builder's matcher signature
     (``init`` the predicted planar motion prev -> cur); :attr:`last` holds the newest match's
@@ -138,7 +179,8 @@ class CloudMatcher:
             return None, None, stats
         pc, tree = small_gicp.preprocess_points(pts, self.cfg.voxel, num_neighbors=self.cfg.knn,
                                                 num_threads=self.cfg.threads)
-        return pc, tree, stats
+        kd = cKDTree(np.asarray(pc.points())[:, :3])
+        return pc, (tree, kd, self.cfg.cov_cluster or neighbourhood_cell(kd, self.cfg.knn)), stats
 
     def __call__(self, cur: Cloud, prev: Cloud, init: NDArray[np.float64] | None
                  ) -> tuple[bool, NDArray[np.float64], NDArray[np.float64]]:
@@ -157,10 +199,11 @@ class CloudMatcher:
             self.last = {"ok": False, "why": "too few points after the filter", "filter": stats}
             return False, nan3, np.full((3, 3), np.nan)
         T0 = planar_matrix(*init) if init is not None else np.eye(4)
-        r = small_gicp.align(t_pc, s_pc, t_tree, T0, registration_type="GICP", max_correspondence_distance=cfg.max_corr,
+        r = small_gicp.align(t_pc, s_pc, t_tree[0], T0, registration_type="GICP",
+                             max_correspondence_distance=cfg.max_corr,
                              num_threads=cfg.threads, max_iterations=cfg.max_iter)
         T = np.asarray(r.T_target_source)
-        cov6 = lsq_covariance(np.asarray(r.H), float(r.error), 3 * int(r.num_inliers))
+        cov6 = match_covariance(s_pc, t_pc, t_tree[1], T, cfg.max_corr, cfg.voxel, t_tree[2], cfg.cov_quantisation)
         pose, cov, diag = project_se2(T, cov6)
         inl = int(r.num_inliers) / max(s_pc.size(), 1)
         ok = bool(r.converged) and inl >= cfg.min_inliers and np.all(np.isfinite(cov))

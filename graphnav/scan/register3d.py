@@ -165,6 +165,55 @@ def lsq_hessian(src: NDArray, tgt: NDArray, T: ArrayLike, kind: str, tgt_normals
     return H, b, e, m
 
 
+def gicp_terms(src: NDArray, tgt: NDArray, T: ArrayLike, src_covs: NDArray, tgt_covs: NDArray
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Per pair of GICP (paired ``src[i] <-> tgt[i]``) the residual ``r = tgt - T src`` (n, 3), its
+    Jacobian ``J = [R [s]x, -R]`` in ``T exp(delta)``, delta = (omega, v) (n, 3, 6; :func:`lsq_hessian`'s)
+    and the weight ``M = (C_t + R C_s R')^-1`` (n, 3, 3)."""
+    T = np.asarray(T, dtype=float)
+    R, t = T[:3, :3], T[:3, 3]
+    n = len(src)
+    S = np.zeros((n, 3, 3))  # [s]x, vectorised
+    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -src[:, 2], src[:, 1], -src[:, 0]
+    S -= S.transpose(0, 2, 1)
+    J = np.zeros((n, 3, 6))
+    J[:, :, :3] = R @ S
+    J[:, :, 3:] = -R
+    M = np.linalg.inv(tgt_covs + R @ src_covs @ R.T)
+    return tgt - (src @ R.T + t), J, M
+
+
+def sandwich_covariance(J: NDArray, M: NDArray, r: NDArray, groups: NDArray | None = None,
+                        extra: NDArray | None = None) -> NDArray[np.float64]:
+    """Cluster-robust sandwich covariance of the M-weighted least-squares estimate (Huber 1967; White
+    1980; Liang & Zeger 1986 for clusters): ``H^-1 B H^-1`` with ``H = sum J' M J`` and
+    ``B = G/(G-1) sum_c g_c g_c'``, ``g_c = sum_{i in c} J_i' M_i r_i`` the score of cluster ``c`` (``groups``
+    an integer label per pair; None: each pair its own cluster) and G the number of clusters. For iid
+    residuals of variance ``s^2`` and M = I its expectation is ``s^2 H^-1`` (tests/scan/test_register3d.py).
+    ``extra`` (n, d, d): per-pair error covariances the residuals cannot show (independent across pairs),
+    added to B as ``sum J' M S M J``. ``J`` (n, d, p), ``M`` (n, d, d), ``r`` (n, d)."""
+    MJ = M @ J
+    p = J.shape[2]
+    H = J.reshape(-1, p).T @ MJ.reshape(-1, p)
+    g = np.einsum("naj,na->nj", MJ, r)
+    if groups is not None:
+        _, inv = np.unique(groups, return_inverse=True)
+        gc = np.zeros((int(inv.max()) + 1 if len(inv) else 0, g.shape[1]))
+        np.add.at(gc, inv.ravel(), g)
+        g = gc
+    G = len(g)
+    if G <= H.shape[0]:
+        return np.diag(np.full(H.shape[0], np.inf))
+    B = G / (G - 1.0) * (g.T @ g)
+    if extra is not None:
+        B = B + MJ.reshape(-1, p).T @ (extra @ MJ).reshape(-1, p)
+    w, V = np.linalg.eigh(0.5 * (H + H.T))
+    w = np.maximum(w, 1e-12 * max(float(w.max()), 1e-300))
+    Hi = (V / w) @ V.T
+    C = Hi @ B @ Hi
+    return 0.5 * (C + C.T)
+
+
 def lsq_covariance(H: NDArray, e: float, m: int) -> NDArray[np.float64]:
     """``s^2 H^-1`` with ``s^2 = 2 e / (m - 6)``; an unconstrained direction gets a huge variance."""
     if m <= 6 or not e > 0:

@@ -10,11 +10,13 @@ from _cloud_sim import apply, find_kitti, pair, rigid
 
 from graphnav.scan.register3d import (
     METHODS,
+    gicp_terms,
     lsq_covariance,
     lsq_hessian,
     plane_covariances,
     pose_error,
     register,
+    sandwich_covariance,
     xyzrpy_matrix,
 )
 
@@ -172,3 +174,48 @@ def test_kitti_pair_every_other_method(kitti, method):
     src, tgt, ref = kitti
     dt, dr = pose_error(register(src, tgt, method).T, ref)
     assert dt < 0.1 and dr < 1.0, (dt, dr)
+
+
+# ----------------------------------------------------------------------------- the sandwich
+
+
+def test_gicp_terms_give_lsq_hessians_h():
+    rng = np.random.default_rng(4)
+    s, t = rng.normal(0, 5, (200, 3)), rng.normal(0, 5, (200, 3))
+    nrm = rng.normal(size=(200, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    covs = plane_covariances(np.einsum("na,nb->nab", nrm, nrm) + 1e-3 * np.eye(3))
+    T = xyzrpy_matrix(0.3, -0.2, 0.1, 0.05, -0.02, 0.4)
+    r, J, M = gicp_terms(s, t, T, covs, covs)
+    H = np.einsum("nai,nab,nbj->ij", J, M, J)
+    H_ref, b_ref, _, _ = lsq_hessian(s, t, T, "gicp", src_covs=covs, tgt_covs=covs)
+    assert np.allclose(H, H_ref) and np.allclose(np.einsum("nai,nab,nb->i", J, M, r), b_ref)
+
+
+def test_sandwich_of_iid_residuals_is_s2_h_inverse():
+    """Closed form: for iid residuals of variance s^2 (M = I) E[B] = s^2 H, so the sandwich's mean is
+    s^2 H^-1 (times G/(G-1)); averaged over draws it matches to a few per cent. One pair per cluster
+    equals no clusters."""
+    rng = np.random.default_rng(5)
+    n, s = 400, 0.03
+    J = rng.normal(size=(n, 3, 6))
+    M = np.broadcast_to(np.eye(3), (n, 3, 3))
+    H = np.einsum("nai,naj->ij", J, J)
+    ref = s**2 * np.linalg.inv(H) * n / (n - 1)
+    mean = np.mean([sandwich_covariance(J, M, rng.normal(0, s, (n, 3))) for _ in range(400)], axis=0)
+    assert np.linalg.norm(mean - ref) < 0.03 * np.linalg.norm(ref)
+    r = rng.normal(0, s, (n, 3))
+    one_each = sandwich_covariance(J, M, r, rng.permutation(n))
+    assert np.allclose(sandwich_covariance(J, M, r), one_each, rtol=1e-9, atol=0)
+    # fully correlated clusters of k pairs with equal Jacobians: the variance grows k-fold
+    k = 4
+    Jc, rc = np.repeat(J[:100], k, axis=0), np.repeat(r[:100], k, axis=0)
+    Mc = np.broadcast_to(np.eye(3), (100 * k, 3, 3))
+    C1 = sandwich_covariance(J[:100], M[:100], r[:100])
+    Ck = sandwich_covariance(Jc, Mc, rc, np.repeat(np.arange(100), k))
+    assert np.allclose(Ck, C1, rtol=1e-9, atol=0)  # H k-fold, each cluster's score k-fold: B k^2-fold
+    iid = sandwich_covariance(Jc, Mc, rc)  # taken as independent: k times too confident
+    assert np.allclose(iid, C1 / k * (100 * k / (100 * k - 1)) / (100 / 99), rtol=1e-9, atol=0)
+    # the extra term: S_i = s^2 I with zero residuals gives s^2 H^-1 exactly (M = I)
+    S = np.broadcast_to(s**2 * np.eye(3), (n, 3, 3))
+    assert np.allclose(sandwich_covariance(J, M, np.zeros((n, 3)), None, S), s**2 * np.linalg.inv(H), rtol=1e-9, atol=0)
