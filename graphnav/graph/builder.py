@@ -138,6 +138,21 @@ def scan_points_of(scan: Scan, icfg: Any) -> NDArray[np.float64]:
     return scan_points(scan, icfg)
 
 
+def screen_match(cfg: SmootherConfig, ok: bool, mp: Any, cov: NDArray[np.float64] | None, init: NDArray[np.float64],
+                 odo_rel: gtsam.Pose2 | None, odo_cov: NDArray[np.float64] | None) -> str | None:
+    """Whether a scan or cloud match becomes a factor: ``"failed"`` (not usable, no proper
+    covariance, not finite, or farther than ``icp_max_step`` from the guess), ``"gated"`` (beyond
+    ``icp_gate`` Mahalanobis units of ``odo_cov + cov`` from the odometry increment) or None (kept)."""
+    if (not ok or cov is None or not np.all(np.isfinite(mp))
+            or np.hypot(mp[0] - init[0], mp[1] - init[1]) > cfg.icp_max_step):
+        return "failed"
+    if cfg.icp_gate is not None and odo_rel is not None and odo_cov is not None:
+        d = np.asarray(gtsam.Pose2.Logmap(odo_rel.between(gtsam.Pose2(*mp))))
+        if float(d @ np.linalg.solve(odo_cov + cov, d)) > cfg.icp_gate**2:
+            return "gated"
+    return None
+
+
 class _CloudPath:
     """The 3D path of the builder: consecutive keyframe clouds -> GICP in levelled frames -> an SE(2)
     between factor (group ``cloud``) with the marginal (x, y, yaw) of the match's own sandwich
@@ -169,16 +184,12 @@ class _CloudPath:
         self.n += 1
         floor = np.array([cfg.cloud_sigma_floor_xy] * 2 + [math.radians(cfg.cloud_sigma_floor_yaw_deg)])
         cov = proper_cov(np.asarray(mc, dtype=float), floor) if ok else None
-        if (not ok or cov is None or not np.all(np.isfinite(mp))
-                or np.hypot(mp[0] - init[0], mp[1] - init[1]) > cfg.icp_max_step):
-            self.failed += 1
+        verdict = screen_match(cfg, ok, mp, cov, init, odo_rel, odo_cov)
+        if verdict is not None:
+            self.failed += verdict == "failed"
+            self.gated += verdict == "gated"
             return None
         rel = gtsam.Pose2(*mp)
-        if cfg.icp_gate is not None and odo_rel is not None and odo_cov is not None:
-            d = np.asarray(gtsam.Pose2.Logmap(odo_rel.between(rel)))
-            if float(d @ np.linalg.solve(odo_cov + cov, d)) > cfg.icp_gate**2:
-                self.gated += 1
-                return None
         last = self.matcher.last
         self.diag.append((last["z"], last["roll"], last["pitch"]))
         s.add(F.icp_between(F.X(k - 1), F.X(k), mp, cov, robust=cfg.icp_robust), "cloud")
@@ -715,16 +726,12 @@ class GraphBuilder:
         s.icp_ms = (time.perf_counter() - c0) * 1e3
         self.n_icp += 1
         cov = proper_cov(np.asarray(mc, dtype=float), np.zeros(3)) if ok else None  # the match's own, as is
-        if (not ok or cov is None or not np.all(np.isfinite(mp))
-                or np.hypot(mp[0] - init[0], mp[1] - init[1]) > cfg.icp_max_step):
-            self.n_icp_failed += 1
+        verdict = screen_match(cfg, ok, mp, cov, init, odo_rel, odo_cov)
+        if verdict is not None:
+            self.n_icp_failed += verdict == "failed"
+            self.n_icp_gated += verdict == "gated"
             return None
         rel = gtsam.Pose2(*mp)
-        if cfg.icp_gate is not None and odo_rel is not None and odo_cov is not None:
-            d = np.asarray(gtsam.Pose2.Logmap(odo_rel.between(rel)))
-            if float(d @ np.linalg.solve(odo_cov + cov, d)) > cfg.icp_gate**2:
-                self.n_icp_gated += 1
-                return None
         s.add(F.icp_between(F.X(k - 1), F.X(k), mp, cov, robust=cfg.icp_robust), "icp")
         self._icp_cov = cov
         return rel

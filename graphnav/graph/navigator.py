@@ -192,16 +192,7 @@ class Navigator:
             elif self.cfg.batch_init == "incremental" and k + 1 >= self._next_init:
                 self._initialise(k, s.t)
             return None
-        try:
-            if loops is not None and loops.stale:  # a loop moved the graph: the places' new estimates
-                values = self.solver.current()
-                loops.refresh(lambda j: _vec(values.atPose2(F.X(j))) if values.exists(F.X(j)) else None)
-            pose = self.solver.estimate(F.X(k))
-            cov = world_cov(pose, self.solver.marginal(F.X(k)))
-        except SolverError as exc:
-            raise self._fail(exc, s.t) from None
-        if loops is not None:
-            loops.observe(k, _vec(pose), cov)
+        pose, cov = self._newest(self.solver, k, s.t, loops)
         self.step_ms.append((time.perf_counter() - c0) * 1e3)
         self.step_cpu.append((time.process_time() - p0) * 1e3)
         prev_t, prev_p = self._prev
@@ -221,6 +212,22 @@ class Navigator:
             self.on_estimate(s.t, vec, cov)
         return Estimate(s.t, vec, cov, *self._kinematics(s.t, vec, prev_t, prev_p))
 
+    def _newest(self, solver: Solver, k: int, t: float, loops: Any) -> tuple[gtsam.Pose2, NDArray[np.float64]]:
+        """The newest pose's online estimate and world covariance from an incremental ``solver``;
+        the loop closer (if any) first gets its places re-estimated when a loop moved the graph,
+        then observes that pose."""
+        try:
+            if loops is not None and loops.stale:
+                values = solver.current()
+                loops.refresh(lambda j: _vec(values.atPose2(F.X(j))) if values.exists(F.X(j)) else None)
+            pose = solver.estimate(F.X(k))
+            cov = world_cov(pose, solver.marginal(F.X(k)))
+        except SolverError as exc:
+            raise self._fail(exc, t) from None
+        if loops is not None:
+            loops.observe(k, _vec(pose), cov)
+        return pose, cov
+
     def _front_step(self, s: Step, k: int, loops: Any) -> None:
         """Batch with loops: the iSAM2 front end takes the step (started with everything batch holds
         when the first scan brings the loop closer), and the loop closer observes its estimate."""
@@ -231,15 +238,9 @@ class Navigator:
             else:
                 self.front.update(s.graph, s.values)
             self.front.relinearize(self.cfg.isam_extra_updates)
-            if loops.stale:
-                values = self.front.current()
-                loops.refresh(lambda j: _vec(values.atPose2(F.X(j))) if values.exists(F.X(j)) else None)
-            pose = self.front.estimate(F.X(k))
-            cov = world_cov(pose, self.front.marginal(F.X(k)))
         except SolverError as exc:
             raise self._fail(exc, s.t) from None
-        loops.observe(k, _vec(pose), cov)
-        self.last_pose, self.last_cov = pose, cov
+        self.last_pose, self.last_cov = self._newest(self.front, k, s.t, loops)
         self.extra["loop_front_end"] = "isam2"
 
     def _initialise(self, k: int, t: float) -> None:
