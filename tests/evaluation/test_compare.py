@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from _compare_cli import run_compare
 from _polyworld import synthetic_log
 
 from graphnav import estimators
@@ -109,23 +110,10 @@ def test_plot_errors_are_the_report_errors(log):
 
 @pytest.fixture(scope="module")
 def cli_run(log, tmp_path_factory):
-    d = tmp_path_factory.mktemp("cmp")
-    path = d / "poly.jsonl"
-    save_log(log, path)
-    out = d / "out"
-    with pytest.MonkeyPatch.context() as mp:
-        for k, v in FAKES.items():
-            mp.setitem(estimators.registry(), k, v)
-        import contextlib
-        import io
-
-        buf = io.StringIO()
-        with contextlib.redirect_stdout(buf):
-            # explicit names keep this test's cost independent of how many estimators exist;
-            # discovery is covered by test_compare_runs_every_runnable_estimator_once
-            rc = main(["compare", str(path), "--out", str(out), "--json", "-O", "fake-smoother.lag=7",
-                       "-e", "dead-reckoning,scan-to-map,fake-smoother,zz-boom"])
-    return rc, buf.getvalue(), out, path
+    # explicit names keep this test's cost independent of how many estimators exist;
+    # discovery is covered by test_compare_runs_every_runnable_estimator_once
+    return run_compare(log, tmp_path_factory.mktemp("cmp"), FAKES,
+                       ["-O", "fake-smoother.lag=7", "-e", "dead-reckoning,scan-to-map,fake-smoother,zz-boom"])
 
 
 def test_cli_json_is_one_object_with_the_issue_keys(cli_run):

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _compare_cli import run_compare
 from _polyworld import synthetic_log
 
 from graphnav import estimators
@@ -47,19 +48,9 @@ NAMES = "dead-reckoning,flagging,zz-boom,ukf"
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    d = tmp_path_factory.mktemp("rep")
-    log = synthetic_log(30)
-    path = d / "poly.jsonl"
-    save_log(log, path)
-    out = d / "out"
-    with pytest.MonkeyPatch.context() as mp:
-        for k, v in FAKES.items():
-            mp.setitem(estimators.registry(), k, v)
-        buf = io.StringIO()
-        with contextlib.redirect_stdout(buf):
-            rc = main(["compare", str(path), "--out", str(out), "--json", "-e", NAMES])
+    rc, stdout, out, path = run_compare(synthetic_log(30), tmp_path_factory.mktemp("rep"), FAKES, ["-e", NAMES])
     assert rc == 0
-    return json.loads(buf.getvalue()), out, path
+    return json.loads(stdout), out, path
 
 
 def test_skipped_estimator_is_a_row_saying_why(run):
