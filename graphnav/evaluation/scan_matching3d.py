@@ -146,6 +146,28 @@ def _chain_to_rels(poses: list[NDArray]) -> list[NDArray]:
     return out
 
 
+def _odometry_loop(pts: list[NDArray], voxel: float, knn: int, align: Any, vmap: Any) -> tuple[list, list]:
+    """The scan-to-map loop both variants share: each frame voxel-downsampled (GICP covariances),
+    aligned by ``align(k, frame, guess) -> T`` from the constant-velocity prediction (not the first),
+    inserted into ``vmap`` at its estimated pose; returns the chained SE(2) increments and the ms per
+    aligned frame."""
+    import small_gicp
+
+    T, delta = np.eye(4), np.eye(4)
+    poses, ms = [], []
+    for k, p in enumerate(pts):
+        c0 = time.perf_counter()
+        pc, _ = small_gicp.preprocess_points(p, voxel, num_neighbors=knn, num_threads=1)
+        if k:
+            new = align(k, pc, T @ delta)
+            delta, T = np.linalg.inv(T) @ new, new
+        vmap.insert(pc, T)
+        if k:
+            ms.append((time.perf_counter() - c0) * 1e3)
+        poses.append(T.copy())
+    return _chain_to_rels(poses), ms
+
+
 def _s2m(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr: float) -> tuple[list, list]:
     """Scan-to-map: each frame (voxel-downsampled, GICP covariances) VGICP-aligned to a voxel-hashed
     local map of the frames before it (inserted at their estimated poses; voxels unseen for 20
@@ -154,22 +176,12 @@ def _s2m(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr:
 
     vmap = small_gicp.GaussianVoxelMap(map_voxel)
     vmap.set_lru(horizon=20, clear_cycle=10)
-    T, delta = np.eye(4), np.eye(4)
-    poses, ms = [], []
-    for k, p in enumerate(pts):
-        c0 = time.perf_counter()
-        pc, _ = small_gicp.preprocess_points(p, voxel, num_neighbors=knn, num_threads=1)
-        if k:
-            guess = T @ delta
-            r = small_gicp.align(vmap, pc, guess, max_correspondence_distance=max_corr, num_threads=1,
-                                 max_iterations=30)
-            new = np.asarray(r.T_target_source)
-            delta, T = np.linalg.inv(T) @ new, new
-        vmap.insert(pc, T)
-        if k:
-            ms.append((time.perf_counter() - c0) * 1e3)
-        poses.append(T.copy())
-    return _chain_to_rels(poses), ms
+
+    def align(k: int, pc: Any, guess: NDArray) -> NDArray:
+        r = small_gicp.align(vmap, pc, guess, max_correspondence_distance=max_corr, num_threads=1, max_iterations=30)
+        return np.asarray(r.T_target_source)
+
+    return _odometry_loop(pts, voxel, knn, align, vmap)
 
 
 def _s2m_gicp(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr: float, rebuild: int = 10,
@@ -180,26 +192,19 @@ def _s2m_gicp(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_
 
     vm = small_gicp.IncrementalVoxelMapCov(map_voxel)
     vm.set_lru(horizon=horizon, clear_cycle=10)
-    T, delta = np.eye(4), np.eye(4)
-    target = tree = None
-    poses, ms = [], []
-    for k, p in enumerate(pts):
-        c0 = time.perf_counter()
-        pc, _ = small_gicp.preprocess_points(p, voxel, num_neighbors=knn, num_threads=1)
-        if k:
-            if target is None or k % rebuild == 1:
-                target = small_gicp.PointCloud(np.asarray(vm.voxel_points())[:, :3])
-                tree = small_gicp.KdTree(target)
-                small_gicp.estimate_normals_covariances(target, tree, num_neighbors=knn)
-            r = small_gicp.align(target, pc, tree, T @ delta, registration_type="GICP",
-                                 max_correspondence_distance=max_corr, num_threads=1, max_iterations=30)
-            new = np.asarray(r.T_target_source)
-            delta, T = np.linalg.inv(T) @ new, new
-        vm.insert(pc, T)
-        if k:
-            ms.append((time.perf_counter() - c0) * 1e3)
-        poses.append(T.copy())
-    return _chain_to_rels(poses), ms
+    built: list[Any] = []  # (target, tree), rebuilt every `rebuild` frames
+
+    def align(k: int, pc: Any, guess: NDArray) -> NDArray:
+        if not built or k % rebuild == 1:
+            target = small_gicp.PointCloud(np.asarray(vm.voxel_points())[:, :3])
+            tree = small_gicp.KdTree(target)
+            small_gicp.estimate_normals_covariances(target, tree, num_neighbors=knn)
+            built[:] = [target, tree]
+        r = small_gicp.align(built[0], pc, built[1], guess, registration_type="GICP",
+                             max_correspondence_distance=max_corr, num_threads=1, max_iterations=30)
+        return np.asarray(r.T_target_source)
+
+    return _odometry_loop(pts, voxel, knn, align, vm)
 
 
 def _kiss(pts: list[NDArray], max_range: float) -> tuple[list, list]:
