@@ -186,10 +186,11 @@ class Navigator:
         self._update(s)
         loops = self.builder.loops
         if not self.solver.online:
-            self.last_pose = s.values.atPose2(F.X(k))
-            if loops is not None:
+            if loops is not None:  # the front end's estimate is the next keyframe's guess
                 self._front_step(s, k, loops)
-            elif self.cfg.batch_init == "incremental" and k + 1 >= self._next_init:
+                return None
+            self.last_pose = s.values.atPose2(F.X(k))
+            if self.cfg.batch_init == "incremental" and k + 1 >= self._next_init:
                 self._initialise(k, s.t)
             return None
         pose, cov = self._newest(self.solver, k, s.t, loops)
