@@ -139,13 +139,63 @@ class Odometry:
 
 @dataclass(frozen=True, slots=True)
 class Imu:
-    """Body-frame accelerations ``ax`` (forward), ``ay`` (left) [m/s^2] and yaw rate ``wz`` [rad/s]."""
+    """An IMU sample in the body frame (x forward, y left, z up): accelerations ``ax``, ``ay``,
+    ``az`` [m/s^2] and angular rates ``wx``, ``wy``, ``wz`` [rad/s], each the mean over the interval
+    since the previous sample.
+
+    The planar 3-axis record (``ax``, ``ay``, ``wz``; ``az``, ``wx``, ``wy`` NaN) is the horizontal
+    specific force, gravity removed and levelled; a 6-axis record (all finite) is the raw specific
+    force of a strapdown IMU, gravity included (``az`` ~ +9.81 at rest, REP-103).
+    """
 
     t: float
     ax: float
     ay: float
     wz: float
+    az: float = math.nan
+    wx: float = math.nan
+    wy: float = math.nan
     kind: ClassVar[str] = "imu"
+
+    @property
+    def six_axis(self) -> bool:
+        """Whether the record carries all six axes (else it is the planar 3-axis record)."""
+        return not (math.isnan(self.az) or math.isnan(self.wx) or math.isnan(self.wy))
+
+
+@dataclass(frozen=True, slots=True)
+class GnssVelocity:
+    """GNSS velocity over ground in the local frame: ``vx`` east, ``vy`` north [m/s] (Doppler, or
+    SOG/COG of RMC/VTG converted), ``sigma`` the 1-sigma per axis [m/s] (NaN: not given)."""
+
+    t: float
+    vx: float
+    vy: float
+    sigma: float = math.nan
+    kind: ClassVar[str] = "gnss_velocity"
+
+
+@dataclass(frozen=True, slots=True)
+class WaterSpeed:
+    """Speed **through water** along the bow ``v`` [m/s] (a speed log, VHW; negative astern);
+    ``sigma_v`` its 1-sigma [m/s] (NaN: not given). Over ground it differs by the water current."""
+
+    t: float
+    v: float
+    sigma_v: float = math.nan
+    kind: ClassVar[str] = "water_speed"
+
+
+@dataclass(frozen=True, slots=True)
+class Attitude:
+    """Roll and pitch [rad] of the body (REP-103: roll about x, pitch about y, bow down positive),
+    ``sigma`` their 1-sigma [rad] (NaN: not given)."""
+
+    t: float
+    roll: float
+    pitch: float
+    sigma: float = math.nan
+    kind: ClassVar[str] = "attitude"
 
 
 @dataclass(frozen=True, slots=True)
@@ -199,9 +249,16 @@ class KnownBeacon:
     kind: ClassVar[str] = "beacon_known"
 
 
-Record = Scan | Gnss | Heading | Odometry | Imu | BeaconObs | Truth | PosePrior | Cloud
+Record = (Scan | Gnss | Heading | Odometry | Imu | BeaconObs | Truth | PosePrior | Cloud | GnssVelocity | WaterSpeed
+          | Attitude)
 RECORD_TYPES: dict[str, type] = {  # new types go last: the npz format stores their index
-    c.kind: c for c in (Scan, Gnss, Heading, Odometry, Imu, BeaconObs, Truth, PosePrior, Cloud)
+    c.kind: c for c in (Scan, Gnss, Heading, Odometry, Imu, BeaconObs, Truth, PosePrior, Cloud, GnssVelocity,
+                        WaterSpeed, Attitude)
+}
+#: scalar fields that a record may leave out (NaN): readers of older files fill them with NaN
+OPTIONAL_SCALARS: dict[str, tuple[str, ...]] = {
+    k: tuple(f.name for f in fields(c) if isinstance(f.default, float) and math.isnan(f.default))
+    for k, c in RECORD_TYPES.items()
 }
 ARRAY_FIELDS = ("ranges", "angles", "points", "intensity", "ring")
 SCALAR_FIELDS: dict[str, tuple[str, ...]] = {
@@ -249,6 +306,9 @@ _BOUNDED = {  # field -> (Limits attribute, what, unit)
     "v": ("max_speed", "speed", "m/s"), "w": ("max_yaw_rate", "yaw rate", "rad/s"),
     "wz": ("max_yaw_rate", "yaw rate", "rad/s"),
     "ax": ("max_accel", "acceleration", "m/s^2"), "ay": ("max_accel", "acceleration", "m/s^2"),
+    "az": ("max_accel", "acceleration", "m/s^2"), "wx": ("max_yaw_rate", "angular rate", "rad/s"),
+    "wy": ("max_yaw_rate", "angular rate", "rad/s"),
+    "vx": ("max_speed", "speed", "m/s"), "vy": ("max_speed", "speed", "m/s"),
 }
 
 
@@ -267,7 +327,11 @@ def check_record(rec: Record | KnownBeacon, limits: Limits | None = None) -> Non
             raise LogError(f"expected a number, got {type(v).__name__}", field=f.name)
         elif f.name == "t" and not math.isfinite(v):
             raise LogError("timestamp must be finite", field="t")
+        elif f.name in ("az", "wx", "wy") and math.isnan(v):
+            continue  # the planar 3-axis IMU record
         elif f.name in ("roll", "pitch"):
+            if isinstance(rec, Attitude) and not math.isfinite(v):
+                raise LogError(f"{f.name} must be finite", field=f.name)
             if not (math.isnan(v) or abs(v) <= math.pi / 2):
                 raise LogError(f"{f.name} must be in [-pi/2, pi/2] rad (or absent)", field=f.name)
         elif f.name == "range_max":

@@ -40,12 +40,19 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "pose_prior": ("t", "x", "y", "yaw", "sigma_xy", "sigma_yaw"),
     "beacon_known": ("id", "x", "y", "sigma"),
     "cloud": ("t", "points"),
+    "gnss_velocity": ("t", "vx", "vy"),
+    "water_speed": ("t", "v"),
+    "attitude": ("t", "roll", "pitch"),
 }
 OPTIONAL: dict[str, tuple[str, ...]] = {
     "scan": ("range_max",),
     "cloud": ("intensity", "ring", "roll", "pitch"),
     "odometry": ("sigma_v", "sigma_w"),
     "beacon": ("sigma_range", "sigma_bearing"),
+    "imu": ("az", "wx", "wy"),
+    "gnss_velocity": ("sigma",),
+    "water_speed": ("sigma_v",),
+    "attitude": ("sigma",),
 }
 
 

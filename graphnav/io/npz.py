@@ -19,11 +19,23 @@ import numpy as np
 from numpy.lib import format as npformat
 
 from ..errors import LogError
-from ..log import RECORD_TYPES, SCALAR_FIELDS, Cloud, KnownBeacon, Limits, NavLog, Record, Scan, check_record
+from ..log import (
+    OPTIONAL_SCALARS,
+    RECORD_TYPES,
+    SCALAR_FIELDS,
+    Cloud,
+    KnownBeacon,
+    Limits,
+    NavLog,
+    Record,
+    Scan,
+    check_record,
+)
 
 KINDS = list(RECORD_TYPES)
 FORMAT_VERSION = 1
-OPTIONAL_COLUMNS = ("range_max", "roll", "pitch")  # added after version 1 files were written: NaN when absent
+# added after version 1 files were written: NaN when absent
+OPTIONAL_COLUMNS = ("range_max", "roll", "pitch", "az", "wx", "wy")
 KNOWN_MEMBERS = frozenset(
     ["version", "order", "meta", "scan/offsets", "scan/ranges", "scan/angles"]
     + ["cloud/offsets", "cloud/xyz", "cloud/intensity", "cloud/ring", "cloud/flags"]
@@ -207,7 +219,7 @@ def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> N
             continue
         n = _get(data, f"{kind}/t", path, length=int(np.count_nonzero(order == KINDS.index(kind)))).shape[0]
         cols = {name: _get(data, f"{kind}/{name}", path, numeric=name != "id", length=n).tolist()
-                if f"{kind}/{name}" in data or name not in OPTIONAL_COLUMNS else [math.nan] * n
+                if f"{kind}/{name}" in data or name not in OPTIONAL_COLUMNS + OPTIONAL_SCALARS[kind] else [math.nan] * n
                 for name in SCALAR_FIELDS[kind]}
         recs: list[Record | None] = []
         if kind == "scan":
