@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import GraphnavError
 from ..log import Cloud, NavLog
 from ..scan.cloud_match import CloudMatchConfig, CloudMatcher, filter_cloud, planar_matrix, project_se2
 
@@ -112,7 +113,7 @@ def _pairwise(method: str, pts: list[NDArray], params: dict[str, Any]) -> tuple[
         try:
             r = register(b, a, method, planar_matrix(*last), **params)
             p, _, _ = project_se2(r.T, r.cov) if r.converged is not False else (None, None, None)
-        except ValueError:
+        except (ValueError, GraphnavError):  # too few points, beyond the bound: a failed match
             p = None
         ms.append((time.perf_counter() - c0) * 1e3)
         if p is None:

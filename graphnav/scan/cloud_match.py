@@ -35,9 +35,20 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from ..log import Cloud
+from ..validate import FRACTION, KNN, THREADS, OptionError, Range, check_fields
 from .register3d import gicp_terms, sandwich_covariance
 
 IDX_SE2 = [3, 4, 2]  # (v_x, v_y, omega_z) in register3d's delta = (omega, v)
+
+
+_CLOUD_RANGES = {"min_range": Range(lo=0.0, hi=1e4), "max_range": Range(lo=0.0, hi=1e4, lo_open=True),
+                 "water_margin": Range(lo=-1e3, hi=1e3), "sensor_height": Range(lo=-1e3, hi=1e3, optional=True),
+                 "min_intensity": Range(optional=True), "voxel": Range(lo=1e-3, hi=1e3),
+                 "knn": KNN, "max_corr": Range(lo=0.0, hi=1e4, lo_open=True),
+                 "max_iter": Range(lo=1, hi=100_000, integer=True), "threads": THREADS,
+                 "min_points": Range(lo=7, hi=10_000_000, integer=True), "min_inliers": FRACTION,
+                 "cov_cluster": Range(lo=0.0, hi=1e4, lo_open=True, optional=True)}
+"""Each numeric :class:`CloudMatchConfig` field's declared range (checked on construction)."""
 
 
 @dataclass(frozen=True)
@@ -65,9 +76,20 @@ class CloudMatchConfig:
     cov_cluster: float | None = None  # cell [m] of the sandwich's clusters (None: the knn neighbourhood's)
     cov_quantisation: bool = True  # the voxel quantisation term of the covariance
 
+    def __post_init__(self) -> None:
+        check_fields(self, _CLOUD_RANGES, "cloud option")
+        if self.max_range <= self.min_range:
+            raise OptionError("cloud option max_range", f"must exceed min_range ({self.min_range:g}), "
+                                                        f"got {self.max_range:g}")
+        for name in ("cov_quantisation",):
+            if not isinstance(getattr(self, name), bool):
+                raise OptionError(f"cloud option {name}", f"must be true or false, got {getattr(self, name)!r}")
+
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> CloudMatchConfig:
         known = set(cls.__dataclass_fields__)
+        if not isinstance(options, dict):
+            raise OptionError("option cloud", f"must be a table of cloud options, got {options!r:.60}")
         bad = sorted(set(options) - known)
         if bad:
             raise ValueError(f"unknown cloud option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}")
