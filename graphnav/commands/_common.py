@@ -51,11 +51,33 @@ def emit(args: argparse.Namespace, obj: dict[str, Any], human: str | None = None
 OPTION_FORM = "[ESTIMATOR.]KEY=VALUE"
 
 
-def _value(text: str) -> Any:
+MAX_OPTION_DEPTH = 32
+"""The deepest nesting of lists and tables an option value (``-O``, ``[options]``) may have."""
+
+
+def _value(text: str, item: str | None = None) -> Any:
     try:
-        return json.loads(text)
+        value = json.loads(text)
     except json.JSONDecodeError:
         return text
+    except RecursionError:
+        raise ValueError(f"option {item or text[:40]!r}: nested deeper than {MAX_OPTION_DEPTH} levels") from None
+    if depth(value) > MAX_OPTION_DEPTH:
+        raise ValueError(f"option {item or text[:40]!r}: nested deeper than {MAX_OPTION_DEPTH} levels")
+    return value
+
+
+def depth(value: Any, limit: int = 10_000) -> int:
+    """How deep lists and tables nest in ``value`` (a scalar: 0), iteratively (no recursion limit)."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, dict | list | tuple):
+            deepest = max(deepest, d + 1)
+            if deepest > limit:
+                return deepest
+            stack.extend((c, d + 1) for c in (v.values() if isinstance(v, dict) else v))
+    return deepest
 
 
 def parse_option(item: str) -> tuple[str | None, str, Any]:
@@ -73,7 +95,7 @@ def parse_option(item: str) -> tuple[str | None, str, Any]:
     key = key.strip().replace("-", "_")
     if not sep or not key or (dot and not scope.strip()) or not key.isidentifier():
         raise ValueError(f"option {item!r} is not {OPTION_FORM}")
-    return (scope.strip() or None), key, _value(value)
+    return (scope.strip() or None), key, _value(value, item)
 
 
 def scoped_options(items: list[str] | None) -> dict[str | None, dict[str, Any]]:

@@ -16,6 +16,23 @@ from ..io import save_log
 from ..sim import degrade, fairway, harbour, marina_degraded, solent
 from ._common import add_json_flag, emit
 
+OVERWRITE_HELP = "replace --out when it is an existing regular file (it is replaced atomically)"
+
+
+def _prepare_out(args: argparse.Namespace) -> Path:
+    """``--out``: its directory created, and refused before any work when it exists without
+    ``--overwrite`` or is no regular file."""
+    from ..io.outputs import check_replaceable, ensure_dir
+
+    out = Path(args.out)
+    ensure_dir(out.parent, "--out (its directory)")
+    check_replaceable(out, overwrite=args.overwrite)
+    return out
+
+
+def _save(log, args: argparse.Namespace) -> None:  # noqa: ANN001
+    save_log(log, args.out, overwrite=args.overwrite)
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("simulate", help="simulate a scenario into a log", description=__doc__)
@@ -30,12 +47,14 @@ def _register_fairway(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--beacons", required=True, help='beacon positions "x1,y1;x2,y2;..." [m]')
     p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--out", required=True, help="output log (.jsonl, .jsonl.gz or .npz)")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.set_defaults(func=_fairway)
 
 
 def _fairway(args: argparse.Namespace) -> int:
+    _prepare_out(args)
     log = fairway.simulate_fairway(fairway.parse_beacons(args.beacons), args.seed)
-    save_log(log, args.out)
+    _save(log, args)
     return 0
 
 
@@ -59,10 +78,34 @@ def _register_harbour(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--t0", type=float, default=0.0, help="time of the first record [s] (e.g. a POSIX time)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.set_defaults(func=_harbour)
 
 
+MAX_DURATION = 7200.0
+"""[s] The longest simulated run (--duration; --laps at most what that takes): the log is built in memory."""
+MAX_LAPS = 12
+
+
+def _check_harbour_args(args: argparse.Namespace) -> None:
+    """The numeric arguments against their ranges (exit 2 naming the flag), before any work."""
+    from ..log import default_limits
+    from ..validate import Range, number
+
+    number("--fix-hz", args.fix_hz, Range(lo=0.0, hi=100.0, lo_open=True))
+    if args.lidar_hz is not None:
+        number("--lidar-hz", args.lidar_hz, Range(lo=0.0, hi=100.0))
+    if args.duration is not None:
+        number("--duration", args.duration, Range(lo=0.0, hi=MAX_DURATION, lo_open=True))
+    if args.laps is not None:
+        number("--laps", args.laps, Range(lo=1, hi=MAX_LAPS, integer=True))
+    top = default_limits().max_time - (args.duration or MAX_DURATION)
+    number("--t0", args.t0, Range(lo=-top, hi=top))
+
+
 def _harbour(args: argparse.Namespace) -> int:
+    _prepare_out(args)
+    _check_harbour_args(args)
     hz = args.lidar_hz if args.lidar_hz is not None else (10.0 if args.lidar == "3d" else 5.0)
     cfg = harbour.HarbourConfig(fix_hz=args.fix_hz, lidar_hz=hz, t0=args.t0)
     if args.lidar == "3d":
@@ -73,8 +116,7 @@ def _harbour(args: argparse.Namespace) -> int:
         log = simulate_harbour3d(args.seed, cfg, Lidar3dConfig(hz=hz), duration=args.duration, laps=args.laps)
     else:
         log = harbour.simulate_harbour(args.seed, cfg, duration=args.duration, laps=args.laps)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
+    _save(log, args)
     emit(
         args,
         {
@@ -101,13 +143,14 @@ def _register_marina_degraded(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jump-m", type=float, default=20.0, help="GNSS jump size [m] (0: none, same noise)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.set_defaults(func=_marina_degraded)
 
 
 def _marina_degraded(args: argparse.Namespace) -> int:
+    _prepare_out(args)
     log = marina_degraded.simulate_marina_degraded(args.marina, args.seed, jump_m=args.jump_m)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
+    _save(log, args)
     emit(
         args,
         {
@@ -135,15 +178,16 @@ def _register_solent(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-calibration", action="store_true", help="leave Table 3's IMU biases in the log")
     p.add_argument("--out", type=Path, required=True, help="log file (.jsonl, .jsonl.gz or .npz)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.set_defaults(func=_solent)
 
 
 def _solent(args: argparse.Namespace) -> int:
+    _prepare_out(args)
     cfg = solent.SolentConfig(scenario=args.scenario, seed=args.seed, current_speed=args.current_speed,
                               calib_residual=args.calib_residual, calibrate=not args.no_calibration)
     log = solent.simulate_solent(cfg)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
+    _save(log, args)
     summary = {"out": str(args.out), "scenario": cfg.scenario, "seed": cfg.seed, "records": log.counts(),
                "duration_s": log.t1 - log.t0, "waypoints_reached": log.meta["waypoints_reached"]}
     emit(args, summary)
@@ -220,6 +264,7 @@ def _register_degrade(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--lenient", action="store_true", help="skip malformed input records (and count them)")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     add_json_flag(p)
     p.set_defaults(func=_degrade)
 
@@ -253,13 +298,13 @@ def degrade_config(args: argparse.Namespace) -> degrade.DegradeConfig:
 
 
 def _degrade(args: argparse.Namespace) -> int:
+    _prepare_out(args)
     from ..io import load_log
 
     cfg = degrade_config(args)
     base = load_log(args.log, lenient=args.lenient)
     log = degrade.degrade(base, cfg, args.seed)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
+    _save(log, args)
     out = {"scenario": "degrade", "input": str(args.log), "seed": args.seed, "out": str(args.out),
            "records": log.counts(), "t0": log.t0, "t1": log.t1, "simulated": log.meta["simulated"],
            "events": log.meta["events"]}

@@ -227,9 +227,41 @@ _DESCRIBED = ("isam2", "batch", "fixed-lag", "ekf", "ekf-slam", "icp-dr", "scan-
               "fuzzy-ukf", "fuzzy-ukf-bias", "dead-reckoning")
 
 
+_SIGNED = {"kappa", "water_margin"}
+"""Numeric options that may be negative (every other numeric option is >= 0)."""
+
+
+def check_value(option: str, value: Any, default: Any) -> None:
+    """An :class:`~graphnav.validate.OptionError` naming ``option`` when ``value`` is not of the kind of
+    its ``default``: a number (finite; an integer when the default is one; >= 0 unless the option is
+    signed) for a numeric default, ``true``/``false`` for a flag, text for a choice, a table for a
+    table; an option without a default (None) takes null, a flag, text or a finite number."""
+    import math
+
+    from ..validate import OptionError, Range, number
+
+    name = f"option {option}"
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise OptionError(name, f"must be true or false, got {value!r:.60}")
+    elif isinstance(default, int | float):
+        lo = -math.inf if option.rpartition(".")[2] in _SIGNED else 0.0
+        number(name, value, Range(lo=lo, integer=isinstance(default, int)))
+    elif isinstance(default, str):
+        if not isinstance(value, str):
+            raise OptionError(name, f"must be text (default {default!r}), got {value!r:.60}")
+    elif isinstance(default, dict):
+        if not isinstance(value, dict):
+            raise OptionError(name, f"must be a table of options, got {value!r:.60}")
+    elif default is None and not (value is None or isinstance(value, bool | str)):
+        number(name, value, Range())
+
+
 def check(name: str, options: dict[str, Any]) -> None:
     """A ``ValueError`` naming the unknown option(s) of estimator ``name`` and the known ones (when
-    its options are all known: the estimators described here, or a run function without ``**``)."""
+    its options are all known: the estimators described here, or a run function without ``**``); an
+    :class:`~graphnav.validate.OptionError` naming an option whose value is not of its kind
+    (:func:`check_value`), and a ``cloud`` table checked as the cloud matcher's options."""
     from . import get
 
     if not options:
@@ -237,8 +269,26 @@ def check(name: str, options: dict[str, Any]) -> None:
     if name not in _DESCRIBED and any(p.kind is p.VAR_KEYWORD
                                       for p in inspect.signature(get(name).run).parameters.values()):
         return
-    known = {o["name"] for o in describe(name)}
+    described = describe(name)
+    known = {o["name"] for o in described}
     bad = sorted(set(options) - known)
     if bad:
         raise ValueError(f"unknown {name} option(s) {bad}; known: {', '.join(sorted(known)) or 'none'} "
                          f"(graphnav run --list-options {name})")
+    defaults: dict[str, list[Any]] = {}
+    for o in described:
+        defaults.setdefault(o["name"], []).append(o["default"])
+    for key, value in options.items():
+        errors = []
+        for default in defaults[key]:  # an option of two graphs (lag): valid for either
+            try:
+                check_value(key, value, default)
+                break
+            except ValueError as exc:
+                errors.append(exc)
+        else:
+            raise errors[0]
+    if isinstance(options.get("cloud"), dict) and name in ("isam2", "batch", "fixed-lag"):
+        from ..scan.cloud_match import CloudMatchConfig
+
+        CloudMatchConfig.from_options(dict(options["cloud"]))
