@@ -63,7 +63,13 @@ def number(name: str, value: Any, rng: Range) -> Any:
 
 
 def _show(value: Any) -> str:
-    text = repr(value) if not isinstance(value, str) else repr(value)
+    """The value as the user wrote it (JSON: true, null, [1, 2]) when it can be, else its repr, cut to 60."""
+    import json
+
+    try:
+        text = json.dumps(value) if not isinstance(value, float) or math.isfinite(value) else repr(value)
+    except (TypeError, ValueError, RecursionError):
+        text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
 
 

@@ -51,6 +51,8 @@ def emit(args: argparse.Namespace, obj: dict[str, Any], human: str | None = None
 OPTION_FORM = "[ESTIMATOR.]KEY=VALUE"
 
 
+MAX_CONFIG_BYTES = 1 << 20
+"""The largest ``--config`` file read."""
 MAX_OPTION_DEPTH = 32
 """The deepest nesting of lists and tables an option value (``-O``, ``[options]``) may have."""
 
@@ -61,9 +63,9 @@ def _value(text: str, item: str | None = None) -> Any:
     except json.JSONDecodeError:
         return text
     except RecursionError:
-        raise ValueError(f"option {item or text[:40]!r}: nested deeper than {MAX_OPTION_DEPTH} levels") from None
+        raise ValueError(f"option {(item or text)[:40]!r}...: nested deeper than {MAX_OPTION_DEPTH} levels") from None
     if depth(value) > MAX_OPTION_DEPTH:
-        raise ValueError(f"option {item or text[:40]!r}: nested deeper than {MAX_OPTION_DEPTH} levels")
+        raise ValueError(f"option {(item or text)[:40]!r}...: nested deeper than {MAX_OPTION_DEPTH} levels")
     return value
 
 
@@ -219,11 +221,21 @@ def config_defaults(parser: argparse.ArgumentParser, path: Path,
     where = str(path)
     try:
         with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise GraphnavError(f"not valid TOML: {exc}", where=where) from None
+            raw = fh.read(MAX_CONFIG_BYTES + 1)
     except OSError as exc:
         raise GraphnavError(exc.strerror or str(exc), where=where) from None
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise GraphnavError(f"larger than {MAX_CONFIG_BYTES} bytes: not a configuration file", where=where)
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise GraphnavError(f"not UTF-8 text (byte {exc.start}); a --config file is UTF-8 TOML", where=where) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise GraphnavError(f"not valid TOML: {exc}", where=where) from None
+    except RecursionError:
+        raise GraphnavError(f"nested deeper than {MAX_OPTION_DEPTH} levels", where=where) from None
+    if depth(data) > MAX_OPTION_DEPTH:
+        raise GraphnavError(f"nested deeper than {MAX_OPTION_DEPTH} levels", where=where)
     by_name: dict[str, argparse.Action] = {}
     for action in parser._actions:
         if action.dest in ("help", "config", "option") or isinstance(action, argparse._SubParsersAction):

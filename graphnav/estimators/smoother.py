@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from ..errors import GraphnavError
 from ..graph import imu_motion
 from ..graph.smoother import run_batch, run_fixed_lag, run_isam2, unmet
 from ..log import NavLog
@@ -23,6 +24,12 @@ def _dispatch(name: str, odometry_run):
         motion = options.pop("motion", "auto")
         if motion not in MOTIONS:
             raise ValueError(f"motion must be one of {MOTIONS}, not {motion!r}")
+        counts = log.counts()
+        if counts.get("scan") and counts.get("cloud") and options.get("use_icp", True) is not False \
+                and options.get("use_cloud", True) is not False:
+            raise GraphnavError(f"the log has both 2D scans ({counts['scan']}) and 3D clouds ({counts['cloud']}); "
+                                "the graph takes one LiDAR: -O use_cloud=false (the scans) or -O use_icp=false "
+                                "(the clouds)", where=str(log.meta.get("source", "log")))
         if motion == "imu" or (motion == "auto" and imu_motion.wants_imu_graph(log)):
             return imu_motion.RUNNERS[name](log, on_estimate=on_estimate, **options)
         return odometry_run(log, on_estimate=on_estimate, **options)
