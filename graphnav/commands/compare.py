@@ -86,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     _check_scopes(options, names)
     t0 = time.perf_counter()
+    if not 0 <= args.workers <= 256:
+        raise ValueError(f"--workers must be in [0, 256] (0: one per CPU), got {args.workers}")
     workers = args.workers if args.workers > 0 else (os.cpu_count() or 1)
     cache = MatchCache() if getattr(args, "icp_cache", True) else None  # (demo builds its own Namespace)
     bar = progress_bar(args, total=_runnable(log, names), desc="compare", unit="estimator")

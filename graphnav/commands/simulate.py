@@ -183,6 +183,10 @@ def _register_solent(sub: argparse._SubParsersAction) -> None:
 
 
 def _solent(args: argparse.Namespace) -> int:
+    from ..validate import Range, number
+
+    number("--current-speed", args.current_speed, Range(lo=0.0, hi=10.0))
+    number("--calib-residual", args.calib_residual, Range(lo=0.0, hi=10.0))
     _prepare_out(args)
     cfg = solent.SolentConfig(scenario=args.scenario, seed=args.seed, current_speed=args.current_speed,
                               calib_residual=args.calib_residual, calibrate=not args.no_calibration)
@@ -271,9 +275,14 @@ def _register_degrade(sub: argparse._SubParsersAction) -> None:
 
 def degrade_config(args: argparse.Namespace) -> degrade.DegradeConfig:
     """The :class:`graphnav.sim.degrade.DegradeConfig` the ``degrade`` options describe."""
+    from ..validate import Range, number
+
+    number("--yaw-rate-bias", args.yaw_rate_bias, Range(lo=-2000.0, hi=2000.0))
     cfg = degrade.PRESETS[args.preset] if args.preset else degrade.DegradeConfig()
     if args.odometry_noise:
         v, w, w0 = _floats(args.odometry_noise, "--odometry-noise", 3, 3)
+        for what, val, top in (("V", v, 10.0), ("W", w, 10.0), ("W0DEG", w0, 360.0)):
+            number(f"--odometry-noise {what}", val, Range(lo=0.0, hi=top))
         if min(v, w, w0) < 0:
             raise ValueError("--odometry-noise: the sigmas must be >= 0")
         cfg = replace(cfg, odometry=degrade.OdometryNoise(v, w, math.radians(w0), math.radians(args.yaw_rate_bias)))
@@ -281,9 +290,16 @@ def degrade_config(args: argparse.Namespace) -> degrade.DegradeConfig:
         raise ValueError("--yaw-rate-bias needs --odometry-noise")
     if args.gnss:
         g = _floats(args.gnss, "--gnss", 1, 2)
+        number("--gnss SIGMA", g[0], Range(lo=0.0, hi=1e6, lo_open=True))
+        if len(g) > 1:
+            number("--gnss HZ", g[1], Range(lo=0.0, hi=1000.0, lo_open=True))
         cfg = replace(cfg, gnss_sigma=g[0], gnss_hz=g[1] if len(g) > 1 else None)
     if args.compass:
         c = _floats(args.compass, "--compass", 1, 3)
+        for what, v, rng in zip(("SIGMA_DEG", "BIAS_DEG", "HZ"), c,
+                                (Range(lo=0.0, hi=360.0, lo_open=True), Range(lo=-360.0, hi=360.0),
+                                 Range(lo=0.0, hi=1000.0, lo_open=True)), strict=False):
+            number(f"--compass {what}", v, rng)
         cfg = replace(cfg, compass_sigma=math.radians(c[0]), compass_bias=math.radians(c[1]) if len(c) > 1 else 0.0,
                       compass_hz=c[2] if len(c) > 2 else None)
     if args.gnss_outage:

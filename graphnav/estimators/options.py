@@ -227,6 +227,8 @@ _DESCRIBED = ("isam2", "batch", "fixed-lag", "ekf", "ekf-slam", "icp-dr", "scan-
               "fuzzy-ukf", "fuzzy-ukf-bias", "dead-reckoning")
 
 
+MAX_INT_OPTION = 2**31 - 1  # an integer option reaches C++ (GTSAM) as a C int
+MAX_FLOAT_OPTION = 1e15  # a numeric option's magnitude: its square stays far from overflow
 _SIGNED = {"kappa", "water_margin"}
 """Numeric options that may be negative (every other numeric option is >= 0)."""
 
@@ -236,8 +238,6 @@ def check_value(option: str, value: Any, default: Any) -> None:
     its ``default``: a number (finite; an integer when the default is one; >= 0 unless the option is
     signed) for a numeric default, ``true``/``false`` for a flag, text for a choice, a table for a
     table; an option without a default (None) takes null, a flag, text or a finite number."""
-    import math
-
     from ..validate import OptionError, Range, number
 
     name = f"option {option}"
@@ -245,8 +245,9 @@ def check_value(option: str, value: Any, default: Any) -> None:
         if not isinstance(value, bool):
             raise OptionError(name, f"must be true or false, got {value!r:.60}")
     elif isinstance(default, int | float):
-        lo = -math.inf if option.rpartition(".")[2] in _SIGNED else 0.0
-        number(name, value, Range(lo=lo, integer=isinstance(default, int)))
+        integer = isinstance(default, int)
+        hi = MAX_INT_OPTION if integer else MAX_FLOAT_OPTION
+        number(name, value, Range(lo=-hi if option.rpartition(".")[2] in _SIGNED else 0.0, hi=hi, integer=integer))
     elif isinstance(default, str):
         if not isinstance(value, str):
             raise OptionError(name, f"must be text (default {default!r}), got {value!r:.60}")
@@ -254,7 +255,7 @@ def check_value(option: str, value: Any, default: Any) -> None:
         if not isinstance(value, dict):
             raise OptionError(name, f"must be a table of options, got {value!r:.60}")
     elif default is None and not (value is None or isinstance(value, bool | str)):
-        number(name, value, Range())
+        number(name, value, Range(lo=-MAX_FLOAT_OPTION, hi=MAX_FLOAT_OPTION))
 
 
 def check(name: str, options: dict[str, Any]) -> None:
