@@ -156,3 +156,16 @@ def test_navigator_add_raises_log_errors_naming_the_record():
         with pytest.raises(LogError) as ei:
             nav.add(bad)
         assert ei.value.where.startswith("record 1")
+
+
+def test_scan_matching_counts_empty_frames_as_failed_for_every_method():
+    """Before: ``failed: 0`` for clouds of 0-1 points (s2m), and s2m-gicp crashed on an empty map."""
+    from graphnav.evaluation.scan_matching3d import compare
+    from graphnav.log import Truth
+
+    recs = []
+    for k in range(4):
+        recs.append(Truth(t=float(k), x=float(k), y=0.0, yaw=0.0))
+        recs.append(make_cloud(float(k), np.array([[10.0, 1.0, 1.0]])[: k % 2]))
+    res = compare(NavLog(recs, [], {}), 4, ("gicp", "gicp-graph", "s2m", "s2m-gicp", "ndt"))
+    assert {m: r["failed"] for m, r in res["methods"].items()} == dict.fromkeys(res["methods"], 3)

@@ -147,29 +147,44 @@ def _chain_to_rels(poses: list[NDArray]) -> list[NDArray]:
     return out
 
 
-def _odometry_loop(pts: list[NDArray], voxel: float, knn: int, align: Any, vmap: Any) -> tuple[list, list]:
+MIN_FRAME_POINTS = 10
+"""A scan-to-map frame (or map) with fewer points is a failed match: the prediction stands in for it."""
+
+
+def _odometry_loop(pts: list[NDArray], voxel: float, knn: int, align: Any, vmap: Any) -> tuple[list, list, int]:
     """The scan-to-map loop both variants share: each frame voxel-downsampled (GICP covariances),
-    aligned by ``align(k, frame, guess) -> T`` from the constant-velocity prediction (not the first),
-    inserted into ``vmap`` at its estimated pose; returns the chained SE(2) increments and the ms per
-    aligned frame."""
+    aligned by ``align(k, frame, guess) -> T or None`` (None: no match) from the constant-velocity
+    prediction (not the first), inserted into ``vmap`` at its estimated pose; a frame of fewer than
+    :data:`MIN_FRAME_POINTS` points, or one ``align`` finds no match for, is failed: the prediction
+    stands in and it is not inserted. Returns the chained SE(2) increments, the ms per aligned frame
+    and the failures."""
     import small_gicp
 
     T, delta = np.eye(4), np.eye(4)
-    poses, ms = [], []
+    poses, ms, failed, mapped = [], [], 0, False
     for k, p in enumerate(pts):
         c0 = time.perf_counter()
-        pc, _ = small_gicp.preprocess_points(p, voxel, num_neighbors=knn, num_threads=1)
+        pc = None
+        if len(p) >= MIN_FRAME_POINTS:
+            pc, _ = small_gicp.preprocess_points(p, voxel, num_neighbors=knn, num_threads=1)
+        matched = k == 0
         if k:
-            new = align(k, pc, T @ delta)
+            new = align(k, pc, T @ delta) if pc is not None and mapped else None
+            matched = new is not None
+            if new is None:
+                failed += 1
+                new = T @ delta
             delta, T = np.linalg.inv(T) @ new, new
-        vmap.insert(pc, T)
+        if pc is not None and (matched or not mapped):  # (the first usable frame starts the map)
+            vmap.insert(pc, T)
+            mapped = True
         if k:
             ms.append((time.perf_counter() - c0) * 1e3)
         poses.append(T.copy())
-    return _chain_to_rels(poses), ms
+    return _chain_to_rels(poses), ms, failed
 
 
-def _s2m(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr: float) -> tuple[list, list]:
+def _s2m(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr: float) -> tuple[list, list, int]:
     """Scan-to-map: each frame (voxel-downsampled, GICP covariances) VGICP-aligned to a voxel-hashed
     local map of the frames before it (inserted at their estimated poses; voxels unseen for 20
     insertions expire) from the constant-velocity prediction."""
@@ -178,15 +193,15 @@ def _s2m(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr:
     vmap = small_gicp.GaussianVoxelMap(map_voxel)
     vmap.set_lru(horizon=20, clear_cycle=10)
 
-    def align(k: int, pc: Any, guess: NDArray) -> NDArray:
+    def align(k: int, pc: Any, guess: NDArray) -> NDArray | None:
         r = small_gicp.align(vmap, pc, guess, max_correspondence_distance=max_corr, num_threads=1, max_iterations=30)
-        return np.asarray(r.T_target_source)
+        return np.asarray(r.T_target_source) if r.num_inliers > 0 else None
 
     return _odometry_loop(pts, voxel, knn, align, vmap)
 
 
 def _s2m_gicp(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr: float, rebuild: int = 10,
-              horizon: int = 30) -> tuple[list, list]:
+              horizon: int = 30) -> tuple[list, list, int]:
     """Scan-to-map GICP: the target is the local map's voxel points (``IncrementalVoxelMapCov``, LRU
     expiry after ``horizon`` insertions) with fresh GICP covariances, rebuilt every ``rebuild`` frames."""
     import small_gicp
@@ -195,15 +210,19 @@ def _s2m_gicp(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_
     vm.set_lru(horizon=horizon, clear_cycle=10)
     built: list[Any] = []  # (target, tree), rebuilt every `rebuild` frames
 
-    def align(k: int, pc: Any, guess: NDArray) -> NDArray:
+    def align(k: int, pc: Any, guess: NDArray) -> NDArray | None:
         if not built or k % rebuild == 1:
-            target = small_gicp.PointCloud(np.asarray(vm.voxel_points())[:, :3])
+            points = np.asarray(vm.voxel_points())[:, :3]
+            if len(points) < MIN_FRAME_POINTS:
+                built.clear()
+                return None
+            target = small_gicp.PointCloud(points)
             tree = small_gicp.KdTree(target)
             small_gicp.estimate_normals_covariances(target, tree, num_neighbors=knn)
             built[:] = [target, tree]
         r = small_gicp.align(built[0], pc, built[1], guess, registration_type="GICP",
                              max_correspondence_distance=max_corr, num_threads=1, max_iterations=30)
-        return np.asarray(r.T_target_source)
+        return np.asarray(r.T_target_source) if r.num_inliers > 0 else None
 
     return _odometry_loop(pts, voxel, knn, align, vm)
 
@@ -256,9 +275,9 @@ def compare(log: NavLog, frames: int = 100, methods: tuple[str, ...] = METHODS,
             elif m == "gicp-graph":
                 rels, ms, failed = _graph_matcher(clouds, cfg, h)
             elif m == "s2m":
-                rels, ms = _s2m(pts, cfg.voxel, 2 * cfg.voxel, cfg.knn, cfg.max_corr / 2)
+                rels, ms, failed = _s2m(pts, cfg.voxel, 2 * cfg.voxel, cfg.knn, cfg.max_corr / 2)
             elif m == "s2m-gicp":
-                rels, ms = _s2m_gicp(pts, cfg.voxel, cfg.voxel, cfg.knn, cfg.max_corr / 2)
+                rels, ms, failed = _s2m_gicp(pts, cfg.voxel, cfg.voxel, cfg.knn, cfg.max_corr / 2)
             else:
                 rels, ms = _kiss(pts, cfg.max_range)
         except ImportError as exc:  # MissingExtra: the line naming the extra
