@@ -158,7 +158,7 @@ def test_navigator_add_raises_log_errors_naming_the_record():
         assert ei.value.where.startswith("record 1")
 
 
-def test_scan_matching_counts_empty_frames_as_failed_for_every_method():
+def test_scan_matching_counts_empty_frames_as_failed_for_every_method(capfd):
     """Before: ``failed: 0`` for clouds of 0-1 points (s2m), and s2m-gicp crashed on an empty map."""
     from graphnav.evaluation.scan_matching3d import compare
     from graphnav.log import Truth
@@ -169,3 +169,17 @@ def test_scan_matching_counts_empty_frames_as_failed_for_every_method():
         recs.append(make_cloud(float(k), np.array([[10.0, 1.0, 1.0]])[: k % 2]))
     res = compare(NavLog(recs, [], {}), 4, ("gicp", "gicp-graph", "s2m", "s2m-gicp", "ndt"))
     assert {m: r["failed"] for m, r in res["methods"].items()} == dict.fromkeys(res["methods"], 3)
+    assert "too small" not in capfd.readouterr().err  # small_gicp's C++ warnings: counted, not printed raw
+    assert all("native_warnings" in r for r in res["methods"].values())
+
+
+def test_native_stderr_is_captured_and_counted(capfd, caplog):
+    import os
+
+    from graphnav.native_stderr import NativeWarnings
+
+    with NativeWarnings("small_gicp") as w:
+        os.write(2, b"warning: voxel coord is out of range!!\n" * 3)
+    assert w.count == 3 and w.lines == ["warning: voxel coord is out of range!!"]
+    assert "voxel coord" not in capfd.readouterr().err
+    assert any("small_gicp: 3 message(s)" in r.getMessage() for r in caplog.records)

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from ..errors import GraphnavError
 from ..log import Cloud, NavLog
+from ..native_stderr import NativeWarnings
 from ..scan.cloud_match import CloudMatchConfig, CloudMatcher, filter_cloud, planar_matrix, project_se2
 
 PAIR_METHODS = ("icp", "p2plane", "gicp", "vgicp", "ndt")
@@ -265,25 +266,26 @@ def compare(log: NavLog, frames: int = 100, methods: tuple[str, ...] = METHODS,
     out: dict[str, Any] = {}
     for m in methods:
         try:
-            failed = 0
-            if m in PAIR_METHODS:
-                if m == "ndt":  # the compiled kernels' one-off load is not a registration's time
-                    from ..scan.ndt import warm_up
+            with NativeWarnings(m) as native:
+                failed = 0
+                if m in PAIR_METHODS:
+                    if m == "ndt":  # the compiled kernels' one-off load is not a registration's time
+                        from ..scan.ndt import warm_up
 
-                    warm_up()
-                rels, ms, failed = _pairwise(m, pts, params)
-            elif m == "gicp-graph":
-                rels, ms, failed = _graph_matcher(clouds, cfg, h)
-            elif m == "s2m":
-                rels, ms, failed = _s2m(pts, cfg.voxel, 2 * cfg.voxel, cfg.knn, cfg.max_corr / 2)
-            elif m == "s2m-gicp":
-                rels, ms, failed = _s2m_gicp(pts, cfg.voxel, cfg.voxel, cfg.knn, cfg.max_corr / 2)
-            else:
-                rels, ms = _kiss(pts, cfg.max_range)
+                        warm_up()
+                    rels, ms, failed = _pairwise(m, pts, params)
+                elif m == "gicp-graph":
+                    rels, ms, failed = _graph_matcher(clouds, cfg, h)
+                elif m == "s2m":
+                    rels, ms, failed = _s2m(pts, cfg.voxel, 2 * cfg.voxel, cfg.knn, cfg.max_corr / 2)
+                elif m == "s2m-gicp":
+                    rels, ms, failed = _s2m_gicp(pts, cfg.voxel, cfg.voxel, cfg.knn, cfg.max_corr / 2)
+                else:
+                    rels, ms = _kiss(pts, cfg.max_range)
         except ImportError as exc:  # MissingExtra: the line naming the extra
             out[m] = {"skipped": str(exc)}
             continue
-        out[m] = _score(m, rels, ms, ref, failed)
+        out[m] = {**_score(m, rels, ms, ref, failed), "native_warnings": native.count}
     res: dict[str, Any] = {"frames": len(clouds), "t0": clouds[0].t, "t1": clouds[-1].t,
                            "points_per_frame": float(np.mean([len(p) for p in pts])),
                            "filter": asdict(cfg), "sensor_height": h, "methods": out}

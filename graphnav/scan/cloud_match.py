@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from ..log import Cloud
+from ..native_stderr import NativeWarnings
 from ..validate import FRACTION, KNN, THREADS, OptionError, Range, check_fields
 from .register3d import gicp_terms, sandwich_covariance
 
@@ -206,6 +207,13 @@ class CloudMatcher:
 
     def __call__(self, cur: Cloud, prev: Cloud, init: NDArray[np.float64] | None
                  ) -> tuple[bool, NDArray[np.float64], NDArray[np.float64]]:
+        with NativeWarnings("small_gicp") as native:  # its C++ warnings: counted, logged once, not raw
+            out = self._match(cur, prev, init)
+        self.last["native_warnings"] = native.count
+        return out
+
+    def _match(self, cur: Cloud, prev: Cloud, init: NDArray[np.float64] | None
+               ) -> tuple[bool, NDArray[np.float64], NDArray[np.float64]]:
         import small_gicp
 
         cfg = self.cfg

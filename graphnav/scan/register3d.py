@@ -49,6 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from ..errors import LogError, require
+from ..native_stderr import NativeWarnings
 from ..validate import FRACTION, KNN, POSITIVE, THREADS, OptionError, Range, check_fields
 from .ndt import NdtParams, build_voxels3, ndt3d, skew, warm_up
 
@@ -408,13 +409,15 @@ def register(source: ArrayLike, target: ArrayLike, method: str = "gicp", init: A
                                                 f"{max(float(np.abs(src).max()), float(np.abs(tgt).max())):.3g} m "
                                                 "(2^20 voxels a side at most)")
     c0 = time.process_time()
-    if method in _SMALL_GICP:
-        out = _small_gicp(method, src, tgt, T0, p)
-    elif method == "ndt":
-        out = _ndt(src, tgt, T0, p)
-    else:
-        out = _open3d(method, src, tgt, T0, p)
+    with NativeWarnings(method) as native:
+        if method in _SMALL_GICP:
+            out = _small_gicp(method, src, tgt, T0, p)
+        elif method == "ndt":
+            out = _ndt(src, tgt, T0, p)
+        else:
+            out = _open3d(method, src, tgt, T0, p)
     cpu = (time.process_time() - c0) * 1e3
+    out["extra"]["native_warnings"] = native.count
     if out["tgt"] is None:  # NDT: the fitness is measured on the target downsampled as the others'
         import small_gicp
 
