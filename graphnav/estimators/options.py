@@ -236,8 +236,9 @@ _SIGNED = {"kappa", "water_margin"}
 def check_value(option: str, value: Any, default: Any) -> None:
     """An :class:`~graphnav.validate.OptionError` naming ``option`` when ``value`` is not of the kind of
     its ``default``: a number (finite; an integer when the default is one; >= 0 unless the option is
-    signed) for a numeric default, ``true``/``false`` for a flag, text for a choice, a table for a
-    table; an option without a default (None) takes null, a flag, text or a finite number."""
+    signed) for a numeric default, ``true``/``false`` for a flag, a table for a table; a choice (text
+    default) or an option without a default (None) takes null, a flag, text or a finite number
+    (never a list or a table); the estimator checks the choice itself."""
     from ..validate import OptionError, Range, number
 
     name = f"option {option}"
@@ -248,13 +249,13 @@ def check_value(option: str, value: Any, default: Any) -> None:
         integer = isinstance(default, int)
         hi = MAX_INT_OPTION if integer else MAX_FLOAT_OPTION
         number(name, value, Range(lo=-hi if option.rpartition(".")[2] in _SIGNED else 0.0, hi=hi, integer=integer))
-    elif isinstance(default, str):
-        if not isinstance(value, str):
-            raise OptionError(name, f"must be text (default {default!r}), got {value!r:.60}")
     elif isinstance(default, dict):
         if not isinstance(value, dict):
             raise OptionError(name, f"must be a table of options, got {value!r:.60}")
-    elif default is None and not (value is None or isinstance(value, bool | str)):
+    elif (default is None or isinstance(default, str)) and not (value is None or isinstance(value, bool | str)):
+        # a choice (text) or an option without a default: some also take a number (ekf-slam's gate)
+        if isinstance(value, list | dict):
+            raise OptionError(name, f"must be a single value (default {default!r}), got {value!r:.60}")
         number(name, value, Range(lo=-MAX_FLOAT_OPTION, hi=MAX_FLOAT_OPTION))
 
 
