@@ -259,6 +259,30 @@ def check_value(option: str, value: Any, default: Any) -> None:
         number(name, value, Range(lo=-MAX_FLOAT_OPTION, hi=MAX_FLOAT_OPTION))
 
 
+def _nullable(name: str) -> set[str]:
+    """Options of estimator ``name`` whose type admits None (``float | None``) in the config
+    dataclasses and run functions they come from: ``null`` is a value of theirs (``gate=null``: no gate)."""
+    from ..graph.config import SmootherConfig
+    from ..graph.imu_motion import ImuGraphConfig
+    from ..scan.icp import IcpConfig
+    from . import ekf, ekf_slam, fuzzy_ukf, gating, get, icp_odometry
+    from .scan_to_map import ScanToMapConfig
+
+    sources: dict[str, tuple] = {
+        "isam2": (SmootherConfig, ImuGraphConfig), "batch": (SmootherConfig, ImuGraphConfig),
+        "fixed-lag": (SmootherConfig, ImuGraphConfig), "ekf": (ekf.run_ekf, gating.InnovationGate),
+        "ekf-slam": (ekf_slam.run_ekf_slam,), "icp-dr": (icp_odometry.run_icp_dr, IcpConfig),
+        "scan-to-map": (ScanToMapConfig,)}
+    ukf = (gating.InnovationGate, fuzzy_ukf.FuzzyCovarianceMatcher)
+    out: set[str] = set()
+    for src in sources.get(name, ukf if "ukf" in name else (get(name).run,)):
+        if dataclasses.is_dataclass(src):
+            out |= {f.name for f in dataclasses.fields(src) if "None" in str(f.type)}
+        else:
+            out |= {p.name for p in inspect.signature(src).parameters.values() if "None" in str(p.annotation)}
+    return out
+
+
 def check(name: str, options: dict[str, Any]) -> None:
     """A ``ValueError`` naming the unknown option(s) of estimator ``name`` and the known ones (when
     its options are all known: the estimators described here, or a run function without ``**``); an
@@ -280,7 +304,10 @@ def check(name: str, options: dict[str, Any]) -> None:
     defaults: dict[str, list[Any]] = {}
     for o in described:
         defaults.setdefault(o["name"], []).append(o["default"])
+    nullable = _nullable(name) if any(v is None for v in options.values()) else set()
     for key, value in options.items():
+        if value is None and key in nullable:
+            continue
         errors = []
         for default in defaults[key]:  # an option of two graphs (lag): valid for either
             try:
