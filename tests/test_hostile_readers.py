@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from graphnav.errors import GraphnavError, LogError
 from graphnav.io import cloudfile, load_log, textlines
@@ -183,3 +185,27 @@ def test_native_stderr_is_captured_and_counted(capfd, caplog):
     assert w.count == 3 and w.lines == ["warning: voxel coord is out of range!!"]
     assert "voxel coord" not in capfd.readouterr().err
     assert any("small_gicp: 3 message(s)" in r.getMessage() for r in caplog.records)
+
+
+_FLOATS = st.sampled_from([0.0, -0.0, -1.0, 1.0, 1e-12, 1e300, -1e300, math.inf, -math.inf, math.nan, 2.0**63, 5])
+
+
+@settings(max_examples=60, deadline=None)
+@given(kind=st.sampled_from(["gnss", "heading", "odometry", "imu", "beacon", "truth", "pose_prior"]),
+       values=st.lists(_FLOATS, min_size=8, max_size=8))
+def test_navigator_add_fuzz_gives_a_result_or_a_log_error(kind, values):
+    """The API entry point, fuzzed like the readers: any field values give a record the graph takes
+    or a LogError naming the record, never another exception."""
+    from dataclasses import fields
+
+    from graphnav.graph.navigator import Navigator
+    from graphnav.log import RECORD_TYPES
+
+    cls = RECORD_TYPES[kind]
+    kw = {f.name: (values[i % len(values)] if f.name != "id" else "b1") for i, f in enumerate(fields(cls))}
+    rec = cls(**kw)
+    nav = Navigator()
+    try:
+        nav.add(rec)
+    except LogError as err:
+        assert err.where.startswith("record 1")
