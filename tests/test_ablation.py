@@ -10,8 +10,8 @@ import pytest
 from _logfactory import every_record_log
 
 from graphnav import cli
-from graphnav.ablation import drop_kinds, parse_kinds
 from graphnav.io import save_log
+from graphnav.io.drop import drop_kinds, parse_kinds
 from graphnav.io.outputs import MANIFEST
 
 
