@@ -109,7 +109,13 @@ def _unmet(log: NavLog) -> str | None:
     return None if ok else "needs at least two odometry (or IMU) records"
 
 
+def _inputs(log: NavLog, options: dict) -> set[str]:
+    motion = "imu" if len(log.of("odometry")) < 2 and len(log.of("imu")) >= 2 else "odometry"
+    return {motion, "pose_prior"}  # (the first truth pose without a prior: info["anchor"])
+
+
 ESTIMATORS = {
     "dead-reckoning": EstimatorSpec(run_any_dead_reckoning, _unmet,
-                                    "odometry (SOG + ROT) integration, else the IMU's (planar strapdown)", "odometry"),
+                                    "odometry (SOG + ROT) integration, else the IMU's (planar strapdown)", "odometry",
+                                    _inputs),
 }
