@@ -90,10 +90,10 @@ def test_an_unknown_estimator_name_is_exit_2_with_a_suggestion(tmp_path, capsys,
 def test_a_compare_in_which_nothing_ran_is_exit_2_and_writes_nothing(tmp_path, capsys):
     p = _log(tmp_path)
     out = tmp_path / "o"
-    rc, obj, _ = graphnav(capsys, "compare", str(p), "-e", "dead-reckoning,ekf-slam", "--drop", "odometry",
+    rc, obj, _ = graphnav(capsys, "compare", str(p), "-e", "dead-reckoning,ekf-slam", "--drop", "odometry,imu",
                           "--out", str(out))
-    assert rc == 2 and "no estimator ran" in obj["error"] and "(after --drop odometry)" in obj["error"]
-    assert "dead-reckoning: not run: needs at least two odometry records" in obj["error"]
+    assert rc == 2 and "no estimator ran" in obj["error"] and "(after --drop odometry,imu)" in obj["error"]
+    assert "dead-reckoning: not run: needs at least two odometry (or IMU) records" in obj["error"]
     assert not out.exists()
     out.mkdir()
     (out / "mine.txt").write_text("x")
@@ -105,8 +105,8 @@ def test_a_compare_in_which_nothing_ran_is_exit_2_and_writes_nothing(tmp_path, c
 def test_a_failed_run_leaves_nothing_in_out(tmp_path, capsys):
     p = _log(tmp_path)
     out = tmp_path / "o"
-    rc, obj, _ = graphnav(capsys, "run", str(p), "-e", "dead-reckoning", "--drop", "odometry", "--out", str(out))
-    assert rc == 2 and "cannot run" in obj["error"] and "(after --drop odometry)" in obj["error"]
+    rc, obj, _ = graphnav(capsys, "run", str(p), "-e", "dead-reckoning", "--drop", "odometry,imu", "--out", str(out))
+    assert rc == 2 and "cannot run" in obj["error"] and "(after --drop odometry,imu)" in obj["error"]
     assert not out.exists()  # no manifest, no header-only online.tum
     out.mkdir()
     rc, _, _ = graphnav(capsys, "run", str(tmp_path / "absent.jsonl"), "-e", "ekf", "--out", str(out))
