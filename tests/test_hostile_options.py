@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from graphnav.cli import main
+from graphnav.config import OptionError, Range, number
 from graphnav.errors import LogError
 from graphnav.estimators.options import check
 from graphnav.scan.cloud_match import CloudMatchConfig
 from graphnav.scan.register3d import METHODS, Reg3Params, register
-from graphnav.validate import OptionError, Range, number
 
 REPO = Path(__file__).resolve().parents[1]
 

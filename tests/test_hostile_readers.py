@@ -178,7 +178,7 @@ def test_scan_matching_counts_empty_frames_as_failed_for_every_method(capfd):
 def test_native_stderr_is_captured_and_counted(capfd, caplog):
     import os
 
-    from graphnav.native_stderr import NativeWarnings
+    from graphnav.scan.native_stderr import NativeWarnings
 
     with NativeWarnings("small_gicp") as w:
         os.write(2, b"warning: voxel coord is out of range!!\n" * 3)

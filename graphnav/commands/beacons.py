@@ -72,7 +72,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def search(args: argparse.Namespace) -> int:
-    from ..validate import Range, number
+    from ..config import Range, number
 
     number("--workers", args.workers, Range(lo=1, hi=256, integer=True))
     number("--chunk", args.chunk, Range(lo=1, hi=10_000_000, integer=True, optional=True))

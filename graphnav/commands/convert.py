@@ -81,8 +81,8 @@ def _prepare_out(args: argparse.Namespace) -> None:
 
 
 def run_carmen(args: argparse.Namespace) -> int:
+    from ..config import Range, number
     from ..io.carmen import read_carmen
-    from ..validate import Range, number
 
     number("--scan-dt", args.scan_dt, Range(lo=0.0, hi=3600.0, lo_open=True))
     if args.max_range is not None:

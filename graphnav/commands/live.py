@@ -43,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..validate import Range, number
+    from ..config import Range, number
 
     for flag, value in (("--duration", args.duration), ("--idle-exit", args.idle_exit)):
         number(flag, value, Range(lo=0.0, hi=1e9, lo_open=True, optional=True))

@@ -38,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..validate import Range, number
+    from ..config import Range, number
 
     number("--speed", args.speed, Range(lo=0.0, hi=1e6))
     number("--corrupt", args.corrupt, Range(lo=0.0, hi=1.0))

@@ -207,7 +207,7 @@ def _register_solent(sub: argparse._SubParsersAction) -> None:
 
 
 def _solent(args: argparse.Namespace) -> int:
-    from ..validate import Range, number
+    from ..config import Range, number
 
     number("--current-speed", args.current_speed, Range(lo=0.0, hi=10.0))
     number("--calib-residual", args.calib_residual, Range(lo=0.0, hi=10.0))
@@ -299,7 +299,7 @@ def _register_degrade(sub: argparse._SubParsersAction) -> None:
 
 def degrade_config(args: argparse.Namespace) -> degrade.DegradeConfig:
     """The :class:`graphnav.sim.degrade.DegradeConfig` the ``degrade`` options describe."""
-    from ..validate import Range, number
+    from ..config import Range, number
 
     number("--yaw-rate-bias", args.yaw_rate_bias, Range(lo=-2000.0, hi=2000.0))
     cfg = degrade.PRESETS[args.preset] if args.preset else degrade.DegradeConfig()

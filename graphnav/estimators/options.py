@@ -234,12 +234,12 @@ _SIGNED = {"kappa", "water_margin"}
 
 
 def check_value(option: str, value: Any, default: Any) -> None:
-    """An :class:`~graphnav.validate.OptionError` naming ``option`` when ``value`` is not of the kind of
+    """An :class:`~graphnav.config.OptionError` naming ``option`` when ``value`` is not of the kind of
     its ``default``: a number (finite; an integer when the default is one; >= 0 unless the option is
     signed) for a numeric default, ``true``/``false`` for a flag, a table for a table; a choice (text
     default) or an option without a default (None) takes null, a flag, text or a finite number
     (never a list or a table); the estimator checks the choice itself."""
-    from ..validate import OptionError, Range, number
+    from ..config import OptionError, Range, number
 
     name = f"option {option}"
     if isinstance(default, bool):
@@ -286,7 +286,7 @@ def _nullable(name: str) -> set[str]:
 def check(name: str, options: dict[str, Any]) -> None:
     """A ``ValueError`` naming the unknown option(s) of estimator ``name`` and the known ones (when
     its options are all known: the estimators described here, or a run function without ``**``); an
-    :class:`~graphnav.validate.OptionError` naming an option whose value is not of its kind
+    :class:`~graphnav.config.OptionError` naming an option whose value is not of its kind
     (:func:`check_value`), and a ``cloud`` table checked as the cloud matcher's options."""
     from . import get
 

@@ -36,8 +36,8 @@ from numpy.typing import NDArray
 
 from ..errors import GraphnavError
 from ..log import Cloud, NavLog
-from ..native_stderr import NativeWarnings
 from ..scan.cloud_match import CloudMatchConfig, CloudMatcher, filter_cloud, planar_matrix, project_se2
+from ..scan.native_stderr import NativeWarnings
 
 PAIR_METHODS = ("icp", "p2plane", "gicp", "vgicp", "ndt")
 METHODS = (*PAIR_METHODS, "gicp-graph", "s2m", "s2m-gicp", "kiss-icp")

@@ -34,9 +34,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from ..config import FRACTION, KNN, THREADS, OptionError, Range, check_fields
 from ..log import Cloud
-from ..native_stderr import NativeWarnings
-from ..validate import FRACTION, KNN, THREADS, OptionError, Range, check_fields
+from .native_stderr import NativeWarnings
 from .register3d import gicp_terms, sandwich_covariance
 
 IDX_SE2 = [3, 4, 2]  # (v_x, v_y, omega_z) in register3d's delta = (omega, v)

@@ -48,9 +48,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ..config import FRACTION, KNN, POSITIVE, THREADS, OptionError, Range, check_fields
 from ..errors import LogError, require
-from ..native_stderr import NativeWarnings
-from ..validate import FRACTION, KNN, POSITIVE, THREADS, OptionError, Range, check_fields
+from .native_stderr import NativeWarnings
 from .ndt import NdtParams, build_voxels3, ndt3d, skew, warm_up
 
 METHODS = ("icp", "p2plane", "gicp", "vgicp", "ndt", "o3d-icp", "o3d-p2plane", "o3d-gicp")
