@@ -259,9 +259,9 @@ def check_value(option: str, value: Any, default: Any) -> None:
         number(name, value, Range(lo=-MAX_FLOAT_OPTION, hi=MAX_FLOAT_OPTION))
 
 
-def _nullable(name: str) -> set[str]:
-    """Options of estimator ``name`` whose type admits None (``float | None``) in the config
-    dataclasses and run functions they come from: ``null`` is a value of theirs (``gate=null``: no gate)."""
+def _annotations(name: str) -> dict[str, str]:
+    """Option -> its type annotation (text) in the config dataclasses and run functions estimator
+    ``name``'s options come from (``float | None``: ``null`` is a value of it, text is not)."""
     from ..graph.config import SmootherConfig
     from ..graph.imu_motion import ImuGraphConfig
     from ..scan.icp import IcpConfig
@@ -274,13 +274,28 @@ def _nullable(name: str) -> set[str]:
         "ekf-slam": (ekf_slam.run_ekf_slam,), "icp-dr": (icp_odometry.run_icp_dr, IcpConfig),
         "scan-to-map": (ScanToMapConfig,)}
     ukf = (gating.InnovationGate, fuzzy_ukf.FuzzyCovarianceMatcher)
-    out: set[str] = set()
+    out: dict[str, str] = {}
     for src in sources.get(name, ukf if "ukf" in name else (get(name).run,)):
         if dataclasses.is_dataclass(src):
-            out |= {f.name for f in dataclasses.fields(src) if "None" in str(f.type)}
+            out.update({f.name: str(f.type) for f in dataclasses.fields(src)})
         else:
-            out |= {p.name for p in inspect.signature(src).parameters.values() if "None" in str(p.annotation)}
+            out.update({p.name: str(p.annotation) for p in inspect.signature(src).parameters.values()
+                        if p.annotation is not inspect.Parameter.empty})
     return out
+
+
+def _by_annotation(option: str, value: Any, ann: str) -> bool:
+    """True when ``value`` is of a kind the annotation ``ann`` admits (None, a flag, text, a number);
+    an annotation that names none of them (or none given) admits anything."""
+    kinds = {"None": value is None, "bool": isinstance(value, bool),
+             "str": isinstance(value, str), "Literal": isinstance(value, str),
+             "float": isinstance(value, int | float) and not isinstance(value, bool),
+             "int": isinstance(value, int) and not isinstance(value, bool)}
+    tokens = set(re.findall(r"[A-Za-z_]+", ann))
+    if tokens & {"dict", "list", "tuple", "Mapping", "Sequence", "Any", "object"}:
+        return True
+    named = [k for k in kinds if k in tokens]
+    return not named or any(kinds[k] for k in named)
 
 
 def check(name: str, options: dict[str, Any]) -> None:
@@ -304,9 +319,12 @@ def check(name: str, options: dict[str, Any]) -> None:
     defaults: dict[str, list[Any]] = {}
     for o in described:
         defaults.setdefault(o["name"], []).append(o["default"])
-    nullable = _nullable(name) if any(v is None for v in options.values()) else set()
+    from ..config import OptionError
+
+    annotations = _annotations(name)
     for key, value in options.items():
-        if value is None and key in nullable:
+        ann = annotations.get(key, "")
+        if value is None and "None" in ann:
             continue
         errors = []
         for default in defaults[key]:  # an option of two graphs (lag): valid for either
@@ -317,6 +335,8 @@ def check(name: str, options: dict[str, Any]) -> None:
                 errors.append(exc)
         else:
             raise errors[0]
+        if ann and not _by_annotation(key, value, ann):
+            raise OptionError(f"option {key}", f"must be of type {ann}, got {value!r:.60}")
     if isinstance(options.get("cloud"), dict) and name in ("isam2", "batch", "fixed-lag"):
         from ..scan.cloud_match import CloudMatchConfig
 
