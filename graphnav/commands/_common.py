@@ -11,8 +11,9 @@ from typing import Any
 from ..errors import GraphnavError
 from ..io.jsonsafe import jsonable
 
-__all__ = ["OPTION_FORM", "add_json_flag", "add_log_args", "emit", "jsonable", "options_by_estimator", "options_for",
-           "parse_option", "parse_options", "plain_options", "progress_enabled", "scoped_options"]
+__all__ = ["OPTION_FORM", "add_drop_flag", "add_json_flag", "add_log_args", "dropped_kinds", "emit", "jsonable",
+           "options_by_estimator", "options_for", "parse_option", "parse_options", "plain_options", "progress_enabled",
+           "scoped_options"]
 
 
 def add_json_flag(p: argparse.ArgumentParser) -> None:
@@ -37,6 +38,20 @@ def add_log_args(p: argparse.ArgumentParser) -> None:
                    help="skip malformed or physically invalid records (and count them)")
     p.add_argument("--max-speed", type=float, metavar="M/S",
                    help="the vessel's plausible speed limit; faster odometry is invalid (default 50 m/s)")
+
+
+def add_drop_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--drop", action="append", metavar="KIND[,KIND]",
+                   help="leave these record kinds out of the log before any estimator sees it, e.g. "
+                        "--drop odometry,beacon (repeatable; beacon_known: the charted beacons); the JSON "
+                        "output lists them as 'dropped'")
+
+
+def dropped_kinds(args: argparse.Namespace) -> list[str]:
+    """The kinds of ``--drop`` (checked: an unknown kind is a ``ValueError`` naming the known ones)."""
+    from ..io.drop import parse_kinds
+
+    return parse_kinds(getattr(args, "drop", None))
 
 
 def emit(args: argparse.Namespace, obj: dict[str, Any], human: str | None = None) -> None:
@@ -96,6 +111,10 @@ def options_for(args: argparse.Namespace, name: str) -> dict[str, Any]:
     given = scoped_options(getattr(args, "option", None))
     other = sorted(s for s in given if s not in (None, name))
     if other:
+        from .. import estimators
+
+        if other[0] not in estimators.registry():
+            raise KeyError(f"-O {other[0]}.KEY=VALUE: " + estimators.unknown_name(other[0]))
         raise ValueError(f"-O {other[0]}.KEY=VALUE: this command runs {name!r}; write KEY=VALUE or "
                          f"{name}.KEY=VALUE")
     files = _file_options(args)
