@@ -309,6 +309,7 @@ class GraphBuilder:
         self.grid_i = 0  # the next grid slot
         self.kf_scan: dict[int, Scan] = {}
         self.n_scans = 0
+        self.lidar_kind: str | None = None  # "scan" or "cloud": the first LiDAR record's kind drives the keyframes
         self.pending: list[Record] = []  # measurements after the newest keyframe
         self.due: dict[int, list[tuple[int, Record]]] = {}  # step -> (attach, record)
         self.late: list[tuple[int, Record]] = []  # after the last keyframe's batch (finish)
@@ -419,6 +420,12 @@ class GraphBuilder:
                 self.grid_i += 1
                 self._new_keyframe(ts, None)
         if kind == "scan" or (kind == "cloud" and self.cfg.use_cloud):
+            if self.lidar_kind is None:
+                self.lidar_kind = kind
+            elif kind != self.lidar_kind:  # a log with 2D scans and 3D clouds: the first kind is the LiDAR
+                self.counts["ignored"] += 1  # (-O use_cloud=false picks the 2D scans)
+                self.counts["lidar_other"] = self.counts.get("lidar_other", 0) + 1
+                return
             if self.mode == "grid" and not self.grid_only:  # the first scan: one keyframe per scan from now on
                 self.mode = "scan"
                 self._want_matcher()
