@@ -343,8 +343,9 @@ class Navigator:
             sog, cog = math.hypot(dx, dy) / dt, math.atan2(dy, dx)
             w = float(wrap_angle(p[2] - prev_p[2])) / dt
         b = self.builder
-        if b.odo_t and t - b.odo_t[-1] <= 2.0:
-            _, v, wr = b.odo_rows[-1][:3]
+        odo = b.odometry
+        if odo and t - odo.t[-1] <= 2.0:
+            _, v, wr = odo.rows[-1][:3]
             sog, w = abs(v), wr
         return sog, cog, w
 

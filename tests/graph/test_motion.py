@@ -359,9 +359,9 @@ def test_odometry_over_an_interval_closed_form_and_rate_independent(rate):
     for turn in (w, 0.0):
         b = GraphBuilder(cfg)
         for t in np.arange(0.0, 10.0, 1.0 / rate):
-            b._odometry_sample(Odometry(float(t), v, turn, math.nan, math.nan))
+            b.odometry.add(Odometry(float(t), v, turn, math.nan, math.nan))
         t0, t1 = 2.03, 6.53  # not on the samples: the first and last sub-arcs are partial
-        pose, cov = b._odometry(t0, t1)
+        pose, cov = b.odometry.between(t0, t1)
         T = t1 - t0
         if turn:
             np.testing.assert_allclose([pose.x(), pose.y(), pose.theta()],
