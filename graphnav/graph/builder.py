@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 import factors as F
 
-from ..geometry import cov_to_world, increment
+from ..geometry import cov_to_world
 from ..log import (
     BeaconObs,
     Cloud,
@@ -53,29 +53,26 @@ from ..log import (
     GnssVelocity,
     Heading,
     KnownBeacon,
-    Odometry,
     PosePrior,
     Record,
     Scan,
-    Truth,
     WaterSpeed,
 )
+from .anchor import anchor_ready, choose_anchor
 from .config import SmootherConfig
 from .imu_chain import ImuChain, ImuConfig, relative_prediction
 from .keyframes import DEFAULT_PERIOD
+from .odometry_buffer import OdometryBuffer
+from .scan_factors import (  # noqa: F401  (Matcher, default_matcher, make_loop_closer: the graph's public names)
+    UNOBSERVED_COV,
+    CloudPath,
+    Matcher,
+    default_matcher,
+    make_loop_closer,
+    proper_cov,
+    screen_match,
+)
 from .space import IB, NavSpace, PlanarSpace, V, W
-
-#: ``matcher(cur, prev, init, init_cov, guess_in_graph) -> (usable, pose, cov)``: ``init`` the motion
-#: guess prev -> cur and ``init_cov`` its covariance (the odometry integrated, else the motion
-#: model's); ``guess_in_graph``: that guess is a factor of its own (odometry), so the match's factor
-#: must not repeat it along the directions it does not observe
-Matcher = Callable[
-    [Scan, Scan, NDArray[np.float64] | None, NDArray[np.float64] | None, bool],
-    tuple[bool, NDArray[np.float64], NDArray[np.float64]],
-]
-#: [m^2, m^2, rad^2] the factor's covariance added along a degenerate match's weak directions when the
-#: guess there is already in the graph: the factor then says nothing there (the matcher's failure value)
-UNOBSERVED_COV = np.diag([1e4, 1e4, 10.0])
 
 #: sensor groups of the factors (the noise estimation scales ``SCALABLE`` ones)
 GROUPS = ("anchor", "odometry", "motion", "icp", "loop", "gnss", "compass", "bias", "beacon", "chart", "pose_prior",
@@ -88,160 +85,6 @@ V0_STATED_SIGMA = 0.2  # [m/s] 1-sigma of an initial velocity the log states (me
 #: the Pose3 graph's estimate of the previous keyframe: pose, nav-frame velocity, IMU bias, velocity covariance
 NavPrev = tuple[gtsam.Pose3, NDArray[np.float64], gtsam.imuBias.ConstantBias, NDArray[np.float64] | None]
 MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior", "gnss_velocity", "water_speed")
-
-
-def default_matcher(options: dict[str, Any]) -> Matcher | None:
-    """The weighted-ICP matcher of :mod:`graphnav.scan.icp`, or ``None`` when it is not available.
-    A match is usable when it converged, or when it was flagged degenerate only (its covariance is
-    then inflated along the unobserved directions, which the factor keeps weak).
-
-    The guess's covariance goes to the matcher as ``init_cov``: a match beyond the 99.9 % bound of
-    both covariances from the guess fails (another minimum), and a direction the guess knows better
-    is weak. Along weak directions the matcher returns the guess with the guess's covariance; when
-    the guess is a factor of the graph already (``guess_in_graph``: the odometry) the match's
-    factor gets :data:`UNOBSERVED_COV` there instead, so the odometry is not counted twice."""
-    try:
-        from ..scan.icp import IcpConfig, scan_points
-        from ..scan.icp_cache import match_points  # shared between estimators inside icp_cache.active()
-    except ImportError:
-        return None
-    cfg = IcpConfig(**options)
-    last: list[Any] = [None, None]  # the previous call's current scan and its points
-
-    def match(cur: Scan, prev: Scan, init: NDArray[np.float64] | None,
-              init_cov: NDArray[np.float64] | None = None, guess_in_graph: bool = False):
-        prev_xy = last[1] if prev is last[0] else scan_points(prev, cfg)  # consecutive pairs: each scan once
-        cur_xy = scan_points(cur, cfg)
-        last[:] = [cur, cur_xy]
-        r = match_points(cur_xy, prev_xy, cfg, init=init, init_cov=init_cov)
-        inflated = bool(r.quality.get("inflated", False))
-        cov = np.asarray(r.cov, dtype=float)
-        if inflated and guess_in_graph and r.quality.get("weak_projector") is not None:
-            p = np.asarray(r.quality["weak_projector"], dtype=float)
-            cov = cov + p @ UNOBSERVED_COV @ p.T
-        return bool(r.ok) or inflated, np.asarray(r.pose, dtype=float), cov
-
-    return match
-
-
-def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any]) -> Any:
-    """The loop closer of :mod:`graphnav.graph.loops` with the weighted ICP as its refinement and the
-    graph's ICP covariance treatment (the match's own, as the consecutive factors; the loop closer
-    adds its floor); ``None`` without the matcher."""
-    try:
-        from ..scan.icp import IcpConfig, match_points
-    except ImportError:
-        return None
-    from .loops import LoopCloser, LoopConfig
-
-    icfg = IcpConfig(**icp_opts)
-
-    def refine(src: NDArray[np.float64], tgt: NDArray[np.float64], init: NDArray[np.float64]):
-        r = match_points(src, tgt, icfg, init=init)
-        return bool(r.ok), np.asarray(r.pose, dtype=float), np.asarray(r.cov, dtype=float), r.quality
-
-    from dataclasses import fields
-
-    known = {f.name for f in fields(LoopConfig)}
-    unknown = sorted(set(cfg.loop) - known)
-    if unknown:
-        raise ValueError(f"unknown loop option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-    closer = LoopCloser(LoopConfig(**cfg.loop), refine,
-                        lambda c: proper_cov(np.asarray(c, dtype=float), np.zeros(3)))
-    closer.points = lambda scan: scan_points_of(scan, icfg)
-    return closer
-
-
-def scan_points_of(scan: Scan, icfg: Any) -> NDArray[np.float64]:
-    from ..scan.icp import scan_points
-
-    return scan_points(scan, icfg)
-
-
-def screen_match(cfg: SmootherConfig, ok: bool, mp: Any, cov: NDArray[np.float64] | None, init: NDArray[np.float64],
-                 odo_rel: gtsam.Pose2 | None, odo_cov: NDArray[np.float64] | None) -> str | None:
-    """Whether a scan or cloud match becomes a factor: ``"failed"`` (not usable, no proper
-    covariance, not finite, or farther than ``icp_max_step`` from the guess), ``"gated"`` (beyond
-    ``icp_gate`` Mahalanobis units of ``odo_cov + cov`` from the odometry increment) or None (kept)."""
-    if (not ok or cov is None or not np.all(np.isfinite(mp))
-            or np.hypot(mp[0] - init[0], mp[1] - init[1]) > cfg.icp_max_step):
-        return "failed"
-    if cfg.icp_gate is not None and odo_rel is not None and odo_cov is not None:
-        d = np.asarray(gtsam.Pose2.Logmap(odo_rel.between(gtsam.Pose2(*mp))))
-        if float(d @ np.linalg.solve(odo_cov + cov, d)) > cfg.icp_gate**2:
-            return "gated"
-    return None
-
-
-class _CloudPath:
-    """The 3D path of the builder: consecutive keyframe clouds -> GICP in levelled frames -> an SE(2)
-    between factor (group ``cloud``) with the marginal (x, y, yaw) of the match's own sandwich
-    covariance (:func:`graphnav.scan.cloud_match.match_covariance`, not scaled) plus a floor; gated
-    against the odometry like the 2D matches (``icp_gate``, ``icp_max_step``); z/roll/pitch of each
-    match kept as diagnostics (docs/scan-matching-3d.md)."""
-
-    def __init__(self, cfg: SmootherConfig, lidar3d: dict[str, Any] | None) -> None:
-        self.cfg = cfg
-        self.height = float(lidar3d["mast"]) if lidar3d and "mast" in lidar3d else None
-        self.matcher: Any = None
-        self.n = self.failed = self.gated = 0
-        self.diag: list[tuple[float, float, float]] = []  # z, roll, pitch of each used match
-
-    def factor(self, b: GraphBuilder, s: Step, k: int, odo_rel: gtsam.Pose2 | None,
-               odo_cov: NDArray[np.float64] | None) -> gtsam.Pose2 | None:
-        cfg = self.cfg
-        prev = b.kf_scan.get(k - 1)
-        if not isinstance(prev, Cloud):
-            return None
-        if self.matcher is None:
-            from ..scan.cloud_match import CloudMatchConfig, CloudMatcher
-
-            self.matcher = CloudMatcher(CloudMatchConfig.from_options(dict(cfg.cloud)), self.height)
-        init = _vec(odo_rel if odo_rel is not None else b.last_rel)
-        c0 = time.perf_counter()
-        ok, mp, mc = self.matcher(b.kf_scan[k], prev, init)
-        s.icp_ms = (time.perf_counter() - c0) * 1e3
-        self.n += 1
-        floor = np.array([cfg.cloud_sigma_floor_xy] * 2 + [math.radians(cfg.cloud_sigma_floor_yaw_deg)])
-        cov = proper_cov(np.asarray(mc, dtype=float), floor) if ok else None
-        verdict = screen_match(cfg, ok, mp, cov, init, odo_rel, odo_cov)
-        if verdict is not None:
-            self.failed += verdict == "failed"
-            self.gated += verdict == "gated"
-            return None
-        rel = gtsam.Pose2(*mp)
-        last = self.matcher.last
-        self.diag.append((last["z"], last["roll"], last["pitch"]))
-        s.add(b.space.between(F.X(k - 1), F.X(k), mp, cov, robust=cfg.icp_robust), "cloud")
-        b._icp_cov = cov  # the newest accepted match's covariance (the step's fused motion covariance)
-        return rel
-
-    def info(self) -> dict[str, Any]:
-        if self.matcher is None:
-            return {}
-        d = np.array(self.diag).reshape(-1, 3)
-        rms = np.sqrt(np.mean(d**2, axis=0)) if len(d) else np.full(3, np.nan)
-        return {"cloud_pairs": self.n, "cloud_failed": self.failed, "cloud_gated": self.gated,
-                "cloud_sensor_height": self.height,
-                "cloud_dropped_rms": {"z_m": float(rms[0]), "roll_deg": float(np.degrees(rms[1])),
-                                      "pitch_deg": float(np.degrees(rms[2]))}}
-
-
-def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
-    return np.array([p.x(), p.y(), p.theta()])
-
-
-def proper_cov(cov: NDArray[np.float64], floor: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """A symmetric positive-definite covariance: ``cov`` symmetrised plus ``diag(floor^2)``; ``None``
-    when it is not finite or not positive semi-definite (beyond rounding)."""
-    c = np.asarray(cov, dtype=float)
-    if c.shape != (3, 3) or not np.all(np.isfinite(c)):
-        return None
-    c = 0.5 * (c + c.T)
-    ev = np.linalg.eigvalsh(c)
-    if ev[0] < -1e-9 * max(1.0, ev[-1]):
-        return None
-    return c + np.diag(np.square(floor))
 
 
 @dataclass
@@ -285,7 +128,7 @@ class GraphBuilder:
         self.imu_model = imu_model
         self.current: tuple[int, int] | None = None  # the water current W(j): (first, newest) keyframe
         self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
-        self.cloud3d = _CloudPath(cfg, lidar3d)  # the 3D path (clouds): graphnav.scan.cloud_match
+        self.cloud3d = CloudPath(cfg, lidar3d)  # the 3D path (clouds): graphnav.scan.cloud_match
         self.charted = {b.id: b for b in chart}
         icp_opts = dict(cfg.icp)
         for k in ("sigma_r_rel", "sigma_alpha"):  # the log's LiDAR error model, when it states one
@@ -309,11 +152,11 @@ class GraphBuilder:
         self.grid_i = 0  # the next grid slot
         self.kf_scan: dict[int, Scan] = {}
         self.n_scans = 0
+        self.lidar_kind: str | None = None  # "scan" or "cloud": the first LiDAR record's kind drives the keyframes
         self.pending: list[Record] = []  # measurements after the newest keyframe
         self.due: dict[int, list[tuple[int, Record]]] = {}  # step -> (attach, record)
         self.late: list[tuple[int, Record]] = []  # after the last keyframe's batch (finish)
-        self.odo_t: list[float] = []
-        self.odo_rows: list[tuple[float, float, float, float, float, float]] = []  # t, v, w, sv, sw, density
+        self.odometry = OdometryBuffer(cfg)  # the odometry samples (graphnav.graph.odometry_buffer)
         self.held: list[Record] | None = []  # before the anchor is chosen
         self.t_last: float | None = None
         self.t_data: float | None = None
@@ -350,7 +193,8 @@ class GraphBuilder:
             return
         self.counts["records"] += 1
         if self.held is not None:  # the anchor is chosen once the records of a time stamp are all in
-            if self.held and rec.t > self.held[-1].t + EPS and self._anchor_ready(rec.t):
+            if (self.held and rec.t > self.held[-1].t + EPS
+                    and anchor_ready(self.held, self.charted, self.cfg.anchor_wait, rec.t)):
                 self._start()
             else:
                 self.held.append(rec)
@@ -419,6 +263,12 @@ class GraphBuilder:
                 self.grid_i += 1
                 self._new_keyframe(ts, None)
         if kind == "scan" or (kind == "cloud" and self.cfg.use_cloud):
+            if self.lidar_kind is None:
+                self.lidar_kind = kind
+            elif kind != self.lidar_kind:  # a log with 2D scans and 3D clouds: the first kind is the LiDAR
+                self.counts["ignored"] += 1  # (-O use_cloud=false picks the 2D scans)
+                self.counts["lidar_other"] = self.counts.get("lidar_other", 0) + 1
+                return
             if self.mode == "grid" and not self.grid_only:  # the first scan: one keyframe per scan from now on
                 self.mode = "scan"
                 self._want_matcher()
@@ -428,7 +278,8 @@ class GraphBuilder:
                 self.n_scans += 1
         elif kind == "odometry":
             if self.cfg.use_odometry or (self.cfg.use_odometry is None and self.imu is None):
-                self._odometry_sample(rec)
+                if self.odometry.add(rec):
+                    self.defaulted.add("odometry")
             else:
                 self.counts["odometry_unused"] = self.counts.get("odometry_unused", 0) + 1
         elif kind in MEASUREMENTS:
@@ -467,92 +318,10 @@ class GraphBuilder:
             self.due.setdefault(k, []).append((a, r))
         self.pending = []
 
-    def _odometry_sample(self, r: Odometry) -> None:
-        cfg = self.cfg
-        sv, sw = r.sigma_v, r.sigma_w
-        if math.isfinite(sv) and math.isfinite(sw):
-            row = (r.t, r.v, r.w, sv, sw, 0.0)
-        else:  # the defaults: noise densities, relative to the speed and turn rate plus a floor
-            self.defaulted.add("odometry")
-            w_floor = math.radians(cfg.odo_sigma_w_deg)
-            row = (r.t, r.v, r.w,
-                   sv if math.isfinite(sv) else math.hypot(cfg.odo_sigma_v, cfg.odo_sigma_v_rel * r.v),
-                   sw if math.isfinite(sw) else math.hypot(w_floor, cfg.odo_sigma_w_rel * r.w), 1.0)
-        if self.odo_t and r.t == self.odo_t[-1]:
-            self.odo_rows[-1] = row  # the newest sample at a time holds (as searchsorted right does)
-        elif self.odo_t and r.t < self.odo_t[-1]:  # a little late: in its place
-            i = bisect.bisect_left(self.odo_t, r.t)
-            if self.odo_t[i] == r.t:
-                self.odo_rows[i] = row
-            else:
-                self.odo_t.insert(i, r.t)
-                self.odo_rows.insert(i, row)
-        else:
-            self.odo_t.append(r.t)
-            self.odo_rows.append(row)
-
-    def _prune_odometry(self, t: float) -> None:
-        """Drop samples no later interval can need (all before the last one at or before ``t``)."""
-        i = bisect.bisect_right(self.odo_t, t) - 1
-        if i > 256:
-            del self.odo_t[:i]
-            del self.odo_rows[:i]
-
     # -- anchor ----------------------------------------------------------------------------------
-    def _anchor_ready(self, t_next: float) -> bool:
-        held = self.held
-        assert held is not None
-        kinds = {r.kind for r in held}
-        if "pose_prior" in kinds or ("gnss" in kinds and "heading" in kinds):
-            return True
-        charted = [r for r in held if r.kind == "beacon" and r.id in self.charted]
-        if charted and len({r.id for r in charted if abs(r.t - charted[0].t) <= 1e-6}) >= 2:
-            return True
-        return t_next - held[0].t > self.cfg.anchor_wait
-
-    def _choose_anchor(self, held: list[Record]) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
-        cfg = self.cfg
-        for r in held:
-            if isinstance(r, PosePrior):
-                return np.array([r.x, r.y, r.yaw]), np.array([r.sigma_xy, r.sigma_xy, r.sigma_yaw]), "pose_prior"
-        yaw_sig = math.radians(cfg.anchor_sigma_yaw_deg)
-        yaw_unknown = math.radians(cfg.anchor_sigma_yaw_unknown_deg)
-        gnss = [r for r in held if isinstance(r, Gnss)]
-        head = [r for r in held if isinstance(r, Heading)]
-        if gnss:
-            g = gnss[0]
-            yaw = head[0].yaw if head else 0.0
-            sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 3.0 * g.sigma
-            return (np.array([g.x, g.y, yaw]), np.array([sxy, sxy, yaw_sig if head else yaw_unknown]),
-                    "first GNSS+compass" if head else "first GNSS")
-        obs = [r for r in held if isinstance(r, BeaconObs) and r.id in self.charted]
-        if obs:
-            t0 = obs[0].t
-            first: dict[str, BeaconObs] = {}
-            for r in obs:
-                if r.t > t0 + 1e-6:
-                    break
-                first.setdefault(r.id, r)
-            sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 10.0
-            if len(first) >= 2:
-                a, b = list(first.values())[:2]
-                ca, cb = self.charted[a.id], self.charted[b.id]
-                pose = F.pose_from_two_beacons((ca.x, ca.y), (a.range, a.bearing), (cb.x, cb.y), (b.range, b.bearing))
-                return pose, np.array([sxy, sxy, yaw_sig]), "charted beacons"
-            a = obs[0]
-            yaw = head[0].yaw if head else 0.0
-            ca = self.charted[a.id]
-            pos = np.array([ca.x, ca.y]) - a.range * np.array([math.cos(yaw + a.bearing), math.sin(yaw + a.bearing)])
-            return (np.array([pos[0], pos[1], yaw]), np.array([sxy, sxy, yaw_sig if head else yaw_unknown]),
-                    "charted beacons")
-        for r in held:
-            if isinstance(r, Truth):  # nothing absolute in the log: the frame is the reference's start
-                return np.array([r.x, r.y, r.yaw]), np.array([1e-3, 1e-3, 1e-4]), "truth (first pose)"
-        return np.zeros(3), np.array([1e-3, 1e-3, 1e-4]), "origin"
-
     def _start(self) -> None:
         held, self.held = sorted(self.held or [], key=lambda r: r.t), None
-        self.anchor_pose, self.anchor_sigmas, self.anchor = self._choose_anchor(held)
+        self.anchor_pose, self.anchor_sigmas, self.anchor = choose_anchor(held, self.charted, self.cfg)
         if held:  # the grid starts at the first record, whatever it is (as keyframes.keyframe_times)
             self.grid_t0 = held[0].t
         first_prior = next((r for r in held if isinstance(r, PosePrior)), None)
@@ -562,30 +331,17 @@ class GraphBuilder:
             self._ingest(r)
 
     # -- relative motion -------------------------------------------------------------------------
-    def _odometry(self, t0: float, t1: float) -> tuple[gtsam.Pose2, NDArray[np.float64]] | None:
-        """The odometry (zero-order hold of the latest sample) composed over ``[t0, t1]``; ``None``
-        before the first sample."""
-        if not self.odo_t or (self.odo_t[0] > t0 + 1e-9 and self.odo_t[0] >= t1):
-            return None
-        lo = max(bisect.bisect_right(self.odo_t, max(t0, self.odo_t[0])) - 1, 0)
-        hi = bisect.bisect_right(self.odo_t, t1)
-        samples = np.array(self.odo_rows[lo:max(hi, lo + 1)], dtype=float)
-        inc = increment(samples, max(t0, self.odo_t[0]), t1, lateral=self.cfg.odo_lateral)
-        if inc is None:
-            return None
-        return gtsam.Pose2(*inc[0]), inc[1]
-
     def _offset_motion(self, a: int, t: float, k: int) -> gtsam.Pose2 | None:
         """Motion from keyframe ``a`` to time ``t`` (``None`` when they coincide): odometry when the
         log has it, else the newest relative motion scaled to the time offset (constant velocity)."""
         ta = self.kf_t[a]
         if abs(t - ta) < 1e-6:
             return None
-        if self.odo_t:
+        if self.odometry:
             if t > ta:
-                odo = self._odometry(ta, t)
+                odo = self.odometry.between(ta, t)
                 return None if odo is None else odo[0]
-            odo = self._odometry(t, ta)
+            odo = self.odometry.between(t, ta)
             return None if odo is None else odo[0].inverse()
         if k == 0:
             return None
@@ -678,7 +434,7 @@ class GraphBuilder:
             assert prev is not None
             t_prev = self.kf_t[k - 1]
             dt = t - t_prev
-            odo = self._odometry(t_prev, t)
+            odo = self.odometry.between(t_prev, t)
             rel: gtsam.Pose2 | None = None
             odo_cov = None
             if odo is not None:
@@ -729,7 +485,7 @@ class GraphBuilder:
             s.stamps[F.L(i)] = t
         self.stepped = k + 1
         self.kf_scan.pop(k - 1, None)
-        self._prune_odometry(self.kf_t[k])
+        self.odometry.prune(self.kf_t[k])
         if nav:
             assert self.imu is not None
             self.imu.prune(self.kf_t[k])
@@ -867,8 +623,13 @@ class GraphBuilder:
         cannot see, its factor says nothing and the IMU and GNSS decide."""
         if odo_rel is None and guess is not None:
             odo_rel, odo_cov = gtsam.Pose2(*guess[1]), guess[2]
-        if isinstance(self.kf_scan.get(k), Cloud):
-            return self.cloud3d.factor(self, s, k, odo_rel, odo_cov)
+        cur = self.kf_scan.get(k)
+        if isinstance(cur, Cloud):
+            got = self.cloud3d.factor(s, k, cur, self.kf_scan.get(k - 1), odo_rel, odo_cov, self.last_rel)
+            if got is None:
+                return None
+            self._icp_cov = got[1]  # the newest accepted match's covariance (the step's fused motion covariance)
+            return got[0]
         cfg = self.cfg
         if self.matcher is None or k not in self.kf_scan or (k - 1) not in self.kf_scan:
             return None
@@ -1004,3 +765,7 @@ class GraphBuilder:
             **(self.loops.info() if self.loops is not None else {}),
             **self.counts,
         }
+
+
+def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
+    return np.array([p.x(), p.y(), p.theta()])

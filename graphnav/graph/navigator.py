@@ -343,8 +343,9 @@ class Navigator:
             sog, cog = math.hypot(dx, dy) / dt, math.atan2(dy, dx)
             w = float(wrap_angle(p[2] - prev_p[2])) / dt
         b = self.builder
-        if b.odo_t and t - b.odo_t[-1] <= 2.0:
-            _, v, wr = b.odo_rows[-1][:3]
+        odo = b.odometry
+        if odo and t - odo.t[-1] <= 2.0:
+            _, v, wr = odo.rows[-1][:3]
             sog, w = abs(v), wr
         return sog, cog, w
 
@@ -443,12 +444,14 @@ class Navigator:
             info["imu_bias_final"] = [*np.asarray(bias.accelerometer()).tolist(),
                                       *np.asarray(bias.gyroscope()).tolist()]
         if b.current is not None:  # the water current [m/s] (east, north): at the end and its mean
-            ws = [np.asarray(values.atVector(W(j)))[:2] for j in range(b.current[0], b.current[1] + 1)
-                  if values.exists(W(j))]
-            if ws:
-                info["water_current"] = {"vx": float(ws[-1][0]), "vy": float(ws[-1][1]),
-                                         "mean_vx": float(np.mean([w[0] for w in ws])),
-                                         "mean_vy": float(np.mean([w[1] for w in ws]))}
+            js = [j for j in range(b.current[0], b.current[1] + 1) if values.exists(W(j))]
+            ws = np.array([np.asarray(values.atVector(W(j)))[:2] for j in js]).reshape(-1, 2)
+            if len(js):
+                every = max(1, len(js) // 1000)  # the series: at most ~1000 samples
+                info["water_current"] = {"vx": float(ws[-1, 0]), "vy": float(ws[-1, 1]),
+                                         "mean_vx": float(ws[:, 0].mean()), "mean_vy": float(ws[:, 1].mean()),
+                                         "series": [[float(t[j]), float(w[0]), float(w[1])]
+                                                    for j, w in list(zip(js, ws, strict=True))[::every]]}
         info.update(self.extra)
         if self.solver.online:
             info["step_cpu_ms_median"] = float(np.median(self.step_cpu)) if self.step_cpu else None

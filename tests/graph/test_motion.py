@@ -359,9 +359,9 @@ def test_odometry_over_an_interval_closed_form_and_rate_independent(rate):
     for turn in (w, 0.0):
         b = GraphBuilder(cfg)
         for t in np.arange(0.0, 10.0, 1.0 / rate):
-            b._odometry_sample(Odometry(float(t), v, turn, math.nan, math.nan))
+            b.odometry.add(Odometry(float(t), v, turn, math.nan, math.nan))
         t0, t1 = 2.03, 6.53  # not on the samples: the first and last sub-arcs are partial
-        pose, cov = b._odometry(t0, t1)
+        pose, cov = b.odometry.between(t0, t1)
         T = t1 - t0
         if turn:
             np.testing.assert_allclose([pose.x(), pose.y(), pose.theta()],
@@ -391,3 +391,17 @@ def test_odometry_chain_in_the_graph_is_the_closed_form_arc():
             want = gtsam.Pose2(*x0).compose(d)
             np.testing.assert_allclose(p[:2], [want.x(), want.y()], atol=1e-6, err_msg=run.__name__)
             assert math.remainder(p[2] - want.theta(), 2 * math.pi) == pytest.approx(0, abs=1e-7)
+
+
+def test_a_log_with_scans_and_clouds_runs_on_its_first_lidar():
+    """2D scans and 3D clouds in one log (two LiDARs): the first kind drives the keyframes and the
+    matching, the other is counted (it crashed: 'Cloud' object has no attribute 'ranges')."""
+    from graphnav.log import make_cloud
+
+    log = _harbour(8.0)
+    rng = np.random.default_rng(0)
+    clouds = [make_cloud(r.t + 1e-3, rng.normal(0, 10, (300, 3))) for r in log.of("scan")[::2]]
+    mixed = NavLog.from_unsorted(list(log.records) + clouds, log.beacons_known, log.meta)
+    r = run_isam2(mixed, covariances=False)
+    assert r.info["lidar_other"] == len(clouds) and r.info["icp_pairs"] > 10
+    assert np.all(np.isfinite(r.trajectory.poses))
