@@ -21,7 +21,15 @@ from ..io import load_log
 from ..io.geo_out import write_wgs84
 from ..io.outputs import OutDir
 from ..scan.icp_cache import MatchCache
-from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, options_by_estimator, progress_bar
+from ._common import (
+    add_json_flag,
+    add_log_args,
+    add_overwrite_flag,
+    emit,
+    log_options,
+    options_by_estimator,
+    progress_bar,
+)
 
 log_ = logging.getLogger("graphnav.compare")
 
@@ -82,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     out = getattr(args, "out_dir", None)  # (demo prepares its own)
     if out is None:
         out = OutDir(args.out, command="compare", overwrite=getattr(args, "overwrite", False))
-    log = load_log(args.log, lenient=args.lenient)
+    log = load_log(args.log, lenient=args.lenient, **log_options(args))
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
     _check_scopes(options, names)
     t0 = time.perf_counter()

@@ -15,7 +15,16 @@ from ..io import load_log
 from ..io.geo_out import record_origin, write_wgs84
 from ..io.outputs import OutDir
 from ..io.tum import TrajectoryWriter, write_truth
-from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, jsonable, options_for, progress_bar
+from ._common import (
+    add_json_flag,
+    add_log_args,
+    add_overwrite_flag,
+    emit,
+    jsonable,
+    log_options,
+    options_for,
+    progress_bar,
+)
 
 log_ = logging.getLogger("graphnav.run")
 
@@ -68,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     estimators.get(args.estimator)  # (an unknown name or option fails before --out is touched)
     check_options(args.estimator, options)
     out = OutDir(args.out, command="run", overwrite=args.overwrite) if args.out else None
-    log = load_log(args.log, lenient=args.lenient)
+    log = load_log(args.log, lenient=args.lenient, **log_options(args))
     writer = None
     if out is not None:
         out.file("online.cov")  # the writer's covariance sidecar, when the estimator gives covariances
