@@ -16,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("info", help="count the records of a log", description=__doc__)
     add_log_args(p)
     p.add_argument("--topic", action="append", metavar="KIND=TOPIC",
-                   help="ROS bags: read KIND (scan, gnss, imu, heading, odometry, nmea) from TOPIC")
+                   help="ROS bags: read KIND (scan, cloud, gnss, gnss_velocity, imu, heading, odometry, nmea) "
+                        "from TOPIC")
     add_json_flag(p)
     p.set_defaults(func=run)
 
