@@ -11,8 +11,9 @@ from typing import Any
 from ..errors import GraphnavError
 from ..io.jsonsafe import jsonable
 
-__all__ = ["OPTION_FORM", "add_json_flag", "add_log_args", "emit", "jsonable", "log_options", "options_by_estimator",
-           "options_for", "parse_option", "parse_options", "plain_options", "progress_enabled", "scoped_options"]
+__all__ = ["OPTION_FORM", "add_drop_flag", "add_json_flag", "add_log_args", "dropped_kinds", "emit", "jsonable",
+           "log_options", "options_by_estimator", "options_for", "parse_option", "parse_options", "plain_options",
+           "progress_enabled", "scoped_options"]
 
 
 def add_json_flag(p: argparse.ArgumentParser) -> None:
@@ -59,6 +60,20 @@ def log_date(text: str) -> str:
 def log_options(args: argparse.Namespace) -> dict[str, Any]:
     """The reader options that :func:`add_log_args` flags give (``date``), for ``load_log(**...)``."""
     return {"date": args.date} if getattr(args, "date", None) else {}
+
+
+def add_drop_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--drop", action="append", metavar="KIND[,KIND]",
+                   help="leave these record kinds out of the log before any estimator sees it, e.g. "
+                        "--drop odometry,beacon (repeatable; beacon_known: the charted beacons); the JSON "
+                        "output lists them as 'dropped'")
+
+
+def dropped_kinds(args: argparse.Namespace) -> list[str]:
+    """The kinds of ``--drop`` (checked: an unknown kind is a ``ValueError`` naming the known ones)."""
+    from ..ablation import parse_kinds
+
+    return parse_kinds(getattr(args, "drop", None))
 
 
 def emit(args: argparse.Namespace, obj: dict[str, Any], human: str | None = None) -> None:
@@ -118,6 +133,10 @@ def options_for(args: argparse.Namespace, name: str) -> dict[str, Any]:
     given = scoped_options(getattr(args, "option", None))
     other = sorted(s for s in given if s not in (None, name))
     if other:
+        from .. import estimators
+
+        if other[0] not in estimators.registry():
+            raise KeyError(f"-O {other[0]}.KEY=VALUE: " + estimators.unknown_name(other[0]))
         raise ValueError(f"-O {other[0]}.KEY=VALUE: this command runs {name!r}; write KEY=VALUE or "
                          f"{name}.KEY=VALUE")
     files = _file_options(args)

@@ -13,6 +13,8 @@ import time
 from pathlib import Path
 
 from .. import estimators
+from ..ablation import drop_kinds
+from ..errors import GraphnavError
 from ..estimators.options import check as check_options
 from ..evaluation.compare import compare, ranked
 from ..evaluation.report import to_json, write_report
@@ -22,9 +24,11 @@ from ..io.geo_out import write_wgs84
 from ..io.outputs import OutDir
 from ..scan.icp_cache import MatchCache
 from ._common import (
+    add_drop_flag,
     add_json_flag,
     add_log_args,
     add_overwrite_flag,
+    dropped_kinds,
     emit,
     log_options,
     options_by_estimator,
@@ -40,6 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_log_args(p)
     p.add_argument("--out", type=Path, required=True, help="output directory (report.md, *.png, *.tum)")
     add_overwrite_flag(p)
+    add_drop_flag(p)
     p.add_argument("--estimators", "-e", default=None,
                    help="comma-separated names, LABEL=NAME to run one estimator twice under another "
                         "label (default: every estimator the log can feed); known: "
@@ -71,6 +76,15 @@ def _runnable(log, names: list[str] | None) -> int:  # noqa: ANN001
     return n
 
 
+def _check_names(names: list[str] | None) -> None:
+    """Every estimator ``-e`` names (``LABEL=NAME``: its NAME) is one graphnav knows: an unknown one is
+    a ``KeyError`` with the closest names (difflib), before anything runs or is written."""
+    for name in names or []:
+        est = (name.partition("=")[2] if "=" in name else name).strip()
+        if est not in estimators.registry():
+            raise KeyError(f"-e {name}: " + estimators.unknown_name(est))
+
+
 def _check_scopes(options: dict[str, dict], names: list[str] | None) -> None:
     """Every ``-O ESTIMATOR.KEY`` names an estimator (or label) this comparison runs, and a key it knows."""
     labels = {}
@@ -79,6 +93,9 @@ def _check_scopes(options: dict[str, dict], names: list[str] | None) -> None:
         labels[label.strip()] = est.strip()
     for scope, given in options.items():
         if scope not in labels:
+            if scope not in estimators.registry():
+                raise KeyError(f"-O {scope}.KEY=VALUE: " + estimators.unknown_name(scope, {*estimators.names(),
+                                                                                         *labels}))
             raise ValueError(f"-O {scope}.KEY=VALUE: {scope!r} is not one of the estimators compared "
                              f"({', '.join(labels)})")
         if labels[scope] in estimators.registry():
@@ -86,13 +103,22 @@ def _check_scopes(options: dict[str, dict], names: list[str] | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    options = options_by_estimator(args)  # (a bad -O fails before --out is touched)
-    out = getattr(args, "out_dir", None)  # (demo prepares its own)
-    if out is None:
-        out = OutDir(args.out, command="compare", overwrite=getattr(args, "overwrite", False))
-    log = load_log(args.log, lenient=args.lenient, **log_options(args))
+    options = options_by_estimator(args)  # (a bad -O, name or kind fails before --out is touched)
     names = [n.strip() for n in args.estimators.split(",") if n.strip()] if args.estimators else None
+    _check_names(names)
     _check_scopes(options, names)
+    dropped = dropped_kinds(args)
+    out = getattr(args, "out_dir", None)  # (demo prepares its own)
+    if out is not None:
+        return _compare(args, options, names, dropped, out)
+    out = OutDir(args.out, command="compare", overwrite=getattr(args, "overwrite", False))
+    with out.discarded_on_error():  # a failed compare leaves nothing in --out
+        return _compare(args, options, names, dropped, out)
+
+
+def _compare(args: argparse.Namespace, options: dict[str, dict], names: list[str] | None, dropped: list[str],
+             out: OutDir) -> int:
+    log = drop_kinds(load_log(args.log, lenient=args.lenient, **log_options(args)), dropped)
     t0 = time.perf_counter()
     workers = args.workers if args.workers > 0 else (os.cpu_count() or 1)
     cache = MatchCache() if getattr(args, "icp_cache", True) else None  # (demo builds its own Namespace)
@@ -113,6 +139,11 @@ def run(args: argparse.Namespace) -> int:
             bar.update(1)
     finally:
         bar.close()
+    if not any(e.ok for e in entries):
+        why = "; ".join(f"{e.name}: " + (f"failed: {e.error}" if e.error is not None else f"not run: {e.skipped}")
+                        for e in entries)
+        after = f" (after --drop {','.join(dropped)})" if dropped else ""
+        raise GraphnavError(f"no estimator ran on this log{after}: {why or 'none given'}", where=str(args.log))
     command = shlex.join(["graphnav", *args.argv]) if hasattr(args, "argv") else None
     files = write_report(entries, log, out, log_name=str(args.log), command=command, workers=workers)
     tracks = {**({"truth": log.truth()} if log.has_truth else {}),
@@ -129,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
             log_.info("%s not run: %s", e.name, e.skipped)
     hits = sum((e.summary or {}).get("icp_cache_hits", 0) for e in entries) if cache is not None else None
     obj = to_json(entries, str(args.log), out=str(args.out), total_runtime_s=total, workers=workers,
-                  icp_cache_hits=hits, map="map.html", **geo)
+                  icp_cache_hits=hits, map="map.html", dropped=dropped, **geo)
     lines = [f"{'estimator':16s} {'ATE RMSE [m]':>12s} {'RPE [m]':>9s} {'runtime [s]':>11s}  note"]
     for e in ranked(entries):
         s = e.summary or {}

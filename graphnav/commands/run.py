@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from .. import estimators
+from ..ablation import drop_kinds
 from ..estimators.options import check as check_options
 from ..evaluation.evaluate import summarize
 from ..io import load_log
@@ -16,9 +17,11 @@ from ..io.geo_out import record_origin, write_wgs84
 from ..io.outputs import OutDir
 from ..io.tum import TrajectoryWriter, write_truth
 from ._common import (
+    add_drop_flag,
     add_json_flag,
     add_log_args,
     add_overwrite_flag,
+    dropped_kinds,
     emit,
     jsonable,
     log_options,
@@ -40,6 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output directory (trajectory.tum, trajectory.csv, summary.json, truth.tum; "
                         "trajectory.geojson/.gpx/.kml in WGS84 when the log has a geodetic origin)")
     add_overwrite_flag(p)
+    add_drop_flag(p)
     p.add_argument("--option", "-O", action="append", metavar="[ESTIMATOR.]KEY=VALUE",
                    help="estimator option (VALUE parsed as JSON when it can be), e.g. -O lag=10; repeatable; "
                         "--list-options ESTIMATOR lists them")
@@ -73,15 +77,35 @@ def run(args: argparse.Namespace) -> int:
     missing = [n for n, v in (("LOG", args.log), ("--estimator", args.estimator)) if not v]
     if missing:
         raise ValueError(f"graphnav run: the following arguments are required: {', '.join(missing)}")
+    estimators.get(args.estimator)  # (an unknown name, option or kind fails before --out is touched)
     options = options_for(args, args.estimator)
-    estimators.get(args.estimator)  # (an unknown name or option fails before --out is touched)
     check_options(args.estimator, options)
-    out = OutDir(args.out, command="run", overwrite=args.overwrite) if args.out else None
-    log = load_log(args.log, lenient=args.lenient, **log_options(args))
+    dropped = dropped_kinds(args)
+    if not args.out:
+        return _run(args, options, dropped, None)
+    out = OutDir(args.out, command="run", overwrite=args.overwrite)
+    online: list[TrajectoryWriter] = []  # (set once the run writes its online track)
+
+    def keep() -> list[str]:  # a run that dies after estimating keeps its online track (flushed as it came)
+        return ["online.tum", "online.cov"] if online and online[0].count else []
+
+    with out.discarded_on_error(keep):  # a failed run leaves nothing else in --out
+        return _run(args, options, dropped, out, online)
+
+
+def _run(args: argparse.Namespace, options: dict, dropped: list[str], out: OutDir | None,
+         online: list[TrajectoryWriter] | None = None) -> int:
+    log = drop_kinds(load_log(args.log, lenient=args.lenient, **log_options(args)), dropped)
+    why = estimators.get(args.estimator).unmet(log)
+    if why:
+        after = f" (after --drop {','.join(dropped)})" if dropped else ""
+        raise ValueError(f"estimator {args.estimator!r} cannot run on {args.log}{after}: {why}")
     writer = None
     if out is not None:
         out.file("online.cov")  # the writer's covariance sidecar, when the estimator gives covariances
         writer = TrajectoryWriter(out.file("online.tum"))  # appended and flushed as estimates arrive
+        if online is not None:
+            online.append(writer)
     log_.info("running %s on %s (%d records)", args.estimator, args.log, len(log))
     span = max(float(log.t1 - log.t0), 0.0) if len(log) else 0.0
     bar = progress_bar(args, total=round(span, 1), unit="s", desc=f"{args.estimator} (log time)",
@@ -107,6 +131,8 @@ def run(args: argparse.Namespace) -> int:
     runtime = time.perf_counter() - t0
     summary = summarize(args.estimator, result, log, runtime_s=runtime)
     summary["options"] = options
+    summary["dropped"] = dropped
+    summary["inputs"] = estimators.inputs(args.estimator, log, options, result.info)
     summary["origin"] = record_origin(log.meta)  # the log's geodetic origin (None: none), for graphnav export
     if out is not None:  # each file atomically (temporary file + rename)
         result.trajectory.to_tum(out.file("trajectory.tum"))

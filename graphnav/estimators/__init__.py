@@ -7,15 +7,18 @@ one loop over :func:`names`.
 
 from __future__ import annotations
 
+import difflib
 import importlib
 import pkgutil
-from collections.abc import Callable
+import re
+from collections.abc import Callable, Iterable
 from typing import Any, NamedTuple, Protocol
 
 from ..log import NavLog
 from ..result import OnEstimate, RunResult  # re-exported: estimator modules import them from here
 
-__all__ = ["EstimatorSpec", "OnEstimate", "RunFn", "RunResult", "get", "names", "registry", "run", "runnable"]
+__all__ = ["EstimatorSpec", "OnEstimate", "RunFn", "RunResult", "get", "inputs", "names", "registry", "run", "runnable",
+           "unknown_name"]
 
 
 class RunFn(Protocol):
@@ -25,12 +28,15 @@ class RunFn(Protocol):
 class EstimatorSpec(NamedTuple):
     """``run(log, on_estimate=None, **options)``; ``unmet(log)`` returns why the log cannot feed
     the estimator (``None`` if it can); a one-line ``description``; ``kind`` is
-    ``"smoother"``, ``"filter"`` or ``"odometry"``."""
+    ``"smoother"``, ``"filter"`` or ``"odometry"``. ``inputs(log, options)``: the record kinds
+    ``run(log, **options)`` reads (measurements, controls, its start pose; :func:`inputs` keeps those
+    the log holds), ``None``: not declared."""
 
     run: RunFn
     unmet: Callable[[NavLog], str | None]
     description: str
     kind: str = "filter"
+    inputs: Callable[[NavLog, dict[str, Any]], Iterable[str]] | None = None
 
 
 _REGISTRY: dict[str, EstimatorSpec] | None = None
@@ -55,11 +61,44 @@ def names() -> list[str]:
     return sorted(registry())
 
 
+def unknown_name(name: str, known: Iterable[str] | None = None) -> str:
+    """The message for an unknown estimator ``name``: the closest known names (difflib) and all of them."""
+    known = sorted(registry() if known is None else known)
+    close = difflib.get_close_matches(name, known, n=2, cutoff=0.6)
+    hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+    return f"unknown estimator {name!r}{hint} (known: {', '.join(known)})"
+
+
 def get(name: str) -> EstimatorSpec:
     reg = registry()
     if name not in reg:
-        raise KeyError(f"unknown estimator {name!r}; known: {', '.join(sorted(reg))}")
+        raise KeyError(unknown_name(name, reg))
     return reg[name]
+
+
+#: what an estimator's ``info["anchor"]`` (where its start pose came from) names -> the record kinds read
+_ANCHOR_WORDS = {"truth": ("truth",), "gnss": ("gnss",), "pose_prior": ("pose_prior",), "compass": ("heading",),
+                 "beacons": ("beacon", "beacon_known")}
+
+
+def inputs(name: str, log: NavLog, options: dict[str, Any] | None = None,
+           info: dict[str, Any] | None = None) -> list[str] | None:
+    """The record kinds estimator ``name`` used on ``log`` with ``options``: the kinds its spec
+    declares (``EstimatorSpec.inputs``) that the log holds, plus the kinds its start pose came from
+    (``info["anchor"]`` of its result, e.g. ``truth`` when nothing else gave one), in
+    :data:`graphnav.ablation.KINDS` order. ``None`` when the spec declares nothing."""
+    from ..ablation import KINDS
+
+    spec = get(name)
+    if spec.inputs is None:
+        return None
+    used = set(spec.inputs(log, dict(options or {})))
+    anchor = (info or {}).get("anchor")
+    if isinstance(anchor, str):
+        for word in re.split(r"[^a-z_]+", anchor.lower()):
+            used.update(_ANCHOR_WORDS.get(word, ()))
+    have = log.counts()
+    return [k for k in KINDS if k in used and have.get(k)]
 
 
 def run(name: str, log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:

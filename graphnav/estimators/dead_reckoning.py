@@ -62,6 +62,11 @@ def _unmet(log: NavLog) -> str | None:
     return None if len(log.of("odometry")) >= 2 else "needs at least two odometry records"
 
 
+def _inputs(log: NavLog, options: dict) -> set[str]:
+    return {"odometry", "pose_prior"}  # (the first truth pose without a prior: info["anchor"])
+
+
 ESTIMATORS = {
-    "dead-reckoning": EstimatorSpec(run_dead_reckoning, _unmet, "odometry (SOG + ROT) integration", "odometry"),
+    "dead-reckoning": EstimatorSpec(run_dead_reckoning, _unmet, "odometry (SOG + ROT) integration", "odometry",
+                                    _inputs),
 }

@@ -324,7 +324,25 @@ def _unmet(log: NavLog) -> str | None:
     return None
 
 
+def _inputs(log: NavLog, options: dict) -> set[str]:
+    """The kinds :func:`run_ekf` reads with ``options``: its motion's (odometry or scans), the updates
+    it makes, and its start (:func:`initial_state`)."""
+    motion = options.get("motion", "auto")
+    if motion == "auto":
+        motion = "odometry" if len(log.of("odometry")) >= 2 else "icp"
+    kinds = {"pose_prior", "odometry" if motion == "odometry" else "scan"}
+    if options.get("use_gnss", True):
+        kinds.add("gnss")
+    if options.get("use_heading", True):
+        kinds.add("heading")
+    if options.get("speed", False):
+        kinds.add("odometry")  # the speed state starts at the first odometry speed
+    if log.pose_prior() is None and log.of("gnss"):
+        kinds |= {"gnss", "heading"}  # the start: the first fix and compass heading
+    return kinds
+
+
 ESTIMATORS = {
     "ekf": EstimatorSpec(run_ekf, _unmet,
-                         "EKF on x, y, yaw (+speed): odometry or ICP motion, gated GNSS + compass", "filter"),
+                         "EKF on x, y, yaw (+speed): odometry or ICP motion, gated GNSS + compass", "filter", _inputs),
 }

@@ -456,7 +456,14 @@ def _unmet(log: NavLog) -> str | None:
     return None
 
 
+def _inputs(log: NavLog, options: dict) -> set[str]:
+    kinds = {"odometry", "beacon", "pose_prior"}
+    if options.get("use_known", True):
+        kinds.add("beacon_known")
+    return kinds
+
+
 ESTIMATORS = {
     "ekf-slam": EstimatorSpec(run_ekf_slam, _unmet, "range-bearing EKF-SLAM (beacon paper, eq. 3-27): gated, "
-                              "FEJ, for real logs; paper=true: the paper's filter", "filter"),
+                              "FEJ, for real logs; paper=true: the paper's filter", "filter", _inputs),
 }

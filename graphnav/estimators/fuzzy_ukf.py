@@ -46,7 +46,7 @@ from scipy.stats import chi2
 from ..log import NavLog
 from . import EstimatorSpec, OnEstimate, RunResult
 from .fuzzy import FuzzyAlpha, Thresholds
-from .ukf import DEFAULTS, measurement_table, run_nav_filter, unmet
+from .ukf import DEFAULTS, inputs, measurement_table, run_nav_filter, unmet
 
 
 class FuzzyCovarianceMatcher:
@@ -167,7 +167,7 @@ def run_fuzzy_ukf_bias(log: NavLog, *, on_estimate: OnEstimate | None = None, **
 
 ESTIMATORS = {
     "fuzzy-ukf": EstimatorSpec(run_fuzzy_ukf, unmet,
-                               "UKF with fuzzy covariance-matching R adaptation (Liu 2019)", "filter"),
+                               "UKF with fuzzy covariance-matching R adaptation (Liu 2019)", "filter", inputs),
     "fuzzy-ukf-bias": EstimatorSpec(run_fuzzy_ukf_bias, unmet,
-                                    "fuzzy-ukf on the bias-augmented ukf-bias state (ours)", "filter"),
+                                    "fuzzy-ukf on the bias-augmented ukf-bias state (ours)", "filter", inputs),
 }

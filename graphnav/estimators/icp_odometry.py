@@ -117,6 +117,13 @@ def _unmet(log: NavLog) -> str | None:
     return None if len(log.of("scan")) >= 2 else "needs at least two LiDAR scans"
 
 
+def _inputs(log: NavLog, options: dict) -> set[str]:
+    kinds = {"scan", "pose_prior"}
+    if options.get("init", "odometry") == "odometry":
+        kinds.add("odometry")  # the initial guess (and the bridge of a failed match)
+    return kinds
+
+
 ESTIMATORS = {
-    "icp-dr": EstimatorSpec(run_icp_dr, _unmet, "weighted-ICP scan-matching dead reckoning", "odometry"),
+    "icp-dr": EstimatorSpec(run_icp_dr, _unmet, "weighted-ICP scan-matching dead reckoning", "odometry", _inputs),
 }

@@ -242,8 +242,15 @@ def _unmet(log: NavLog) -> str | None:
     return None if n >= 2 else f"needs at least two scans with >= {ScanToMapConfig.min_points} returns"
 
 
+def _inputs(log: NavLog, options: dict) -> set[str]:
+    kinds = {"scan", "pose_prior"}
+    if make_config(**options).predict == "odometry":
+        kinds.add("odometry")  # the initial guess
+    return kinds
+
+
 ESTIMATORS = {
     "scan-to-map": EstimatorSpec(
         run_scan_to_map, _unmet, "LiDAR scan-to-local-map registration (small_gicp VGICP default)",
-        "odometry"),
+        "odometry", _inputs),
 }

@@ -31,15 +31,33 @@ def _dispatch(name: str, odometry_run):
     return run
 
 
+def _inputs(log: NavLog, options: dict[str, Any]) -> set[str]:
+    """The kinds the graph :func:`_dispatch` picks reads. Keep in step with graphnav/graph/ (the test
+    tests/estimators/test_inputs.py drops each kind and checks the output changes exactly when it is listed)."""
+    motion = options.get("motion", "auto")
+    if motion == "imu" or (motion == "auto" and imu_motion.wants_imu_graph(log)):
+        return {"imu", "gnss", "heading", "pose_prior"}
+    kinds = {"scan", "gnss", "heading", "beacon", "pose_prior"}
+    if log.of("beacon"):
+        kinds.add("beacon_known")  # the chart, for the beacons the log observes
+    if options.get("use_odometry", True):
+        kinds.add("odometry")
+    if options.get("use_cloud", True):
+        kinds.add("cloud")
+    return kinds
+
+
 ESTIMATORS = {
     "isam2": EstimatorSpec(
         _dispatch("isam2", run_isam2), unmet, "iSAM2 factor-graph smoother: online + smoothed, all sensors",
-        "smoother"
+        "smoother", _inputs
     ),
     "batch": EstimatorSpec(
-        _dispatch("batch", run_batch), unmet, "batch Levenberg-Marquardt over the whole factor graph", "smoother"
+        _dispatch("batch", run_batch), unmet, "batch Levenberg-Marquardt over the whole factor graph", "smoother",
+        _inputs
     ),
     "fixed-lag": EstimatorSpec(
-        _dispatch("fixed-lag", run_fixed_lag), unmet, "incremental fixed-lag smoother (bounded memory)", "smoother"
+        _dispatch("fixed-lag", run_fixed_lag), unmet, "incremental fixed-lag smoother (bounded memory)", "smoother",
+        _inputs
     ),
 }

@@ -336,7 +336,13 @@ def run_ukf_bias(log: NavLog, *, on_estimate: OnEstimate | None = None, **option
     return run_nav_filter(log, "ukf-bias", bias=True, on_estimate=on_estimate, options=options)
 
 
+def inputs(log: NavLog, options: dict) -> set[str]:
+    """The kinds :func:`run_nav_filter` reads: IMU (prediction), GNSS and compass (updates), the pose prior."""
+    return {"imu", "gnss", "heading", "pose_prior"}
+
+
 ESTIMATORS = {
-    "ukf": EstimatorSpec(run_ukf, unmet, "conventional UKF, IMU-driven, GNSS + compass (Liu 2019)", "filter"),
-    "ukf-bias": EstimatorSpec(run_ukf_bias, unmet, "UKF with accelerometer/gyro bias states", "filter"),
+    "ukf": EstimatorSpec(run_ukf, unmet, "conventional UKF, IMU-driven, GNSS + compass (Liu 2019)", "filter",
+                         inputs),
+    "ukf-bias": EstimatorSpec(run_ukf_bias, unmet, "UKF with accelerometer/gyro bias states", "filter", inputs),
 }

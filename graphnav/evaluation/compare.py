@@ -54,6 +54,7 @@ def _run(entry: Entry, est: str, log: NavLog) -> Entry:
         entry.runtime_s = time.perf_counter() - t0
         entry.result = res
         entry.summary = summarize(entry.name, res, log, runtime_s=entry.runtime_s)
+        entry.summary["inputs"] = estimators.inputs(est, log, entry.options, res.info)
         if cache is not None:
             entry.summary["icp_cache_hits"] = cache.hits - hits0
             if cache.hits > hits0:  # a shared match costs what it cost its first computation

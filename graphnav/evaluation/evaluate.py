@@ -8,18 +8,41 @@ import numpy as np
 
 from ..log import NavLog
 from ..result import RunResult
-from .metrics import ate, heading_error, movement_errors, nees_stats, rpe
+from .metrics import ate, event_windows, heading_error, movement_errors, nees_stats, rpe, window_errors
 
 
 def _median(a: np.ndarray) -> float:
     return float(np.median(a)) if len(a) else float("nan")
 
 
+def errors_by_event(result: RunResult, log: NavLog, *, max_dt: float = 0.02) -> dict[str, dict[str, Any]]:
+    """Position errors inside the log's ``meta["events"]`` windows, per event kind (gnss_outage,
+    gnss_jump, gnss_multipath, ...): ``{kind: {"windows", "duration_s", "n", "rmse_m", "max_m",
+    "online_n", "online_rmse_m", "online_max_m"}}``. ``n``: the estimate/truth pairs inside the
+    kind's windows (:func:`~graphnav.evaluation.metrics.window_errors`, the pairs of the ATE); the
+    ``online_*`` figures are the online trajectory's (the same as the others when the estimator
+    has one trajectory; ``None`` without an online one). ``{}`` without truth or events."""
+    if not log.has_truth:
+        return {}
+    ref = log.truth()
+    out: dict[str, dict[str, Any]] = {}
+    for kind, wins in event_windows(log.meta.get("events")).items():
+        w = window_errors(result.trajectory, ref, wins, max_dt=max_dt)
+        d: dict[str, Any] = {"windows": len(wins), "duration_s": float(sum(t1 - t0 for t0, t1 in wins)),
+                             "n": w["n"], "rmse_m": w["rmse"], "max_m": w["max"]}
+        o = window_errors(result.online, ref, wins, max_dt=max_dt) if result.online is not None else None
+        d.update({"online_n": o["n"] if o else None, "online_rmse_m": o["rmse"] if o else None,
+                  "online_max_m": o["max"] if o else None})
+        out[kind] = d
+    return out
+
+
 def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
               rpe_delta: int = 10, max_dt: float = 0.02) -> dict[str, Any]:
     """The standard summary: ``estimator``, ``steps``, ``ate_*``, ``rpe_*``, timing, movement errors,
-    ``heading_rmse_deg`` and ``nees_mean`` (position NEES of the estimate's own covariance, 2 dof:
-    about 2 when consistent; ``None`` when the estimator gives no covariance).
+    ``heading_rmse_deg``, ``errors_by_event`` (:func:`errors_by_event`) and ``nees_mean`` (position NEES
+    of the estimate's own covariance, 2 dof: about 2 when consistent; ``None`` when the estimator gives
+    no covariance).
 
     ATE is unaligned (in the log's frame) unless the key says ``aligned``. Keys for truth-based
     figures are present only when the log has truth.
@@ -55,6 +78,7 @@ def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
             out["online_ate_rmse_m"] = ate(result.online, ref, max_dt=max_dt)["rmse"]
             ns = nees_stats(result.online, ref, max_dt=max_dt)
             out["online_nees_mean"] = ns["mean"] if ns else None
+        out["errors_by_event"] = errors_by_event(result, log, max_dt=max_dt)
     for k in ("anchor", "loop_closures", "loop_candidates"):
         if k in result.info:
             out[k] = result.info[k]

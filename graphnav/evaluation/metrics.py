@@ -188,3 +188,35 @@ def movement_errors(
         "rot": signed(np.degrees(a["rot"] - b["rot"])),
         "hdg": signed(np.degrees(wrap_angle(a["hdg"] - b["hdg"]))),
     }
+
+
+def event_windows(events: Any) -> dict[str, list[tuple[float, float]]]:
+    """A log's ``meta["events"]`` (``[{"kind", "t0", "t1"}, ...]``) -> ``{kind: [(t0, t1), ...]}`` in
+    the order given. Entries that are not such a window (no kind, a bound not finite, ``t1 < t0``) are
+    left out."""
+    out: dict[str, list[tuple[float, float]]] = {}
+    for ev in events if isinstance(events, list | tuple) else ():
+        if not isinstance(ev, dict) or not isinstance(ev.get("kind"), str) or not ev["kind"]:
+            continue
+        try:
+            t0, t1 = float(ev["t0"]), float(ev["t1"])
+        except (KeyError, TypeError, ValueError):
+            continue
+        if np.isfinite(t0) and np.isfinite(t1) and t1 >= t0:
+            out.setdefault(ev["kind"], []).append((t0, t1))
+    return out
+
+
+def window_errors(est: Trajectory, ref: Trajectory, windows: list[tuple[float, float]], *,
+                  max_dt: float = 0.02) -> dict[str, float]:
+    """Position error statistics (:func:`ate`'s, unaligned) over the pairs of :func:`associate` whose
+    reference time lies inside one of ``windows`` (``t0 <= t <= t1``, bounds included). Returns
+    ``rmse``, ``max`` [m] and ``n`` (pairs; 0 with NaN figures when none falls inside)."""
+    ie, ir = associate(est, ref, max_dt)
+    t = ref.t[ir]
+    inside = np.zeros(len(t), bool)
+    for t0, t1 in windows:
+        inside |= (t >= t0) & (t <= t1)
+    p, q = est.poses[ie[inside]], ref.poses[ir[inside]]
+    s = _stats(np.hypot(p[:, 0] - q[:, 0], p[:, 1] - q[:, 1]))
+    return {"rmse": s["rmse"], "max": s["max"], "n": s["n"]}

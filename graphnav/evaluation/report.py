@@ -295,7 +295,9 @@ def _blocks(entries: Sequence[Entry], log: NavLog, log_name: str, prov: dict[str
     b.append(("h", 2, "Configuration"))
     for e in entries:
         if e.ok:
-            b += [("h", 3, f"{e.name} ({e.kind})"), ("p", e.description),
+            used = (e.summary or {}).get("inputs")
+            uses = f" Inputs (record kinds it used): {', '.join(used) if used else 'none'}." if used is not None else ""
+            b += [("h", 3, f"{e.name} ({e.kind})"), ("p", e.description + uses),
                   ("code", "json", json.dumps(_config(e), indent=2, sort_keys=True))]
     tums = ", ".join(f"`{file_stem(e.name)}.tum`" for e in entries if e.ok and e.result is not None)
     files = f"Trajectories: {tums} (TUM, evo-readable)"

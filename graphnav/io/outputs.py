@@ -18,7 +18,7 @@ import contextlib
 import json
 import logging
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
@@ -93,6 +93,7 @@ class OutDir:
 
     def __init__(self, path: str | Path, *, command: str, overwrite: bool = False, own_ok: bool = False,
                  flag: str = "--out") -> None:
+        self.created = not Path(path).exists()
         self.path = ensure_dir(path, flag)
         self.command = command
         self.files: list[str] = []
@@ -145,6 +146,41 @@ class OutDir:
             self.files.append(name)
             self._write_manifest()
         return self.path / name
+
+    def discard(self, keep: Iterable[str] = ()) -> list[str]:
+        """A failed run: delete the files it wrote (those :meth:`file` recorded) but ``keep``, its
+        ``.tmp-*`` files, and the manifest when nothing is kept (else it lists what is); then the
+        directory itself when this run created it and it is empty. Other files are left alone.
+        Returns the names deleted."""
+        kept = [n for n in self.files if n in set(keep) and (self.path / n).is_file()]
+        removed = []
+        tmp = [e.name for e in self.path.iterdir() if e.name.startswith(f"{TMP_PREFIX}{os.getpid()}-")]
+        for name in [*(n for n in self.files if n not in kept), *tmp, *([] if kept else [MANIFEST])]:
+            p = self.path / name
+            if p.is_file() or p.is_symlink():
+                with contextlib.suppress(OSError):
+                    p.unlink()
+                    removed.append(name)
+        self.files = kept
+        if kept:
+            self._write_manifest()
+        elif self.created:
+            with contextlib.suppress(OSError):
+                self.path.rmdir()  # (only when empty)
+        return removed
+
+    @contextlib.contextmanager
+    def discarded_on_error(self, keep: Callable[[], Iterable[str]] | None = None) -> Iterator[OutDir]:
+        """``with out.discarded_on_error():`` a block that raises leaves nothing of this run in the
+        directory (:meth:`discard`), but the files ``keep()`` names (e.g. an online track that holds
+        estimates). An interrupt (Ctrl-C) keeps everything written so far."""
+        try:
+            yield self
+        except Exception:
+            removed = self.discard(keep() if keep is not None else ())
+            if removed:
+                log.info("%s: the run failed; removed what it wrote (%s)", self.path, ", ".join(removed))
+            raise
 
     def write_text(self, name: str, text: str) -> Path:
         return write_text_atomic(self.file(name), text)

@@ -137,6 +137,25 @@ def test_cli_json_is_one_object_with_the_issue_keys(cli_run):
     assert "nees_mean" in est["scan-to-map"] and est["scan-to-map"]["nees_mean"] is None  # no covariance
     assert est["fake-smoother"]["options"] == {"lag": 7}
     assert est["scan-to-map"]["ate_rmse_m"] < 0.1
+    assert obj["dropped"] == []
+
+
+def test_cli_json_has_errors_by_event_and_inputs(cli_run):
+    """Per estimator: the errors inside the log's GNSS outage and jump (the fake smoother: 0.3 m
+    smoothed, 0.6 m online everywhere), and the record kinds it used."""
+    _, stdout, _, _ = cli_run
+    est = json.loads(stdout)["estimators"]
+    ev = est["fake-smoother"]["errors_by_event"]
+    assert set(ev) == {"gnss_outage", "gnss_jump"}
+    for d in ev.values():
+        assert d["n"] > 0 and d["rmse_m"] == pytest.approx(0.3) and d["max_m"] == pytest.approx(0.3)
+        assert d["online_rmse_m"] == pytest.approx(0.6) and d["online_max_m"] == pytest.approx(0.6)
+    dr = est["dead-reckoning"]["errors_by_event"]["gnss_outage"]
+    assert dr["n"] > 0 and dr["online_rmse_m"] == dr["rmse_m"] > 0  # one trajectory: online is the same
+    assert est["dead-reckoning"]["inputs"] == ["odometry", "pose_prior"]
+    assert est["scan-to-map"]["inputs"] == ["scan", "odometry", "pose_prior"]
+    assert est["fake-smoother"]["inputs"] is None  # (a fake: declares none)
+    assert "errors_by_event" not in est["zz-boom"]
 
 
 def test_cli_writes_report_figures_and_tum(cli_run):

@@ -118,3 +118,61 @@ def test_movement_errors_and_heading():
     biased = Trajectory(ref.t, ref.poses + [0.0, 0.0, np.radians(3.0)])
     assert heading_error(biased, ref)["rmse"] == pytest.approx(3.0)
     assert movement_errors(biased, ref)["hdg"]["mean"] == pytest.approx(3.0)
+
+
+def test_window_errors_known_answer():
+    """Truth at 10 Hz along x; the estimate is off by 1 m inside [2, 3] s, by 3 m at t = 5.0 s exactly,
+    exact elsewhere: the windows see exactly those errors, bounds included."""
+    from graphnav.evaluation.metrics import window_errors
+
+    t = np.round(np.arange(0.0, 10.0, 0.1), 10)
+    ref = Trajectory(t, np.column_stack([t, np.zeros_like(t), np.zeros_like(t)]))
+    off = np.where((t >= 2.0) & (t <= 3.0), 1.0, 0.0) + np.where(t == 5.0, 3.0, 0.0)
+    est = Trajectory(t, np.column_stack([t, off, np.zeros_like(t)]))
+    w = window_errors(est, ref, [(2.0, 3.0)])
+    assert w["n"] == 11 and w["rmse"] == pytest.approx(1.0) and w["max"] == pytest.approx(1.0)
+    w = window_errors(est, ref, [(1.0, 2.95), (4.95, 5.05)])  # 21 pairs: 10 exact, 10 at 1 m, 1 at 3 m
+    assert w["n"] == 21 and w["max"] == pytest.approx(3.0)
+    assert w["rmse"] == pytest.approx(np.sqrt((10 * 1.0 + 9.0) / 21))
+    empty = window_errors(est, ref, [(20.0, 30.0)])
+    assert empty["n"] == 0 and np.isnan(empty["rmse"])
+
+
+def test_event_windows_group_by_kind_and_skip_malformed_entries():
+    from graphnav.evaluation.metrics import event_windows
+
+    events = [{"kind": "gnss_outage", "t0": 1, "t1": 2}, {"kind": "gnss_jump", "t0": 3.0, "t1": 3.5},
+              {"kind": "gnss_outage", "t0": 5.0, "t1": 6.0}, {"kind": "x", "t0": 2.0, "t1": 1.0},
+              {"kind": "y", "t0": "a", "t1": 1.0}, {"t0": 0, "t1": 1}, "junk", {"kind": "z", "t0": float("nan"),
+                                                                                "t1": 1.0}]
+    assert event_windows(events) == {"gnss_outage": [(1.0, 2.0), (5.0, 6.0)], "gnss_jump": [(3.0, 3.5)]}
+    assert event_windows(None) == {} and event_windows({"kind": "a"}) == {}
+
+
+def test_errors_by_event_smoothed_and_online():
+    """A smoothed estimate off by 0.3 m and an online one off by 0.6 m everywhere: per kind those
+    figures; ``online_*`` None without an online trajectory; {} without truth."""
+    from graphnav.evaluation.evaluate import errors_by_event, summarize
+    from graphnav.log import NavLog, Truth
+    from graphnav.result import RunResult
+
+    t = np.arange(0.0, 10.0, 0.5)
+    log = NavLog([Truth(float(s), float(s), 0.0, 0.0) for s in t],
+                 meta={"events": [{"kind": "gnss_outage", "t0": 1.0, "t1": 2.0},
+                                  {"kind": "gnss_outage", "t0": 6.0, "t1": 7.0},
+                                  {"kind": "gnss_jump", "t0": 8.0, "t1": 8.2}]})
+    poses = np.column_stack([t, np.zeros_like(t), np.zeros_like(t)])
+    smoothed = Trajectory(t, poses + [0.3, 0.0, 0.0])
+    online = Trajectory(t, poses + [0.0, 0.6, 0.0])
+    ev = errors_by_event(RunResult(smoothed, online, np.zeros(0)), log)
+    assert set(ev) == {"gnss_outage", "gnss_jump"}
+    o = ev["gnss_outage"]
+    assert o["windows"] == 2 and o["duration_s"] == pytest.approx(2.0) and o["n"] == 6 and o["online_n"] == 6
+    assert o["rmse_m"] == pytest.approx(0.3) and o["max_m"] == pytest.approx(0.3)
+    assert o["online_rmse_m"] == pytest.approx(0.6) and o["online_max_m"] == pytest.approx(0.6)
+    assert ev["gnss_jump"]["n"] == 1
+    no_online = errors_by_event(RunResult(smoothed, None, np.zeros(0)), log)["gnss_outage"]
+    assert no_online["online_rmse_m"] is None and no_online["rmse_m"] == pytest.approx(0.3)
+    s = summarize("x", RunResult(smoothed, online, np.zeros(0)), log, runtime_s=0.0)
+    assert s["errors_by_event"] == ev
+    assert errors_by_event(RunResult(smoothed, online, np.zeros(0)), NavLog([], meta=log.meta)) == {}
