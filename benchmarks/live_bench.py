@@ -2,7 +2,7 @@
 
 Runs the real CLI in separate processes on loopback: ``graphnav live`` (receiver, estimator,
 publisher) and ``graphnav replay`` (sender) on the harbour scenario with 10 Hz GNSS and compass
-(``graphnav simulate harbour --fix-hz 10 --lidar-hz 0``; GGA + RMC + ZDA + HDT + VTG + ROT per
+(``graphnav simulate harbour --profile legacy --fix-hz 10 --lidar-hz 0``; GGA + RMC + ZDA + HDT + VTG + ROT per
 epoch), samples the live process's RSS from /proc every second, and prints a table (plus one JSON
 object with ``--json``). By default it measures fixed-lag, isam2 and ekf one after the other.
 
@@ -35,7 +35,7 @@ T0 = 1.7e9  # POSIX start of the simulated logs (NMEA needs dates)
 
 def harbour_log(seconds: float, seed: int):
     """The harbour route (repeated as needed) with 10 Hz GNSS/compass/odometry and no scans."""
-    return simulate_harbour(seed, HarbourConfig(fix_hz=10.0, lidar_hz=0.0, t0=T0), duration=seconds)
+    return simulate_harbour(seed, HarbourConfig.legacy(fix_hz=10.0, lidar_hz=0.0, t0=T0), duration=seconds)
 
 
 def free_port() -> int:

@@ -12,7 +12,8 @@ With ``--log FILE.jsonl[.gz]`` the records are instead streamed from that file l
 (constant memory: nothing but the estimator grows), e.g. a day made beforehand in its own process:
 
     python benchmarks/online_memory.py --hours 4
-    graphnav simulate harbour --duration 86400 --fix-hz 10 --lidar-hz 0 --t0 1.7e9 --seed 7 --out day.jsonl.gz
+    graphnav simulate harbour --profile legacy --duration 86400 --fix-hz 10 --lidar-hz 0 --t0 1.7e9 --seed 7 \
+        --out day.jsonl.gz
     python benchmarks/online_memory.py --log day.jsonl.gz --every 60
 """
 
@@ -38,7 +39,7 @@ from graphnav.sim.harbour import HarbourConfig, simulate_harbour  # noqa: E402
 
 def sensor_log(hours: float) -> NavLog:
     """``hours`` of the harbour route, 10 Hz GNSS, compass and SOG/ROT: the NMEA-carried records only."""
-    log = simulate_harbour(7, HarbourConfig(fix_hz=10.0, lidar_hz=0.0, t0=1.7e9), duration=hours * 3600)
+    log = simulate_harbour(7, HarbourConfig.legacy(fix_hz=10.0, lidar_hz=0.0, t0=1.7e9), duration=hours * 3600)
     keep = [r for r in log.records if r.kind in ("gnss", "heading", "odometry")]
     return NavLog(keep, meta={"origin": {"lat": 43.5, "lon": 16.4}})
 

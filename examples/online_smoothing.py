@@ -21,7 +21,7 @@ import numpy as np
 
 import graphnav
 from graphnav.evaluation.metrics import ate
-from graphnav.sim.harbour import simulate_harbour
+from graphnav.sim.harbour import HarbourConfig, simulate_harbour
 from graphnav.trajectory import Trajectory
 
 
@@ -33,7 +33,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
 
-    log = simulate_harbour(args.seed, duration=args.duration)  # a time-ordered list of records
+    # a time-ordered list of records; the legacy profile: 10 Hz odometry, 5 Hz scans (the graph's odometry motion)
+    log = simulate_harbour(args.seed, HarbourConfig.legacy(), duration=args.duration)
     config = graphnav.SmootherConfig(solver="fixed-lag", lag=args.lag) if args.lag else graphnav.SmootherConfig()
     # the chart (charted beacons) and the LiDAR error model come with the log
     nav = graphnav.Navigator(config, chart=log.beacons_known, lidar=log.meta.get("lidar"))

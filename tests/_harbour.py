@@ -1,5 +1,5 @@
 """A short live-mode trial from the harbour simulator: every sensor at one rate (GNSS, compass,
-SOG/ROT odometry), optional 1 Hz scans, exact truth, POSIX time stamps and a geodetic origin, so
+SOG/ROT odometry; the legacy profile), optional 1 Hz scans, exact truth, POSIX time stamps and a geodetic origin, so
 the log turns into NMEA. No multipath, no outage, no beacons: a plain white-noise trial."""
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ def harbour_trial(duration: float = 60.0, rate: float = 10.0, *, sigma_gnss: flo
     """``duration`` s of the harbour route from ``T0``: ``duration * rate`` epochs at ``rate`` Hz
     (a divisor of 50), the first at ``T0``. ``odo_sigma``: (m/s, rad/s) odometry noise (default
     the simulator's)."""
-    cfg = HarbourConfig(fix_hz=rate, lidar_hz=scan_hz if scans else 0.0, t0=T0, gnss_sigma=sigma_gnss,
-                        compass_sigma=math.radians(sigma_heading_deg), multipath_amp=0.0, outage_len=0.0)
+    cfg = HarbourConfig.legacy(fix_hz=rate, lidar_hz=scan_hz if scans else 0.0, t0=T0, gnss_sigma=sigma_gnss,
+                               compass_sigma=math.radians(sigma_heading_deg), multipath_amp=0.0, outage_len=0.0)
     if odo_sigma is not None:
         cfg.odo_sigma_v, cfg.odo_sigma_w = odo_sigma
     log = simulate_harbour(seed, cfg, duration=duration - 1e-3)

@@ -10,8 +10,8 @@ import pytest
 from _logfactory import every_record_log
 
 from graphnav import cli
-from graphnav.ablation import drop_kinds, parse_kinds
 from graphnav.io import save_log
+from graphnav.io.drop import drop_kinds, parse_kinds
 from graphnav.io.outputs import MANIFEST
 
 
@@ -90,10 +90,10 @@ def test_an_unknown_estimator_name_is_exit_2_with_a_suggestion(tmp_path, capsys,
 def test_a_compare_in_which_nothing_ran_is_exit_2_and_writes_nothing(tmp_path, capsys):
     p = _log(tmp_path)
     out = tmp_path / "o"
-    rc, obj, _ = graphnav(capsys, "compare", str(p), "-e", "dead-reckoning,ekf-slam", "--drop", "odometry",
+    rc, obj, _ = graphnav(capsys, "compare", str(p), "-e", "dead-reckoning,ekf-slam", "--drop", "odometry,imu",
                           "--out", str(out))
-    assert rc == 2 and "no estimator ran" in obj["error"] and "(after --drop odometry)" in obj["error"]
-    assert "dead-reckoning: not run: needs at least two odometry records" in obj["error"]
+    assert rc == 2 and "no estimator ran" in obj["error"] and "(after --drop odometry,imu)" in obj["error"]
+    assert "dead-reckoning: not run: needs at least two odometry (or IMU) records" in obj["error"]
     assert not out.exists()
     out.mkdir()
     (out / "mine.txt").write_text("x")
@@ -105,11 +105,21 @@ def test_a_compare_in_which_nothing_ran_is_exit_2_and_writes_nothing(tmp_path, c
 def test_a_failed_run_leaves_nothing_in_out(tmp_path, capsys):
     p = _log(tmp_path)
     out = tmp_path / "o"
-    rc, obj, _ = graphnav(capsys, "run", str(p), "-e", "dead-reckoning", "--drop", "odometry", "--out", str(out))
-    assert rc == 2 and "cannot run" in obj["error"] and "(after --drop odometry)" in obj["error"]
+    rc, obj, _ = graphnav(capsys, "run", str(p), "-e", "dead-reckoning", "--drop", "odometry,imu", "--out", str(out))
+    assert rc == 2 and "cannot run" in obj["error"] and "(after --drop odometry,imu)" in obj["error"]
     assert not out.exists()  # no manifest, no header-only online.tum
     out.mkdir()
     rc, _, _ = graphnav(capsys, "run", str(tmp_path / "absent.jsonl"), "-e", "ekf", "--out", str(out))
     assert rc == 2 and list(out.iterdir()) == []  # the directory was there before: kept, empty
     rc, _, _ = graphnav(capsys, "run", str(p), "-e", "ekf", "--out", str(out))
     assert rc == 0 and (out / MANIFEST).exists() and (out / "online.tum").exists()
+
+
+@pytest.mark.parametrize("argv, wanted", [
+    (["montecarlo", "solent", "--runs", "1", "--estimators", "ekf,ufk"], "did you mean 'ukf'"),
+    (["montecarlo", "solent", "--runs", "1", "-O", "fuzy-ukf.window=5"], "did you mean 'fuzzy-ukf'"),
+    (["live", "--nmea", "udp://127.0.0.1:1", "-e", "isam"], "did you mean 'isam2'"),
+])
+def test_unknown_names_in_montecarlo_and_live_are_exit_2_with_a_suggestion(capsys, argv, wanted):
+    rc, obj, err = graphnav(capsys, *argv)
+    assert rc == 2 and wanted in obj["error"] and "Traceback" not in err, obj

@@ -41,12 +41,12 @@ def embedded_log(out_dir: OutDir) -> Path:
     if EMBEDDED.exists():
         return EMBEDDED
     from ..io import save_log
-    from ..sim.harbour import simulate_harbour
+    from ..sim.harbour import EMBEDDED_PROFILE, HarbourConfig, simulate_harbour
 
     path = out_dir.file("harbour-seed0.npz")
     log_.info("data/harbour.npz not found beside the package: simulating harbour seed 0 into %s", path)
     with atomic_path(path) as tmp:
-        save_log(simulate_harbour(seed=0), tmp)
+        save_log(simulate_harbour(seed=0, cfg=HarbourConfig.for_profile(EMBEDDED_PROFILE)), tmp)
     return path
 
 

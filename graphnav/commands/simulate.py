@@ -39,20 +39,33 @@ def _fairway(args: argparse.Namespace) -> int:
     return 0
 
 
+MAX_DURATION = 7 * 86400.0  # [s]: --duration's bound (a week)
+MAX_LAPS = 1000  # --laps' bound (a lap is ~11 min: about a week)
+
+
 def _register_harbour(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "harbour",
-        help="a vessel crossing a small harbour: LiDAR, GNSS, compass, odometry, beacons",
+        help="a vessel crossing a small harbour: IMU, GNSS (+ Doppler), compass, speed log, LiDAR, beacons",
         description=harbour.__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
+    p.add_argument("--profile", choices=harbour.PROFILES, default="usv",
+                   help="usv: a real USV's sensors (100 Hz IMU with bias drift, GNSS + Doppler velocity, compass "
+                        "with deviation, speed log in a tidal current, 10 Hz LiDAR; default); legacy: the "
+                        "robot-style log data/harbour.npz was first made with (10 Hz odometry, 1 Hz IMU, 5 Hz "
+                        "LiDAR, still water), draw for draw")
+    p.add_argument("--odometer", action="store_true",
+                   help="add 10 Hz odometry records (SOG, ROT) for robot-style logs (legacy has them)")
+    p.add_argument("--current-speed", type=float, default=None, metavar="M/S",
+                   help="mean speed of the tidal current (usv default 0.4, +-0.1 over 20 min; 0: still water)")
     p.add_argument("--duration", type=float, default=None,
                    help="length of the run [s] (shorter: truncated; longer: the route repeats)")
     p.add_argument("--laps", type=int, default=None, help="times round the route (default 1, or what --duration needs)")
     p.add_argument("--fix-hz", type=float, default=1.0, help="GNSS and compass rate [Hz] (default 1)")
     p.add_argument("--lidar-hz", type=float, default=None,
-                   help="LiDAR rate [Hz] (default 5 for 2d, 10 for 3d; 0: no scans)")
+                   help="LiDAR rate [Hz] (default 10; 5 with --profile legacy; 0: no scans)")
     p.add_argument("--lidar", choices=("2d", "3d"), default="2d",
                    help="2d: 360-beam scans (default); 3d: a 16-beam VLP-16-like cloud ray-cast against the "
                         "extruded harbour, with wave roll/pitch, water returns and spray (graphnav.sim.harbour3d)")
@@ -62,9 +75,38 @@ def _register_harbour(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_harbour)
 
 
+def harbour_config(args: argparse.Namespace) -> harbour.HarbourConfig:
+    """The :class:`graphnav.sim.harbour.HarbourConfig` the ``simulate harbour`` options describe
+    (``ValueError`` naming the option when one is out of range)."""
+    if args.duration is not None and not 0.0 < args.duration <= MAX_DURATION:
+        raise ValueError(f"--duration must be > 0 and <= {MAX_DURATION:g} s (a week), got {args.duration}")
+    if args.laps is not None and not 0 < args.laps <= MAX_LAPS:
+        raise ValueError(f"--laps must be between 1 and {MAX_LAPS}, got {args.laps}")
+    if not (math.isfinite(args.fix_hz) and 0.0 < args.fix_hz <= 50.0):
+        raise ValueError(f"--fix-hz must be > 0 and <= 50, got {args.fix_hz}")
+    if args.lidar_hz is not None and not (math.isfinite(args.lidar_hz) and 0.0 <= args.lidar_hz <= 50.0):
+        raise ValueError(f"--lidar-hz must be >= 0 and <= 50, got {args.lidar_hz}")
+    if not math.isfinite(args.t0):
+        raise ValueError(f"--t0 must be finite, got {args.t0}")
+    kw: dict = {"fix_hz": args.fix_hz, "t0": args.t0}
+    if args.lidar_hz is not None:
+        kw["lidar_hz"] = args.lidar_hz
+    elif args.lidar == "3d":
+        kw["lidar_hz"] = 10.0
+    if args.odometer:
+        kw["odometer"] = True
+    if args.current_speed is not None:
+        if not (math.isfinite(args.current_speed) and 0.0 <= args.current_speed <= 5.0):
+            raise ValueError(f"--current-speed must be >= 0 and <= 5 m/s, got {args.current_speed}")
+        base = harbour.HarbourConfig.for_profile(args.profile).current
+        amp = min(base.speed_amp, args.current_speed) if base.speed_amp else 0.0
+        kw["current"] = replace(base, speed=args.current_speed, speed_amp=amp)
+    return harbour.HarbourConfig.for_profile(args.profile, **kw)
+
+
 def _harbour(args: argparse.Namespace) -> int:
-    hz = args.lidar_hz if args.lidar_hz is not None else (10.0 if args.lidar == "3d" else 5.0)
-    cfg = harbour.HarbourConfig(fix_hz=args.fix_hz, lidar_hz=hz, t0=args.t0)
+    cfg = harbour_config(args)
+    hz = cfg.lidar_hz
     if args.lidar == "3d":
         from ..sim.harbour3d import Lidar3dConfig, simulate_harbour3d
 
@@ -79,6 +121,7 @@ def _harbour(args: argparse.Namespace) -> int:
         args,
         {
             "scenario": "harbour" if args.lidar == "2d" else "harbour3d",
+            "profile": cfg.profile,
             "seed": args.seed,
             "out": str(args.out),
             "records": log.counts(),

@@ -1,7 +1,11 @@
-"""Dead reckoning from the ship's log and rate-of-turn sensor (odometry records).
+"""Dead reckoning from the ship's log and rate-of-turn sensor (odometry records), else from the IMU.
 
 The simplest baseline: integrate ``v`` and ``w`` with the unicycle model (the beacon paper's
 motion model, eq. 3), starting at the log's pose prior, else the first truth pose, else the origin.
+A log without odometry but with an IMU (a USV's) is dead-reckoned from the IMU alone: planar
+strapdown integration of the body-frame specific force and yaw rate (each record the mean over the
+interval since the previous one), from the same start pose and ``meta["initial_velocity"]`` (zero
+when the log does not know it).
 """
 
 from __future__ import annotations
@@ -11,7 +15,7 @@ import time
 import numpy as np
 
 from ..geometry import wrap_angle
-from ..log import NavLog, Odometry
+from ..log import Imu, NavLog, Odometry
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
 
@@ -58,15 +62,60 @@ def run_dead_reckoning(log: NavLog, *, on_estimate: OnEstimate | None = None) ->
     return RunResult(traj, traj, np.array(step_ms), info={"anchor": anchor})
 
 
+def imu_dead_reckoning(log: NavLog, *, on_estimate: OnEstimate | None = None) -> RunResult:
+    """Planar strapdown dead reckoning on the log's ``imu`` records (the module docstring)."""
+    imu = [r for r in log.records if isinstance(r, Imu)]
+    pose, anchor = start_pose(log)
+    prior = log.pose_prior()
+    t_prev = prior.t if prior is not None and prior.t < imu[0].t else imu[0].t
+    v0 = log.meta.get("initial_velocity") if isinstance(log.meta, dict) else None
+    vel = np.array(v0, dtype=float) if v0 is not None else np.zeros(2)
+    pos, th = pose[:2].copy(), float(pose[2])
+    t, poses, step_ms = [t_prev], [pose], []
+    if on_estimate is not None:
+        on_estimate(t_prev, pose, None)
+    for r in imu:
+        dt = r.t - t_prev
+        if dt <= 0:
+            continue
+        t0 = time.perf_counter()
+        mid = th + 0.5 * dt * r.wz
+        c, s = np.cos(mid), np.sin(mid)
+        acc = np.array([c * r.ax - s * r.ay, s * r.ax + c * r.ay])
+        pos = pos + dt * vel + 0.5 * dt * dt * acc
+        vel = vel + dt * acc
+        th = th + dt * r.wz
+        step_ms.append((time.perf_counter() - t0) * 1e3)
+        t_prev = r.t
+        pose = np.array([pos[0], pos[1], wrap_angle(th)])
+        t.append(r.t)
+        poses.append(pose)
+        if on_estimate is not None:
+            on_estimate(r.t, pose, None)
+    traj = Trajectory(np.array(t), np.array(poses), name="dead-reckoning")
+    return RunResult(traj, traj, np.array(step_ms),
+                     info={"anchor": anchor, "motion": "imu", "initial_velocity": "meta" if v0 is not None else "zero"})
+
+
+def run_any_dead_reckoning(log: NavLog, *, on_estimate: OnEstimate | None = None) -> RunResult:
+    """Odometry dead reckoning when the log has odometry, else the IMU's."""
+    if len(log.of("odometry")) < 2 and len(log.of("imu")) >= 2:
+        return imu_dead_reckoning(log, on_estimate=on_estimate)
+    return run_dead_reckoning(log, on_estimate=on_estimate)
+
+
 def _unmet(log: NavLog) -> str | None:
-    return None if len(log.of("odometry")) >= 2 else "needs at least two odometry records"
+    ok = len(log.of("odometry")) >= 2 or len(log.of("imu")) >= 2
+    return None if ok else "needs at least two odometry (or IMU) records"
 
 
 def _inputs(log: NavLog, options: dict) -> set[str]:
-    return {"odometry", "pose_prior"}  # (the first truth pose without a prior: info["anchor"])
+    motion = "imu" if len(log.of("odometry")) < 2 and len(log.of("imu")) >= 2 else "odometry"
+    return {motion, "pose_prior"}  # (the first truth pose without a prior: info["anchor"])
 
 
 ESTIMATORS = {
-    "dead-reckoning": EstimatorSpec(run_dead_reckoning, _unmet, "odometry (SOG + ROT) integration", "odometry",
+    "dead-reckoning": EstimatorSpec(run_any_dead_reckoning, _unmet,
+                                    "odometry (SOG + ROT) integration, else the IMU's (planar strapdown)", "odometry",
                                     _inputs),
 }

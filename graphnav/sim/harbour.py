@@ -1,33 +1,46 @@
-"""``harbour``: a vessel crossing a small harbour, every sensor, exact truth (the embedded dataset).
+"""``harbour``: a vessel crossing a small harbour, every sensor a USV carries, exact truth (the embedded dataset).
 
 Geometry: a 300 m x 200 m basin closed by quay walls (entrance gap in the south wall), three
 piers from the north quay, a jetty from the west quay and moored hulls alongside, all polygons.
-The vessel follows a waypoint route through the slips at ~1.5 m/s (heading-rate-limited turns),
-about 11 minutes a lap; ``laps`` (or a ``duration`` longer than a lap) repeats the route, so the
-same scenario also makes hours-long logs for the live-mode benchmarks.
+The vessel follows a waypoint route through the slips at ~1.5 m/s through the water
+(heading-rate-limited turns), about 11 minutes a lap; ``laps`` (or a ``duration`` longer than a lap)
+repeats the route, so the same scenario also makes hours-long logs for the live-mode benchmarks.
 
-Sensors (all deterministic per seed):
+Two profiles (``HarbourConfig()`` / ``graphnav simulate harbour``: ``usv``; ``HarbourConfig.legacy()`` /
+``--profile legacy``: the robot-style log ``data/harbour.npz`` was first made with, draw for draw).
+Sensors of the ``usv`` profile (all deterministic per seed; docs/datasets.md has every number):
 
-* 2D LiDAR at 5 Hz (``lidar_hz``; 0: no scans), 1 deg beam spacing, 40 m range, ray-cast against
+* a tidal current of 0.3-0.5 m/s (0.4 +- 0.1 over a 20 min period, flowing towards 30 +- 25 deg
+  CCW from east over 30 min, uniform over the basin; :mod:`graphnav.sim.water_current`, the truth in
+  ``meta["current"]``): over ground the vessel moves through the water plus the current, and it
+  steers the heading that makes good its course, so heading and course over ground differ (crab
+  angle ~10 deg typical, up to ~25 deg);
+* IMU at 100 Hz (``imu_hz``): planar records ``ax`` (forward), ``ay`` (left), ``wz``, each the exact
+  mean over (t_{k-1}, t_k] of the body-frame specific force and yaw rate of the simulated motion
+  (speed changes along the bow, the centripetal ``u w``, the current's own acceleration), with the
+  ``solent`` bias model (Table 3's bias calibrated to a 10 % residual) plus a bias random walk and
+  white noise at Table 3's noise density (:mod:`graphnav.sim.imu_errors`; ``meta["imu"]`` with the
+  bias left in the records every 10 s);
+* GNSS at 1 Hz (``fix_hz``), sigma 3 m per axis, plus a multipath bias near the quays (up to 4 m,
+  pointing away from the nearest wall, fading out 15 m from it) and one 30 s outage; with every
+  fix a Doppler velocity over ground (``gnss_velocity``, sigma 0.05 m/s per axis), absent in the outage too;
+* compass at the GNSS rate: white noise 1 deg plus a constant deviation of 1.5 deg (``meta["compass"]``;
+  the record's sigma is their root-sum-square, 1.8 deg, as a datasheet's accuracy);
+* speed log (``water_speed``) at 1 Hz: the speed through the water along the bow, sigma 0.05 m/s;
+* 2D LiDAR at 10 Hz (``lidar_hz``; 0: no scans), 1 deg beam spacing, 40 m range, ray-cast against
   the polygons (vectorised over beams and segments), with the weighted-ICP paper's error model:
   range sigma ``0.004258 r`` and an angular (beam-direction) sigma of 0.5 deg; beyond range or
-  dropped (1 %) = NaN.
-* GNSS at 1 Hz (``fix_hz``), sigma 3 m per axis, plus a multipath bias near the quays (up to 4 m, pointing
-  away from the nearest wall, fading out 15 m from it) and one 30 s outage.
-* compass at the GNSS rate, sigma 2 deg; odometry (SOG/ROT) at 10 Hz, sigma 0.05 m/s and 0.3 deg/s.
-* IMU at 1 Hz (``imu_hz``; 0: none), the ``solent`` scenario's records: body-frame acceleration
-  ``ax`` (forward), ``ay`` (left) and yaw rate ``wz``, each the exact mean over (t_{k-1}, t_k] of
-  the simulated motion (the speed changes along the bow, the centripetal ``v w`` to port, the turn
-  rate), with its noise model (:func:`graphnav.sim.solent.imu_measurements`: Table 3's biases and
-  white noise, calibrated to a 10 % residual bias; ``meta["imu"]``). 1 Hz is the sample time
-  T = 1 s the fuzzy-UKF paper's filters are tuned for: their process noise is per step, so at
-  10 Hz it is 10x smaller per second and the plain UKF cannot follow the residual bias (harbour
-  ATE 7.4 m at 10 Hz, 4.9 m at 1 Hz; ukf-bias 1.0 / 1.7 m). The known initial velocity is
-  ``meta["initial_velocity"]`` (as in ``solent``). The IMU has its own random stream, so every
-  other sensor's draws are those of the log without it.
-* 4 charted beacons (chart sigma 0.2 m), range/bearing at 1 Hz within 150 m, sigma 0.5 m / 0.5 deg.
-* truth at 10 Hz, a pose prior at the start, and ``meta["events"]`` for the outage and the
-  multipath intervals. Times start at ``t0`` (0; a POSIX time makes NMEA-ready logs).
+  dropped (1 %) = NaN;
+* 4 charted beacons (chart sigma 0.2 m), range/bearing at 1 Hz within 150 m, sigma 0.5 m / 0.5 deg;
+* no odometer (``odometer=True`` / ``--odometer``: 10 Hz SOG + ROT records, sigma 0.05 m/s, 0.3 deg/s);
+* truth at 10 Hz, a pose prior at the start, ``meta["initial_velocity"]`` (over ground), and
+  ``meta["events"]`` for the outage and the multipath intervals. Times start at ``t0`` (0; a POSIX
+  time makes NMEA-ready logs).
+
+The ``legacy`` profile: still water, 10 Hz odometry, IMU at 1 Hz without bias drift (the UKFs'
+T = 1 s), 5 Hz LiDAR, compass 2 deg without deviation, no GNSS velocity, no speed log. Each sensor
+has its own random stream (``SeedSequence(seed).spawn(8)``, the legacy five first), so the legacy
+log is unchanged, record for record and key for key of its meta.
 
 Geodetic origin (``meta["origin"]``, the convention of :mod:`graphnav.io.nmea`): the local frame
 (x east, y north) is the east-north tangent plane whose origin, the basin's south-west corner, lies
@@ -41,13 +54,29 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry import wrap_angle
-from ..log import BeaconObs, Gnss, Heading, Imu, KnownBeacon, NavLog, Odometry, PosePrior, Scan, Truth
+from ..log import (
+    BeaconObs,
+    Gnss,
+    GnssVelocity,
+    Heading,
+    Imu,
+    KnownBeacon,
+    NavLog,
+    Odometry,
+    PosePrior,
+    Scan,
+    Truth,
+    WaterSpeed,
+)
+from .imu_errors import imu_with_drift
 from .solent import imu_measurements
+from .water_current import TidalCurrent
 
 SIGMA_R_REL = 0.004258
 
@@ -189,24 +218,43 @@ ORIGIN = {"lat": 54.515435, "lon": 18.551351, "h": 0.0}
 (the tangent-plane offset, rounded to 1e-6 deg; ``h`` [m] ellipsoidal, unused by a surface vessel)."""
 
 
+PROFILES = ("usv", "legacy")
+EMBEDDED_PROFILE = "legacy"
+"""The profile ``data/harbour.npz`` was simulated with (seed 0, defaults otherwise): what ``graphnav
+demo`` simulates when the file is absent and what the regeneration test compares it against. Set it
+to ``"usv"`` when the file is regenerated with the default profile."""
+
+LEGACY_CURRENT = TidalCurrent(speed=0.0, speed_amp=0.0)
+
+
 @dataclass
 class HarbourConfig:
-    speed: float = 1.5
+    """Everything that defines a harbour run. The defaults are the ``usv`` profile (a real USV's
+    sensors); :meth:`legacy` gives the robot-style log ``data/harbour.npz`` was first made with."""
+
+    profile: str = "usv"  # "usv" or "legacy" (legacy: the old random-stream layout and meta, draw for draw)
+    speed: float = 1.5  # speed through the water [m/s]
     max_rot: float = math.radians(6.0)
-    dt: float = 0.02
-    lidar_hz: float = 5.0
+    dt: float = 0.01  # truth integration step [s] (1/imu_hz, 1/lidar_hz, ... multiples of it)
+    lidar_hz: float = 10.0
     beam_deg: float = 1.0
     max_range: float = 40.0
     sigma_alpha: float = math.radians(0.5)
     dropout: float = 0.01
     gnss_sigma: float = 3.0
+    gnss_vel_sigma: float = 0.05  # Doppler velocity 1-sigma per axis [m/s]; 0: no velocity records
     multipath_amp: float = 4.0
     multipath_dist: float = 15.0
     outage_t0: float = 300.0
     outage_len: float = 30.0
-    compass_sigma: float = math.radians(2.0)
+    compass_sigma: float = math.radians(1.0)  # white noise
+    compass_deviation: float = math.radians(1.5)  # constant (uncorrected deviation); the record's sigma covers both
+    odometer: bool = False  # 10 Hz odometry (SOG, ROT) records
     odo_sigma_v: float = 0.05
     odo_sigma_w: float = math.radians(0.3)
+    water_speed_hz: float = 1.0  # speed log (through water, along the bow); 0: none
+    water_speed_sigma: float = 0.05
+    current: TidalCurrent = TidalCurrent()
     beacon_range: float = 150.0
     beacon_sigma_r: float = 0.5
     beacon_sigma_b: float = math.radians(0.5)
@@ -214,18 +262,43 @@ class HarbourConfig:
     prior_sigma_xy: float = 0.3
     prior_sigma_yaw: float = math.radians(1.0)
     fix_hz: float = 1.0  # GNSS and compass rate (beacons stay at 1 Hz)
-    imu_hz: float = 1.0  # IMU rate (1/imu_hz a multiple of dt; 0: no IMU): the solent scenario's T = 1 s
+    imu_hz: float = 100.0  # IMU rate (1/imu_hz a multiple of dt; 0: no IMU)
+    imu_bias_drift: bool = True  # bias random walk + noise density (graphnav.sim.imu_errors); False: solent's
     imu_calibrate: bool = True  # log raw - bias estimate (solent's calibration); False: the raw IMU
     imu_calib_residual: float = 0.1  # residual bias after calibration, as a fraction of the bias
     t0: float = 0.0  # time of the first record [s]
 
+    def __post_init__(self) -> None:
+        if self.profile not in PROFILES:
+            raise ValueError(f"harbour profile must be one of {', '.join(PROFILES)}, not {self.profile!r}")
+
+    @classmethod
+    def legacy(cls, **overrides: Any) -> HarbourConfig:
+        """The robot-style profile (``data/harbour.npz`` before issue 21): 10 Hz odometry, 1 Hz IMU
+        without bias drift, 5 Hz LiDAR, compass 2 deg without deviation, still water, no GNSS
+        velocity or speed log; seed for seed the very records (and meta) it always gave."""
+        base = dict(profile="legacy", dt=0.02, lidar_hz=5.0, gnss_vel_sigma=0.0, compass_sigma=math.radians(2.0),
+                    compass_deviation=0.0, odometer=True, water_speed_hz=0.0, current=LEGACY_CURRENT,
+                    imu_hz=1.0, imu_bias_drift=False)
+        return cls(**{**base, **overrides})
+
+    @classmethod
+    def for_profile(cls, profile: str, **overrides: Any) -> HarbourConfig:
+        """The config of a named profile (``usv`` or ``legacy``) with some fields overridden."""
+        if profile == "legacy":
+            return cls.legacy(**overrides)
+        return cls(**{"profile": profile, **overrides})
+
 
 def vessel_track(cfg: HarbourConfig, rng: np.random.Generator, *, laps: int = 1,
                  t_max: float = math.inf) -> tuple[NDArray, NDArray, NDArray]:
-    """Times, poses (N, 3) and (v, w) controls following :data:`ROUTE` ``laps`` times with
-    rate-limited turns (each further lap continues from the last waypoint to the second one), up
-    to ``t_max`` [s]."""
+    """Times, poses (N, 3) and (u, w) controls (speed through the water along the bow, yaw rate)
+    following :data:`ROUTE` ``laps`` times with rate-limited turns (each further lap continues from
+    the last waypoint to the second one), up to ``t_max`` [s]. Over ground the vessel moves by its
+    arc through the water plus ``cfg.current`` (at the step's middle); in a current it steers the
+    heading that makes good the course to the next waypoint (crabbing)."""
     route = np.vstack([ROUTE] + [ROUTE[1:]] * (laps - 1))
+    cur = None if cfg.current.still else cfg.current
     pos = route[0].copy()
     yaw = math.atan2(*(route[1] - route[0])[::-1])
     wp = 1
@@ -233,16 +306,25 @@ def vessel_track(cfg: HarbourConfig, rng: np.random.Generator, *, laps: int = 1,
     t = 0.0
     v_slow = 0.0
     t_wp = 0.0
+    a_slow, b_slow = 0.995 ** (cfg.dt / 0.02), 0.005 * math.sqrt(cfg.dt / 0.02)  # the same process at any dt
+    u_prev = cfg.speed
+    legacy, k = cfg.profile == "legacy", 0
     while wp < len(route) and t <= t_max:
         to = route[wp] - pos
         if np.hypot(*to) < 6.0 or t - t_wp > 3.0 * np.hypot(*(route[wp] - route[wp - 1])) / cfg.speed + 30.0:
             wp += 1  # reached (or unreachable within the turn radius: go on)
             t_wp = t
             continue
-        err = wrap_angle(math.atan2(to[1], to[0]) - yaw)
+        course = math.atan2(to[1], to[0])
+        if cur is not None:  # the heading whose water track plus the current points at the waypoint
+            cx, cy = cur.at(t)
+            across = (to[0] * cy - to[1] * cx) / math.hypot(to[0], to[1])
+            course -= math.asin(max(-0.8, min(0.8, across / max(u_prev, 0.3))))
+        err = wrap_angle(course - yaw)
         w = float(np.clip(0.8 * err, -cfg.max_rot, cfg.max_rot))
-        v_slow = 0.995 * v_slow + 0.005 * rng.normal(0.0, 1.0)
+        v_slow = a_slow * v_slow + b_slow * rng.normal(0.0, 1.0)
         v = cfg.speed * (1.0 - 0.25 * min(abs(err), 1.0)) + 0.1 * v_slow
+        u_prev = v
         t_l.append(t)
         p_l.append((pos[0], pos[1], yaw))
         c_l.append((v, w))
@@ -252,22 +334,41 @@ def vessel_track(cfg: HarbourConfig, rng: np.random.Generator, *, laps: int = 1,
             pos = pos + (v / w) * np.array(
                 [math.sin(yaw + w * cfg.dt) - math.sin(yaw), -math.cos(yaw + w * cfg.dt) + math.cos(yaw)]
             )
+        if cur is not None:
+            pos = pos + cfg.dt * np.array(cur.at(t + 0.5 * cfg.dt))
         yaw = wrap_angle(yaw + w * cfg.dt)
-        t += cfg.dt
+        k += 1
+        t = t + cfg.dt if legacy else k * cfg.dt  # legacy: the accumulated times data/harbour.npz has
     return np.array(t_l), np.array(p_l), np.array(c_l)
 
 
-def imu_truth(t: NDArray, p: NDArray, ctl: NDArray, every: int, dt: float) -> tuple[NDArray, NDArray, NDArray]:
+def ground_velocity(cfg: HarbourConfig, t: NDArray, p: NDArray, ctl: NDArray) -> NDArray[np.float64]:
+    """True velocity over ground (N, 2) at the track's times ``t`` (run time): the water track
+    ``u (cos yaw, sin yaw)`` plus the current."""
+    v = ctl[:, :1] * np.column_stack([np.cos(p[:, 2]), np.sin(p[:, 2])])
+    return v if cfg.current.still else v + cfg.current.velocity(t)
+
+
+def imu_truth(t: NDArray, p: NDArray, ctl: NDArray, every: int, dt: float,
+              current: TidalCurrent | None = None) -> tuple[NDArray, NDArray, NDArray]:
     """Exact IMU truth of :func:`vessel_track`'s motion: for the samples ``i = every, 2 every, ...``
     the mean body-frame acceleration (m, 2) and yaw rate (m,) over (t_{i-every}, t_i]. Step ``j``
     runs the arc of constant ``(v_j, w_j)`` over ``[t_j, t_j + dt)``: along it the body acceleration
     is ``(0, v_j w_j)`` (centripetal, to port for ``w > 0``); at its start the speed jumps from
-    ``v_{j-1}`` to ``v_j`` along the bow (``v_{-1} = v_0``). Returns the sample indices too."""
+    ``v_{j-1}`` to ``v_j`` along the bow (``v_{-1} = v_0``). A ``current`` (the one the track was
+    made with) adds its acceleration, rotated into the body frame at the step's middle (midpoint
+    rule, error ~1e-12 m/s^2). Returns the sample indices too."""
     v, w = ctl[:, 0], ctl[:, 1]
     jump = np.diff(v, prepend=v[0])  # at the start of step j
     ii = np.arange(every, len(t), every)
     cx = np.concatenate([[0.0], np.cumsum(jump)])  # cumulative sums over steps [0, j)
     cy = np.concatenate([[0.0], np.cumsum(v * w * dt)])
+    if current is not None and not current.still:
+        a = current.acceleration(t + 0.5 * dt)
+        mid = p[:, 2] + 0.5 * dt * w
+        c, s = np.cos(mid), np.sin(mid)
+        cx = cx + np.concatenate([[0.0], np.cumsum((c * a[:, 0] + s * a[:, 1]) * dt)])
+        cy = cy + np.concatenate([[0.0], np.cumsum((-s * a[:, 0] + c * a[:, 1]) * dt)])
     cw = np.concatenate([[0.0], np.cumsum(w * dt)])
     T = every * dt
     acc_b = np.column_stack([(cx[ii] - cx[ii - every]) / T, (cy[ii] - cy[ii - every]) / T])
@@ -280,16 +381,22 @@ def simulate_harbour(
     """The harbour log: ``laps`` of the route (default 1, or as many as ``duration`` needs),
     truncated to ``duration`` [s] if given."""
     cfg = cfg or HarbourConfig()
-    # spawn(5)'s first four children are spawn(4)'s: the IMU stream leaves the other sensors' draws as they were
-    rng_track, rng_lidar, rng_gnss, rng_misc, rng_imu = (
-        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(5)
+    legacy = cfg.profile == "legacy"
+    # spawn(8)'s first five children are spawn(5)'s (the legacy layout): the streams added since leave
+    # the other sensors' draws as they were
+    rng_track, rng_lidar, rng_gnss, rng_misc, rng_imu, rng_vel, rng_water, rng_odo = (
+        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(8)
     )
+    if legacy:
+        rng_odo = rng_misc  # the legacy log drew its odometry noise before the compass's, from one stream
     if laps is None:
         laps = 1 if duration is None else 1 + int(duration // 300.0)  # a lap takes > 600 s
     t, p, ctl = vessel_track(cfg, rng_track, laps=laps, t_max=math.inf if duration is None else duration)
     if duration is not None:
         keep = t <= duration
         t, p, ctl = t[keep], p[keep], ctl[keep]
+    current = None if cfg.current.still else cfg.current
+    vel = ground_velocity(cfg, t, p, ctl)
     segs = segments(harbour_polygons())
     recs: list = []
     step = lambda hz: max(int(round(1.0 / (hz * cfg.dt))), 1)  # noqa: E731
@@ -297,22 +404,30 @@ def simulate_harbour(
 
     for i in range(0, len(t), step(10.0)):
         recs.append(Truth(float(ts[i]), float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
-        recs.append(
-            Odometry(
-                float(ts[i]),
-                float(ctl[i, 0] + rng_misc.normal(0, cfg.odo_sigma_v)),
-                float(ctl[i, 1] + rng_misc.normal(0, cfg.odo_sigma_w)),
-                cfg.odo_sigma_v,
-                cfg.odo_sigma_w,
+        if cfg.odometer:  # speed over ground (the record's meaning) and yaw rate
+            sog = ctl[i, 0] if current is None else math.hypot(vel[i, 0], vel[i, 1])
+            recs.append(
+                Odometry(
+                    float(ts[i]),
+                    float(sog + rng_odo.normal(0, cfg.odo_sigma_v)),
+                    float(ctl[i, 1] + rng_odo.normal(0, cfg.odo_sigma_w)),
+                    cfg.odo_sigma_v,
+                    cfg.odo_sigma_w,
+                )
             )
-        )
 
     imu_meta = None
     if cfg.imu_hz > 0:
-        ii, acc_b, rate = imu_truth(t, p, ctl, step(cfg.imu_hz), cfg.dt)
-        acc, gyr, imu_meta = imu_measurements(rng_imu, acc_b, rate, calibrate=cfg.imu_calibrate,
-                                              calib_residual=cfg.imu_calib_residual)
-        imu_meta["hz"] = cfg.imu_hz
+        if abs(1.0 / (cfg.imu_hz * cfg.dt) - step(cfg.imu_hz)) > 1e-6:
+            raise ValueError(f"imu_hz {cfg.imu_hz:g} needs a sample time that is a multiple of dt {cfg.dt:g} s")
+        ii, acc_b, rate = imu_truth(t, p, ctl, step(cfg.imu_hz), cfg.dt, current)
+        if cfg.imu_bias_drift:
+            acc, gyr, imu_meta = imu_with_drift(rng_imu, ts[ii], acc_b, rate, cfg.imu_hz, calibrate=cfg.imu_calibrate,
+                                                calib_residual=cfg.imu_calib_residual)
+        else:
+            acc, gyr, imu_meta = imu_measurements(rng_imu, acc_b, rate, calibrate=cfg.imu_calibrate,
+                                                  calib_residual=cfg.imu_calib_residual)
+            imu_meta["hz"] = cfg.imu_hz
         recs += [Imu(float(ts[i]), float(a[0]), float(a[1]), float(g)) for i, a, g in zip(ii, acc, gyr, strict=True)]
 
     nb = int(round(360.0 / cfg.beam_deg))
@@ -333,6 +448,8 @@ def simulate_harbour(
         for c in range(0, len(gi), 2000):  # chunks: the distance matrix is points x segments
             dist[c:c + 2000], away[c:c + 2000] = distance_to_segments(segs, p[gi[c:c + 2000], :2])
     amp = cfg.multipath_amp * np.clip(1.0 - dist / cfg.multipath_dist, 0.0, 1.0)
+    vel_noise = rng_vel.normal(0.0, cfg.gnss_vel_sigma, (len(gi), 2)) if cfg.gnss_vel_sigma > 0 else None
+    compass_sigma = math.hypot(cfg.compass_sigma, cfg.compass_deviation) if cfg.compass_deviation else cfg.compass_sigma
     events = [{"kind": "gnss_outage", "t0": cfg.t0 + cfg.outage_t0, "t1": cfg.t0 + cfg.outage_t0 + cfg.outage_len}]
     in_mp = False
     beacon_every = step(1.0)
@@ -348,8 +465,13 @@ def simulate_harbour(
         if not (cfg.outage_t0 <= t_rel < cfg.outage_t0 + cfg.outage_len):
             gx, gy = p[i, :2] + amp[j] * away[j] + noise
             recs.append(Gnss(ti, float(gx), float(gy), cfg.gnss_sigma))
+            if vel_noise is not None:
+                vx, vy = vel[i] + vel_noise[j]
+                recs.append(GnssVelocity(ti, float(vx), float(vy), cfg.gnss_vel_sigma))
         hd = p[i, 2] + rng_misc.normal(0.0, cfg.compass_sigma)
-        recs.append(Heading(ti, float(wrap_angle(hd)), cfg.compass_sigma))
+        if cfg.compass_deviation:
+            hd += cfg.compass_deviation
+        recs.append(Heading(ti, float(wrap_angle(hd)), compass_sigma))
         for bid, (bx, by) in BEACONS.items() if i % beacon_every == 0 else ():
             dx, dy = bx - p[i, 0], by - p[i, 1]
             rng_ = math.hypot(dx, dy)
@@ -365,12 +487,20 @@ def simulate_harbour(
                         cfg.beacon_sigma_b,
                     )
                 )
+    if cfg.water_speed_hz > 0:
+        wi = np.arange(0, len(t), step(cfg.water_speed_hz))
+        ws = ctl[wi, 0] + rng_water.normal(0.0, cfg.water_speed_sigma, len(wi))
+        recs += [WaterSpeed(float(ts[i]), float(v), cfg.water_speed_sigma) for i, v in zip(wi, ws, strict=True)]
     px, py = p[0, :2] + rng_misc.normal(0.0, cfg.prior_sigma_xy, 2)
     pyaw = p[0, 2] + rng_misc.normal(0.0, cfg.prior_sigma_yaw)
     recs.append(
         PosePrior(float(ts[0]), float(px), float(py), float(pyaw), cfg.prior_sigma_xy, cfg.prior_sigma_yaw)
     )
     known = [KnownBeacon(b, bx, by, cfg.chart_sigma) for b, (bx, by) in BEACONS.items()]
+    if current is None:
+        v0 = [float(ctl[0, 0] * math.cos(p[0, 2])), float(ctl[0, 0] * math.sin(p[0, 2]))]
+    else:
+        v0 = [float(vel[0, 0]), float(vel[0, 1])]
     meta = {
         "name": "harbour",
         "seed": seed,
@@ -385,8 +515,19 @@ def simulate_harbour(
         },
         "frame": "local harbour frame: x east, y north, origin at the basin's south-west corner (meta.origin)",
         "origin": dict(ORIGIN),
-        "initial_velocity": [float(ctl[0, 0] * math.cos(p[0, 2])), float(ctl[0, 0] * math.sin(p[0, 2]))],
+        "initial_velocity": v0,
     }
     if imu_meta is not None:
         meta["imu"] = imu_meta
+    if not legacy:  # the legacy log's meta is kept as it was, key for key
+        meta["profile"] = cfg.profile
+        meta["gnss"] = {"hz": cfg.fix_hz, "sigma": cfg.gnss_sigma, "velocity_sigma": cfg.gnss_vel_sigma,
+                        "multipath_amp": cfg.multipath_amp, "multipath_dist": cfg.multipath_dist}
+        meta["compass"] = {"hz": cfg.fix_hz, "sigma": cfg.compass_sigma, "deviation": cfg.compass_deviation,
+                           "record_sigma": compass_sigma}
+        meta["water_speed"] = {"hz": cfg.water_speed_hz, "sigma": cfg.water_speed_sigma}
+        meta["odometer"] = ({"hz": 10.0, "sigma_v": cfg.odo_sigma_v, "sigma_w": cfg.odo_sigma_w}
+                            if cfg.odometer else None)
+    if current is not None:
+        meta["current"] = current.to_meta(0.0, float(t[-1]), cfg.t0)
     return NavLog.from_unsorted(recs, known, meta)

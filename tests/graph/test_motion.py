@@ -105,7 +105,7 @@ def test_constant_velocity_bridges_a_failed_match_exactly():
 
 # -- records that used to break the graph --------------------------------------------------------
 def _harbour(duration: float, **kw) -> NavLog:
-    cfg = HarbourConfig(**kw)
+    cfg = HarbourConfig.legacy(**kw)
     return simulate_harbour(3, cfg, duration=duration)
 
 

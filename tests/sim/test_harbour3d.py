@@ -29,7 +29,7 @@ def log3():
 def test_other_sensors_are_the_2d_harbours(log3):
     log2 = simulate_harbour(0, HarbourConfig(lidar_hz=0.0), duration=3.0)
     assert "scan" not in log3.counts()
-    for kind in ("gnss", "heading", "odometry", "beacon", "truth", "pose_prior"):
+    for kind in ("gnss", "gnss_velocity", "heading", "water_speed", "imu", "beacon", "truth", "pose_prior"):
         a, b = log2.of(kind), log3.of(kind)
         assert len(a) == len(b) > 0 and all(x == y for x, y in zip(a, b, strict=True)), kind
 

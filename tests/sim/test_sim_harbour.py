@@ -51,17 +51,21 @@ def test_deterministic_per_seed(short):
     assert [(r.x, r.y) for r in a] == [(r.x, r.y) for r in b]
     assert [(r.x, r.y) for r in a] != [(r.x, r.y) for r in c]
     np.testing.assert_array_equal(short.of("scan")[7].ranges, again.of("scan")[7].ranges)
+    for kind in ("imu", "gnss_velocity", "water_speed", "heading", "beacon", "truth", "pose_prior"):
+        assert short.of(kind) == again.of(kind) != other.of(kind), kind
+    assert short.meta == again.meta
 
 
 def test_sensors_and_rates(short):
     cfg = HarbourConfig()
     c = short.counts()
-    assert c["scan"] == pytest.approx(20 * cfg.lidar_hz, abs=1)
-    assert c["gnss"] == pytest.approx(20, abs=1) and c["heading"] == c["gnss"]
-    assert c["odometry"] == c["truth"] and c["pose_prior"] == 1
+    assert cfg.lidar_hz == 10.0 and c["scan"] == pytest.approx(20 * cfg.lidar_hz, abs=1)
+    assert c["gnss"] == pytest.approx(20, abs=1) and c["heading"] == c["gnss"] == c["gnss_velocity"]
+    assert c["water_speed"] == c["gnss"] and c["imu"] == 2000  # 100 Hz from t = 0.01 s
+    assert "odometry" not in c and c["truth"] == 201 and c["pose_prior"] == 1  # no odometer by default
     assert len(short.beacons_known) == len(BEACONS)
     scan = short.of("scan")[10]
-    assert scan.ranges.size == 360 and np.all(scan.ranges[scan.valid()] <= cfg.max_range)
+    assert scan.ranges.size == 360 and np.all(scan.ranges[scan.valid()] <= cfg.max_range * (1 + 5 * 0.004258))
     assert short.meta["lidar"]["sigma_r_rel"] == pytest.approx(0.004258)
     # beacon sightings only within 150 m, with the charted positions
     tr = short.truth()
@@ -117,6 +121,7 @@ def test_live_options_rates_time_base_and_laps(short):
     the embedded scenario, so the 1 Hz draws of a 10 Hz run are not compared (other streams)."""
     cfg = HarbourConfig(fix_hz=10.0, lidar_hz=0.0, t0=1.7e9)
     log = simulate_harbour(0, cfg, duration=20.0)
+    assert log.meta["current"]["t"][0] == 1.7e9  # the current's series in record time
     c = log.counts()
     assert "scan" not in c and c["gnss"] == c["heading"] == c["truth"] == 201  # 10 Hz, both ends
     assert c["beacon"] == short.counts()["beacon"]  # beacons stay at 1 Hz
@@ -126,7 +131,7 @@ def test_live_options_rates_time_base_and_laps(short):
     assert ev["gnss_outage"]["t0"] == 1.7e9 + HarbourConfig().outage_t0
     from graphnav.sim.harbour import vessel_track
 
-    coarse = HarbourConfig(dt=0.1, lidar_hz=0.0)  # 0.1 s track steps: a lap in ~7000 steps
+    coarse = HarbourConfig(dt=0.1, lidar_hz=0.0, imu_hz=10.0)  # 0.1 s track steps: a lap in ~7000 steps
     t1, p1, _ = vessel_track(coarse, np.random.default_rng(0))
     t2, p2, _ = vessel_track(coarse, np.random.default_rng(0), laps=2, t_max=t1[-1] + 60.0)
     np.testing.assert_array_equal(p2[: len(p1)], p1)  # the second lap continues the first
@@ -142,7 +147,7 @@ def test_imu_truth_closed_form():
     the forward-acceleration sum the speed change (no sway), and ay = v w on a steady turn."""
     from graphnav.sim.harbour import imu_truth, vessel_track
 
-    cfg = HarbourConfig()
+    cfg = HarbourConfig.legacy()  # still water: the body acceleration is the water track's alone
     t, p, ctl = vessel_track(cfg, np.random.default_rng(0), t_max=240.0)
     ii, acc, rate = imu_truth(t, p, ctl, 5, cfg.dt)
     T = 5 * cfg.dt
@@ -166,14 +171,14 @@ def test_imu_truth_closed_form():
 
 
 def test_imu_records_noise_model_and_origin(short):
-    """IMU records = exact means + the solent scenario's calibrated bias residual + Table 3 noise;
-    its own random stream (every other record as without it); the geodetic origin in meta."""
+    """The legacy IMU records = exact means + the solent scenario's calibrated bias residual + Table 3
+    noise; its own random stream (every other record as without it); the geodetic origin in meta."""
     from graphnav.geodesy import LocalFrame
     from graphnav.sim import solent
     from graphnav.sim.harbour import MARINA_GDYNIA, ORIGIN, imu_truth, vessel_track
 
-    cfg = HarbourConfig()
-    log = simulate_harbour(0, duration=300.5, cfg=HarbourConfig(lidar_hz=0.0, imu_hz=10.0))
+    cfg = HarbourConfig.legacy()
+    log = simulate_harbour(0, duration=300.5, cfg=HarbourConfig.legacy(lidar_hz=0.0, imu_hz=10.0))
     imu = log.columns("imu")
     assert len(imu["t"]) == pytest.approx(3005, abs=1) and imu["t"][0] == pytest.approx(0.1)  # 10 Hz: statistics
     t, p, ctl = vessel_track(cfg, np.random.default_rng(np.random.SeedSequence(0).spawn(5)[0]), t_max=300.5)
@@ -188,13 +193,14 @@ def test_imu_records_noise_model_and_origin(short):
     assert np.all(np.abs(err.mean(axis=0) - resid) < tol)
     np.testing.assert_allclose(err.std(axis=0), [solent.TABLE3_ACC_STD] * 2 + [np.radians(solent.TABLE3_GYRO_STD_DEG)],
                                rtol=0.05)
-    none = simulate_harbour(0, HarbourConfig(imu_hz=0.0), duration=20.0)
+    legacy = simulate_harbour(0, HarbourConfig.legacy(), duration=20.0)
+    none = simulate_harbour(0, HarbourConfig.legacy(imu_hz=0.0), duration=20.0)
     assert "imu" not in none.counts() and "imu" not in none.meta
     for kind in ("gnss", "heading", "odometry", "beacon", "truth", "pose_prior"):
-        assert none.of(kind) == short.of(kind), kind
-    np.testing.assert_array_equal(none.of("scan")[-1].ranges, short.of("scan")[-1].ranges)
+        assert none.of(kind) == legacy.of(kind), kind
+    np.testing.assert_array_equal(none.of("scan")[-1].ranges, legacy.of("scan")[-1].ranges)
     assert log.meta["initial_velocity"] == pytest.approx([ctl[0, 0] * np.cos(p[0, 2]), ctl[0, 0] * np.sin(p[0, 2])])
-    assert short.counts()["imu"] == 20 and short.meta["imu"]["hz"] == 1.0  # the default: 1 Hz, from t = 1 s
+    assert legacy.counts()["imu"] == 20 and legacy.meta["imu"]["hz"] == 1.0  # legacy: 1 Hz, from t = 1 s
     assert short.meta["origin"] == ORIGIN
     x, y = LocalFrame(ORIGIN["lat"], ORIGIN["lon"], ORIGIN["h"]).to_local(*MARINA_GDYNIA)
     assert (float(x), float(y)) == pytest.approx((150.0, 100.0), abs=0.1)  # the basin's centre on the marina
@@ -205,7 +211,7 @@ def test_ukfs_run_on_the_harbour_imu():
     from graphnav import estimators
     from graphnav.evaluation.metrics import ate
 
-    log = simulate_harbour(0, HarbourConfig(lidar_hz=0.0), duration=120.0)
+    log = simulate_harbour(0, HarbourConfig.legacy(lidar_hz=0.0), duration=120.0)  # the UKFs' T = 1 s
     for name in ("ukf", "fuzzy-ukf"):
         r = estimators.run(name, log)
         assert ate(r.trajectory, log.truth(), max_dt=0.06)["rmse"] < HarbourConfig().gnss_sigma
@@ -217,7 +223,7 @@ def test_embedded_log_is_seed0():
     assert log.meta["name"] == "harbour" and log.meta["seed"] == 0
     assert DATA.stat().st_size < 5e6
     assert 600 < log.t1 - log.t0 < 900  # 10-15 minutes
-    fresh = simulate_harbour(0, duration=5.0)
+    fresh = simulate_harbour(0, HarbourConfig.for_profile(log.meta.get("profile", "legacy")), duration=5.0)
     a = [(r.x, r.y) for r in log.of("gnss") if r.t <= 5.0]
     b = [(r.x, r.y) for r in fresh.of("gnss")]
     np.testing.assert_allclose(a, b)
@@ -249,11 +255,11 @@ def test_marina_degraded(marina_dir):
 
 
 def test_isam2_with_weighted_icp_on_a_harbour_slice():
-    """End to end on 8 s of harbour: real scan matching, odometry, GNSS, compass, beacons."""
+    """End to end on 8 s of the legacy harbour: real scan matching, odometry, GNSS, compass, beacons."""
     from graphnav.evaluation.metrics import ate
     from graphnav.graph.smoother import run_isam2
 
-    log = simulate_harbour(0, duration=8.0)
+    log = simulate_harbour(0, HarbourConfig.legacy(), duration=8.0)
     r = run_isam2(log, covariances=False)
     assert r.info["icp"] and r.info["icp_pairs"] == len(log.of("scan")) - 1
     assert r.info["icp_failed"] < 0.2 * r.info["icp_pairs"]
