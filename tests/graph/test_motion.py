@@ -137,7 +137,8 @@ def _prev_scan_t(recs, t: float) -> float:
 
 def test_scans_without_returns_and_equal_times_in_the_grid():
     """Empty scans (all beams missing) in the middle and GNSS fixes duplicated at one time stamp,
-    no odometry: the matcher fails there and the motion model carries the chain."""
+    no odometry: the matcher fails there and the motion model carries the chain (the Pose2 graph:
+    constant velocity; the log's IMU in the Pose3 graph)."""
     log = _harbour(30.0)
     recs = []
     for r in log.records:
@@ -150,9 +151,12 @@ def test_scans_without_returns_and_equal_times_in_the_grid():
             recs.append(Gnss(r.t, r.x + 0.5, r.y, r.sigma))
     lg = NavLog(recs, log.beacons_known, log.meta)
     for run in RUNS:
-        r = run(lg, covariances=False)
-        assert r.info["icp_failed"] >= 10 and r.info["motion_fallback"] >= 10
-        assert ate(r.trajectory, log.truth(), max_dt=0.02)["rmse"] < 1.0, run.__name__
+        for motion in ("odometry", "auto"):
+            r = run(lg, covariances=False, motion=motion)
+            assert r.info["icp_failed"] >= 10
+            assert r.info["state"] == ("planar" if motion == "odometry" else "nav")
+            assert r.info["motion_fallback"] >= 10 if motion == "odometry" else r.info["motion_fallback"] == 0
+            assert ate(r.trajectory, log.truth(), max_dt=0.02)["rmse"] < 1.0, (run.__name__, motion)
 
 
 # -- a GNSS-only log follows its fixes --------------------------------------------------------------
