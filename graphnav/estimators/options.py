@@ -253,14 +253,13 @@ def _annotations(name: str) -> dict[str, str]:
     """Option -> its type annotation (text) in the config dataclasses and run functions estimator
     ``name``'s options come from (``float | None``: ``null`` is a value of it, text is not)."""
     from ..graph.config import SmootherConfig
-    from ..graph.imu_motion import ImuGraphConfig
     from ..scan.icp import IcpConfig
     from . import ekf, ekf_slam, fuzzy_ukf, gating, get, icp_odometry
     from .scan_to_map import ScanToMapConfig
 
     sources: dict[str, tuple] = {
-        "isam2": (SmootherConfig, ImuGraphConfig), "batch": (SmootherConfig, ImuGraphConfig),
-        "fixed-lag": (SmootherConfig, ImuGraphConfig), "ekf": (ekf.run_ekf, gating.InnovationGate),
+        "isam2": (SmootherConfig,), "batch": (SmootherConfig,), "fixed-lag": (SmootherConfig,),
+        "ekf": (ekf.run_ekf, gating.InnovationGate),
         "ekf-slam": (ekf_slam.run_ekf_slam,), "icp-dr": (icp_odometry.run_icp_dr, IcpConfig),
         "scan-to-map": (ScanToMapConfig,)}
     ukf = (gating.InnovationGate, fuzzy_ukf.FuzzyCovarianceMatcher)
