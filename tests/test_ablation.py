@@ -10,8 +10,8 @@ import pytest
 from _logfactory import every_record_log
 
 from graphnav import cli
-from graphnav.ablation import drop_kinds, parse_kinds
 from graphnav.io import save_log
+from graphnav.io.drop import drop_kinds, parse_kinds
 from graphnav.io.outputs import MANIFEST
 
 
@@ -113,3 +113,13 @@ def test_a_failed_run_leaves_nothing_in_out(tmp_path, capsys):
     assert rc == 2 and list(out.iterdir()) == []  # the directory was there before: kept, empty
     rc, _, _ = graphnav(capsys, "run", str(p), "-e", "ekf", "--out", str(out))
     assert rc == 0 and (out / MANIFEST).exists() and (out / "online.tum").exists()
+
+
+@pytest.mark.parametrize("argv, wanted", [
+    (["montecarlo", "solent", "--runs", "1", "--estimators", "ekf,ufk"], "did you mean 'ukf'"),
+    (["montecarlo", "solent", "--runs", "1", "-O", "fuzy-ukf.window=5"], "did you mean 'fuzzy-ukf'"),
+    (["live", "--nmea", "udp://127.0.0.1:1", "-e", "isam"], "did you mean 'isam2'"),
+])
+def test_unknown_names_in_montecarlo_and_live_are_exit_2_with_a_suggestion(capsys, argv, wanted):
+    rc, obj, err = graphnav(capsys, *argv)
+    assert rc == 2 and wanted in obj["error"] and "Traceback" not in err, obj

@@ -49,7 +49,7 @@ def add_drop_flag(p: argparse.ArgumentParser) -> None:
 
 def dropped_kinds(args: argparse.Namespace) -> list[str]:
     """The kinds of ``--drop`` (checked: an unknown kind is a ``ValueError`` naming the known ones)."""
-    from ..ablation import parse_kinds
+    from ..io.drop import parse_kinds
 
     return parse_kinds(getattr(args, "drop", None))
 

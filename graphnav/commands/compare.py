@@ -13,13 +13,13 @@ import time
 from pathlib import Path
 
 from .. import estimators
-from ..ablation import drop_kinds
 from ..errors import GraphnavError
 from ..estimators.options import check as check_options
 from ..evaluation.compare import compare, ranked
 from ..evaluation.report import to_json, write_report
 from ..evaluation.trackmap import write_track_map
 from ..io import load_log
+from ..io.drop import drop_kinds
 from ..io.geo_out import write_wgs84
 from ..io.outputs import OutDir
 from ..scan.icp_cache import MatchCache

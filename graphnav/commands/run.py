@@ -9,10 +9,10 @@ import time
 from pathlib import Path
 
 from .. import estimators
-from ..ablation import drop_kinds
 from ..estimators.options import check as check_options
 from ..evaluation.evaluate import summarize
 from ..io import load_log
+from ..io.drop import drop_kinds
 from ..io.geo_out import record_origin, write_wgs84
 from ..io.outputs import OutDir
 from ..io.tum import TrajectoryWriter, write_truth

@@ -86,8 +86,8 @@ def inputs(name: str, log: NavLog, options: dict[str, Any] | None = None,
     """The record kinds estimator ``name`` used on ``log`` with ``options``: the kinds its spec
     declares (``EstimatorSpec.inputs``) that the log holds, plus the kinds its start pose came from
     (``info["anchor"]`` of its result, e.g. ``truth`` when nothing else gave one), in
-    :data:`graphnav.ablation.KINDS` order. ``None`` when the spec declares nothing."""
-    from ..ablation import KINDS
+    :data:`graphnav.io.drop.KINDS` order. ``None`` when the spec declares nothing."""
+    from ..io.drop import KINDS
 
     spec = get(name)
     if spec.inputs is None:

@@ -140,6 +140,27 @@ def results_table(entries: Sequence[Entry]) -> tuple[list[str], list[list[str]]]
     return head, rows
 
 
+def event_table(entries: Sequence[Entry]) -> tuple[list[str], list[list[str]]] | None:
+    """Position errors inside the log's event windows (``errors_by_event``), one row per estimator
+    in the ranking's order and a smoothed / online column pair per event kind; ``None`` when no
+    estimator has any."""
+    kinds: list[str] = []
+    for e in entries:
+        for k in (e.summary or {}).get("errors_by_event") or {}:
+            if k not in kinds:
+                kinds.append(k)
+    if not kinds:
+        return None
+    head = ["estimator", *(f"{k} {w} [m]" for k in kinds for w in ("RMSE", "max", "online RMSE"))]
+    rows = []
+    for e in ranked(entries):
+        ev = (e.summary or {}).get("errors_by_event") or {}
+        if e.ok:
+            rows.append([e.name, *(_fmt((ev.get(k) or {}).get(f), "{:.3f}") for k in kinds
+                                   for f in ("rmse_m", "max_m", "online_rmse_m"))])
+    return head, rows
+
+
 def markdown_table(entries: Sequence[Entry]) -> str:
     head, rows = results_table(entries)
     return _md_table(head, rows, ["---:", "---", "---"] + ["---:"] * (len(head) - 4) + ["---"])
@@ -287,6 +308,12 @@ def _blocks(entries: Sequence[Entry], log: NavLog, log_name: str, prov: dict[str
                 + NEES_NOTE
                 + (SHARED_NOTE if any((e.summary or {}).get("icp_cache_hits") for e in entries) else "")),
           ("table", head, rows)]
+    ev_table = event_table(entries)
+    if ev_table is not None:
+        b += [("h", 3, "Errors inside events"),
+              ("p", "Position error (unaligned, the pairs of the ATE) inside the log's event windows, pooled per "
+                    "kind; *online*: the estimate available at each time."),
+              ("table", *ev_table)]
     if not log.has_truth:
         b.append(("p", "The log has no truth: only timing is reported."))
     if figs:

@@ -53,8 +53,12 @@ ONLINE_ESTIMATORS: dict[str, Callable[..., OnlineEstimator]] = {
 def make_online(name: str, **options: Any) -> OnlineEstimator:
     """An online estimator by name (``fixed-lag`` (default for unbounded runs), ``isam2``, ``ekf``)."""
     if name not in ONLINE_ESTIMATORS:
+        import difflib
+
         have = ", ".join(sorted(ONLINE_ESTIMATORS))
-        raise ValueError(f"no online adapter for estimator {name!r} yet (have: {have});"
+        close = difflib.get_close_matches(name, sorted(ONLINE_ESTIMATORS), n=2, cutoff=0.6)
+        hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
+        raise ValueError(f"no online adapter for estimator {name!r} yet ({hint}have: {have});"
                          " estimators plug in through graphnav.result.OnlineEstimator")
     try:
         return ONLINE_ESTIMATORS[name](**options)

@@ -1,7 +1,7 @@
 """``inputs``: the record kinds each estimator says it used are the ones whose removal changes its output.
 
 On a small log with every record kind, each estimator runs once as is and once per kind with that
-kind dropped (:func:`graphnav.ablation.drop_kinds`): a kind listed in its ``inputs`` must change the
+kind dropped (:func:`graphnav.io.drop.drop_kinds`): a kind listed in its ``inputs`` must change the
 estimate (or make the log unable to feed it), a kind not listed must leave it bit for bit the same.
 """
 
@@ -12,7 +12,7 @@ import pytest
 from _logfactory import every_record_log
 
 from graphnav import estimators
-from graphnav.ablation import KINDS, drop_kinds
+from graphnav.io.drop import KINDS, drop_kinds
 from graphnav.log import Attitude, GnssVelocity, Heading, NavLog, WaterSpeed, make_cloud
 
 

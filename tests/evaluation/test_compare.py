@@ -143,7 +143,7 @@ def test_cli_json_is_one_object_with_the_issue_keys(cli_run):
 def test_cli_json_has_errors_by_event_and_inputs(cli_run):
     """Per estimator: the errors inside the log's GNSS outage and jump (the fake smoother: 0.3 m
     smoothed, 0.6 m online everywhere), and the record kinds it used."""
-    _, stdout, _, _ = cli_run
+    _, stdout, out, _ = cli_run
     est = json.loads(stdout)["estimators"]
     ev = est["fake-smoother"]["errors_by_event"]
     assert set(ev) == {"gnss_outage", "gnss_jump"}
@@ -156,6 +156,13 @@ def test_cli_json_has_errors_by_event_and_inputs(cli_run):
     assert est["scan-to-map"]["inputs"] == ["scan", "odometry", "pose_prior"]
     assert est["fake-smoother"]["inputs"] is None  # (a fake: declares none)
     assert "errors_by_event" not in est["zz-boom"]
+    report = (out / "report.md").read_text()
+    assert "Inputs (record kinds it used): scan, odometry, pose_prior." in report
+    row = next(ln for ln in report.splitlines() if ln.startswith("| fake-smoother |"))
+    head = next(ln for ln in report.splitlines() if ln.startswith("| estimator | gnss_outage RMSE [m]"))
+    assert [c.strip() for c in head.split("|")[2:5]] == ["gnss_outage RMSE [m]", "gnss_outage max [m]",
+                                                          "gnss_outage online RMSE [m]"]
+    assert [c.strip() for c in row.split("|")[2:5]] == ["0.300", "0.300", "0.600"]
 
 
 def test_cli_writes_report_figures_and_tum(cli_run):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from .log import RECORD_TYPES, NavLog
+from ..log import RECORD_TYPES, NavLog
 
 __all__ = ["KINDS", "drop_kinds", "parse_kinds"]
 
