@@ -196,7 +196,7 @@ IMU_DEFAULTS: dict[str, Any] = {
     "acc_density": 0.0039, "gyro_density": math.radians(0.033), "acc_bias_rw": 1e-5,
     "gyro_bias_rw": math.radians(1e-4), "bias": True, "current": False, "sigma_bias_acc": 0.01,
     "sigma_bias_gyro_deg": 0.1, "sigma_current0": 0.5, "q_current": 0.005, "v0": (0.0, 0.0, 2.0),
-    "sigma_gnss_velocity": 0.1, "sigma_water_speed": 0.1, "use_velocity": True,
+    "sigma_gnss_velocity": 0.1, "sigma_water_speed": 0.1, "use_velocity": True, "use_odometry": True,
 }
 
 MatchFn = Callable[..., Any]  # graphnav.scan.icp.match_scans(scan, prev, init=...) -> MatchResult
@@ -250,7 +250,7 @@ class EkfStepper:
             self.f = PoseEkf(x0, P0, gate=gate, **gating)
         self.motion = motion
         self.kinds: tuple[type, ...] = {"odometry": (Gnss, Heading, Odometry), "icp": (Gnss, Heading, Scan),
-                                        "imu": (Gnss, Heading, Imu, GnssVelocity, WaterSpeed)}[motion]
+                                        "imu": (Gnss, Heading, Imu, GnssVelocity, WaterSpeed, Odometry)}[motion]
         self.sigma_v, self.sigma_w, self.sigma_acc = sigma_v, sigma_w, sigma_acc
         self.use_gnss, self.use_heading = use_gnss, use_heading
         self.match = match
@@ -297,6 +297,9 @@ class EkfStepper:
         io = self.imu_opts
         if isinstance(r, Imu):
             self.imu_u = r
+        elif isinstance(r, Odometry) and self.motion == "imu":
+            if io["use_odometry"]:
+                f.update_sog(r.v, _sig(r.sigma_v, self.sigma_v), r.t)  # type: ignore[attr-defined]
         elif isinstance(r, Odometry):
             self.u = r
             if f.has_speed:
@@ -439,6 +442,8 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
             kinds.add("gnss_velocity")
         if options.get("current", "auto") not in (False, "false"):
             kinds.add("water_speed")
+        if options.get("use_odometry", True):
+            kinds.add("odometry")  # speed over ground, an update
     if options.get("speed", False):
         kinds.add("odometry")  # the speed state starts at the first odometry speed
     if log.pose_prior() is None and log.of("gnss"):

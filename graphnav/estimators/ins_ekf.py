@@ -86,6 +86,17 @@ class InsEkf(PoseEkf):
         H[0, 3] = H[1, 4] = 1.0
         return self._update("gnss_velocity", np.asarray(v, dtype=float) - self.x[3:5], H, np.eye(2) * sigma ** 2, t)
 
+    def update_sog(self, v: float, sigma: float, t: float | None = None) -> bool:
+        """Speed over ground ``|v|`` (an odometry record's speed: a Doppler log / SOG); skipped
+        (False) below 0.2 m/s, where its direction is undefined."""
+        vx, vy = self.x[3], self.x[4]
+        h = math.hypot(vx, vy)
+        if h < 0.2 or abs(v) < 0.2:
+            return False
+        H = np.zeros((1, len(self.x)))
+        H[0, 3], H[0, 4] = vx / h, vy / h
+        return self._update("speed", np.array([abs(v) - h]), H, np.array([[sigma ** 2]]), t, reinit=False)
+
     def update_water_speed(self, v: float, sigma: float, t: float | None = None) -> bool:
         """Speed through water along the bow (needs the current states)."""
         if self.ic is None:
