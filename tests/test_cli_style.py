@@ -195,7 +195,7 @@ def test_list_options(capsys):
 
     assert opts["lag"]["default"] == SmootherConfig().lag and "fixed-lag window" in opts["lag"]["meaning"]
     assert opts["converge"]["meaning"].endswith('"updates" (final_updates only), "none"')  # continuation lines
-    assert "motion" in opts and "substeps" in opts  # the IMU graph's options too
+    assert "motion" in opts and "imu" in opts and "water_speed_sigma" in opts  # the Pose3 graph's options too
     assert main(["run", "--list-options", "ukf"]) == 0
     text = capsys.readouterr().out
     assert "r_gps_x" in text and "Table 2: 6" in text  # null: the records' sigma

@@ -12,8 +12,8 @@ from ..errors import GraphnavError
 from ..io.jsonsafe import jsonable
 
 __all__ = ["OPTION_FORM", "add_drop_flag", "add_json_flag", "add_log_args", "dropped_kinds", "emit", "jsonable",
-           "options_by_estimator", "options_for", "parse_option", "parse_options", "plain_options", "progress_enabled",
-           "scoped_options"]
+           "log_options", "options_by_estimator", "options_for", "parse_option", "parse_options", "plain_options",
+           "progress_enabled", "scoped_options"]
 
 
 def add_json_flag(p: argparse.ArgumentParser) -> None:
@@ -38,6 +38,28 @@ def add_log_args(p: argparse.ArgumentParser) -> None:
                    help="skip malformed or physically invalid records (and count them)")
     p.add_argument("--max-speed", type=float, metavar="M/S",
                    help="the vessel's plausible speed limit; faster odometry is invalid (default 50 m/s)")
+    add_date_flag(p)
+
+
+def add_date_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--date", type=log_date, metavar="YYYY-MM-DD",
+                   help="NMEA logs without a date (no RMC, ZDA without date): the UTC day of the first time of "
+                        "day (t becomes POSIX time); a log's own date wins (docs/nmea.md)")
+
+
+def log_date(text: str) -> str:
+    """``--date``'s value: a ``YYYY-MM-DD`` calendar date (argparse reports anything else, exit 2)."""
+    from datetime import date
+
+    try:
+        return date.fromisoformat(text.strip()).isoformat()
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected YYYY-MM-DD, got {text[:30]!r}") from None
+
+
+def log_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The reader options that :func:`add_log_args` flags give (``date``), for ``load_log(**...)``."""
+    return {"date": args.date} if getattr(args, "date", None) else {}
 
 
 def add_drop_flag(p: argparse.ArgumentParser) -> None:

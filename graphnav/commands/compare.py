@@ -30,6 +30,7 @@ from ._common import (
     add_overwrite_flag,
     dropped_kinds,
     emit,
+    log_options,
     options_by_estimator,
     progress_bar,
 )
@@ -117,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _compare(args: argparse.Namespace, options: dict[str, dict], names: list[str] | None, dropped: list[str],
              out: OutDir) -> int:
-    log = drop_kinds(load_log(args.log, lenient=args.lenient), dropped)
+    log = drop_kinds(load_log(args.log, lenient=args.lenient, **log_options(args)), dropped)
     t0 = time.perf_counter()
     workers = args.workers if args.workers > 0 else (os.cpu_count() or 1)
     cache = MatchCache() if getattr(args, "icp_cache", True) else None  # (demo builds its own Namespace)

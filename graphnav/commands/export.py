@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import GraphnavError
+from ._common import add_date_flag, log_options
 
 FORMATS = ("nmea", "geojson", "gpx", "kml")
 NMEA_SENTENCES = ("GGA", "RMC", "HDT", "VTG")
@@ -38,6 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="for a LOG: export its truth or its GNSS fixes (default: the truth when it has one)")
     p.add_argument("--overwrite", action="store_true", help="replace FILE when it exists")
     p.add_argument("--lenient", action="store_true", help="for a LOG: skip malformed records (and count them)")
+    add_date_flag(p)
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     p.set_defaults(func=run)
 
@@ -85,7 +87,7 @@ def _from_log(args: argparse.Namespace) -> tuple[Any, Any, dict[str, Any]]:
     from ..io import load_log
     from ..trajectory import Trajectory
 
-    log = load_log(args.input, lenient=args.lenient)
+    log = load_log(args.input, lenient=args.lenient, **log_options(args))
     source = args.source or ("truth" if log.has_truth else "gnss")
     if source == "truth":
         if not log.has_truth:

@@ -16,7 +16,7 @@ from ..scan.icp import VARIANTS, IcpConfig
 from ..scan.icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
 from ..scan.motion_guess import INITS
 from ..scan.movement import movement_from_increments
-from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, plain_options, progress_bar
+from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, log_options, plain_options, progress_bar
 
 log_ = logging.getLogger("graphnav.icp")
 
@@ -42,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     out = OutDir(args.out, command="icp", overwrite=args.overwrite) if args.out else None
-    log = load_log(args.log, lenient=args.lenient)
+    log = load_log(args.log, lenient=args.lenient, **log_options(args))
     options = plain_options(args)
     cfg = IcpConfig(variant=args.variant, **options)
     if len(log.of("scan")) < 2:

@@ -8,7 +8,7 @@ import threading
 
 from ..io import load_log
 from ..online.replay import replay
-from ._common import add_json_flag, add_log_args, emit
+from ._common import add_json_flag, add_log_args, emit, log_options
 
 
 def parse_origin(text: str | None) -> tuple[float, float] | None:
@@ -38,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    log = load_log(args.log, lenient=args.lenient)
+    log = load_log(args.log, lenient=args.lenient, **log_options(args))
     stop = threading.Event()
     old = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:

@@ -24,6 +24,7 @@ from ._common import (
     dropped_kinds,
     emit,
     jsonable,
+    log_options,
     options_for,
     progress_bar,
 )
@@ -94,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, options: dict, dropped: list[str], out: OutDir | None,
          online: list[TrajectoryWriter] | None = None) -> int:
-    log = drop_kinds(load_log(args.log, lenient=args.lenient), dropped)
+    log = drop_kinds(load_log(args.log, lenient=args.lenient, **log_options(args)), dropped)
     why = estimators.get(args.estimator).unmet(log)
     if why:
         after = f" (after --drop {','.join(dropped)})" if dropped else ""

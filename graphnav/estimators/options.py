@@ -1,5 +1,5 @@
 """Every estimator's options (``-O KEY=VALUE``) with their defaults and meanings, read from the code
-that defines them: the config dataclasses' field comments (``SmootherConfig``, ``ImuGraphConfig``,
+that defines them: the config dataclasses' field comments (``SmootherConfig``,
 ``IcpConfig``, ``ScanToMapConfig``), the run functions' keyword arguments (meaning: the sentence of
 their docstring that names them) and the UKF's option table. ``graphnav run --list-options NAME``
 prints them."""
@@ -198,18 +198,8 @@ def describe(name: str) -> list[Option]:
     spec = get(name)  # KeyError naming the known ones
     if name in ("isam2", "batch", "fixed-lag"):
         from ..graph.config import SmootherConfig
-        from ..graph.imu_motion import ImuGraphConfig
-        from .smoother import MOTIONS
 
-        motion = {"name": "motion", "default": "auto", "group": "graph",
-                  "meaning": f"which graph: {', '.join(MOTIONS)} (auto: the IMU graph when the log has IMU "
-                             "records and GNSS, no scans and no beacons)"}
-        odo = dataclass_options(SmootherConfig, "odometry/ICP graph (SmootherConfig)", skip=("solver",))
-        imu = dataclass_options(ImuGraphConfig, "IMU graph (ImuGraphConfig, motion=imu)")
-        same = {o["name"]: o["meaning"] for o in odo}
-        for o in imu:  # a field of the same name means the same
-            o["meaning"] = o["meaning"] or same.get(o["name"], "")
-        return [motion] + odo + imu
+        return dataclass_options(SmootherConfig, "navigation graph (SmootherConfig)", skip=("solver",))
     if name == "ekf":
         from .ekf import IMU_DEFAULTS, run_ekf
         from .gating import InnovationGate

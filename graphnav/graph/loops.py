@@ -472,7 +472,7 @@ class LoopCloser:
             model = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.DCS.Create(cfg.kernel_k), base)
         else:
             model = base
-        s.add(gtsam.BetweenFactorPose2(F.X(loop.i), F.X(loop.k), _pose(loop.z), model), "loop")
+        s.add(s.space.between(F.X(loop.i), F.X(loop.k), np.asarray(loop.z, dtype=float), loop.cov, model=model), "loop")
         loop.accepted = True
         self.accepted.append((loop.i, loop.k))
         self.counts["loop_closures"] += 1

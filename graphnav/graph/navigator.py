@@ -43,9 +43,10 @@ from ..log import KnownBeacon, NavLog, Record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from . import noise
-from .builder import GraphBuilder, Matcher, Step
+from .builder import GraphBuilder, Matcher, NavPrev, Step
 from .config import SmootherConfig
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt, marginals
+from .space import IB, PlanarSpace, V, W
 
 BATCH_INIT_FIRST = 32  # batch_init="incremental": the first solve at this many keyframes
 
@@ -59,12 +60,16 @@ def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
     return np.array([p.x(), p.y(), p.theta()])
 
 
-def graph_params(cfg: SmootherConfig) -> gtsam.ISAM2Params:
-    """The iSAM2 parameters of the odometry/ICP graph: thresholds per variable type (poses ``x``,
-    beacons ``l``, compass-bias frame ``b``)."""
-    return isam_params({"x": [cfg.relinearize_threshold] * 3, "l": [cfg.relinearize_threshold_landmarks] * 2,
-                        "b": [1.0, 1.0, math.radians(cfg.relinearize_threshold_bias_deg)]},
-                       skip=cfg.relinearize_skip, partial_check=cfg.partial_relinearization_check,
+def graph_params(cfg: SmootherConfig, space: PlanarSpace | None = None) -> gtsam.ISAM2Params:
+    """The iSAM2 parameters of the graph: thresholds per variable type (poses ``x``, beacons ``l``,
+    compass-bias frame ``b``; in the Pose3 graph also velocities ``v`` and IMU biases ``i``)."""
+    space = space or PlanarSpace()
+    return isam_params(space.thresholds(cfg.relinearize_threshold, cfg.relinearize_threshold_landmarks,
+                                        math.radians(cfg.relinearize_threshold_bias_deg),
+                                        cfg.relinearize_threshold_velocity,
+                                        (cfg.relinearize_threshold_imu_acc, cfg.relinearize_threshold_imu_gyro)),
+                       skip=cfg.relinearize_skip or (5 if space.name == "nav" else 1),
+                       partial_check=cfg.partial_relinearization_check,
                        wildfire=cfg.wildfire_threshold, factorization=cfg.isam_factorization,
                        optimizer=cfg.isam_optimizer)
 
@@ -84,7 +89,8 @@ class Navigator:
 
     def __init__(self, config: SmootherConfig | None = None, *, chart: Iterable[KnownBeacon] = (),
                  lidar: dict[str, Any] | None = None, scans: bool | None = None, matcher: Matcher | None = None,
-                 lidar3d: dict[str, Any] | None = None,
+                 lidar3d: dict[str, Any] | None = None, imu: bool | None = None,
+                 imu_model: dict[str, Any] | None = None,
                  on_estimate: OnEstimate | None = None, history: bool = True, **options: Any) -> None:
         if config is None:
             cfg = SmootherConfig.from_options(options)
@@ -92,8 +98,12 @@ class Navigator:
             SmootherConfig.from_options(options)  # unknown keys are an error
             cfg = replace(config, **options)
         self.cfg = cfg
-        self.builder = GraphBuilder(cfg, matcher=matcher, chart=chart, lidar=lidar, scans=scans, lidar3d=lidar3d)
-        self.solver = Solver(cfg.solver, graph_params(cfg), lag=cfg.lag,
+        self.builder = GraphBuilder(cfg, matcher=matcher, chart=chart, lidar=lidar, scans=scans, lidar3d=lidar3d,
+                                    imu=imu, imu_model=imu_model)
+        self.space = self.builder.space
+        self.nav = self.builder.imu is not None
+        self.last_state: NavPrev | None = None  # the Pose3 graph: the newest keyframe's full state
+        self.solver = Solver(cfg.solver, graph_params(cfg, self.space), lag=cfg.lag,
                              lm=LmSettings(cfg.lm_tol, cfg.lm_max_iterations))
         self.groups: list[str] = []  # sensor group of every factor in solver.graph
         self.on_estimate = on_estimate
@@ -126,7 +136,12 @@ class Navigator:
         lidar3d = log.meta.get("lidar3d") if isinstance(log.meta.get("lidar3d"), dict) else None
         scans = bool(log.of("scan")) or (bool(log.of("cloud")) and (config is None or config.use_cloud)
                                          and kw.get("use_cloud", True))
-        return cls(config, chart=log.beacons_known, lidar=lidar, scans=scans, lidar3d=lidar3d, **kw)
+        imu_model = log.meta.get("imu") if isinstance(log.meta.get("imu"), dict) else None
+        v0 = log.meta.get("initial_velocity")
+        if imu_model is not None or v0 is not None:
+            imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}
+        return cls(config, chart=log.beacons_known, lidar=lidar, scans=scans, lidar3d=lidar3d,
+                   imu=any(r.kind == "imu" for r in log.records), imu_model=imu_model, **kw)
 
     # -- online ----------------------------------------------------------------------------------
     def add(self, rec: Record | KnownBeacon) -> Estimate | None:
@@ -156,7 +171,7 @@ class Navigator:
         return est
 
     def _estimate_of(self, k: int) -> gtsam.Pose2:
-        return self.solver.estimate(F.X(k))
+        return self.space.pose2(self.solver.estimate(F.X(k), self.space.pose_type))
 
     def _fail(self, exc: SolverError, t: float) -> GraphnavError:
         r = self._rec
@@ -175,11 +190,13 @@ class Navigator:
             self.groups.extend(s.groups)
 
     def _freeze(self, key: int) -> tuple[gtsam.Pose2, NDArray[np.float64] | None]:
-        p = self.solver.estimate(key)
-        return p, (world_cov(p, self.solver.marginal(key)) if self.cfg.covariances else None)
+        p = self.solver.estimate(key, self.space.pose_type)
+        cov = self.space.world_cov(p, self.solver.marginal(key)) if self.cfg.covariances else None
+        return self.space.pose2(p), cov
 
     def _step(self, k: int) -> Estimate | None:
-        s = self.builder.step(k, self.last_pose, self.last_cov if self.solver.online or self.front else None)
+        s = self.builder.step(k, self.last_pose, self.last_cov if self.solver.online or self.front else None,
+                              self.last_state)
         if s.icp_ms is not None:
             self.icp_ms.append(s.icp_ms)
         c0, p0 = time.perf_counter(), time.process_time()
@@ -189,7 +206,7 @@ class Navigator:
             if loops is not None:  # the front end's estimate is the next keyframe's guess
                 self._front_step(s, k, loops)
                 return None
-            self.last_pose = s.values.atPose2(F.X(k))
+            self._take(s.values, k)
             if self.cfg.batch_init == "incremental" and k + 1 >= self._next_init:
                 self._initialise(k, s.t)
             return None
@@ -220,9 +237,18 @@ class Navigator:
         try:
             if loops is not None and loops.stale:
                 values = solver.current()
-                loops.refresh(lambda j: _vec(values.atPose2(F.X(j))) if values.exists(F.X(j)) else None)
-            pose = solver.estimate(F.X(k))
-            cov = world_cov(pose, solver.marginal(F.X(k)))
+                loops.refresh(lambda j: _vec(self.space.read(values, F.X(j))) if values.exists(F.X(j)) else None)
+            p = solver.estimate(F.X(k), self.space.pose_type)
+            cov = self.space.world_cov(p, solver.marginal(F.X(k)))
+            pose = self.space.pose2(p)
+            if self.nav:
+                vel = np.asarray(solver.estimate(V(k), "Vector"))
+                bias = solver.estimate(IB(k), "ConstantBias")
+                vel_cov = solver.marginal(V(k)) if self.builder.matcher is not None else None
+                self.last_state = (p, vel, bias, vel_cov)
+                cur = self.builder.current
+                if cur is not None and cur[1] == k:
+                    self.builder.current_guess = np.asarray(solver.estimate(W(k), "Vector"))
         except SolverError as exc:
             raise self._fail(exc, t) from None
         if loops is not None:
@@ -234,7 +260,7 @@ class Navigator:
         when the first scan brings the loop closer), and the loop closer observes its estimate."""
         try:
             if self.front is None:
-                self.front = Solver("isam2", graph_params(self.cfg), keep_graph=False)
+                self.front = Solver("isam2", graph_params(self.cfg, self.space), keep_graph=False)
                 self.front.update(self.solver.graph, self.solver.initial)
             else:
                 self.front.update(s.graph, s.values)
@@ -256,12 +282,21 @@ class Navigator:
         except SolverError as exc:
             raise self._fail(exc, t) from None
         self.solver.initial = values
-        self.last_pose = values.atPose2(F.X(k))
+        self._take(values, k)
         self._next_init = max(k + 2, math.ceil((k + 1) * self.cfg.batch_init_growth))
         e = self.extra
         e["batch_init_solves"] = e.get("batch_init_solves", 0) + 1
         e["batch_init_iterations"] = e.get("batch_init_iterations", 0) + it
         e["batch_init_ms"] = e.get("batch_init_ms", 0.0) + (time.perf_counter() - c0) * 1e3
+
+    def _take(self, values: gtsam.Values, k: int) -> None:
+        """Keyframe ``k``'s state in ``values`` is the next step's starting point (batch)."""
+        self.last_pose = self.space.read(values, F.X(k))
+        if self.nav:
+            self.last_state = (values.atPose3(F.X(k)), np.asarray(values.atVector(V(k))),
+                               values.atConstantBias(IB(k)), None)
+            if values.exists(W(k)):
+                self.builder.current_guess = np.asarray(values.atVector(W(k)))
 
     def _rebase(self, k: int, t: float) -> None:
         """A fresh fixed-lag smoother with priors carrying the current marginals of the variables
@@ -269,15 +304,26 @@ class Navigator:
         g, v, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
         keys = [F.X(k)] + ([self.builder.bias_key] if self.builder.bias_key is not None else [])
         keys += [F.L(i) for i in self.builder.beacon_ids.values()]
+        keys += [V(k), IB(k)] if self.nav else []
+        keys += [W(k)] if self.builder.current is not None and self.builder.current[1] == k else []
+        sp = self.space
         try:
             for key in keys:
                 cov = self.solver.marginal(key)
-                if gtsam.Symbol(key).chr() == ord("l"):
-                    p = self.solver.estimate(key, "Point2")
-                    g.add(gtsam.PriorFactorPoint2(key, p, gtsam.noiseModel.Gaussian.Covariance(cov)))
+                model = gtsam.noiseModel.Gaussian.Covariance(cov)
+                ch = chr(gtsam.Symbol(key).chr())
+                if ch == "l":
+                    p = self.solver.estimate(key, sp.point_type)
+                    g.add(sp.landmark_prior_cov(key, p, cov))
+                elif ch in "vw":
+                    p = self.solver.estimate(key, "Vector")
+                    g.add(gtsam.PriorFactorVector(key, p, model))
+                elif ch == "i":
+                    p = self.solver.estimate(key, "ConstantBias")
+                    g.add(gtsam.PriorFactorConstantBias(key, p, model))
                 else:
-                    p = self.solver.estimate(key)
-                    g.add(F.pose_prior(key, _vec(p), cov))
+                    p = self.solver.estimate(key, sp.pose_type)
+                    g.add(sp.prior_cov(key, p, cov))
                 v.insert(key, p)
                 stamps[key] = t
             self.solver.rebase(g, v, stamps)
@@ -297,8 +343,9 @@ class Navigator:
             sog, cog = math.hypot(dx, dy) / dt, math.atan2(dy, dx)
             w = float(wrap_angle(p[2] - prev_p[2])) / dt
         b = self.builder
-        if b.odo_t and t - b.odo_t[-1] <= 2.0:
-            _, v, wr = b.odo_rows[-1][:3]
+        odo = b.odometry
+        if odo and t - odo.t[-1] <= 2.0:
+            _, v, wr = odo.rows[-1][:3]
             sog, w = abs(v), wr
         return sog, cog, w
 
@@ -351,8 +398,8 @@ class Navigator:
                 for k in range(n):
                     fr = self.solver.frozen.get(F.X(k))
                     if fr is None:
-                        p = values.atPose2(F.X(k))
-                        c = world_cov(p, self.solver.marginal(F.X(k))) if cfg.covariances else None
+                        p = self.space.read(values, F.X(k))
+                        c = self.space.world_cov(p, self.solver.marginal(F.X(k))) if cfg.covariances else None
                     else:
                         p, c = fr
                     poses.append(_vec(p))
@@ -367,13 +414,14 @@ class Navigator:
                         values = self._batch(values, info)
                 else:
                     values = self._batch(self.solver.initial, info)
-                poses = [_vec(values.atPose2(F.X(k))) for k in range(n)]
+                p2 = [self.space.read(values, F.X(k)) for k in range(n)]
+                poses = [_vec(p) for p in p2]
                 if cfg.covariances:
                     if cfg.solver == "isam2" and cfg.converge != "lm":
-                        covs = [world_cov(values.atPose2(F.X(k)), self.solver.marginal(F.X(k))) for k in range(n)]
+                        covs = [self.space.world_cov(p2[k], self.solver.marginal(F.X(k))) for k in range(n)]
                     else:
                         m = marginals(self.solver.graph, values)
-                        covs = [world_cov(values.atPose2(F.X(k)), m(F.X(k))) for k in range(n)]
+                        covs = [self.space.world_cov(p2[k], m(F.X(k))) for k in range(n)]
         except SolverError as exc:
             raise GraphnavError(f"the navigation graph could not be solved at the end of the log: {exc}",
                                 where=f"record {self.n_records}") from None
@@ -386,10 +434,24 @@ class Navigator:
         if info.get("loop_edges"):  # the accepted loops as (older, newer) keyframe times, for plots
             info["loop_edge_times"] = [[float(t[i]), float(t[k])] for i, k in info["loop_edges"]]
         if b.bias_key is not None and values.exists(b.bias_key):
-            info["compass_bias_deg"] = math.degrees(F.compass_bias(values.atPose2(b.bias_key)))
+            info["compass_bias_deg"] = math.degrees(self.space.compass_bias(self.space.read_bias_frame(values,
+                                                                                                         b.bias_key)))
         info["beacon_init"] = {bid: p.tolist() for bid, p in b.beacon_init.items()}
-        info["beacon_estimates"] = {bid: values.atPoint2(F.L(i)).tolist() for bid, i in b.beacon_ids.items()
-                                    if values.exists(F.L(i))}
+        info["beacon_estimates"] = {bid: self.space.landmark_xy(values, F.L(i)).tolist()
+                                    for bid, i in b.beacon_ids.items() if values.exists(F.L(i))}
+        if self.nav and values.exists(IB(n - 1)):
+            bias = values.atConstantBias(IB(n - 1))
+            info["imu_bias_final"] = [*np.asarray(bias.accelerometer()).tolist(),
+                                      *np.asarray(bias.gyroscope()).tolist()]
+        if b.current is not None:  # the water current [m/s] (east, north): at the end and its mean
+            js = [j for j in range(b.current[0], b.current[1] + 1) if values.exists(W(j))]
+            ws = np.array([np.asarray(values.atVector(W(j)))[:2] for j in js]).reshape(-1, 2)
+            if len(js):
+                every = max(1, len(js) // 1000)  # the series: at most ~1000 samples
+                info["water_current"] = {"vx": float(ws[-1, 0]), "vy": float(ws[-1, 1]),
+                                         "mean_vx": float(ws[:, 0].mean()), "mean_vy": float(ws[:, 1].mean()),
+                                         "series": [[float(t[j]), float(w[0]), float(w[1])]
+                                                    for j, w in list(zip(js, ws, strict=True))[::every]]}
         info.update(self.extra)
         if self.solver.online:
             info["step_cpu_ms_median"] = float(np.median(self.step_cpu)) if self.step_cpu else None

@@ -2,9 +2,8 @@
 incremental fixed-lag smoother, behind the same three calls.
 
 * :func:`isam_params` builds the ``ISAM2Params`` (relinearisation thresholds per variable type,
-  skip, partial check, wildfire) -- the one place they are written; the odometry/ICP graph
-  (:mod:`graphnav.graph.builder`) and the IMU graph (:mod:`graphnav.graph.imu_motion`) pass their
-  own thresholds.
+  skip, partial check, wildfire) -- the one place they are written; the navigation graph
+  (:mod:`graphnav.graph.navigator`) passes the thresholds of its state space.
 * :class:`Solver` takes per-keyframe factor batches (``update``), answers the online estimate of a
   variable and its marginal (iSAM2 / fixed-lag; batch answers the initial guess and ``None``) and,
   at the end, the smoothed values (:meth:`Solver.smoothed`). iSAM2 and batch keep the whole graph

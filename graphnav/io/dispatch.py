@@ -19,11 +19,16 @@ SNIFF_SUFFIXES = (".log", ".log.gz", ".txt", ".txt.gz")  # CARMEN or NMEA, told 
 def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None = None, **options) -> NavLog:
     """Read any supported log. ``lenient`` skips (and counts) malformed or physically invalid
     records (``limits``, :class:`graphnav.log.Limits`; default :func:`graphnav.log.default_limits`)
-    where the format has records to skip; other ``options`` go to the chosen reader."""
+    where the format has records to skip; ``date`` (``"YYYY-MM-DD"``) is the day of an NMEA log
+    without a date of its own (ignored for other formats, whose times are complete); other
+    ``options`` go to the chosen reader."""
     p = Path(path)
     name = p.name.lower()
     if not p.exists():
         raise LogError("no such file or directory", file=str(p))
+    day = options.pop("date", None)  # the day of a dateless NMEA log (the only reader that needs one)
+    if day is not None and not (name.endswith(NMEA_SUFFIXES) or name.endswith(SNIFF_SUFFIXES)):
+        day = None
     if p.is_dir():
         from .marina import is_marina_dir, read_marina
 
@@ -63,7 +68,7 @@ def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None =
     if name.endswith(NMEA_SUFFIXES) or name.endswith(SNIFF_SUFFIXES):
         from .nmea import read_nmea
 
-        return read_nmea(p, lenient=lenient, limits=limits, **options)
+        return read_nmea(p, lenient=lenient, limits=limits, date=day, **options)
     if name.endswith(BAG_SUFFIXES):
         from .rosbag import read_bag
 

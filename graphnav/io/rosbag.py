@@ -9,11 +9,17 @@ Message types and what they become (details and conventions in docs/live.md, "RO
                             fix, in ``meta["origin"]``); ``sigma = sqrt(mean(cov_xx, cov_yy))``
                             when the covariance is known, else ``DEFAULT_GNSS_SIGMA``; status
                             ``NO_FIX`` and NaN positions are skipped (``meta["no_fix"]``)
-``sensor_msgs/Imu``         ``imu`` (ax, ay, wz; REP-103 body axes = ours) unless the message
-                            marks angular velocity unknown (covariance[0] = -1); plus ``heading``
+``sensor_msgs/Imu``         ``imu`` (REP-103 body axes = ours) unless the message marks angular
+                            velocity unknown (covariance[0] = -1): 6-axis (ax, ay, az, wx, wy,
+                            wz, gravity included) when it carries real z/x/y axes (linear
+                            acceleration known, and az, wx, wy not all exactly 0, which is what a
+                            planar source writes), else planar (ax, ay, wz); plus ``heading``
                             from the orientation (REP-103 ENU yaw = ours) when it is given
                             (orientation covariance[0] != -1, non-zero quaternion), at most
                             ``imu_heading_hz`` per topic
+``geometry_msgs/``          ``gnss_velocity``: ``twist.linear.x`` east, ``.y`` north [m/s] (a GNSS
+``TwistWithCovariance``     driver's velocity in ENU, as ublox_gps's ``fix_velocity``); ``sigma =
+``Stamped``                 sqrt(mean(cov_xx, cov_yy))`` when positive, else NaN
 ``nav_msgs/Odometry``       ``odometry``: ``v = twist.linear.x`` (forward), ``w = twist.angular.z``,
                             sigmas from the twist covariance when positive
 ``sensor_msgs/PointCloud2`` ``cloud`` (sensor frame, :mod:`graphnav.log` ``Cloud``): fields ``x``,
@@ -51,6 +57,7 @@ from ..log import (
     MAX_STATED_RANGE,
     Cloud,
     Gnss,
+    GnssVelocity,
     Heading,
     Imu,
     Limits,
@@ -72,6 +79,7 @@ KINDS = {
     "nav_msgs/msg/Odometry": "odometry",
     "nmea_msgs/msg/Sentence": "nmea",
     "sensor_msgs/msg/PointCloud2": "cloud",
+    "geometry_msgs/msg/TwistWithCovarianceStamped": "gnss_velocity",
 }
 #: PointField datatype codes -> numpy (little-endian; ``is_bigendian`` swaps)
 POINTFIELD_DTYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
@@ -184,8 +192,12 @@ class _Converter:
     def imu(self, m, t: float, topic: str) -> list[Record]:
         out: list[Record] = []
         if m.angular_velocity_covariance[0] != -1:
-            out.append(Imu(t, float(m.linear_acceleration.x), float(m.linear_acceleration.y),
-                           float(m.angular_velocity.z)))
+            a, w = m.linear_acceleration, m.angular_velocity
+            rec = Imu(t, float(a.x), float(a.y), float(w.z))
+            if m.linear_acceleration_covariance[0] != -1 and (a.z != 0.0 or w.x != 0.0 or w.y != 0.0):
+                rec = replace(rec, az=float(a.z), wx=float(w.x), wy=float(w.y))
+                self.count("imu_six_axis")
+            out.append(rec)
         q = m.orientation
         if m.orientation_covariance[0] != -1 and (q.x or q.y or q.z or q.w):
             self.attitude.append((t, *roll_pitch_of_quaternion(q.x, q.y, q.z, q.w)))
@@ -195,6 +207,12 @@ class _Converter:
                 out.append(Heading(t, float(wrap_angle(yaw_of_quaternion(q.x, q.y, q.z, q.w))), sigma))
                 self.last_imu_heading[topic] = t
         return out
+
+    def gnss_velocity(self, m, t: float, topic: str) -> list[Record]:
+        cov = np.asarray(m.twist.covariance, dtype=float)
+        sigma = math.sqrt(0.5 * (cov[0] + cov[7])) if cov[0] > 0 and cov[7] > 0 else math.nan
+        v = m.twist.twist.linear
+        return [GnssVelocity(t, float(v.x), float(v.y), sigma)]
 
     def odometry(self, m, t: float, topic: str) -> list[Record]:
         cov = np.asarray(m.twist.covariance, dtype=float)
@@ -372,7 +390,8 @@ def read_bag(path: str | Path, topics: dict[str, str] | None = None, *,
         conns = [(c.topic, c.msgtype, c.msgcount) for c in reader.connections]
         chosen = choose_topics(conns, topics)
         handlers = {"scan": conv.scan, "gnss": conv.gnss, "imu": conv.imu, "heading": conv.imu,
-                    "odometry": conv.odometry, "nmea": conv.nmea_, "cloud": conv.cloud}
+                    "odometry": conv.odometry, "nmea": conv.nmea_, "cloud": conv.cloud,
+                    "gnss_velocity": conv.gnss_velocity}
         wanted = [c for c in reader.connections if c.topic in chosen]
         try:
             for i, (conn, ns, raw) in enumerate(reader.messages(connections=wanted)):
@@ -434,8 +453,9 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
     """Write a log as a bag: ``*.bag`` -> ROS 1, anything else -> a ROS 2 bag directory
     (``storage`` ``"sqlite3"`` or ``"mcap"``). scan -> ``/scan`` LaserScan (uniform beams needed),
     cloud -> ``/points`` PointCloud2,
-    gnss -> ``/fix`` NavSatFix, imu -> ``/imu`` Imu, heading -> ``/heading`` Imu with orientation
-    only, odometry -> ``/odom`` Odometry, ``nmea_sentences`` -> ``/nmea_sentence``. For tests,
+    gnss -> ``/fix`` NavSatFix, imu -> ``/imu`` Imu (6-axis records with their z/x/y axes), heading ->
+    ``/heading`` Imu with orientation only, odometry -> ``/odom`` Odometry, gnss_velocity ->
+    ``/gnss_vel`` TwistWithCovarianceStamped (ENU), ``nmea_sentences`` -> ``/nmea_sentence``. For tests,
     demos and converting logs for ROS tools."""
     from .nmea_out import frame_of
 
@@ -466,7 +486,7 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
                 conns[topic] = writer.add_connection(topic, msgtype, typestore=ts)
             writer.write(conns[topic], int(round(t * 1e9)), ser(msg, msgtype))
 
-        def imu_msg(t, ax=0.0, ay=0.0, wz=0.0, yaw=None, sigma=None):
+        def imu_msg(t, ax=0.0, ay=0.0, wz=0.0, yaw=None, sigma=None, az=0.0, wx=0.0, wy=0.0):
             ori = Q(x=0.0, y=0.0, z=0.0, w=0.0)
             ocov = unknown9.copy()
             if yaw is not None:
@@ -475,8 +495,8 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
             acov = unknown9.copy() if yaw is not None else np.zeros(9)
             return T["sensor_msgs/msg/Imu"](
                 header=_header(ts, t, "base_link", ros1), orientation=ori, orientation_covariance=ocov,
-                angular_velocity=V3(x=0.0, y=0.0, z=wz), angular_velocity_covariance=acov,
-                linear_acceleration=V3(x=ax, y=ay, z=0.0), linear_acceleration_covariance=acov)
+                angular_velocity=V3(x=wx, y=wy, z=wz), angular_velocity_covariance=acov,
+                linear_acceleration=V3(x=ax, y=ay, z=az), linear_acceleration_covariance=acov)
 
         for r in log.records:
             if isinstance(r, Scan):
@@ -502,7 +522,18 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
                     position_covariance=np.diag([r.sigma ** 2, r.sigma ** 2, (2 * r.sigma) ** 2]).ravel(),
                     position_covariance_type=2))
             elif isinstance(r, Imu):
-                put("/imu", "sensor_msgs/msg/Imu", r.t, imu_msg(r.t, r.ax, r.ay, r.wz))
+                six = r.six_axis
+                put("/imu", "sensor_msgs/msg/Imu", r.t, imu_msg(r.t, r.ax, r.ay, r.wz, az=r.az if six else 0.0,
+                                                                wx=r.wx if six else 0.0, wy=r.wy if six else 0.0))
+            elif isinstance(r, GnssVelocity):
+                cov = np.zeros(36)
+                if math.isfinite(r.sigma):
+                    cov[0] = cov[7] = r.sigma ** 2
+                tw = T["geometry_msgs/msg/Twist"](linear=V3(x=r.vx, y=r.vy, z=0.0), angular=V3(x=0.0, y=0.0, z=0.0))
+                put("/gnss_vel", "geometry_msgs/msg/TwistWithCovarianceStamped", r.t,
+                    T["geometry_msgs/msg/TwistWithCovarianceStamped"](
+                        header=_header(ts, r.t, "enu", ros1),
+                        twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=cov)))
             elif isinstance(r, Heading):
                 put("/heading", "sensor_msgs/msg/Imu", r.t, imu_msg(r.t, yaw=r.yaw, sigma=r.sigma))
             elif isinstance(r, Odometry):

@@ -90,7 +90,10 @@ def test_inputs_follow_the_options_and_the_anchor(log):
     assert "odometry" not in estimators.inputs("icp-dr", log, {"init": "cv"})
     assert "odometry" in estimators.inputs("icp-dr", log, {})
     assert "beacon_known" not in estimators.inputs("ekf-slam", log, {"use_known": False})
-    assert estimators.inputs("isam2", log, {"motion": "imu"}) == ["gnss", "heading", "imu", "pose_prior"]
+    nav = estimators.inputs("isam2", log, {"motion": "imu"})  # the one graph on Pose3: every sensor but odometry
+    assert {"imu", "gnss", "heading", "scan", "gnss_velocity", "water_speed"} <= set(nav) and "odometry" not in nav
+    assert "odometry" in estimators.inputs("isam2", log, {"motion": "imu", "use_odometry": True})
+    assert "odometry" in estimators.inputs("isam2", log, {"motion": "odometry"})
     no_prior = drop_kinds(log, ["pose_prior"])
     info = estimators.run("dead-reckoning", no_prior).info
     assert info["anchor"] == "truth"

@@ -137,7 +137,8 @@ def _prev_scan_t(recs, t: float) -> float:
 
 def test_scans_without_returns_and_equal_times_in_the_grid():
     """Empty scans (all beams missing) in the middle and GNSS fixes duplicated at one time stamp,
-    no odometry: the matcher fails there and the motion model carries the chain."""
+    no odometry: the matcher fails there and the motion model carries the chain (the Pose2 graph:
+    constant velocity; the log's IMU in the Pose3 graph)."""
     log = _harbour(30.0)
     recs = []
     for r in log.records:
@@ -150,9 +151,12 @@ def test_scans_without_returns_and_equal_times_in_the_grid():
             recs.append(Gnss(r.t, r.x + 0.5, r.y, r.sigma))
     lg = NavLog(recs, log.beacons_known, log.meta)
     for run in RUNS:
-        r = run(lg, covariances=False)
-        assert r.info["icp_failed"] >= 10 and r.info["motion_fallback"] >= 10
-        assert ate(r.trajectory, log.truth(), max_dt=0.02)["rmse"] < 1.0, run.__name__
+        for motion in ("odometry", "auto"):
+            r = run(lg, covariances=False, motion=motion)
+            assert r.info["icp_failed"] >= 10
+            assert r.info["state"] == ("planar" if motion == "odometry" else "nav")
+            assert r.info["motion_fallback"] >= 10 if motion == "odometry" else r.info["motion_fallback"] == 0
+            assert ate(r.trajectory, log.truth(), max_dt=0.02)["rmse"] < 1.0, (run.__name__, motion)
 
 
 # -- a GNSS-only log follows its fixes --------------------------------------------------------------
@@ -355,9 +359,9 @@ def test_odometry_over_an_interval_closed_form_and_rate_independent(rate):
     for turn in (w, 0.0):
         b = GraphBuilder(cfg)
         for t in np.arange(0.0, 10.0, 1.0 / rate):
-            b._odometry_sample(Odometry(float(t), v, turn, math.nan, math.nan))
+            b.odometry.add(Odometry(float(t), v, turn, math.nan, math.nan))
         t0, t1 = 2.03, 6.53  # not on the samples: the first and last sub-arcs are partial
-        pose, cov = b._odometry(t0, t1)
+        pose, cov = b.odometry.between(t0, t1)
         T = t1 - t0
         if turn:
             np.testing.assert_allclose([pose.x(), pose.y(), pose.theta()],
@@ -387,3 +391,17 @@ def test_odometry_chain_in_the_graph_is_the_closed_form_arc():
             want = gtsam.Pose2(*x0).compose(d)
             np.testing.assert_allclose(p[:2], [want.x(), want.y()], atol=1e-6, err_msg=run.__name__)
             assert math.remainder(p[2] - want.theta(), 2 * math.pi) == pytest.approx(0, abs=1e-7)
+
+
+def test_a_log_with_scans_and_clouds_runs_on_its_first_lidar():
+    """2D scans and 3D clouds in one log (two LiDARs): the first kind drives the keyframes and the
+    matching, the other is counted (it crashed: 'Cloud' object has no attribute 'ranges')."""
+    from graphnav.log import make_cloud
+
+    log = _harbour(8.0)
+    rng = np.random.default_rng(0)
+    clouds = [make_cloud(r.t + 1e-3, rng.normal(0, 10, (300, 3))) for r in log.of("scan")[::2]]
+    mixed = NavLog.from_unsorted(list(log.records) + clouds, log.beacons_known, log.meta)
+    r = run_isam2(mixed, covariances=False)
+    assert r.info["lidar_other"] == len(clouds) and r.info["icp_pairs"] > 10
+    assert np.all(np.isfinite(r.trajectory.poses))

@@ -167,6 +167,11 @@ NMEA_VALID = [
     "GPRMC,123520,A,4807.038,N,01131.000,E,22.4,84.4,230394,003.1,W,A",
     "GPZDA,123521.00,23,03,1994,00,00", "HEHDT,45.0,T", "HCHDG,100.0,2.0,E,3.0,W", "TIROT,60.0,A",
     "GPVTG,90.0,T,,M,1.0,N,1.8,K,A", "HETHS,270.0,A",
+    # the instrument sentences of #21/#23: velocity, water speed, magnetic heading, GLL/GNS/GST, attitude
+    "IIVHW,,T,,M,06.11,N,11.31,K", "IIHDM,100.0,M", "GPGLL,6005.071,N,02332.346,E,123522,A,D",
+    "GNGNS,123523.00,4332.69262,S,17235.48549,E,RR,13,0.9,25.63,11.24,,", "GPZDA,123524,,,,00,",
+    "GPGST,123523.00,0.006,0.023,0.020,273.6,0.023,0.020,0.031", "YXXDR,A,-1.5,D,PTCH,A,2.5,D,ROLL",
+    "PASHR,123525.000,224.19,T,-01.26,+00.83,+00.00,0.101,0.113,0.267,1,0", "GPZDA,123526.00,23,03,94,00,00",
 ]
 field_junk = st.one_of(st.text(alphabet=string.ascii_letters + string.digits + ".-+ ", max_size=10),
                        st.sampled_from(["999.9", "1e308", "nan", "inf", "-0", "", "235960", "9" * 40]))

@@ -146,16 +146,18 @@ def test_heading_sentences(tmp_path):
     lines = [sentence("GPZDA,120000.00,01,06,2025,00,00"),
              sentence("HEHDT,45.0,T"),
              sentence("HCHDG,100.0,2.0,E,3.0,W"),  # magnetic 100 + dev 2E - var 3W = 99 true
-             sentence("HCHDG,100.0,,,,"),  # no variation anywhere: used as is, counted
+             sentence("HCHDG,100.0,,,,"),  # before any RMC: the file's first RMC variation (1.5 E)
              sentence("GPRMC,120001,A,4807.038,N,01131.000,E,,,010625,1.5,E,A"),
              sentence("HCHDG,100.0,,,,"),  # the RMC's 1.5 E variation applies
+             sentence("GPRMC,120002,A,4807.038,N,01131.000,E,,,010625,2.5,W,A"),
+             sentence("HCHDM,100.0,M"),  # the last RMC's: 2.5 W
              sentence("HETHS,270.0,A"),
              sentence("HETHS,271.0,V")]  # invalid: skipped
     log = read_nmea(write(tmp_path, lines))
     yaw = log.columns("heading")["yaw"]
-    expect = heading_deg_to_yaw(np.array([45.0, 99.0, 100.0, 101.5, 270.0]))
+    expect = heading_deg_to_yaw(np.array([45.0, 99.0, 101.5, 101.5, 97.5, 270.0]))
     np.testing.assert_allclose(wrap_angle(yaw - expect), 0, atol=1e-12)
-    assert log.meta["hdg_without_variation"] == 1
+    assert "hdg_without_variation" not in log.meta
     assert log.of("heading")[0].t == pytest.approx(1748779200.0)
 
 

@@ -62,7 +62,7 @@ def test_rmc_with_variation_sentinel_is_kept(tmp_path):
         read_nmea(p)
     assert (ei.value.line, ei.value.field) == (1, "mag_variation")
     out, meta = parse_nmea(p, lenient=True)
-    assert len(out.records) == 40 and len(out.sog_cog) == 40
+    assert len(out.records) == 80 and len(out.sog_cog) == 40  # 40 fixes + 40 velocities
     assert meta["skipped"] == 0 and meta["dropped_fields"] == {"mag_variation": 40}
     assert meta["time"] == "posix" and out.records[0].t == pytest.approx(T0)
 
@@ -75,7 +75,9 @@ def test_bad_optional_rmc_field_drops_only_the_field(tmp_path, kw, field):
         read_nmea(p)
     assert ei.value.field == field and ei.value.line == 1
     log = read_nmea(p, lenient=True)
-    assert log.counts() == {"gnss": 2} and log.meta["dropped_fields"] == {field: 1} and log.meta["skipped"] == 0
+    velocities = 1 if field == "spd_over_grnd" else 2  # a dropped SOG gives no velocity
+    assert log.counts() == {"gnss": 2, "gnss_velocity": velocities}
+    assert log.meta["dropped_fields"] == {field: 1} and log.meta["skipped"] == 0
 
 
 def test_bad_hdop_uses_the_default(tmp_path):

@@ -116,3 +116,26 @@ def test_info_lists_topics(tmp_path, trial, capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["topics"]["/imu"]["used_as"] == "imu" and out["topics"]["/heading"]["used_as"] is None
     assert out["records"]["gnss"] == 30 and "heading" not in out["records"]
+
+
+@pytest.mark.parametrize("name", ["six.bag", "six_db3"])
+def test_six_axis_imu_and_gnss_velocity(tmp_path, name):
+    """A 6-axis Imu (real z, x, y axes) reads back as the 6-axis record, a planar one as planar; a
+    TwistWithCovarianceStamped (ENU) as gnss_velocity with sigma = sqrt(mean(cov_xx, cov_yy))."""
+    from graphnav.log import GnssVelocity
+
+    t0 = 1.7e9
+    recs = [Imu(t0 + 0.01 * k, 0.1, -0.2, 0.03, az=9.81, wx=0.01 * k, wy=-0.02) for k in range(5)]
+    recs += [Imu(t0 + 0.1 + 0.01 * k, 0.3, 0.1, -0.05) for k in range(3)]  # planar: NaN az, wx, wy
+    recs += [GnssVelocity(t0 + k, 1.5, -0.5, 0.1) for k in range(3)] + [GnssVelocity(t0 + 3.0, 2.0, 0.0)]
+    log = NavLog.from_unsorted(recs)
+    back = read_bag(write_bag(log, tmp_path / name))
+    imu = back.of("imu")
+    assert [r.six_axis for r in imu] == [True] * 5 + [False] * 3
+    assert imu[2].az == pytest.approx(9.81) and imu[2].wx == pytest.approx(0.02) and imu[2].wy == pytest.approx(-0.02)
+    assert math.isnan(imu[6].az) and imu[6].wz == pytest.approx(-0.05)
+    assert back.meta["imu_six_axis"] == 5
+    vel = back.of("gnss_velocity")
+    assert [(v.vx, v.vy) for v in vel] == [(1.5, -0.5)] * 3 + [(2.0, 0.0)]
+    assert vel[0].sigma == pytest.approx(0.1) and math.isnan(vel[3].sigma)
+    assert back.meta["topics"]["/gnss_vel"]["used_as"] == "gnss_velocity"

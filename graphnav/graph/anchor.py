@@ -1,0 +1,74 @@
+"""The anchor of the navigation graph: when it can be chosen, and the first pose's prior.
+
+Records are held until :func:`anchor_ready` says so; :func:`choose_anchor` then picks the prior of
+the first keyframe from them (the same priority as a look at the whole log).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+import factors as F
+
+from ..log import BeaconObs, Gnss, Heading, KnownBeacon, PosePrior, Record, Truth
+from .config import SmootherConfig
+
+
+def anchor_ready(held: list[Record], charted: dict[str, KnownBeacon], anchor_wait: float, t_next: float) -> bool:
+    """Whether the anchor can be chosen from the ``held`` records once a record at ``t_next`` arrives:
+    a ``pose_prior``; a GNSS fix and a compass reading; two charted beacons sighted together; or
+    ``anchor_wait`` seconds of log time."""
+    kinds = {r.kind for r in held}
+    if "pose_prior" in kinds or ("gnss" in kinds and "heading" in kinds):
+        return True
+    charted = [r for r in held if r.kind == "beacon" and r.id in charted]
+    if charted and len({r.id for r in charted if abs(r.t - charted[0].t) <= 1e-6}) >= 2:
+        return True
+    return t_next - held[0].t > anchor_wait
+
+
+def choose_anchor(held: list[Record], charted: dict[str, KnownBeacon], cfg: SmootherConfig
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
+    """The first pose's prior (pose, 1-sigmas, name) from the held records, in this order: the
+    ``pose_prior``; the first GNSS fix (+ the first compass reading); charted beacons (two sighted
+    together give the yaw); the first truth pose (a frame, nothing absolute in the log); the origin."""
+    for r in held:
+        if isinstance(r, PosePrior):
+            return np.array([r.x, r.y, r.yaw]), np.array([r.sigma_xy, r.sigma_xy, r.sigma_yaw]), "pose_prior"
+    yaw_sig = math.radians(cfg.anchor_sigma_yaw_deg)
+    yaw_unknown = math.radians(cfg.anchor_sigma_yaw_unknown_deg)
+    gnss = [r for r in held if isinstance(r, Gnss)]
+    head = [r for r in held if isinstance(r, Heading)]
+    if gnss:
+        g = gnss[0]
+        yaw = head[0].yaw if head else 0.0
+        sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 3.0 * g.sigma
+        return (np.array([g.x, g.y, yaw]), np.array([sxy, sxy, yaw_sig if head else yaw_unknown]),
+                "first GNSS+compass" if head else "first GNSS")
+    obs = [r for r in held if isinstance(r, BeaconObs) and r.id in charted]
+    if obs:
+        t0 = obs[0].t
+        first: dict[str, BeaconObs] = {}
+        for r in obs:
+            if r.t > t0 + 1e-6:
+                break
+            first.setdefault(r.id, r)
+        sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 10.0
+        if len(first) >= 2:
+            a, b = list(first.values())[:2]
+            ca, cb = charted[a.id], charted[b.id]
+            pose = F.pose_from_two_beacons((ca.x, ca.y), (a.range, a.bearing), (cb.x, cb.y), (b.range, b.bearing))
+            return pose, np.array([sxy, sxy, yaw_sig]), "charted beacons"
+        a = obs[0]
+        yaw = head[0].yaw if head else 0.0
+        ca = charted[a.id]
+        pos = np.array([ca.x, ca.y]) - a.range * np.array([math.cos(yaw + a.bearing), math.sin(yaw + a.bearing)])
+        return (np.array([pos[0], pos[1], yaw]), np.array([sxy, sxy, yaw_sig if head else yaw_unknown]),
+                "charted beacons")
+    for r in held:
+        if isinstance(r, Truth):  # nothing absolute in the log: the frame is the reference's start
+            return np.array([r.x, r.y, r.yaw]), np.array([1e-3, 1e-3, 1e-4]), "truth (first pose)"
+    return np.zeros(3), np.array([1e-3, 1e-3, 1e-4]), "origin"

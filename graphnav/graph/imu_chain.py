@@ -1,0 +1,201 @@
+"""The IMU between keyframes: samples buffered as they arrive, preintegrated over a keyframe
+interval with GTSAM (``PreintegratedImuMeasurements``; Forster et al. 2017, eq. 33-38) into an
+``ImuFactor`` and a prediction of the next state.
+
+Each ``imu`` record is the mean over the interval since the previous one (docs/log-format.md), so
+a sample is held over ``(t_prev, t]`` and clipped to the keyframe interval; where the stream has a
+gap, or the sample closing an interval has not arrived yet, the last sample is held (zero-order hold). Planar 3-axis
+records are the levelled horizontal specific force with gravity removed (gravity off,
+:func:`factors.imu.planar_imu_params`); a log whose records carry all six axes is preintegrated
+in 3D with gravity (``n_gravity``, z up).
+
+The noise is the log's stated IMU model (``meta["imu"]``: ``acc_std`` [m/s^2] and ``gyro_std``
+[rad/s] per sample at ``hz``) when it has one, else :class:`ImuConfig`'s; as continuous densities
+``sigma^2 / hz`` the integrated error does not depend on the sample rate.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+from factors.imu import IB
+
+from ..log import Imu
+
+GRAVITY = 9.80665  # [m/s^2] standard gravity (6-axis records)
+
+
+@dataclass
+class ImuConfig:
+    """The IMU's error model where the log states none (``[imu]`` section of the graph's options)."""
+
+    acc_sigma: float = 0.02  # [m/s^2] white noise per sample at ``hz`` (a MEMS IMU's datasheet order)
+    gyro_sigma_deg: float = 0.05  # [deg/s] white noise per sample
+    hz: float = 100.0  # the rate those sigmas are stated at
+    integration_sigma: float = 1e-3  # [m/sqrt(s)] position integration error
+    bias_sigma_acc: float = 0.05  # [m/s^2] residual accelerometer bias after calibration (prior)
+    bias_sigma_gyro_deg: float = 0.1  # [deg/s] residual gyro bias (prior)
+    bias_rw_acc: float = 1e-4  # [m/s^2/sqrt(s)] bias random walk
+    bias_rw_gyro_deg: float = 1e-3  # [deg/s/sqrt(s)]
+    substeps: int = 1  # integration steps per sample (4 for slow IMUs: the acceleration turns within a sample)
+    # without IMU records (motion "vessel"): the velocity is a random walk in the world frame, driven by
+    # white-noise acceleration, and the heading a random walk apart from it (course != heading)
+    vessel_accel: float = 0.3  # [m/s^2/sqrt(s)] a vessel's manoeuvring acceleration density
+    vessel_yaw_rate_deg: float = 5.0  # [deg/s/sqrt(s)]
+
+
+class ImuChain:
+    """IMU samples in, per-interval preintegration out (see the module docstring)."""
+
+    def __init__(self, cfg: ImuConfig, stated: dict[str, Any] | None = None) -> None:
+        self.cfg = cfg
+        self.std: tuple[float, float, float | None] = (cfg.acc_sigma, math.radians(cfg.gyro_sigma_deg), cfg.hz)
+        self.source = "config"
+        if isinstance(stated, dict) and all(k in stated for k in ("acc_std", "gyro_std")):
+            hz = stated.get("hz")  # without it: the records' own rate
+            self.std = (float(stated["acc_std"]), float(stated["gyro_std"]), float(hz) if hz else None)
+            self.source = "log"
+        self.t: list[float] = []
+        self.rows: list[tuple[float, ...]] = []  # ax, ay, az, wx, wy, wz
+        self.six: bool | None = None
+        self.params: gtsam.PreintegrationParams | None = None
+        p = gtsam.PreintegrationParams.MakeSharedU(0.0)  # no IMU: zero measurements, the vessel model's noise
+        p.setAccelerometerCovariance(np.eye(3) * cfg.vessel_accel**2)
+        p.setGyroscopeCovariance(np.eye(3) * math.radians(cfg.vessel_yaw_rate_deg) ** 2)
+        p.setIntegrationCovariance(np.eye(3) * cfg.integration_sigma**2)
+        self.vessel_params = p
+
+    def __bool__(self) -> bool:
+        return bool(self.t)
+
+    def _make_params(self) -> gtsam.PreintegrationParams:
+        """Preintegration parameters with the noise densities ``std / sqrt(rate)`` [per sqrt(s)]."""
+        acc, gyro, hz = self.std
+        rate = hz if hz else 1.0 / max(self._period(), 1e-6)
+        p = gtsam.PreintegrationParams.MakeSharedU(GRAVITY if self.six else 0.0)
+        p.setAccelerometerCovariance(np.eye(3) * acc**2 / rate)
+        p.setGyroscopeCovariance(np.eye(3) * gyro**2 / rate)
+        p.setIntegrationCovariance(np.eye(3) * self.cfg.integration_sigma**2)
+        return p
+
+    def _period(self) -> float:
+        """The median interval of the records so far [s] (1 / ``hz`` of the config before two)."""
+        if len(self.t) < 2:
+            return 1.0 / self.cfg.hz
+        return float(np.median(np.diff(self.t[-200:])))
+
+    def add(self, r: Imu) -> None:
+        six = r.six_axis
+        if self.six is None:
+            self.six = six
+        if six:
+            row = (r.ax, r.ay, r.az, r.wx, r.wy, r.wz)
+        else:
+            row = (r.ax, r.ay, 0.0, 0.0, 0.0, r.wz)
+        if self.t and r.t <= self.t[-1]:
+            if r.t == self.t[-1]:
+                self.rows[-1] = row
+            return  # out of order: dropped (the interval it covers is held by its neighbour)
+        self.t.append(r.t)
+        self.rows.append(row)
+
+    def covers(self, t: float) -> bool:
+        return bool(self.t) and self.t[-1] >= t - 1e-9
+
+    def samples(self, ta: float, tb: float) -> list[tuple[NDArray[np.float64], NDArray[np.float64], float]]:
+        """``(acc, omega, dt)`` over ``[ta, tb]``: each record held over the interval since the
+        previous one, the last one held on to ``tb`` (zero-order hold over a gap or a late sample)."""
+        out: list[tuple[NDArray[np.float64], NDArray[np.float64], float]] = []
+        if not self.t or tb <= ta:
+            return out
+        i = bisect.bisect_right(self.t, ta)
+        lo = ta
+        while lo < tb - 1e-12:
+            if i < len(self.t):
+                hi, r = min(self.t[i], tb), self.rows[i]
+            else:
+                hi, r = tb, self.rows[-1]
+            if hi > lo:
+                out.append((np.array(r[:3]), np.array(r[3:]), hi - lo))
+            lo = hi
+            i += 1
+        return out
+
+    def preintegrate(self, bias: gtsam.imuBias.ConstantBias, ta: float, tb: float
+                     ) -> gtsam.PreintegratedImuMeasurements:
+        """GTSAM preintegration of ``[ta, tb]`` at ``bias``. Planar records: the acceleration is
+        applied at the mid-step attitude (the rotation by ``(wz - b_gz) h / 2`` of
+        :func:`factors.imu.preintegrate`: second order, as the constant-turn arc)."""
+        if self.params is None and self.t and (len(self.t) >= 2 or self.std[2]):
+            self.params = self._make_params()
+        if self.params is None:  # no IMU: the white-noise acceleration model
+            pim = gtsam.PreintegratedImuMeasurements(self.vessel_params, bias)
+            if tb > ta:
+                pim.integrateMeasurement(np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope()), tb - ta)
+            return pim
+        pim = gtsam.PreintegratedImuMeasurements(self.params, bias)
+        n = max(1, self.cfg.substeps)
+        ba, bg = bias.accelerometer(), bias.gyroscope()
+        for acc, omega, dt in self.samples(ta, tb):
+            h = dt / n
+            if not self.six:
+                half = 0.5 * (omega[2] - bg[2]) * h
+                c, s = math.cos(half), math.sin(half)
+                ux, uy = acc[0] - ba[0], acc[1] - ba[1]
+                acc = np.array([c * ux - s * uy + ba[0], s * ux + c * uy + ba[1], 0.0])
+            for _ in range(n):
+                pim.integrateMeasurement(acc, omega, h)
+        return pim
+
+    def prune(self, t: float) -> None:
+        """Drop samples no later interval can need (all before the last one at or before ``t``)."""
+        i = bisect.bisect_right(self.t, t) - 1
+        if i > 1024:
+            del self.t[:i - 1]
+            del self.rows[:i - 1]
+
+    def _axes(self) -> NDArray[np.float64]:
+        """Per bias axis (acc x, y, z, gyro x, y, z): 1 where the records measure it; a planar record
+        does not measure az, wx, wy (they are exactly 0): their bias prior is a tenth (nothing else
+        observes them; tighter, the marginals' Cholesky factorisation failed near the bias variables)."""
+        return np.ones(6) if self.six else np.array([1, 1, 0.1, 0.1, 0.1, 1.0])
+
+    def bias_prior(self, k: int) -> gtsam.NonlinearFactor:
+        c = self.cfg
+        sig = np.array([c.bias_sigma_acc] * 3 + [math.radians(c.bias_sigma_gyro_deg)] * 3) * self._axes()
+        return gtsam.PriorFactorConstantBias(IB(k), gtsam.imuBias.ConstantBias(), gtsam.noiseModel.Diagonal.Sigmas(sig))
+
+    def bias_between(self, k0: int, k1: int, dt: float) -> gtsam.NonlinearFactor:
+        c = self.cfg
+        sig = np.array([c.bias_rw_acc] * 3 + [math.radians(c.bias_rw_gyro_deg)] * 3) * math.sqrt(max(dt, 1e-9))
+        return gtsam.BetweenFactorConstantBias(IB(k0), IB(k1), gtsam.imuBias.ConstantBias(),
+                                               gtsam.noiseModel.Diagonal.Sigmas(sig))
+
+
+def relative_prediction(pim: gtsam.PreintegratedImuMeasurements, pose: gtsam.Pose3, vel: NDArray[np.float64],
+                        bias: gtsam.imuBias.ConstantBias, vel_cov: NDArray[np.float64] | None
+                        ) -> tuple[gtsam.NavState, NDArray[np.float64], NDArray[np.float64]]:
+    """The predicted state at the end of ``pim``, the planar relative motion (x, y, yaw in the
+    start's frame) and its covariance: the preintegration's own (``preintMeasCov``: rotation,
+    position, velocity) plus the start velocity's uncertainty carried over ``dt``."""
+    state = pim.predict(gtsam.NavState(pose, vel), bias) if pim.deltaTij() > 0 else gtsam.NavState(pose, vel)
+    rel = pose.between(state.pose())
+    t = rel.translation()
+    rel_vec = np.array([t[0], t[1], rel.rotation().yaw()])
+    c9 = np.asarray(pim.preintMeasCov()) if pim.deltaTij() > 0 else np.zeros((9, 9))
+    cov = np.zeros((3, 3))
+    cov[:2, :2] = c9[3:5, 3:5]
+    cov[2, 2] = c9[2, 2]
+    cov[:2, 2] = cov[2, :2] = c9[3:5, 2]
+    if vel_cov is not None:
+        R = pose.rotation().matrix()[:2, :2]
+        dt = pim.deltaTij()
+        cov[:2, :2] += R.T @ np.asarray(vel_cov)[:2, :2] @ R * dt * dt
+    return state, rel_vec, cov

@@ -1,0 +1,191 @@
+"""Scan and cloud factors of the navigation graph: the weighted-ICP matcher (its guess, covariance
+and acceptance rule), the loop closer's matcher, and the 3D cloud path (GICP projected to SE(2)).
+
+A match becomes a between factor with the match's own covariance (:mod:`graphnav.scan.covariance`);
+:func:`screen_match` is the one acceptance rule for scans and clouds (failed / gated / kept).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+import factors as F
+
+from ..log import Cloud, Scan
+from .config import SmootherConfig
+
+if TYPE_CHECKING:
+    from .builder import Step
+
+#: ``matcher(cur, prev, init, init_cov, guess_in_graph) -> (usable, pose, cov)``: ``init`` the motion
+#: guess prev -> cur and ``init_cov`` its covariance (the odometry integrated, else the motion
+#: model's); ``guess_in_graph``: that guess is a factor of its own (odometry), so the match's factor
+#: must not repeat it along the directions it does not observe
+Matcher = Callable[
+    [Scan, Scan, NDArray[np.float64] | None, NDArray[np.float64] | None, bool],
+    tuple[bool, NDArray[np.float64], NDArray[np.float64]],
+]
+#: [m^2, m^2, rad^2] the factor's covariance added along a degenerate match's weak directions when the
+#: guess there is already in the graph: the factor then says nothing there (the matcher's failure value)
+UNOBSERVED_COV = np.diag([1e4, 1e4, 10.0])
+
+
+def default_matcher(options: dict[str, Any]) -> Matcher | None:
+    """The weighted-ICP matcher of :mod:`graphnav.scan.icp`, or ``None`` when it is not available.
+    A match is usable when it converged, or when it was flagged degenerate only (its covariance is
+    then inflated along the unobserved directions, which the factor keeps weak).
+
+    The guess's covariance goes to the matcher as ``init_cov``: a match beyond the 99.9 % bound of
+    both covariances from the guess fails (another minimum), and a direction the guess knows better
+    is weak. Along weak directions the matcher returns the guess with the guess's covariance; when
+    the guess is a factor of the graph already (``guess_in_graph``: the odometry) the match's
+    factor gets :data:`UNOBSERVED_COV` there instead, so the odometry is not counted twice."""
+    try:
+        from ..scan.icp import IcpConfig, scan_points
+        from ..scan.icp_cache import match_points  # shared between estimators inside icp_cache.active()
+    except ImportError:
+        return None
+    cfg = IcpConfig(**options)
+    last: list[Any] = [None, None]  # the previous call's current scan and its points
+
+    def match(cur: Scan, prev: Scan, init: NDArray[np.float64] | None,
+              init_cov: NDArray[np.float64] | None = None, guess_in_graph: bool = False):
+        prev_xy = last[1] if prev is last[0] else scan_points(prev, cfg)  # consecutive pairs: each scan once
+        cur_xy = scan_points(cur, cfg)
+        last[:] = [cur, cur_xy]
+        r = match_points(cur_xy, prev_xy, cfg, init=init, init_cov=init_cov)
+        inflated = bool(r.quality.get("inflated", False))
+        cov = np.asarray(r.cov, dtype=float)
+        if inflated and guess_in_graph and r.quality.get("weak_projector") is not None:
+            p = np.asarray(r.quality["weak_projector"], dtype=float)
+            cov = cov + p @ UNOBSERVED_COV @ p.T
+        return bool(r.ok) or inflated, np.asarray(r.pose, dtype=float), cov
+
+    return match
+
+
+def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any]) -> Any:
+    """The loop closer of :mod:`graphnav.graph.loops` with the weighted ICP as its refinement and the
+    graph's ICP covariance treatment (the match's own, as the consecutive factors; the loop closer
+    adds its floor); ``None`` without the matcher."""
+    try:
+        from ..scan.icp import IcpConfig, match_points
+    except ImportError:
+        return None
+    from .loops import LoopCloser, LoopConfig
+
+    icfg = IcpConfig(**icp_opts)
+
+    def refine(src: NDArray[np.float64], tgt: NDArray[np.float64], init: NDArray[np.float64]):
+        r = match_points(src, tgt, icfg, init=init)
+        return bool(r.ok), np.asarray(r.pose, dtype=float), np.asarray(r.cov, dtype=float), r.quality
+
+    from dataclasses import fields
+
+    known = {f.name for f in fields(LoopConfig)}
+    unknown = sorted(set(cfg.loop) - known)
+    if unknown:
+        raise ValueError(f"unknown loop option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    closer = LoopCloser(LoopConfig(**cfg.loop), refine,
+                        lambda c: proper_cov(np.asarray(c, dtype=float), np.zeros(3)))
+    closer.points = lambda scan: scan_points_of(scan, icfg)
+    return closer
+
+
+def scan_points_of(scan: Scan, icfg: Any) -> NDArray[np.float64]:
+    from ..scan.icp import scan_points
+
+    return scan_points(scan, icfg)
+
+
+def screen_match(cfg: SmootherConfig, ok: bool, mp: Any, cov: NDArray[np.float64] | None, init: NDArray[np.float64],
+                 odo_rel: gtsam.Pose2 | None, odo_cov: NDArray[np.float64] | None) -> str | None:
+    """Whether a scan or cloud match becomes a factor: ``"failed"`` (not usable, no proper
+    covariance, not finite, or farther than ``icp_max_step`` from the guess), ``"gated"`` (beyond
+    ``icp_gate`` Mahalanobis units of ``odo_cov + cov`` from the odometry increment) or None (kept)."""
+    if (not ok or cov is None or not np.all(np.isfinite(mp))
+            or np.hypot(mp[0] - init[0], mp[1] - init[1]) > cfg.icp_max_step):
+        return "failed"
+    if cfg.icp_gate is not None and odo_rel is not None and odo_cov is not None:
+        d = np.asarray(gtsam.Pose2.Logmap(odo_rel.between(gtsam.Pose2(*mp))))
+        if float(d @ np.linalg.solve(odo_cov + cov, d)) > cfg.icp_gate**2:
+            return "gated"
+    return None
+
+
+class CloudPath:
+    """The 3D path of the builder: consecutive keyframe clouds -> GICP in levelled frames -> an SE(2)
+    between factor (group ``cloud``) with the marginal (x, y, yaw) of the match's own sandwich
+    covariance (:func:`graphnav.scan.cloud_match.match_covariance`, not scaled) plus a floor; gated
+    against the odometry like the 2D matches (``icp_gate``, ``icp_max_step``); z/roll/pitch of each
+    match kept as diagnostics (docs/scan-matching-3d.md)."""
+
+    def __init__(self, cfg: SmootherConfig, lidar3d: dict[str, Any] | None) -> None:
+        self.cfg = cfg
+        self.height = float(lidar3d["mast"]) if lidar3d and "mast" in lidar3d else None
+        self.matcher: Any = None
+        self.n = self.failed = self.gated = 0
+        self.diag: list[tuple[float, float, float]] = []  # z, roll, pitch of each used match
+
+    def factor(self, s: Step, k: int, cur: Cloud, prev: Any, odo_rel: gtsam.Pose2 | None,
+               odo_cov: NDArray[np.float64] | None, last_rel: gtsam.Pose2
+               ) -> tuple[gtsam.Pose2, NDArray[np.float64]] | None:
+        """The GICP factor of keyframe ``k``'s cloud ``cur`` against ``prev`` (added to ``s``): the
+        relative pose and its covariance, or ``None`` (no previous cloud, failed or gated)."""
+        cfg = self.cfg
+        if not isinstance(prev, Cloud):
+            return None
+        if self.matcher is None:
+            from ..scan.cloud_match import CloudMatchConfig, CloudMatcher
+
+            self.matcher = CloudMatcher(CloudMatchConfig.from_options(dict(cfg.cloud)), self.height)
+        init = _vec(odo_rel if odo_rel is not None else last_rel)
+        c0 = time.perf_counter()
+        ok, mp, mc = self.matcher(cur, prev, init)
+        s.icp_ms = (time.perf_counter() - c0) * 1e3
+        self.n += 1
+        floor = np.array([cfg.cloud_sigma_floor_xy] * 2 + [math.radians(cfg.cloud_sigma_floor_yaw_deg)])
+        cov = proper_cov(np.asarray(mc, dtype=float), floor) if ok else None
+        verdict = screen_match(cfg, ok, mp, cov, init, odo_rel, odo_cov)
+        if verdict is not None:
+            self.failed += verdict == "failed"
+            self.gated += verdict == "gated"
+            return None
+        last = self.matcher.last
+        self.diag.append((last["z"], last["roll"], last["pitch"]))
+        s.add(s.space.between(F.X(k - 1), F.X(k), mp, cov, robust=cfg.icp_robust), "cloud")
+        return gtsam.Pose2(*mp), cov
+
+    def info(self) -> dict[str, Any]:
+        if self.matcher is None:
+            return {}
+        d = np.array(self.diag).reshape(-1, 3)
+        rms = np.sqrt(np.mean(d**2, axis=0)) if len(d) else np.full(3, np.nan)
+        return {"cloud_pairs": self.n, "cloud_failed": self.failed, "cloud_gated": self.gated,
+                "cloud_sensor_height": self.height,
+                "cloud_dropped_rms": {"z_m": float(rms[0]), "roll_deg": float(np.degrees(rms[1])),
+                                      "pitch_deg": float(np.degrees(rms[2]))}}
+
+
+def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
+    return np.array([p.x(), p.y(), p.theta()])
+
+
+def proper_cov(cov: NDArray[np.float64], floor: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """A symmetric positive-definite covariance: ``cov`` symmetrised plus ``diag(floor^2)``; ``None``
+    when it is not finite or not positive semi-definite (beyond rounding)."""
+    c = np.asarray(cov, dtype=float)
+    if c.shape != (3, 3) or not np.all(np.isfinite(c)):
+        return None
+    c = 0.5 * (c + c.T)
+    ev = np.linalg.eigvalsh(c)
+    if ev[0] < -1e-9 * max(1.0, ev[-1]):
+        return None
+    return c + np.diag(np.square(floor))

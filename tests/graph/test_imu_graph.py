@@ -1,0 +1,228 @@
+"""The IMU in the one navigation graph (graphnav.graph.builder + space.NavSpace + imu_chain): GTSAM
+preintegration between keyframes, with scans, GNSS velocity, compass, beacons on the same keyframes.
+Known answers on synthetic logs with exact truth."""
+
+from __future__ import annotations
+
+import math
+
+import gtsam
+import numpy as np
+import pytest
+
+import factors as F
+from graphnav import estimators
+from graphnav.evaluation.metrics import ate, heading_error
+from graphnav.graph.imu_chain import ImuChain, ImuConfig
+from graphnav.graph.smoother import run_batch, run_fixed_lag, run_isam2
+from graphnav.graph.space import NavSpace
+from graphnav.log import Gnss, GnssVelocity, Heading, Imu, NavLog, PosePrior, Truth
+from graphnav.sim.solent import simulate_solent
+
+FAST = {"covariances": False}
+
+
+def turn_log(v: float = 2.0, w_deg: float = 2.0, n: int = 120, *, bias=(0.0, 0.0, 0.0), gnss_sigma: float = 0.5,
+             gnss_noise: float = 0.0, compass_noise_deg: float = 0.0, seed: int = 0,
+             jump: tuple[int, int, float] | None = None, imu_rate: int = 1, velocity: bool = False,
+             current: tuple[float, float] = (0.0, 0.0)) -> NavLog:
+    """Constant speed ``v`` through the water and yaw rate ``w`` from (0, 0, yaw 0) (``w = 0``: a
+    straight line), plus a constant ``current`` (the track over ground drifts with it: heading !=
+    course); GNSS (and with ``velocity`` its velocity) and compass at 1 Hz, IMU at ``imu_rate`` Hz:
+    the exact body-frame acceleration (0, v w) and rate w, plus ``bias``."""
+    w = math.radians(w_deg)
+    rng = np.random.default_rng(seed)
+    t = np.arange(n + 1, dtype=float)
+    yaw = w * t
+    if w:
+        x, y = v / w * np.sin(yaw), v / w * (1.0 - np.cos(yaw))
+    else:
+        x, y = v * t, np.zeros_like(t)
+    x, y = x + current[0] * t, y + current[1] * t
+    recs: list = [PosePrior(0.0, 0.0, 0.0, 0.0, 0.1, math.radians(0.5))]
+    for k in range(n + 1):
+        gx, gy = x[k] + rng.normal(0, gnss_noise), y[k] + rng.normal(0, gnss_noise)
+        if jump is not None and jump[0] <= k < jump[1]:
+            gx += jump[2]
+        recs += [Truth(t[k], x[k], y[k], float((yaw[k] + math.pi) % (2 * math.pi) - math.pi)),
+                 Gnss(t[k], gx, gy, gnss_sigma),
+                 Heading(t[k], float(yaw[k] + rng.normal(0, math.radians(compass_noise_deg))), math.radians(0.5))]
+        if velocity:
+            recs.append(GnssVelocity(t[k], v * math.cos(yaw[k]) + current[0], v * math.sin(yaw[k]) + current[1], 0.02))
+        for j in range(imu_rate if k else 0):
+            recs.append(Imu(t[k] - j / imu_rate, bias[0], v * w + bias[1], w + bias[2]))
+    return NavLog.from_unsorted(recs, meta={"initial_velocity": [v + current[0], current[1]]})
+
+
+def test_imu_chain_preintegrates_a_constant_turn_in_closed_form():
+    """100 Hz records of a constant turn -> the arc of radius v / w (exact kinematics)."""
+    v, w, T = 2.0, math.radians(3.0), 20.0
+    chain = ImuChain(ImuConfig())
+    for i in range(1, int(T * 100) + 1):
+        chain.add(Imu(i / 100, 0.0, v * w, w))
+    pim = chain.preintegrate(gtsam.imuBias.ConstantBias(), 0.0, T)
+    s = pim.predict(gtsam.NavState(F.planar_pose(0.0, 0.0, 0.0), np.array([v, 0.0, 0.0])),
+                    gtsam.imuBias.ConstantBias())
+    arc = [v / w * math.sin(w * T), v / w * (1 - math.cos(w * T)), w * T]
+    np.testing.assert_allclose(F.pose_xy_yaw(s.pose()), arc, atol=1e-6)
+    np.testing.assert_allclose(s.velocity()[:2], [v * math.cos(w * T), v * math.sin(w * T)], atol=1e-6)
+    # a gap in the stream is held (zero-order hold): the same interval from samples 5 s apart at the ends
+    sparse = ImuChain(ImuConfig())
+    for ti in (0.01, 0.02, 19.99, 20.0):
+        sparse.add(Imu(ti, 0.0, v * w, w))
+    assert sparse.preintegrate(gtsam.imuBias.ConstantBias(), 0.0, T).deltaTij() == pytest.approx(T)
+
+
+def test_six_axis_records_are_preintegrated_with_gravity():
+    """A 6-axis IMU at rest reads +g on z: with gravity on, the predicted state does not move."""
+    chain = ImuChain(ImuConfig())
+    for i in range(1, 201):
+        chain.add(Imu(i / 100, 0.0, 0.0, 0.0, 9.80665, 0.0, 0.0))
+    assert chain.six
+    pim = chain.preintegrate(gtsam.imuBias.ConstantBias(), 0.0, 2.0)
+    s = pim.predict(gtsam.NavState(F.planar_pose(1.0, 2.0, 0.5), np.zeros(3)), gtsam.imuBias.ConstantBias())
+    np.testing.assert_allclose(s.pose().translation(), [1.0, 2.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(s.velocity(), np.zeros(3), atol=1e-9)
+
+
+def test_nav_space_embeds_planar_factors_exactly():
+    sp = NavSpace()
+    vals = gtsam.Values()
+    vals.insert(F.X(0), F.planar_pose(1.0, 2.0, 0.3))
+    vals.insert(F.X(1), F.planar_pose(2.0, 2.5, 0.4))
+    cov = np.diag([0.01, 0.04, 1e-4])
+    f = sp.between(F.X(0), F.X(1), np.array([0.9, 0.2, 0.1]), cov)
+    rel = gtsam.Pose2(1.0, 2.0, 0.3).between(gtsam.Pose2(2.0, 2.5, 0.4))
+    e2 = np.asarray(gtsam.Pose2.Logmap(gtsam.Pose2(0.9, 0.2, 0.1).between(rel)))
+    p2 = gtsam.BetweenFactorPose2(F.X(0), F.X(1), gtsam.Pose2(0.9, 0.2, 0.1), gtsam.noiseModel.Gaussian.Covariance(cov))
+    v2 = gtsam.Values()
+    v2.insert(F.X(0), gtsam.Pose2(1.0, 2.0, 0.3))
+    v2.insert(F.X(1), gtsam.Pose2(2.0, 2.5, 0.4))
+    assert f.error(vals) == pytest.approx(p2.error(v2), rel=1e-3)  # the same residual, the same weight
+    assert np.hypot(*e2[:2]) > 0.05  # (not trivially zero)
+    # world covariance from a Pose3 marginal: the body x variance turns into world y at yaw 90 deg
+    c6 = np.diag([1e-6, 1e-6, 0.01, 4.0, 1.0, 1e-6])
+    np.testing.assert_allclose(np.diag(sp.world_cov(F.planar_pose(0, 0, math.pi / 2), c6)), [1.0, 4.0, 0.01],
+                               atol=1e-12)
+    # GNSS velocity: a PriorFactorVector on V(k) in the nav frame
+    vals.insert(F.V(3), np.array([1.0, 0.5, 0.0]))
+    gv = sp.velocity(3, 1.2, 0.5, 0.1, None)
+    np.testing.assert_allclose(gv.unwhitenedError(vals), [-0.2, 0.0, 0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize("w_deg", [0.0, 2.0])
+def test_noise_free_imu_recovers_truth(w_deg):
+    log = turn_log(w_deg=w_deg, n=100)
+    for run in (run_isam2, run_batch):
+        r = run(log, imu={"substeps": 20}, **FAST)
+        assert r.info["state"] == "nav"
+        assert ate(r.trajectory, log.truth())["rmse"] < 0.02
+        assert heading_error(r.trajectory, log.truth())["rmse"] < 0.02  # deg
+        assert np.abs(r.info["imu_bias_final"]).max() < 1e-3
+
+
+def test_biases_are_estimated():
+    true = (0.02, -0.015, math.radians(0.3))
+    log = turn_log(w_deg=1.5, n=240, bias=true, gnss_sigma=1.0, gnss_noise=1.0, compass_noise_deg=0.5, seed=3)
+    imu = {"bias_sigma_acc": 0.05, "bias_sigma_gyro_deg": 1.0, "bias_rw_acc": 1e-5, "bias_rw_gyro_deg": 1e-4,
+           "acc_sigma": 0.0039, "gyro_sigma_deg": 0.033, "hz": 1.0, "substeps": 4}
+    r = run_batch(log, imu=imu, compass_bias=False, **FAST)
+    b = np.array(r.info["imu_bias_final"])
+    assert abs(b[0] - true[0]) < 3e-3 and abs(b[1] - true[1]) < 3e-3
+    assert abs(b[5] - true[2]) < math.radians(0.03)
+    assert ate(r.trajectory, log.truth())["rmse"] < 0.5  # 1 m GNSS noise
+    # without the bias states (a tight zero prior, no random walk) the track is much worse
+    tight = {**imu, "bias_sigma_acc": 1e-6, "bias_sigma_gyro_deg": 1e-5, "bias_rw_acc": 1e-9, "bias_rw_gyro_deg": 1e-9}
+    r0 = run_batch(log, imu=tight, compass_bias=False, **FAST)
+    assert ate(r0.trajectory, log.truth())["rmse"] > 3 * ate(r.trajectory, log.truth())["rmse"]
+
+
+def test_current_moves_the_track_off_the_bow_and_gnss_velocity_is_used():
+    """A 0.5 m/s cross current: course != heading. The velocity state follows it; with GNSS
+    velocity the track is better than without (same fixes)."""
+    base = dict(v=2.0, w_deg=0.0, n=120, gnss_sigma=3.0, gnss_noise=3.0, seed=4, current=(0.0, 0.5), imu_rate=10)
+    plain, vel = turn_log(**base), turn_log(**base, velocity=True)
+    ref = plain.truth()
+    e_plain = ate(run_isam2(plain, **FAST).trajectory, ref)["rmse"]
+    rv = run_isam2(vel, **FAST)
+    e_vel = ate(rv.trajectory, ref)["rmse"]
+    assert e_vel < 0.7 * e_plain
+    assert e_vel < 0.5
+    # the course over ground of the estimate is the current's crab angle off the bow
+    p = rv.trajectory.poses
+    course = math.atan2(p[-1, 1] - p[10, 1], p[-1, 0] - p[10, 0])
+    assert course == pytest.approx(math.atan2(0.5, 2.0), abs=math.radians(1.0))
+    assert heading_error(rv.trajectory, ref)["rmse"] < 1.0
+
+
+def test_gnss_jump_is_survived_with_huber():
+    jump = (60, 70, 30.0)  # 10 fixes 30 m off (15 sigma)
+    base = turn_log(n=150, gnss_sigma=2.0, gnss_noise=2.0, seed=1)
+    jumped = turn_log(n=150, gnss_sigma=2.0, gnss_noise=2.0, seed=1, jump=jump)
+    ref = base.truth()
+    e0 = ate(run_isam2(base, **FAST).trajectory, ref)["rmse"]
+    e_h = ate(run_isam2(jumped, **FAST).trajectory, ref)["rmse"]
+    assert e0 < 1.0
+    assert e_h < e0 + 1.0
+
+
+@pytest.fixture(scope="module")
+def solent():
+    return simulate_solent(scenario=1, seed=0, max_steps=250)
+
+
+def test_solent_one_graph_beats_the_ukf_and_batch_agrees(solent):
+    ref = solent.truth()
+    iz = estimators.run("isam2", solent)
+    assert iz.info["state"] == "nav" and iz.info["imu_noise"] == "log"
+    ukf = estimators.run("ukf", solent)
+    e_i, e_u = ate(iz.trajectory, ref)["rmse"], ate(ukf.trajectory, ref)["rmse"]
+    assert e_i < 0.7 * e_u
+    assert ate(iz.online, ref)["rmse"] < 1.5 * e_u  # online: the filter's situation
+    bt = estimators.run("batch", solent, **FAST)
+    assert ate(bt.trajectory, ref)["rmse"] < 1.1 * e_i
+    err = iz.trajectory.poses[:, :2] - ref.interpolate(iz.trajectory.t)[:, :2]
+    nees = np.einsum("ni,nij,nj->n", err, np.linalg.inv(iz.trajectory.cov[:, :2, :2]), err)
+    assert 0.3 < nees.mean() < 8.0
+
+
+def test_motion_option_and_fixed_lag(solent):
+    odo = estimators.run("isam2", solent, motion="odometry", **FAST)
+    assert odo.info["state"] == "planar"
+    with pytest.raises(ValueError, match="motion"):
+        estimators.run("isam2", solent, motion="wheels")
+    fl = run_fixed_lag(solent, lag=15.0, **FAST)
+    ref = solent.truth()
+    assert fl.info["state"] == "nav"
+    assert ate(fl.trajectory, ref)["rmse"] < ate(estimators.run("ukf", solent).trajectory, ref)["rmse"]
+
+
+def test_vessel_model_without_imu_lets_course_and_heading_differ():
+    """No IMU, no odometry: ``motion="vessel"`` (Pose3 + velocity, white-noise acceleration) follows a
+    boat crabbing in a current; the planar constant-velocity model pushes it along its bow."""
+    log = turn_log(v=1.0, w_deg=0.0, n=120, gnss_sigma=2.0, gnss_noise=2.0, seed=5, current=(0.0, 0.6), velocity=True)
+    log = log.without(lambda r: r.kind == "imu")
+    ref = log.truth()
+    ves = run_isam2(log, motion="vessel", **FAST)
+    assert ves.info["state"] == "nav"
+    planar = run_isam2(log, **FAST)
+    assert planar.info["state"] == "planar"
+    assert ate(ves.trajectory, ref)["rmse"] < ate(planar.trajectory, ref)["rmse"]
+    assert ate(ves.online, ref)["rmse"] < ate(planar.online, ref)["rmse"]
+
+
+def test_water_current_is_estimated_from_water_speed_and_gnss():
+    """A known 0.4 m/s current: speed through water along the bow + GNSS over ground -> the current
+    state within 0.1 m/s (the speed log alone would see none of it)."""
+    from graphnav.log import WaterSpeed
+
+    log = turn_log(v=2.0, w_deg=1.0, n=300, gnss_sigma=1.0, gnss_noise=1.0, seed=6, current=(0.3, -0.25),
+                   imu_rate=10)
+    log = NavLog.from_unsorted(list(log.records) + [WaterSpeed(float(t), 2.0, 0.03) for t in range(1, 301)],
+                               meta=log.meta)
+    r = run_isam2(log, **FAST)
+    wc = r.info["water_current"]
+    assert abs(wc["vx"] - 0.3) < 0.1 and abs(wc["vy"] + 0.25) < 0.1
+    assert abs(wc["mean_vx"] - 0.3) < 0.1 and abs(wc["mean_vy"] + 0.25) < 0.1
+    # the planar graph has no velocity: the records are counted, not used
+    assert "water_current" not in run_isam2(log, motion="odometry", **FAST).info
