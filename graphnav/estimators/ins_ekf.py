@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry import wrap_angle
-from .ekf import PoseEkf
+from .pose_ekf import PoseEkf
 
 
 class InsEkf(PoseEkf):
