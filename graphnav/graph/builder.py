@@ -36,7 +36,6 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
 from typing import Any
 
 import gtsam
@@ -47,21 +46,18 @@ import factors as F
 
 from ..geometry import cov_to_world
 from ..log import (
-    BeaconObs,
     Cloud,
     Gnss,
-    GnssVelocity,
-    Heading,
     KnownBeacon,
     PosePrior,
     Record,
     Scan,
-    WaterSpeed,
 )
 from .anchor import anchor_ready, choose_anchor
 from .config import SmootherConfig
 from .imu_chain import ImuChain, ImuConfig, relative_prediction
 from .keyframes import DEFAULT_PERIOD
+from .measurements import Measurements
 from .odometry_buffer import OdometryBuffer
 from .scan_factors import (  # noqa: F401  (Matcher, default_matcher, make_loop_closer: the graph's public names)
     UNOBSERVED_COV,
@@ -72,7 +68,8 @@ from .scan_factors import (  # noqa: F401  (Matcher, default_matcher, make_loop_
     proper_cov,
     screen_match,
 )
-from .space import IB, NavSpace, PlanarSpace, V, W
+from .space import IB, NavSpace, PlanarSpace, V
+from .step import Step
 
 #: sensor groups of the factors (the noise estimation scales ``SCALABLE`` ones)
 GROUPS = ("anchor", "odometry", "motion", "icp", "loop", "gnss", "compass", "bias", "beacon", "chart", "pose_prior",
@@ -80,31 +77,10 @@ GROUPS = ("anchor", "odometry", "motion", "icp", "loop", "gnss", "compass", "bia
 SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon", "cloud")
 EPS = 1e-9  # [s] times closer than this are equal (as keyframes.schedule)
 MIN_IMU_DT = 1e-4  # [s] keyframes closer than this share their state (no ImuFactor: its covariance would vanish)
-SURFACE_V = 0.1  # [m/s] the vertical of a water-speed factor (no vertical water velocity)
 V0_STATED_SIGMA = 0.2  # [m/s] 1-sigma of an initial velocity the log states (meta["initial_velocity"])
 #: the Pose3 graph's estimate of the previous keyframe: pose, nav-frame velocity, IMU bias, velocity covariance
 NavPrev = tuple[gtsam.Pose3, NDArray[np.float64], gtsam.imuBias.ConstantBias, NDArray[np.float64] | None]
 MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior", "gnss_velocity", "water_speed")
-
-
-@dataclass
-class Step:
-    """New factors/values of keyframe ``k`` (time ``t``), the keys' timestamps (fixed-lag) and
-    each factor's sensor group (parallel to ``graph``)."""
-
-    k: int
-    t: float
-    graph: gtsam.NonlinearFactorGraph
-    values: gtsam.Values
-    stamps: dict[int, float]
-    groups: list[str] = field(default_factory=list)
-    icp_ms: float | None = None
-    new_keyframe: bool = True  # False: late measurements after the last keyframe (finish)
-    space: PlanarSpace = field(default_factory=PlanarSpace)  # the variables' types (graphnav.graph.space)
-
-    def add(self, factor: gtsam.NonlinearFactor, group: str) -> None:
-        self.graph.add(factor)
-        self.groups.append(group)
 
 
 class GraphBuilder:
@@ -126,8 +102,6 @@ class GraphBuilder:
         self.space: PlanarSpace = NavSpace() if nav else PlanarSpace()
         self.imu: ImuChain | None = ImuChain(ImuConfig(**cfg.imu), imu_model) if nav else None
         self.imu_model = imu_model
-        self.current: tuple[int, int] | None = None  # the water current W(j): (first, newest) keyframe
-        self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
         self.cloud3d = CloudPath(cfg, lidar3d)  # the 3D path (clouds): graphnav.scan.cloud_match
         self.charted = {b.id: b for b in chart}
         icp_opts = dict(cfg.icp)
@@ -168,18 +142,40 @@ class GraphBuilder:
         self.twist_t: float | None = None  # ... and its time
         self.fixes: deque[tuple[float, float, float, float]] = deque(maxlen=256)  # recent GNSS (t, x, y, sigma)
         self.gnss_twist: tuple[float, NDArray[np.float64], float] | None = None  # (t, twist, speed sigma)
-        self.after_outage: set[int] = set()  # ids of the first fixes after a GNSS outage
-        self.beacon_ids: dict[str, int] = {}
-        self.beacon_init: dict[str, NDArray[np.float64]] = {}
-        self.bias_key: int | None = None
         self.anchor_pose: NDArray[np.float64] | None = None
         self.anchor_sigmas: NDArray[np.float64] | None = None
         self.anchor: str | None = None
         self.counts = {"records": 0, "late": 0, "ignored": 0, "motion_fallback": 0}
-        self.n_rejected = 0
-        self.consecutive_rejects = 0
         self.n_icp = self.n_icp_failed = self.n_icp_degenerate = self.n_icp_gated = 0
         self.defaulted: set[str] = set()  # groups whose sigmas came from the configuration
+        # the measurement factors and their state (beacons, compass-bias frame, GNSS gate, water current)
+        self.meas = Measurements(cfg, self.space, self.imu is not None, self.charted, self.kf_t, self.defaulted,
+                                 self.counts)
+
+    # the measurement state the navigator reads (and, for the current, keeps up to date)
+    @property
+    def beacon_ids(self) -> dict[str, int]:
+        return self.meas.beacon_ids
+
+    @property
+    def beacon_init(self) -> dict[str, NDArray[np.float64]]:
+        return self.meas.beacon_init
+
+    @property
+    def bias_key(self) -> int | None:
+        return self.meas.bias_key
+
+    @property
+    def current(self) -> tuple[int, int] | None:
+        return self.meas.current
+
+    @property
+    def current_guess(self) -> NDArray[np.float64]:
+        return self.meas.current_guess
+
+    @current_guess.setter
+    def current_guess(self, value: NDArray[np.float64]) -> None:
+        self.meas.current_guess = value
 
     # -- records in ------------------------------------------------------------------------------
     @property
@@ -285,7 +281,7 @@ class GraphBuilder:
         elif kind in MEASUREMENTS:
             if isinstance(rec, Gnss):
                 if self.fixes and t - self.fixes[-1][0] > self.cfg.gnss_gate_outage:
-                    self.after_outage.add(id(rec))  # the first fix after an outage is not gated
+                    self.meas.after_outage.add(id(rec))  # the first fix after an outage is not gated
                 self.fixes.append((rec.t, rec.x, rec.y, rec.sigma))
             if self.kf_t and t <= self.kf_t[-1] + EPS:  # at (or, late, before) the newest keyframe
                 j = bisect.bisect_left(self.kf_t, t - EPS)  # the first keyframe at or after it: added there
@@ -478,9 +474,9 @@ class GraphBuilder:
             # (rotated to the world); k-1's alone let a drifting online estimate reject correct fixes
             # (Solent s2, 20 m fixes: 15.9 m ATE with the gate on k-1's covariance, 3.2 m without a gate)
             gate_cov = prev_cov + cov_to_world(prev.theta(), step_cov)
-        self._measurements(s, k, self.due.pop(k, []), pose_k, gate_cov, prev if k > 0 else None)
-        if self.current is not None:
-            self._current_step(s, k)
+        self.meas.add(s, k, self.due.pop(k, []), pose_k, gate_cov, prev if k > 0 else None, self._offset_motion)
+        if self.meas.current is not None:
+            self.meas.current_step(s, k)
         for i in self.beacon_ids.values():
             s.stamps[F.L(i)] = t
         self.stepped = k + 1
@@ -534,46 +530,6 @@ class GraphBuilder:
         s.stamps[V(k)] = s.stamps[IB(k)] = tb
         return pred, rel, cov
 
-    def _water_speed(self, s: Step, a: int, pa: gtsam.Pose2, r: WaterSpeed) -> None:
-        """Speed through water ``v`` along the bow at keyframe ``a``: ``V(a) - W(a) = v (cos yaw, sin yaw)``
-        (velocity over ground minus the water current), a native ``BetweenFactorVector(W(a), V(a))``
-        whose direction is the current heading estimate; along the bow the log's sigma, across it
-        the leeway ``hypot(water_leeway, water_leeway_rel |v|)`` (sideslip and the heading's error)."""
-        cfg = self.cfg
-        if self.current is None:  # the first water speed starts the current: W(a) with its prior
-            self.current = (a, a)
-            s.values.insert(W(a), np.zeros(3))
-            s.stamps[W(a)] = self.kf_t[a]
-            sc = cfg.current_sigma
-            s.add(gtsam.PriorFactorVector(W(a), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(
-                np.array([sc, sc, 1e-3]))), "current")
-        if a < self.current[0]:
-            self.counts["ignored"] += 1
-            return
-        sv = r.sigma_v if math.isfinite(r.sigma_v) else cfg.water_speed_sigma
-        if not math.isfinite(r.sigma_v):
-            self.defaulted.add("water_speed")
-        lee = math.hypot(cfg.water_leeway, cfg.water_leeway_rel * abs(r.v))
-        c, sn = math.cos(pa.theta()), math.sin(pa.theta())
-        R = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
-        cov = R @ np.diag([sv**2, lee**2, SURFACE_V**2]) @ R.T
-        s.add(gtsam.BetweenFactorVector(W(a), V(a), np.array([r.v * c, r.v * sn, 0.0]),
-                                        gtsam.noiseModel.Gaussian.Covariance(cov)), "water_speed")
-
-    def _current_step(self, s: Step, k: int) -> None:
-        """The water current's variables up to keyframe ``k``: a random walk ``current_rw`` between
-        consecutive keyframes (a tidal current turns over hours)."""
-        assert self.current is not None
-        first, last = self.current
-        for j in range(last + 1, k + 1):
-            dt = max(self.kf_t[j] - self.kf_t[j - 1], 1e-9)
-            sig = self.cfg.current_rw * math.sqrt(dt)
-            s.values.insert(W(j), self.current_guess)
-            s.stamps[W(j)] = self.kf_t[j]
-            s.add(gtsam.BetweenFactorVector(W(j - 1), W(j), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(
-                np.array([sig, sig, 1e-3]))), "current")
-        self.current = (first, max(last, k))
-
     def _lift(self, p3: gtsam.Pose3, p2: gtsam.Pose2) -> gtsam.Pose3:
         """The IMU's predicted attitude (roll, pitch) and height with the planar pose ``p2``."""
         r = p3.rotation()
@@ -609,7 +565,7 @@ class GraphBuilder:
         k = len(self.kf_t) - 1
         s = Step(k, self.kf_t[k], gtsam.NonlinearFactorGraph(), gtsam.Values(), {}, new_keyframe=False)
         late, self.late = self.late, []
-        self._measurements(s, k, late, est(k), prev_cov, None, est=est)
+        self.meas.add(s, k, late, est(k), prev_cov, None, self._offset_motion, est=est)
         for i in self.beacon_ids.values():
             s.stamps[F.L(i)] = self.kf_t[k]
         return s
@@ -653,105 +609,12 @@ class GraphBuilder:
         self._icp_cov = cov
         return rel
 
-    def _measurements(self, s: Step, k: int, due: list[tuple[int, Record]], pose_k: gtsam.Pose2,
-                      prev_cov: NDArray[np.float64] | None, prev: gtsam.Pose2 | None,
-                      est: Callable[[int], gtsam.Pose2] | None = None) -> None:
-        cfg = self.cfg
-
-        def at(a: int) -> gtsam.Pose2:
-            if est is not None:
-                return est(a)
-            return pose_k if a == k else prev  # a is k or k-1
-
-        for a, r in due:
-            xa = F.X(a)
-            delta = self._offset_motion(a, r.t, k) if cfg.compensate_attachment else None
-            if isinstance(r, Gnss):
-                rx, ry = r.x, r.y
-                if delta is not None:  # the fix is of the pose at r.t = X_a * delta: move it back to X_a
-                    c, sn = math.cos(at(a).theta()), math.sin(at(a).theta())
-                    rx -= c * delta.x() - sn * delta.y()
-                    ry -= sn * delta.x() + c * delta.y()
-                gate_on = cfg.gnss_gate_online if cfg.gnss_gate_online is not None else self.imu is None
-                if gate_on and cfg.gnss_gate is not None and prev_cov is not None and id(r) not in self.after_outage:
-                    pa = at(a)
-                    d = np.array([rx - pa.x(), ry - pa.y()])
-                    S = prev_cov[:2, :2] + (r.sigma**2) * np.eye(2)
-                    if (float(d @ np.linalg.solve(S, d)) > cfg.gnss_gate**2
-                            and self.consecutive_rejects < cfg.gnss_gate_max_rejects):
-                        self.n_rejected += 1
-                        self.consecutive_rejects += 1
-                        continue
-                self.consecutive_rejects = 0
-                self.after_outage.discard(id(r))
-                s.add(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k), "gnss")
-            elif isinstance(r, Heading):
-                sig = r.sigma * cfg.compass_sigma_scale
-                yaw = r.yaw - (delta.theta() if delta is not None else 0.0)
-                if cfg.compass_bias and self.bias_key is None:  # the bias frame, with the first reading
-                    self.bias_key = F.B(0)
-                    s.values.insert(self.bias_key, self.space.bias_frame())
-                    s.stamps[self.bias_key] = s.t
-                    s.add(self.space.bias_prior(self.bias_key, math.radians(cfg.compass_bias_sigma_deg)), "bias")
-                if self.bias_key is not None:
-                    s.add(self.space.biased_compass(self.bias_key, xa, yaw, sig, cfg.compass_robust), "compass")
-                else:
-                    s.add(self.space.compass(xa, yaw, sig, cfg.compass_robust), "compass")
-            elif isinstance(r, WaterSpeed):
-                if self.imu is None:  # the planar graph has no velocity variable
-                    self.counts["ignored"] += 1
-                    continue
-                self._water_speed(s, a, at(a), r)
-            elif isinstance(r, GnssVelocity):
-                if self.imu is None:  # the planar graph has no velocity variable
-                    self.counts["ignored"] += 1
-                    continue
-                sv = r.sigma if math.isfinite(r.sigma) else cfg.gnss_velocity_sigma
-                if not math.isfinite(r.sigma):
-                    self.defaulted.add("gnss_velocity")
-                s.add(self.space.velocity(a, r.vx, r.vy, sv, cfg.gnss_robust), "gnss_velocity")
-            elif isinstance(r, BeaconObs):
-                self._beacon(s, xa, at(a), r, delta)
-            elif isinstance(r, PosePrior):
-                sig = np.array([r.sigma_xy, r.sigma_xy, r.sigma_yaw])
-                s.add(self.space.prior(xa, np.array([r.x, r.y, r.yaw]), sig), "pose_prior")
-
-    def _beacon(self, s: Step, xa: int, pa: gtsam.Pose2, r: BeaconObs, delta: gtsam.Pose2 | None) -> None:
-        cfg = self.cfg
-        charted = self.charted.get(r.id)
-        if charted is None and not cfg.unknown_beacons:
-            return
-        rng_, brg = r.range, r.bearing
-        if delta is not None:  # the sighting from X_a * delta, as seen from X_a
-            ba = delta.transformFrom(np.array([rng_ * math.cos(brg), rng_ * math.sin(brg)]))
-            rng_, brg = float(np.hypot(ba[0], ba[1])), math.atan2(ba[1], ba[0])
-        if r.id not in self.beacon_ids:
-            i = len(self.beacon_ids)
-            self.beacon_ids[r.id] = i
-            lk = F.L(i)
-            if charted is not None:
-                p0 = np.array([charted.x, charted.y])
-                s.add(self.space.landmark_prior(lk, charted.x, charted.y, charted.sigma), "chart")
-            else:
-                p0 = F.init_from_sighting(_vec(pa), rng_, brg)
-            self.beacon_init[r.id] = p0
-            s.values.insert(lk, self.space.landmark(p0))
-            if charted is None and self.imu is not None:  # an unknown mark: at the sea surface
-                s.add(self.space.landmark_prior(lk, float(p0[0]), float(p0[1]), 1e4), "chart")
-        if not (math.isfinite(r.sigma_range) and math.isfinite(r.sigma_bearing)):
-            self.defaulted.add("beacon")
-        sr = r.sigma_range if math.isfinite(r.sigma_range) else math.hypot(cfg.beacon_sigma_range,
-                                                                           cfg.beacon_sigma_range_rel * r.range)
-        sb = r.sigma_bearing if math.isfinite(r.sigma_bearing) else math.radians(cfg.beacon_sigma_bearing_deg)
-        s.add(self.space.beacon(xa, F.L(self.beacon_ids[r.id]), rng_, brg, sr, sb, cfg.beacon_robust, cfg.beacon_k),
-              "beacon")
-
     def info(self) -> dict[str, Any]:
         return {
             "anchor": self.anchor,
             "keyframes": len(self.kf_t),
             "keyframe_policy": "scan" if self.mode == "scan" else f"grid {self.period:g} s",
-            "gnss_rejected": self.n_rejected,
+            "gnss_rejected": self.meas.n_rejected,
             "icp_pairs": self.n_icp,
             "icp_failed": self.n_icp_failed,
             "icp_gated": self.n_icp_gated,

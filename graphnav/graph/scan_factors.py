@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -20,9 +20,7 @@ import factors as F
 
 from ..log import Cloud, Scan
 from .config import SmootherConfig
-
-if TYPE_CHECKING:
-    from .builder import Step
+from .step import Step
 
 #: ``matcher(cur, prev, init, init_cov, guess_in_graph) -> (usable, pose, cov)``: ``init`` the motion
 #: guess prev -> cur and ``init_cov`` its covariance (the odometry integrated, else the motion

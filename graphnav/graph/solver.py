@@ -220,9 +220,26 @@ class Solver:
 
 
 def marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> Callable[[int], NDArray[np.float64]]:
-    """``key -> marginal covariance`` of a batch solution (``gtsam.Marginals``)."""
+    """``key -> marginal covariance`` of a batch solution: ``gtsam.Marginals`` (Cholesky), or where
+    that finds the system indeterminate, the marginals of a QR-factorised iSAM2 Bayes tree of the same
+    graph linearised at ``values`` (the Pose3 graph's loose roll/pitch/height directions and IMU
+    biases leave it ill-conditioned, not singular)."""
     try:
         m = gtsam.Marginals(graph, values)
+        return lambda key: np.asarray(m.marginalCovariance(key))
+    except RuntimeError:
+        pass  # Marginals factorises by Cholesky, which squares the condition number: QR in an iSAM2 tree
+    p = isam_params(1e9, factorization="QR")  # at ``values``: no relinearisation
+    try:
+        isam = gtsam.ISAM2(p)
+        isam.update(graph, values)
     except RuntimeError as exc:
         raise SolverError(_gtsam_message(exc)) from None
-    return lambda key: np.asarray(m.marginalCovariance(key))
+
+    def marginal(key: int) -> NDArray[np.float64]:
+        try:
+            return np.asarray(isam.marginalCovariance(key))
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
+
+    return marginal

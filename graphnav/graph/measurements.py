@@ -1,0 +1,182 @@
+"""The measurement factors of the navigation graph: GNSS (gated online, compensated to its keyframe),
+GNSS velocity, compass (through an estimated bias frame), beacons (charted and unknown), water speed
+with the water current's state, and later ``pose_prior`` records -- each in the graph's state space
+(:mod:`graphnav.graph.space`), each tagged with its sensor group.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+import factors as F
+
+from ..log import BeaconObs, Gnss, GnssVelocity, Heading, KnownBeacon, PosePrior, Record, WaterSpeed
+from .config import SmootherConfig
+from .space import PlanarSpace, V, W
+from .step import Step
+
+SURFACE_V = 0.1  # [m/s] the vertical of a water-speed factor (no vertical water velocity)
+
+
+class Measurements:
+    """The measurement factors and their state: the charted beacons and the beacons met so far, the
+    compass-bias frame, the online GNSS gate's counters, the water current's variables.
+
+    ``charted``, ``defaulted`` and ``counts`` are the builder's (shared); ``kf_t`` its keyframe times.
+    """
+
+    def __init__(self, cfg: SmootherConfig, space: PlanarSpace, nav: bool, charted: dict[str, KnownBeacon],
+                 kf_t: list[float], defaulted: set[str], counts: dict[str, int]) -> None:
+        self.cfg, self.space, self.nav = cfg, space, nav
+        self.charted, self.kf_t, self.defaulted, self.counts = charted, kf_t, defaulted, counts
+        self.beacon_ids: dict[str, int] = {}
+        self.beacon_init: dict[str, NDArray[np.float64]] = {}
+        self.bias_key: int | None = None
+        self.n_rejected = 0
+        self.consecutive_rejects = 0
+        self.after_outage: set[int] = set()  # ids of the first fixes after a GNSS outage (not gated)
+        self.current: tuple[int, int] | None = None  # the water current W(j): (first, newest) keyframe
+        self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
+
+    def add(self, s: Step, k: int, due: list[tuple[int, Record]], pose_k: gtsam.Pose2,
+            prev_cov: NDArray[np.float64] | None, prev: gtsam.Pose2 | None,
+            offset: Callable[[int, float, int], gtsam.Pose2 | None],
+            est: Callable[[int], gtsam.Pose2] | None = None) -> None:
+        """The factors of the records ``due`` at keyframe ``k`` (each ``(a, record)``: attached to
+        keyframe ``a``, ``k`` or ``k-1``; with ``est``, any earlier one). ``prev_cov``: the online GNSS
+        gate's prediction covariance (``None``: no gate); ``offset(a, t, k)``: the motion from keyframe
+        ``a`` to time ``t`` (the attachment's compensation)."""
+        cfg = self.cfg
+
+        def at(a: int) -> gtsam.Pose2:
+            if est is not None:
+                return est(a)
+            return pose_k if a == k else prev  # a is k or k-1
+
+        for a, r in due:
+            xa = F.X(a)
+            delta = offset(a, r.t, k) if cfg.compensate_attachment else None
+            if isinstance(r, Gnss):
+                rx, ry = r.x, r.y
+                if delta is not None:  # the fix is of the pose at r.t = X_a * delta: move it back to X_a
+                    c, sn = math.cos(at(a).theta()), math.sin(at(a).theta())
+                    rx -= c * delta.x() - sn * delta.y()
+                    ry -= sn * delta.x() + c * delta.y()
+                gate_on = cfg.gnss_gate_online if cfg.gnss_gate_online is not None else not self.nav
+                if gate_on and cfg.gnss_gate is not None and prev_cov is not None and id(r) not in self.after_outage:
+                    pa = at(a)
+                    d = np.array([rx - pa.x(), ry - pa.y()])
+                    S = prev_cov[:2, :2] + (r.sigma**2) * np.eye(2)
+                    if (float(d @ np.linalg.solve(S, d)) > cfg.gnss_gate**2
+                            and self.consecutive_rejects < cfg.gnss_gate_max_rejects):
+                        self.n_rejected += 1
+                        self.consecutive_rejects += 1
+                        continue
+                self.consecutive_rejects = 0
+                self.after_outage.discard(id(r))
+                s.add(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k), "gnss")
+            elif isinstance(r, Heading):
+                sig = r.sigma * cfg.compass_sigma_scale
+                yaw = r.yaw - (delta.theta() if delta is not None else 0.0)
+                if cfg.compass_bias and self.bias_key is None:  # the bias frame, with the first reading
+                    self.bias_key = F.B(0)
+                    s.values.insert(self.bias_key, self.space.bias_frame())
+                    s.stamps[self.bias_key] = s.t
+                    s.add(self.space.bias_prior(self.bias_key, math.radians(cfg.compass_bias_sigma_deg)), "bias")
+                if self.bias_key is not None:
+                    s.add(self.space.biased_compass(self.bias_key, xa, yaw, sig, cfg.compass_robust), "compass")
+                else:
+                    s.add(self.space.compass(xa, yaw, sig, cfg.compass_robust), "compass")
+            elif isinstance(r, WaterSpeed):
+                if not self.nav:  # the planar graph has no velocity variable
+                    self.counts["ignored"] += 1
+                    continue
+                self.water_speed(s, a, at(a), r)
+            elif isinstance(r, GnssVelocity):
+                if not self.nav:  # the planar graph has no velocity variable
+                    self.counts["ignored"] += 1
+                    continue
+                sv = r.sigma if math.isfinite(r.sigma) else cfg.gnss_velocity_sigma
+                if not math.isfinite(r.sigma):
+                    self.defaulted.add("gnss_velocity")
+                s.add(self.space.velocity(a, r.vx, r.vy, sv, cfg.gnss_robust), "gnss_velocity")
+            elif isinstance(r, BeaconObs):
+                self._beacon(s, xa, at(a), r, delta)
+            elif isinstance(r, PosePrior):
+                sig = np.array([r.sigma_xy, r.sigma_xy, r.sigma_yaw])
+                s.add(self.space.prior(xa, np.array([r.x, r.y, r.yaw]), sig), "pose_prior")
+
+    def _beacon(self, s: Step, xa: int, pa: gtsam.Pose2, r: BeaconObs, delta: gtsam.Pose2 | None) -> None:
+        cfg = self.cfg
+        charted = self.charted.get(r.id)
+        if charted is None and not cfg.unknown_beacons:
+            return
+        rng_, brg = r.range, r.bearing
+        if delta is not None:  # the sighting from X_a * delta, as seen from X_a
+            ba = delta.transformFrom(np.array([rng_ * math.cos(brg), rng_ * math.sin(brg)]))
+            rng_, brg = float(np.hypot(ba[0], ba[1])), math.atan2(ba[1], ba[0])
+        if r.id not in self.beacon_ids:
+            i = len(self.beacon_ids)
+            self.beacon_ids[r.id] = i
+            lk = F.L(i)
+            if charted is not None:
+                p0 = np.array([charted.x, charted.y])
+                s.add(self.space.landmark_prior(lk, charted.x, charted.y, charted.sigma), "chart")
+            else:
+                p0 = F.init_from_sighting(np.array([pa.x(), pa.y(), pa.theta()]), rng_, brg)
+            self.beacon_init[r.id] = p0
+            s.values.insert(lk, self.space.landmark(p0))
+            if charted is None and self.nav:  # an unknown mark: at the sea surface
+                s.add(self.space.landmark_prior(lk, float(p0[0]), float(p0[1]), 1e4), "chart")
+        if not (math.isfinite(r.sigma_range) and math.isfinite(r.sigma_bearing)):
+            self.defaulted.add("beacon")
+        sr = r.sigma_range if math.isfinite(r.sigma_range) else math.hypot(cfg.beacon_sigma_range,
+                                                                           cfg.beacon_sigma_range_rel * r.range)
+        sb = r.sigma_bearing if math.isfinite(r.sigma_bearing) else math.radians(cfg.beacon_sigma_bearing_deg)
+        s.add(self.space.beacon(xa, F.L(self.beacon_ids[r.id]), rng_, brg, sr, sb, cfg.beacon_robust, cfg.beacon_k),
+              "beacon")
+
+    def water_speed(self, s: Step, a: int, pa: gtsam.Pose2, r: WaterSpeed) -> None:
+        """Speed through water ``v`` along the bow at keyframe ``a``: ``V(a) - W(a) = v (cos yaw, sin yaw)``
+        (velocity over ground minus the water current), a native ``BetweenFactorVector(W(a), V(a))``
+        whose direction is the current heading estimate; along the bow the log's sigma, across it
+        the leeway ``hypot(water_leeway, water_leeway_rel |v|)`` (sideslip and the heading's error)."""
+        cfg = self.cfg
+        if self.current is None:  # the first water speed starts the current: W(a) with its prior
+            self.current = (a, a)
+            s.values.insert(W(a), np.zeros(3))
+            s.stamps[W(a)] = self.kf_t[a]
+            sc = cfg.current_sigma
+            s.add(gtsam.PriorFactorVector(W(a), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(
+                np.array([sc, sc, 1e-3]))), "current")
+        if a < self.current[0]:
+            self.counts["ignored"] += 1
+            return
+        sv = r.sigma_v if math.isfinite(r.sigma_v) else cfg.water_speed_sigma
+        if not math.isfinite(r.sigma_v):
+            self.defaulted.add("water_speed")
+        lee = math.hypot(cfg.water_leeway, cfg.water_leeway_rel * abs(r.v))
+        c, sn = math.cos(pa.theta()), math.sin(pa.theta())
+        R = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+        cov = R @ np.diag([sv**2, lee**2, SURFACE_V**2]) @ R.T
+        s.add(gtsam.BetweenFactorVector(W(a), V(a), np.array([r.v * c, r.v * sn, 0.0]),
+                                        gtsam.noiseModel.Gaussian.Covariance(cov)), "water_speed")
+
+    def current_step(self, s: Step, k: int) -> None:
+        """The water current's variables up to keyframe ``k``: a random walk ``current_rw`` between
+        consecutive keyframes (a tidal current turns over hours)."""
+        assert self.current is not None
+        first, last = self.current
+        for j in range(last + 1, k + 1):
+            dt = max(self.kf_t[j] - self.kf_t[j - 1], 1e-9)
+            sig = self.cfg.current_rw * math.sqrt(dt)
+            s.values.insert(W(j), self.current_guess)
+            s.stamps[W(j)] = self.kf_t[j]
+            s.add(gtsam.BetweenFactorVector(W(j - 1), W(j), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(
+                np.array([sig, sig, 1e-3]))), "current")
+        self.current = (first, max(last, k))
