@@ -133,11 +133,39 @@ _MEANINGS: dict[str, dict[str, str]] = {
                  "use_known": "false: ignore the log's charted beacons (map every beacon)"},
     "ukf": {"alpha": "sigma-point spread (Merwe weights)", "beta": "sigma-point weight of the prior (2: Gaussian)",
             "kappa": "secondary sigma-point spread", "sigma_v0": "[m/s] prior 1-sigma of the initial velocity",
-            "sigma_bias_acc": "[m/s^2] ukf-bias: prior on the residual accelerometer bias",
-            "sigma_bias_gyro_deg": "[deg/s] ukf-bias: prior on the residual gyro bias",
-            "q_bias_acc": "[m/s^2/sqrt(s)] ukf-bias: accelerometer bias random walk",
-            "q_bias_gyro_deg": "[deg/s/sqrt(s)] ukf-bias: gyro bias random walk"},
+            "q_bias_gyro_deg": "[deg/s/sqrt(s)] bias states: gyro bias random walk (null: the log's meta['imu'])",
+            "q_bias_acc": "[m/s^2/sqrt(s)] bias states: accelerometer bias random walk (null: the log's meta['imu'])",
+            "sigma_bias_acc": "[m/s^2] bias states: prior on the residual accelerometer bias",
+            "sigma_bias_gyro_deg": "[deg/s] bias states: prior on the residual gyro bias",
+            "r_gps_x": "[m] GNSS x sigma (null: the records'; Table 2: 6)",
+            "r_gps_y": "[m] GNSS y sigma (null: the records'; Table 2: 7)",
+            "r_com_deg": "[deg] compass sigma (null: the records'; Table 2: 0.5)",
+            "q_acc": "[m/s^2] IMU acceleration noise per sample (null: meta['imu'] acc_std, else Table 2's 0.0039)",
+            "q_gyro_deg": "[deg/s] IMU yaw-rate noise per sample (null: meta['imu'] gyro_std, else Table 2's 0.033)",
+            "current": "water-current states: auto (when the log has water_speed), true, false",
+            "sigma_current0": "[m/s] prior 1-sigma of the water current",
+            "sigma_water_speed": "[m/s] water-speed sigma when the record gives none",
+            "q_current": "[m/s/sqrt(s)] water-current random walk",
+            "bias": "IMU bias states: auto (unless meta['imu'] says bias_free), true, false (the paper's 5-state UKF)"},
 }
+_MEANINGS["ekf"].update({
+    "motion": "odometry, imu, icp or auto (odometry if the log has it, else the IMU, else ICP on the scans)",
+    "acc_density": "[m/s^2/sqrt(Hz)] IMU motion: accelerometer noise density (null: the log's meta['imu'])",
+    "gyro_density": "[rad/s/sqrt(Hz)] IMU motion: gyro noise density (null: the log's meta['imu'])",
+    "acc_bias_rw": "[m/s^2/sqrt(s)] IMU motion: accelerometer bias random walk (null: the log's meta['imu'])",
+    "gyro_bias_rw": "[rad/s/sqrt(s)] IMU motion: gyro bias random walk (null: the log's meta['imu'])",
+    "bias": "IMU motion: bias states, auto (unless meta['imu'] says bias_free), true, false",
+    "current": "IMU motion: water-current states, auto (when the log has water_speed), true, false",
+    "sigma_bias_acc": "[m/s^2] IMU motion: prior on the residual accelerometer bias",
+    "sigma_bias_gyro_deg": "[deg/s] IMU motion: prior on the residual gyro bias",
+    "sigma_current0": "[m/s] IMU motion: prior 1-sigma of the water current",
+    "q_current": "[m/s/sqrt(s)] IMU motion: water-current random walk",
+    "v0": "IMU motion: initial velocity [vx, vy, sigma] (null: meta initial_velocity, else the first GNSS velocity)",
+    "sigma_gnss_velocity": "[m/s] GNSS velocity sigma when the record gives none",
+    "sigma_water_speed": "[m/s] water-speed sigma when the record gives none",
+    "use_velocity": "false: GNSS velocities are not used (IMU motion)",
+    "use_odometry": "false: odometry speeds are not used as SOG updates (IMU motion)",
+})
 
 
 def _fill(options: list[Option], table: str) -> list[Option]:
@@ -156,9 +184,10 @@ def _ukf_options(group: str) -> list[Option]:
         if m and _comment(line):
             comments[m.group(1)] = _comment(line)
     gate_doc = {o["name"]: o["meaning"] for o in function_options(gating.InnovationGate, "gate")}
+    gate_word = "innovation gate (docs/ekf.md, Gating)"
     return _fill([{"name": k, "default": v, "group": group,
-                   "meaning": comments.get(k) or gate_doc.get(k) or ("innovation gate (docs/ekf.md, Gating)"
-                                                                     if k in gating.GATING_DEFAULTS else "")}
+                   "meaning": _MEANINGS["ukf"].get(k) or comments.get(k) or gate_doc.get(k)
+                   or (gate_word if k in gating.GATING_DEFAULTS else "")}
                   for k, v in ukf.DEFAULTS.items()], "ukf")
 
 
@@ -172,11 +201,16 @@ def describe(name: str) -> list[Option]:
 
         return dataclass_options(SmootherConfig, "navigation graph (SmootherConfig)", skip=("solver",))
     if name == "ekf":
-        from .ekf import run_ekf
+        from .ekf import IMU_DEFAULTS, run_ekf
         from .gating import InnovationGate
 
-        return _fill(function_options(run_ekf, "ekf"), "ekf") + function_options(InnovationGate, "innovation gate",
-                                                                                 skip=("gate",))
+        imu: list[Option] = [{"name": k, "group": "IMU motion (motion=imu)", "meaning": "",
+                              "default": "auto" if k in ("bias", "current") else
+                              None if k in ("acc_density", "gyro_density", "acc_bias_rw", "gyro_bias_rw", "v0")
+                              else v} for k, v in IMU_DEFAULTS.items()]
+        return (_fill(function_options(run_ekf, "ekf"), "ekf") + function_options(InnovationGate, "innovation gate",
+                                                                                  skip=("gate",))
+                + _fill(imu, "ekf"))
     if name == "icp-dr":
         from ..scan.icp import IcpConfig
         from .icp_odometry import run_icp_dr
@@ -188,7 +222,8 @@ def describe(name: str) -> list[Option]:
 
         return dataclass_options(ScanToMapConfig, "scan-to-map (ScanToMapConfig)")
     if name in ("ukf", "ukf-bias"):
-        return _ukf_options(name)
+        bias = [{"name": "bias", "default": "auto", "group": name, "meaning": _MEANINGS["ukf"]["bias"]}]
+        return (bias if name == "ukf" else []) + _ukf_options(name)
     if name == "ekf-slam":
         from .ekf_slam import run_ekf_slam
 
@@ -207,8 +242,9 @@ def describe(name: str) -> list[Option]:
                 "meaning": "confidence level of the test of the innovations' window mean; when significant "
                            "the predicted covariance is inflated to cover it (null: off)"}]
         if name == "fuzzy-ukf":
-            own.append({"name": "bias", "default": False, "group": "fuzzy",
-                        "meaning": "true: the UKF with bias states (as fuzzy-ukf-bias)"})
+            own.append({"name": "bias", "default": "auto", "group": "fuzzy",
+                        "meaning": "IMU bias states: auto (unless meta['imu'] says bias_free; then as "
+                                   "fuzzy-ukf-bias), true, false (the paper's 5-state filter)"})
         return own + _ukf_options("ukf")
     return function_options(spec.run, name)  # any other estimator: its run function's keyword arguments
 
