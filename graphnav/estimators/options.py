@@ -253,9 +253,81 @@ _DESCRIBED = ("isam2", "batch", "fixed-lag", "ekf", "ekf-slam", "icp-dr", "scan-
               "fuzzy-ukf", "fuzzy-ukf-bias", "dead-reckoning")
 
 
+MAX_INT_OPTION = 2**31 - 1  # an integer option reaches C++ (GTSAM) as a C int
+MAX_FLOAT_OPTION = 1e15  # a numeric option's magnitude: its square stays far from overflow
+_SIGNED = {"kappa", "water_margin"}
+"""Numeric options that may be negative (every other numeric option is >= 0)."""
+
+
+def check_value(option: str, value: Any, default: Any) -> None:
+    """An :class:`~graphnav.config.OptionError` naming ``option`` when ``value`` is not of the kind of
+    its ``default``: a number (finite; an integer when the default is one; >= 0 unless the option is
+    signed) for a numeric default, ``true``/``false`` for a flag, a table for a table; a choice (text
+    default) or an option without a default (None) takes null, a flag, text or a finite number
+    (never a list or a table); the estimator checks the choice itself."""
+    from ..config import OptionError, Range, number
+
+    name = f"option {option}"
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise OptionError(name, f"must be true or false, got {value!r:.60}")
+    elif isinstance(default, int | float):
+        integer = isinstance(default, int)
+        hi = MAX_INT_OPTION if integer else MAX_FLOAT_OPTION
+        number(name, value, Range(lo=-hi if option.rpartition(".")[2] in _SIGNED else 0.0, hi=hi, integer=integer))
+    elif isinstance(default, dict):
+        if not isinstance(value, dict):
+            raise OptionError(name, f"must be a table of options, got {value!r:.60}")
+    elif (default is None or isinstance(default, str)) and not (value is None or isinstance(value, bool | str)):
+        # a choice (text) or an option without a default: some also take a number (ekf-slam's gate)
+        if isinstance(value, list | dict):
+            raise OptionError(name, f"must be a single value (default {default!r}), got {value!r:.60}")
+        number(name, value, Range(lo=-MAX_FLOAT_OPTION, hi=MAX_FLOAT_OPTION))
+
+
+def _annotations(name: str) -> dict[str, str]:
+    """Option -> its type annotation (text) in the config dataclasses and run functions estimator
+    ``name``'s options come from (``float | None``: ``null`` is a value of it, text is not)."""
+    from ..graph.config import SmootherConfig
+    from ..scan.icp import IcpConfig
+    from . import ekf, ekf_slam, fuzzy_ukf, gating, get, icp_odometry
+    from .scan_to_map import ScanToMapConfig
+
+    sources: dict[str, tuple] = {
+        "isam2": (SmootherConfig,), "batch": (SmootherConfig,), "fixed-lag": (SmootherConfig,),
+        "ekf": (ekf.run_ekf, gating.InnovationGate),
+        "ekf-slam": (ekf_slam.run_ekf_slam,), "icp-dr": (icp_odometry.run_icp_dr, IcpConfig),
+        "scan-to-map": (ScanToMapConfig,)}
+    ukf = (gating.InnovationGate, fuzzy_ukf.FuzzyCovarianceMatcher)
+    out: dict[str, str] = {}
+    for src in sources.get(name, ukf if "ukf" in name else (get(name).run,)):
+        if dataclasses.is_dataclass(src):
+            out.update({f.name: str(f.type) for f in dataclasses.fields(src)})
+        else:
+            out.update({p.name: str(p.annotation) for p in inspect.signature(src).parameters.values()
+                        if p.annotation is not inspect.Parameter.empty})
+    return out
+
+
+def _by_annotation(option: str, value: Any, ann: str) -> bool:
+    """True when ``value`` is of a kind the annotation ``ann`` admits (None, a flag, text, a number);
+    an annotation that names none of them (or none given) admits anything."""
+    kinds = {"None": value is None, "bool": isinstance(value, bool),
+             "str": isinstance(value, str), "Literal": isinstance(value, str),
+             "float": isinstance(value, int | float) and not isinstance(value, bool),
+             "int": isinstance(value, int) and not isinstance(value, bool)}
+    tokens = set(re.findall(r"[A-Za-z_]+", ann))
+    if tokens & {"dict", "list", "tuple", "Mapping", "Sequence", "Any", "object"}:
+        return True
+    named = [k for k in kinds if k in tokens]
+    return not named or any(kinds[k] for k in named)
+
+
 def check(name: str, options: dict[str, Any]) -> None:
     """A ``ValueError`` naming the unknown option(s) of estimator ``name`` and the known ones (when
-    its options are all known: the estimators described here, or a run function without ``**``)."""
+    its options are all known: the estimators described here, or a run function without ``**``); an
+    :class:`~graphnav.config.OptionError` naming an option whose value is not of its kind
+    (:func:`check_value`), and a ``cloud`` table checked as the cloud matcher's options."""
     from . import get
 
     if not options:
@@ -263,8 +335,34 @@ def check(name: str, options: dict[str, Any]) -> None:
     if name not in _DESCRIBED and any(p.kind is p.VAR_KEYWORD
                                       for p in inspect.signature(get(name).run).parameters.values()):
         return
-    known = {o["name"] for o in describe(name)}
+    described = describe(name)
+    known = {o["name"] for o in described}
     bad = sorted(set(options) - known)
     if bad:
         raise ValueError(f"unknown {name} option(s) {bad}; known: {', '.join(sorted(known)) or 'none'} "
                          f"(graphnav run --list-options {name})")
+    defaults: dict[str, list[Any]] = {}
+    for o in described:
+        defaults.setdefault(o["name"], []).append(o["default"])
+    from ..config import OptionError
+
+    annotations = _annotations(name)
+    for key, value in options.items():
+        ann = annotations.get(key, "")
+        if value is None and "None" in ann:
+            continue
+        errors = []
+        for default in defaults[key]:  # an option of two graphs (lag): valid for either
+            try:
+                check_value(key, value, default)
+                break
+            except ValueError as exc:
+                errors.append(exc)
+        else:
+            raise errors[0]
+        if ann and not _by_annotation(key, value, ann):
+            raise OptionError(f"option {key}", f"must be of type {ann}, got {value!r:.60}")
+    if isinstance(options.get("cloud"), dict) and name in ("isam2", "batch", "fixed-lag"):
+        from ..scan.cloud_match import CloudMatchConfig
+
+        CloudMatchConfig.from_options(dict(options["cloud"]))
