@@ -138,10 +138,10 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, "max_speed", None) is not None:  # --max-speed: the readers' validity bound
             from dataclasses import replace
 
+            from .config import Range, number
             from .log import default_limits, set_default_limits
 
-            if not args.max_speed > 0:
-                raise ValueError(f"--max-speed must be > 0, got {args.max_speed}")
+            number("--max-speed", args.max_speed, Range(lo=0.0, hi=3e8, lo_open=True))
             set_default_limits(replace(default_limits(), max_speed=args.max_speed))
         return int(args.func(args) or 0)
     except GraphnavError as err:

@@ -94,7 +94,10 @@ def make_cloud(t: float, points, intensity=None, ring=None, roll: float = math.n
         inten = None if intensity is None else np.ascontiguousarray(np.asarray(intensity, dtype=np.float32).ravel())
     rg = None
     if ring is not None:
-        r = np.asarray(ring).ravel()
+        try:
+            r = np.asarray(ring).ravel()
+        except (OverflowError, ValueError, TypeError):
+            raise LogError(f"ring must hold integers in [0, {MAX_RING}]", field="ring") from None
         if r.size and (not np.issubdtype(r.dtype, np.integer) or r.min() < 0 or r.max() > MAX_RING):
             raise LogError(f"ring must hold integers in [0, {MAX_RING}]", field="ring")
         rg = np.ascontiguousarray(r.astype(np.uint16))
@@ -368,6 +371,40 @@ def check_record(rec: Record | KnownBeacon, limits: Limits | None = None) -> Non
             raise LogError("every beam with a return needs a finite angle", field="angles")
     elif isinstance(rec, Cloud):
         _check_cloud(rec)
+
+
+API_LIMITS = Limits(max_speed=math.inf, max_yaw_rate=math.inf, max_accel=math.inf, max_beacon_range=math.inf)
+"""The bounds :func:`validate_record` applies by default: only those that keep the arithmetic finite
+(times, coordinates, angles, sigmas); the physical plausibility of speeds and rates is the readers'."""
+
+
+def validate_record(obj: Any, *, index: int | None = None, limits: Limits | None = None,
+                    kinds: Iterable[str] | None = None) -> Record | KnownBeacon:
+    """``obj`` if it is a well-formed record (:func:`check_record` with ``limits``, default
+    :data:`API_LIMITS`) of one of ``kinds`` (default: any record type, or a :class:`KnownBeacon`), else a
+    :class:`LogError` naming the record (``record INDEX``, its type and time) and the field at fault.
+    The check for records handed to an estimator one at a time (``Navigator.add``)."""
+    what = "record" if index is None else f"record {index}"
+    allowed = tuple(RECORD_TYPES[k] for k in kinds) if kinds is not None else (*RECORD_TYPES.values(), KnownBeacon)
+    if not isinstance(obj, allowed):
+        names = ", ".join(c.__name__ for c in allowed)
+        got = type(obj).__name__ if obj is not None else "None"
+        if isinstance(obj, tuple(RECORD_TYPES.values())):
+            raise LogError(f"a {got} record is not taken here (takes: {names})", file=what)
+        raise LogError(f"expected a record ({names}), got {got}", file=what)
+    ints = {f.name: float(v) for f in fields(obj) if f.name not in ARRAY_FIELDS
+            and isinstance(v := getattr(obj, f.name), int) and not isinstance(v, bool) and abs(v) < 2**53}
+    if ints:  # Gnss(t=0, ...) from Python: the same record in floats
+        from dataclasses import replace
+
+        obj = replace(obj, **ints)
+    try:
+        check_record(obj, limits or API_LIMITS)
+    except LogError as err:
+        t = getattr(obj, "t", None)
+        at = f" at t={t!r}" if t is not None else ""
+        raise LogError(err.message, file=f"{what} ({type(obj).__name__}{at})", field=err.field) from None
+    return obj
 
 
 def _check_cloud(rec: Cloud) -> None:

@@ -88,11 +88,35 @@ def emit(args: argparse.Namespace, obj: dict[str, Any], human: str | None = None
 OPTION_FORM = "[ESTIMATOR.]KEY=VALUE"
 
 
-def _value(text: str) -> Any:
+MAX_CONFIG_BYTES = 1 << 20
+"""The largest ``--config`` file read."""
+MAX_OPTION_DEPTH = 32
+"""The deepest nesting of lists and tables an option value (``-O``, ``[options]``) may have."""
+
+
+def _value(text: str, item: str | None = None) -> Any:
     try:
-        return json.loads(text)
+        value = json.loads(text)
     except json.JSONDecodeError:
         return text
+    except RecursionError:
+        raise ValueError(f"option {(item or text)[:40]!r}...: nested deeper than {MAX_OPTION_DEPTH} levels") from None
+    if depth(value) > MAX_OPTION_DEPTH:
+        raise ValueError(f"option {(item or text)[:40]!r}...: nested deeper than {MAX_OPTION_DEPTH} levels")
+    return value
+
+
+def depth(value: Any, limit: int = 10_000) -> int:
+    """How deep lists and tables nest in ``value`` (a scalar: 0), iteratively (no recursion limit)."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, dict | list | tuple):
+            deepest = max(deepest, d + 1)
+            if deepest > limit:
+                return deepest
+            stack.extend((c, d + 1) for c in (v.values() if isinstance(v, dict) else v))
+    return deepest
 
 
 def parse_option(item: str) -> tuple[str | None, str, Any]:
@@ -110,7 +134,7 @@ def parse_option(item: str) -> tuple[str | None, str, Any]:
     key = key.strip().replace("-", "_")
     if not sep or not key or (dot and not scope.strip()) or not key.isidentifier():
         raise ValueError(f"option {item!r} is not {OPTION_FORM}")
-    return (scope.strip() or None), key, _value(value)
+    return (scope.strip() or None), key, _value(value, item)
 
 
 def scoped_options(items: list[str] | None) -> dict[str | None, dict[str, Any]]:
@@ -238,11 +262,21 @@ def config_defaults(parser: argparse.ArgumentParser, path: Path,
     where = str(path)
     try:
         with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise GraphnavError(f"not valid TOML: {exc}", where=where) from None
+            raw = fh.read(MAX_CONFIG_BYTES + 1)
     except OSError as exc:
         raise GraphnavError(exc.strerror or str(exc), where=where) from None
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise GraphnavError(f"larger than {MAX_CONFIG_BYTES} bytes: not a configuration file", where=where)
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise GraphnavError(f"not UTF-8 text (byte {exc.start}); a --config file is UTF-8 TOML", where=where) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise GraphnavError(f"not valid TOML: {exc}", where=where) from None
+    except RecursionError:
+        raise GraphnavError(f"nested deeper than {MAX_OPTION_DEPTH} levels", where=where) from None
+    if depth(data) > MAX_OPTION_DEPTH:
+        raise GraphnavError(f"nested deeper than {MAX_OPTION_DEPTH} levels", where=where)
     by_name: dict[str, argparse.Action] = {}
     for action in parser._actions:
         if action.dest in ("help", "config", "option") or isinstance(action, argparse._SubParsersAction):

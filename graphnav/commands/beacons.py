@@ -72,6 +72,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def search(args: argparse.Namespace) -> int:
+    from ..config import Range, number
+
+    number("--workers", args.workers, Range(lo=1, hi=256, integer=True))
+    number("--chunk", args.chunk, Range(lo=1, hi=10_000_000, integer=True, optional=True))
+    number("--limit", args.limit, Range(lo=1, hi=10_000_000, integer=True, optional=True))
+    number("--p0-beacon", args.p0_beacon, Range(lo=0.0, hi=1e12, lo_open=True))
     layouts = grid(args.beacons)
     if args.limit:
         layouts = layouts[:: args.limit]

@@ -120,6 +120,8 @@ def _compare(args: argparse.Namespace, options: dict[str, dict], names: list[str
              out: OutDir) -> int:
     log = drop_kinds(load_log(args.log, lenient=args.lenient, **log_options(args)), dropped)
     t0 = time.perf_counter()
+    if not 0 <= args.workers <= 256:
+        raise ValueError(f"--workers must be in [0, 256] (0: one per CPU), got {args.workers}")
     workers = args.workers if args.workers > 0 else (os.cpu_count() or 1)
     cache = MatchCache() if getattr(args, "icp_cache", True) else None  # (demo builds its own Namespace)
     bar = progress_bar(args, total=_runnable(log, names), desc="compare", unit="estimator")

@@ -50,6 +50,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace --out when it is an existing regular file (it is replaced atomically)")
     p.add_argument("--lenient", action="store_true", help="skip malformed lines (and count them)")
     add_json_flag(p)
 
@@ -57,8 +59,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 def _write(args: argparse.Namespace, log, extra: dict[str, Any]) -> int:
     from ..io import save_log
 
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
+    save_log(log, args.out, overwrite=args.overwrite)
     out: dict[str, Any] = {"format": args.format, "input": str(args.input), "out": str(args.out),
                            "records": log.counts(), "t0": log.t0, "t1": log.t1, **extra}
     for key in ("skipped", "skipped_errors"):
@@ -71,8 +72,22 @@ def _write(args: argparse.Namespace, log, extra: dict[str, Any]) -> int:
     return 0
 
 
+def _prepare_out(args: argparse.Namespace) -> None:
+    """``--out`` refused before any reading when it exists without ``--overwrite`` or is no regular file."""
+    from ..io.outputs import check_replaceable, ensure_dir
+
+    ensure_dir(args.out.parent, "--out (its directory)")
+    check_replaceable(args.out, overwrite=args.overwrite)
+
+
 def run_carmen(args: argparse.Namespace) -> int:
+    from ..config import Range, number
     from ..io.carmen import read_carmen
+
+    number("--scan-dt", args.scan_dt, Range(lo=0.0, hi=3600.0, lo_open=True))
+    if args.max_range is not None:
+        number("--max-range", args.max_range, Range(lo=0.0, hi=1e4, lo_open=True))
+    _prepare_out(args)
 
     log = read_carmen(args.input, lenient=args.lenient, truth=not args.no_truth, time=args.time,
                       scan_dt=args.scan_dt, max_range=args.max_range)
@@ -83,6 +98,8 @@ def run_carmen(args: argparse.Namespace) -> int:
 
 def run_mrclam(args: argparse.Namespace) -> int:
     from ..io.mrclam import read_mrclam
+
+    _prepare_out(args)
 
     log = read_mrclam(args.input, args.robot, lenient=args.lenient, charted=args.charted)
     dropped = log.meta["dropped"]

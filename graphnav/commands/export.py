@@ -66,8 +66,9 @@ def _from_run_dir(path: Path) -> tuple[Any, Any, dict[str, Any]]:
 
     try:
         summary = json.loads((path / "summary.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise GraphnavError(f"summary.json is not readable JSON ({exc})", where=str(path / "summary.json")) from None
+    except (OSError, ValueError, RecursionError) as exc:
+        raise GraphnavError(f"summary.json is not readable JSON ({type(exc).__name__}: {str(exc)[:80]})",
+                            where=str(path / "summary.json")) from None
     name = str(summary.get("estimator", "trajectory")) if isinstance(summary, dict) else "trajectory"
     tum, csv = path / "trajectory.tum", path / "trajectory.csv"
     try:
@@ -109,18 +110,13 @@ def _from_log(args: argparse.Namespace) -> tuple[Any, Any, dict[str, Any]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..io.geo_out import GeoTrack, origin_dict, render
+    from ..io.geo_out import GeoTrack, check_track, origin_dict, render
     from ..io.nmea_out import trajectory_to_nmea
-    from ..io.outputs import write_text_atomic
+    from ..io.outputs import check_replaceable, write_text_atomic
     from ._common import emit
 
     fmt = _format(args)
-    if args.out.exists() and not args.overwrite:
-        raise GraphnavError("--out: the file exists; pass --overwrite to replace it", where=str(args.out))
-    if args.out.is_dir():
-        raise GraphnavError("--out: is a directory, not a file", where=str(args.out))
-    if not args.out.parent.is_dir():
-        raise GraphnavError("--out: the directory does not exist", where=str(args.out.parent))
+    check_replaceable(args.out, overwrite=args.overwrite)
     src = Path(args.input)
     if is_run_dir(src):
         if args.source is not None:
@@ -130,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
         traj, frame, info = _from_log(args)
     if not len(traj):
         raise GraphnavError("nothing to export: the track is empty", where=str(src))
+    check_track(traj, str(src))
     obj: dict[str, Any] = {"input": str(src), **info, "to": fmt, "out": str(args.out), "poses": len(traj),
                            "origin": origin_dict(frame)}
     if fmt == "nmea":

@@ -43,6 +43,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..config import Range, number
+
+    for flag, value in (("--duration", args.duration), ("--idle-exit", args.idle_exit)):
+        number(flag, value, Range(lo=0.0, hi=1e9, lo_open=True, optional=True))
     if args.out:
         ensure_dir(args.out)
     options = options_for(args, args.estimator)

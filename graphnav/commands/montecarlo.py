@@ -21,6 +21,9 @@ from ._common import add_dashboard_flag, add_json_flag, emit, options_by_estimat
 log_ = logging.getLogger("graphnav.montecarlo")
 
 
+MAX_RUNS = 100_000  # --runs: each run is a task object held in memory
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("montecarlo", help="Monte Carlo estimator comparison on simulated missions",
                        description=__doc__)
@@ -53,8 +56,10 @@ def run_solent(args: argparse.Namespace) -> int:
     skipped = [n for n in wanted if n not in known]
     if args.estimators and skipped:  # a name the user gave (the default list may name uninstalled ones)
         raise KeyError(f"--estimators {args.estimators}: " + estimators.unknown_name(skipped[0]))
-    if args.runs < 1:
-        raise ValueError("--runs must be >= 1")
+    if not 1 <= args.runs <= MAX_RUNS:
+        raise ValueError(f"--runs must be in [1, {MAX_RUNS}], got {args.runs}")
+    if not 1 <= args.workers <= 256:
+        raise ValueError(f"--workers must be in [1, 256], got {args.workers}")
     opts = options_by_estimator(args)
     for name, given in opts.items():
         if name not in known:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import GraphnavError
 from ._common import add_json_flag, emit, plain_options
 
 
@@ -59,7 +60,13 @@ def run(args: argparse.Namespace) -> int:
     if args.init is not None:
         x, y, z, r, pch, yaw = args.init
         init = xyzrpy_matrix(x, y, z, *np.radians([r, pch, yaw]))
-    res = register_clouds(src, tgt, args.method, init, **params)
+    try:
+        res = register_clouds(src, tgt, args.method, init, **params)
+    except GraphnavError as err:  # "source"/"target": name the file
+        files = {"source": str(args.source), "target": str(args.target)}
+        if err.where in files:
+            raise GraphnavError(f"{err.where} cloud: {err.message}", where=files[err.where]) from None
+        raise
     out = {"source": str(args.source), "target": str(args.target), **res.as_dict()}
     out.pop("extra")
     out.update({k: v for k, v in res.extra.items() if k != "hessian"})
@@ -75,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
     lines += ["  " + " ".join(f"{v:11.6f}" for v in row) for row in T]
     lines += [f"ms          {res.ms:.1f} (prep {res.extra['ms_prep']:.1f}, align {res.extra['ms_align']:.1f})",
               f"fitness     {res.fitness:.4f}   rmse {res.rmse:.4f} m   objective {res.objective:.6g}",
-              f"converged   {res.converged}   iterations {res.iterations}",
+              f"converged   {res.converged}   iterations {res.iterations}"
+              + (f"   ({res.extra['reason']})" if res.extra.get("reason") else ""),
               "sigma       " + " ".join(f"{v:.3g}" for v in sd) + "   (omega [rad], v [m]; T exp(delta))"]
     if ref is not None:
         lines.append(f"error       {out['translation_error_m']:.4f} m   {out['rotation_error_deg']:.4f} deg")

@@ -38,6 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..config import Range, number
+
+    number("--speed", args.speed, Range(lo=0.0, hi=1e6))
+    number("--corrupt", args.corrupt, Range(lo=0.0, hi=1.0))
     log = load_log(args.log, lenient=args.lenient, **log_options(args))
     stop = threading.Event()
     old = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}

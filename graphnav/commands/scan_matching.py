@@ -29,8 +29,8 @@ def run(args: argparse.Namespace) -> int:
     from ..evaluation.scan_matching3d import compare
     from ..io import load_log
 
-    if args.frames < 2:
-        raise ValueError(f"--frames must be >= 2, got {args.frames}")
+    if not 2 <= args.frames <= 1_000_000:
+        raise ValueError(f"--frames must be in [2, 1000000], got {args.frames}")
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
     log = load_log(args.log)
     res = compare(log, args.frames, methods, plain_options(args))

@@ -16,6 +16,23 @@ from ..io import save_log
 from ..sim import degrade, fairway, harbour, marina_degraded, solent
 from ._common import add_json_flag, emit
 
+OVERWRITE_HELP = "replace --out when it is an existing regular file (it is replaced atomically)"
+
+
+def _prepare_out(args: argparse.Namespace) -> Path:
+    """``--out``: its directory created, and refused before any work when it exists without
+    ``--overwrite`` or is no regular file."""
+    from ..io.outputs import check_replaceable, ensure_dir
+
+    out = Path(args.out)
+    ensure_dir(out.parent, "--out (its directory)")
+    check_replaceable(out, overwrite=args.overwrite)
+    return out
+
+
+def _save(log, args: argparse.Namespace) -> None:  # noqa: ANN001
+    save_log(log, args.out, overwrite=args.overwrite)
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("simulate", help="simulate a scenario into a log", description=__doc__)
@@ -30,12 +47,14 @@ def _register_fairway(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--beacons", required=True, help='beacon positions "x1,y1;x2,y2;..." [m]')
     p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--out", required=True, help="output log (.jsonl, .jsonl.gz or .npz)")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.set_defaults(func=_fairway)
 
 
 def _fairway(args: argparse.Namespace) -> int:
+    _prepare_out(args)
     log = fairway.simulate_fairway(fairway.parse_beacons(args.beacons), args.seed)
-    save_log(log, args.out)
+    _save(log, args)
     return 0
 
 
@@ -72,12 +91,15 @@ def _register_harbour(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--t0", type=float, default=0.0, help="time of the first record [s] (e.g. a POSIX time)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.set_defaults(func=_harbour)
 
 
 def harbour_config(args: argparse.Namespace) -> harbour.HarbourConfig:
     """The :class:`graphnav.sim.harbour.HarbourConfig` the ``simulate harbour`` options describe
     (``ValueError`` naming the option when one is out of range)."""
+    from ..log import default_limits
+
     if args.duration is not None and not 0.0 < args.duration <= MAX_DURATION:
         raise ValueError(f"--duration must be > 0 and <= {MAX_DURATION:g} s (a week), got {args.duration}")
     if args.laps is not None and not 0 < args.laps <= MAX_LAPS:
@@ -86,8 +108,9 @@ def harbour_config(args: argparse.Namespace) -> harbour.HarbourConfig:
         raise ValueError(f"--fix-hz must be > 0 and <= 50, got {args.fix_hz}")
     if args.lidar_hz is not None and not (math.isfinite(args.lidar_hz) and 0.0 <= args.lidar_hz <= 50.0):
         raise ValueError(f"--lidar-hz must be >= 0 and <= 50, got {args.lidar_hz}")
-    if not math.isfinite(args.t0):
-        raise ValueError(f"--t0 must be finite, got {args.t0}")
+    top = default_limits().max_time - (args.duration or MAX_DURATION)
+    if not (math.isfinite(args.t0) and abs(args.t0) <= top):  # every record's time must stay a valid time
+        raise ValueError(f"--t0 must be finite and within +-{top:g} s, got {args.t0}")
     kw: dict = {"fix_hz": args.fix_hz, "t0": args.t0}
     if args.lidar_hz is not None:
         kw["lidar_hz"] = args.lidar_hz
@@ -105,6 +128,7 @@ def harbour_config(args: argparse.Namespace) -> harbour.HarbourConfig:
 
 
 def _harbour(args: argparse.Namespace) -> int:
+    _prepare_out(args)
     cfg = harbour_config(args)
     hz = cfg.lidar_hz
     if args.lidar == "3d":
@@ -115,8 +139,7 @@ def _harbour(args: argparse.Namespace) -> int:
         log = simulate_harbour3d(args.seed, cfg, Lidar3dConfig(hz=hz), duration=args.duration, laps=args.laps)
     else:
         log = harbour.simulate_harbour(args.seed, cfg, duration=args.duration, laps=args.laps)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
+    _save(log, args)
     emit(
         args,
         {
@@ -144,13 +167,14 @@ def _register_marina_degraded(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jump-m", type=float, default=20.0, help="GNSS jump size [m] (0: none, same noise)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.set_defaults(func=_marina_degraded)
 
 
 def _marina_degraded(args: argparse.Namespace) -> int:
+    _prepare_out(args)
     log = marina_degraded.simulate_marina_degraded(args.marina, args.seed, jump_m=args.jump_m)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
+    _save(log, args)
     emit(
         args,
         {
@@ -178,15 +202,20 @@ def _register_solent(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-calibration", action="store_true", help="leave Table 3's IMU biases in the log")
     p.add_argument("--out", type=Path, required=True, help="log file (.jsonl, .jsonl.gz or .npz)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.set_defaults(func=_solent)
 
 
 def _solent(args: argparse.Namespace) -> int:
+    from ..config import Range, number
+
+    number("--current-speed", args.current_speed, Range(lo=0.0, hi=10.0))
+    number("--calib-residual", args.calib_residual, Range(lo=0.0, hi=10.0))
+    _prepare_out(args)
     cfg = solent.SolentConfig(scenario=args.scenario, seed=args.seed, current_speed=args.current_speed,
                               calib_residual=args.calib_residual, calibrate=not args.no_calibration)
     log = solent.simulate_solent(cfg)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
+    _save(log, args)
     summary = {"out": str(args.out), "scenario": cfg.scenario, "seed": cfg.seed, "records": log.counts(),
                "duration_s": log.t1 - log.t0, "waypoints_reached": log.meta["waypoints_reached"]}
     emit(args, summary)
@@ -263,15 +292,21 @@ def _register_degrade(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--lenient", action="store_true", help="skip malformed input records (and count them)")
+    p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     add_json_flag(p)
     p.set_defaults(func=_degrade)
 
 
 def degrade_config(args: argparse.Namespace) -> degrade.DegradeConfig:
     """The :class:`graphnav.sim.degrade.DegradeConfig` the ``degrade`` options describe."""
+    from ..config import Range, number
+
+    number("--yaw-rate-bias", args.yaw_rate_bias, Range(lo=-2000.0, hi=2000.0))
     cfg = degrade.PRESETS[args.preset] if args.preset else degrade.DegradeConfig()
     if args.odometry_noise:
         v, w, w0 = _floats(args.odometry_noise, "--odometry-noise", 3, 3)
+        for what, val, top in (("V", v, 10.0), ("W", w, 10.0), ("W0DEG", w0, 360.0)):
+            number(f"--odometry-noise {what}", val, Range(lo=0.0, hi=top))
         if min(v, w, w0) < 0:
             raise ValueError("--odometry-noise: the sigmas must be >= 0")
         cfg = replace(cfg, odometry=degrade.OdometryNoise(v, w, math.radians(w0), math.radians(args.yaw_rate_bias)))
@@ -279,9 +314,16 @@ def degrade_config(args: argparse.Namespace) -> degrade.DegradeConfig:
         raise ValueError("--yaw-rate-bias needs --odometry-noise")
     if args.gnss:
         g = _floats(args.gnss, "--gnss", 1, 2)
+        number("--gnss SIGMA", g[0], Range(lo=0.0, hi=1e6, lo_open=True))
+        if len(g) > 1:
+            number("--gnss HZ", g[1], Range(lo=0.0, hi=1000.0, lo_open=True))
         cfg = replace(cfg, gnss_sigma=g[0], gnss_hz=g[1] if len(g) > 1 else None)
     if args.compass:
         c = _floats(args.compass, "--compass", 1, 3)
+        for what, v, rng in zip(("SIGMA_DEG", "BIAS_DEG", "HZ"), c,
+                                (Range(lo=0.0, hi=360.0, lo_open=True), Range(lo=-360.0, hi=360.0),
+                                 Range(lo=0.0, hi=1000.0, lo_open=True)), strict=False):
+            number(f"--compass {what}", v, rng)
         cfg = replace(cfg, compass_sigma=math.radians(c[0]), compass_bias=math.radians(c[1]) if len(c) > 1 else 0.0,
                       compass_hz=c[2] if len(c) > 2 else None)
     if args.gnss_outage:
@@ -296,13 +338,13 @@ def degrade_config(args: argparse.Namespace) -> degrade.DegradeConfig:
 
 
 def _degrade(args: argparse.Namespace) -> int:
+    _prepare_out(args)
     from ..io import load_log
 
     cfg = degrade_config(args)
     base = load_log(args.log, lenient=args.lenient)
     log = degrade.degrade(base, cfg, args.seed)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_log(log, args.out)
+    _save(log, args)
     out = {"scenario": "degrade", "input": str(args.log), "seed": args.seed, "out": str(args.out),
            "records": log.counts(), "t0": log.t0, "t1": log.t1, "simulated": log.meta["simulated"],
            "events": log.meta["events"]}

@@ -12,7 +12,8 @@ Heading innovations are wrapped to [-pi, pi); the yaw state is kept wrapped.
 Updates use the Joseph form. With ``speed=True`` the state is [x, y, yaw, v]: v is a random walk
 (``sigma_acc``) and odometry speed becomes a measurement of it. See docs/ekf.md.
 
-:class:`PoseEkf` is the filter algebra; :class:`EkfStepper` the record-by-record cycle around it,
+:class:`~graphnav.estimators.pose_ekf.PoseEkf` is the filter algebra (:class:`~graphnav.estimators.ins_ekf.InsEkf`
+with the IMU motion); :class:`EkfStepper` the record-by-record cycle around it,
 shared by the batch :func:`run_ekf` and the live adapter :class:`graphnav.online.ekf_online.EkfOnline`.
 """
 
@@ -27,11 +28,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..geometry import wrap_angle
-from ..log import Gnss, Heading, NavLog, Odometry, PosePrior, Record, Scan, Truth
+from ..log import Gnss, GnssVelocity, Heading, Imu, NavLog, Odometry, PosePrior, Record, Scan, Truth, WaterSpeed
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
-from .gating import GATING_DEFAULTS, InnovationGate, reinit_block
+from .gating import GATING_DEFAULTS
+from .ins_ekf import InsEkf
+from .pose_ekf import PoseEkf
 
 
 def icp_available() -> bool:
@@ -40,110 +42,6 @@ def icp_available() -> bool:
     except ImportError:
         return False
     return True
-
-
-class PoseEkf:
-    """EKF on [x, y, yaw] or [x, y, yaw, v] with Joseph-form, chi-square-gated updates
-    (:class:`graphnav.estimators.gating.InnovationGate`; ``gating`` holds its options)."""
-
-    def __init__(self, x0: NDArray[np.float64], P0: NDArray[np.float64], *, gate: float | None = 0.999,
-                 **gating: Any) -> None:
-        self.x = np.array(x0, dtype=float)
-        self.P = np.array(P0, dtype=float)
-        self.gate = gate
-        self.gater = InnovationGate(gate, **gating)
-        self.counts = self.gater.counts  # accepted, rejected, reinit
-        self.n_updates = 0
-
-    def gate_limit(self, dof: int) -> float:
-        """``chi2.ppf(gate, dof)`` (the same expression as scipy.stats' ``chi2``), computed once per dof."""
-        return self.gater.limit(dof)
-
-    @property
-    def has_speed(self) -> bool:
-        return len(self.x) == 4
-
-    # ------------------------------------------------------------------ prediction
-    def predict_odometry(self, v: float, w: float, dt: float, sigma_v: float, sigma_w: float,
-                         sigma_acc: float = 0.5) -> None:
-        """Unicycle step over ``dt`` with speed ``v`` (ignored when v is a state) and yaw rate ``w``."""
-        th = self.x[2]
-        c, s = math.cos(th), math.sin(th)
-        n = len(self.x)
-        G = np.eye(n)
-        if self.has_speed:
-            v = self.x[3]
-            G[0, 3], G[1, 3] = c * dt, s * dt
-        G[0, 2], G[1, 2] = -s * dt * v, c * dt * v
-        Wm = np.zeros((n, 2))
-        Q = np.zeros((n, n))
-        if self.has_speed:
-            Q[3, 3] = sigma_acc**2 * dt
-        else:
-            Wm[0, 0], Wm[1, 0] = c * dt, s * dt
-        Wm[2, 1] = dt
-        self.x[0] += v * dt * c
-        self.x[1] += v * dt * s
-        self.x[2] = wrap_angle(th + w * dt)
-        self.P = G @ self.P @ G.T + Wm @ np.diag([sigma_v**2, sigma_w**2]) @ Wm.T + Q
-
-    def predict_increment(self, delta: NDArray[np.float64], cov: NDArray[np.float64]) -> None:
-        """Compose a body-frame increment (dx, dy, dyaw) with additive covariance ``cov``."""
-        th = self.x[2]
-        c, s = math.cos(th), math.sin(th)
-        dx, dy, dth = delta
-        n = len(self.x)
-        G = np.eye(n)
-        G[0, 2], G[1, 2] = -s * dx - c * dy, c * dx - s * dy
-        V = np.zeros((n, 3))
-        V[:2, :2] = [[c, -s], [s, c]]
-        V[2, 2] = 1.0
-        self.x[0] += c * dx - s * dy
-        self.x[1] += s * dx + c * dy
-        self.x[2] = wrap_angle(th + dth)
-        self.P = G @ self.P @ G.T + V @ cov @ V.T
-
-    # ------------------------------------------------------------------ corrections
-    def _update(self, sensor: str, nu: NDArray, H: NDArray, R: NDArray, t: float | None = None,
-                angle: bool = False) -> bool:
-        """Gated Joseph update; ``t`` the measurement time [s] for the gate's time rules (default:
-        the number of updates so far). False if the measurement was rejected."""
-        self.n_updates += 1
-        HPH = H @ self.P @ H.T
-        S = HPH + R
-        verdict = self.gater.test(sensor, float(self.n_updates if t is None else t), nu, HPH, R, angle=angle)
-        if verdict == "reject":
-            return False
-        if verdict == "reinit":  # sustained evidence: the measured components restart at the measurement
-            idx = np.flatnonzero(H.any(axis=0))
-            z = self.x[idx] + nu
-            if angle:
-                z = wrap_angle(z)
-            reinit_block(self.x, self.P, idx, z, R * self.gater.scale(sensor))
-            return True
-        K = self.P @ H.T @ np.linalg.inv(S)
-        self.x = self.x + K @ nu
-        self.x[2] = wrap_angle(self.x[2])
-        A = np.eye(len(self.x)) - K @ H
-        self.P = A @ self.P @ A.T + K @ R @ K.T
-        self.P = 0.5 * (self.P + self.P.T)
-        return True
-
-    def update_position(self, xy: tuple[float, float], sigma: float, t: float | None = None) -> bool:
-        H = np.zeros((2, len(self.x)))
-        H[0, 0] = H[1, 1] = 1.0
-        return self._update("gnss", np.asarray(xy) - self.x[:2], H, np.eye(2) * sigma**2, t)
-
-    def update_heading(self, yaw: float, sigma: float, t: float | None = None) -> bool:
-        H = np.zeros((1, len(self.x)))
-        H[0, 2] = 1.0
-        return self._update("heading", np.array([wrap_angle(yaw - self.x[2])]), H, np.array([[sigma**2]]), t,
-                            angle=True)
-
-    def update_speed(self, v: float, sigma: float, t: float | None = None) -> bool:
-        H = np.zeros((1, 4))
-        H[0, 3] = 1.0
-        return self._update("speed", np.array([v - self.x[3]]), H, np.array([[sigma**2]]), t)
 
 
 def initial_state(records: Iterable[Record], speed: bool) -> tuple[NDArray, NDArray, str]:
@@ -188,24 +86,37 @@ def _sig(v: float, default: float) -> float:
     return default if not math.isfinite(v) else v
 
 
+#: options of the IMU motion (``motion="imu"``; run_ekf fills the noise from the log's IMU model,
+#: :func:`graphnav.estimators.imu_model.imu_noise`): densities [per sqrt(s)], bias/current states,
+#: their priors and random walks, the initial velocity ``(v_x, v_y, sigma)``, sigmas for records without one
+IMU_DEFAULTS: dict[str, Any] = {
+    "acc_density": 0.0039, "gyro_density": math.radians(0.033), "acc_bias_rw": 1e-5,
+    "gyro_bias_rw": math.radians(1e-4), "bias": True, "current": False, "sigma_bias_acc": 0.01,
+    "sigma_bias_gyro_deg": 0.1, "sigma_current0": 0.5, "q_current": 0.005, "v0": (0.0, 0.0, 2.0),
+    "sigma_gnss_velocity": 0.1, "sigma_water_speed": 0.1, "use_velocity": True, "use_odometry": True,
+}
+
 MatchFn = Callable[..., Any]  # graphnav.scan.icp.match_scans(scan, prev, init=...) -> MatchResult
 
 
 class EkfStepper:
     """The EKF's record-by-record cycle, shared by the batch :func:`run_ekf` and the online
     :class:`graphnav.online.ekf_online.EkfOnline`: ``step(record)`` predicts to the record's time
-    (unicycle odometry, the beacon paper's eq. 3, with the last SOG/ROT control held) or composes an ICP increment
+    (unicycle odometry, the beacon paper's eq. 3, with the last SOG/ROT control held; or the IMU,
+    ``motion="imu"``, :class:`graphnav.estimators.ins_ekf.InsEkf`, each record over its own interval
+    and the last one held up to a measurement between records) or composes an ICP increment
     (``motion="icp"``: consecutive scans matched by ``match``, default
-    :func:`graphnav.scan.icp.match_scans`), then applies the gated GNSS/heading update (:class:`PoseEkf`).
+    :func:`graphnav.scan.icp.match_scans`), then applies the gated GNSS/heading (and with the IMU,
+    GNSS velocity and water speed) update. ``imu``: the IMU motion's options (:data:`IMU_DEFAULTS`).
     ``keep`` bounds the timing buffers (``None``: keep all)."""
 
     def __init__(self, x0: NDArray[np.float64], P0: NDArray[np.float64], *, motion: str = "odometry",
                  gate: float | None = 0.999, sigma_v: float = 0.5,
                  sigma_w: float = math.radians(0.5), sigma_acc: float = 0.5, use_gnss: bool = True,
                  use_heading: bool = True, match: MatchFn | None = None,
-                 keep: int | None = None, **gating: Any) -> None:
-        if motion not in ("odometry", "icp"):
-            raise ValueError(f"motion must be 'odometry' or 'icp', not {motion!r}")
+                 keep: int | None = None, imu: dict[str, Any] | None = None, **gating: Any) -> None:
+        if motion not in ("odometry", "icp", "imu"):
+            raise ValueError(f"motion must be 'odometry', 'icp' or 'imu', not {motion!r}")
         if motion == "icp" and match is None:
             if not icp_available():
                 raise ValueError("ICP motion needs graphnav.scan.icp (not installed in this build)")
@@ -213,14 +124,34 @@ class EkfStepper:
         unknown = set(gating) - set(GATING_DEFAULTS)
         if unknown:
             raise ValueError(f"unknown ekf option(s): {sorted(unknown)}")
-        self.f = PoseEkf(x0, P0, gate=gate, **gating)
+        unknown = set(imu or {}) - set(IMU_DEFAULTS)
+        if unknown:
+            raise ValueError(f"unknown ekf option(s): {sorted(unknown)}")
+        self.imu_opts = io = {**IMU_DEFAULTS, **(imu or {})}
+        if motion == "imu":
+            bias, cur = bool(io["bias"]), bool(io["current"])
+            vx, vy, sv = io["v0"]
+            x = [*np.asarray(x0, float)[:3], vx, vy] + [0.0] * (3 * bias) + [0.0] * (2 * cur)
+            d = [sv ** 2] * 2 + [io["sigma_bias_acc"] ** 2] * (2 * bias) \
+                + [math.radians(io["sigma_bias_gyro_deg"]) ** 2] * bias + [io["sigma_current0"] ** 2] * (2 * cur)
+            P = np.zeros((len(x), len(x)))
+            P[:3, :3] = np.asarray(P0, float)[:3, :3]
+            P[3:, 3:] = np.diag(d)
+            self.f: PoseEkf = InsEkf(np.array(x), P, bias=bias, current=cur, acc_density=io["acc_density"],
+                                     gyro_density=io["gyro_density"], acc_bias_rw=io["acc_bias_rw"],
+                                     gyro_bias_rw=io["gyro_bias_rw"], current_rw=io["q_current"],
+                                     gate=gate, **gating)
+        else:
+            self.f = PoseEkf(x0, P0, gate=gate, **gating)
         self.motion = motion
-        self.kinds: tuple[type, ...] = (Gnss, Heading, Odometry) if motion == "odometry" else (Gnss, Heading, Scan)
+        self.kinds: tuple[type, ...] = {"odometry": (Gnss, Heading, Odometry), "icp": (Gnss, Heading, Scan),
+                                        "imu": (Gnss, Heading, Imu, GnssVelocity, WaterSpeed, Odometry)}[motion]
         self.sigma_v, self.sigma_w, self.sigma_acc = sigma_v, sigma_w, sigma_acc
         self.use_gnss, self.use_heading = use_gnss, use_heading
         self.match = match
         self.t: float | None = None  # time of the latest record taken (the state is reported at it)
         self.u: Odometry | None = None  # the held control
+        self.imu_u: Imu | None = None  # the held IMU record
         self.prev_scan: Scan | None = None
         self.last_inc, self.last_cov = np.zeros(3), np.eye(3)
         self.icp_failed = 0
@@ -253,8 +184,18 @@ class EkfStepper:
             if u is not None and self.motion == "odometry":
                 f.predict_odometry(u.v, u.w, r.t - self.t, _sig(u.sigma_v, self.sigma_v),
                                    _sig(u.sigma_w, self.sigma_w), self.sigma_acc)
+            elif self.motion == "imu":
+                m = r if isinstance(r, Imu) else self.imu_u  # a record is the mean over its own interval
+                if m is not None:
+                    f.predict_imu(m.ax, m.ay, m.wz, r.t - self.t)  # type: ignore[attr-defined]
             self.t = r.t
-        if isinstance(r, Odometry):
+        io = self.imu_opts
+        if isinstance(r, Imu):
+            self.imu_u = r
+        elif isinstance(r, Odometry) and self.motion == "imu":
+            if io["use_odometry"]:
+                f.update_sog(r.v, _sig(r.sigma_v, self.sigma_v), r.t)  # type: ignore[attr-defined]
+        elif isinstance(r, Odometry):
             self.u = r
             if f.has_speed:
                 f.update_speed(r.v, _sig(r.sigma_v, self.sigma_v), r.t)
@@ -262,6 +203,10 @@ class EkfStepper:
             f.update_position((r.x, r.y), r.sigma, r.t)
         elif isinstance(r, Heading) and self.use_heading:
             f.update_heading(r.yaw, r.sigma, r.t)
+        elif isinstance(r, GnssVelocity) and io["use_velocity"]:
+            f.update_velocity((r.vx, r.vy), _sig(r.sigma, io["sigma_gnss_velocity"]), r.t)  # type: ignore
+        elif isinstance(r, WaterSpeed) and io["current"]:
+            f.update_water_speed(r.v, _sig(r.sigma_v, io["sigma_water_speed"]), r.t)  # type: ignore
         self.step_ms.append((time.perf_counter() - t0) * 1e3)
         return True
 
@@ -282,22 +227,63 @@ class EkfStepper:
         return self.last_inc, np.diag(np.square(CV_BRIDGE_SIGMA))
 
 
+def auto_motion(log: NavLog) -> str:
+    """``motion="auto"``: odometry if the log has it, else the IMU, else ICP on the scans."""
+    if len(log.of("odometry")) >= 2:
+        return "odometry"
+    return "imu" if len(log.of("imu")) >= 2 else "icp"
+
+
+def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
+    """The IMU motion's options for ``log`` (:data:`IMU_DEFAULTS`): the noise densities and bias
+    random walks of the log's IMU model (:func:`graphnav.estimators.imu_model.imu_noise`, the
+    graph's), bias states when the IMU has a bias and current states when the log has water speed
+    (``"auto"``), the initial velocity from ``meta["initial_velocity"]`` or the first GNSS velocity;
+    ``given`` (options of the same names) wins."""
+    from .imu_model import imu_noise, resolve_flag, wants_bias
+
+    m = imu_noise(log)
+    given = dict(given)
+    out: dict[str, Any] = {**IMU_DEFAULTS, "acc_density": m["acc_std"] / math.sqrt(m["hz"]),
+                           "gyro_density": m["gyro_std"] / math.sqrt(m["hz"]),
+                           "acc_bias_rw": m["acc_bias_rw"], "gyro_bias_rw": m["gyro_bias_rw"]}
+    out["bias"] = resolve_flag(given.pop("bias", "auto"), wants_bias(log)[0], "bias")
+    out["current"] = resolve_flag(given.pop("current", "auto"), bool(log.of("water_speed")), "current")
+    v0 = log.meta.get("initial_velocity") if isinstance(log.meta, dict) else None
+    gv = log.of("gnss_velocity")
+    t0 = log.t0
+    if v0 is not None:
+        out["v0"] = (float(v0[0]), float(v0[1]), 0.2)
+    elif gv and t0 is not None and gv[0].t - t0 <= 1.0:
+        out["v0"] = (gv[0].vx, gv[0].vy, 3.0 * _sig(gv[0].sigma, out["sigma_gnss_velocity"]))
+    out.update(given)
+    return out
+
+
 def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str = "auto", speed: bool = False,
             gate: float | None = 0.999, sigma_v: float = 0.5,
             sigma_w: float = math.radians(0.5), sigma_acc: float = 0.5, use_gnss: bool = True,
             use_heading: bool = True, **gating: Any) -> RunResult:
-    """EKF over a log. ``motion``: ``"odometry"``, ``"icp"`` or ``"auto"`` (odometry if the log has
-    it, else ICP on the scans). ``gate``: chi-square probability (``None`` disables gating);
-    ``gating``: the other options of :class:`~graphnav.estimators.gating.InnovationGate`
-    (``reinit_n``, ``confirm_n``, ``confirm_s``, ``reinit_after_s``, ``scale_window``).
-    Sigmas in the records win over ``sigma_v``/``sigma_w``. One estimate per record time."""
+    """EKF over a log. ``motion``: ``"odometry"``, ``"imu"``, ``"icp"`` or ``"auto"``
+    (:func:`auto_motion`: odometry if the log has it, else the IMU, else ICP on the scans). ``gate``:
+    chi-square probability (``None`` disables gating); ``gating``: the other options of
+    :class:`~graphnav.estimators.gating.InnovationGate` (``reinit_n``, ``confirm_n``, ``confirm_s``,
+    ``reinit_after_s``, ``scale_window``) and the IMU motion's (:data:`IMU_DEFAULTS`, filled from the
+    log by :func:`imu_options`). Sigmas in the records win over ``sigma_v``/``sigma_w``. One estimate
+    per record time."""
     if motion == "auto":
-        motion = "odometry" if len(log.of("odometry")) >= 2 else "icp"
+        motion = auto_motion(log)
+    imu_given = {k: gating.pop(k) for k in list(gating) if k in IMU_DEFAULTS or k == "bias" or k == "current"}
+    imu = imu_options(log, imu_given) if motion == "imu" else None
+    if imu_given and motion != "imu":
+        raise ValueError(f"ekf option(s) {sorted(imu_given)} need motion='imu'")
     x0, P0, anchor = initial_state(log.records, speed)
     st = EkfStepper(x0, P0, motion=motion, gate=gate, sigma_v=sigma_v,
                     sigma_w=sigma_w, sigma_acc=sigma_acc, use_gnss=use_gnss, use_heading=use_heading,
-                    **gating)
+                    imu=imu, **gating)
     recs = [r for r in log.records if st.uses(r)]
+    if motion == "imu":  # at equal times the IMU record (the motion up to t) before the measurements at t
+        recs.sort(key=lambda r: (r.t, not isinstance(r, Imu)))
     if not recs:
         raise ValueError("ekf: the log has no usable records")
     ts, poses, covs = [], [], []
@@ -312,29 +298,47 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
     traj = Trajectory(np.array(ts), np.array(poses), np.array(covs), name="ekf")
     info: dict[str, Any] = {"anchor": anchor, "motion": motion, "speed_state": speed,
                             **st.f.gater.info(), "icp_failed": st.icp_failed}
+    if imu is not None:
+        f = st.f
+        info.update(bias_states=imu["bias"], current_states=imu["current"],
+                    process_noise={k: imu[k] for k in ("acc_density", "gyro_density", "acc_bias_rw",
+                                                        "gyro_bias_rw", "q_current")})
+        if imu["bias"]:
+            info["bias_final"] = f.x[5:8].tolist()
+        if imu["current"]:
+            ic = 5 + 3 * imu["bias"]
+            info["current_final"] = f.x[ic:ic + 2].tolist()
     return RunResult(traj, traj, np.array(st.step_ms), np.array(st.icp_ms), info=info)
 
 
 def _unmet(log: NavLog) -> str | None:
     has_odo = len(log.of("odometry")) >= 2
+    has_imu = len(log.of("imu")) >= 2
     has_scans = len(log.of("scan")) >= 2
-    if not has_odo and not (has_scans and icp_available()):
+    if not has_odo and not has_imu and not (has_scans and icp_available()):
         extra = " (scans need graphnav.scan.icp, not installed)" if has_scans else ""
-        return "needs odometry records" + extra
+        return "needs odometry or imu records" + extra
     return None
 
 
 def _inputs(log: NavLog, options: dict) -> set[str]:
-    """The kinds :func:`run_ekf` reads with ``options``: its motion's (odometry or scans), the updates
-    it makes, and its start (:func:`initial_state`)."""
+    """The kinds :func:`run_ekf` reads with ``options``: its motion's (odometry, IMU or scans), the
+    updates it makes, and its start (:func:`initial_state`)."""
     motion = options.get("motion", "auto")
     if motion == "auto":
-        motion = "odometry" if len(log.of("odometry")) >= 2 else "icp"
-    kinds = {"pose_prior", "odometry" if motion == "odometry" else "scan"}
+        motion = auto_motion(log)
+    kinds = {"pose_prior", {"odometry": "odometry", "imu": "imu", "icp": "scan"}[motion]}
     if options.get("use_gnss", True):
         kinds.add("gnss")
     if options.get("use_heading", True):
         kinds.add("heading")
+    if motion == "imu":
+        if options.get("use_velocity", True):
+            kinds.add("gnss_velocity")
+        if options.get("current", "auto") not in (False, "false"):
+            kinds.add("water_speed")
+        if options.get("use_odometry", True):
+            kinds.add("odometry")  # speed over ground, an update
     if options.get("speed", False):
         kinds.add("odometry")  # the speed state starts at the first odometry speed
     if log.pose_prior() is None and log.of("gnss"):
@@ -344,5 +348,6 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
 
 ESTIMATORS = {
     "ekf": EstimatorSpec(run_ekf, _unmet,
-                         "EKF on x, y, yaw (+speed): odometry or ICP motion, gated GNSS + compass", "filter", _inputs),
+                         "EKF: odometry, IMU (INS/GNSS, bias + current states) or ICP motion; "
+                         "gated GNSS (+velocity), compass, water speed", "filter", _inputs),
 }

@@ -46,7 +46,8 @@ from scipy.stats import chi2
 from ..log import NavLog
 from . import EstimatorSpec, OnEstimate, RunResult
 from .fuzzy import FuzzyAlpha, Thresholds
-from .ukf import DEFAULTS, inputs, measurement_table, run_nav_filter, unmet
+from .imu_model import resolve_flag, wants_bias
+from .ukf import DEFAULTS, channel_variances, inputs, measurement_table, run_nav_filter, unmet
 
 
 class FuzzyCovarianceMatcher:
@@ -140,20 +141,30 @@ class FuzzyCovarianceMatcher:
 
 
 def run_fuzzy_ukf(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
+    """fuzzy-ukf; ``bias``: ``"auto"`` (default: bias states when the IMU has a bias,
+    :func:`graphnav.estimators.imu_model.wants_bias`), true or false (the paper's 5-state filter)."""
+    return _run(log, "fuzzy-ukf", on_estimate, options)
+
+
+def _run(log: NavLog, name: str, on_estimate: OnEstimate | None, options: dict[str, Any]) -> RunResult:
     options = dict(options)
     window = int(options.pop("window", 30))
     r_update = str(options.pop("r_update", "compound"))
     c_a = str(options.pop("c_a", "centered"))
-    bias = bool(options.pop("bias", False))
+    auto_bias, _ = wants_bias(log)
+    bias = resolve_flag(options.pop("bias", "auto"), auto_bias, "bias")
     # with bias states the model error is estimated in the state: no inflation by default
     mean_test = options.pop("mean_test", None if bias else 0.95)
     mean_test = None if mean_test is None else float(mean_test)
 
     o = {**DEFAULTS, **options}
-    r0 = np.array([o["r_gps_x"], o["r_gps_y"], np.radians(o["r_com_deg"])]) ** 2
-    n = len(measurement_table(log)["t"])
+    tab = measurement_table(log)
+    rk = channel_variances(tab, o)[:, :3]
+    # the prior R per channel: the records' (median) variance, or the options' (Table 2)
+    r0 = np.array([np.nanmedian(rk[:, j]) if np.isfinite(rk[:, j]).any() else 1.0 for j in range(3)])
+    n = len(tab["t"])
     matcher = FuzzyCovarianceMatcher(r0, n, window=window, r_update=r_update, c_a=c_a, mean_test=mean_test)
-    res = run_nav_filter(log, "fuzzy-ukf-bias" if bias else "fuzzy-ukf", bias=bias, adapter=matcher,
+    res = run_nav_filter(log, name, bias=bias, adapter=matcher,
                          on_estimate=on_estimate, options=options)
     res.info["options"].update(window=window, r_update=r_update, bias=bias, c_a=c_a, mean_test=mean_test)
     res.info.update(matcher.hist)
@@ -162,7 +173,7 @@ def run_fuzzy_ukf(log: NavLog, *, on_estimate: OnEstimate | None = None, **optio
 
 
 def run_fuzzy_ukf_bias(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
-    return run_fuzzy_ukf(log, on_estimate=on_estimate, **{**options, "bias": True})
+    return _run(log, "fuzzy-ukf-bias", on_estimate, {**options, "bias": True})
 
 
 ESTIMATORS = {

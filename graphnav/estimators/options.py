@@ -133,11 +133,39 @@ _MEANINGS: dict[str, dict[str, str]] = {
                  "use_known": "false: ignore the log's charted beacons (map every beacon)"},
     "ukf": {"alpha": "sigma-point spread (Merwe weights)", "beta": "sigma-point weight of the prior (2: Gaussian)",
             "kappa": "secondary sigma-point spread", "sigma_v0": "[m/s] prior 1-sigma of the initial velocity",
-            "sigma_bias_acc": "[m/s^2] ukf-bias: prior on the residual accelerometer bias",
-            "sigma_bias_gyro_deg": "[deg/s] ukf-bias: prior on the residual gyro bias",
-            "q_bias_acc": "[m/s^2/sqrt(s)] ukf-bias: accelerometer bias random walk",
-            "q_bias_gyro_deg": "[deg/s/sqrt(s)] ukf-bias: gyro bias random walk"},
+            "q_bias_gyro_deg": "[deg/s/sqrt(s)] bias states: gyro bias random walk (null: the log's meta['imu'])",
+            "q_bias_acc": "[m/s^2/sqrt(s)] bias states: accelerometer bias random walk (null: the log's meta['imu'])",
+            "sigma_bias_acc": "[m/s^2] bias states: prior on the residual accelerometer bias",
+            "sigma_bias_gyro_deg": "[deg/s] bias states: prior on the residual gyro bias",
+            "r_gps_x": "[m] GNSS x sigma (null: the records'; Table 2: 6)",
+            "r_gps_y": "[m] GNSS y sigma (null: the records'; Table 2: 7)",
+            "r_com_deg": "[deg] compass sigma (null: the records'; Table 2: 0.5)",
+            "q_acc": "[m/s^2] IMU acceleration noise per sample (null: meta['imu'] acc_std, else Table 2's 0.0039)",
+            "q_gyro_deg": "[deg/s] IMU yaw-rate noise per sample (null: meta['imu'] gyro_std, else Table 2's 0.033)",
+            "current": "water-current states: auto (when the log has water_speed), true, false",
+            "sigma_current0": "[m/s] prior 1-sigma of the water current",
+            "sigma_water_speed": "[m/s] water-speed sigma when the record gives none",
+            "q_current": "[m/s/sqrt(s)] water-current random walk",
+            "bias": "IMU bias states: auto (unless meta['imu'] says bias_free), true, false (the paper's 5-state UKF)"},
 }
+_MEANINGS["ekf"].update({
+    "motion": "odometry, imu, icp or auto (odometry if the log has it, else the IMU, else ICP on the scans)",
+    "acc_density": "[m/s^2/sqrt(Hz)] IMU motion: accelerometer noise density (null: the log's meta['imu'])",
+    "gyro_density": "[rad/s/sqrt(Hz)] IMU motion: gyro noise density (null: the log's meta['imu'])",
+    "acc_bias_rw": "[m/s^2/sqrt(s)] IMU motion: accelerometer bias random walk (null: the log's meta['imu'])",
+    "gyro_bias_rw": "[rad/s/sqrt(s)] IMU motion: gyro bias random walk (null: the log's meta['imu'])",
+    "bias": "IMU motion: bias states, auto (unless meta['imu'] says bias_free), true, false",
+    "current": "IMU motion: water-current states, auto (when the log has water_speed), true, false",
+    "sigma_bias_acc": "[m/s^2] IMU motion: prior on the residual accelerometer bias",
+    "sigma_bias_gyro_deg": "[deg/s] IMU motion: prior on the residual gyro bias",
+    "sigma_current0": "[m/s] IMU motion: prior 1-sigma of the water current",
+    "q_current": "[m/s/sqrt(s)] IMU motion: water-current random walk",
+    "v0": "IMU motion: initial velocity [vx, vy, sigma] (null: meta initial_velocity, else the first GNSS velocity)",
+    "sigma_gnss_velocity": "[m/s] GNSS velocity sigma when the record gives none",
+    "sigma_water_speed": "[m/s] water-speed sigma when the record gives none",
+    "use_velocity": "false: GNSS velocities are not used (IMU motion)",
+    "use_odometry": "false: odometry speeds are not used as SOG updates (IMU motion)",
+})
 
 
 def _fill(options: list[Option], table: str) -> list[Option]:
@@ -156,9 +184,10 @@ def _ukf_options(group: str) -> list[Option]:
         if m and _comment(line):
             comments[m.group(1)] = _comment(line)
     gate_doc = {o["name"]: o["meaning"] for o in function_options(gating.InnovationGate, "gate")}
+    gate_word = "innovation gate (docs/ekf.md, Gating)"
     return _fill([{"name": k, "default": v, "group": group,
-                   "meaning": comments.get(k) or gate_doc.get(k) or ("innovation gate (docs/ekf.md, Gating)"
-                                                                     if k in gating.GATING_DEFAULTS else "")}
+                   "meaning": _MEANINGS["ukf"].get(k) or comments.get(k) or gate_doc.get(k)
+                   or (gate_word if k in gating.GATING_DEFAULTS else "")}
                   for k, v in ukf.DEFAULTS.items()], "ukf")
 
 
@@ -172,11 +201,16 @@ def describe(name: str) -> list[Option]:
 
         return dataclass_options(SmootherConfig, "navigation graph (SmootherConfig)", skip=("solver",))
     if name == "ekf":
-        from .ekf import run_ekf
+        from .ekf import IMU_DEFAULTS, run_ekf
         from .gating import InnovationGate
 
-        return _fill(function_options(run_ekf, "ekf"), "ekf") + function_options(InnovationGate, "innovation gate",
-                                                                                 skip=("gate",))
+        imu: list[Option] = [{"name": k, "group": "IMU motion (motion=imu)", "meaning": "",
+                              "default": "auto" if k in ("bias", "current") else
+                              None if k in ("acc_density", "gyro_density", "acc_bias_rw", "gyro_bias_rw", "v0")
+                              else v} for k, v in IMU_DEFAULTS.items()]
+        return (_fill(function_options(run_ekf, "ekf"), "ekf") + function_options(InnovationGate, "innovation gate",
+                                                                                  skip=("gate",))
+                + _fill(imu, "ekf"))
     if name == "icp-dr":
         from ..scan.icp import IcpConfig
         from .icp_odometry import run_icp_dr
@@ -188,7 +222,8 @@ def describe(name: str) -> list[Option]:
 
         return dataclass_options(ScanToMapConfig, "scan-to-map (ScanToMapConfig)")
     if name in ("ukf", "ukf-bias"):
-        return _ukf_options(name)
+        bias = [{"name": "bias", "default": "auto", "group": name, "meaning": _MEANINGS["ukf"]["bias"]}]
+        return (bias if name == "ukf" else []) + _ukf_options(name)
     if name == "ekf-slam":
         from .ekf_slam import run_ekf_slam
 
@@ -207,8 +242,9 @@ def describe(name: str) -> list[Option]:
                 "meaning": "confidence level of the test of the innovations' window mean; when significant "
                            "the predicted covariance is inflated to cover it (null: off)"}]
         if name == "fuzzy-ukf":
-            own.append({"name": "bias", "default": False, "group": "fuzzy",
-                        "meaning": "true: the UKF with bias states (as fuzzy-ukf-bias)"})
+            own.append({"name": "bias", "default": "auto", "group": "fuzzy",
+                        "meaning": "IMU bias states: auto (unless meta['imu'] says bias_free; then as "
+                                   "fuzzy-ukf-bias), true, false (the paper's 5-state filter)"})
         return own + _ukf_options("ukf")
     return function_options(spec.run, name)  # any other estimator: its run function's keyword arguments
 
@@ -217,9 +253,81 @@ _DESCRIBED = ("isam2", "batch", "fixed-lag", "ekf", "ekf-slam", "icp-dr", "scan-
               "fuzzy-ukf", "fuzzy-ukf-bias", "dead-reckoning")
 
 
+MAX_INT_OPTION = 2**31 - 1  # an integer option reaches C++ (GTSAM) as a C int
+MAX_FLOAT_OPTION = 1e15  # a numeric option's magnitude: its square stays far from overflow
+_SIGNED = {"kappa", "water_margin"}
+"""Numeric options that may be negative (every other numeric option is >= 0)."""
+
+
+def check_value(option: str, value: Any, default: Any) -> None:
+    """An :class:`~graphnav.config.OptionError` naming ``option`` when ``value`` is not of the kind of
+    its ``default``: a number (finite; an integer when the default is one; >= 0 unless the option is
+    signed) for a numeric default, ``true``/``false`` for a flag, a table for a table; a choice (text
+    default) or an option without a default (None) takes null, a flag, text or a finite number
+    (never a list or a table); the estimator checks the choice itself."""
+    from ..config import OptionError, Range, number
+
+    name = f"option {option}"
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise OptionError(name, f"must be true or false, got {value!r:.60}")
+    elif isinstance(default, int | float):
+        integer = isinstance(default, int)
+        hi = MAX_INT_OPTION if integer else MAX_FLOAT_OPTION
+        number(name, value, Range(lo=-hi if option.rpartition(".")[2] in _SIGNED else 0.0, hi=hi, integer=integer))
+    elif isinstance(default, dict):
+        if not isinstance(value, dict):
+            raise OptionError(name, f"must be a table of options, got {value!r:.60}")
+    elif (default is None or isinstance(default, str)) and not (value is None or isinstance(value, bool | str)):
+        # a choice (text) or an option without a default: some also take a number (ekf-slam's gate)
+        if isinstance(value, list | dict):
+            raise OptionError(name, f"must be a single value (default {default!r}), got {value!r:.60}")
+        number(name, value, Range(lo=-MAX_FLOAT_OPTION, hi=MAX_FLOAT_OPTION))
+
+
+def _annotations(name: str) -> dict[str, str]:
+    """Option -> its type annotation (text) in the config dataclasses and run functions estimator
+    ``name``'s options come from (``float | None``: ``null`` is a value of it, text is not)."""
+    from ..graph.config import SmootherConfig
+    from ..scan.icp import IcpConfig
+    from . import ekf, ekf_slam, fuzzy_ukf, gating, get, icp_odometry
+    from .scan_to_map import ScanToMapConfig
+
+    sources: dict[str, tuple] = {
+        "isam2": (SmootherConfig,), "batch": (SmootherConfig,), "fixed-lag": (SmootherConfig,),
+        "ekf": (ekf.run_ekf, gating.InnovationGate),
+        "ekf-slam": (ekf_slam.run_ekf_slam,), "icp-dr": (icp_odometry.run_icp_dr, IcpConfig),
+        "scan-to-map": (ScanToMapConfig,)}
+    ukf = (gating.InnovationGate, fuzzy_ukf.FuzzyCovarianceMatcher)
+    out: dict[str, str] = {}
+    for src in sources.get(name, ukf if "ukf" in name else (get(name).run,)):
+        if dataclasses.is_dataclass(src):
+            out.update({f.name: str(f.type) for f in dataclasses.fields(src)})
+        else:
+            out.update({p.name: str(p.annotation) for p in inspect.signature(src).parameters.values()
+                        if p.annotation is not inspect.Parameter.empty})
+    return out
+
+
+def _by_annotation(option: str, value: Any, ann: str) -> bool:
+    """True when ``value`` is of a kind the annotation ``ann`` admits (None, a flag, text, a number);
+    an annotation that names none of them (or none given) admits anything."""
+    kinds = {"None": value is None, "bool": isinstance(value, bool),
+             "str": isinstance(value, str), "Literal": isinstance(value, str),
+             "float": isinstance(value, int | float) and not isinstance(value, bool),
+             "int": isinstance(value, int) and not isinstance(value, bool)}
+    tokens = set(re.findall(r"[A-Za-z_]+", ann))
+    if tokens & {"dict", "list", "tuple", "Mapping", "Sequence", "Any", "object"}:
+        return True
+    named = [k for k in kinds if k in tokens]
+    return not named or any(kinds[k] for k in named)
+
+
 def check(name: str, options: dict[str, Any]) -> None:
     """A ``ValueError`` naming the unknown option(s) of estimator ``name`` and the known ones (when
-    its options are all known: the estimators described here, or a run function without ``**``)."""
+    its options are all known: the estimators described here, or a run function without ``**``); an
+    :class:`~graphnav.config.OptionError` naming an option whose value is not of its kind
+    (:func:`check_value`), and a ``cloud`` table checked as the cloud matcher's options."""
     from . import get
 
     if not options:
@@ -227,8 +335,34 @@ def check(name: str, options: dict[str, Any]) -> None:
     if name not in _DESCRIBED and any(p.kind is p.VAR_KEYWORD
                                       for p in inspect.signature(get(name).run).parameters.values()):
         return
-    known = {o["name"] for o in describe(name)}
+    described = describe(name)
+    known = {o["name"] for o in described}
     bad = sorted(set(options) - known)
     if bad:
         raise ValueError(f"unknown {name} option(s) {bad}; known: {', '.join(sorted(known)) or 'none'} "
                          f"(graphnav run --list-options {name})")
+    defaults: dict[str, list[Any]] = {}
+    for o in described:
+        defaults.setdefault(o["name"], []).append(o["default"])
+    from ..config import OptionError
+
+    annotations = _annotations(name)
+    for key, value in options.items():
+        ann = annotations.get(key, "")
+        if value is None and "None" in ann:
+            continue
+        errors = []
+        for default in defaults[key]:  # an option of two graphs (lag): valid for either
+            try:
+                check_value(key, value, default)
+                break
+            except ValueError as exc:
+                errors.append(exc)
+        else:
+            raise errors[0]
+        if ann and not _by_annotation(key, value, ann):
+            raise OptionError(f"option {key}", f"must be of type {ann}, got {value!r:.60}")
+    if isinstance(options.get("cloud"), dict) and name in ("isam2", "batch", "fixed-lag"):
+        from ..scan.cloud_match import CloudMatchConfig
+
+        CloudMatchConfig.from_options(dict(options["cloud"]))

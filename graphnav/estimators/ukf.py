@@ -36,6 +36,7 @@ from ..log import NavLog
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
 from .gating import GATING_DEFAULTS, InnovationGate, reinit_block
+from .imu_model import imu_noise, resolve_flag, wants_bias
 
 # Table 2: the filters' a-priori noise (1-sigma)
 TABLE2 = {
@@ -75,22 +76,27 @@ def wrapped_mean(X: NDArray, wm: NDArray, angle_idx: int) -> NDArray:
 
 
 class UnscentedNav:
-    """The appendix UKF for the USV model; ``n_bias = 3`` adds accelerometer/gyro bias states."""
+    """The appendix UKF for the USV model; ``n_bias = 3`` adds accelerometer/gyro bias states,
+    ``current=True`` the water current ``[c_x, c_y]`` (a random walk) after them."""
 
     TH = 4  # index of theta
 
     def __init__(self, x0: NDArray, P0: NDArray, *, q_acc: float, q_gyro: float,
-                 q_bias_acc: float = 0.0, q_bias_gyro: float = 0.0,
+                 q_bias_acc: float = 0.0, q_bias_gyro: float = 0.0, current: bool = False, q_current: float = 0.0,
                  alpha: float = 0.5, beta: float = 2.0, kappa: float = 0.0) -> None:
         self.x = np.array(x0, dtype=float)
         self.P = np.array(P0, dtype=float)
         self.n = n = self.x.shape[0]
-        self.bias = n == 8
-        if n not in (5, 8):
-            raise ValueError("state must have 5 or 8 entries")
+        nb = n - 5 - 2 * bool(current)
+        if nb not in (0, 3):
+            raise ValueError("state must have 5 or 8 entries (+2 with the current)")
+        self.bias = nb == 3
+        self.ib = 5 if self.bias else None  # first bias index
+        self.ic = 5 + nb if current else None  # first current index
         self.wm, self.wc, self.lam = merwe_weights(n, alpha, beta, kappa)
         self.q_acc, self.q_gyro = q_acc, q_gyro
         self.q_bias = np.array([q_bias_acc, q_bias_acc, q_bias_gyro]) ** 2
+        self.q_current = q_current
         self._Q_T = None
         self.P_pred = self.P.copy()
 
@@ -104,7 +110,9 @@ class UnscentedNav:
                 Q[i + 2, i + 2] = qa * T * T
             Q[4, 4] = (self.q_gyro * T) ** 2
             if self.bias:
-                Q[5:, 5:] = np.diag(self.q_bias * T)
+                Q[5:8, 5:8] = np.diag(self.q_bias * T)
+            if self.ic is not None:
+                Q[self.ic, self.ic] = Q[self.ic + 1, self.ic + 1] = self.q_current ** 2 * T
             self._Q_T = (T, Q)
         return self._Q_T[1]
 
@@ -150,6 +158,32 @@ class UnscentedNav:
         P = self.P - K @ PHt.T
         self.P = 0.5 * (P + P.T)
 
+    def water_speed_innovation(self, v: float) -> tuple[NDArray, NDArray, NDArray]:
+        """Unscented transform of the speed through water along the bow,
+        ``h(x) = (v_x - c_x) cos(theta) + (v_y - c_y) sin(theta)`` (current states required):
+        ``(eps (1,), P_zz without R (1, 1), P_xz (n, 1))``."""
+        if self.ic is None:
+            raise ValueError("a water-speed update needs the current states")
+        X = sigma_points(self.x, self.P, self.lam)
+        th = X[:, 4]
+        Z = (X[:, 2] - X[:, self.ic]) * np.cos(th) + (X[:, 3] - X[:, self.ic + 1]) * np.sin(th)
+        zm = float(self.wm @ Z)
+        dz = Z - zm
+        D = X - self.x
+        D[:, 4] = wrap_angle(D[:, 4])
+        pzz = float(self.wc @ (dz * dz))
+        pxz = (D.T * self.wc) @ dz
+        return np.array([v - zm]), np.array([[pzz]]), pxz[:, None]
+
+    def update_nonlinear(self, eps: NDArray, Pzz: NDArray, Pxz: NDArray, R: NDArray) -> None:
+        """The unscented Kalman update ``K = P_xz (P_zz + R)^-1``, ``P -= K S K^T``."""
+        S = Pzz + R
+        K = Pxz @ np.linalg.inv(S)
+        self.x = self.x + K @ eps
+        self.x[4] = wrap_angle(self.x[4])
+        P = self.P - K @ S @ K.T
+        self.P = 0.5 * (P + P.T)
+
 
 # --- driving a filter over a log --------------------------------------------------------------
 
@@ -174,8 +208,17 @@ def inflate(P: NDArray, lam: NDArray) -> NDArray:
     return P * np.outer(s, s)
 
 
+#: measurement channels of :func:`measurement_table`: GNSS x, y [m], compass [rad], GNSS velocity
+#: east, north [m/s], speed through water [m/s]
+CHANNELS = ("gnss_x", "gnss_y", "heading", "gnss_vx", "gnss_vy", "water_speed")
+_SOURCES = (("gnss", ("x", "y"), "sigma", 0), ("heading", ("yaw",), "sigma", 2),
+            ("gnss_velocity", ("vx", "vy"), "sigma", 3), ("water_speed", ("v",), "sigma_v", 5))
+
+
 def measurement_table(log: NavLog) -> dict[str, NDArray]:
-    """Filter timeline (start + IMU times) and the GNSS/compass values attached to each step."""
+    """Filter timeline (start + IMU times) and the measurements attached to each step: ``z`` (n, 6)
+    values and ``r`` (n, 6) the records' variances (NaN: none there, or no sigma given), channels
+    :data:`CHANNELS`; a record attaches to the nearest step within half an IMU interval."""
     imu = log.columns("imu")
     if len(imu["t"]) < 1:
         raise ValueError("needs imu records")
@@ -183,8 +226,9 @@ def measurement_table(log: NavLog) -> dict[str, NDArray]:
     dt0 = float(np.median(np.diff(ti))) if len(ti) > 1 else 1.0
     t = np.concatenate([[ti[0] - dt0], ti])
     n = len(t)
-    z = np.full((n, 3), np.nan)
-    for kind, cols in (("gnss", ("x", "y")), ("heading", ("yaw",))):
+    z = np.full((n, len(CHANNELS)), np.nan)
+    r = np.full((n, len(CHANNELS)), np.nan)
+    for kind, cols, sig, j0 in _SOURCES:
         c = log.columns(kind)
         if not len(c["t"]):
             continue
@@ -192,56 +236,109 @@ def measurement_table(log: NavLog) -> dict[str, NDArray]:
         km = np.clip(k - 1, 0, n - 1)
         k = np.where(np.abs(t[km] - c["t"]) < np.abs(t[k] - c["t"]), km, k)
         ok = np.abs(t[k] - c["t"]) <= 0.5 * dt0
-        j0 = 0 if kind == "gnss" else 2
         for j, name in enumerate(cols):
             z[k[ok], j0 + j] = c[name][ok]
+            r[k[ok], j0 + j] = np.asarray(c[sig], dtype=float)[ok] ** 2
     return {"t": t, "ax": np.concatenate([[0.0], imu["ax"]]), "ay": np.concatenate([[0.0], imu["ay"]]),
-            "wz": np.concatenate([[0.0], imu["wz"]]), "z": z}
+            "wz": np.concatenate([[0.0], imu["wz"]]), "z": z, "r": r}
+
+
+def channel_variances(tab: dict[str, NDArray], opts: dict[str, Any]) -> NDArray:
+    """(n, 6) measurement variances per step: the records' sigmas (docs/ekf.md: the graph's sensor
+    model), where an option overrides them (``r_gps_x``, ``r_gps_y`` [m], ``r_com_deg`` [deg]: Table 2's
+    values reproduce the paper) or a record gives none (``sigma_gnss_velocity``, ``sigma_water_speed``)."""
+    r = tab["r"].copy()
+    for j, key, scale in ((0, "r_gps_x", 1.0), (1, "r_gps_y", 1.0), (2, "r_com_deg", math.pi / 180)):
+        if opts.get(key) is not None:
+            r[:, j] = (float(opts[key]) * scale) ** 2
+    for cols, key in (((3, 4), "sigma_gnss_velocity"), ((5,), "sigma_water_speed")):
+        for j in cols:
+            r[:, j] = np.where(np.isfinite(r[:, j]) & (r[:, j] > 0), r[:, j], float(opts[key]) ** 2)
+    z = tab["z"]
+    return np.where(np.isnan(z), np.nan, r)
 
 
 def initial_state(log: NavLog, tab: dict[str, NDArray], n_bias: int,
-                  opts: dict[str, Any]) -> tuple[NDArray, NDArray]:
-    """x0/P0 from the pose prior (else the first GNSS fix and compass heading); velocity from
-    ``meta["initial_velocity"]`` when the log knows it (the paper's known initial state), else zero."""
+                  opts: dict[str, Any], current: bool = False) -> tuple[NDArray, NDArray]:
+    """x0/P0 from the pose prior (else the first GNSS fix and compass heading, with their sigmas);
+    velocity from ``meta["initial_velocity"]`` when the log knows it (the paper's known initial state),
+    else the GNSS velocity at the first step when there is one, else zero (2 m/s); the current (if
+    estimated) zero with ``sigma_current0``."""
     prior = log.pose_prior()
-    z0 = tab["z"][~np.isnan(tab["z"][:, 0])]
-    h0 = tab["z"][~np.isnan(tab["z"][:, 2])]
+    z, r = tab["z"], channel_variances(tab, opts)
+    i0 = np.flatnonzero(~np.isnan(z[:, 0]))
+    h0 = np.flatnonzero(~np.isnan(z[:, 2]))
     if prior is not None:
         p, yaw, sp, sy = (prior.x, prior.y), prior.yaw, prior.sigma_xy, prior.sigma_yaw
     else:
-        p = tuple(z0[0, :2]) if len(z0) else (0.0, 0.0)
-        yaw = float(h0[0, 2]) if len(h0) else 0.0
-        sp, sy = TABLE2["r_gps_y"], math.radians(10.0)
+        p = tuple(z[i0[0], :2]) if len(i0) else (0.0, 0.0)
+        sp = math.sqrt(float(np.max(r[i0[0], :2]))) if len(i0) else TABLE2["r_gps_y"]
+        yaw = float(z[h0[0], 2]) if len(h0) else 0.0
+        sy = max(math.sqrt(float(r[h0[0], 2])), math.radians(10.0)) if len(h0) else math.pi
     v0 = log.meta.get("initial_velocity")
-    v, sv = ((float(v0[0]), float(v0[1])), opts["sigma_v0"]) if v0 is not None else ((0.0, 0.0), 2.0)
+    iv = np.flatnonzero(~np.isnan(z[:, 3]) & ~np.isnan(z[:, 4]))
+    if v0 is not None:
+        v, sv = (float(v0[0]), float(v0[1])), opts["sigma_v0"]
+    elif len(iv) and iv[0] <= 1:
+        v, sv = (float(z[iv[0], 3]), float(z[iv[0], 4])), 3.0 * math.sqrt(float(np.max(r[iv[0], 3:5])))
+    else:
+        v, sv = (0.0, 0.0), 2.0
     x = [p[0], p[1], v[0], v[1], yaw] + [0.0] * n_bias
     d = [sp * sp, sp * sp, sv * sv, sv * sv, sy * sy]
     if n_bias:
         d += [opts["sigma_bias_acc"] ** 2] * 2 + [math.radians(opts["sigma_bias_gyro_deg"]) ** 2]
+    if current:
+        x += [0.0, 0.0]
+        d += [opts["sigma_current0"] ** 2] * 2
     return np.array(x), np.diag(d)
 
 
 DEFAULTS: dict[str, Any] = {
-    **TABLE2, "alpha": 0.5, "beta": 2.0, "kappa": 0.0, "sigma_v0": 0.2,
+    # measurement noise: None = the records' sigmas (Table 2: r_gps_x=6, r_gps_y=7, r_com_deg=0.5)
+    "r_gps_x": None, "r_gps_y": None, "r_com_deg": None,
+    "sigma_gnss_velocity": 0.1, "sigma_water_speed": 0.1,  # [m/s] when a record gives no sigma
+    # IMU white noise per sample: None = the log's meta["imu"] (acc_std [m/s^2], gyro_std), else Table 2
+    "q_acc": None, "q_gyro_deg": None,
+    "alpha": 0.5, "beta": 2.0, "kappa": 0.0, "sigma_v0": 0.2,
     **GATING_DEFAULTS,  # the innovation gate (gating.py)
-    # ukf-bias only: prior on the residual bias after calibration, and its random walk
-    "sigma_bias_acc": 0.01, "sigma_bias_gyro_deg": 0.1, "q_bias_acc": 1e-5, "q_bias_gyro_deg": 1e-4,
+    # bias states: prior on the residual bias after calibration, and its random walk (None: meta["imu"]'s)
+    "sigma_bias_acc": 0.01, "sigma_bias_gyro_deg": 0.1, "q_bias_acc": None, "q_bias_gyro_deg": None,
+    # water current states (with water_speed records): prior [m/s] and random walk [m/s/sqrt(s)]
+    "current": "auto", "sigma_current0": 0.5, "q_current": 0.005,
 }
 
 
-def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapter | None = None,
+def _noise(log: NavLog, opts: dict[str, Any]) -> dict[str, float]:
+    """The process noise in force: options over the log's IMU model (:func:`imu_noise`)."""
+    m = imu_noise(log)
+    return {"q_acc": m["acc_std"] if opts["q_acc"] is None else float(opts["q_acc"]),
+            "q_gyro": m["gyro_std"] if opts["q_gyro_deg"] is None else math.radians(opts["q_gyro_deg"]),
+            "q_bias_acc": m["acc_bias_rw"] if opts["q_bias_acc"] is None else float(opts["q_bias_acc"]),
+            "q_bias_gyro": (m["gyro_bias_rw"] if opts["q_bias_gyro_deg"] is None
+                            else math.radians(opts["q_bias_gyro_deg"])),
+            "source": m["source"]}
+
+
+def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter: Adapter | None = None,
                    on_estimate: OnEstimate | None = None, options: dict[str, Any] | None = None) -> RunResult:
-    """Run the UKF over the log: predict with each IMU record, update with the GNSS/compass at that time."""
+    """Run the UKF over the log: predict with each IMU record, update with the GNSS/compass at that
+    time, then the GNSS velocity and (with the current states) the speed through water.
+    ``bias``: ``"auto"`` (:func:`graphnav.estimators.imu_model.wants_bias`), true or false."""
     opts = {**DEFAULTS, **(options or {})}
     unknown = set(opts) - set(DEFAULTS)
     if unknown:
         raise ValueError(f"unknown {name} option(s): {sorted(unknown)}")
+    auto_bias, bias_why = wants_bias(log)
+    bias = resolve_flag(bias, auto_bias, "bias")
     tab = measurement_table(log)
-    x0, P0 = initial_state(log, tab, 3 if bias else 0, opts)
-    f = UnscentedNav(x0, P0, q_acc=opts["q_acc"], q_gyro=math.radians(opts["q_gyro_deg"]),
-                     q_bias_acc=opts["q_bias_acc"], q_bias_gyro=math.radians(opts["q_bias_gyro_deg"]),
+    current = resolve_flag(opts["current"], bool(np.any(~np.isnan(tab["z"][:, 5]))), "current")
+    x0, P0 = initial_state(log, tab, 3 if bias else 0, opts, current)
+    qn = _noise(log, opts)
+    f = UnscentedNav(x0, P0, q_acc=qn["q_acc"], q_gyro=qn["q_gyro"],
+                     q_bias_acc=qn["q_bias_acc"], q_bias_gyro=qn["q_bias_gyro"],
+                     current=current, q_current=float(opts["q_current"]),
                      alpha=opts["alpha"], beta=opts["beta"], kappa=opts["kappa"])
-    r0 = np.array([opts["r_gps_x"], opts["r_gps_y"], math.radians(opts["r_com_deg"])]) ** 2
+    rk = channel_variances(tab, opts)
     gater = InnovationGate(**{k: opts[k] for k in GATING_DEFAULTS})
     r_gate = getattr(adapter, "r_current", None)  # an adaptive R: gate with the one it holds now
     inflation = getattr(adapter, "inflation", None)
@@ -256,19 +353,21 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapt
     pix = np.ix_(pidx, pidx)
     has = ~np.isnan(z)
     all_idx = np.array([0, 1, 4])
+    vidx = np.array([2, 3])
     sel = {}
     for k in range(n):
         t0 = time.perf_counter()
         if k:
             f.predict(tab["ax"][k], tab["ay"][k], tab["wz"][k], t[k] - t[k - 1])
-        m = has[k]
+        m = has[k, :3]
+        r0k = rk[k, :3]
         if inflation is not None and m.any():
             lam = np.ones(3)
             lam[m] = inflation(np.flatnonzero(m), f.P[pidx, pidx][m])
             if np.any(lam > 1.0):
                 f.P = inflate(f.P, lam)
         if m.any() and gater.gate is not None:
-            m = _gated(f, gater, float(t[k]), z[k], m, r_gate(np.flatnonzero(m)) if r_gate else r0[m])
+            m = _gated(f, gater, float(t[k]), z[k], m, r_gate(np.flatnonzero(m)) if r_gate else r0k[m])
         if m.any():
             key = (m[0], m[1], m[2])
             if key not in sel:
@@ -276,9 +375,22 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapt
                 sel[key] = (all_idx[m], ch_, np.ix_(all_idx[m], all_idx[m]))
             idx, ch, ix = sel[key]
             eps, HPH = f.innovation(idx, z[k, ch], ix)
-            R = adapter(k, ch, eps, HPH, r0[ch]) if adapter is not None else r0[ch]
+            R = adapter(k, ch, eps, HPH, r0k[ch]) if adapter is not None else r0k[ch]
             r_used[k, ch] = R
             f.update(idx, eps, HPH, np.diag(R))
+        if has[k, 3] and has[k, 4]:  # GNSS velocity over ground: H picks v_x, v_y
+            eps, HPH = f.innovation(vidx, z[k, 3:5])
+            R = np.diag(rk[k, 3:5])
+            verdict = gater.test("gnss_velocity", float(t[k]), eps, HPH, R)
+            if verdict == "accept":
+                f.update(vidx, eps, HPH, R)
+            elif verdict == "reinit":
+                reinit_block(f.x, f.P, vidx, z[k, 3:5].astype(float), R * gater.scale("gnss_velocity"))
+        if current and has[k, 5]:  # speed through water: (v - c) along the bow, unscented
+            eps, Pzz, Pxz = f.water_speed_innovation(float(z[k, 5]))
+            R = np.array([[rk[k, 5]]])
+            if gater.test("water_speed", float(t[k]), eps, Pzz, R) != "reject":
+                f.update_nonlinear(eps, Pzz, Pxz, R)
         if k:
             step_ms[k - 1] = (time.perf_counter() - t0) * 1e3
         poses[k] = f.x[pidx]
@@ -288,9 +400,17 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool = False, adapter: Adapt
             on_estimate(float(t[k]), poses[k].copy(), cov[k].copy())
     traj = Trajectory(t, poses, cov, name=name)
     info: dict[str, Any] = {"options": {k: opts[k] for k in sorted(opts)}, "state_final": f.x.tolist(),
-                            "r_used": r_used, "velocity": states[:, 2:4], **gater.info()}
+                            "r_used": r_used, "velocity": states[:, 2:4], **gater.info(),
+                            "bias_states": bias, "bias_reason": bias_why if bias == auto_bias else "option",
+                            "current_states": current,
+                            "process_noise": {"q_acc": qn["q_acc"], "q_gyro": qn["q_gyro"],
+                                              "q_bias_acc": qn["q_bias_acc"], "q_bias_gyro": qn["q_bias_gyro"],
+                                              "source": qn["source"]}}
     if bias:
-        info["bias_final"] = f.x[5:].tolist()
+        info["bias_final"] = f.x[5:8].tolist()
+    if current:
+        info["current_final"] = f.x[f.ic:f.ic + 2].tolist()
+        info["current"] = states[:, f.ic:f.ic + 2]
     return RunResult(traj, traj, step_ms, info=info)
 
 
@@ -329,7 +449,11 @@ def unmet(log: NavLog) -> str | None:
 
 
 def run_ukf(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
-    return run_nav_filter(log, "ukf", on_estimate=on_estimate, options=options)
+    """The UKF at its best for the log: bias states by default when the IMU has a bias (``bias``:
+    ``"auto"``, true, false; false is the paper's conventional 5-state UKF)."""
+    options = dict(options)
+    bias = options.pop("bias", "auto")
+    return run_nav_filter(log, "ukf", bias=bias, on_estimate=on_estimate, options=options)
 
 
 def run_ukf_bias(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
@@ -337,8 +461,12 @@ def run_ukf_bias(log: NavLog, *, on_estimate: OnEstimate | None = None, **option
 
 
 def inputs(log: NavLog, options: dict) -> set[str]:
-    """The kinds :func:`run_nav_filter` reads: IMU (prediction), GNSS and compass (updates), the pose prior."""
-    return {"imu", "gnss", "heading", "pose_prior"}
+    """The kinds :func:`run_nav_filter` reads: IMU (prediction), GNSS position and velocity, compass and
+    (with the current states, by default whenever the log has it) water speed (updates), the pose prior."""
+    kinds = {"imu", "gnss", "gnss_velocity", "heading", "pose_prior"}
+    if options.get("current", "auto") not in (False, "false"):
+        kinds.add("water_speed")
+    return kinds
 
 
 ESTIMATORS = {

@@ -34,8 +34,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import GraphnavError
 from ..log import Cloud, NavLog
 from ..scan.cloud_match import CloudMatchConfig, CloudMatcher, filter_cloud, planar_matrix, project_se2
+from ..scan.native_stderr import NativeWarnings
 
 PAIR_METHODS = ("icp", "p2plane", "gicp", "vgicp", "ndt")
 METHODS = (*PAIR_METHODS, "gicp-graph", "s2m", "s2m-gicp", "kiss-icp")
@@ -112,7 +114,7 @@ def _pairwise(method: str, pts: list[NDArray], params: dict[str, Any]) -> tuple[
         try:
             r = register(b, a, method, planar_matrix(*last), **params)
             p, _, _ = project_se2(r.T, r.cov) if r.converged is not False else (None, None, None)
-        except ValueError:
+        except (ValueError, GraphnavError):  # too few points, beyond the bound: a failed match
             p = None
         ms.append((time.perf_counter() - c0) * 1e3)
         if p is None:
@@ -146,29 +148,44 @@ def _chain_to_rels(poses: list[NDArray]) -> list[NDArray]:
     return out
 
 
-def _odometry_loop(pts: list[NDArray], voxel: float, knn: int, align: Any, vmap: Any) -> tuple[list, list]:
+MIN_FRAME_POINTS = 10
+"""A scan-to-map frame (or map) with fewer points is a failed match: the prediction stands in for it."""
+
+
+def _odometry_loop(pts: list[NDArray], voxel: float, knn: int, align: Any, vmap: Any) -> tuple[list, list, int]:
     """The scan-to-map loop both variants share: each frame voxel-downsampled (GICP covariances),
-    aligned by ``align(k, frame, guess) -> T`` from the constant-velocity prediction (not the first),
-    inserted into ``vmap`` at its estimated pose; returns the chained SE(2) increments and the ms per
-    aligned frame."""
+    aligned by ``align(k, frame, guess) -> T or None`` (None: no match) from the constant-velocity
+    prediction (not the first), inserted into ``vmap`` at its estimated pose; a frame of fewer than
+    :data:`MIN_FRAME_POINTS` points, or one ``align`` finds no match for, is failed: the prediction
+    stands in and it is not inserted. Returns the chained SE(2) increments, the ms per aligned frame
+    and the failures."""
     import small_gicp
 
     T, delta = np.eye(4), np.eye(4)
-    poses, ms = [], []
+    poses, ms, failed, mapped = [], [], 0, False
     for k, p in enumerate(pts):
         c0 = time.perf_counter()
-        pc, _ = small_gicp.preprocess_points(p, voxel, num_neighbors=knn, num_threads=1)
+        pc = None
+        if len(p) >= MIN_FRAME_POINTS:
+            pc, _ = small_gicp.preprocess_points(p, voxel, num_neighbors=knn, num_threads=1)
+        matched = k == 0
         if k:
-            new = align(k, pc, T @ delta)
+            new = align(k, pc, T @ delta) if pc is not None and mapped else None
+            matched = new is not None
+            if new is None:
+                failed += 1
+                new = T @ delta
             delta, T = np.linalg.inv(T) @ new, new
-        vmap.insert(pc, T)
+        if pc is not None and (matched or not mapped):  # (the first usable frame starts the map)
+            vmap.insert(pc, T)
+            mapped = True
         if k:
             ms.append((time.perf_counter() - c0) * 1e3)
         poses.append(T.copy())
-    return _chain_to_rels(poses), ms
+    return _chain_to_rels(poses), ms, failed
 
 
-def _s2m(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr: float) -> tuple[list, list]:
+def _s2m(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr: float) -> tuple[list, list, int]:
     """Scan-to-map: each frame (voxel-downsampled, GICP covariances) VGICP-aligned to a voxel-hashed
     local map of the frames before it (inserted at their estimated poses; voxels unseen for 20
     insertions expire) from the constant-velocity prediction."""
@@ -177,15 +194,15 @@ def _s2m(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr:
     vmap = small_gicp.GaussianVoxelMap(map_voxel)
     vmap.set_lru(horizon=20, clear_cycle=10)
 
-    def align(k: int, pc: Any, guess: NDArray) -> NDArray:
+    def align(k: int, pc: Any, guess: NDArray) -> NDArray | None:
         r = small_gicp.align(vmap, pc, guess, max_correspondence_distance=max_corr, num_threads=1, max_iterations=30)
-        return np.asarray(r.T_target_source)
+        return np.asarray(r.T_target_source) if r.num_inliers > 0 else None
 
     return _odometry_loop(pts, voxel, knn, align, vmap)
 
 
 def _s2m_gicp(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr: float, rebuild: int = 10,
-              horizon: int = 30) -> tuple[list, list]:
+              horizon: int = 30) -> tuple[list, list, int]:
     """Scan-to-map GICP: the target is the local map's voxel points (``IncrementalVoxelMapCov``, LRU
     expiry after ``horizon`` insertions) with fresh GICP covariances, rebuilt every ``rebuild`` frames."""
     import small_gicp
@@ -194,15 +211,19 @@ def _s2m_gicp(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_
     vm.set_lru(horizon=horizon, clear_cycle=10)
     built: list[Any] = []  # (target, tree), rebuilt every `rebuild` frames
 
-    def align(k: int, pc: Any, guess: NDArray) -> NDArray:
+    def align(k: int, pc: Any, guess: NDArray) -> NDArray | None:
         if not built or k % rebuild == 1:
-            target = small_gicp.PointCloud(np.asarray(vm.voxel_points())[:, :3])
+            points = np.asarray(vm.voxel_points())[:, :3]
+            if len(points) < MIN_FRAME_POINTS:
+                built.clear()
+                return None
+            target = small_gicp.PointCloud(points)
             tree = small_gicp.KdTree(target)
             small_gicp.estimate_normals_covariances(target, tree, num_neighbors=knn)
             built[:] = [target, tree]
         r = small_gicp.align(built[0], pc, built[1], guess, registration_type="GICP",
                              max_correspondence_distance=max_corr, num_threads=1, max_iterations=30)
-        return np.asarray(r.T_target_source)
+        return np.asarray(r.T_target_source) if r.num_inliers > 0 else None
 
     return _odometry_loop(pts, voxel, knn, align, vm)
 
@@ -245,25 +266,26 @@ def compare(log: NavLog, frames: int = 100, methods: tuple[str, ...] = METHODS,
     out: dict[str, Any] = {}
     for m in methods:
         try:
-            failed = 0
-            if m in PAIR_METHODS:
-                if m == "ndt":  # the compiled kernels' one-off load is not a registration's time
-                    from ..scan.ndt import warm_up
+            with NativeWarnings(m) as native:
+                failed = 0
+                if m in PAIR_METHODS:
+                    if m == "ndt":  # the compiled kernels' one-off load is not a registration's time
+                        from ..scan.ndt import warm_up
 
-                    warm_up()
-                rels, ms, failed = _pairwise(m, pts, params)
-            elif m == "gicp-graph":
-                rels, ms, failed = _graph_matcher(clouds, cfg, h)
-            elif m == "s2m":
-                rels, ms = _s2m(pts, cfg.voxel, 2 * cfg.voxel, cfg.knn, cfg.max_corr / 2)
-            elif m == "s2m-gicp":
-                rels, ms = _s2m_gicp(pts, cfg.voxel, cfg.voxel, cfg.knn, cfg.max_corr / 2)
-            else:
-                rels, ms = _kiss(pts, cfg.max_range)
+                        warm_up()
+                    rels, ms, failed = _pairwise(m, pts, params)
+                elif m == "gicp-graph":
+                    rels, ms, failed = _graph_matcher(clouds, cfg, h)
+                elif m == "s2m":
+                    rels, ms, failed = _s2m(pts, cfg.voxel, 2 * cfg.voxel, cfg.knn, cfg.max_corr / 2)
+                elif m == "s2m-gicp":
+                    rels, ms, failed = _s2m_gicp(pts, cfg.voxel, cfg.voxel, cfg.knn, cfg.max_corr / 2)
+                else:
+                    rels, ms = _kiss(pts, cfg.max_range)
         except ImportError as exc:  # MissingExtra: the line naming the extra
             out[m] = {"skipped": str(exc)}
             continue
-        out[m] = _score(m, rels, ms, ref, failed)
+        out[m] = {**_score(m, rels, ms, ref, failed), "native_warnings": native.count}
     res: dict[str, Any] = {"frames": len(clouds), "t0": clouds[0].t, "t1": clouds[-1].t,
                            "points_per_frame": float(np.mean([len(p) for p in pts])),
                            "filter": asdict(cfg), "sensor_height": h, "methods": out}

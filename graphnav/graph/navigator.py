@@ -39,7 +39,7 @@ import factors as F
 
 from ..errors import GraphnavError
 from ..geometry import cov_to_world, wrap_angle
-from ..log import KnownBeacon, NavLog, Record
+from ..log import KnownBeacon, NavLog, Record, validate_record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from . import noise
@@ -148,6 +148,7 @@ class Navigator:
         """Take one record; the newest online estimate when a keyframe was solved, else ``None``."""
         if self._result is not None:
             raise RuntimeError("the navigator has finished (smoothed() was called)")
+        rec = validate_record(rec, index=self.n_records + 1)  # a LogError naming the record, before the graph
         self.n_records += 1
         self._rec = rec if not isinstance(rec, KnownBeacon) else self._rec
         self.builder.push(rec)

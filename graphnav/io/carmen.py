@@ -62,7 +62,7 @@ from ..log import Limits, NavLog, Record, Scan, Truth, check_record
 
 MAX_LINE_BYTES = 4_000_000
 MAX_BEAMS = 100_000
-#: FLASER saturation: returns within this fraction of the log's largest range are max-range readings ...
+#: FLASER saturation: returns within this fraction below the saturation value (the spike) are max-range readings ...
 SATURATION_BAND = 0.01
 #: ... when they are at least this fraction of all returns (a real sensor cut-off, not one far wall)
 SATURATION_MIN_FRACTION = 0.001
@@ -70,6 +70,8 @@ SATURATION_MIN_FRACTION = 0.001
 SATURATION_SPIKE = 10.0
 #: ... and at least this many (a handful of far returns is not a sensor's saturation).
 SATURATION_MIN_COUNT = 10
+SATURATION_MAX_ABOVE = 0.1
+"""Returns above the saturation value, at most this fraction of the spike (stray readings)."""
 #: A beam with the same range in every scan is dead only when the log has at least this many scans.
 DEAD_BEAM_MIN_SCANS = 20
 DEFAULT_SCAN_DT = 1.0
@@ -267,27 +269,39 @@ def is_carmen(path: str | Path, probe_lines: int = 200) -> bool:
 def saturation_threshold(ranges: NDArray[np.float64] | list[NDArray[np.float64]]) -> float | None:
     """The max-range cut for a sensor that does not state its maximum (FLASER).
 
-    Returns ``(1 - SATURATION_BAND) * r_max`` (``r_max`` = the largest return in the log) when the
-    returns at or above it are at least :data:`SATURATION_MIN_COUNT`, at least
-    :data:`SATURATION_MIN_FRACTION` of all returns and
-    :data:`SATURATION_SPIKE` times as many as in the band of equal width below -- the spike a
-    saturating scanner writes at its maximum (81.91 m, 51.15 m or 32.767 m in the CARMEN logs);
-    ``None`` when there is no such spike (no cut). ``ranges``: one array, or a list of them (the
-    scans, counted one at a time: no concatenated copy of the whole log)."""
+    The sensor's saturation value ``r_sat`` is the spike it writes at its maximum (81.91 m, 51.15 m or
+    32.767 m in the CARMEN logs): the largest reading that at least :data:`SATURATION_MIN_COUNT` returns
+    and :data:`SATURATION_MIN_FRACTION` of all returns share exactly, with at most
+    :data:`SATURATION_MAX_ABOVE` times as many returns above it (stray readings beyond the maximum, a
+    40 m or a 1e308 among 32.767 m saturations, do not move it). Returns ``(1 - SATURATION_BAND) *
+    r_sat`` when the returns at or above that cut are :data:`SATURATION_SPIKE` times as many as in the
+    band of equal width below it; ``None`` when there is no such spike (no cut). ``ranges``: one array,
+    or a list of them (the scans, counted one at a time: no concatenated copy of the whole log)."""
     parts = [ranges] if isinstance(ranges, np.ndarray) else ranges
-    n, r_max = 0, -math.inf
+    counts: Counter[float] = Counter()
+    n = 0
     for p in parts:
         ok = np.isfinite(p) & (p > 0.0)
         if ok.any():
             n += int(np.count_nonzero(ok))
-            r_max = max(r_max, float(p[ok].max()))
+            vals, cnt = np.unique(p[ok], return_counts=True)
+            counts.update(dict(zip(vals.tolist(), cnt.tolist(), strict=True)))
     if n == 0:
         return None
-    cut = (1.0 - SATURATION_BAND) * r_max
-    top = sum(int(np.count_nonzero(np.isfinite(p) & (p >= cut))) for p in parts)
-    below = sum(int(np.count_nonzero((p >= cut - SATURATION_BAND * r_max) & (p < cut))) for p in parts)
-    spike = top >= SATURATION_MIN_COUNT and top >= SATURATION_MIN_FRACTION * n and top >= SATURATION_SPIKE * below
-    return cut if spike else None
+    r_sat, above = None, 0
+    for v in sorted(counts, reverse=True):
+        c = counts[v]
+        if c >= SATURATION_MIN_COUNT and c >= SATURATION_MIN_FRACTION * n:
+            if above <= SATURATION_MAX_ABOVE * c:
+                r_sat = v
+            break
+        above += c
+    if r_sat is None:
+        return None
+    cut = (1.0 - SATURATION_BAND) * r_sat
+    top = sum(c for v, c in counts.items() if cut <= v <= r_sat)
+    below = sum(c for v, c in counts.items() if cut - SATURATION_BAND * r_sat <= v < cut)
+    return cut if top >= SATURATION_SPIKE * below else None
 
 
 def dead_beams(scans: list[NDArray[np.float64]]) -> NDArray[np.intp]:

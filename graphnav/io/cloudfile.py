@@ -29,7 +29,10 @@ FORMATS = (".ply", ".pcd", ".bin")
 _PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
               "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
 _MAX_HEADER = 1 << 16
-MAX_POINTS = 50_000_000  # a declared count beyond this is refused before anything is allocated
+MAX_CLOUD_BYTES = 256 << 20
+"""The memory budget of one cloud: the (N, 3) float64 points it is read into (registration then takes
+a few times this); a file that declares more is refused before anything is allocated."""
+MAX_POINTS = MAX_CLOUD_BYTES // 24  # ~11.2 M points
 
 
 def read_cloud(path: str | os.PathLike) -> NDArray[np.float64]:
@@ -54,7 +57,8 @@ def _read(path: Path) -> tuple[NDArray[np.float64], NDArray | None, NDArray | No
             raise LogError(f"not a KITTI Velodyne scan: {size} bytes is not a positive multiple of 16 "
                            "(float32 x, y, z, intensity)", file=str(path))
         if size // 16 > MAX_POINTS:
-            raise LogError(f"{size // 16} points, more than {MAX_POINTS}", file=str(path))
+            raise LogError(f"{size // 16} points, more than {MAX_POINTS} (the {MAX_CLOUD_BYTES >> 20} MiB budget "
+                           "of a cloud)", file=str(path))
         raw = np.fromfile(path, dtype="<f4").reshape(-1, 4)
         pts, inten, ring = raw[:, :3].astype(float), raw[:, 3], None
     elif ext == ".ply":

@@ -4,6 +4,7 @@ NMEA (.nmea[.gz]; other .log/.txt files)."""
 
 from __future__ import annotations
 
+import stat
 from pathlib import Path
 
 from ..errors import LogError
@@ -26,6 +27,8 @@ def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None =
     name = p.name.lower()
     if not p.exists():
         raise LogError("no such file or directory", file=str(p))
+    if not (p.is_dir() or p.is_file() or stat.S_ISFIFO(p.stat().st_mode)):
+        raise LogError("not a regular file, directory or pipe (a device or socket has no end)", file=str(p))
     day = options.pop("date", None)  # the day of a dateless NMEA log (the only reader that needs one)
     if day is not None and not (name.endswith(NMEA_SUFFIXES) or name.endswith(SNIFF_SUFFIXES)):
         day = None
@@ -78,17 +81,23 @@ def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None =
                    file=str(p))
 
 
-def save_log(log: NavLog, path: str | Path) -> None:
-    """Write a log as JSON Lines (``.jsonl``/``.jsonl.gz``) or binary (``.npz``)."""
+def save_log(log: NavLog, path: str | Path, *, overwrite: bool = True, flag: str = "--out") -> None:
+    """Write a log as JSON Lines (``.jsonl``/``.jsonl.gz``) or binary (``.npz``), atomically (a
+    temporary file renamed onto ``path``: a crash leaves the earlier file, never half of one). Only a
+    regular file is replaced, and only with ``overwrite`` (a :class:`GraphnavError` naming ``flag``)."""
+    from .outputs import atomic_path, check_replaceable
+
     p = Path(path)
     name = p.name.lower()
-    if name.endswith(".npz"):
-        from .npz import write_npz
-
-        write_npz(log, p)
-    elif name.endswith(JSONL_SUFFIXES):
-        from .jsonl import write_jsonl
-
-        write_jsonl(log, p)
-    else:
+    if not name.endswith((".npz", *JSONL_SUFFIXES)):
         raise LogError("can write .jsonl, .jsonl.gz or .npz", file=str(p))
+    check_replaceable(p, overwrite=overwrite, flag=flag)
+    with atomic_path(p) as tmp:
+        if name.endswith(".npz"):
+            from .npz import write_npz
+
+            write_npz(log, tmp)
+        else:
+            from .jsonl import write_jsonl
+
+            write_jsonl(log, tmp)

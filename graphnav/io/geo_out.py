@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -26,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import GraphnavError
 from ..geodesy import LocalFrame, origin_frame
 from ..geometry import yaw_to_heading_deg
 from ..trajectory import Trajectory
@@ -48,16 +50,48 @@ class GeoTrack:
 
     @classmethod
     def from_trajectory(cls, traj: Trajectory, frame: LocalFrame, name: str | None = None) -> GeoTrack:
-        """The trajectory's poses converted by ``frame`` (poses with a non-finite position are left out)."""
-        ok = np.isfinite(traj.t) & np.isfinite(traj.x) & np.isfinite(traj.y)
-        lat, lon = frame.to_geodetic(traj.x[ok], traj.y[ok])
-        yaw = traj.yaw[ok]
+        """The trajectory's poses converted by ``frame`` (poses with a non-finite position or time, a
+        time beyond :data:`MAX_TIME` or a position off the Earth are left out); the name keeps only
+        the characters XML allows."""
+        ok = np.isfinite(traj.t) & (np.abs(traj.t) <= MAX_TIME) & np.isfinite(traj.x) & np.isfinite(traj.y)
+        ok &= (np.abs(traj.x) <= MAX_COORD) & (np.abs(traj.y) <= MAX_COORD)
+        lat, lon = (np.atleast_1d(v) for v in frame.to_geodetic(traj.x[ok], traj.y[ok]))
+        good = np.isfinite(lat) & np.isfinite(lon) & (np.abs(lat) <= 90.0)
+        yaw = traj.yaw[ok][good]
         heading = np.where(np.isfinite(yaw), yaw_to_heading_deg(np.nan_to_num(yaw)), np.nan)
-        return cls(name if name is not None else traj.name, traj.t[ok], np.atleast_1d(lat), np.atleast_1d(lon),
+        return cls(xml_safe(name if name is not None else (traj.name or "")), traj.t[ok][good], lat[good], lon[good],
                    np.atleast_1d(heading))
 
     def times(self) -> list[datetime]:
         return [datetime.fromtimestamp(round(float(t), 6), UTC) for t in self.t]
+
+
+MAX_TIME = 1e10
+"""[s] The largest |t| a track's time may have (POSIX seconds reach 1e10 in 2286; :class:`graphnav.log.Limits`)."""
+MAX_COORD = 1e7
+"""[m] The largest |x|, |y| of a local-frame position (:class:`graphnav.log.Limits`)."""
+_XML_BAD = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+
+
+def xml_safe(text: str) -> str:
+    """``text`` without the characters XML 1.0 cannot hold (NUL, other C0 controls, lone surrogates)."""
+    return _XML_BAD.sub("", str(text))
+
+
+def check_track(traj: Trajectory, where: str) -> None:
+    """A :class:`GraphnavError` naming ``where`` when a pose's time or position cannot be a date or a
+    place: a non-finite time, |t| beyond :data:`MAX_TIME`, a finite position beyond :data:`MAX_COORD`."""
+    t = np.asarray(traj.t, dtype=float)
+    bad = ~np.isfinite(t) | (np.abs(np.nan_to_num(t)) > MAX_TIME)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise GraphnavError(f"pose {i}: time {float(t[i])!r} s is not a date (|t| <= {MAX_TIME:g} s)", where=where)
+    xy = np.column_stack([traj.x, traj.y])
+    far = np.isfinite(xy).all(axis=1) & (np.abs(np.nan_to_num(xy)) > MAX_COORD).any(axis=1)
+    if far.any():
+        i = int(np.argmax(far))
+        raise GraphnavError(f"pose {i}: position ({xy[i, 0]:g}, {xy[i, 1]:g}) m is beyond {MAX_COORD:g} m of the "
+                            "origin: not a place on Earth", where=where)
 
 
 def _iso(d: datetime) -> str:

@@ -15,6 +15,7 @@ from ..errors import LogError
 from ..geodesy import LocalFrame
 from ..log import (
     MAX_CLOUD_POINTS,
+    MAX_RING,
     RECORD_TYPES,
     BeaconObs,
     Cloud,
@@ -54,6 +55,11 @@ OPTIONAL: dict[str, tuple[str, ...]] = {
     "water_speed": ("sigma_v",),
     "attitude": ("sigma",),
 }
+
+
+MAX_LINE_BYTES = 80 * MAX_CLOUD_POINTS
+"""The longest line read: a cloud of :data:`graphnav.log.MAX_CLOUD_POINTS` points at 4 decimals with
+intensity and ring takes ~55 bytes a point."""
 
 
 class _OwnedGzip(gzip.GzipFile):
@@ -134,8 +140,8 @@ def _cloud(obj: dict) -> Cloud:
     if obj.get("ring") is not None:
         rv = obj["ring"]
         if not isinstance(rv, list) or len(rv) != n or not all(
-                isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in rv):
-            raise LogError(f"expected {n} non-negative integers", field="ring")
+                isinstance(x, int) and not isinstance(x, bool) and 0 <= x <= MAX_RING for x in rv):
+            raise LogError(f"expected {n} integers in [0, {MAX_RING}]", field="ring")
         ring = np.array(rv, dtype=np.int64) if rv else np.zeros(0, dtype=np.int64)
     att = [_num(obj, k) if obj.get(k) is not None else math.nan for k in ("roll", "pitch")]
     return make_cloud(_num(obj, "t"), pts, inten, ring, *att)
@@ -215,7 +221,7 @@ def read_jsonl(path: str | Path, *, lenient: bool = False, limits: Limits | None
     frame: LocalFrame | None = None
     skipped: list[str] = []
     last_t = -math.inf
-    lines = Lines(path, lenient=lenient)  # read and decompressed line by line
+    lines = Lines(path, lenient=lenient, max_line=MAX_LINE_BYTES)  # read and decompressed line by line
     for lineno, raw in lines:
         try:
             try:

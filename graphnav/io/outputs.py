@@ -18,6 +18,7 @@ import contextlib
 import json
 import logging
 import os
+import stat
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
@@ -50,15 +51,58 @@ def _fsync(path: Path) -> None:
         os.close(fd)
 
 
+def file_kind(path: str | Path) -> str | None:
+    """What is at ``path`` without following a symlink: None (nothing), ``"file"`` (a regular file),
+    or what else it is (``"symbolic link"``, ``"directory"``, ``"FIFO"``, ``"device"``, ``"socket"``)."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return None
+    except OSError:
+        return "unreadable entry"
+    if stat.S_ISREG(mode):
+        return "file"
+    if stat.S_ISLNK(mode):
+        return "symbolic link"
+    if stat.S_ISDIR(mode):
+        return "directory"
+    if stat.S_ISFIFO(mode):
+        return "FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "device"
+    return "socket" if stat.S_ISSOCK(mode) else "special file"
+
+
+def check_replaceable(path: str | Path, *, overwrite: bool, flag: str = "--out") -> None:
+    """A :class:`GraphnavError` naming ``flag`` and ``path`` unless a file may be written there: nothing
+    there, or a regular file and ``overwrite`` (a symlink, FIFO, device or directory is never replaced);
+    the parent directory must exist."""
+    kind = file_kind(path)
+    if kind is not None and kind != "file":
+        raise GraphnavError(f"{flag}: exists and is a {kind}, not a regular file; graphnav replaces only regular "
+                            "files", where=str(path))
+    if kind == "file" and not overwrite:
+        raise GraphnavError(f"{flag}: the file exists; pass --overwrite to replace it", where=str(path))
+    if not Path(path).parent.is_dir():
+        raise GraphnavError(f"{flag}: the directory does not exist", where=str(Path(path).parent))
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path`` (same name ending); when the block ends normally the
-    file there is synced and renamed onto ``path``; on an exception it is removed."""
+    file there is synced and renamed onto ``path``; on an exception it is removed. Only a regular
+    file (or nothing) at ``path`` is replaced: a symlink, FIFO, device or directory there is a
+    :class:`GraphnavError`."""
     path = Path(path)
+    kind = file_kind(path)
+    if kind not in (None, "file"):
+        raise GraphnavError(f"exists and is a {kind}, not a regular file: not replaced", where=str(path))
     tmp = path.with_name(f"{TMP_PREFIX}{os.getpid()}-{path.name}")
     try:
         yield tmp
         _fsync(tmp)
+        if file_kind(path) not in (None, "file"):
+            raise GraphnavError("became a non-regular file while being written: not replaced", where=str(path))
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -97,6 +141,7 @@ class OutDir:
         self.path = ensure_dir(path, flag)
         self.command = command
         self.files: list[str] = []
+        self._lock = _lock_dir(self.path, flag)
         previous = self._read_manifest()
         present = sorted(e.name for e in self.path.iterdir() if e.name != MANIFEST)
         if present:
@@ -135,7 +180,12 @@ class OutDir:
         return removed
 
     def _write_manifest(self) -> None:
-        write_text_atomic(self.path / MANIFEST, json.dumps({"command": self.command, "files": self.files}, indent=1))
+        write_text_atomic(self.path / MANIFEST, json.dumps({"command": self.command, "pid": os.getpid(),
+                                                            "files": self.files}, indent=1))
+
+    def close(self) -> None:
+        """Release the directory (also at exit, or when this object is collected)."""
+        _release(self.path)
 
     def file(self, name: str) -> Path:
         """The path of ``name`` in the directory, recorded in the manifest first (so that a run that
@@ -193,6 +243,52 @@ class OutDir:
 
     def __str__(self) -> str:
         return str(self.path)
+
+
+_LOCKS: dict[str, list[int]] = {}  # real path -> [fd, users in this process]
+
+
+def _lock_dir(path: Path, flag: str) -> str:
+    """Take the directory for this process (``flock`` on the directory itself: nothing is written, and
+    the kernel releases it when the process ends, however it ends). A directory another process holds
+    is a :class:`GraphnavError` naming the holder (its pid and command, from the manifest)."""
+    key = os.path.realpath(path)
+    if key in _LOCKS:  # this process already holds it (a command that opens its --out twice)
+        held, now = os.fstat(_LOCKS[key][0]), os.stat(path)
+        if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
+            _LOCKS[key][1] += 1
+            return key
+        with contextlib.suppress(OSError):  # the directory was removed and made again: lock the new one
+            os.close(_LOCKS.pop(key)[0])
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock
+        return key
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        holder = "another process"
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            obj = json.loads((path / MANIFEST).read_text(encoding="utf-8"))
+            holder = f"process {int(obj['pid'])} ('graphnav {obj['command']}')"
+        raise GraphnavError(f"{flag}: the directory is in use by {holder}; wait for it to finish or choose "
+                            "another directory", where=str(path)) from None
+    _LOCKS[key] = [fd, 1]
+    return key
+
+
+def _release(path: Path) -> None:
+    key = os.path.realpath(path)
+    entry = _LOCKS.get(key)
+    if entry is None:
+        return
+    entry[1] -= 1
+    if entry[1] <= 0:
+        del _LOCKS[key]
+        with contextlib.suppress(OSError):
+            os.close(entry[0])
 
 
 def _plain(name: str) -> bool:

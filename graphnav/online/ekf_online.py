@@ -19,8 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from ..estimators.ekf import EkfStepper, initial_state
-from ..log import Gnss, Heading, Odometry, PosePrior, Record
+from ..estimators.ekf import IMU_DEFAULTS, EkfStepper, initial_state
+from ..geometry import wrap_angle
+from ..log import Gnss, GnssVelocity, Heading, Odometry, PosePrior, Record
 from ..result import Estimate
 
 
@@ -28,7 +29,9 @@ class EkfOnline:
     """EKF behind ``add(record) -> Estimate | None``. ``emit``: ``"fix"`` (default) yields an
     estimate per GNSS fix, and per used record while no fix came for ``outage_s`` [s];
     ``"all"`` one per used record. The other options are :func:`run_ekf`'s (``motion`` is
-    ``"odometry"`` or ``"icp"``; there is no ``"auto"`` without the whole log)."""
+    ``"odometry"``, ``"imu"`` or ``"icp"``; there is no ``"auto"`` without the whole log; with
+    ``"imu"`` the IMU motion's options, :data:`graphnav.estimators.ekf.IMU_DEFAULTS`, the initial
+    velocity the first held GNSS velocity when ``v0`` is not given)."""
 
     def __init__(self, *, motion: str = "odometry", speed: bool = False, emit: str = "fix", outage_s: float = 1.5,
                  init_wait: float = 2.0, **ekf_options: Any) -> None:
@@ -36,7 +39,12 @@ class EkfOnline:
             raise ValueError(f"emit must be 'fix' or 'all', not {emit!r}")
         self.motion, self.speed, self.emit = motion, speed, emit
         self.outage_s, self.init_wait = outage_s, init_wait
-        self.options = {"keep": 10_000, **ekf_options}
+        imu = {k: ekf_options.pop(k) for k in list(ekf_options) if k in IMU_DEFAULTS}
+        self.options: dict[str, Any] = {"keep": 10_000, **ekf_options}
+        if imu:
+            if motion != "imu":
+                raise ValueError(f"ekf option(s) {sorted(imu)} need motion='imu'")
+            self.options["imu"] = imu
         EkfStepper(np.zeros(3), np.eye(3), motion=motion, **self.options)  # validate the options now
         self.stepper: EkfStepper | None = None
         self.pending: deque[Record] = deque(maxlen=10_000)
@@ -45,8 +53,8 @@ class EkfOnline:
         self.anchor: str | None = None
         self.last_fix_t = -math.inf
         self.last_emit_t = -math.inf
-        self.counts = {"gnss": 0, "heading": 0, "odometry": 0, "scan": 0, "late": 0, "other": 0,
-                       "dropped_before_start": 0}
+        self.counts = {"gnss": 0, "heading": 0, "odometry": 0, "scan": 0, "imu": 0, "gnss_velocity": 0,
+                       "water_speed": 0, "late": 0, "other": 0, "dropped_before_start": 0}
 
     # -- initialisation
     def _hold(self, record: Record) -> None:
@@ -73,7 +81,13 @@ class EkfOnline:
 
     def _start(self) -> None:
         x0, P0, self.anchor = initial_state(self.pending, self.speed)
-        self.stepper = st = EkfStepper(x0, P0, motion=self.motion, **self.options)
+        options = self.options
+        if self.motion == "imu" and "v0" not in options.get("imu", {}):
+            gv = next((r for r in self.pending if isinstance(r, GnssVelocity)), None)
+            if gv is not None and gv.t - self.pending[0].t <= 1.0:  # as run_ekf's rule
+                sv = gv.sigma if math.isfinite(gv.sigma) else IMU_DEFAULTS["sigma_gnss_velocity"]
+                options = {**options, "imu": {**options.get("imu", {}), "v0": (gv.vx, gv.vy, 3.0 * sv)}}
+        self.stepper = st = EkfStepper(x0, P0, motion=self.motion, **options)
         for r in self.pending:
             if st.step(r) and isinstance(r, Gnss) and st.use_gnss:  # as in add: an unused fix is none
                 self.last_fix_t = r.t
@@ -110,6 +124,13 @@ class EkfOnline:
         assert st is not None and st.t is not None
         f = st.f
         self.last_emit_t = st.t
+        if self.motion == "imu":  # velocity over ground from the state, rate of turn from the IMU less its bias
+            vx, vy = float(f.x[3]), float(f.x[4])
+            m = st.imu_u
+            ib = getattr(f, "ib", None)
+            w = None if m is None else m.wz - (float(f.x[ib + 2]) if ib is not None else 0.0)
+            return Estimate(st.t, f.x[:3].copy(), f.P[:3, :3].copy(), math.hypot(vx, vy),
+                            float(wrap_angle(math.atan2(vy, vx))), w)
         u = st.u
         v = float(f.x[3]) if f.has_speed else (u.v if u is not None else None)
         w = u.w if u is not None else None

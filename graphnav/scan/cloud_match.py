@@ -34,10 +34,22 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from ..config import FRACTION, KNN, THREADS, OptionError, Range, check_fields
 from ..log import Cloud
+from .native_stderr import NativeWarnings
 from .register3d import gicp_terms, sandwich_covariance
 
 IDX_SE2 = [3, 4, 2]  # (v_x, v_y, omega_z) in register3d's delta = (omega, v)
+
+
+_CLOUD_RANGES = {"min_range": Range(lo=0.0, hi=1e4), "max_range": Range(lo=0.0, hi=1e4, lo_open=True),
+                 "water_margin": Range(lo=-1e3, hi=1e3), "sensor_height": Range(lo=-1e3, hi=1e3, optional=True),
+                 "min_intensity": Range(optional=True), "voxel": Range(lo=1e-3, hi=1e3),
+                 "knn": KNN, "max_corr": Range(lo=0.0, hi=1e4, lo_open=True),
+                 "max_iter": Range(lo=1, hi=100_000, integer=True), "threads": THREADS,
+                 "min_points": Range(lo=7, hi=10_000_000, integer=True), "min_inliers": FRACTION,
+                 "cov_cluster": Range(lo=0.0, hi=1e4, lo_open=True, optional=True)}
+"""Each numeric :class:`CloudMatchConfig` field's declared range (checked on construction)."""
 
 
 @dataclass(frozen=True)
@@ -65,9 +77,20 @@ class CloudMatchConfig:
     cov_cluster: float | None = None  # cell [m] of the sandwich's clusters (None: the knn neighbourhood's)
     cov_quantisation: bool = True  # the voxel quantisation term of the covariance
 
+    def __post_init__(self) -> None:
+        check_fields(self, _CLOUD_RANGES, "cloud option")
+        if self.max_range <= self.min_range:
+            raise OptionError("cloud option max_range", f"must exceed min_range ({self.min_range:g}), "
+                                                        f"got {self.max_range:g}")
+        for name in ("cov_quantisation",):
+            if not isinstance(getattr(self, name), bool):
+                raise OptionError(f"cloud option {name}", f"must be true or false, got {getattr(self, name)!r}")
+
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> CloudMatchConfig:
         known = set(cls.__dataclass_fields__)
+        if not isinstance(options, dict):
+            raise OptionError("option cloud", f"must be a table of cloud options, got {options!r:.60}")
         bad = sorted(set(options) - known)
         if bad:
             raise ValueError(f"unknown cloud option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}")
@@ -184,6 +207,13 @@ class CloudMatcher:
 
     def __call__(self, cur: Cloud, prev: Cloud, init: NDArray[np.float64] | None
                  ) -> tuple[bool, NDArray[np.float64], NDArray[np.float64]]:
+        with NativeWarnings("small_gicp") as native:  # its C++ warnings: counted, logged once, not raw
+            out = self._match(cur, prev, init)
+        self.last["native_warnings"] = native.count
+        return out
+
+    def _match(self, cur: Cloud, prev: Cloud, init: NDArray[np.float64] | None
+               ) -> tuple[bool, NDArray[np.float64], NDArray[np.float64]]:
         import small_gicp
 
         cfg = self.cfg

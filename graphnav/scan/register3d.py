@@ -48,12 +48,25 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from ..errors import require
+from ..config import FRACTION, KNN, POSITIVE, THREADS, OptionError, Range, check_fields
+from ..errors import LogError, require
+from .native_stderr import NativeWarnings
 from .ndt import NdtParams, build_voxels3, ndt3d, skew, warm_up
 
 METHODS = ("icp", "p2plane", "gicp", "vgicp", "ndt", "o3d-icp", "o3d-p2plane", "o3d-gicp")
 _SMALL_GICP = {"icp": "ICP", "p2plane": "PLANE_ICP", "gicp": "GICP", "vgicp": "VGICP"}
 COV_CONVENTION = "T exp(delta), delta = (omega_x, omega_y, omega_z, v_x, v_y, v_z) in the source frame (GTSAM Pose3)"
+
+
+_REG3_RANGES = {"voxel": Range(lo=0.0, hi=1e4), "max_corr": Range(lo=0.0, hi=1e6, lo_open=True), "knn": KNN,
+                "vgicp_voxel": Range(lo=0.0, hi=1e4, lo_open=True),
+                "max_iter": Range(lo=1, hi=100_000, integer=True, optional=True),
+                "eps_trans": POSITIVE, "eps_rot": POSITIVE, "threads": THREADS,
+                "resolution": Range(lo=0.0, hi=1e4, lo_open=True), "outlier_ratio": Range(lo=0.0, hi=1.0, lo_open=True),
+                "neighbors": Range(lo=1, hi=27, integer=True),
+                "min_points": Range(lo=3, hi=1_000_000, integer=True),
+                "eig_ratio": FRACTION}
+"""Each numeric :class:`Reg3Params` field's declared range (checked on construction)."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +92,13 @@ class Reg3Params:
     min_points: int = 6
     eig_ratio: float = 0.01
     backend: str = "auto"
+
+    def __post_init__(self) -> None:
+        check_fields(self, _REG3_RANGES, "option")
+        if self.neighbors not in (1, 7, 27):
+            raise OptionError("option neighbors", f"must be 1, 7 or 27, got {self.neighbors!r}")
+        if self.backend not in ("auto", "numba", "numpy"):
+            raise OptionError("option backend", f"must be auto, numba or numpy, got {self.backend!r}")
 
     @classmethod
     def from_kwargs(cls, **params: Any) -> Reg3Params:
@@ -240,15 +260,49 @@ def fit_quality(src: NDArray, tree: cKDTree, T: NDArray, max_corr: float) -> tup
     return float(ok.mean()), float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else float("nan")
 
 
+MAX_COORD = 1e5
+"""[m] A registered point farther than this from the origin is refused: small_gicp's voxel keys hold
+2^20 voxels a side (beyond, "voxel coord is out of range" and a silent identity) and float32 clouds
+resolve 1 cm only up to 1e5 m; shift georeferenced clouds to a local origin first."""
+MIN_POINTS = 10
+
+
 def _as_points(a: ArrayLike, name: str) -> NDArray[np.float64]:
     p = np.asarray(a, dtype=float)
     if p.ndim != 2 or p.shape[1] < 3:
-        raise ValueError(f"{name}: expected (N, 3) points, got shape {p.shape}")
+        raise LogError(f"expected (N, 3) points, got shape {p.shape}", file=name)
     p = np.ascontiguousarray(p[:, :3])
     p = p[np.all(np.isfinite(p), axis=1)]
-    if len(p) < 10:
-        raise ValueError(f"{name}: only {len(p)} finite points")
+    if len(p) < MIN_POINTS:
+        raise LogError(f"only {len(p)} finite points; a registration needs {MIN_POINTS}", file=name)
+    far = float(np.abs(p).max())
+    if far > MAX_COORD:
+        raise LogError(f"a point lies {far:.3g} m from the origin, beyond the registration bound "
+                       f"({MAX_COORD:g} m); shift the cloud to a local origin", file=name)
     return p
+
+
+def degeneracy(points: NDArray[np.float64], resolution: float) -> str | None:
+    """Why ``points`` cannot fix a 3D pose (all at one spot, on a line, on a plane, within ``resolution``),
+    or None: from the spread of the points along their principal axes."""
+    c = points - points.mean(axis=0)
+    sd = np.sqrt(np.maximum(np.linalg.eigvalsh(c.T @ c / max(len(c) - 1, 1)), 0.0))  # ascending
+    tol = max(resolution, 1e-6 * float(sd[-1]), 1e-9)
+    flat = int(np.sum(sd <= tol))
+    if flat == 3:
+        return "all points at one spot"
+    if flat == 2:
+        return "the points lie on a line"
+    if flat == 1:
+        return "the points lie on a plane"
+    return None
+
+
+def _failed(method: str, T0: NDArray, reason: str, src: NDArray, tgt: NDArray) -> Registration:
+    """The result of a registration that could not run: ``converged`` false, ``reason`` in extra."""
+    return Registration(method, T0.copy(), 0.0, 0.0, float("nan"), float("nan"), np.diag(np.full(6, np.inf)),
+                        False, 0, {"reason": reason, "ms_prep": 0.0, "ms_align": 0.0, "cpu_ms": 0.0,
+                                   "source_points": len(src), "target_points": len(tgt), "source_used": 0})
 
 
 # -- backends -------------------------------------------------------------------------------------
@@ -344,20 +398,47 @@ def register(source: ArrayLike, target: ArrayLike, method: str = "gicp", init: A
     p = Reg3Params.from_kwargs(**params)
     src, tgt = _as_points(source, "source"), _as_points(target, "target")
     T0 = np.eye(4) if init is None else np.asarray(init, dtype=float).reshape(4, 4)
+    for name, pts in (("source", src), ("target", tgt)):
+        why = degeneracy(pts, 0.0)
+        if why is not None:
+            return _failed(method, T0, f"{name}: degenerate geometry ({why})", src, tgt)
+    for name, size in (("voxel", p.voxel), ("vgicp_voxel", p.vgicp_voxel if method == "vgicp" else 0.0),
+                       ("resolution", p.resolution if method == "ndt" else 0.0)):
+        if size > 0 and max(float(np.abs(src).max()), float(np.abs(tgt).max())) / size >= 2**20:
+            raise OptionError(f"option {name}", f"{size:g} m is too fine for clouds that reach "
+                                                f"{max(float(np.abs(src).max()), float(np.abs(tgt).max())):.3g} m "
+                                                "(2^20 voxels a side at most)")
     c0 = time.process_time()
-    if method in _SMALL_GICP:
-        out = _small_gicp(method, src, tgt, T0, p)
-    elif method == "ndt":
-        out = _ndt(src, tgt, T0, p)
-    else:
-        out = _open3d(method, src, tgt, T0, p)
+    with NativeWarnings(method) as native:
+        if method in _SMALL_GICP:
+            out = _small_gicp(method, src, tgt, T0, p)
+        elif method == "ndt":
+            out = _ndt(src, tgt, T0, p)
+        else:
+            out = _open3d(method, src, tgt, T0, p)
     cpu = (time.process_time() - c0) * 1e3
+    out["extra"]["native_warnings"] = native.count
     if out["tgt"] is None:  # NDT: the fitness is measured on the target downsampled as the others'
         import small_gicp
 
         out["tgt"] = small_gicp.voxelgrid_sampling(tgt, p.voxel).points()[:, :3] if p.voxel > 0 else tgt
     fit, rmse = fit_quality(out["src"], cKDTree(out["tgt"]), out["T"], p.max_corr)
+    converged, reason = out["converged"], None
+    if not np.all(np.isfinite(out["T"])):
+        converged, reason = False, "the estimate is not finite"
+    elif fit == 0.0:
+        converged, reason = False, f"no source point within max_corr ({p.max_corr:g} m) of the target at T"
+    elif len(out["src"]) < MIN_POINTS:
+        converged, reason = False, f"only {len(out['src'])} source points after the voxel filter"
+    else:
+        why = degeneracy(out["src"], 0.0)
+        if why is not None:
+            converged, reason = False, f"source after the voxel filter: degenerate geometry ({why})"
+    if reason is not None:
+        out["extra"]["reason"] = reason
+    elif converged is None:  # open3d does not say: a result with inliers
+        converged = True
     extra = {"ms_prep": out["ms_prep"], "ms_align": out["ms_align"], "cpu_ms": cpu, "source_points": len(src),
              "target_points": len(tgt), "source_used": len(out["src"]), **out["extra"]}
     return Registration(method, out["T"], out["ms_prep"] + out["ms_align"], fit, rmse, out["objective"],
-                        0.5 * (out["cov"] + out["cov"].T), out["converged"], out["iterations"], extra)
+                        0.5 * (out["cov"] + out["cov"].T), converged, out["iterations"], extra)

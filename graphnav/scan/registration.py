@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ..config import FRACTION, KNN, POSITIVE, THREADS, Range, check_fields
 from ..errors import require
 from ..geometry import wrap_angle
 from ..log import DEFAULT_MAX_RANGE
@@ -87,6 +88,13 @@ class Params:
     eps_rot: float = 1e-4
     planar: str = "constrain"
     threads: int = 1
+
+    def __post_init__(self) -> None:
+        check_fields(self, {"max_corr": Range(lo=0.0, hi=1e4, lo_open=True), "voxel": Range(lo=1e-3, hi=1e3),
+                            "neighbors": KNN, "normal_radius": Range(lo=0.0, hi=1e4, lo_open=True),
+                            "planarity": FRACTION, "curtain": Range(lo=0.0, hi=1e3, lo_open=True),
+                            "max_iter": Range(lo=1, hi=100_000, integer=True), "eps_trans": POSITIVE,
+                            "eps_rot": POSITIVE, "threads": THREADS}, "option")
 
 
 @dataclass

@@ -285,8 +285,8 @@ def test_convert_and_info_cli(tmp_path):
                        capture_output=True, text=True, check=True, cwd=REPO)
     assert json.loads(r.stdout)["records"] == {"scan": 3, "truth": 3}
     bad = write(tmp_path, ["FLASER 2 1.0"], "bad.log")
-    r = subprocess.run([sys.executable, "-m", "graphnav", "convert", "carmen", str(bad), "--out", str(out)],
-                       capture_output=True, text=True, cwd=REPO)
+    r = subprocess.run([sys.executable, "-m", "graphnav", "convert", "carmen", str(bad), "--out", str(out),
+                        "--overwrite"], capture_output=True, text=True, cwd=REPO)
     assert r.returncode == 2 and f"{bad}:1: field 'num_readings'" in r.stderr and "Traceback" not in r.stderr
 
 

@@ -131,8 +131,8 @@ def test_convert_cli(dataset, tmp_path):
     assert back.counts() == obj["records"]
     assert all(math.isnan(r.sigma_v) for r in back.of("odometry"))  # still no sigmas after the round trip
     r = subprocess.run([sys.executable, "-m", "graphnav", "convert", "mrclam", str(dataset), "--robot", "1",
-                        "--charted", "--out", str(out), "--json"], capture_output=True, text=True, check=True,
-                       cwd=REPO)
+                        "--charted", "--out", str(out), "--overwrite", "--json"], capture_output=True, text=True,
+                       check=True, cwd=REPO)
     assert json.loads(r.stdout)["records"]["beacon_known"] == 2
 
 

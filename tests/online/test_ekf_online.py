@@ -174,3 +174,20 @@ def test_records_held_before_the_first_fix_are_bounded_and_counted():
         assert est.add(Heading(0.1 * k, 0.3, 0.02)) is None  # no fix yet: held, nothing estimated
     assert len(est.pending) == est.pending.maxlen and est.counts["dropped_before_start"] == 5
     assert est.counts["heading"] == n
+
+
+def test_online_is_the_batch_filter_with_imu_motion():
+    """A USV's log (no odometry): the INS/GNSS EKF online, given the IMU options the batch reads
+    from the log, gives the batch filter's estimates."""
+    from graphnav.estimators.ekf import imu_options
+
+    log = load_log(REPO / "data" / "harbour.npz").sliced(None, 120.0)
+    log = log.without(lambda r: r.kind == "odometry")
+    batch = run_ekf(log)
+    assert batch.info["motion"] == "imu"
+    est = EkfOnline(emit="all", motion="imu", **imu_options(log, {}))
+    t, poses = last_per_time(run_online(log, est))
+    np.testing.assert_array_equal(t, batch.trajectory.t[1:])
+    np.testing.assert_allclose(poses, batch.trajectory.poses[1:], atol=1e-9)
+    e = est._estimate()
+    assert e.sog is not None and 1.0 < e.sog < 2.0 and est.info()["imu"] > 0

@@ -195,7 +195,8 @@ def test_cli_profiles_and_options(tmp_path, capsys):
     assert d["profile"] == "usv" and d["records"]["odometry"] == 121 and d["records"]["imu"] == 1200
     log = load_log(out)
     assert log.meta["current"]["speed"] == 0.3 and log.meta["current"]["speed_amp"] == 0.1
-    assert main(["simulate", "harbour", "--profile", "legacy", "--duration", "12", "--out", str(out), "--json"]) == 0
+    assert main(["simulate", "harbour", "--profile", "legacy", "--duration", "12", "--out", str(out), "--overwrite",
+                 "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["profile"] == "legacy" and d["records"]["scan"] == 61 and d["records"]["imu"] == 12
     assert "gnss_velocity" not in d["records"] and "water_speed" not in d["records"]

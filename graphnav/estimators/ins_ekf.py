@@ -1,0 +1,112 @@
+"""The ``ekf``'s IMU motion (``motion="imu"``): a loosely coupled planar INS/GNSS EKF.
+
+State ``[x, y, yaw, v_x, v_y]`` (navigation-frame velocity), optionally ``+ [b_ax, b_ay, b_g]``
+(IMU biases, random walks) and ``+ [c_x, c_y]`` (the water current, a random walk). The same
+model as the UKFs (:mod:`graphnav.estimators.ukf`), linearised: with ``a = R(yaw) (f - b_a)``::
+
+    p += T v + T^2/2 a;  v += T a;  yaw += T (w_z - b_g)
+
+Process noise from the IMU's white noise as a density (per-sample sigma ``s`` at rate ``hz``:
+``s^2 / hz`` per second), bias and current random walks. Measurements: GNSS position (H picks x, y),
+compass (yaw), GNSS velocity (v_x, v_y) and speed through water
+``h = (v_x - c_x) cos(yaw) + (v_y - c_y) sin(yaw)``, each through :class:`PoseEkf`'s gated Joseph update.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry import wrap_angle
+from .pose_ekf import PoseEkf
+
+
+class InsEkf(PoseEkf):
+    """:class:`PoseEkf` with the IMU-driven state (module docstring); ``x[:3]`` is the pose as in PoseEkf."""
+
+    def __init__(self, x0: NDArray[np.float64], P0: NDArray[np.float64], *, bias: bool, current: bool,
+                 acc_density: float, gyro_density: float, acc_bias_rw: float = 0.0, gyro_bias_rw: float = 0.0,
+                 current_rw: float = 0.0, **kw) -> None:
+        super().__init__(x0, P0, **kw)
+        n = 5 + 3 * bias + 2 * current
+        if self.x.shape != (n,) or self.P.shape != (n, n):
+            raise ValueError(f"state must have {n} entries")
+        self.ib = 5 if bias else None
+        self.ic = 5 + 3 * bias if current else None
+        self.qa, self.qg = acc_density ** 2, gyro_density ** 2
+        self.qba, self.qbg, self.qc = acc_bias_rw ** 2, gyro_bias_rw ** 2, current_rw ** 2
+
+    @property
+    def has_speed(self) -> bool:
+        return False
+
+    def predict_imu(self, ax: float, ay: float, wz: float, T: float) -> None:
+        """Propagate over ``T`` [s] with the specific force ``(ax, ay)`` and yaw rate ``wz`` held."""
+        if T <= 0.0:
+            return
+        x, n, ib = self.x, len(self.x), self.ib
+        if ib is not None:
+            ax, ay, wz = ax - x[ib], ay - x[ib + 1], wz - x[ib + 2]
+        th = x[2]
+        c, s = math.cos(th), math.sin(th)
+        anx, any_ = c * ax - s * ay, s * ax + c * ay
+        h = 0.5 * T * T
+        F = np.eye(n)
+        F[0, 3] = F[1, 4] = T
+        F[0, 2], F[1, 2] = -h * any_, h * anx
+        F[3, 2], F[4, 2] = -T * any_, T * anx
+        if ib is not None:
+            dA = np.array([[-c, s], [-s, -c]])  # d a_n / d (b_ax, b_ay)
+            F[0:2, ib:ib + 2] = h * dA
+            F[3:5, ib:ib + 2] = T * dA
+            F[2, ib + 2] = -T
+        Q = np.zeros((n, n))
+        for i in (0, 1):
+            Q[i, i] = self.qa * T ** 3 / 3
+            Q[i, i + 3] = Q[i + 3, i] = self.qa * T * T / 2
+            Q[i + 3, i + 3] = self.qa * T
+        Q[2, 2] = self.qg * T
+        if ib is not None:
+            Q[ib, ib] = Q[ib + 1, ib + 1] = self.qba * T
+            Q[ib + 2, ib + 2] = self.qbg * T
+        if self.ic is not None:
+            Q[self.ic, self.ic] = Q[self.ic + 1, self.ic + 1] = self.qc * T
+        x[0] += T * x[3] + h * anx
+        x[1] += T * x[4] + h * any_
+        x[3] += T * anx
+        x[4] += T * any_
+        x[2] = wrap_angle(th + T * wz)
+        self.P = F @ self.P @ F.T + Q
+
+    def update_velocity(self, v: tuple[float, float], sigma: float, t: float | None = None) -> bool:
+        """GNSS velocity over ground (east, north) [m/s]."""
+        H = np.zeros((2, len(self.x)))
+        H[0, 3] = H[1, 4] = 1.0
+        return self._update("gnss_velocity", np.asarray(v, dtype=float) - self.x[3:5], H, np.eye(2) * sigma ** 2, t)
+
+    def update_sog(self, v: float, sigma: float, t: float | None = None) -> bool:
+        """Speed over ground ``|v|`` (an odometry record's speed: a Doppler log / SOG); skipped
+        (False) below 0.2 m/s, where its direction is undefined."""
+        vx, vy = self.x[3], self.x[4]
+        h = math.hypot(vx, vy)
+        if h < 0.2 or abs(v) < 0.2:
+            return False
+        H = np.zeros((1, len(self.x)))
+        H[0, 3], H[0, 4] = vx / h, vy / h
+        return self._update("speed", np.array([abs(v) - h]), H, np.array([[sigma ** 2]]), t, reinit=False)
+
+    def update_water_speed(self, v: float, sigma: float, t: float | None = None) -> bool:
+        """Speed through water along the bow (needs the current states)."""
+        if self.ic is None:
+            raise ValueError("a water-speed update needs the current states")
+        ic, x = self.ic, self.x
+        c, s = math.cos(x[2]), math.sin(x[2])
+        ux, uy = x[3] - x[ic], x[4] - x[ic + 1]
+        H = np.zeros((1, len(x)))
+        H[0, 2] = -ux * s + uy * c
+        H[0, 3], H[0, 4] = c, s
+        H[0, ic], H[0, ic + 1] = -c, -s
+        nu = np.array([v - (ux * c + uy * s)])
+        return self._update("water_speed", nu, H, np.array([[sigma ** 2]]), t, reinit=False)

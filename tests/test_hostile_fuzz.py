@@ -1,0 +1,175 @@
+"""Issue #27 / #23 item 8: every command's numeric arguments and option values driven through 0,
+negative, NaN, infinite and huge values: exit 0 or 2 (a message naming the argument), never 1 (an
+internal error) nor a signal, and bounded work (the inputs are small; a huge value that would mean
+unbounded work is refused, not run). In-process (``graphnav.cli.main``); each example is cheap."""
+
+from __future__ import annotations
+
+import io
+import json
+from contextlib import redirect_stderr, redirect_stdout
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from graphnav.cli import main
+from graphnav.log import default_limits, set_default_limits
+
+HOSTILE = ["0", "-1", "-0.5", "0.5", "nan", "NaN", "inf", "-inf", "1e300", "-1e300", "1e9", str(2**63), "1.5",
+           "true", "[1]", "null", '{"a": 1}', "ten"]
+"""Argument values: zero, negative, NaN, infinite, huge, fractional, and values of the wrong kind."""
+NUMERIC = [v for v in HOSTILE if v not in ("true", "[1]", "null", '{"a": 1}')]
+FUZZ = settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
+                                                                       HealthCheck.too_slow])
+
+
+@pytest.fixture(autouse=True)
+def _keep_limits():
+    before = default_limits()
+    yield
+    set_default_limits(before)  # --max-speed sets the process-wide default
+
+
+def exit_code(argv: list[str]) -> int:
+    """``graphnav ARGV --json``: the exit code; a JSON object on stdout with an ``error`` when it is 2."""
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        try:
+            code = main([*argv, "--json"])
+        except SystemExit as exc:  # argparse: a value of the wrong type
+            code = exc.code if isinstance(exc.code, int) else 2
+    assert code in (0, 2), (argv, code, err.getvalue()[-2000:])
+    assert "Traceback" not in err.getvalue(), err.getvalue()[-2000:]
+    text = out.getvalue().strip()
+    if code == 2 and text:
+        assert "error" in json.loads(text)
+    return code
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("fuzz")
+    assert exit_code(["simulate", "harbour", "--duration", "4", "--out", str(d / "h.jsonl")]) == 0
+    assert exit_code(["simulate", "harbour", "--lidar", "3d", "--duration", "0.5", "--out", str(d / "h3.jsonl")]) == 0
+    rng = np.random.default_rng(0)
+    a = np.zeros((600, 4), np.float32)
+    a[:, :3] = rng.uniform(-10, 10, (600, 3))
+    a.tofile(d / "a.bin")
+    (a + np.float32([0.1, 0, 0, 0])).tofile(d / "b.bin")
+    (d / "c.log").write_text("".join(f"FLASER 3 1.0 2.0 3.0 0 0 0 0 0 0 {k}.0 host {k}.0\n" for k in range(3)))
+    return {"log": d / "h.jsonl", "log3d": d / "h3.jsonl", "a": d / "a.bin", "b": d / "b.bin",
+            "carmen": d / "c.log", "dir": d}
+
+
+@FUZZ
+@given(flag=st.sampled_from(["--duration", "--laps", "--fix-hz", "--lidar-hz", "--t0", "--seed"]),
+       value=st.sampled_from(NUMERIC))
+def test_simulate_harbour(files, flag, value):
+    base = [] if flag == "--duration" else ["--duration", "2"]
+    exit_code(["simulate", "harbour", *base, flag, value, "--lidar-hz", "0" if flag != "--lidar-hz" else value,
+               "--out", str(files["dir"] / "s.jsonl"), "--overwrite"])
+
+
+@FUZZ
+@given(flag=st.sampled_from(["--current-speed", "--calib-residual", "--seed"]), value=st.sampled_from(NUMERIC))
+def test_simulate_solent_rejects_or_runs(files, flag, value):
+    if value in ("0", "0.5", "1.5") and flag != "--seed":
+        return  # valid: a full mission (seconds); the valid path is tested elsewhere
+    exit_code(["simulate", "solent", flag, value, "--out", str(files["dir"] / "so.jsonl"), "--overwrite"])
+
+
+@FUZZ
+@given(flag=st.sampled_from(["--yaw-rate-bias", "--gnss", "--compass", "--odometry-noise"]),
+       value=st.sampled_from(NUMERIC))
+def test_simulate_degrade(files, flag, value):
+    odo = [] if flag == "--odometry-noise" else ["--odometry-noise", "0.1,0.1,0.1"]
+    arg = f"{value},{value},{value}" if flag == "--odometry-noise" else value
+    exit_code(["simulate", "degrade", str(files["log"]), *odo, flag, arg, "--out", str(files["dir"] / "d.jsonl"),
+               "--overwrite"])
+
+
+@FUZZ
+@given(key=st.sampled_from(["voxel", "max_corr", "knn", "vgicp_voxel", "max_iter", "eps_trans", "eps_rot", "threads",
+                            "resolution", "outlier_ratio", "neighbors", "min_points", "eig_ratio"]),
+       value=st.sampled_from(HOSTILE), method=st.sampled_from(["gicp", "vgicp", "ndt", "icp"]))
+def test_register_options(files, key, value, method):
+    exit_code(["register", str(files["a"]), str(files["b"]), "--method", method, "-O", f"{key}={value}"])
+
+
+@FUZZ
+@given(value=st.sampled_from(NUMERIC))
+def test_register_voxel(files, value):
+    exit_code(["register", str(files["a"]), str(files["b"]), "--voxel", value])
+
+
+@FUZZ
+@given(key=st.sampled_from(["gate", "sigma_v", "sigma_w", "sigma_acc", "reinit_n", "confirm_n", "confirm_s",
+                            "reinit_after_s", "scale_window", "speed", "use_gnss"]),
+       value=st.sampled_from(HOSTILE))
+def test_run_ekf_options(files, key, value):
+    exit_code(["run", str(files["log"]), "-e", "ekf", "-O", f"{key}={value}"])
+
+
+@FUZZ
+@given(key=st.sampled_from(["lag", "relinearize_skip", "gnss_gate", "odo_sigma_v", "cv_sigma_v", "lm_max_iterations",
+                            "noise_iterations", "keyframe_period", "anchor_sigma_xy", "use_icp", "cloud"]),
+       value=st.sampled_from([v for v in HOSTILE if v not in ("0.5", "1.5", "0", "1e9")]))
+def test_run_smoother_option_values_rejected_before_the_run(files, key, value):
+    exit_code(["run", str(files["log"]), "-e", "isam2", "-O", f"{key}={value}"])
+
+
+@FUZZ
+@given(value=st.sampled_from(NUMERIC))
+def test_max_speed(files, value):
+    exit_code(["info", str(files["log"]), "--max-speed", value])
+
+
+@FUZZ
+@given(flag=st.sampled_from(["--frames", "-O"]), value=st.sampled_from(HOSTILE),
+       key=st.sampled_from(["voxel", "knn", "max_corr", "threads", "max_iter", "min_points", "min_range", "max_range",
+                            "min_inliers", "water_margin"]))
+def test_scan_matching(files, flag, value, key):
+    arg = [flag, value] if flag == "--frames" else ["--frames", "3", "-O", f"{key}={value}"]
+    exit_code(["scan-matching", str(files["log3d"]), "--methods", "gicp,gicp-graph", *arg])
+
+
+@FUZZ
+@given(flag=st.sampled_from(["--scan-dt", "--max-range"]), value=st.sampled_from(NUMERIC))
+def test_convert_carmen(files, flag, value):
+    exit_code(["convert", "carmen", str(files["carmen"]), flag, value, "--out", str(files["dir"] / "cv.jsonl"),
+               "--overwrite"])
+
+
+@FUZZ
+@given(flag=st.sampled_from(["--speed", "--corrupt", "--seed"]), value=st.sampled_from(NUMERIC))
+def test_replay(files, flag, value):
+    base = [] if flag == "--speed" else ["--speed", "0"]
+    if flag == "--speed" and value in ("0.5", "1.5"):
+        value = "1e6"  # a valid but real-time replay would take seconds
+    exit_code(["replay", str(files["log"]), "--nmea-out", "udp://127.0.0.1:9", *base, flag, value])
+
+
+INVALID = ["0", "-1", "nan", "inf", "-inf", "1e300", "1e9", str(2**63), "ten"]
+"""Values that must be refused outright (the valid ones start a cluster, a search or a listener)."""
+
+
+@FUZZ
+@given(argv=st.sampled_from([["montecarlo", "solent", "--runs"], ["montecarlo", "solent", "--workers"],
+                             ["beacons", "search", "--beacons", "1", "--workers"],
+                             ["beacons", "search", "--beacons", "1", "--chunk"],
+                             ["beacons", "search", "--beacons", "1", "--limit"],
+                             ["beacons", "search", "--beacons", "1", "--p0-beacon"],
+                             ["live", "--nmea", "udp://127.0.0.1:0", "-e", "ekf", "--duration"],
+                             ["live", "--nmea", "udp://127.0.0.1:0", "-e", "ekf", "--idle-exit"],
+                             ["compare", "LOG", "--workers"]]),
+       value=st.sampled_from(INVALID))
+def test_commands_that_start_work_refuse_invalid_counts(files, argv, value):
+    argv = [str(files["log"]) if a == "LOG" else a for a in argv]
+    if argv[-1] in ("--p0-beacon", "--duration", "--idle-exit") and value in ("1e9", str(2**63)):
+        value = "-" + value  # large but valid there
+    if argv[-1] == "--workers" and argv[0] == "compare" and value == "0":
+        value = "-1"  # 0: one per CPU
+    assert exit_code([*argv, value]) == 2
