@@ -79,7 +79,7 @@ def fix_distances(log_path: Path, tum: Path, lenient: bool) -> np.ndarray:
     return np.hypot(ex - g["x"][inside], ey - g["y"][inside])
 
 
-def study(corpus: Path, min_fixes: int, run: bool) -> dict:
+def study(corpus: Path, min_fixes: int, run: bool, options: list[str] | None = None) -> dict:
     rows = []
     for f in sorted(p for p in corpus.iterdir() if p.is_file() and p.name != "README.md"):
         row: dict = {"file": f.name}
@@ -98,6 +98,7 @@ def study(corpus: Path, min_fixes: int, run: bool) -> dict:
             lenient = row["strict"] != "ok"
             with tempfile.TemporaryDirectory() as tmp:
                 args = ["run", str(f), "-e", "isam2", "--json", "--out", tmp] + (["--lenient"] if lenient else [])
+                args += [a for o in options or () for a in ("-O", o)]
                 rc, obj, err = cli(*args)
                 row["isam2"] = outcome(rc, obj, err) + (" (--lenient)" if lenient else "")
                 if rc == 0:
@@ -152,11 +153,13 @@ def main() -> int:
     ap.add_argument("--min-fixes", type=int, default=5)
     ap.add_argument("--no-run", action="store_true", help="only the info table (no isam2 runs)")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("-O", dest="options", action="append", default=[], metavar="KEY=VALUE",
+                    help="an isam2 option for every run (e.g. -O motion=vessel)")
     args = ap.parse_args()
     if args.corpus is None or not args.corpus.is_dir():
         print("nmea_corpus not found (../shared/data/nmea_corpus or --corpus DIR)", file=sys.stderr)
         return 2
-    res = study(args.corpus, args.min_fixes, not args.no_run)
+    res = study(args.corpus, args.min_fixes, not args.no_run, args.options)
     print(json.dumps(res) if args.json else table(res))
     return 0
 

@@ -335,7 +335,8 @@ class Navigator:
 
     def _kinematics(self, t: float, p: NDArray[np.float64], prev_t: float | None,
                     prev_p: NDArray[np.float64] | None) -> tuple[float | None, float | None, float | None]:
-        """Speed over ground, course, yaw rate: from the latest odometry sample when recent, else
+        """Speed over ground, course, yaw rate: on the Pose3 graph SOG and COG from the velocity
+        state (the yaw rate differenced); else from the latest odometry sample when recent, else
         differenced from the previous keyframe."""
         sog = cog = w = None
         if prev_t is not None and prev_p is not None and t > prev_t:
@@ -343,6 +344,9 @@ class Navigator:
             dx, dy = p[0] - prev_p[0], p[1] - prev_p[1]
             sog, cog = math.hypot(dx, dy) / dt, math.atan2(dy, dx)
             w = float(wrap_angle(p[2] - prev_p[2])) / dt
+        if self.nav and self.last_state is not None:  # the velocity over ground is a state
+            v = self.last_state[1]
+            return math.hypot(v[0], v[1]), math.atan2(v[1], v[0]), w
         b = self.builder
         odo = b.odometry
         if odo and t - odo.t[-1] <= 2.0:

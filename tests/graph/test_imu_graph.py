@@ -226,3 +226,17 @@ def test_water_current_is_estimated_from_water_speed_and_gnss():
     assert abs(wc["mean_vx"] - 0.3) < 0.1 and abs(wc["mean_vy"] + 0.25) < 0.1
     # the planar graph has no velocity: the records are counted, not used
     assert "water_current" not in run_isam2(log, motion="odometry", **FAST).info
+
+
+def test_online_estimates_carry_the_velocity_states_sog_and_cog():
+    """The Navigator's online Estimate on the Pose3 graph: SOG and COG of the velocity over ground
+    (a cross current: COG is the crab angle off the bow, not the heading)."""
+    from graphnav.graph.navigator import Navigator
+
+    log = turn_log(v=2.0, w_deg=0.0, n=60, gnss_sigma=1.0, gnss_noise=1.0, seed=7, current=(0.0, 0.5), imu_rate=10,
+                   velocity=True)
+    nav = Navigator.for_log(log, covariances=False)
+    ests = [e for e in (nav.add(r) for r in log) if e is not None]
+    last = ests[-1]
+    assert last.sog == pytest.approx(math.hypot(2.0, 0.5), abs=0.05)
+    assert last.cog == pytest.approx(math.atan2(0.5, 2.0), abs=math.radians(2.0))
