@@ -57,9 +57,9 @@ OPTIONAL: dict[str, tuple[str, ...]] = {
 }
 
 
-MAX_LINE_BYTES = 80 * MAX_CLOUD_POINTS
-"""The longest line read: a cloud of :data:`graphnav.log.MAX_CLOUD_POINTS` points at 4 decimals with
-intensity and ring takes ~55 bytes a point."""
+MAX_LINE_BYTES = 32 << 20
+"""The longest line read (32 MiB): a cloud of about 500 000 points at 4 decimals with intensity and ring
+(~55 bytes a point); larger clouds go in the ``.npz`` form. Reading a line takes a few times its size."""
 
 
 class _OwnedGzip(gzip.GzipFile):
