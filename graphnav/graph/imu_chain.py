@@ -106,9 +106,6 @@ class ImuChain:
         self.t.append(r.t)
         self.rows.append(row)
 
-    def covers(self, t: float) -> bool:
-        return bool(self.t) and self.t[-1] >= t - 1e-9
-
     def samples(self, ta: float, tb: float) -> list[tuple[NDArray[np.float64], NDArray[np.float64], float]]:
         """``(acc, omega, dt)`` over ``[ta, tb]``: each record held over the interval since the
         previous one, the last one held on to ``tb`` (zero-order hold over a gap or a late sample)."""
