@@ -30,7 +30,7 @@ from collections.abc import Iterable
 
 import gtsam
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .robust import robustify
 
@@ -45,49 +45,36 @@ def IB(k: int) -> int:
     return gtsam.symbol("i", k)
 
 
-def planar_imu_params(
-    acc_sigma: float, gyro_sigma: float, sample_dt: float = 1.0, integration_sigma: float = 1e-4
-) -> gtsam.PreintegrationParams:
-    """Preintegration parameters, gravity off, for records with white noise ``acc_sigma`` [m/s^2]
-    and ``gyro_sigma`` [rad/s] per ``sample_dt`` [s] (continuous densities ``sigma^2 sample_dt``)."""
-    p = gtsam.PreintegrationParams.MakeSharedU(0.0)
-    p.setAccelerometerCovariance(np.eye(3) * acc_sigma**2 * sample_dt)
-    p.setGyroscopeCovariance(np.eye(3) * gyro_sigma**2 * sample_dt)
-    p.setIntegrationCovariance(np.eye(3) * integration_sigma**2)
-    return p
-
-
-def bias_vector(b_ax: float = 0.0, b_ay: float = 0.0, b_gz: float = 0.0) -> gtsam.imuBias.ConstantBias:
-    """A planar IMU bias: accelerometer (b_ax, b_ay, 0), gyro (0, 0, b_gz)."""
-    return gtsam.imuBias.ConstantBias(np.array([b_ax, b_ay, 0.0]), np.array([0.0, 0.0, b_gz]))
-
-
 def preintegrate(
     params: gtsam.PreintegrationParams,
     bias: gtsam.imuBias.ConstantBias,
-    samples: Iterable[tuple[float, float, float, float]],
+    samples: Iterable[tuple[NDArray[np.float64], NDArray[np.float64], float]],
     substeps: int = 1,
+    *,
+    planar: bool = True,
 ) -> gtsam.PreintegratedImuMeasurements:
-    """Preintegrate ``(ax, ay, wz, dt)`` samples (each held constant over ``dt``, split into
-    ``substeps`` so that the body-frame acceleration turns with the boat within a sample).
+    """Preintegrate ``(acc, omega, dt)`` samples (3-vectors, each held constant over ``dt``, split
+    into ``substeps``).
 
-    GTSAM applies a step's acceleration with the attitude at the *start* of the step (first order:
-    the velocity lags by ``wz h / 2``); the acceleration is therefore passed rotated by
-    ``Rz(wz h / 2)``, which applies it with the mid-step attitude (second order, as the exact
-    constant-turn arc). The rotation acts on the bias-corrected sample at the preintegration's
-    bias ``bias`` (which GTSAM subtracts again), so it is exact at that linearisation point."""
+    ``planar`` (the 3-axis record: ``acc = (ax, ay, 0)``, ``omega = (0, 0, wz)``): GTSAM applies a
+    step's acceleration with the attitude at the *start* of the step (first order: the velocity lags
+    by ``wz h / 2``); the acceleration is therefore passed rotated by ``Rz(wz h / 2)``, which applies it
+    with the mid-step attitude (second order, as the exact constant-turn arc). The rotation acts on
+    the bias-corrected sample at the preintegration's bias ``bias`` (which GTSAM subtracts again), so
+    it is exact at that linearisation point. 6-axis samples are passed as they are."""
     pim = gtsam.PreintegratedImuMeasurements(params, bias)
     ba, bg = bias.accelerometer(), bias.gyroscope()
-    for ax, ay, wz, dt in samples:
+    n = max(1, int(substeps))
+    for acc, omega, dt in samples:
         if dt <= 0.0:
             continue
-        h = dt / substeps
-        half = 0.5 * (wz - bg[2]) * h
-        c, s = math.cos(half), math.sin(half)
-        ux, uy = ax - ba[0], ay - ba[1]
-        acc = np.array([c * ux - s * uy + ba[0], s * ux + c * uy + ba[1], 0.0])
-        omega = np.array([0.0, 0.0, wz])
-        for _ in range(substeps):
+        h = dt / n
+        if planar:
+            half = 0.5 * (omega[2] - bg[2]) * h
+            c, s = math.cos(half), math.sin(half)
+            ux, uy = acc[0] - ba[0], acc[1] - ba[1]
+            acc = np.array([c * ux - s * uy + ba[0], s * ux + c * uy + ba[1], 0.0])
+        for _ in range(n):
             pim.integrateMeasurement(acc, omega, h)
     return pim
 
@@ -106,9 +93,11 @@ def bias_between(k0: int, k1: int, rw_acc: float, rw_gyro: float, dt: float) -> 
     )
 
 
-def bias_prior(k: int, sigma_acc: float, sigma_gyro: float) -> gtsam.PriorFactorConstantBias:
-    """Prior on the residual bias after calibration: zero mean, ``sigma_acc`` / ``sigma_gyro`` 1-sigma."""
-    sig = np.array([sigma_acc] * 3 + [sigma_gyro] * 3)
+def bias_prior(k: int, sigma_acc: ArrayLike, sigma_gyro: ArrayLike) -> gtsam.PriorFactorConstantBias:
+    """Prior on the residual bias after calibration: zero mean, ``sigma_acc`` / ``sigma_gyro`` 1-sigma
+    (scalars, or one per axis x, y, z)."""
+    sig = np.concatenate([np.broadcast_to(np.asarray(sigma_acc, dtype=float), 3),
+                          np.broadcast_to(np.asarray(sigma_gyro, dtype=float), 3)])
     return gtsam.PriorFactorConstantBias(IB(k), gtsam.imuBias.ConstantBias(), gtsam.noiseModel.Diagonal.Sigmas(sig))
 
 
@@ -121,26 +110,6 @@ def pose_xy_yaw(p: gtsam.Pose3) -> NDArray[np.float64]:
     """``(x, y, yaw)`` of a ``Pose3``."""
     t = p.translation()
     return np.array([t[0], t[1], p.rotation().yaw()])
-
-
-def initial_state_factors(
-    k: int,
-    pose: tuple[float, float, float],
-    sigma_xy: float,
-    sigma_yaw: float,
-    vel: tuple[float, float],
-    sigma_v: float,
-    *,
-    sigma_tilt: float = 1e-4,
-    sigma_z: float = 1e-3,
-) -> list[gtsam.NonlinearFactor]:
-    """Priors on pose ``k`` (level: roll/pitch ``sigma_tilt``, z ``sigma_z``) and its velocity."""
-    pn = gtsam.noiseModel.Diagonal.Sigmas(np.array([sigma_tilt, sigma_tilt, sigma_yaw, sigma_xy, sigma_xy, sigma_z]))
-    vn = gtsam.noiseModel.Diagonal.Sigmas(np.array([sigma_v, sigma_v, sigma_z]))
-    return [
-        gtsam.PriorFactorPose3(gtsam.symbol("x", k), planar_pose(*pose), pn),
-        gtsam.PriorFactorVector(V(k), np.array([vel[0], vel[1], 0.0]), vn),
-    ]
 
 
 def gnss3_factor(

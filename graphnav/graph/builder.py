@@ -359,7 +359,7 @@ class GraphBuilder:
         covariance and the model's name."""
         cfg = self.cfg
         dt = max(dt, 0.0)
-        floor = np.array([cfg.motion_floor_xy, cfg.motion_floor_xy, math.radians(cfg.motion_floor_yaw_deg)])
+        floor = self._motion_floor()
         twist, extra, age = None, 0.0, 0.0
         if cfg.motion_model == "constant-velocity":
             if self.twist is not None and (t is None or self.twist_t is None or t - self.twist_t <= cfg.cv_max_age):
@@ -412,12 +412,11 @@ class GraphBuilder:
         the velocity's covariance."""
         if k != self.stepped:
             raise ValueError(f"keyframe {k} stepped out of order (next is {self.stepped})")
-        cfg = self.cfg
         t = self.kf_t[k]
         nav = self.imu is not None
         s = Step(k, t, gtsam.NonlinearFactorGraph(), gtsam.Values(), {F.X(k): t}, space=self.space)
         xk = F.X(k)
-        floor = np.array([cfg.motion_floor_xy, cfg.motion_floor_xy, math.radians(cfg.motion_floor_yaw_deg)])
+        floor = self._motion_floor()
         step_cov: NDArray[np.float64] | None = None
         value_k: Any = None
         if k == 0:
@@ -511,8 +510,7 @@ class GraphBuilder:
         pose, vel, bias, vel_cov = state
         s.add(self.imu.bias_between(k - 1, k, tb - ta), "imu_bias")
         if tb - ta < MIN_IMU_DT:  # keyframes at one time (a duplicated scan): the same state, within the floor
-            c = self.cfg
-            floor = np.square([c.motion_floor_xy, c.motion_floor_xy, math.radians(c.motion_floor_yaw_deg)])
+            floor = np.square(self._motion_floor())
             s.add(self.space.between(F.X(k - 1), F.X(k), np.zeros(3), np.diag(floor)), "motion")
             s.add(gtsam.BetweenFactorVector(V(k - 1), V(k), np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, 1e-3)),
                   "motion")
@@ -523,12 +521,16 @@ class GraphBuilder:
         pim = self.imu.preintegrate(bias, ta, tb)
         s.add(F.imu_factor(k - 1, k, pim), "imu")
         pred, rel, cov = relative_prediction(pim, pose, vel, bias, vel_cov)
-        c = self.cfg
-        cov = cov + np.diag(np.square([c.motion_floor_xy, c.motion_floor_xy, math.radians(c.motion_floor_yaw_deg)]))
+        cov = cov + np.diag(np.square(self._motion_floor()))
         s.values.insert(V(k), pred.velocity())
         s.values.insert(IB(k), bias)
         s.stamps[V(k)] = s.stamps[IB(k)] = tb
         return pred, rel, cov
+
+    def _motion_floor(self) -> NDArray[np.float64]:
+        """[m, m, rad] added in quadrature to every motion factor (``dt = 0`` stays proper)."""
+        c = self.cfg
+        return np.array([c.motion_floor_xy, c.motion_floor_xy, math.radians(c.motion_floor_yaw_deg)])
 
     def _lift(self, p3: gtsam.Pose3, p2: gtsam.Pose2) -> gtsam.Pose3:
         """The IMU's predicted attitude (roll, pitch) and height with the planar pose ``p2``."""

@@ -6,7 +6,7 @@ Each ``imu`` record is the mean over the interval since the previous one (docs/l
 a sample is held over ``(t_prev, t]`` and clipped to the keyframe interval; where the stream has a
 gap, or the sample closing an interval has not arrived yet, the last sample is held (zero-order hold). Planar 3-axis
 records are the levelled horizontal specific force with gravity removed (gravity off,
-:func:`factors.imu.planar_imu_params`); a log whose records carry all six axes is preintegrated
+gravity off); a log whose records carry all six axes is preintegrated
 in 3D with gravity (``n_gravity``, z up).
 
 The noise is the log's stated IMU model (``meta["imu"]``: ``acc_std`` [m/s^2] and ``gyro_std``
@@ -25,7 +25,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from factors.imu import IB
+import factors as F
 
 from ..log import Imu
 
@@ -127,9 +127,8 @@ class ImuChain:
 
     def preintegrate(self, bias: gtsam.imuBias.ConstantBias, ta: float, tb: float
                      ) -> gtsam.PreintegratedImuMeasurements:
-        """GTSAM preintegration of ``[ta, tb]`` at ``bias``. Planar records: the acceleration is
-        applied at the mid-step attitude (the rotation by ``(wz - b_gz) h / 2`` of
-        :func:`factors.imu.preintegrate`: second order, as the constant-turn arc)."""
+        """GTSAM preintegration of ``[ta, tb]`` at ``bias`` (:func:`factors.imu.preintegrate`: planar
+        records with the acceleration at the mid-step attitude, second order as the constant-turn arc)."""
         if self.params is None and self.t and (len(self.t) >= 2 or self.std[2]):
             self.params = self._make_params()
         if self.params is None:  # no IMU: the white-noise acceleration model
@@ -137,19 +136,7 @@ class ImuChain:
             if tb > ta:
                 pim.integrateMeasurement(np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope()), tb - ta)
             return pim
-        pim = gtsam.PreintegratedImuMeasurements(self.params, bias)
-        n = max(1, self.cfg.substeps)
-        ba, bg = bias.accelerometer(), bias.gyroscope()
-        for acc, omega, dt in self.samples(ta, tb):
-            h = dt / n
-            if not self.six:
-                half = 0.5 * (omega[2] - bg[2]) * h
-                c, s = math.cos(half), math.sin(half)
-                ux, uy = acc[0] - ba[0], acc[1] - ba[1]
-                acc = np.array([c * ux - s * uy + ba[0], s * ux + c * uy + ba[1], 0.0])
-            for _ in range(n):
-                pim.integrateMeasurement(acc, omega, h)
-        return pim
+        return F.preintegrate(self.params, bias, self.samples(ta, tb), self.cfg.substeps, planar=not self.six)
 
     def prune(self, t: float) -> None:
         """Drop samples no later interval can need (all before the last one at or before ``t``)."""
@@ -165,15 +152,12 @@ class ImuChain:
         return np.ones(6) if self.six else np.array([1, 1, 0.1, 0.1, 0.1, 1.0])
 
     def bias_prior(self, k: int) -> gtsam.NonlinearFactor:
-        c = self.cfg
-        sig = np.array([c.bias_sigma_acc] * 3 + [math.radians(c.bias_sigma_gyro_deg)] * 3) * self._axes()
-        return gtsam.PriorFactorConstantBias(IB(k), gtsam.imuBias.ConstantBias(), gtsam.noiseModel.Diagonal.Sigmas(sig))
+        c, ax = self.cfg, self._axes()
+        return F.bias_prior(k, c.bias_sigma_acc * ax[:3], math.radians(c.bias_sigma_gyro_deg) * ax[3:])
 
     def bias_between(self, k0: int, k1: int, dt: float) -> gtsam.NonlinearFactor:
         c = self.cfg
-        sig = np.array([c.bias_rw_acc] * 3 + [math.radians(c.bias_rw_gyro_deg)] * 3) * math.sqrt(max(dt, 1e-9))
-        return gtsam.BetweenFactorConstantBias(IB(k0), IB(k1), gtsam.imuBias.ConstantBias(),
-                                               gtsam.noiseModel.Diagonal.Sigmas(sig))
+        return F.bias_between(k0, k1, c.bias_rw_acc, math.radians(c.bias_rw_gyro_deg), dt)
 
 
 def relative_prediction(pim: gtsam.PreintegratedImuMeasurements, pose: gtsam.Pose3, vel: NDArray[np.float64],
