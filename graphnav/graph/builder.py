@@ -54,12 +54,12 @@ from ..log import (
     Record,
     Scan,
 )
-from ..mounts import parse_mounts
 from .anchor import anchor_ready, choose_anchor
 from .config import SmootherConfig
 from .imu_chain import ImuChain, ImuConfig, relative_prediction
 from .keyframes import DEFAULT_PERIOD
 from .measurements import Measurements
+from .mounts import parse_mounts
 from .odometry_buffer import OdometryBuffer
 from .scan_factors import (  # noqa: F401  (Matcher, default_matcher, make_loop_closer: the graph's public names)
     UNOBSERVED_COV,

@@ -140,7 +140,7 @@ class Navigator:
         if log.meta.get("mounts") is not None:  # the log's mounts, the option's winning per sensor
             from dataclasses import asdict
 
-            from ..mounts import merged
+            from .mounts import merged
 
             given = kw.get("mounts", config.mounts if config is not None else {})
             kw["mounts"] = {k: asdict(m) for k, m in merged(log.meta["mounts"], given).items()}

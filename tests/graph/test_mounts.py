@@ -1,4 +1,4 @@
-"""Sensor mounts (graphnav.mounts, docs/mounts.md) on known answers: a boat turning on a circle with
+"""Sensor mounts (graphnav.graph.mounts, docs/mounts.md) on known answers: a boat turning on a circle with
 its GNSS antenna 3 m forward of the body origin (with the lever arm the error is at the fixes' noise
 level, without it it is the arm), a LiDAR mounted off the origin (its sensor-frame matches conjugated
 to the body's motion), an IMU off the origin (the centripetal term removed), the options' checks."""
@@ -15,10 +15,10 @@ import factors as F
 from graphnav.config import OptionError
 from graphnav.graph.builder import GraphBuilder
 from graphnav.graph.config import SmootherConfig
+from graphnav.graph.mounts import Mount, merged, parse_mounts
 from graphnav.graph.scan_factors import conjugate
 from graphnav.graph.smoother import run
 from graphnav.log import Gnss, Heading, Imu, NavLog, Odometry, Scan, Truth
-from graphnav.mounts import Mount, merged, parse_mounts
 
 R_CIRCLE, SPEED = 20.0, 2.0
 OMEGA = SPEED / R_CIRCLE  # 0.1 rad/s

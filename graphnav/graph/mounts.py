@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from .config import OptionError, Range, number
+from ..config import OptionError, Range, number
 
 #: the sensors a mount may be given for
 SENSORS = ("gnss", "lidar", "imu", "water_speed")
