@@ -12,10 +12,10 @@ import numpy as np
 
 from ..io import load_log
 from ..io.outputs import OutDir, atomic_open, atomic_path
-from ..scan.icp import VARIANTS, IcpConfig
 from ..scan.icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
 from ..scan.motion_guess import INITS
 from ..scan.movement import movement_from_increments
+from ..scan.weighted_icp import VARIANTS, IcpConfig
 from ._common import add_json_flag, add_log_args, add_overwrite_flag, emit, log_options, plain_options, progress_bar
 
 log_ = logging.getLogger("graphnav.icp")

@@ -10,7 +10,7 @@ import logging
 
 from ..io import load_log
 from ..io.outputs import ensure_dir, write_text_atomic
-from ..online.live import LiveRunner
+from ..online.live_runner import LiveRunner
 from ..online.runner import ONLINE_ESTIMATORS, make_online
 from ._common import add_json_flag, emit, jsonable, options_for
 from .replay import parse_origin

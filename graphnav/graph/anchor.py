@@ -14,8 +14,8 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..log import BeaconObs, Gnss, Heading, KnownBeacon, PosePrior, Record, Truth
-from .config import SmootherConfig
 from .mounts import parse_mounts
+from .smoother_config import SmootherConfig
 
 
 def anchor_ready(held: list[Record], charted: dict[str, KnownBeacon], anchor_wait: float, t_next: float) -> bool:

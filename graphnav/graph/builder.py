@@ -55,7 +55,6 @@ from ..log import (
     Scan,
 )
 from .anchor import anchor_ready, choose_anchor
-from .config import SmootherConfig
 from .imu_chain import ImuChain, ImuConfig, relative_prediction
 from .keyframes import DEFAULT_PERIOD
 from .measurements import Measurements
@@ -71,6 +70,7 @@ from .scan_factors import (  # noqa: F401  (Matcher, default_matcher, make_loop_
     proper_cov,
     screen_match,
 )
+from .smoother_config import SmootherConfig
 from .space import IB, NavSpace, PlanarSpace, V
 from .step import Step
 

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..log import BeaconObs, Gnss, GnssVelocity, Heading, KnownBeacon, PosePrior, Record, WaterSpeed
-from .config import SmootherConfig
+from .smoother_config import SmootherConfig
 from .space import PlanarSpace, V, W
 from .step import Step
 

@@ -18,7 +18,7 @@ agree --; batch LM from the chained initial guess; fixed-lag each pose as it lef
 batch solutions drop gross GNSS outliers by their residual and re-solve, and estimate a noise scale
 per sensor group when ``noise_estimation`` asks (:mod:`graphnav.graph.noise`).
 
-``graphnav run -e isam2|batch|fixed-lag`` (:mod:`graphnav.graph.smoother`) and ``graphnav live``
+``graphnav run -e isam2|batch|fixed-lag`` (:mod:`graphnav.graph.log_runs`) and ``graphnav live``
 (:mod:`graphnav.online.runner`) are loops over it. A failure of GTSAM is a
 :class:`~graphnav.errors.GraphnavError` naming the record and time.
 """
@@ -44,7 +44,7 @@ from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from . import noise
 from .builder import GraphBuilder, Matcher, NavPrev, Step
-from .config import SmootherConfig
+from .smoother_config import SmootherConfig
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt, marginals
 from .space import IB, PlanarSpace, V, W
 

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..log import Cloud, Scan
-from .config import SmootherConfig
+from .smoother_config import SmootherConfig
 from .step import Step
 
 #: ``matcher(cur, prev, init, init_cov, guess_in_graph) -> (usable, pose, cov)``: ``init`` the motion
@@ -36,7 +36,7 @@ UNOBSERVED_COV = np.diag([1e4, 1e4, 10.0])
 
 
 def default_matcher(options: dict[str, Any]) -> Matcher | None:
-    """The weighted-ICP matcher of :mod:`graphnav.scan.icp`, or ``None`` when it is not available.
+    """The weighted-ICP matcher of :mod:`graphnav.scan.weighted_icp`, or ``None`` when it is not available.
     A match is usable when it converged, or when it was flagged degenerate only (its covariance is
     then inflated along the unobserved directions, which the factor keeps weak).
 
@@ -46,8 +46,8 @@ def default_matcher(options: dict[str, Any]) -> Matcher | None:
     the guess is a factor of the graph already (``guess_in_graph``: the odometry) the match's
     factor gets :data:`UNOBSERVED_COV` there instead, so the odometry is not counted twice."""
     try:
-        from ..scan.icp import IcpConfig, scan_points
         from ..scan.icp_cache import match_points  # shared between estimators inside icp_cache.active()
+        from ..scan.weighted_icp import IcpConfig, scan_points
     except ImportError:
         return None
     cfg = IcpConfig(**options)
@@ -108,7 +108,7 @@ def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any], extrinsic: g
     adds its floor); ``None`` without the matcher. With a LiDAR ``extrinsic`` the places' points are
     moved into the body frame (the places are body poses)."""
     try:
-        from ..scan.icp import IcpConfig, match_points
+        from ..scan.weighted_icp import IcpConfig, match_points
     except ImportError:
         return None
     from .loops import LoopCloser, LoopConfig
@@ -137,7 +137,7 @@ def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any], extrinsic: g
 
 
 def scan_points_of(scan: Scan, icfg: Any) -> NDArray[np.float64]:
-    from ..scan.icp import scan_points
+    from ..scan.weighted_icp import scan_points
 
     return scan_points(scan, icfg)
 

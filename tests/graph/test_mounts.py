@@ -14,10 +14,10 @@ import pytest
 import factors as F
 from graphnav.config import OptionError
 from graphnav.graph.builder import GraphBuilder
-from graphnav.graph.config import SmootherConfig
+from graphnav.graph.log_runs import run
 from graphnav.graph.mounts import Mount, merged, parse_mounts
 from graphnav.graph.scan_factors import conjugate
-from graphnav.graph.smoother import run
+from graphnav.graph.smoother_config import SmootherConfig
 from graphnav.log import Gnss, Heading, Imu, NavLog, Odometry, Scan, Truth
 
 R_CIRCLE, SPEED = 20.0, 2.0

@@ -93,7 +93,7 @@ class SmootherConfig:
     icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
     icp_max_step: float = 5.0  # [m] an ICP step farther than this from the prediction is rejected
     icp_gate: float | None = 4.0  # reject a match whose Mahalanobis distance to the odometry exceeds it
-    icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.icp.IcpConfig
+    icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.weighted_icp.IcpConfig
 
     # -- loop closures (graphnav.graph.loops, docs/loops.md) ------------------------------------
     loops: bool = True  # close loops when the log has scans
