@@ -71,7 +71,8 @@ def log_options(args: argparse.Namespace) -> dict[str, Any]:
 def add_drop_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drop", action="append", metavar="KIND[,KIND]",
                    help="leave these record kinds out of the log before any estimator sees it, e.g. "
-                        "--drop odometry,beacon (repeatable; beacon_known: the charted beacons); the JSON "
+                        "--drop odometry,beacon (repeatable; beacon_known: the charted beacons; KIND@SOURCE: "
+                        "only that source's, e.g. --drop gnss@52 keeps the other GNSS); the JSON "
                         "output lists them as 'dropped'")
 
 
