@@ -32,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
     out = {"records": log.counts(), "t0": log.t0, "t1": log.t1, "has_truth": log.has_truth}
     for key in ("name", "origin", "skipped", "skipped_errors", "truncated", "dropped_fields", "frame", "reference",
                 "topics", "time", "date", "messages", "ignored", "unused", "missing_returns", "dead_beams", "dropped",
-                "sentences", "hdg_without_variation", "format", "pgns", "paths"):
+                "sentences", "hdg_without_variation", "format", "pgns", "paths", "columns", "units"):
         if key in log.meta:
             out[key] = log.meta[key]
     from ..io.n2k import record_sources

@@ -49,6 +49,14 @@ def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None =
     if not (p.is_dir() or p.is_file() or stat.S_ISFIFO(p.stat().st_mode)):
         raise LogError("not a regular file, directory or pipe (a device or socket has no end)", file=str(p))
     day = options.pop("date", None)  # the day of a dateless NMEA 0183 / time-of-day NMEA 2000 log
+    columns = options.pop("columns", None)  # a CSV's column mapping (the only reader that takes one)
+    if name.endswith((".csv", ".csv.gz", ".tsv", ".tsv.gz")):
+        from .csv_table import read_csv_log
+
+        return read_csv_log(p, columns=columns, lenient=lenient, limits=limits)
+    if columns is not None:
+        raise LogError("--columns maps the columns of a CSV log (.csv, .tsv); this is not one", file=str(p),
+                       field="--columns")
     if day is not None and not (name.endswith(NMEA_SUFFIXES) or name.endswith(SNIFF_SUFFIXES)
                                 or name.endswith(N2K_SUFFIXES)):
         day = None
@@ -107,7 +115,8 @@ def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None =
 
         return read_bag(p, lenient=lenient, limits=limits, **options)
     raise LogError("unknown log type (expected a marina directory, .jsonl[.gz], .npz, .nmea, a CARMEN .log/.clf, "
-                   "NMEA 2000 text (.n2k, .raw, .data), Signal K deltas (.sk) or a ROS bag)",
+                   "NMEA 2000 text (.n2k, .raw, .data), Signal K deltas (.sk), .csv/.tsv (with --columns) or a ROS "
+                   "bag)",
                    file=str(p))
 
 
