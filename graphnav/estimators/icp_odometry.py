@@ -1,6 +1,6 @@
 """Weighted-ICP dead reckoning: chain the scan matches from the start pose.
 
-Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.scan.icp.match_points`; initial guess the
+Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.scan.weighted_icp.match_points`; initial guess the
 odometry increment with its covariance when the log has odometry, else the IMU's prediction with its
 covariance when it has an IMU (:mod:`graphnav.scan.imu_guess`: LiDAR-inertial odometry), else
 constant velocity) and the
@@ -31,9 +31,9 @@ import numpy as np
 from ..geometry import cov_to_world, se2_adjoint_inv, se2_between, se2_compose
 from ..log import NavLog, odometry_samples
 from ..scan import icp_cache
-from ..scan.icp import IcpConfig, scan_points
 from ..scan.imu_guess import ImuGuess, imu_samples
 from ..scan.motion_guess import MotionGuess
+from ..scan.weighted_icp import IcpConfig, scan_points
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
 from .dead_reckoning import start_pose

@@ -14,7 +14,7 @@ import factors as F
 from graphnav import estimators
 from graphnav.evaluation.metrics import ate, heading_error
 from graphnav.graph.imu_chain import ImuChain, ImuConfig
-from graphnav.graph.smoother import run_batch, run_fixed_lag, run_isam2
+from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
 from graphnav.graph.space import NavSpace
 from graphnav.log import Gnss, GnssVelocity, Heading, Imu, NavLog, PosePrior, Truth
 from graphnav.sim.solent import simulate_solent
@@ -246,7 +246,7 @@ def test_keyframes_follow_the_motion_with_an_imu_and_every_scan_without():
     """LIO-SAM's keyframe rule on the IMU graph (1 m, 0.2 rad, at least one a second): far fewer keyframes
     than 10 Hz scans, the same accuracy as one per scan (a test of the rule, not of a tuned figure)."""
     from graphnav.graph.builder import GraphBuilder
-    from graphnav.graph.config import SmootherConfig
+    from graphnav.graph.smoother_config import SmootherConfig
     from graphnav.sim.harbour import HarbourConfig, simulate_harbour
 
     log = simulate_harbour(0, HarbourConfig(), duration=15.0)
