@@ -83,7 +83,8 @@ class Measurements:
                             and self.consecutive_rejects < cfg.gnss_gate_max_rejects):
                         self.n_rejected += 1
                         self.consecutive_rejects += 1
-                        self.rejected.append(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k, self.arm))
+                        self.rejected.append(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k,
+                                                             self.arm))
                         continue
                 self.consecutive_rejects = 0
                 self.after_outage.discard(id(r))
