@@ -31,9 +31,9 @@ from scipy.stats import chi2
 from . import noise
 from .solver import LmSettings, SolverError, _gtsam_message, levenberg_marquardt
 
-#: sensor groups whose factors the data may switch off (scan matches, loop closures, 3D cloud matches,
-#: GNSS fixes: a cold start's jumps, multipath)
-SWITCHABLE = ("icp", "loop", "cloud", "gnss")
+#: sensor groups whose factors the data may switch off (scan matches, 3D cloud matches, GNSS fixes: a cold
+#: start's jumps, multipath; the configuration's ``robust_groups``, which may add "loop")
+SWITCHABLE = ("icp", "cloud", "gnss")
 #: window lengths [keyframes] of the odometry consistency check: the verdict is on the short ones (the
 #: local motion); the long ones are reported, where a smoothed track corrects the odometry's drift and
 #: differs from it by more than its stated noise whenever that noise is optimistic over long windows
