@@ -16,6 +16,7 @@ CONVERGE = ("lm", "updates", "none")
 NOISE_ESTIMATION = ("off", "defaulted", "all")
 BATCH_INIT = ("incremental", "chained")
 ROBUST_BACKEND = ("gnc", "off")
+ROBUST_GROUPS = ("icp", "loop", "cloud", "gnss")  # the sensor groups the back end may switch off
 
 
 @dataclass
@@ -184,6 +185,9 @@ class SmootherConfig:
                 raise ValueError(f"{name} must be one of {', '.join(allowed)}; got {val!r}")
         if not self.batch_init_growth > 1.0:
             raise ValueError(f"batch_init_growth must be > 1, got {self.batch_init_growth}")
+        if not isinstance(self.robust_groups, list | tuple) or any(
+                not isinstance(g, str) or g not in ROBUST_GROUPS for g in self.robust_groups):
+            raise ValueError(f"robust_groups must be a list of {', '.join(ROBUST_GROUPS)}; got {self.robust_groups!r}")
         if not 0.5 < self.robust_prob < 1.0:
             raise ValueError(f"robust_prob must be in (0.5, 1), got {self.robust_prob}")
         if self.scan_stride < 1:

@@ -75,3 +75,15 @@ def test_gnc_without_candidates_is_a_no_op():
     g, groups, values, _ = _chain(10)
     g2, _, _, rep = switch_off(g, values, ["odometry" if x == "icp" else x for x in groups], LmSettings(1e-10, 100))
     assert rep["ran"] is False and g2.size() == g.size()
+
+
+def test_robust_options_are_checked():
+    import pytest
+
+    from graphnav.graph.smoother_config import SmootherConfig
+
+    for bad in ({"robust_groups": 5}, {"robust_groups": ["odometry"]}, {"robust_prob": 1.0},
+                {"robust_backend": "dcs"}):
+        with pytest.raises(ValueError):
+            SmootherConfig(**bad)
+    assert SmootherConfig(robust_groups=["icp", "loop"]).robust_groups == ["icp", "loop"]
