@@ -330,7 +330,7 @@ class LiveRunner:
                  restart: Callable[[], OnlineEstimator] | None = None,
                  time_tolerance: float = TIME_TOLERANCE_S, resync_stamps: int = RESYNC_STAMPS,
                  n2k_sources: list[str] | None = None, signalk_sources: list[str] | None = None,
-                 publish_signalk: str | None = None) -> None:
+                 publish_signalk: str | None = None, drop: list[str] | None = None) -> None:
         self.sources = [_Source(parse_endpoint(s)) for s in sources]
         self.sources += [_Source(parse_endpoint(s), "n2k") for s in n2k_sources or []]
         if signalk_sources:
@@ -340,6 +340,12 @@ class LiveRunner:
                              for s in signalk_sources]
         if not self.sources:
             raise ValueError("at least one --nmea, --n2k or --signalk source is needed")
+        from ..io.drop import parse_kinds
+
+        self.drop = parse_kinds(drop)  # record kinds (KIND or KIND@SOURCE) left out, as run --drop
+        self._drop_kinds = {k for k in self.drop if "@" not in k}
+        self._drop_pairs = {tuple(k.split("@", 1)) for k in self.drop if "@" in k}
+        self.dropped = 0
         self.marine = None  # MarineInput, made when an n2k/signalk source is given
         self.bad_marine = 0
         self.sources += [_Source(parse_endpoint(s, ("udp",)), "scan") for s in scan_sources or []]
@@ -560,6 +566,9 @@ class LiveRunner:
             self._record(rec, arrival if isinstance(rec, Gnss) else None)
 
     def _record(self, rec, arrival: float | None) -> None:
+        if self.drop and (rec.kind in self._drop_kinds or (rec.kind, getattr(rec, "source", "")) in self._drop_pairs):
+            self.dropped += 1
+            return
         self.records += 1
         est = self.estimator.add(rec)
         if est is not None:
@@ -696,6 +705,8 @@ class LiveRunner:
             out["bad_marine_lines"] = self.bad_marine
         if self.publish_signalk is not None:
             out["published_signalk"] = self.published_signalk
+        if self.drop:
+            out["dropped"], out["dropped_records"] = self.drop, self.dropped
         if any(s.kind == "scan" for s in self.sources):
             out["scans_in"], out["bad_scans"] = self.scans_in, self.bad_scans
         if self.decoder.frame is not None:
