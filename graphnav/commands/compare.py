@@ -15,7 +15,7 @@ from pathlib import Path
 from .. import estimators
 from ..errors import GraphnavError
 from ..estimators.options import check as check_options
-from ..evaluation.compare import compare, ranked
+from ..evaluation.comparison import compare, ranked
 from ..evaluation.report import to_json, write_report
 from ..evaluation.trackmap import write_track_map
 from ..io import load_log

@@ -31,7 +31,7 @@ from ..io.outputs import OutDir, write_text_atomic
 from ..io.tum import write_truth
 from ..log import NavLog
 from . import plots
-from .compare import Entry, ranked
+from .comparison import Entry, ranked
 
 # (summary key, column header, format)
 COLUMNS: list[tuple[str, str, str]] = [
