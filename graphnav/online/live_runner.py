@@ -580,8 +580,8 @@ class LiveRunner:
                 self.time_outliers += 1
                 continue
             if self.scan_wait:
-                self._release_waiting(rec.t)
-            self._record(rec, arrival if isinstance(rec, Gnss) else None)
+                self._release_waiting(rec.t, arrival)
+            self._record(rec, arrival)
 
     def _record(self, rec, arrival: float | None) -> None:
         if self.drop and (rec.kind in self._drop_kinds or (rec.kind, getattr(rec, "source", "")) in self._drop_pairs):
