@@ -85,7 +85,7 @@ class Measurements:
                         self.n_rejected += 1
                         self.consecutive_rejects += 1
                         self.rejected.append(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k,
-                                                             self.arm))
+                                                             arm3))
                         continue
                 self.consecutive_rejects = 0
                 self.after_outage.discard(id(r))

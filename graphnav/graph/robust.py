@@ -89,8 +89,13 @@ def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: 
         report["ran"] = False
         return graph, groups, values, report
     gnc_graph = gtsam.NonlinearFactorGraph()
-    for i in range(graph.size()):
-        gnc_graph.add(noise.scaled(graph.at(i), factor[i]) if i in factor else graph.at(i))
+    try:
+        for i in range(graph.size()):
+            gnc_graph.add(noise.scaled(graph.at(i), factor[i]) if i in factor else graph.at(i))
+    except RuntimeError:  # GNC re-weights by cloning every factor: a Python CustomFactor (a GNSS lever arm
+        report["ran"] = False  # on the Pose2 graph) cannot be cloned
+        report["skipped"] = "a factor GTSAM cannot clone (CustomFactor)"
+        return graph, groups, values, report
     base = gtsam.LevenbergMarquardtParams()
     base.setMaxIterations(lm.max_iterations)
     base.setRelativeErrorTol(max(lm.tol, 1e-6))
@@ -105,6 +110,10 @@ def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: 
         opt.optimize()
         w = np.asarray(opt.getWeights())
     except RuntimeError as exc:
+        if "clone" in str(exc):
+            report["ran"] = False
+            report["skipped"] = "a factor GTSAM cannot clone (CustomFactor)"
+            return graph, groups, values, report
         raise SolverError(_gtsam_message(exc)) from None
     report["ran"] = True
     off = {i for i in suspects if w[i] < 0.5}  # beyond its bound at the solution, and weighed out by GNC
