@@ -49,7 +49,6 @@ from ..geometry import cov_to_world
 from ..log import (
     Cloud,
     Gnss,
-    GnssVelocity,
     KnownBeacon,
     PosePrior,
     Record,
@@ -77,14 +76,14 @@ from .step import Step
 
 #: sensor groups of the factors (the noise estimation scales ``SCALABLE`` ones)
 GROUPS = ("anchor", "odometry", "motion", "icp", "loop", "gnss", "compass", "bias", "beacon", "chart", "pose_prior",
-          "cloud", "imu", "imu_bias", "gnss_velocity", "water_speed", "current")
+          "cloud", "imu", "imu_bias", "gnss_velocity", "water_speed", "current", "attitude")
 SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon", "cloud")
 EPS = 1e-9  # [s] times closer than this are equal (as keyframes.schedule)
 MIN_IMU_DT = 1e-4  # [s] keyframes closer than this share their state (no ImuFactor: its covariance would vanish)
 V0_STATED_SIGMA = 0.2  # [m/s] 1-sigma of an initial velocity the log states (meta["initial_velocity"])
 #: the Pose3 graph's estimate of the previous keyframe: pose, nav-frame velocity, IMU bias, velocity covariance
 NavPrev = tuple[gtsam.Pose3, NDArray[np.float64], gtsam.imuBias.ConstantBias, NDArray[np.float64] | None]
-MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior", "gnss_velocity", "water_speed")
+MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior", "gnss_velocity", "water_speed", "attitude")
 
 
 class GraphBuilder:
@@ -151,7 +150,6 @@ class GraphBuilder:
         self.twist_t: float | None = None  # ... and its time
         self.fixes: deque[tuple[float, float, float, float]] = deque(maxlen=256)  # recent GNSS (t, x, y, sigma)
         self.gnss_twist: tuple[float, NDArray[np.float64], float] | None = None  # (t, twist, speed sigma)
-        self.sog: deque[tuple[float, float, float]] = deque(maxlen=64)  # recent GNSS velocity records: t, speed, sigma
         self.anchor_pose: NDArray[np.float64] | None = None
         self.anchor_sigmas: NDArray[np.float64] | None = None
         self.anchor: str | None = None
@@ -297,9 +295,6 @@ class GraphBuilder:
             else:
                 self.counts["odometry_unused"] = self.counts.get("odometry_unused", 0) + 1
         elif kind in MEASUREMENTS:
-            if isinstance(rec, GnssVelocity):  # the receiver's own speed over ground (RMC, VTG, Doppler)
-                sv = rec.sigma if math.isfinite(rec.sigma) else self.cfg.gnss_velocity_sigma
-                self.sog.append((t, math.hypot(rec.vx, rec.vy), sv))
             if isinstance(rec, Gnss):
                 if self.fixes and t - self.fixes[-1][0] > self.cfg.gnss_gate_outage:
                     self.meas.after_outage.add(id(rec))  # the first fix after an outage is not gated
@@ -425,8 +420,7 @@ class GraphBuilder:
         body-frame twist ``(speed, 0, 0)``, and the speed's 1-sigma ``sigma / sqrt(sum (t_i -
         mean t)^2)`` and its age [s]; zero speed when it is below 3 sigma (direction unknown). A fit
         whose speed sigma exceeds ``cv_sigma_v`` (few fixes) is not used: through an outage the last
-        good velocity is kept for ``cv_max_age`` seconds. A GNSS velocity record (the receiver's SOG:
-        RMC, VTG) at or before ``t`` is used instead when it is newer than the fit or more precise."""
+        good velocity is kept for ``cv_max_age`` seconds."""
         cfg = self.cfg
         w = [f for f in self.fixes if t - cfg.cv_gnss_window <= f[0] <= t + EPS]
         if len(w) >= 3 and w[-1][0] - w[0][0] >= cfg.cv_gnss_window / 3:
@@ -439,11 +433,6 @@ class GraphBuilder:
             if sv <= cfg.cv_sigma_v:  # a fit worth having (else the last one is kept)
                 # below 3 sigma the direction is unknown: no motion, with the speed's sigma
                 self.gnss_twist = (w[-1][0], np.array([speed if speed > 3 * sv else 0.0, 0.0, 0.0]), sv)
-        stated = next((v for v in reversed(self.sog) if v[0] <= t + EPS), None)
-        if stated is not None and t - stated[0] <= cfg.cv_max_age and (
-                self.gnss_twist is None or stated[0] >= self.gnss_twist[0] or stated[2] < self.gnss_twist[2]):
-            ts, speed, sv = stated  # the receiver's speed over ground: as good as a fit of its fixes, or better
-            return np.array([speed if speed > 3 * sv else 0.0, 0.0, 0.0]), sv, max(t - ts, 0.0)
         if self.gnss_twist is None or t - self.gnss_twist[0] > cfg.cv_max_age:
             return None
         return self.gnss_twist[1], self.gnss_twist[2], max(t - self.gnss_twist[0], 0.0)
@@ -563,7 +552,7 @@ class GraphBuilder:
             s.values.insert(IB(k), bias)
             s.stamps[V(k)] = s.stamps[IB(k)] = tb
             return gtsam.NavState(pose, vel), np.zeros(3), np.diag(floor)
-        pim = self.imu.preintegrate(bias, ta, tb)
+        pim = self.imu.preintegrate(bias, ta, tb, speed=float(np.hypot(vel[0], vel[1])))
         s.add(F.imu_factor(k - 1, k, pim), "imu")
         pred, rel, cov = relative_prediction(pim, pose, vel, bias, vel_cov)
         cov = cov + np.diag(np.square(self._motion_floor()))
