@@ -6,7 +6,7 @@ docs/ekf.md, *Gating*.
 
 * ATE RMSE of ``ekf`` on ``data/harbour.npz`` and marina-degraded seeds 1-3 (skipped without the
   marina dataset), the mean position RMSE of ``ekf``, ``ukf``, ``fuzzy-ukf`` over Solent seeds 0-4
-  per scenario (``graphnav.evaluation.montecarlo.solent_trial``);
+  per scenario (``graphnav.evaluation.monte_carlo_trials.solent_trial``);
 * a 1 km GNSS jump for 60 s: the turning drive of tests/test_ekf.py (jump 60-120 s) and Solent
   scenarios 1-2 seed 0 (fixes +1 km east from 200 s to 260 s): the maximum position error inside
   and around the jump beside the same log without it.
@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT / "tests" / "estimators"))
 
 from graphnav import estimators  # noqa: E402
 from graphnav.evaluation.metrics import ate  # noqa: E402
-from graphnav.evaluation.montecarlo import solent_trial  # noqa: E402
+from graphnav.evaluation.monte_carlo_trials import solent_trial  # noqa: E402
 from graphnav.io import load_log  # noqa: E402
 from graphnav.log import Gnss, NavLog  # noqa: E402
 from graphnav.sim.solent import simulate_solent  # noqa: E402

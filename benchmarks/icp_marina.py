@@ -27,7 +27,6 @@ sys.path.insert(0, str(ROOT))
 
 from graphnav.geometry import se2_from_matrix  # noqa: E402
 from graphnav.io.marina import read_marina  # noqa: E402
-from graphnav.scan.icp import IcpConfig, line_normals, match_points, scan_points  # noqa: E402
 from graphnav.scan.icp_pairs import (  # noqa: E402
     PairRun,
     nees,
@@ -35,6 +34,7 @@ from graphnav.scan.icp_pairs import (  # noqa: E402
     score_pairs,
     valid_reference_steps,
 )
+from graphnav.scan.weighted_icp import IcpConfig, line_normals, match_points, scan_points  # noqa: E402
 
 QUAY = (76, 97)  # pairs along the long straight quay (inclusive)
 PAPER = {  # Table 1 of the paper (865 scans at 0.2 s): mean, std, max of SOG [m/s] and dCOG [deg]
@@ -164,7 +164,7 @@ def run(marina: Path, init: str):
         if results[m]:
             pr = PairRun(t0, t1, results[m], ms[m], IcpConfig(variant=m.split()[0]), init)
         else:
-            from graphnav.scan.icp import MatchResult
+            from graphnav.scan.weighted_icp import MatchResult
 
             fake = [MatchResult(p, np.eye(3), bool(o), {}) for p, o in zip(poses[m], oks[m], strict=True)]
             pr = PairRun(t0, t1, fake, ms[m], IcpConfig(), init)

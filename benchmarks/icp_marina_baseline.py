@@ -22,8 +22,8 @@ sys.path.insert(0, str(ROOT))
 
 from graphnav.geometry import se2_between, se2_compose  # noqa: E402
 from graphnav.io.marina import read_marina  # noqa: E402
-from graphnav.scan.icp import IcpConfig, match_points, scan_points  # noqa: E402
 from graphnav.scan.icp_pairs import run_pairs  # noqa: E402
+from graphnav.scan.weighted_icp import IcpConfig, match_points, scan_points  # noqa: E402
 
 STRETCHES = [(3, 13), (13, 23), (20, 30), (76, 86), (86, 96), (100, 110), (110, 120), (120, 130), (130, 140)]
 

@@ -42,8 +42,8 @@ sys.path.insert(0, str(ROOT))
 from graphnav.geometry import se2_between  # noqa: E402
 from graphnav.io import load_log  # noqa: E402
 from graphnav.io.marina import read_marina  # noqa: E402
-from graphnav.scan.icp import IcpConfig  # noqa: E402
 from graphnav.scan.icp_pairs import nees, reference_increments, run_pairs, valid_reference_steps  # noqa: E402
+from graphnav.scan.weighted_icp import IcpConfig  # noqa: E402
 
 CHI2_3_95 = 7.815
 MARINA_REF = {"README lower (0.01 m, 0.03 deg)": (0.01, 0.03), "README upper (0.05 m, 0.1 deg)": (0.05, 0.1)}

@@ -39,8 +39,8 @@ sys.path.insert(0, str(ROOT))
 from graphnav.geometry import increment, se2_between, wrap_angle  # noqa: E402
 from graphnav.io import load_log  # noqa: E402
 from graphnav.log import odometry_samples  # noqa: E402
-from graphnav.scan.icp import IcpConfig, scan_points  # noqa: E402
 from graphnav.scan.icp_pairs import reference_increments, run_pairs  # noqa: E402
+from graphnav.scan.weighted_icp import IcpConfig, scan_points  # noqa: E402
 
 METHODS = ("ours", "ours_nocov", "o3d", "odo")
 LABELS = {"ours": "ours", "ours_nocov": "ours, guess w/o cov", "o3d": "open3d p2plane", "odo": "odometry"}

@@ -29,8 +29,8 @@ sys.path.insert(0, str(ROOT))
 
 from graphnav.geometry import se2_between  # noqa: E402
 from graphnav.io.marina import read_marina  # noqa: E402
-from graphnav.scan.icp import IcpConfig, match_points  # noqa: E402
 from graphnav.scan.icp_pairs import nees, reference_increments, run_pairs, valid_reference_steps  # noqa: E402
+from graphnav.scan.weighted_icp import IcpConfig, match_points  # noqa: E402
 
 SEGMENTS = {"turn 1": (35, 50), "quay": (76, 98), "straight": (115, 141), "turn 2": (147, 167)}
 

@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from graphnav.beacons.layout import Fairway
-from graphnav.evaluation.compare import compare, ranked
+from graphnav.evaluation.comparison import compare, ranked
 from graphnav.log import KnownBeacon, NavLog, PosePrior
 from graphnav.sim.fairway import parse_beacons, simulate_fairway
 

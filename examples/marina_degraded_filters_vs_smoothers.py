@@ -2,7 +2,7 @@
 
 ``marina-degraded`` (docs/datasets.md) adds to the 177 real marina LiDAR scans a simulated 1 Hz
 GNSS (3 m, one 40 s outage, one 10 s jump of 20 m) and a compass (2 deg, constant 3 deg bias).
-Every estimator the log can feed runs on the same log (:func:`graphnav.evaluation.compare.compare`, the
+Every estimator the log can feed runs on the same log (:func:`graphnav.evaluation.comparison.compare`, the
 library behind ``graphnav compare``), sharing the weighted-ICP matches (:mod:`graphnav.scan.icp_cache`),
 and the table ranks them by ATE against the reference. The last lines check the issue's targets:
 the iSAM2 smoother at most 0.7x the best filter's ATE and at most half of scan-to-map's.
@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from graphnav.evaluation.compare import compare, ranked
+from graphnav.evaluation.comparison import compare, ranked
 from graphnav.evaluation.report import markdown_table, write_report
 from graphnav.io.marina import is_marina_dir
 from graphnav.scan.icp_cache import MatchCache

@@ -5,7 +5,7 @@ or compass of its own, so this script simulates them from the reference (``--gns
 ``--compass-sigma-deg``; ``--no-gnss`` for pure scan-matching odometry anchored on the first
 reference pose). The graph uses the ``factors`` package (native GTSAM factors only):
 
-* one weighted-ICP ``BetweenFactorPose2`` per consecutive scan pair (:func:`graphnav.scan.icp.match_scans`,
+* one weighted-ICP ``BetweenFactorPose2`` per consecutive scan pair (:func:`graphnav.scan.weighted_icp.match_scans`,
   HDL variant, its full 3x3 covariance scaled as the smoother does, docs/smoother.md);
 * a robust ``PoseTranslationPrior2D`` per GNSS fix, a ``PoseRotationPrior2D`` per compass reading;
 
@@ -31,7 +31,7 @@ import factors as F
 from graphnav.evaluation.metrics import ate
 from graphnav.geometry import cov_to_world
 from graphnav.io.marina import is_marina_dir, read_marina
-from graphnav.scan.icp import IcpConfig, match_scans
+from graphnav.scan.weighted_icp import IcpConfig, match_scans
 from graphnav.trajectory import Trajectory
 
 

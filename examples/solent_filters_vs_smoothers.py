@@ -24,7 +24,13 @@ from matplotlib.figure import Figure  # (no pyplot: the matplotlib backend is le
 from tqdm import tqdm
 
 from graphnav import estimators
-from graphnav.evaluation.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial
+from graphnav.evaluation.monte_carlo_trials import (
+    PAPER_ESTIMATORS,
+    aggregate,
+    improvement_pct,
+    map_trials,
+    solent_trial,
+)
 from graphnav.geometry import wrap_angle
 from graphnav.sim.solent import simulate_solent
 

@@ -22,7 +22,7 @@ _LAZY = {
     "load_log": ("graphnav.io", "load_log"),
     "save_log": ("graphnav.io", "save_log"),
     "Navigator": ("graphnav.graph.navigator", "Navigator"),
-    "SmootherConfig": ("graphnav.graph.config", "SmootherConfig"),
+    "SmootherConfig": ("graphnav.graph.smoother_config", "SmootherConfig"),
     "Estimate": ("graphnav.result", "Estimate"),
     "RunResult": ("graphnav.result", "RunResult"),
     "Trajectory": ("graphnav.trajectory", "Trajectory"),

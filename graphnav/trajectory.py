@@ -109,7 +109,9 @@ class Trajectory:
                    name=name or Path(path).stem)
 
     def to_csv(self, path: str | Path) -> None:
-        """Write CSV ``t,x,y,yaw`` plus the 6 unique covariance entries when present (atomically)."""
+        """Write CSV ``t,x,y,yaw`` plus the 6 unique covariance entries when present (atomically), every
+        value at full precision (the shortest text that reads back to the same float: POSIX times keep
+        their microseconds)."""
         from .io.outputs import atomic_open
 
         cols = ["t", "x", "y", "yaw"]
@@ -123,7 +125,7 @@ class Trajectory:
                 if self.cov is not None:
                     c = self.cov[i]
                     row += [c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2]]
-                w.writerow([f"{v:.9g}" for v in row])
+                w.writerow([repr(float(v)) for v in row])
 
     @classmethod
     def from_csv(cls, path: str | Path, name: str = "") -> Trajectory:

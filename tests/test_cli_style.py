@@ -191,7 +191,7 @@ def test_list_options(capsys):
     assert main(["run", "--list-options", "isam2", "--json"]) == 0
     obj = _json(capsys)
     opts = {o["name"]: o for o in obj["options"]}
-    from graphnav.graph.config import SmootherConfig
+    from graphnav.graph.smoother_config import SmootherConfig
 
     assert opts["lag"]["default"] == SmootherConfig().lag and "fixed-lag window" in opts["lag"]["meaning"]
     assert opts["converge"]["meaning"].endswith('"updates" (final_updates only), "none"')  # continuation lines

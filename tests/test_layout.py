@@ -94,3 +94,13 @@ def test_library_does_not_import_the_cli():
 def test_top_level_has_at_most_ten_modules():
     top = sorted(p.name for p in PKG.glob("*.py"))
     assert len(top) <= 10, top
+
+
+def test_module_names_are_unique():
+    """No two modules share a file name (``__init__`` aside), across graphnav and factors (issue #26)."""
+    names: dict[str, list[str]] = {}
+    for root in (PKG, PKG.parent / "factors"):
+        for p in root.rglob("*.py"):
+            if p.name != "__init__.py":
+                names.setdefault(p.stem, []).append(str(p.relative_to(PKG.parent)))
+    assert {n: ps for n, ps in names.items() if len(ps) > 1} == {}

@@ -11,7 +11,7 @@ import pytest
 
 from graphnav import cli
 from graphnav.io.outputs import MANIFEST, OutDir, atomic_open, atomic_path, write_text_atomic
-from graphnav.online.live import new_live_file
+from graphnav.online.live_runner import new_live_file
 from graphnav.trajectory import Trajectory
 
 

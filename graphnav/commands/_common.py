@@ -89,6 +89,9 @@ def add_log_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-speed", type=float, metavar="M/S",
                    help="the vessel's plausible speed limit; faster odometry is invalid (default 50 m/s)")
     add_date_flag(p)
+    p.add_argument("--columns", metavar="FIELD=COLUMN[:UNIT],...",
+                   help="a CSV/TSV log's column mapping, e.g. t=time,lat=Latitude,lon=Longitude,sigma=2.5,"
+                        "heading=HDG:deg,sog=SOG:kn,cog=COG (a number is a constant; units and fields: docs/csv.md)")
 
 
 def add_date_flag(p: argparse.ArgumentParser) -> None:
@@ -108,14 +111,18 @@ def log_date(text: str) -> str:
 
 
 def log_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The reader options that :func:`add_log_args` flags give (``date``), for ``load_log(**...)``."""
-    return {"date": args.date} if getattr(args, "date", None) else {}
+    """The reader options that :func:`add_log_args` flags give (``date``, ``columns``), for ``load_log(**...)``."""
+    out: dict[str, Any] = {"date": args.date} if getattr(args, "date", None) else {}
+    if getattr(args, "columns", None) is not None:
+        out["columns"] = args.columns
+    return out
 
 
 def add_drop_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drop", action="append", metavar="KIND[,KIND]",
                    help="leave these record kinds out of the log before any estimator sees it, e.g. "
-                        "--drop odometry,beacon (repeatable; beacon_known: the charted beacons); the JSON "
+                        "--drop odometry,beacon (repeatable; beacon_known: the charted beacons; KIND@SOURCE: "
+                        "only that source's, e.g. --drop gnss@52 keeps the other GNSS); the JSON "
                         "output lists them as 'dropped'")
 
 

@@ -15,7 +15,7 @@ import time
 
 from .. import estimators
 from ..estimators.options import check as check_options
-from ..evaluation.montecarlo import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial
+from ..evaluation.monte_carlo_trials import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial
 from ._common import add_dashboard_flag, add_json_flag, emit, options_by_estimator, parse_options, progress_enabled
 
 log_ = logging.getLogger("graphnav.montecarlo")

@@ -7,7 +7,7 @@ import signal
 import threading
 
 from ..io import load_log
-from ..online.replay import replay
+from ..online.nmea_replay import replay
 from ._common import add_json_flag, add_log_args, emit, log_options
 
 

@@ -165,7 +165,7 @@ def _report(args: argparse.Namespace, whole, log, plan, result, summary: dict, r
     returns the summary's ``wgs84`` entry."""
     import shlex
 
-    from ..evaluation.compare import Comparison, Entry
+    from ..evaluation.comparison import Comparison, Entry
     from ..evaluation.datacheck import data_checks
     from ..evaluation.report import render
     from ..evaluation.report.writer import write

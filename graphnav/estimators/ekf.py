@@ -1,7 +1,7 @@
 """A general EKF on [x, y, yaw] (optionally + speed): the classic filter baseline.
 
 Motion input: odometry (speed + rate of turn, unicycle model as eq. 3 of the beacon paper), or,
-when a log has LiDAR scans but no odometry, ICP increments from :func:`graphnav.scan.icp.match_scans`
+when a log has LiDAR scans but no odometry, ICP increments from :func:`graphnav.scan.weighted_icp.match_scans`
 (used only if that module is installed). Measurements: GNSS position and compass heading, each
 gated by a chi-square test on the normalised innovation squared (:class:`InnovationGate`: a GNSS
 jump is rejected, however long it lasts while the filter is tracking); the measured components
@@ -38,7 +38,7 @@ from .pose_ekf import PoseEkf
 
 def icp_available() -> bool:
     try:
-        from ..scan.icp import match_scans  # noqa: F401
+        from ..scan.weighted_icp import match_scans  # noqa: F401
     except ImportError:
         return False
     return True
@@ -96,7 +96,7 @@ IMU_DEFAULTS: dict[str, Any] = {
     "sigma_gnss_velocity": 0.1, "sigma_water_speed": 0.1, "use_velocity": True, "use_odometry": True,
 }
 
-MatchFn = Callable[..., Any]  # graphnav.scan.icp.match_scans(scan, prev, init=...) -> MatchResult
+MatchFn = Callable[..., Any]  # graphnav.scan.weighted_icp.match_scans(scan, prev, init=...) -> MatchResult
 
 
 class EkfStepper:
@@ -106,7 +106,7 @@ class EkfStepper:
     ``motion="imu"``, :class:`graphnav.estimators.ins_ekf.InsEkf`, each record over its own interval
     and the last one held up to a measurement between records) or composes an ICP increment
     (``motion="icp"``: consecutive scans matched by ``match``, default
-    :func:`graphnav.scan.icp.match_scans`), then applies the gated GNSS/heading (and with the IMU,
+    :func:`graphnav.scan.weighted_icp.match_scans`), then applies the gated GNSS/heading (and with the IMU,
     GNSS velocity and water speed) update. ``imu``: the IMU motion's options (:data:`IMU_DEFAULTS`).
     ``keep`` bounds the timing buffers (``None``: keep all)."""
 
@@ -119,8 +119,8 @@ class EkfStepper:
             raise ValueError(f"motion must be 'odometry', 'icp' or 'imu', not {motion!r}")
         if motion == "icp" and match is None:
             if not icp_available():
-                raise ValueError("ICP motion needs graphnav.scan.icp (not installed in this build)")
-            from ..scan.icp_cache import match_scans as match  # graphnav.scan.icp's, shared inside icp_cache.active()
+                raise ValueError("ICP motion needs graphnav.scan.weighted_icp (not installed in this build)")
+            from ..scan.icp_cache import match_scans as match  # weighted ICP, shared inside icp_cache.active()
         unknown = set(gating) - set(GATING_DEFAULTS)
         if unknown:
             raise ValueError(f"unknown ekf option(s): {sorted(unknown)}")
@@ -316,7 +316,7 @@ def _unmet(log: NavLog) -> str | None:
     has_imu = len(log.of("imu")) >= 2
     has_scans = len(log.of("scan")) >= 2
     if not has_odo and not has_imu and not (has_scans and icp_available()):
-        extra = " (scans need graphnav.scan.icp, not installed)" if has_scans else ""
+        extra = " (scans need graphnav.scan.weighted_icp, not installed)" if has_scans else ""
         return "needs odometry or imu records" + extra
     return None
 

@@ -1,6 +1,6 @@
 """Weighted-ICP dead reckoning: chain the scan matches from the start pose.
 
-Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.scan.icp.match_points`; initial guess the
+Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.scan.weighted_icp.match_points`; initial guess the
 odometry increment with its covariance when the log has odometry, else constant velocity) and the
 increment is composed onto the previous pose; the covariance is propagated to first order
 (``P' = Ad P Ad^T + Q`` in the body frame, GTSAM's convention) and reported in the world frame
@@ -28,8 +28,8 @@ import numpy as np
 from ..geometry import cov_to_world, se2_adjoint_inv, se2_compose
 from ..log import NavLog, odometry_samples
 from ..scan import icp_cache
-from ..scan.icp import IcpConfig, scan_points
 from ..scan.motion_guess import MotionGuess
+from ..scan.weighted_icp import IcpConfig, scan_points
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
 from .dead_reckoning import start_pose

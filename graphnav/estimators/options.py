@@ -197,7 +197,7 @@ def describe(name: str) -> list[Option]:
 
     spec = get(name)  # KeyError naming the known ones
     if name in ("isam2", "batch", "fixed-lag"):
-        from ..graph.config import SmootherConfig
+        from ..graph.smoother_config import SmootherConfig
 
         return dataclass_options(SmootherConfig, "navigation graph (SmootherConfig)", skip=("solver",))
     if name == "ekf":
@@ -212,7 +212,7 @@ def describe(name: str) -> list[Option]:
                                                                                   skip=("gate",))
                 + _fill(imu, "ekf"))
     if name == "icp-dr":
-        from ..scan.icp import IcpConfig
+        from ..scan.weighted_icp import IcpConfig
         from .icp_odometry import run_icp_dr
 
         return function_options(run_icp_dr, "icp-dr") + dataclass_options(IcpConfig, "ICP (IcpConfig)",
@@ -288,8 +288,8 @@ def check_value(option: str, value: Any, default: Any) -> None:
 def _annotations(name: str) -> dict[str, str]:
     """Option -> its type annotation (text) in the config dataclasses and run functions estimator
     ``name``'s options come from (``float | None``: ``null`` is a value of it, text is not)."""
-    from ..graph.config import SmootherConfig
-    from ..scan.icp import IcpConfig
+    from ..graph.smoother_config import SmootherConfig
+    from ..scan.weighted_icp import IcpConfig
     from . import ekf, ekf_slam, fuzzy_ukf, gating, get, icp_odometry
     from .scan_to_map import ScanToMapConfig
 

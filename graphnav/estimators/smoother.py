@@ -1,6 +1,6 @@
-"""The factor-graph smoothers (:mod:`graphnav.graph.smoother`) as estimators: ``isam2``, ``batch``, ``fixed-lag``.
+"""The factor-graph smoothers (:mod:`graphnav.graph.log_runs`) as estimators: ``isam2``, ``batch``, ``fixed-lag``.
 
-Options are the fields of :class:`graphnav.graph.config.SmootherConfig` (``-O key=value``). One graph
+Options are the fields of :class:`graphnav.graph.smoother_config.SmootherConfig` (``-O key=value``). One graph
 for every log: ``motion`` (default ``auto``) picks its state -- ``Pose3`` + velocity + IMU bias with
 GTSAM IMU preintegration when the log has IMU records, ``Pose2`` with odometry / constant velocity
 otherwise (docs/smoother.md).
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..graph.smoother import run_batch, run_fixed_lag, run_isam2, unmet
+from ..graph.log_runs import run_batch, run_fixed_lag, run_isam2, unmet
 from ..log import NavLog
 from . import EstimatorSpec
 

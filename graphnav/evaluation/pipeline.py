@@ -1,5 +1,5 @@
 """``graphnav compare`` as a library call: one typed :class:`CompareOptions` -> read the log ->
-:func:`~graphnav.evaluation.compare.compare` -> :func:`~graphnav.evaluation.report.render` -> one
+:func:`~graphnav.evaluation.comparison.compare` -> :func:`~graphnav.evaluation.report.render` -> one
 writer. The command (and ``demo``) only parse arguments into the options and print the outcome."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from ..io import load_log
 from ..io.drop import drop_kinds
 from ..io.outputs import OutDir
 from ..log import NavLog
-from .compare import Comparison, compare
+from .comparison import Comparison, compare
 from .holdout import HoldoutSpec
 
 log_ = logging.getLogger("graphnav.compare")

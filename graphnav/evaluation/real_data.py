@@ -149,7 +149,7 @@ def _num(x: Any) -> float | None:
 
 def run_log(task: dict[str, Any]) -> dict[str, Any]:
     """The sweep task: convert one log and run every estimator it can feed (or those of
-    ``task["estimators"]`` it can feed) through :func:`graphnav.evaluation.compare.compare`, with a
+    ``task["estimators"]`` it can feed) through :func:`graphnav.evaluation.comparison.compare`, with a
     shared weighted-ICP match cache unless ``task["icp_cache"]`` is false (then each estimator's
     runtime includes all its own matches). Returns ``{"log", "dataset", "records", "duration_s",
     "load_s", "rows": [...]}`` (or ``"error"`` when the log cannot be read); a row is
@@ -157,7 +157,7 @@ def run_log(task: dict[str, Any]) -> dict[str, Any]:
     ``{"estimator", "error", "runtime_s"}`` (the error on one line)."""
     from .. import estimators as est
     from ..scan.icp_cache import MatchCache
-    from .compare import compare
+    from .comparison import compare
 
     out: dict[str, Any] = {"log": task["key"], "dataset": task["dataset"], "rows": []}
     t0 = time.perf_counter()

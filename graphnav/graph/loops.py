@@ -23,7 +23,7 @@
    ``yaw_margin_deg``; a match needs ``min_hits`` of its points on a reference surface and no
    distinct second peak above ``max_ambiguity`` of its score (a look-alike place), and must be
    plausible against the estimate (``chi2_3(chain_prob)``). Then the weighted ICP
-   (:func:`graphnav.scan.icp.match_points`) from the correlative pose on the submap
+   (:func:`graphnav.scan.weighted_icp.match_points`) from the correlative pose on the submap
    (``refine_submap``): it must converge, not be degenerate and stay within ``refine_agree`` /
    ``refine_agree_deg`` of the correlative pose. Its covariance is the loop's.
 4. **Consistency** (pairwise, in the spirit of PCM, Mangelson et al. 2018): a verified loop is

@@ -18,7 +18,7 @@ agree --; batch LM from the chained initial guess; fixed-lag each pose as it lef
 batch solutions drop gross GNSS outliers by their residual and re-solve, and estimate a noise scale
 per sensor group when ``noise_estimation`` asks (:mod:`graphnav.graph.noise`).
 
-``graphnav run -e isam2|batch|fixed-lag`` (:mod:`graphnav.graph.smoother`) and ``graphnav live``
+``graphnav run -e isam2|batch|fixed-lag`` (:mod:`graphnav.graph.log_runs`) and ``graphnav live``
 (:mod:`graphnav.online.runner`) are loops over it. A failure of GTSAM is a
 :class:`~graphnav.errors.GraphnavError` naming the record and time.
 """
@@ -44,7 +44,7 @@ from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from . import noise
 from .builder import GraphBuilder, Matcher, NavPrev, Step
-from .config import SmootherConfig
+from .smoother_config import SmootherConfig
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt, marginals
 from .space import IB, PlanarSpace, V, W
 
@@ -137,6 +137,13 @@ class Navigator:
         scans = bool(log.of("scan")) or (bool(log.of("cloud")) and (config is None or config.use_cloud)
                                          and kw.get("use_cloud", True))
         imu_model = log.meta.get("imu") if isinstance(log.meta.get("imu"), dict) else None
+        if log.meta.get("mounts") is not None:  # the log's mounts, the option's winning per sensor
+            from dataclasses import asdict
+
+            from .mounts import merged
+
+            given = kw.get("mounts", config.mounts if config is not None else {})
+            kw["mounts"] = {k: asdict(m) for k, m in merged(log.meta["mounts"], given).items()}
         v0 = log.meta.get("initial_velocity")
         if imu_model is not None or v0 is not None:
             imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from ..geometry import increment
 from ..log import Odometry
-from .config import SmootherConfig
+from .smoother_config import SmootherConfig
 
 
 class OdometryBuffer:

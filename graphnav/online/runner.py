@@ -7,7 +7,7 @@ Records arrive in time order (late ones are the estimator's business); an
 published. Estimators plug into live mode by implementing this protocol and registering a factory in
 :data:`ONLINE_ESTIMATORS`: ``fixed-lag`` and ``isam2`` (the navigation graph,
 :class:`graphnav.graph.navigator.Navigator`, the same one ``graphnav run -e isam2`` runs; options are
-the fields of :class:`graphnav.graph.config.SmootherConfig`), ``ekf``
+the fields of :class:`graphnav.graph.smoother_config.SmootherConfig`), ``ekf``
 (:class:`graphnav.online.ekf_online.EkfOnline`, the batch ``ekf`` step for step).
 """
 

@@ -1,12 +1,12 @@
-"""Compiled (numba) matcher of :mod:`graphnav.scan.icp`: every variant, from the points to the covariance.
+"""Compiled (numba) matcher of :mod:`graphnav.scan.weighted_icp`: every variant, from the points to the covariance.
 
-The same algorithm as the numpy loop in :mod:`graphnav.scan.icp` (Algorithm 1, eq. 9-22), with an
+The same algorithm as the numpy loop in :mod:`graphnav.scan.weighted_icp` (Algorithm 1, eq. 9-22), with an
 exact grid-based nearest-neighbour search instead of ``cKDTree``; tests check that both give
 the same matches. :func:`p2p_match` (K/H/HM/HD) and :func:`hdl_match` (HDL) run the whole
 numeric part of one match in one call (the LiDAR error model of eq. 5-8, the target's lines,
 the loop, the covariance and the point-to-line information); only the eigen-analysis of
 :mod:`graphnav.scan.degeneracy` and the report stay in Python. Imported lazily; absent numba,
-:mod:`graphnav.scan.icp` uses its numpy loop.
+:mod:`graphnav.scan.weighted_icp` uses its numpy loop.
 """
 
 from __future__ import annotations
@@ -270,7 +270,7 @@ def resolution(tx, ty, half):
 @njit(cache=True)
 def target_resolution(tx, ty, half, min_res, tm2):
     """:func:`resolution` of the target, the distance a correct pair can have at each target point
-    (:func:`graphnav.scan.icp.pair_scale`: ``sqrt(res^2 + 2 M^2)`` floored at ``min_res``) and its
+    (:func:`graphnav.scan.weighted_icp.pair_scale`: ``sqrt(res^2 + 2 M^2)`` floored at ``min_res``) and its
     median ``D``."""
     res = resolution(tx, ty, half)
     scale = np.empty(res.shape[0])
@@ -281,7 +281,7 @@ def target_resolution(tx, ty, half, min_res, tm2):
 
 @njit(cache=True)
 def zhang_gate(d, idx, res, n, dmax):
-    """:func:`graphnav.scan.icp.zhang_gate` on the distances ``d / res[idx]`` (``res``: pair scales)."""
+    """:func:`graphnav.scan.weighted_icp.zhang_gate` on the distances ``d / res[idx]`` (``res``: pair scales)."""
     u = np.empty(n)
     m = 0
     for i in range(n):
@@ -306,7 +306,7 @@ def zhang_gate(d, idx, res, n, dmax):
 @njit(cache=True)
 def p2p_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c,
                 wpow, max_corr, w):
-    """Pair weights of :func:`graphnav.scan.icp._weights` for K/H/HM/HD into ``w`` (eq. 11-13, Huber)."""
+    """Pair weights of :func:`graphnav.scan.weighted_icp._weights` for K/H/HM/HD into ``w`` (eq. 11-13, Huber)."""
     n = px.shape[0]
     khu = huber_c * np.median(d)
     anyw = False
@@ -397,7 +397,7 @@ def _wrap(k, n):
 
 @njit(cache=True)
 def scan_order_normals(tx, ty, half, max_gap, res):
-    """As :func:`graphnav.scan.icp.scan_order_normals` (PCA of beam-order windows; a gap wider than
+    """As :func:`graphnav.scan.weighted_icp.scan_order_normals` (PCA of beam-order windows; a gap wider than
     ``max_gap`` resolutions ``res`` (:func:`resolution`), the smaller of the two points', ends a surface)."""
     n = tx.shape[0]
     order = np.argsort(np.arctan2(ty, tx), kind="mergesort")
@@ -444,7 +444,7 @@ def scan_order_normals(tx, ty, half, max_gap, res):
 @njit(cache=True)
 def pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2):
     """Eq. 8 covariance ``(sxx, sxy, syy)`` of pair ``(i, j)``: source point ``i`` rotated by
-    ``R(c, s)`` plus target point ``j`` (:func:`graphnav.scan.icp._pair_cov`)."""
+    ``R(c, s)`` plus target point ``j`` (:func:`graphnav.scan.weighted_icp._pair_cov`)."""
     ux = c * sux[i] - s * suy[i]
     uy = s * sux[i] + c * suy[i]
     dsv = sb2[i] - sa2[i]
@@ -458,7 +458,7 @@ def pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2):
 
 @njit(cache=True)
 def final_pairs(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, th, t_x, t_y, idx, model):
-    """The pairs at the solution for :func:`graphnav.scan.icp._report`: moved source points and the
+    """The pairs at the solution for :func:`graphnav.scan.weighted_icp._report`: moved source points and the
     eq. 8 pair covariance entries (``model`` False: identity, the unweighted variants)."""
     n = sx.shape[0]
     c, s = math.cos(th), math.sin(th)
@@ -478,7 +478,7 @@ def final_pairs(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, th, t_x,
 @njit(cache=True)
 def hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
                 huber_c, wpow, max_corr, flat_pow, res, dmax, p2p, w):
-    """Pair weights of :func:`graphnav.scan.icp._weights` for HDL into ``w`` (``p2p``: the HD weights
+    """Pair weights of :func:`graphnav.scan.weighted_icp._weights` for HDL into ``w`` (``p2p``: the HD weights
     of the point-to-point warm-up): directional error along the target normal (eq. 9, 11), Huber
     on the point-to-line distance, x flatness^power, 0 outside Zhang's gate ``d / res[idx] <= dmax``
     (``res``: the target's pair scales, :func:`target_resolution`)."""
@@ -528,7 +528,7 @@ def hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2,
 
 @njit(cache=True)
 def _solve3(h, b):
-    """``-(h + 1e-12 I)^-1 b`` as :func:`graphnav.scan.icp._p2l_step` (least squares when singular)."""
+    """``-(h + 1e-12 I)^-1 b`` as :func:`graphnav.scan.weighted_icp._p2l_step` (least squares when singular)."""
     if not (np.all(np.isfinite(h)) and np.all(np.isfinite(b))):
         return np.zeros(3)  # no step (numba's solvers raise on non-finite input, and a raise in the
         # except branch below is a numba internal error, not an exception)
@@ -570,7 +570,7 @@ def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, f
             for i in range(n):
                 sw += w[i]
             dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)
-        else:  # one Gauss-Newton step of sum w (n.(p' - q))^2 (graphnav.scan.icp._p2l_step)
+        else:  # one Gauss-Newton step of sum w (n.(p' - q))^2 (graphnav.scan.weighted_icp._p2l_step)
             hm[:] = 0.0
             bv[:] = 0.0
             for i in range(n):
@@ -631,7 +631,7 @@ def _scan_cell_k(px, py, ix, iy, ny, start, items, tx, ty, bd, bi, cnt):
 
 @njit(cache=True)
 def knn_line_normals(tx, ty, k, h):
-    """As :func:`graphnav.scan.icp.line_normals`: unit normal and flatness of the line through each
+    """As :func:`graphnav.scan.weighted_icp.line_normals`: unit normal and flatness of the line through each
     target point's ``k`` nearest neighbours (PCA; exact k nearest by rings of grid cells)."""
     n = tx.shape[0]
     k = min(k, n)
@@ -694,7 +694,7 @@ def knn_line_normals(tx, ty, k, h):
 
 @njit(cache=True)
 def cloud_terms(x, y, sig, use_sig, sigma_alpha, sigma_r_rel):
-    """As :class:`graphnav.scan.icp._Cloud`: unit radial vector, squared semi-axes ``a^2, b^2`` (eq. 6-7;
+    """As :class:`graphnav.scan.weighted_icp._Cloud`: unit radial vector, squared semi-axes ``a^2, b^2`` (eq. 6-7;
     ``use_sig``: the caller's isotropic 1-sigma per point, a = b) and the mean error ``M^2`` (eq. 5)."""
     n = x.shape[0]
     ux = np.empty(n)
@@ -721,7 +721,7 @@ def cloud_terms(x, y, sig, use_sig, sigma_alpha, sigma_r_rel):
 def p2p_match(sx, sy, ssig, use_ssig, tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel, variant, huber_c, wpow,
               max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, half, max_gap, gate0, min_res):
     """One K/H/HM/HD match (:func:`p2p_loop`), then its final pairs for the shared covariance and
-    report (:func:`graphnav.scan.icp._report`): ``(theta, tx, ty, iterations, converged, idx, px,
+    report (:func:`graphnav.scan.weighted_icp._report`): ``(theta, tx, ty, iterations, converged, idx, px,
     py, w, sxx, sxy, syy, nrx, nry, flat, res, gate, radius, last_moved, src_range)``, the normals
     and flatness (beam order, :func:`scan_order_normals`) and resolution per target point, the
     last step's largest point displacement and the source's largest range."""

@@ -1,6 +1,6 @@
 """The covariance of a scan match, derived from the match itself (the one place it is computed).
 
-Both matcher paths (the numpy loop of :mod:`graphnav.scan.icp` and the compiled
+Both matcher paths (the numpy loop of :mod:`graphnav.scan.weighted_icp` and the compiled
 :mod:`graphnav.scan._icp_fast`) hand the final pairs to :func:`between`, which returns the covariance
 of the between factor ``BetweenFactorPose2(prev, cur, Pose2(*pose), Gaussian.Covariance(cov))`` and the
 degeneracy analysis (:mod:`graphnav.scan.degeneracy`). The scan-to-map estimator uses the same

@@ -2,10 +2,10 @@
 
 ``graphnav compare`` runs several estimators on one log; isam2, batch and fixed-lag (one shared
 :class:`~graphnav.graph.builder.GraphBuilder` sequence), the EKF with ICP increments and ``icp-dr``
-all call :func:`graphnav.scan.icp.match_points` on the same consecutive scans. Inside
+all call :func:`graphnav.scan.weighted_icp.match_points` on the same consecutive scans. Inside
 ``with active(MatchCache()):`` the call sites that go through :func:`match_points` /
 :func:`match_scans` of this module look the match up first. The key is the exact content of
-both point sets, the whole :class:`~graphnav.scan.icp.IcpConfig` and the initial guess, so a hit
+both point sets, the whole :class:`~graphnav.scan.weighted_icp.IcpConfig` and the initial guess, so a hit
 returns exactly what the call would have computed (ICP is deterministic); an estimator with
 another guess or config computes its own match. Outside ``active`` nothing is cached.
 """
@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import icp
+from . import weighted_icp as icp
 
 _active: MatchCache | None = None  # a module global, not a ContextVar: forked workers inherit it
 
@@ -60,7 +60,7 @@ class MatchCache:
 
     def match_points(self, src_xy: ArrayLike, tgt_xy: ArrayLike, cfg: icp.IcpConfig | None = None,
                      init: ArrayLike | None = None, init_cov: ArrayLike | None = None) -> icp.MatchResult:
-        """:func:`graphnav.scan.icp.match_points`, computed once per key (a copy is returned)."""
+        """:func:`graphnav.scan.weighted_icp.match_points`, computed once per key (a copy is returned)."""
         cfg = cfg or icp.IcpConfig()
         k = self.key(src_xy, tgt_xy, cfg, init, init_cov)
         got = self._store.get(k)
@@ -100,7 +100,7 @@ def current() -> MatchCache | None:
 
 def match_points(src_xy: ArrayLike, tgt_xy: ArrayLike, config: icp.IcpConfig | None = None,
                  init: ArrayLike | None = None, init_cov: ArrayLike | None = None) -> icp.MatchResult:
-    """:func:`graphnav.scan.icp.match_points` through the active cache (plain call when none is active)."""
+    """:func:`graphnav.scan.weighted_icp.match_points` through the active cache (plain call when none is active)."""
     cache = _active
     if cache is None:
         return icp.match_points(src_xy, tgt_xy, config, init, init_cov=init_cov)
@@ -109,6 +109,6 @@ def match_points(src_xy: ArrayLike, tgt_xy: ArrayLike, config: icp.IcpConfig | N
 
 def match_scans(source: Any, target: Any, config: icp.IcpConfig | None = None,
                 init: ArrayLike | None = None) -> icp.MatchResult:
-    """:func:`graphnav.scan.icp.match_scans` through the active cache."""
+    """:func:`graphnav.scan.weighted_icp.match_scans` through the active cache."""
     cfg = config or icp.IcpConfig()
     return match_points(icp.scan_points(source, cfg), icp.scan_points(target, cfg), cfg, init)

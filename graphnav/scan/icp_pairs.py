@@ -16,8 +16,8 @@ from numpy.typing import NDArray
 
 from ..geometry import se2_between, wrap_angle
 from ..log import NavLog, odometry_samples
-from .icp import IcpConfig, MatchResult, match_points, scan_points
 from .motion_guess import MotionGuess
+from .weighted_icp import IcpConfig, MatchResult, match_points, scan_points
 
 
 @dataclass

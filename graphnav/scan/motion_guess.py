@@ -19,11 +19,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry import increment
-from .icp import GUESS_SIGMA, MatchResult
+from .weighted_icp import GUESS_SIGMA, MatchResult
 
 INITS = ("cv", "zero", "odometry")
 # 1-sigma of a constant-velocity bridge (no odometry): x, y [m], yaw [rad]; the matcher's guess
-# without a covariance has the same (graphnav.scan.icp.GUESS_SIGMA)
+# without a covariance has the same (graphnav.scan.weighted_icp.GUESS_SIGMA)
 CV_BRIDGE_SIGMA = GUESS_SIGMA
 
 

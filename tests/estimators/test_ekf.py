@@ -138,7 +138,7 @@ def test_speed_state_estimates_speed():
     assert np.sqrt(np.mean(pos_err(res, log) ** 2)) < 1.5
 
 
-@pytest.mark.skipif(not icp_available(), reason="graphnav.scan.icp not in this build (branch icp)")
+@pytest.mark.skipif(not icp_available(), reason="graphnav.scan.weighted_icp not in this build (branch icp)")
 def test_icp_motion_on_marina(marina_log):
     res = run_ekf(marina_log.sliced(None, marina_log.t0 + 30.0), motion="icp")
     assert len(res.icp_ms) > 0 and np.all(np.isfinite(res.trajectory.poses))

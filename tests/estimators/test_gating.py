@@ -75,7 +75,7 @@ def test_ukf_bias_is_not_starved_of_scenario_2s_compass(seed):
     filter's heading variance is small, so few readings pass the plain test and those that do are the
     ones closest to the estimate; learning the scale from accepted readings alone stalled there
     (heading RMSE 41 deg / 32 deg on these seeds). The lone rejections teach it."""
-    from graphnav.evaluation.montecarlo import solent_trial
+    from graphnav.evaluation.monte_carlo_trials import solent_trial
 
     r = solent_trial(2, seed, ["ukf-bias"])["ukf-bias"]
     assert r["hdg_rmse_deg"] < 3.0, r

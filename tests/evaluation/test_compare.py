@@ -13,7 +13,7 @@ from graphnav import estimators
 from graphnav.cli import main
 from graphnav.estimators import EstimatorSpec, RunResult
 from graphnav.evaluation import plots
-from graphnav.evaluation.compare import compare, ranked
+from graphnav.evaluation.comparison import compare, ranked
 from graphnav.evaluation.metrics import ate, movement_errors
 from graphnav.io import save_log
 from graphnav.trajectory import Trajectory
@@ -251,7 +251,7 @@ def test_dcog_error_ignores_a_constant_course_offset(log):
 
 
 def test_report_configuration_summarises_long_arrays():
-    from graphnav.evaluation.compare import Entry
+    from graphnav.evaluation.comparison import Entry
     from graphnav.evaluation.report import _config
 
     res = RunResult(Trajectory([0.0], [[0.0, 0.0, 0.0]]), info={"k": 3, "nested": {"a": np.arange(500)},
@@ -265,7 +265,7 @@ def test_parallel_smoothers_share_their_matches_in_one_process():
     still takes every weighted-ICP match from the first; the table equals the sequential one."""
     from _polyworld import synthetic_log
 
-    from graphnav.evaluation.compare import groups
+    from graphnav.evaluation.comparison import groups
     from graphnav.scan import icp_cache
 
     assert groups([(0, "batch"), (1, "ekf"), (2, "isam2"), (3, "ukf")]) == [

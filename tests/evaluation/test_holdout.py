@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from graphnav.cli import main
-from graphnav.evaluation.compare import compare
+from graphnav.evaluation.comparison import compare
 from graphnav.evaluation.datacheck import gnss_jumps
 from graphnav.evaluation.holdout import HoldoutSpec, withhold
 from graphnav.evaluation.metrics import gnss_residuals

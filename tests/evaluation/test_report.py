@@ -23,7 +23,7 @@ from _polyworld import synthetic_log
 from graphnav import estimators
 from graphnav.cli import main
 from graphnav.estimators import EstimatorSpec, RunResult
-from graphnav.evaluation.compare import Entry, compare
+from graphnav.evaluation.comparison import Entry, compare
 from graphnav.evaluation.report import warnings
 from graphnav.io import save_log
 from graphnav.log import NavLog

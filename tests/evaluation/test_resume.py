@@ -14,7 +14,7 @@ import pytest
 import graphnav
 from graphnav import cli
 from graphnav.evaluation import sweep
-from graphnav.evaluation.montecarlo import solent_trial
+from graphnav.evaluation.monte_carlo_trials import solent_trial
 from graphnav.evaluation.sweep import code_version, load_done, read_header, run_sweep, task_key
 
 REPO = Path(__file__).resolve().parents[2]

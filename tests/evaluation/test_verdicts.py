@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graphnav.evaluation.compare import Comparison, Entry
+from graphnav.evaluation.comparison import Comparison, Entry
 from graphnav.evaluation.report.verdicts import data_lines, verdicts
 from graphnav.log import NavLog, Truth
 from graphnav.result import RunResult

@@ -14,7 +14,7 @@ import factors as F
 from graphnav import estimators
 from graphnav.evaluation.metrics import ate, heading_error
 from graphnav.graph.imu_chain import ImuChain, ImuConfig
-from graphnav.graph.smoother import run_batch, run_fixed_lag, run_isam2
+from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
 from graphnav.graph.space import NavSpace
 from graphnav.log import Gnss, GnssVelocity, Heading, Imu, NavLog, PosePrior, Truth
 from graphnav.sim.solent import simulate_solent

@@ -14,8 +14,8 @@ import pytest
 import factors as F
 from graphnav.graph import loops as LP
 from graphnav.graph.builder import Step, make_loop_closer
-from graphnav.graph.config import SmootherConfig
 from graphnav.graph.navigator import Navigator
+from graphnav.graph.smoother_config import SmootherConfig
 from graphnav.log import NavLog, Odometry, Scan, Truth
 
 

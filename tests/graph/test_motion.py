@@ -16,9 +16,9 @@ from graphnav.errors import GraphnavError
 from graphnav.evaluation.metrics import ate
 from graphnav.geometry import se2_between
 from graphnav.graph.builder import GraphBuilder
-from graphnav.graph.config import SmootherConfig
+from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
 from graphnav.graph.navigator import Navigator
-from graphnav.graph.smoother import run_batch, run_fixed_lag, run_isam2
+from graphnav.graph.smoother_config import SmootherConfig
 from graphnav.io import load_log
 from graphnav.log import Gnss, NavLog, Odometry, PosePrior, Scan, Truth
 from graphnav.sim.harbour import HarbourConfig, simulate_harbour

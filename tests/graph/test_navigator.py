@@ -13,8 +13,8 @@ import factors as F
 import graphnav
 from graphnav.estimators.dead_reckoning import unicycle_step
 from graphnav.evaluation.metrics import ate
+from graphnav.graph.log_runs import run_isam2
 from graphnav.graph.navigator import Navigator
-from graphnav.graph.smoother import run_isam2
 from graphnav.log import Gnss, Heading, NavLog, Odometry
 from graphnav.online.runner import make_online, run_online
 from graphnav.sim.square import square_loop

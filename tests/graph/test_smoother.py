@@ -18,7 +18,7 @@ from graphnav import estimators
 from graphnav.evaluation.metrics import ate
 from graphnav.geometry import se2_between
 from graphnav.graph.keyframes import attachment_error_bound, keyframe_times, nearest, schedule
-from graphnav.graph.smoother import SmootherConfig, run_batch, run_fixed_lag, run_isam2
+from graphnav.graph.log_runs import SmootherConfig, run_batch, run_fixed_lag, run_isam2
 from graphnav.io import save_log
 from graphnav.io.tum import TrajectoryWriter
 from graphnav.log import NavLog, Scan
@@ -219,7 +219,7 @@ def test_keyframe_policy():
 
 
 def test_world_covariance_rotation():
-    from graphnav.graph.smoother import world_cov
+    from graphnav.graph.log_runs import world_cov
 
     c = world_cov(gtsam.Pose2(0, 0, math.pi / 2), np.diag([4.0, 1.0, 0.1]))
     np.testing.assert_allclose(c, np.diag([1.0, 4.0, 0.1]), atol=1e-12)

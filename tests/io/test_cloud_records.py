@@ -251,7 +251,7 @@ def test_bag_of_a_3d_harbour_runs_isam2(tmp_path):
     """The issue's round trip: clouds, NavSatFix and Imu in a bag, read back into the same log, and the
     graph runs on it with the cloud factors (a bag's PointCloud2 carries no attitude: level)."""
     pytest.importorskip("open3d")
-    from graphnav.graph.smoother import run_isam2
+    from graphnav.graph.log_runs import run_isam2
     from graphnav.sim.harbour3d import Lidar3dConfig, simulate_harbour3d
 
     full = simulate_harbour3d(2, lidar=Lidar3dConfig(az_deg=1.0), duration=2.5)

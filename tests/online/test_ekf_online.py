@@ -21,7 +21,7 @@ from graphnav.geodesy import LocalFrame
 from graphnav.io import load_log
 from graphnav.log import Gnss, Heading, NavLog
 from graphnav.online.ekf_online import EkfOnline
-from graphnav.online.replay import replay
+from graphnav.online.nmea_replay import replay
 from graphnav.online.runner import make_online, run_online
 
 REPO = Path(__file__).resolve().parents[2]

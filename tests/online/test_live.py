@@ -22,8 +22,8 @@ from graphnav.geodesy import LocalFrame
 from graphnav.geometry import heading_deg_to_yaw, wrap_angle
 from graphnav.io.nmea import read_nmea
 from graphnav.io.nmea_out import sentence
-from graphnav.online.live import LiveRunner, parse_endpoint
-from graphnav.online.replay import corrupt_sentence, log_sentences, replay
+from graphnav.online.live_runner import LiveRunner, parse_endpoint
+from graphnav.online.nmea_replay import corrupt_sentence, log_sentences, replay
 from graphnav.online.runner import make_online, run_online
 
 REPO = Path(__file__).resolve().parents[2]

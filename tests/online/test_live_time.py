@@ -14,8 +14,8 @@ from _live import start_live
 
 from graphnav.io.nmea_out import _hhmmss, sentence
 from graphnav.log import NavLog
-from graphnav.online.live import RESYNC_STAMPS, TIME_TOLERANCE_S, LiveRunner, StreamClock
-from graphnav.online.replay import log_sentences
+from graphnav.online.live_runner import RESYNC_STAMPS, TIME_TOLERANCE_S, LiveRunner, StreamClock
+from graphnav.online.nmea_replay import log_sentences
 from graphnav.online.runner import make_online
 
 HOUR = 3600.0

@@ -20,8 +20,8 @@ import pytest
 
 from graphnav.errors import LogError
 from graphnav.log import DEFAULT_MAX_RANGE, MAX_STATED_RANGE, Scan, check_record
-from graphnav.scan.icp import IcpConfig, match_points, match_scans
 from graphnav.scan.lidar import polar_to_points
+from graphnav.scan.weighted_icp import IcpConfig, match_points, match_scans
 from tests._scan_sim import noisy_scan, room
 
 REPO = Path(__file__).resolve().parents[2]
@@ -104,7 +104,7 @@ def test_far_beam_is_bounded_in_memory(value):
     """The beam that grew the grid to OOM (1e5 m) or segfaulted it (1e308 m), in a subprocess."""
     out = _run_isolated(f"""
         import numpy as np
-        from graphnav.scan.icp import IcpConfig, match_scans
+        from graphnav.scan.weighted_icp import IcpConfig, match_scans
         from graphnav.log import Scan
         from tests.scan.test_bounded_scans import _pair
         import resource

@@ -110,7 +110,7 @@ def test_clouds_carry_the_graph_without_odometry_or_gnss():
     cm over 20 s); without them the graph has only its motion model."""
     pytest.importorskip("open3d")
     from graphnav.evaluation.metrics import ate
-    from graphnav.graph.smoother import run_isam2
+    from graphnav.graph.log_runs import run_isam2
     from graphnav.sim.harbour3d import Lidar3dConfig, simulate_harbour3d
 
     full = simulate_harbour3d(0, lidar=Lidar3dConfig(az_deg=0.5), duration=20.0)

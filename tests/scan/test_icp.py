@@ -1,4 +1,4 @@
-"""Weighted ICP on synthetic scans with exact truth (graphnav.scan.icp)."""
+"""Weighted ICP on synthetic scans with exact truth (graphnav.scan.weighted_icp)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 
 from graphnav.geometry import se2_between, se2_compose
 from graphnav.log import NavLog, Scan, Truth
-from graphnav.scan.icp import (
+from graphnav.scan.movement import movement_from_increments
+from graphnav.scan.weighted_icp import (
     VARIANTS,
     IcpConfig,
     MatchResult,
@@ -24,7 +25,6 @@ from graphnav.scan.icp import (
     weighted_align,
     weighted_svd_align,
 )
-from graphnav.scan.movement import movement_from_increments
 
 TIGHT = {"tol": 1e-12, "tol_step": 1e-10, "max_iter": 100}
 
@@ -324,7 +324,7 @@ _NUMBA_CHECK = """
 import numpy as np, sys
 sys.path[:0] = [{repo!r}, {tests!r}]
 from _scan_sim import even_points, observe, room
-from graphnav.scan.icp import IcpConfig, match_points
+from graphnav.scan.weighted_icp import IcpConfig, match_points
 rng = np.random.default_rng(8)
 world = even_points(room(), 0.5)
 src = observe(world, (0.5, -0.2, 0.04), rng, 0.004, 0.003)
@@ -396,7 +396,7 @@ def test_numba_backend_equals_numpy():
     from scipy.spatial import cKDTree
 
     from graphnav.scan._icp_fast import build_grid, knn_line_normals, nearest, nearest_from
-    from graphnav.scan.icp import line_normals
+    from graphnav.scan.weighted_icp import line_normals
 
     rng = np.random.default_rng(8)
     tgt = rng.uniform(-20, 20, (300, 2))
@@ -484,10 +484,10 @@ def test_backend_auto_falls_back_to_numpy_without_numba(monkeypatch):
     imported; ``"numba"`` then fails loudly."""
     import sys
 
-    import graphnav.scan.icp
+    import graphnav.scan.weighted_icp
 
     monkeypatch.setitem(sys.modules, "graphnav.scan._icp_fast", None)  # import -> ImportError
-    monkeypatch.setattr(graphnav.scan.icp, "_COMPILED", [])  # the import is tried once per process: again here
+    monkeypatch.setattr(graphnav.scan.weighted_icp, "_COMPILED", [])  # the import is tried once per process: again here
     rng = np.random.default_rng(3)
     world = even_points(room(), 0.5)
     src = observe(world, (0.2, 0.1, 0.02), rng, 0.004, 0.003)

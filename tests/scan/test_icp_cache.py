@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from _polyworld import synthetic_log
 
-from graphnav.evaluation.compare import compare
-from graphnav.scan import icp, icp_cache
+from graphnav.evaluation.comparison import compare
+from graphnav.scan import icp_cache
+from graphnav.scan import weighted_icp as icp
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,8 @@ from graphnav.estimators.icp_odometry import run_icp_dr
 from graphnav.geometry import increment, se2_compose
 from graphnav.log import NavLog, Odometry, PosePrior, Scan, Truth, odometry_samples
 from graphnav.scan import degeneracy
-from graphnav.scan.icp import GUESS_SIGMA, VARIANTS, IcpConfig, MatchResult, match_points
 from graphnav.scan.motion_guess import MotionGuess
+from graphnav.scan.weighted_icp import GUESS_SIGMA, VARIANTS, IcpConfig, MatchResult, match_points
 
 
 def _wall_pair(variant: str, seed: int = 4):

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from graphnav.scan.icp import IcpConfig
 from graphnav.scan.icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
+from graphnav.scan.weighted_icp import IcpConfig
 
 pytestmark = pytest.mark.marina
 

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from graphnav.geometry import se2_compose
 from graphnav.scan import correlative as C
 from graphnav.scan import descriptor as D
-from graphnav.scan.icp import IcpConfig, match_points
+from graphnav.scan.weighted_icp import IcpConfig, match_points
 
 
 def _world() -> np.ndarray:

@@ -257,7 +257,7 @@ def test_marina_degraded(marina_dir):
 def test_isam2_with_weighted_icp_on_a_harbour_slice():
     """End to end on 8 s of the legacy harbour: real scan matching, odometry, GNSS, compass, beacons."""
     from graphnav.evaluation.metrics import ate
-    from graphnav.graph.smoother import run_isam2
+    from graphnav.graph.log_runs import run_isam2
 
     log = simulate_harbour(0, HarbourConfig.legacy(), duration=8.0)
     r = run_isam2(log, covariances=False)

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from graphnav.evaluation.montecarlo import aggregate, improvement_pct
+from graphnav.evaluation.monte_carlo_trials import aggregate, improvement_pct
 from graphnav.geometry import wrap_angle, yaw_to_heading_deg
 from graphnav.io import load_log
 from graphnav.sim.solent import START, WAYPOINTS, SolentConfig, _truth, current_direction, simulate_solent

@@ -1,5 +1,5 @@
 """A comparison as a report, in memory: :func:`render` turns a
-:class:`~graphnav.evaluation.compare.Comparison` into a :class:`Report` (Markdown, one self-contained
+:class:`~graphnav.evaluation.comparison.Comparison` into a :class:`Report` (Markdown, one self-contained
 HTML page, the PNG figures, the track map, the trajectories to write), and
 :func:`~.writer.write` persists it through an :class:`~graphnav.io.outputs.OutDir` — the only step
 that touches the disk (evo's core/tools split: metrics -> comparison -> report -> writer).
@@ -20,7 +20,7 @@ import numpy as np
 
 from ...log import NavLog
 from ...trajectory import Trajectory
-from ..compare import Comparison, Entry
+from ..comparison import Comparison, Entry
 from .provenance import provenance
 from .render import render_html, render_markdown
 from .text import (

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from .. import plots
-from ..compare import Comparison
+from ..comparison import Comparison
 
 #: (plot function, args, kwargs, file name, caption)
 Job = tuple[Any, tuple, dict, str, str]

@@ -13,7 +13,7 @@ import numpy as np
 
 from ...io.jsonsafe import jsonable
 from ...log import NavLog
-from ..compare import Comparison, Entry, ranked
+from ..comparison import Comparison, Entry, ranked
 from .render import md_table
 from .verdicts import data_lines, holdout_table, verdicts
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..compare import Comparison, Entry
+from ..comparison import Comparison, Entry
 
 #: a mean NEES (2 dof) outside this band gets a sentence saying what it means
 NEES_BAND = (0.3, 5.0)

@@ -7,6 +7,12 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
   chart plotter's server) and reconnects every second when the link drops. Every line is checked
   (checksum required) and decoded by :class:`graphnav.io.nmea.NmeaDecoder`; a bad sentence is
   counted (``bad_sentences``) and logged (the first 20, then every 1000th), never fatal.
+* **NMEA 2000 and Signal K** -- ``n2k_sources`` (``udp://``/``tcp://``) carry an NMEA 2000 gateway's
+  text lines (canboat, Yacht Devices RAW, Actisense N2K ASCII: :mod:`graphnav.io.n2k`);
+  ``signalk_sources`` (``ws://HOST:PORT``, path default ``/signalk/v1/stream?subscribe=self``) a Signal
+  K server's delta stream (:mod:`graphnav.online.marine_feed`, :mod:`graphnav.io.signalk`). Their
+  records carry their own time stamps (checked by the stream clock); a bad line is counted
+  (``bad_marine_lines``), never fatal.
 * **Scans** -- ``scan_sources`` (``udp://HOST:PORT``) receive one scan per datagram: a JSON
   Lines ``scan`` record (docs/log-format.md: ``{"t", "type": "scan", "ranges", "angles"}`` or
   ``angle_min``/``angle_increment``; ``null``/0 = no return), ``t`` on the NMEA clock (POSIX s);
@@ -24,7 +30,8 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
 * **Output** -- every estimate is appended to a new file per run, ``DIR/live-YYYYmmddTHHMMSSZ.tum``
   (UTC start time; + ``.cov``; an earlier run's file is never touched), flushed line by line
   (:class:`graphnav.io.tum.TrajectoryWriter`), and published as GGA, HDT, VTG, ROT
-  (valid checksums, one datagram per estimate) to ``publish`` (``udp://HOST:PORT``).
+  (valid checksums, one datagram per estimate) to ``publish`` (``udp://HOST:PORT``), and as one
+  Signal K delta per estimate (:func:`graphnav.io.signalk.solution_delta`) to ``publish_signalk``.
 * **Stopping** -- SIGINT/SIGTERM (or :meth:`LiveRunner.stop`, ``duration``, ``idle_exit``, the
   end of the scan replay) ends the loop; files are flushed and closed and ``summary()`` returns
   ``sentences_in``, ``bad_sentences``, ``estimates``, ``published``, ``latency_ms_median``,
@@ -66,6 +73,7 @@ from ..result import Estimate, OnlineEstimator
 log_ = logging.getLogger("graphnav.live")
 LATENCY_WINDOW = 100_000
 MAX_LINE = 4096  # a TCP line longer than this without a newline is garbage
+MAX_MESSAGE = 1 << 20  # a Signal K delta (one websocket message) longer than this is garbage
 TIME_TOLERANCE_S = 10.0
 """A time stamp may lie this far behind the stream clock, or this far ahead of it beyond the wall
 time elapsed since the clock's last stamp arrived; farther is an outlier (:class:`StreamClock`)."""
@@ -169,18 +177,32 @@ class StreamClock:
 
 
 class _Source:
-    """One input: a bound UDP socket or a (re)connecting TCP client with a line buffer.
-    ``kind`` is ``"nmea"`` (lines) or ``"scan"`` (UDP, one JSON scan record per datagram)."""
+    """One input: a bound UDP socket or a (re)connecting TCP client with a line buffer, or a
+    websocket client (``ws://``: :class:`graphnav.online.marine_feed.WebSocketLines`, its messages as
+    lines). ``kind`` is ``"nmea"`` (lines), ``"n2k"`` (NMEA 2000 gateway lines), ``"signalk"`` (delta
+    JSON, one a line) or ``"scan"`` (UDP, one JSON scan record per datagram)."""
 
-    def __init__(self, ep: Endpoint, kind: str = "nmea") -> None:
+    def __init__(self, ep: Endpoint, kind: str = "nmea", url: str = "") -> None:
         self.ep = ep
         self.kind = kind
+        self.url = url
+        self.feed = None  # the websocket client of a ws:// source
         self.sock: socket.socket | None = None
         self.buf = b""
         self.next_try = 0.0
         self.connecting: float | None = None  # when a non-blocking TCP connect started
 
     def open(self, sel: selectors.BaseSelector) -> None:
+        if self.ep.scheme in ("ws", "wss"):
+            if time.monotonic() < self.next_try:
+                return
+            self.next_try = time.monotonic() + 1.0
+            from .marine_feed import WebSocketLines
+
+            self.feed = WebSocketLines(self.url)
+            self.sock, self.buf = self.feed.sock, b""
+            sel.register(self.sock, selectors.EVENT_READ, self)
+            return
         if self.ep.scheme == "udp":
             addr = resolve(self.ep)
             s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -229,6 +251,9 @@ class _Source:
             sel.unregister(self.sock)
             self.sock.close()
             self.sock = None
+        if self.feed is not None:
+            self.feed.close()
+            self.feed = None
 
     def read(self, sel: selectors.BaseSelector) -> list[bytes]:
         assert self.sock is not None
@@ -268,7 +293,7 @@ class _Source:
             return lines
         lines = (self.buf + data).split(b"\n")
         self.buf = lines.pop()
-        if len(self.buf) > MAX_LINE:
+        if len(self.buf) > (MAX_LINE if self.kind in ("nmea", "n2k") else MAX_MESSAGE):
             lines.append(self.buf)
             self.buf = b""
         return lines
@@ -295,6 +320,7 @@ class LiveRunner:
     :meth:`summary`."""
 
     writer: TrajectoryWriter | None = None
+    sk_sock: socket.socket | None = None  # --publish-signalk's socket while running
 
     def __init__(self, sources: list[str], estimator: OnlineEstimator, *, publish: str | None = None,
                  out_dir: str | Path | None = None, scans_from: NavLog | None = None,
@@ -302,10 +328,20 @@ class LiveRunner:
                  duration: float | None = None, idle_exit: float | None = None,
                  scan_sources: list[str] | None = None,
                  restart: Callable[[], OnlineEstimator] | None = None,
-                 time_tolerance: float = TIME_TOLERANCE_S, resync_stamps: int = RESYNC_STAMPS) -> None:
+                 time_tolerance: float = TIME_TOLERANCE_S, resync_stamps: int = RESYNC_STAMPS,
+                 n2k_sources: list[str] | None = None, signalk_sources: list[str] | None = None,
+                 publish_signalk: str | None = None) -> None:
         self.sources = [_Source(parse_endpoint(s)) for s in sources]
+        self.sources += [_Source(parse_endpoint(s), "n2k") for s in n2k_sources or []]
+        if signalk_sources:
+            from .marine_feed import signalk_url
+
+            self.sources += [_Source(parse_endpoint(s, ("ws", "wss")), "signalk", signalk_url(s))
+                             for s in signalk_sources]
         if not self.sources:
-            raise ValueError("at least one --nmea source is needed")
+            raise ValueError("at least one --nmea, --n2k or --signalk source is needed")
+        self.marine = None  # MarineInput, made when an n2k/signalk source is given
+        self.bad_marine = 0
         self.sources += [_Source(parse_endpoint(s, ("udp",)), "scan") for s in scan_sources or []]
         self.scans_in = 0
         self.scan_wait: list[Scan] = []  # network scans waiting for the NMEA clock
@@ -317,6 +353,8 @@ class LiveRunner:
         self.warned_outlier = False
         self.run_buf: deque[tuple[bytes, float, bool]] = deque(maxlen=64 * max(1, resync_stamps))
         self.publish = parse_endpoint(publish, ("udp",)) if publish else None
+        self.publish_signalk = parse_endpoint(publish_signalk, ("udp",)) if publish_signalk else None
+        self.published_signalk = 0
         self.out_dir = Path(out_dir) if out_dir else None
         self.scans = [r for r in scans_from.records if isinstance(r, Scan)] if scans_from else None
         self.scan_i = 0
@@ -496,6 +534,31 @@ class LiveRunner:
             self.stop_reason = "end of --scans-from replay"
             self._stop.set()
 
+    def _marine_line(self, kind: str, raw: bytes, arrival: float) -> None:
+        """One NMEA 2000 or Signal K line: its records, each stamped time checked by the stream
+        clock (an outlier is counted and dropped); a bad line is counted (``bad_marine``), never fatal."""
+        if self.marine is None:
+            from .marine_feed import MarineInput
+
+            self.marine = MarineInput(self.decoder.frame)
+        self.marine.frame = self.marine.frame or self.decoder.frame
+        try:
+            recs = self.marine.feed(kind, raw)
+        except LogError as err:
+            self.bad_marine += 1
+            if self.bad_marine <= 20 or self.bad_marine % 1000 == 0:
+                log_.warning("bad %s line #%d (%s): %r", kind, self.bad_marine, err, raw[:80])
+            return
+        if self.decoder.frame is None and self.marine.frame is not None:
+            self.decoder.frame = self.marine.frame  # the published solution's frame
+        for rec in recs:
+            if self.clock.check(rec.t, arrival) == "outlier":
+                self.time_outliers += 1
+                continue
+            if self.scan_wait:
+                self._release_waiting(rec.t)
+            self._record(rec, arrival if isinstance(rec, Gnss) else None)
+
     def _record(self, rec, arrival: float | None) -> None:
         self.records += 1
         est = self.estimator.add(rec)
@@ -516,6 +579,16 @@ class LiveRunner:
                 self.published += len(lines)
             except OSError as exc:
                 log_.warning("publish to %s failed: %s", self.publish, exc)
+        if self.sk_sock is not None and self.decoder.frame is not None:
+            from ..io.signalk import solution_delta
+
+            delta = solution_delta(est.t, est.vec, self.decoder.frame, cov=est.cov, sog=est.sog, cog_yaw=est.cog,
+                                   w=est.w)
+            try:
+                self.sk_sock.sendto(json.dumps(delta).encode("utf-8"), self.sk_addr)
+                self.published_signalk += 1
+            except OSError as exc:
+                log_.warning("publish to %s failed: %s", self.publish_signalk, exc)
         if arrival is not None:  # the published solution is the latency-critical path; the file comes next
             self.latency_ms[self.n_latency % LATENCY_WINDOW] = (time.perf_counter() - arrival) * 1e3
             self.n_latency += 1
@@ -527,6 +600,7 @@ class LiveRunner:
         sel = selectors.DefaultSelector()
         self.writer = None
         self.pub_sock = None
+        self.sk_sock = None
         old = {}
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -537,6 +611,9 @@ class LiveRunner:
             if self.publish is not None:
                 self.pub_addr = resolve(self.publish)
                 self.pub_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            if self.publish_signalk is not None:
+                self.sk_addr = resolve(self.publish_signalk)
+                self.sk_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             for src in self.sources:
                 src.open(sel)
             log_.info("listening on %s; publishing to %s", ", ".join(str(s.ep) for s in self.sources),
@@ -566,6 +643,8 @@ class LiveRunner:
                     for raw in lines:
                         if src.kind == "scan":
                             self._scan_packet(raw, arrival)
+                        elif src.kind != "nmea":
+                            self._marine_line(src.kind, raw, arrival)
                         else:
                             self._sentence(raw, arrival)
                         if self._stop.is_set():
@@ -586,6 +665,8 @@ class LiveRunner:
                 self.writer.close()
             if self.pub_sock is not None:
                 self.pub_sock.close()
+            if self.sk_sock is not None:
+                self.sk_sock.close()
             for sig, h in old.items():
                 signal.signal(sig, h)
         return self.summary()
@@ -610,6 +691,11 @@ class LiveRunner:
         }
         if self.scans is not None:
             out["scans_replayed"] = self.scan_i
+        if self.marine is not None:
+            out.update(self.marine.info())
+            out["bad_marine_lines"] = self.bad_marine
+        if self.publish_signalk is not None:
+            out["published_signalk"] = self.published_signalk
         if any(s.kind == "scan" for s in self.sources):
             out["scans_in"], out["bad_scans"] = self.scans_in, self.bad_scans
         if self.decoder.frame is not None:

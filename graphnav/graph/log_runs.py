@@ -2,7 +2,7 @@
 the record-by-record :class:`~graphnav.graph.navigator.Navigator` (one graph builder,
 :mod:`graphnav.graph.builder`; one solver wrapper, :mod:`graphnav.graph.solver`), so the three
 and every online user solve exactly the same problem. Options are the fields of
-:class:`~graphnav.graph.config.SmootherConfig`.
+:class:`~graphnav.graph.smoother_config.SmootherConfig`.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from typing import Any
 from ..log import NavLog
 from ..result import OnEstimate, RunResult
 from .builder import Matcher, default_matcher
-from .config import SmootherConfig
 from .navigator import Navigator, world_cov
+from .smoother_config import SmootherConfig
 
 __all__ = ["SmootherConfig", "default_matcher", "run", "run_batch", "run_fixed_lag", "run_isam2", "unmet",
            "world_cov"]

@@ -93,7 +93,7 @@ class SmootherConfig:
     icp_robust: str | None = None  # robust kernel on ICP factors (None, "huber", "cauchy")
     icp_max_step: float = 5.0  # [m] an ICP step farther than this from the prediction is rejected
     icp_gate: float | None = 4.0  # reject a match whose Mahalanobis distance to the odometry exceeds it
-    icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.icp.IcpConfig
+    icp: dict[str, Any] = field(default_factory=dict)  # options for graphnav.scan.weighted_icp.IcpConfig
 
     # -- loop closures (graphnav.graph.loops, docs/loops.md) ------------------------------------
     loops: bool = True  # close loops when the log has scans
@@ -146,6 +146,10 @@ class SmootherConfig:
     #  Gauss-Newton step diverges where nothing else observes the yaw (a GNSS-only log); odometry and
     #  GNSS recover a start 180 deg off (square loop: online 0.80 m against 0.68 m with pi)
 
+    # -- sensor mounts (lever arms and rotations; graphnav.graph.mounts, docs/mounts.md) -----------------
+    mounts: dict[str, Any] = field(default_factory=dict)  # {sensor: {x, y, z [m], roll, pitch, yaw [rad]}} in the
+    #  body frame for gnss (antenna), lidar (extrinsics), imu, water_speed; over the log meta's "mounts"
+
     # -- noise the log does not give --------------------------------------------------------------
     noise_estimation: str = "defaulted"  # variance scale per sensor group after the batch solution:
     #  "defaulted" (the groups whose sigmas came from the defaults above), "all", "off"
@@ -166,6 +170,9 @@ class SmootherConfig:
             raise ValueError(f"scan_stride must be >= 1, got {self.scan_stride}")
         if self.keyframe_period is not None and not self.keyframe_period > 0:
             raise ValueError(f"keyframe period must be > 0, got {self.keyframe_period}")
+        from .mounts import parse_mounts
+
+        parse_mounts(self.mounts)  # an OptionError naming mounts.SENSOR.FIELD
 
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> SmootherConfig:
