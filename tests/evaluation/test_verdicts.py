@@ -28,13 +28,15 @@ def test_equal_tracks_are_said_with_the_reason():
     ukf = _entry("ukf", poses + [0.0, 5.0, 0.0], kind="filter", description="conventional UKF",
                  summary={"inputs": ["imu", "gnss"], "ate_rmse_m": 5.0, "nees_mean": 15.2})
     skipped = Entry("scan-to-map", "odometry", "LiDAR", skipped="needs at least two scans")
-    v = verdicts(Comparison([dr, icp, ukf, skipped], log))
+    fused = _entry("fused", poses, info={"init": "odometry", "matches": 50, "failed_matches": 1})
+    v = verdicts(Comparison([dr, icp, ukf, skipped, fused], log))
     assert v[0].startswith("**dead-reckoning** (odometry): a test estimator. Used: odometry.")
     assert "Its track equals **dead-reckoning**'s within 1e-09 m" in v[1]
     assert "98 % of its registrations were degenerate, so at every step it kept its guess" in v[1]
     assert "Worse than **dead-reckoning** (3 m) although it uses GNSS." in v[2]
     assert "Over-confident: its position NEES is 15.2" in v[2] and "models no IMU biases" in v[2]
     assert v[3].endswith("Not run: needs at least two scans.")
+    assert "it starts every scan match from its odometry guess" in v[4]
 
 
 def test_data_lines_name_gaps_and_jumps():

@@ -54,8 +54,15 @@ def verdict(e: Entry, comp: Comparison, same: dict[str, tuple[str, float]]) -> s
     deg = _degenerate(e)
     if e.name in same:
         other, d = same[e.name]
-        why = (f"{deg}, so at every step it kept its guess, which is **{other}**'s motion" if deg else
-               "it received the same information through the same motion model")
+        init = (e.result.info if e.result is not None else {}).get("init")
+        if deg:
+            why = f"{deg}, so at every step it kept its guess, which is **{other}**'s motion"
+        elif isinstance(init, str) and init in ("odometry", "imu"):
+            why = (f"it starts every scan match from its {init} guess and fuses the match with that guess, whose "
+                   f"covariance is far smaller, so the guess wins and its track is the {init} integration (for the "
+                   "scans alone: -O guess_cov=false, where the estimator has it)")
+        else:
+            why = "it received the same information through the same motion model"
         out.append(f"Its track equals **{other}**'s within {d:.1g} m at every common time: {why}.")
     elif deg:
         out.append(f"{deg[0].upper() + deg[1:]}: along the weak directions it kept its motion guess, so its "
