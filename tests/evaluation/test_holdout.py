@@ -83,13 +83,18 @@ def test_heading_and_water_speed_dead_reckoning_coasts_through_the_windows():
     assert comp.same_tracks() == {"from-start": ("water-dr", pytest.approx(0.0, abs=1e-9))}
 
 
-def test_gnss_jumps_are_found_and_listed():
+def test_gnss_jumps_are_found_and_listed_by_info(tmp_path):
+    from graphnav.io import save_log
+
     log = _straight(100)
     recs = [Gnss(r.t, r.x + (80.0 if 50 <= r.t < 60 else 0.0), r.y, r.sigma) if r.kind == "gnss" else r
             for r in log.records]
     j = gnss_jumps(NavLog(recs))
     assert j["count"] == 2 and [(d["t0"], d["t1"]) for d in j["largest"]] == [(49.0, 50.0), (59.0, 60.0)]
     assert gnss_jumps(log)["count"] == 0
+    save_log(NavLog(recs), tmp_path / "j.jsonl")
+    rc, obj = _cli("info", str(tmp_path / "j.jsonl"))
+    assert rc == 0 and obj["gnss_jumps"]["count"] == 2 and obj["gnss_jumps"]["largest"][0]["distance_m"] == 82.0
 
 
 @pytest.fixture(scope="module")
