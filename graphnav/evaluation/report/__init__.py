@@ -12,7 +12,6 @@ load. Both reports are rendered from one list of blocks, so they say the same th
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +22,7 @@ from ...trajectory import Trajectory
 from ..comparison import Comparison, Entry
 from .provenance import provenance
 from .render import render_html, render_markdown
+from .rendered import Report
 from .text import (
     COLUMNS,
     _config,
@@ -38,22 +38,6 @@ from .text import (
 
 __all__ = ["COLUMNS", "Report", "_config", "event_table", "file_stem", "markdown_table", "provenance", "render",
            "results_table", "summary_lines", "to_json", "warnings", "write_report"]
-
-
-@dataclass
-class Report:
-    """A rendered report: file name -> content, nothing written yet. ``tum``: the trajectories to write
-    as TUM (file name -> trajectory); ``images``: file name -> (caption, PNG); ``map_html`` ``None``
-    when no map was asked; ``geo_tracks`` the tracks for the WGS84 files (truth included)."""
-
-    log: NavLog
-    markdown: str
-    html: str
-    images: dict[str, tuple[str, bytes]]
-    tum: dict[str, Trajectory]
-    map_html: str | None = None
-    geo_tracks: dict[str, Trajectory] = field(default_factory=dict)
-    wgs84: dict[str, Any] | None = None
 
 
 def render(comp: Comparison, *, command: str | None = None, log_path: str | Path | None = None,

@@ -8,7 +8,7 @@ from pathlib import Path
 from ...io.geo_out import write_wgs84
 from ...io.outputs import OutDir, atomic_path, write_text_atomic
 from ...io.tum import write_truth
-from . import Report
+from .rendered import Report
 
 
 def write(report: Report, out: OutDir | str | Path) -> dict[str, Path]:
