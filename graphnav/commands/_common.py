@@ -15,7 +15,7 @@ from ..io.jsonsafe import jsonable
 
 __all__ = ["OPTION_FORM", "add_drop_flag", "add_json_flag", "add_log_args", "dropped_kinds", "emit", "jsonable",
            "log_options", "options_by_estimator", "options_for", "parse_option", "parse_options", "plain_options",
-           "progress_enabled", "scoped_options"]
+           "progress_enabled", "scoped_options", "seed_arg"]
 
 
 def add_json_flag(p: argparse.ArgumentParser) -> None:
@@ -98,6 +98,22 @@ def add_date_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--date", type=log_date, metavar="YYYY-MM-DD",
                    help="NMEA logs without a date (no RMC, ZDA without date): the UTC day of the first time of "
                         "day (t becomes POSIX time); a log's own date wins (docs/nmea.md)")
+
+
+MAX_SEED = 2**63 - 1
+"""The largest ``--seed`` (NumPy takes any non-negative integer; a seed is a count, not a size)."""
+
+
+def seed_arg(text: str) -> int:
+    """``--seed``'s value: an integer in ``[0, 2^63 - 1]`` (argparse names the flag otherwise, exit 2);
+    NumPy's own message for a negative seed named no argument."""
+    try:
+        value = int(text.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text[:30]!r}") from None
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be in [0, 2^63 - 1], got {text[:30]}")
+    return value
 
 
 def log_date(text: str) -> str:

@@ -285,7 +285,7 @@ class GraphBuilder:
                 self.mode = "scan"
                 self._want_matcher()
             if self.mode == "scan":
-                if self.n_scans % self.cfg.scan_stride == 0:
+                if self._scan_is_keyframe(t):
                     self._new_keyframe(t, rec)
                 self.n_scans += 1
         elif kind == "odometry":
@@ -312,6 +312,24 @@ class GraphBuilder:
             self.imu.add(rec)
         else:  # truth (a reference, not a measurement); imu on the planar graph; water speed, attitude
             self.counts["ignored"] += 1
+
+    def _scan_is_keyframe(self, t: float) -> bool:
+        """Every ``scan_stride``-th scan; with an IMU (``keyframe_motion``), only once the vessel has
+        moved ``keyframe_distance`` (at the newest interval's speed) or turned ``keyframe_angle_deg``
+        (the gyro) since the newest keyframe, or ``keyframe_max_dt`` has passed."""
+        cfg = self.cfg
+        if self.n_scans % cfg.scan_stride:
+            return False
+        use = cfg.keyframe_motion if cfg.keyframe_motion is not None else bool(self.imu)
+        if not use or not self.kf_t or not self.imu:
+            return True
+        dt = t - self.kf_t[-1]
+        if dt >= cfg.keyframe_max_dt - EPS:
+            return True
+        speed = math.hypot(self.last_rel.x(), self.last_rel.y()) / self.last_gap if self.last_gap > 0 else 0.0
+        if speed * dt >= cfg.keyframe_distance:
+            return True
+        return self.imu.rotation(self.kf_t[-1], t) >= math.radians(cfg.keyframe_angle_deg)
 
     def _want_matcher(self) -> None:
         if self.matcher is None and self.cfg.use_icp:

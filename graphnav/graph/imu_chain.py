@@ -128,6 +128,10 @@ class ImuChain:
             i += 1
         return out
 
+    def rotation(self, ta: float, tb: float) -> float:
+        """An upper bound of the rotation over ``[ta, tb]`` [rad]: the integrated gyro rate's norm."""
+        return float(sum(np.linalg.norm(w) * dt for _, w, dt in self.samples(ta, tb)))
+
     def preintegrate(self, bias: gtsam.imuBias.ConstantBias, ta: float, tb: float
                      ) -> gtsam.PreintegratedImuMeasurements:
         """GTSAM preintegration of ``[ta, tb]`` at ``bias`` (:func:`factors.imu.preintegrate`: planar

@@ -137,7 +137,8 @@ def test_compare_holdout_on_a_real_log_ranks_and_reports(psaros_slice, tmp_path)
 
 def test_run_holdout_and_report_for_one_estimator(psaros_slice, tmp_path):
     out = tmp_path / "r"
-    rc, obj = _cli("run", str(psaros_slice), "-e", "water-dr", "--holdout-gnss", "200,40", "--out", str(out))
+    rc, obj = _cli("run", str(psaros_slice), "-e", "water-dr", "--holdout-gnss", "200,40", "--out", str(out),
+                   "--report")
     assert rc == 0 and obj["holdout"]["scored_windows"] == 3 and obj["holdout"]["rmse_m"] > 0
     for f in ("report.md", "report.html", "map.html", "trajectory.tum", "summary.json", "trajectories.png"):
         assert (out / f).exists(), f
