@@ -162,6 +162,9 @@ x = 0.0                      # e.g. 3.0: 3 m forward of the body origin
 y = 0.0
 z = 0.0                      # (its height is not used: the graph observes no heel)
 
+# [options.mounts."gnss@52"]  # one source's antenna (two receivers on one bus; a record's source)
+#   x = 1.2
+
 [options.mounts.lidar]       # the LiDAR's optical centre and axes: matches are conjugated to the body
 # x = 0.0
 # y = 0.0
