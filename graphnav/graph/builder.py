@@ -552,7 +552,7 @@ class GraphBuilder:
             s.values.insert(IB(k), bias)
             s.stamps[V(k)] = s.stamps[IB(k)] = tb
             return gtsam.NavState(pose, vel), np.zeros(3), np.diag(floor)
-        pim = self.imu.preintegrate(bias, ta, tb)
+        pim = self.imu.preintegrate(bias, ta, tb, speed=float(np.hypot(vel[0], vel[1])))
         s.add(F.imu_factor(k - 1, k, pim), "imu")
         pred, rel, cov = relative_prediction(pim, pose, vel, bias, vel_cov)
         cov = cov + np.diag(np.square(self._motion_floor()))

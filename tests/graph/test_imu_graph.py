@@ -266,3 +266,19 @@ def test_keyframes_follow_the_motion_with_an_imu_and_every_scan_without():
     e_every, e_motion = (ate(r.trajectory, truth)["rmse"] for r in (every, motion))
     assert len(motion.trajectory) < len(every.trajectory) / 5
     assert e_motion < 1.3 * e_every + 0.02, (e_motion, e_every)
+
+
+def test_vessel_model_yaw_noise_grows_at_low_speed():
+    """Without an IMU (motion "vessel") the yaw-rate density is the configured one under way and grows as
+    steerage / speed below the steerage speed (x10 at most): a drifting boat's heading is free."""
+    chain = ImuChain(ImuConfig(vessel_yaw_rate_deg=2.0, vessel_steerage_speed=1.0))
+    bias = gtsam.imuBias.ConstantBias()
+
+    def yaw_var(speed):
+        return np.asarray(chain.preintegrate(bias, 0.0, 1.0, speed=speed).preintMeasCov())[2, 2]
+
+    under_way = yaw_var(2.0)
+    assert under_way == pytest.approx(math.radians(2.0) ** 2, rel=1e-6)
+    assert yaw_var(None) == under_way and yaw_var(1.0) == under_way
+    assert yaw_var(0.5) == pytest.approx(4 * under_way, rel=1e-6)
+    assert yaw_var(0.0) == pytest.approx(100 * under_way, rel=1e-6)
