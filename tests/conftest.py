@@ -53,3 +53,12 @@ def _run_writes_no_report_by_default(monkeypatch):
     import graphnav.commands.run as run_command
 
     monkeypatch.setattr(run_command, "REPORT_DEFAULT", False)
+
+
+@pytest.fixture(scope="session")
+def legacy_harbour():
+    """The robot-style harbour log (seed 0, ``--profile legacy``: 10 Hz odometry, 1 Hz IMU, 5 Hz scans),
+    ``data/harbour.npz`` before issue 21, for the tests whose known answers are about that log."""
+    from graphnav.sim.harbour import HarbourConfig, simulate_harbour
+
+    return simulate_harbour(0, HarbourConfig.legacy())
