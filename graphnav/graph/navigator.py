@@ -424,8 +424,8 @@ class Navigator:
                     values = self.solver.current()
                     if cfg.converge == "lm":
                         values = self._batch(values, info)
-                else:
-                    values = self._batch(self.solver.initial, info)
+                else:  # with a loop closer's iSAM2 front end, its estimate is the one LM solve's start
+                    values = self._batch(self.front.current() if self.front is not None else self.solver.initial, info)
                 p2 = [self.space.read(values, F.X(k)) for k in range(n)]
                 poses = [_vec(p) for p in p2]
                 if cfg.covariances:
