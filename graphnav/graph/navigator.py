@@ -244,8 +244,12 @@ class Navigator:
         then observes that pose."""
         try:
             if loops is not None and loops.stale:
-                values = solver.current()
-                loops.refresh(lambda j: _vec(self.space.read(values, F.X(j))) if values.exists(F.X(j)) else None)
+                if solver.kind == "isam2":  # each place's pose alone: no full back-substitution of every state
+                    sp = self.space
+                    loops.refresh(lambda j: _vec(sp.pose2(solver.estimate(F.X(j), sp.pose_type))))
+                else:
+                    values = solver.current()
+                    loops.refresh(lambda j: _vec(self.space.read(values, F.X(j))) if values.exists(F.X(j)) else None)
             p = solver.estimate(F.X(k), self.space.pose_type)
             cov = self.space.world_cov(p, solver.marginal(F.X(k)))
             pose = self.space.pose2(p)
@@ -424,8 +428,8 @@ class Navigator:
                     values = self.solver.current()
                     if cfg.converge == "lm":
                         values = self._batch(values, info)
-                else:
-                    values = self._batch(self.solver.initial, info)
+                else:  # with a loop closer's iSAM2 front end, its estimate is the one LM solve's start
+                    values = self._batch(self.front.current() if self.front is not None else self.solver.initial, info)
                 p2 = [self.space.read(values, F.X(k)) for k in range(n)]
                 poses = [_vec(p) for p in p2]
                 if cfg.covariances:

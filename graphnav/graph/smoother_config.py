@@ -126,6 +126,8 @@ class SmootherConfig:
     #  unchanged); its outliers are left to the robust kernel and the batch's drop
     gnss_gate_max_rejects: int = 15  # ...unless this many in a row were rejected (re-acquire after drift)
     gnss_gate_outage: float = 5.0  # [s] ...and the first fix after a gap this long is not gated (outage)
+    attitude_sigma_deg: float = 1.0  # [deg] an attitude record's roll/pitch 1-sigma when it states none (a MEMS
+    #  AHRS datasheet's dynamic accuracy); attitude records are used on the IMU graph only (Pose3)
     gnss_velocity_sigma: float = 0.1  # [m/s] a GNSS velocity record's 1-sigma per axis when it states none
 
     # -- water speed and current (the Pose3 graph) ----------------------------------------------
