@@ -25,8 +25,8 @@ sys.path.insert(0, str(ROOT))
 from graphnav.geometry import increment  # noqa: E402
 from graphnav.io import load_log  # noqa: E402
 from graphnav.log import odometry_samples  # noqa: E402
-from graphnav.scan.icp import IcpConfig, match_points, scan_points  # noqa: E402
 from graphnav.scan.icp_pairs import reference_increments  # noqa: E402
+from graphnav.scan.weighted_icp import IcpConfig, match_points, scan_points  # noqa: E402
 
 
 def _slope(a: np.ndarray, b: np.ndarray) -> float:
