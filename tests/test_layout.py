@@ -1,6 +1,7 @@
-"""The package layout of issue #13 (docs/architecture.md), checked on the source: no import cycle
-between graphnav modules (function-level, lazy imports included), no library module importing the
-CLI layer, at most 10 modules at the top level."""
+"""The package layout of issues #13 and #26 (docs/architecture.md), checked on the source: no import
+cycle between graphnav modules (function-level, lazy imports included), no module importing a higher
+layer (kernel < io < scan/sim/beacons < graph < estimators < evaluation/online < commands), no library
+module importing the CLI layer, unique module names, at most 10 modules at the top level."""
 
 from __future__ import annotations
 
@@ -82,6 +83,45 @@ def test_cycle_finder_finds_a_cycle():
 
 def test_no_import_cycle():
     assert cycles(import_graph()) == []
+
+
+#: the layers, lowest first: a module may import its own layer and the ones below, never one above
+LAYERS = (("kernel",), ("io",), ("scan", "sim", "beacons"), ("graph",), ("estimators",), ("evaluation", "online"),
+          ("commands", "cli", "__main__"))
+
+
+def layer(mod: str) -> int:
+    """The layer of a graphnav module: a top-level module (``graphnav.log``, ...) is the kernel, a
+    package's modules are that package's layer."""
+    top = mod.split(".")[1]
+    found = [i for i, names in enumerate(LAYERS) if top in names]
+    return found[0] if found else 0  # a top-level module: the kernel
+
+
+def upward_imports(graph: dict[str, set[str]]) -> dict[str, list[str]]:
+    """Module -> the modules of a higher layer it imports. Importing an enclosing package (``from .. import
+    estimators`` runs ``graphnav/__init__``, the lazy top-level API) is not an edge: it has already run."""
+    out: dict[str, list[str]] = {}
+    for mod, edges in graph.items():
+        if mod == "graphnav":
+            continue
+        up = sorted(e for e in edges if not mod.startswith(e + ".") and layer(e) > layer(mod))
+        if up:
+            out[mod] = up
+    return out
+
+
+def test_layer_finder_finds_an_upward_import():
+    assert layer("graphnav.trajectory") == 0 and layer("graphnav.io.tum") == 1 and layer("graphnav.io") == 1
+    assert layer("graphnav.sim.harbour") == layer("graphnav.beacons.layout") == 2
+    assert layer("graphnav.commands.run") == layer("graphnav.cli") == 6
+    graph = {"graphnav.trajectory": {"graphnav.io.outputs"}, "graphnav.io.outputs": set(),
+             "graphnav.online.live_runner": {"graphnav", "graphnav.graph.navigator"}}
+    assert upward_imports(graph) == {"graphnav.trajectory": ["graphnav.io.outputs"]}
+
+
+def test_no_import_from_a_higher_layer():
+    assert upward_imports(import_graph()) == {}
 
 
 def test_library_does_not_import_the_cli():

@@ -15,7 +15,8 @@ from ..io import load_log
 from ..io.drop import drop_kinds
 from ..io.geo_out import record_origin, write_wgs84
 from ..io.outputs import OutDir
-from ..io.tum import TrajectoryWriter, write_truth
+from ..io.trajectory_csv import write_trajectory_csv
+from ..io.tum import TrajectoryWriter, write_truth, write_tum
 from ._common import (
     add_drop_flag,
     add_json_flag,
@@ -135,11 +136,11 @@ def _run(args: argparse.Namespace, options: dict, dropped: list[str], out: OutDi
     summary["inputs"] = estimators.inputs(args.estimator, log, options, result.info)
     summary["origin"] = record_origin(log.meta)  # the log's geodetic origin (None: none), for graphnav export
     if out is not None:  # each file atomically (temporary file + rename)
-        result.trajectory.to_tum(out.file("trajectory.tum"))
+        write_tum(result.trajectory, out.file("trajectory.tum"))
         write_truth(log, out)  # truth.tum beside the estimate: evo_ape tum truth.tum trajectory.tum
-        result.trajectory.to_csv(out.file("trajectory.csv"))
+        write_trajectory_csv(result.trajectory, out.file("trajectory.csv"))
         if result.online is not None and result.online is not result.trajectory:
-            result.online.to_tum(out.file("online_final.tum"))
+            write_tum(result.online, out.file("online_final.tum"))
         tracks = {args.estimator: result.trajectory, **({"truth": log.truth()} if log.has_truth else {})}
         summary.update(write_wgs84(out, tracks, log.meta))  # WGS84 tracks, or "wgs84": None and why
         out.write_text("summary.json", json.dumps(jsonable({**summary, "info": result.info}), indent=2))

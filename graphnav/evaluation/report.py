@@ -28,7 +28,7 @@ import numpy as np
 
 from ..io.jsonsafe import jsonable
 from ..io.outputs import OutDir, write_text_atomic
-from ..io.tum import write_truth
+from ..io.tum import write_truth, write_tum
 from ..log import NavLog
 from . import plots
 from .comparison import Entry, ranked
@@ -496,12 +496,12 @@ def write_report(entries: Sequence[Entry], log: NavLog, out: Path | OutDir, *, l
     trajs = {e.name: e.result.trajectory for e in ok}
     for e in ok:
         p = out / f"{file_stem(e.name)}.tum"
-        e.result.trajectory.to_tum(p)
+        write_tum(e.result.trajectory, p)
         files[p.name] = p
         onl = e.result.online
         if onl is not None and onl is not e.result.trajectory and len(onl):
             p = out / f"{file_stem(e.name)}.online.tum"
-            onl.to_tum(p)
+            write_tum(onl, p)
             files[p.name] = p
     truth_path = write_truth(log, out)
     if truth_path is not None:
