@@ -8,10 +8,10 @@ import argparse
 import json
 import logging
 
+from ..estimators import make_online, online_names
 from ..io import load_log
 from ..io.outputs import ensure_dir, write_text_atomic
 from ..online.live_runner import LiveRunner
-from ..online.runner import ONLINE_ESTIMATORS, make_online
 from ._common import add_json_flag, emit, jsonable, options_for
 from .replay import parse_origin
 
@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scans-from", metavar="LOG", help="replay this log's scans on the NMEA stream's clock; "
                    "the run ends with the last scan")
     p.add_argument("--estimator", "-e", default="fixed-lag",
-                   help=f"online estimator: {', '.join(sorted(ONLINE_ESTIMATORS))} (default fixed-lag)")
+                   help=f"online estimator: {', '.join(online_names())} (default fixed-lag)")
     p.add_argument("--option", "-O", action="append", metavar="[ESTIMATOR.]KEY=VALUE",
                    help="estimator option (VALUE parsed as JSON when it can be); repeatable")
     p.add_argument("--publish", metavar="udp://HOST:PORT", help="send the solution as NMEA here")

@@ -63,7 +63,7 @@ def list_options(args: argparse.Namespace) -> int:
         if o["group"] != group:
             group = o["group"]
             lines.append(f"  [{group}]")
-        lines.append(f"  {o['name']:32s} {json.dumps(jsonable(o['default']))}")
+        lines.append(f"  {o['name']:32s} {json.dumps(jsonable(o['default'])):14s} {o['type']}")
         if o["meaning"]:
             lines.append(f"      {o['meaning']}")
     if not opts:

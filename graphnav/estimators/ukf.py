@@ -26,16 +26,19 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import option
 from ..geometry import wrap_angle
 from ..log import NavLog
+from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
-from . import EstimatorSpec, OnEstimate, RunResult
-from .gating import GATING_DEFAULTS, InnovationGate, reinit_block
+from .base import BatchEstimator
+from .gating import GATING_DEFAULTS, GateOptions, InnovationGate, reinit_block
 from .imu_model import imu_noise, resolve_flag, wants_bias
 
 # Table 2: the filters' a-priori noise (1-sigma)
@@ -293,19 +296,38 @@ def initial_state(log: NavLog, tab: dict[str, NDArray], n_bias: int,
     return np.array(x), np.diag(d)
 
 
-DEFAULTS: dict[str, Any] = {
-    # measurement noise: None = the records' sigmas (Table 2: r_gps_x=6, r_gps_y=7, r_com_deg=0.5)
-    "r_gps_x": None, "r_gps_y": None, "r_com_deg": None,
-    "sigma_gnss_velocity": 0.1, "sigma_water_speed": 0.1,  # [m/s] when a record gives no sigma
-    # IMU white noise per sample: None = the log's meta["imu"] (acc_std [m/s^2], gyro_std), else Table 2
-    "q_acc": None, "q_gyro_deg": None,
-    "alpha": 0.5, "beta": 2.0, "kappa": 0.0, "sigma_v0": 0.2,
-    **GATING_DEFAULTS,  # the innovation gate (gating.py)
-    # bias states: prior on the residual bias after calibration, and its random walk (None: meta["imu"]'s)
-    "sigma_bias_acc": 0.01, "sigma_bias_gyro_deg": 0.1, "q_bias_acc": None, "q_bias_gyro_deg": None,
-    # water current states (with water_speed records): prior [m/s] and random walk [m/s/sqrt(s)]
-    "current": "auto", "sigma_current0": 0.5, "q_current": 0.005,
-}
+@dataclass
+class UkfOptions(GateOptions):
+    """The UKF's options (:func:`run_nav_filter`) and its innovation gate's."""
+
+    group: ClassVar[str] = "ukf"
+    # measurement noise: null = the records' sigmas
+    r_gps_x: float | None = option(None, "GNSS x sigma (null: the records'; Table 2: 6)", unit="m")
+    r_gps_y: float | None = option(None, "GNSS y sigma (null: the records'; Table 2: 7)", unit="m")
+    r_com_deg: float | None = option(None, "compass sigma (null: the records'; Table 2: 0.5)", unit="deg")
+    sigma_gnss_velocity: float = option(0.1, "GNSS velocity sigma when the record gives none", unit="m/s")
+    sigma_water_speed: float = option(0.1, "water-speed sigma when the record gives none", unit="m/s")
+    q_acc: float | None = option(None, "IMU acceleration noise per sample (null: meta['imu'] acc_std, else Table "
+                                 "2's 0.0039)", unit="m/s^2")
+    q_gyro_deg: float | None = option(None, "IMU yaw-rate noise per sample (null: meta['imu'] gyro_std, else "
+                                      "Table 2's 0.033)", unit="deg/s")
+    alpha: float = option(0.5, "sigma-point spread (Merwe weights)")
+    beta: float = option(2.0, "sigma-point weight of the prior (2: Gaussian)")
+    kappa: float = option(0.0, "secondary sigma-point spread")
+    sigma_v0: float = option(0.2, "prior 1-sigma of the initial velocity", unit="m/s")
+    sigma_bias_acc: float = option(0.01, "bias states: prior on the residual accelerometer bias", unit="m/s^2")
+    sigma_bias_gyro_deg: float = option(0.1, "bias states: prior on the residual gyro bias", unit="deg/s")
+    q_bias_acc: float | None = option(None, "bias states: accelerometer bias random walk (null: the log's "
+                                      "meta['imu'])", unit="m/s^2/sqrt(s)")
+    q_bias_gyro_deg: float | None = option(None, "bias states: gyro bias random walk (null: the log's meta['imu'])",
+                                           unit="deg/s/sqrt(s)")
+    current: bool | str = option("auto", "water-current states: auto (when the log has water_speed), true, false")
+    sigma_current0: float = option(0.5, "prior 1-sigma of the water current", unit="m/s")
+    q_current: float = option(0.005, "water-current random walk", unit="m/s/sqrt(s)")
+
+
+DEFAULTS: dict[str, Any] = {f.name: f.default for f in fields(UkfOptions)}
+"""The UKF's options and their defaults (:class:`UkfOptions`)."""
 
 
 def _noise(log: NavLog, opts: dict[str, Any]) -> dict[str, float]:
@@ -469,8 +491,34 @@ def inputs(log: NavLog, options: dict) -> set[str]:
     return kinds
 
 
-ESTIMATORS = {
-    "ukf": EstimatorSpec(run_ukf, unmet, "conventional UKF, IMU-driven, GNSS + compass (Liu 2019)", "filter",
-                         inputs),
-    "ukf-bias": EstimatorSpec(run_ukf_bias, unmet, "UKF with accelerometer/gyro bias states", "filter", inputs),
-}
+@dataclass
+class UkfConfig(UkfOptions):
+    """The ``ukf`` estimator's options."""
+
+    bias: bool | str = option("auto", "IMU bias states: auto (unless meta['imu'] says bias_free), true, false (the "
+                              "paper's 5-state UKF)")
+
+
+class Ukf(BatchEstimator):
+    """The UKF at its best for the log (:func:`run_ukf`)."""
+
+    description = "conventional UKF, IMU-driven, GNSS + compass (Liu 2019)"
+    Config = UkfConfig
+    unmet = staticmethod(unmet)
+    inputs = staticmethod(inputs)
+
+    def solve(self, log: NavLog) -> RunResult:
+        return run_ukf(log, on_estimate=self.on_estimate, **self.options)
+
+
+class UkfBias(Ukf):
+    """The UKF with bias states (:func:`run_ukf_bias`)."""
+
+    description = "UKF with accelerometer/gyro bias states"
+    Config = UkfOptions
+
+    def solve(self, log: NavLog) -> RunResult:
+        return run_ukf_bias(log, on_estimate=self.on_estimate, **self.options)
+
+
+ESTIMATORS = {"ukf": Ukf, "ukf-bias": UkfBias}

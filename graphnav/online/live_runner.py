@@ -16,9 +16,9 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
   shifted so that its first scan falls on the first timed sentence). The run ends when the last
   scan has been handed over.
 * **Estimator** -- anything implementing :class:`graphnav.result.OnlineEstimator`
-  (``add(record) -> Estimate | None``), by name from :data:`graphnav.online.runner.ONLINE_ESTIMATORS`:
+  (``add(record) -> Estimate | None``), by name from :func:`graphnav.estimators.make_online`:
   :class:`graphnav.graph.navigator.Navigator` (the navigation graph of ``graphnav run``, with the
-  fixed-lag smoother, the default, or iSAM2) or :class:`graphnav.online.ekf_online.EkfOnline` (the
+  fixed-lag smoother, the default, or iSAM2) or :class:`graphnav.estimators.ekf_online.EkfOnline` (the
   ``ekf`` estimator). When the loop stops, the estimator's ``flush()`` (if it has one) solves what
   was waiting for a later record and that estimate is published too.
 * **Output** -- every estimate is appended to a new file per run, ``DIR/live-YYYYmmddTHHMMSSZ.tum``

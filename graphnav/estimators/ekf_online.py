@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from ..estimators.ekf import IMU_DEFAULTS, EkfStepper, initial_state
 from ..geometry import wrap_angle
 from ..log import Gnss, GnssVelocity, Heading, Odometry, PosePrior, Record
 from ..result import Estimate
+from .ekf import IMU_DEFAULTS, EkfStepper, initial_state
 
 
 class EkfOnline:
