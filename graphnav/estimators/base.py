@@ -78,7 +78,11 @@ class Estimator:
 
 class BatchEstimator(Estimator):
     """An estimator that solves the whole log at once: ``add`` keeps the records, ``finish`` calls
-    ``solve(log)`` on them (on ``self.log`` itself when the records are exactly its records)."""
+    ``solve(log)`` on them (on ``self.log`` itself when the records are exactly its records): by
+    default its batch function ``batch(log, on_estimate=None, **options) -> RunResult`` with the
+    options given."""
+
+    batch: ClassVar[Callable[..., RunResult] | None] = None
 
     def __init__(self, log: NavLog | None = None, *, on_estimate: OnEstimate | None = None, **options: Any) -> None:
         super().__init__(log, on_estimate=on_estimate, **options)
@@ -96,7 +100,10 @@ class BatchEstimator(Estimator):
         return self.solve(log)
 
     def solve(self, log: NavLog) -> RunResult:
-        raise NotImplementedError
+        batch = type(self).batch
+        if batch is None:
+            raise NotImplementedError(f"{type(self).__name__} has no batch function")
+        return batch(log, on_estimate=self.on_estimate, **self.options)
 
 
 RunFn = Callable[..., RunResult]
@@ -107,8 +114,7 @@ def EstimatorSpec(run: RunFn, unmet: Callable[[NavLog], str | None], description
     """An estimator class around a batch function ``run(log, on_estimate=None, **options) -> RunResult``
     (options unchecked: ``Config`` is ``None``); for estimators written as one function."""
     attrs: dict[str, Any] = {"description": description, "kind": kind, "Config": None,
-                             "unmet": staticmethod(unmet), "solve": lambda self, log: run(
-                                 log, on_estimate=self.on_estimate, **self.options)}
+                             "unmet": staticmethod(unmet), "batch": staticmethod(run)}
     if inputs is not None:
         attrs["inputs"] = staticmethod(inputs)
     return type(f"FunctionEstimator_{getattr(run, '__name__', 'run')}", (BatchEstimator,), attrs)

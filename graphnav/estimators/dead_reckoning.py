@@ -124,8 +124,7 @@ class DeadReckoning(BatchEstimator):
     unmet = staticmethod(_unmet)
     inputs = staticmethod(_inputs)
 
-    def solve(self, log: NavLog) -> RunResult:
-        return run_any_dead_reckoning(log, on_estimate=self.on_estimate, **self.options)
+    batch = staticmethod(run_any_dead_reckoning)
 
 
 ESTIMATORS = {"dead-reckoning": DeadReckoning}

@@ -409,8 +409,7 @@ class Ekf(BatchEstimator):
 
         return EkfOnline(**options)
 
-    def solve(self, log: NavLog) -> RunResult:
-        return run_ekf(log, on_estimate=self.on_estimate, **self.options)
+    batch = staticmethod(run_ekf)
 
 
 ESTIMATORS = {"ekf": Ekf}

@@ -505,8 +505,7 @@ class EkfSlamEstimator(BatchEstimator):
     unmet = staticmethod(_unmet)
     inputs = staticmethod(_inputs)
 
-    def solve(self, log: NavLog) -> RunResult:
-        return run_ekf_slam(log, on_estimate=self.on_estimate, **self.options)
+    batch = staticmethod(run_ekf_slam)
 
 
 ESTIMATORS = {"ekf-slam": EkfSlamEstimator}

@@ -211,8 +211,7 @@ class FuzzyUkf(BatchEstimator):
     unmet = staticmethod(unmet)
     inputs = staticmethod(inputs)
 
-    def solve(self, log: NavLog) -> RunResult:
-        return run_fuzzy_ukf(log, on_estimate=self.on_estimate, **self.options)
+    batch = staticmethod(run_fuzzy_ukf)
 
 
 class FuzzyUkfBias(FuzzyUkf):
@@ -221,8 +220,7 @@ class FuzzyUkfBias(FuzzyUkf):
     description = "fuzzy-ukf on the bias-augmented ukf-bias state (ours)"
     Config = FuzzyUkfBiasConfig
 
-    def solve(self, log: NavLog) -> RunResult:
-        return run_fuzzy_ukf_bias(log, on_estimate=self.on_estimate, **self.options)
+    batch = staticmethod(run_fuzzy_ukf_bias)
 
 
 ESTIMATORS = {"fuzzy-ukf": FuzzyUkf, "fuzzy-ukf-bias": FuzzyUkfBias}

@@ -148,8 +148,7 @@ class IcpDr(BatchEstimator):
     unmet = staticmethod(_unmet)
     inputs = staticmethod(_inputs)
 
-    def solve(self, log: NavLog) -> RunResult:
-        return run_icp_dr(log, on_estimate=self.on_estimate, **self.options)
+    batch = staticmethod(run_icp_dr)
 
 
 ESTIMATORS = {"icp-dr": IcpDr}

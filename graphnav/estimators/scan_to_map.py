@@ -261,8 +261,7 @@ class ScanToMap(BatchEstimator):
     unmet = staticmethod(_unmet)
     inputs = staticmethod(_inputs)
 
-    def solve(self, log: NavLog) -> RunResult:
-        return run_scan_to_map(log, on_estimate=self.on_estimate, **self.options)
+    batch = staticmethod(run_scan_to_map)
 
 
 ESTIMATORS = {"scan-to-map": ScanToMap}

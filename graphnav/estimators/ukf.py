@@ -507,8 +507,7 @@ class Ukf(BatchEstimator):
     unmet = staticmethod(unmet)
     inputs = staticmethod(inputs)
 
-    def solve(self, log: NavLog) -> RunResult:
-        return run_ukf(log, on_estimate=self.on_estimate, **self.options)
+    batch = staticmethod(run_ukf)
 
 
 class UkfBias(Ukf):
@@ -517,8 +516,7 @@ class UkfBias(Ukf):
     description = "UKF with accelerometer/gyro bias states"
     Config = UkfOptions
 
-    def solve(self, log: NavLog) -> RunResult:
-        return run_ukf_bias(log, on_estimate=self.on_estimate, **self.options)
+    batch = staticmethod(run_ukf_bias)
 
 
 ESTIMATORS = {"ukf": Ukf, "ukf-bias": UkfBias}
