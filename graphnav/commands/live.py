@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
                         duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans,
                         restart=lambda: make_online(args.estimator, **options))
     summary = runner.run()
-    if args.out and runner.writer is not None:  # beside this run's own TUM file, written atomically
-        write_text_atomic(runner.writer.path.with_suffix(".summary.json"), json.dumps(jsonable(summary), indent=2))
+    if args.out and runner.sink.writer is not None:  # beside this run's own TUM file, written atomically
+        write_text_atomic(runner.sink.writer.path.with_suffix(".summary.json"), json.dumps(jsonable(summary), indent=2))
     emit(args, summary)
     return 0

@@ -16,11 +16,11 @@ from _harbour import harbour_trial
 from _live import start_live
 
 from graphnav.estimators.ekf import run_ekf
+from graphnav.estimators.ekf_online import EkfOnline
 from graphnav.evaluation.metrics import ate
 from graphnav.geodesy import LocalFrame
 from graphnav.io import load_log
 from graphnav.log import Gnss, Heading, NavLog
-from graphnav.estimators.ekf_online import EkfOnline
 from graphnav.online.nmea_replay import replay
 from graphnav.online.runner import make_online, run_online
 
