@@ -1,4 +1,4 @@
-"""Log records -> native GTSAM factors (no Python ``CustomFactor``).
+"""Log records -> native GTSAM factors (one small Python ``CustomFactor``: a Pose2 GNSS fix with a lever arm).
 
 One module per sensor: :mod:`factors.gnss` (``PoseTranslationPrior2D``), :mod:`factors.compass`
 (``PoseRotationPrior2D`` or a bias-aware ``BetweenFactorPose2``), :mod:`factors.between`
@@ -16,7 +16,7 @@ import gtsam
 from .beacon import beacon_factor, beacon_prior, init_from_sighting, pose_from_two_beacons
 from .between import compose_with_cov, icp_between, odometry_between, odometry_increment
 from .compass import biased_compass_factor, compass_bias, compass_bias_prior, compass_factor
-from .gnss import gnss_factor
+from .gnss import antenna_position, gnss_factor
 from .imu import (
     IB,
     V,
@@ -50,6 +50,7 @@ def B(i: int = 0) -> int:
 
 __all__ = [
     "B",
+    "antenna_position",
     "IB",
     "L",
     "V",

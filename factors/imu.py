@@ -113,11 +113,18 @@ def pose_xy_yaw(p: gtsam.Pose3) -> NDArray[np.float64]:
 
 
 def gnss3_factor(
-    key: int, x: float, y: float, sigma: float, *, robust: str | None = "huber", k: float | None = None
-) -> gtsam.GPSFactor:
-    """GNSS fix as a ``GPSFactor`` at z = 0 (isotropic ``sigma`` [m]), robust by default."""
+    key: int, x: float, y: float, sigma: float, *, robust: str | None = "huber", k: float | None = None,
+    arm: tuple[float, float, float] | None = None,
+) -> gtsam.NonlinearFactor:
+    """GNSS fix as a ``GPSFactor`` at z = 0 (isotropic ``sigma`` [m]), robust by default; with a lever
+    ``arm`` (the antenna's offset in the body frame, m) GTSAM's ``GPSFactorArm`` with the horizontal
+    part of the arm: the graph does not observe roll and pitch, so a height on the arm would let them
+    absorb the fixes' noise (harbour circle: 2.9 m median instead of 0.05 m); heel is not modelled."""
     noise = robustify(gtsam.noiseModel.Isotropic.Sigma(3, float(sigma)), robust, k)
-    return gtsam.GPSFactor(key, np.array([x, y, 0.0], dtype=float), noise)
+    if arm is None or (arm[0] == 0.0 and arm[1] == 0.0):
+        return gtsam.GPSFactor(key, np.array([x, y, 0.0], dtype=float), noise)
+    a = np.array([arm[0], arm[1], 0.0], dtype=float)
+    return gtsam.GPSFactorArm(key, np.array([x, y, 0.0], dtype=float), a, noise)
 
 
 def compass3_factor(

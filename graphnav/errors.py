@@ -90,7 +90,7 @@ class MissingExtra(GraphnavError, ImportError):
 
 EXTRAS = {"open3d": ("open3d", "open3d"), "distributed": ("dask", "dask"), "dask": ("dask", "dask"),
           "rosbags": ("rosbags", "ros"), "numba": ("numba", "fast"), "pypcd4": ("pypcd4", "pcd"),
-          "kiss_icp": ("kiss-icp", "bench")}
+          "kiss_icp": ("kiss-icp", "bench"), "nmea2000": ("nmea2000", "marine"), "tornado": ("tornado", "marine")}
 """Importable module -> (the distribution to install, the extra of pyproject.toml that installs it)."""
 
 

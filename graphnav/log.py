@@ -112,6 +112,7 @@ class Gnss:
     x: float
     y: float
     sigma: float
+    source: str = ""
     kind: ClassVar[str] = "gnss"
 
 
@@ -122,6 +123,7 @@ class Heading:
     t: float
     yaw: float
     sigma: float
+    source: str = ""
     kind: ClassVar[str] = "heading"
 
 
@@ -137,6 +139,7 @@ class Odometry:
     w: float
     sigma_v: float = math.nan
     sigma_w: float = math.nan
+    source: str = ""
     kind: ClassVar[str] = "odometry"
 
 
@@ -175,6 +178,7 @@ class GnssVelocity:
     vx: float
     vy: float
     sigma: float = math.nan
+    source: str = ""
     kind: ClassVar[str] = "gnss_velocity"
 
 
@@ -186,6 +190,7 @@ class WaterSpeed:
     t: float
     v: float
     sigma_v: float = math.nan
+    source: str = ""
     kind: ClassVar[str] = "water_speed"
 
 
@@ -198,6 +203,7 @@ class Attitude:
     roll: float
     pitch: float
     sigma: float = math.nan
+    source: str = ""
     kind: ClassVar[str] = "attitude"
 
 
@@ -264,10 +270,18 @@ OPTIONAL_SCALARS: dict[str, tuple[str, ...]] = {
     for k, c in RECORD_TYPES.items()
 }
 ARRAY_FIELDS = ("ranges", "angles", "points", "intensity", "ring")
+#: The sensor a record came from (an NMEA 2000 source address, a Signal K ``$source``; "" = not
+#: stated): several sources of one quantity are kept apart by it (docs/log-format.md, "Sources").
+SOURCE_FIELD = "source"
+#: Longest ``source`` a record may carry (characters).
+MAX_SOURCE_CHARS = 64
 SCALAR_FIELDS: dict[str, tuple[str, ...]] = {
-    k: tuple(f.name for f in fields(c) if f.name not in ARRAY_FIELDS)
+    k: tuple(f.name for f in fields(c) if f.name not in ARRAY_FIELDS and f.name != SOURCE_FIELD)
     for k, c in RECORD_TYPES.items()
 }
+#: The record kinds that carry a ``source``.
+SOURCED_KINDS: tuple[str, ...] = tuple(k for k, c in RECORD_TYPES.items()
+                                       if any(f.name == SOURCE_FIELD for f in fields(c)))
 
 
 @dataclass(frozen=True)
@@ -326,6 +340,10 @@ def check_record(rec: Record | KnownBeacon, limits: Limits | None = None) -> Non
                 raise LogError("beacon id must be a non-empty string", field="id")
         elif f.name in ARRAY_FIELDS:
             continue
+        elif f.name == SOURCE_FIELD:
+            if not isinstance(v, str) or len(v) > MAX_SOURCE_CHARS or not v.isprintable():
+                raise LogError(f"source must be a printable string of at most {MAX_SOURCE_CHARS} characters",
+                               field=SOURCE_FIELD)
         elif not isinstance(v, float):
             raise LogError(f"expected a number, got {type(v).__name__}", field=f.name)
         elif f.name == "t" and not math.isfinite(v):

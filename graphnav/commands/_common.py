@@ -13,7 +13,7 @@ from ..io.jsonsafe import jsonable
 
 __all__ = ["OPTION_FORM", "add_drop_flag", "add_json_flag", "add_log_args", "dropped_kinds", "emit", "jsonable",
            "log_options", "options_by_estimator", "options_for", "parse_option", "parse_options", "plain_options",
-           "progress_enabled", "scoped_options"]
+           "progress_enabled", "scoped_options", "seed_arg"]
 
 
 def add_json_flag(p: argparse.ArgumentParser) -> None:
@@ -39,12 +39,31 @@ def add_log_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-speed", type=float, metavar="M/S",
                    help="the vessel's plausible speed limit; faster odometry is invalid (default 50 m/s)")
     add_date_flag(p)
+    p.add_argument("--columns", metavar="FIELD=COLUMN[:UNIT],...",
+                   help="a CSV/TSV log's column mapping, e.g. t=time,lat=Latitude,lon=Longitude,sigma=2.5,"
+                        "heading=HDG:deg,sog=SOG:kn,cog=COG (a number is a constant; units and fields: docs/csv.md)")
 
 
 def add_date_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--date", type=log_date, metavar="YYYY-MM-DD",
                    help="NMEA logs without a date (no RMC, ZDA without date): the UTC day of the first time of "
                         "day (t becomes POSIX time); a log's own date wins (docs/nmea.md)")
+
+
+MAX_SEED = 2**63 - 1
+"""The largest ``--seed`` (NumPy takes any non-negative integer; a seed is a count, not a size)."""
+
+
+def seed_arg(text: str) -> int:
+    """``--seed``'s value: an integer in ``[0, 2^63 - 1]`` (argparse names the flag otherwise, exit 2);
+    NumPy's own message for a negative seed named no argument."""
+    try:
+        value = int(text.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text[:30]!r}") from None
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be in [0, 2^63 - 1], got {text[:30]}")
+    return value
 
 
 def log_date(text: str) -> str:
@@ -58,14 +77,18 @@ def log_date(text: str) -> str:
 
 
 def log_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The reader options that :func:`add_log_args` flags give (``date``), for ``load_log(**...)``."""
-    return {"date": args.date} if getattr(args, "date", None) else {}
+    """The reader options that :func:`add_log_args` flags give (``date``, ``columns``), for ``load_log(**...)``."""
+    out: dict[str, Any] = {"date": args.date} if getattr(args, "date", None) else {}
+    if getattr(args, "columns", None) is not None:
+        out["columns"] = args.columns
+    return out
 
 
 def add_drop_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drop", action="append", metavar="KIND[,KIND]",
                    help="leave these record kinds out of the log before any estimator sees it, e.g. "
-                        "--drop odometry,beacon (repeatable; beacon_known: the charted beacons); the JSON "
+                        "--drop odometry,beacon (repeatable; beacon_known: the charted beacons; KIND@SOURCE: "
+                        "only that source's, e.g. --drop gnss@52 keeps the other GNSS); the JSON "
                         "output lists them as 'dropped'")
 
 

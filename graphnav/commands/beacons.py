@@ -22,7 +22,7 @@ from ..beacons.layout import (
     summarize_search,
 )
 from ..evaluation.sweep import run_sweep
-from ._common import add_dashboard_flag, add_json_flag, emit, progress_enabled
+from ._common import add_dashboard_flag, add_json_flag, emit, progress_enabled, seed_arg
 
 log = logging.getLogger("graphnav.beacons")
 
@@ -65,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--p0-beacon", type=float, default=1e6, help="beacon prior variance [m^2] (eq. 14)")
     s.add_argument("--w-second", choices=("rot", "theta"), default="rot",
                    help="second column of W (eq. 22): rot = dg/dROT (default) or theta = dg/dtheta as printed")
-    s.add_argument("--seed", type=int, default=0, help="noise seed for --linearize estimate (default 0)")
+    s.add_argument("--seed", type=seed_arg, default=0, help="noise seed for --linearize estimate (default 0)")
     s.add_argument("--no-progress", action="store_true", help="no progress bar (as --quiet)")
     add_json_flag(s)
     s.set_defaults(func=search)

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import GraphnavError
 from ..io import load_log
 from ..io.outputs import OutDir, atomic_open, atomic_path
 from ..scan.icp_pairs import nees, reference_increments, run_pairs, score_pairs, valid_reference_steps
@@ -41,12 +42,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    out = OutDir(args.out, command="icp", overwrite=args.overwrite) if args.out else None
+    if not args.out:
+        return _icp(args, None)
+    out = OutDir(args.out, command="icp", overwrite=args.overwrite)
+    with out.discarded_on_error():  # a failed icp leaves nothing in --out
+        return _icp(args, out)
+
+
+def _icp(args: argparse.Namespace, out: OutDir | None) -> int:
     log = load_log(args.log, lenient=args.lenient, **log_options(args))
     options = plain_options(args)
     cfg = IcpConfig(variant=args.variant, **options)
     if len(log.of("scan")) < 2:
-        raise SystemExit(f"{args.log}: needs at least two scans, has {len(log.of('scan'))}")
+        raise GraphnavError(f"needs at least two scans, has {len(log.of('scan'))}", where=str(args.log))
     log_.info("matching %d scan pairs with %s (init %s)", len(log.of("scan")) - 1, args.variant, args.init)
     with progress_bar(args, total=len(log.of("scan")) - 1, desc=f"{args.variant} ICP", unit="pair") as bar:
         pr = run_pairs(log, cfg, init=args.init, on_match=lambda k, res: bar.update(1))

@@ -32,13 +32,18 @@ def run(args: argparse.Namespace) -> int:
     out = {"records": log.counts(), "t0": log.t0, "t1": log.t1, "has_truth": log.has_truth}
     for key in ("name", "origin", "skipped", "skipped_errors", "truncated", "dropped_fields", "frame", "reference",
                 "topics", "time", "date", "messages", "ignored", "unused", "missing_returns", "dead_beams", "dropped",
-                "sentences", "hdg_without_variation"):
+                "sentences", "hdg_without_variation", "format", "pgns", "paths", "columns", "units"):
         if key in log.meta:
             out[key] = log.meta[key]
+    from ..io.n2k import record_sources
+
+    if sources := record_sources(log):
+        out["sources"] = sources
     out["gaps"] = gaps(log)
     human = "\n".join(
         [f"{args.log}: {len(log)} records, t = {log.t0} .. {log.t1} s, truth: {log.has_truth}"]
-        + [f"  {k:14s} {v}" for k, v in out["records"].items()]
+        + [f"  {k:14s} {v}" + (f"  (by source: {out['sources'][k]})" if k in out.get("sources", {}) else "")
+           for k, v in out["records"].items()]
         + ([f"  date: {log.meta['date'].get('note') or log.meta['date']}"] if "date" in log.meta else [])
         + [f"  gaps ({k}): {g['count']} longer than {g['threshold_s']:.3g} s, {g['total_s']:.1f} s in all"
            for k, g in out["gaps"].items() if g["count"]]

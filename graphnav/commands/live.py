@@ -1,5 +1,7 @@
 """``graphnav live --nmea udp://127.0.0.1:10110 --publish udp://127.0.0.1:10111 --out DIR``: online
-navigation from NMEA streams, the solution published as NMEA (GGA, HDT, VTG, ROT). Listen on
+navigation from NMEA 0183 streams (and NMEA 2000 gateways, ``--n2k``; Signal K servers, ``--signalk
+ws://HOST:PORT``), the solution published as NMEA (GGA, HDT, VTG, ROT) and as Signal K deltas
+(``--publish-signalk``). Listen on
 loopback unless the sender is another machine (then bind that interface's address)."""
 
 from __future__ import annotations
@@ -8,9 +10,10 @@ import argparse
 import json
 import logging
 
-from ..estimators import make_online, online_names
+from ..errors import GraphnavError
 from ..io import load_log
 from ..io.outputs import ensure_dir, write_text_atomic
+from ..estimators import make_online, online_names
 from ..online.live_runner import LiveRunner
 from ._common import add_json_flag, emit, jsonable, options_for
 from .replay import parse_origin
@@ -20,8 +23,14 @@ log_ = logging.getLogger("graphnav.live")
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("live", help="online estimation from NMEA streams", description=__doc__)
-    p.add_argument("--nmea", action="append", required=True, metavar="udp://HOST:PORT|tcp://HOST:PORT",
+    p.add_argument("--nmea", action="append", metavar="udp://HOST:PORT|tcp://HOST:PORT",
                    help="NMEA 0183 source (UDP: bind; TCP: connect); repeatable")
+    p.add_argument("--n2k", action="append", metavar="udp://HOST:PORT|tcp://HOST:PORT",
+                   help="NMEA 2000 gateway text (canboat, Yacht Devices RAW, Actisense N2K ASCII; docs/log-format.md); "
+                        "repeatable")
+    p.add_argument("--signalk", action="append", metavar="ws://HOST:PORT[/PATH]",
+                   help="a Signal K server's websocket delta stream (path default /signalk/v1/stream?subscribe=self); "
+                        "repeatable")
     p.add_argument("--scans", action="append", metavar="udp://HOST:PORT",
                    help="LiDAR scans, one JSON scan record per datagram (docs/live.md); repeatable")
     p.add_argument("--scans-from", metavar="LOG", help="replay this log's scans on the NMEA stream's clock; "
@@ -31,6 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--option", "-O", action="append", metavar="[ESTIMATOR.]KEY=VALUE",
                    help="estimator option (VALUE parsed as JSON when it can be); repeatable")
     p.add_argument("--publish", metavar="udp://HOST:PORT", help="send the solution as NMEA here")
+    p.add_argument("--publish-signalk", metavar="udp://HOST:PORT",
+                   help="send the solution as Signal K deltas here (one datagram per estimate; "
+                        "uncertainties under meta)")
     p.add_argument("--out", metavar="DIR", help="write every estimate to a new DIR/live-YYYYmmddTHHMMSSZ.tum "
                    "(UTC start; flushed line by line), the summary beside it (.summary.json)")
     p.add_argument("--origin", metavar="LAT,LON", help="local frame origin (default: the first fix)")
@@ -47,12 +59,15 @@ def run(args: argparse.Namespace) -> int:
 
     for flag, value in (("--duration", args.duration), ("--idle-exit", args.idle_exit)):
         number(flag, value, Range(lo=0.0, hi=1e9, lo_open=True, optional=True))
+    if not (args.nmea or args.n2k or args.signalk):
+        raise GraphnavError("give at least one source: --nmea, --n2k or --signalk", where="--nmea")
     if args.out:
         ensure_dir(args.out)
     options = options_for(args, args.estimator)
     estimator = make_online(args.estimator, **options)
     scans = load_log(args.scans_from) if args.scans_from else None
-    runner = LiveRunner(args.nmea, estimator, publish=args.publish, out_dir=args.out, scans_from=scans,
+    runner = LiveRunner(args.nmea or [], estimator, n2k_sources=args.n2k, signalk_sources=args.signalk,
+                        publish_signalk=args.publish_signalk, publish=args.publish, out_dir=args.out, scans_from=scans,
                         origin=parse_origin(args.origin), require_checksum=not args.no_checksum_required,
                         duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans,
                         restart=lambda: make_online(args.estimator, **options))

@@ -16,7 +16,15 @@ import time
 from .. import estimators
 from ..estimators.options import check as check_options
 from ..evaluation.monte_carlo_trials import PAPER_ESTIMATORS, aggregate, improvement_pct, map_trials, solent_trial
-from ._common import add_dashboard_flag, add_json_flag, emit, options_by_estimator, parse_options, progress_enabled
+from ._common import (
+    add_dashboard_flag,
+    add_json_flag,
+    emit,
+    options_by_estimator,
+    parse_options,
+    progress_enabled,
+    seed_arg,
+)
 
 log_ = logging.getLogger("graphnav.montecarlo")
 
@@ -33,7 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the paper's scenario: 1 datasheet noise (Table 3), 2 GNSS 20 m and compass 5 deg, "
                         "3 the first then the second from step 300 (default 2)")
     s.add_argument("--runs", type=int, default=50, help="simulated missions (default 50)")
-    s.add_argument("--seed", type=int, default=0, help="first seed: runs use SEED .. SEED+RUNS-1 (default 0)")
+    s.add_argument("--seed", type=seed_arg, default=0, help="first seed: runs use SEED .. SEED+RUNS-1 (default 0)")
     s.add_argument("--scheduler", help="Dask scheduler address, or 'serial' (default: a local cluster)")
     s.add_argument("--workers", type=int, default=2, help="local cluster processes (default 2)")
     add_dashboard_flag(s)

@@ -8,7 +8,7 @@ import threading
 
 from ..io import load_log
 from ..online.nmea_replay import replay
-from ._common import add_json_flag, add_log_args, emit, log_options
+from ._common import add_json_flag, add_log_args, emit, log_options, seed_arg
 
 
 def parse_origin(text: str | None) -> tuple[float, float] | None:
@@ -32,7 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(default: the log's meta origin, else 43.5,16.4)")
     p.add_argument("--corrupt", type=float, default=0.0, metavar="FRACTION",
                    help="damage this fraction of sentences (checksum/robustness tests)")
-    p.add_argument("--seed", type=int, default=0, help="seed of --corrupt's damage (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of --corrupt's damage (default 0)")
     add_json_flag(p)
     p.set_defaults(func=run)
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ..io import save_log
 from ..sim import degrade, fairway, harbour, marina_degraded, solent
-from ._common import add_json_flag, emit
+from ._common import add_json_flag, emit, seed_arg
 
 OVERWRITE_HELP = "replace --out when it is an existing regular file (it is replaced atomically)"
 
@@ -45,7 +45,7 @@ def _register_fairway(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fairway", help="the beacon paper's fairway passage: odometry + beacon range/bearing",
                        description=fairway.__doc__)
     p.add_argument("--beacons", required=True, help='beacon positions "x1,y1;x2,y2;..." [m]')
-    p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--out", required=True, help="output log (.jsonl, .jsonl.gz or .npz)")
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     p.set_defaults(func=_fairway)
@@ -60,6 +60,24 @@ def _fairway(args: argparse.Namespace) -> int:
 
 MAX_DURATION = 7 * 86400.0  # [s]: --duration's bound (a week)
 MAX_LAPS = 1000  # --laps' bound (a lap is ~11 min: about a week)
+#: the simulated log is held in memory: its estimated size is bounded (2 GiB). Peak RSS measured on
+#: `simulate harbour` (2-core VM): 0.084 MB per simulated second without LiDAR, 9.3 kB per 2D scan,
+#: 160 kB per 16-beam 3D cloud (120 s vs 480 s, --lidar-hz 0/10/20; 3D 20 s vs 60 s)
+MAX_SIM_BYTES = 2 << 30
+SIM_BYTES_PER_S = 84e3
+SCAN_BYTES = {"2d": 9.3e3, "3d": 160e3}
+LAP_S = 11 * 60.0  # [s] a lap of the harbour route, about
+
+
+def memory_bound(seconds: float, lidar_hz: float, lidar: str) -> None:
+    """A ``ValueError`` naming --duration/--laps when the simulated log would hold more than
+    :data:`MAX_SIM_BYTES` in memory."""
+    need = seconds * (SIM_BYTES_PER_S + lidar_hz * SCAN_BYTES[lidar])
+    if need > MAX_SIM_BYTES:
+        most = MAX_SIM_BYTES / (SIM_BYTES_PER_S + lidar_hz * SCAN_BYTES[lidar])
+        raise ValueError(f"--duration/--laps: {seconds:g} s of simulation at --lidar-hz {lidar_hz:g} ({lidar}) would "
+                         f"hold ~{need / 2**30:.1f} GiB in memory; at most {most:.0f} s there (the bound is "
+                         f"{MAX_SIM_BYTES / 2**30:g} GiB): simulate longer runs in pieces with --t0")
 
 
 def _register_harbour(sub: argparse._SubParsersAction) -> None:
@@ -69,7 +87,7 @@ def _register_harbour(sub: argparse._SubParsersAction) -> None:
         description=harbour.__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--profile", choices=harbour.PROFILES, default="usv",
                    help="usv: a real USV's sensors (100 Hz IMU with bias drift, GNSS + Doppler velocity, compass "
                         "with deviation, speed log in a tidal current, 10 Hz LiDAR; default); legacy: the "
@@ -116,6 +134,8 @@ def harbour_config(args: argparse.Namespace) -> harbour.HarbourConfig:
         kw["lidar_hz"] = args.lidar_hz
     elif args.lidar == "3d":
         kw["lidar_hz"] = 10.0
+    seconds = args.duration if args.duration is not None else LAP_S * (args.laps or 1)
+    memory_bound(seconds, kw.get("lidar_hz", harbour.HarbourConfig.for_profile(args.profile).lidar_hz), args.lidar)
     if args.odometer:
         kw["odometer"] = True
     if args.current_speed is not None:
@@ -163,7 +183,7 @@ def _register_marina_degraded(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--marina", type=Path, required=True, help="the icp_data_marina directory")
-    p.add_argument("--seed", type=int, default=1, help="random seed of the simulated noise (default 1)")
+    p.add_argument("--seed", type=seed_arg, default=1, help="random seed of the simulated noise (default 1)")
     p.add_argument("--jump-m", type=float, default=20.0, help="GNSS jump size [m] (0: none, same noise)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
@@ -171,7 +191,12 @@ def _register_marina_degraded(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_marina_degraded)
 
 
+MAX_JUMP_M = 1e4  # [m] --jump-m's bound: a GNSS jump farther than 10 km is no multipath
+
+
 def _marina_degraded(args: argparse.Namespace) -> int:
+    if not (math.isfinite(args.jump_m) and 0.0 <= args.jump_m <= MAX_JUMP_M):
+        raise ValueError(f"--jump-m must be >= 0 and <= {MAX_JUMP_M:g} m, got {args.jump_m}")
     _prepare_out(args)
     log = marina_degraded.simulate_marina_degraded(args.marina, args.seed, jump_m=args.jump_m)
     _save(log, args)
@@ -194,7 +219,7 @@ def _register_solent(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", type=int, choices=(1, 2, 3), default=1,
                    help="the paper's scenario: 1 datasheet noise (Table 3), 2 GNSS 20 m and compass 5 deg, "
                         "3 the first then the second from step 300 (default 1)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--current-speed", type=float, default=solent.SolentConfig.current_speed,
                    help=f"sea current [m/s] (default {solent.SolentConfig.current_speed:g})")
     p.add_argument("--calib-residual", type=float, default=solent.SolentConfig.calib_residual,
@@ -289,7 +314,7 @@ def _register_degrade(sub: argparse._SubParsersAction) -> None:
                    help="no GNSS for DURATION s from START (s after the first truth, or A%%..B%%); repeatable")
     p.add_argument("--gnss-jump", action="append", metavar="START,DURATION,METRES",
                    help="GNSS off by METRES (direction from the seed) for DURATION s from START; repeatable")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the simulated noise (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="random seed of the simulated noise (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output log (.jsonl[.gz] or .npz)")
     p.add_argument("--lenient", action="store_true", help="skip malformed input records (and count them)")
     p.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)

@@ -1,7 +1,9 @@
 """Weighted-ICP dead reckoning: chain the scan matches from the start pose.
 
 Scan ``k+1`` is matched to scan ``k`` (:func:`graphnav.scan.weighted_icp.match_points`; initial guess the
-odometry increment with its covariance when the log has odometry, else constant velocity) and the
+odometry increment with its covariance when the log has odometry, else the IMU's prediction with its
+covariance when it has an IMU (:mod:`graphnav.scan.imu_guess`: LiDAR-inertial odometry), else
+constant velocity) and the
 increment is composed onto the previous pose; the covariance is propagated to first order
 (``P' = Ad P Ad^T + Q`` in the body frame, GTSAM's convention) and reported in the world frame
 (the :class:`~graphnav.trajectory.Trajectory` convention).
@@ -10,8 +12,9 @@ The start pose is the log's pose prior, else the first truth pose, else the orig
 :class:`~graphnav.scan.motion_guess.MotionGuess` (never from a flagged match). A flagged match (``ok``
 False: degenerate geometry, too few points or inliers, not converged, or beyond the odometry guess's
 99.9 % bound) is bridged by the odometry increment with its
-covariance when the log has odometry, else by the constant-velocity guess with a wide covariance,
-and counted (``info["failed_matches"]``, ``info["bridged_odometry"]``, ``info["bridged_cv"]``). A match
+covariance when the log has odometry, else by the IMU's prediction, else by the constant-velocity
+guess with a wide covariance, and counted (``info["failed_matches"]``, ``info["bridged_odometry"]``,
+``info["bridged_imu"]``, ``info["bridged_cv"]``). A match
 flagged for degeneracy only, from an odometry guess, is chained as returned (the match across its weak
 directions, the guess along them) with its covariance (the match's across, the odometry's along;
 ``info["constrained"]``).
@@ -26,10 +29,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..config import option
-from ..geometry import cov_to_world, se2_adjoint_inv, se2_compose
+from ..geometry import cov_to_world, se2_adjoint_inv, se2_between, se2_compose
 from ..log import NavLog, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan import icp_cache
+from ..scan.imu_guess import ImuGuess, imu_samples
 from ..scan.motion_guess import MotionGuess
 from ..scan.weighted_icp import IcpConfig, scan_points
 from ..trajectory import Trajectory
@@ -47,12 +51,14 @@ def _to_world(pose: np.ndarray, cov: np.ndarray) -> np.ndarray:
 
 def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: str = "HDL",
                init: str = "odometry", sigma_xy0: float = 0.0, sigma_yaw0: float = 0.0, guess_cov: bool = True,
-               **options: Any) -> RunResult:
+               keyframe_dist: float = 1.0, keyframe_angle_deg: float = 10.0, **options: Any) -> RunResult:
     """Options: ``variant`` (K, H, HM, HD, HDL), ``init`` ("odometry": the odometry increment when the log
-    has odometry, else constant velocity; "cv" or "zero"; :class:`~graphnav.scan.motion_guess.MotionGuess`),
+    has odometry, else the IMU's prediction when it has an IMU, else constant velocity; "imu", "cv" or
+    "zero"; :class:`~graphnav.scan.motion_guess.MotionGuess`),
     any :class:`IcpConfig` field, ``guess_cov`` (False: the odometry guess goes without its covariance,
-    so a match is not tested against it), and the start pose's 1-sigma (``sigma_xy0``, ``sigma_yaw0``;
-    a pose prior's own sigmas win)."""
+    so a match is not tested against it), the start pose's 1-sigma (``sigma_xy0``, ``sigma_yaw0``;
+    a pose prior's own sigmas win), and with the IMU's guess the keyframe rule (``keyframe_dist`` [m],
+    ``keyframe_angle_deg``: the scan-to-map baseline's)."""
     unknown = set(options) - _CONFIG_FIELDS
     if unknown:
         raise ValueError(f"unknown icp-dr options: {', '.join(sorted(unknown))}")
@@ -75,44 +81,94 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
     covs = [_to_world(pose, cov)]
     if on_estimate is not None:
         on_estimate(scans[0].t, pose, _to_world(pose, cov))
-    pts_prev = scan_points(scans[0], cfg)
     icp_ms = []
-    bridged = {"odometry": 0, "cv": 0}
+    bridged = {"odometry": 0, "imu": 0, "cv": 0}
     constrained = 0
-    guesser = MotionGuess(init, odometry_samples(log))
+    guesser = MotionGuess(init, odometry_samples(log), _imu_guess(log, pose) if init in ("odometry", "imu") else None)
+    # with the IMU's guess, LiDAR-inertial keyframes: each scan's pose is the keyframe's composed with the
+    # IMU's prediction, and a scan is matched (and becomes the keyframe) once the predicted motion from
+    # the keyframe reaches keyframe_dist or keyframe_angle_deg (a pair 0.1 s apart measures the
+    # motion less well than the IMU does; over a metre the match carries the information)
+    lio = guesser.imu is not None and guesser.odometry is None and guesser.mode in ("odometry", "imu")
+    kf_t, kf_pose, kf_cov, kf_pts = scans[0].t, pose, cov, scan_points(scans[0], cfg)
+    matches = 0
     for k in range(1, len(scans)):
-        ta, tb = scans[k - 1].t, scans[k].t
-        pts = scan_points(scans[k], cfg)
+        ta, tb = kf_t, scans[k].t
         guess = guesser.guess(ta, tb)
-        t0 = time.perf_counter()
-        res = icp_cache.match_points(pts, pts_prev, cfg, init=guess,  # shared in compare
-                                     init_cov=guesser.cov if guess_cov else None)
-        icp_ms.append((time.perf_counter() - t0) * 1e3)
-        guesser.update(res, ta, tb)
-        if res.ok:
-            inc, q = res.pose, res.cov
-        elif res.quality.get("inflated") and guesser.cov is not None:
-            # degenerate only: the match across its weak directions, the odometry guess along them
-            # (keep_constrained), with the covariance of each where it is taken from
-            inc, q = res.pose, res.cov
-            constrained += 1
+        matched = False
+        if lio and k < len(scans) - 1 and guess is not None and not (
+                np.hypot(guess[0], guess[1]) >= keyframe_dist or abs(guess[2]) >= np.radians(keyframe_angle_deg)):
+            inc, q = guess, guesser.cov
         else:
-            inc, q, how = guesser.bridge(ta, tb)
-            bridged[how] += 1
+            pts = scan_points(scans[k], cfg)
+            t0 = time.perf_counter()
+            res = icp_cache.match_points(pts, kf_pts, cfg, init=guess,  # shared in compare
+                                         init_cov=guesser.cov if guess_cov else None)
+            icp_ms.append((time.perf_counter() - t0) * 1e3)
+            matches += 1
+            matched = True
+            guesser.update(res, ta, tb)
+            if res.ok:
+                inc, q = res.pose, res.cov
+            elif res.quality.get("inflated") and guesser.cov is not None:
+                # degenerate only: the match across its weak directions, the odometry guess along them
+                # (keep_constrained), with the covariance of each where it is taken from
+                inc, q = res.pose, res.cov
+                constrained += 1
+            else:
+                inc, q, how = guesser.bridge(ta, tb)
+                bridged[how] += 1
+            if lio and guess is not None and guesser.cov is not None and (res.ok or res.quality.get("inflated")):
+                inc, q = _fuse(guess, guesser.cov, res)
         a = se2_adjoint_inv(inc)
-        cov = a @ cov @ a.T + q
-        pose = se2_compose(pose, inc)
+        cov = a @ kf_cov @ a.T + q
+        pose = se2_compose(kf_pose, inc)
         t.append(scans[k].t)
         poses.append(pose)
         covs.append(_to_world(pose, cov))
         if on_estimate is not None:
             on_estimate(scans[k].t, pose, covs[-1])
-        pts_prev = pts
+        if matched:
+            kf_t, kf_pose, kf_cov, kf_pts = tb, pose, cov, pts
     traj = Trajectory(np.array(t), np.array(poses), np.array(covs), name="icp-dr")
     info = {"anchor": anchor, "variant": variant, "init": init, "failed_matches": sum(bridged.values()),
-            "bridged_odometry": bridged["odometry"], "bridged_cv": bridged["cv"], "constrained": constrained,
-            "matches": len(scans) - 1}
+            "bridged_odometry": bridged["odometry"], "bridged_imu": bridged["imu"], "bridged_cv": bridged["cv"],
+            "constrained": constrained, "matches": matches, "guess": _guess_source(guesser)}
     return RunResult(traj, traj, np.zeros(0), np.array(icp_ms), info=info)
+
+
+def _fuse(guess: np.ndarray, g_cov: np.ndarray, res: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The IMU's prediction and the match, two independent estimates of one increment, combined by
+    their information (a loosely coupled LiDAR-inertial update): ``guess (+) K xi``, ``xi`` the match
+    in the guess's tangent space, ``K = P_g (P_g + P_m)^-1``. A degenerate match's weak directions
+    (where its pose and covariance are the guess's own) carry no information."""
+    p_m = np.asarray(res.cov, dtype=float)
+    weak = res.quality.get("weak_projector")
+    if weak is not None:
+        w = np.asarray(weak, dtype=float)
+        p_m = p_m + 1e8 * (w @ w.T)
+    k = g_cov @ np.linalg.inv(g_cov + p_m)
+    xi = se2_between(guess, np.asarray(res.pose, dtype=float))
+    cov = (np.eye(3) - k) @ g_cov
+    return se2_compose(guess, k @ xi), 0.5 * (cov + cov.T)
+
+
+def _imu_guess(log: NavLog, pose: np.ndarray) -> ImuGuess | None:
+    """The IMU's prediction for a log without odometry (the log's IMU model and start velocity)."""
+    if len(log.of("odometry")) >= 2:
+        return None
+    samples = imu_samples(log)
+    meta = log.meta if isinstance(log.meta, dict) else {}
+    v0 = meta.get("initial_velocity")
+    guess = ImuGuess(samples, meta.get("imu"), None if v0 is None else np.asarray(v0, dtype=float)[:2],
+                     float(pose[2]))
+    return guess if guess else None
+
+
+def _guess_source(g: MotionGuess) -> str:
+    if g.mode in ("odometry", "imu"):
+        return "odometry" if g.odometry is not None else "imu" if g.imu is not None else "cv"
+    return g.mode
 
 
 def _unmet(log: NavLog) -> str | None:
@@ -121,8 +177,8 @@ def _unmet(log: NavLog) -> str | None:
 
 def _inputs(log: NavLog, options: dict) -> set[str]:
     kinds = {"scan", "pose_prior"}
-    if options.get("init", "odometry") == "odometry":
-        kinds.add("odometry")  # the initial guess (and the bridge of a failed match)
+    if options.get("init", "odometry") in ("odometry", "imu"):  # the initial guess (and the bridge of a failed match)
+        kinds.add("odometry" if len(log.of("odometry")) >= 2 else "imu" if len(log.of("imu")) >= 2 else "scan")
     return kinds
 
 
@@ -132,11 +188,14 @@ class IcpDrConfig(IcpConfig):
 
     group: ClassVar[str] = "icp-dr"
     init: str = option("odometry", "the initial guess: odometry (the odometry increment when the log has odometry, "
-                       "else constant velocity), cv or zero (MotionGuess)")
+                       "else the IMU's prediction when it has an IMU, else constant velocity), imu, cv or zero")
     guess_cov: bool = option(True, "false: the odometry guess goes without its covariance, so a match is not tested "
                              "against it")
     sigma_xy0: float = option(0.0, "the start pose's 1-sigma in x and y (a pose prior's own sigmas win)", unit="m")
     sigma_yaw0: float = option(0.0, "the start pose's yaw 1-sigma (a pose prior's own sigmas win)", unit="rad")
+    keyframe_dist: float = option(1.0, "with the IMU's guess: a scan becomes a keyframe after the vessel moved "
+                                  "this far (the scan-to-map baseline's rule)", unit="m")
+    keyframe_angle_deg: float = option(10.0, "with the IMU's guess: ... or turned this much", unit="deg")
 
 
 class IcpDr(BatchEstimator):

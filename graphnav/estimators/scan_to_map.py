@@ -29,11 +29,12 @@ from typing import Any
 import numpy as np
 
 from ..config import config_from_options, option
-from ..geometry import increment, se2_between, se2_compose, wrap_angle
+from ..geometry import increment, se2_adjoint_inv, se2_between, se2_compose, wrap_angle
 from ..log import NavLog, Scan, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan.covariance import SAMPLING_VARIANCE, sandwich
 from ..scan.degeneracy import analyse, flatness, keep_constrained, line_information
+from ..scan.imu_guess import ImuGuess, imu_samples
 from ..scan.registration import (
     Params,
     Target,
@@ -80,7 +81,8 @@ class ScanToMapConfig:
     degenerate: str = option("constrained",
         "a degenerate registration: \"constrained\" keeps it across the weak directions and takes the prediction along "
         "them; \"predict\" takes the prediction (either way the scan may join the map)")
-    predict: str = option("odometry", "initial guess: \"odometry\" (when the log has odometry, else cv) or \"cv\"")
+    predict: str = option("odometry", "initial guess: \"odometry\" (when the log has odometry, else the IMU's when "
+                          "it has an IMU, else cv), \"imu\" or \"cv\"")
 
     def params(self) -> Params:
         return Params(max_corr=self.max_corr, voxel=self.voxel, neighbors=self.neighbors,
@@ -94,8 +96,8 @@ def make_config(**options: Any) -> ScanToMapConfig:
         raise ValueError(f"planar must be 'constrain' or 'project', got {cfg.planar!r}")
     if cfg.degenerate not in ("constrained", "predict"):
         raise ValueError(f"degenerate must be 'constrained' or 'predict', got {cfg.degenerate!r}")
-    if cfg.predict not in ("odometry", "cv"):
-        raise ValueError(f"predict must be 'odometry' or 'cv', got {cfg.predict!r}")
+    if cfg.predict not in ("odometry", "imu", "cv"):
+        raise ValueError(f"predict must be 'odometry', 'imu' or 'cv', got {cfg.predict!r}")
     return ScanToMapConfig(**{**asdict(cfg), "backend": resolve_method(cfg.backend)})
 
 
@@ -108,7 +110,7 @@ def predict_constant_velocity(p_prev2: np.ndarray, p_prev: np.ndarray, dt_prev: 
 
 
 def _degeneracy(xy: np.ndarray, pose: np.ndarray, target: Target, map_lines: Any, cfg: ScanToMapConfig,
-                pred_cov: np.ndarray | None) -> Any:
+                pred_cov: np.ndarray | None) -> tuple[Any, np.ndarray]:
     """Degeneracy of a registration (:func:`graphnav.scan.degeneracy.analyse`) with its covariance from
     :func:`graphnav.scan.covariance.sandwich` over the point-to-line pairs: flatness as weights, the
     residual variance along the normals plus the sampling term of the map's resolution (one point
@@ -122,7 +124,7 @@ def _degeneracy(xy: np.ndarray, pose: np.ndarray, target: Target, map_lines: Any
         var = lp.s2 + cfg.neighbors * SAMPLING_VARIANCE * cfg.map_voxel**2
         cov = sandwich(lp.rows[:, None, :], lp.flat, np.full((len(lp.res), 1, 1), var))
     return analyse(lp.info, lp.radius, cov, max_condition=cfg.max_condition, max_sigma=cfg.max_sigma * cfg.map_voxel,
-                   prior_cov=pred_cov)
+                   prior_cov=pred_cov), cov
 
 
 def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
@@ -147,11 +149,19 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
     conds: list[float] = []
     failed = degenerate = 0
     odo = odometry_samples(log) if cfg.predict == "odometry" else np.zeros((0, 5))
+    imu = None
+    if cfg.predict == "imu" or (cfg.predict == "odometry" and not len(odo)):
+        meta = log.meta if isinstance(log.meta, dict) else {}
+        v0 = meta.get("initial_velocity")
+        imu = ImuGuess(imu_samples(log), meta.get("imu"), None if v0 is None else np.asarray(v0, dtype=float)[:2],
+                       float(pose0[2]))
+        imu = imu if imu else None
     map_lines: tuple[np.ndarray, np.ndarray] | None = None  # normals, flatness of the map points
     keyframes: deque[tuple[np.ndarray, np.ndarray, Any]] = deque(maxlen=cfg.keyframes)
     vgicp = cfg.backend == "small_gicp:VGICP"  # the voxel map is built from the keyframes' own clouds
     last_kf: np.ndarray | None = None
     target: Target | None = None
+    p_pose = np.zeros((3, 3))  # with the IMU: the pose's covariance relative to the map (body frame)
 
     for scan in scans:
         t_step = time.perf_counter()
@@ -161,13 +171,19 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
         xy = voxel_downsample(xy, cfg.scan_voxel)
         enough = len(xy) >= cfg.min_points
         source = None
+        reg_cov = None
         registered = target is None  # no map yet: this scan starts it at the (predicted) pose
         if not poses:
             pose = np.array(pose0, dtype=float)
         else:
             inc = increment(odo, ts[-1], scan.t) if len(odo) else None
             pred_cov = None
-            if inc is not None:
+            imu_inc = imu.guess(ts[-1], scan.t) if imu is not None else None
+            if imu_inc is not None:  # the IMU's prediction of the filter (see the module docstring)
+                pred = se2_compose(poses[-1], imu_inc[0])
+                a = se2_adjoint_inv(imu_inc[0])
+                p_pose = a @ p_pose @ a.T + imu_inc[1]
+            elif inc is not None:
                 pred = se2_compose(poses[-1], inc[0])
                 pred_cov = inc[1]
             elif len(poses) >= 2:
@@ -187,7 +203,7 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
                 jump = np.hypot(*(res.pose[:2] - pred[:2]))
                 ok = np.all(np.isfinite(res.pose)) and jump <= cfg.max_correction
                 if ok and res.fitness >= cfg.min_fitness:
-                    deg = _degeneracy(xy, res.pose, target, map_lines, cfg, pred_cov)
+                    deg, reg_cov = _degeneracy(xy, res.pose, target, map_lines, cfg, pred_cov)
                     conds.append(deg.condition)
                     if not deg.degenerate:
                         pose = res.pose
@@ -216,6 +232,18 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
             target = Target(world, cfg.backend, params, parts)
             nrm, ev = local_frames_2d(world, cfg.neighbors, params.normal_radius)
             map_lines = (nrm, flatness(ev))
+        if imu is not None and poses:
+            ok_reg = registered and source is not None and reg_cov is not None and np.all(np.isfinite(reg_cov))
+            weak = deg.projector() if ok_reg and deg.weak.any() else None
+            reg_inc = se2_between(poses[-1], pose)
+            if ok_reg:  # the registration updates the predicted pose by the information of each
+                r = np.asarray(reg_cov, dtype=float) + (0.0 if weak is None else 1e8 * weak @ weak.T)
+                k = p_pose @ np.linalg.inv(p_pose + r)
+                pose = se2_compose(pred, k @ se2_between(pred, pose))
+                p_pose = (np.eye(3) - k) @ p_pose
+                p_pose = 0.5 * (p_pose + p_pose.T)
+            # the velocity: corrected by the registration, carried to this scan
+            imu.update(ts[-1], scan.t, reg_inc if ok_reg else None, reg_cov if ok_reg else None, weak)
         step_ms.append((time.perf_counter() - t_step) * 1e3 - this_icp)
         ts.append(scan.t)
         poses.append(np.array(pose, dtype=float))
@@ -246,8 +274,11 @@ def _unmet(log: NavLog) -> str | None:
 
 def _inputs(log: NavLog, options: dict) -> set[str]:
     kinds = {"scan", "pose_prior"}
-    if make_config(**options).predict == "odometry":
+    predict = make_config(**options).predict
+    if predict == "odometry" and len(log.of("odometry")) >= 2:
         kinds.add("odometry")  # the initial guess
+    elif predict != "cv" and len(log.of("imu")) >= 2:
+        kinds.add("imu")
     return kinds
 
 

@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..log import BeaconObs, Gnss, Heading, KnownBeacon, PosePrior, Record, Truth
+from .mounts import parse_mounts
 from .smoother_config import SmootherConfig
 
 
@@ -46,7 +47,13 @@ def choose_anchor(held: list[Record], charted: dict[str, KnownBeacon], cfg: Smoo
         g = gnss[0]
         yaw = head[0].yaw if head else 0.0
         sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 3.0 * g.sigma
-        return (np.array([g.x, g.y, yaw]), np.array([sxy, sxy, yaw_sig if head else yaw_unknown]),
+        mount = parse_mounts(cfg.mounts).get("gnss")
+        x, y = g.x, g.y
+        if mount is not None and (mount.x or mount.y):  # the fix is the antenna's: the body is an arm behind it
+            c, s = math.cos(yaw), math.sin(yaw)
+            x, y = x - (c * mount.x - s * mount.y), y - (s * mount.x + c * mount.y)
+            sxy = math.hypot(sxy, math.hypot(mount.x, mount.y) * (yaw_sig if head else 1.0))
+        return (np.array([x, y, yaw]), np.array([sxy, sxy, yaw_sig if head else yaw_unknown]),
                 "first GNSS+compass" if head else "first GNSS")
     obs = [r for r in held if isinstance(r, BeaconObs) and r.id in charted]
     if obs:

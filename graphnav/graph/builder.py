@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 
 import factors as F
 
+from ..config import OptionError
 from ..geometry import cov_to_world
 from ..log import (
     Cloud,
@@ -57,6 +58,7 @@ from .anchor import anchor_ready, choose_anchor
 from .imu_chain import ImuChain, ImuConfig, relative_prediction
 from .keyframes import DEFAULT_PERIOD
 from .measurements import Measurements
+from .mounts import parse_mounts
 from .odometry_buffer import OdometryBuffer
 from .scan_factors import (  # noqa: F401  (Matcher, default_matcher, make_loop_closer: the graph's public names)
     UNOBSERVED_COV,
@@ -64,6 +66,7 @@ from .scan_factors import (  # noqa: F401  (Matcher, default_matcher, make_loop_
     Matcher,
     default_matcher,
     make_loop_closer,
+    mounted,
     proper_cov,
     screen_match,
 )
@@ -101,8 +104,13 @@ class GraphBuilder:
         nav = cfg.motion in ("imu", "vessel") or (cfg.motion == "auto" and bool(imu))
         self.space: PlanarSpace = NavSpace() if nav else PlanarSpace()
         self.imu: ImuChain | None = ImuChain(ImuConfig(**cfg.imu), imu_model) if nav else None
+        self.mounts = parse_mounts(cfg.mounts)
+        if self.imu is not None and "imu" in self.mounts:  # GTSAM's body_P_sensor (docs/mounts.md)
+            self.imu.body_P_sensor = self.mounts["imu"].pose3()
+        lidar_mount = self.mounts.get("lidar")
+        self.extrinsic = None if lidar_mount is None or lidar_mount.is_identity else gtsam.Pose2(*lidar_mount.planar)
         self.imu_model = imu_model
-        self.cloud3d = CloudPath(cfg, lidar3d)  # the 3D path (clouds): graphnav.scan.cloud_match
+        self.cloud3d = CloudPath(cfg, lidar3d, self.extrinsic)  # the 3D path (clouds): graphnav.scan.cloud_match
         self.charted = {b.id: b for b in chart}
         icp_opts = dict(cfg.icp)
         for k in ("sigma_r_rel", "sigma_alpha"):  # the log's LiDAR error model, when it states one
@@ -151,6 +159,14 @@ class GraphBuilder:
         # the measurement factors and their state (beacons, compass-bias frame, GNSS gate, water current)
         self.meas = Measurements(cfg, self.space, self.imu is not None, self.charted, self.kf_t, self.defaulted,
                                  self.counts)
+        if "gnss" in self.mounts:
+            g = self.mounts["gnss"]
+            self.meas.arm = (g.x, g.y, g.z)
+        if "water_speed" in self.mounts:
+            self.meas.log_yaw = self.mounts["water_speed"].yaw
+            if abs(math.cos(self.meas.log_yaw)) < 0.5:
+                raise OptionError("mounts.water_speed.yaw", "mounts.water_speed.yaw: a speed log more than 60 deg "
+                                  f"off the bow measures no speed along it, got {self.meas.log_yaw:g} rad")
 
     # the measurement state the navigator reads (and, for the current, keeps up to date)
     @property
@@ -269,7 +285,7 @@ class GraphBuilder:
                 self.mode = "scan"
                 self._want_matcher()
             if self.mode == "scan":
-                if self.n_scans % self.cfg.scan_stride == 0:
+                if self._scan_is_keyframe(t):
                     self._new_keyframe(t, rec)
                 self.n_scans += 1
         elif kind == "odometry":
@@ -297,12 +313,30 @@ class GraphBuilder:
         else:  # truth (a reference, not a measurement); imu on the planar graph; water speed, attitude
             self.counts["ignored"] += 1
 
+    def _scan_is_keyframe(self, t: float) -> bool:
+        """Every ``scan_stride``-th scan; with an IMU (``keyframe_motion``), only once the vessel has
+        moved ``keyframe_distance`` (at the newest interval's speed) or turned ``keyframe_angle_deg``
+        (the gyro) since the newest keyframe, or ``keyframe_max_dt`` has passed."""
+        cfg = self.cfg
+        if self.n_scans % cfg.scan_stride:
+            return False
+        use = cfg.keyframe_motion if cfg.keyframe_motion is not None else bool(self.imu)
+        if not use or not self.kf_t or not self.imu:
+            return True
+        dt = t - self.kf_t[-1]
+        if dt >= cfg.keyframe_max_dt - EPS:
+            return True
+        speed = math.hypot(self.last_rel.x(), self.last_rel.y()) / self.last_gap if self.last_gap > 0 else 0.0
+        if speed * dt >= cfg.keyframe_distance:
+            return True
+        return self.imu.rotation(self.kf_t[-1], t) >= math.radians(cfg.keyframe_angle_deg)
+
     def _want_matcher(self) -> None:
         if self.matcher is None and self.cfg.use_icp:
-            self.matcher = (self._matcher_given if self._matcher_given is not None
-                            else default_matcher(self._icp_opts))
+            self.matcher = mounted(self._matcher_given if self._matcher_given is not None
+                                   else default_matcher(self._icp_opts), self.extrinsic)
         if self.loops is None and self.cfg.loops:
-            self.loops = make_loop_closer(self.cfg, self._icp_opts)
+            self.loops = make_loop_closer(self.cfg, self._icp_opts, self.extrinsic)
 
     def _new_keyframe(self, t: float, scan: Scan | None) -> None:
         k = len(self.kf_t)

@@ -66,6 +66,7 @@ class ImuChain:
         self.rows: list[tuple[float, ...]] = []  # ax, ay, az, wx, wy, wz
         self.six: bool | None = None
         self.params: gtsam.PreintegrationParams | None = None
+        self.body_P_sensor: gtsam.Pose3 | None = None  # the IMU's mount (graphnav.graph.mounts), when not at the origin
         p = gtsam.PreintegrationParams.MakeSharedU(0.0)  # no IMU: zero measurements, the vessel model's noise
         p.setAccelerometerCovariance(np.eye(3) * cfg.vessel_accel**2)
         p.setGyroscopeCovariance(np.eye(3) * math.radians(cfg.vessel_yaw_rate_deg) ** 2)
@@ -83,6 +84,8 @@ class ImuChain:
         p.setAccelerometerCovariance(np.eye(3) * acc**2 / rate)
         p.setGyroscopeCovariance(np.eye(3) * gyro**2 / rate)
         p.setIntegrationCovariance(np.eye(3) * self.cfg.integration_sigma**2)
+        if self.body_P_sensor is not None:  # GTSAM rotates the samples and removes the centripetal term
+            p.setBodyPSensor(self.body_P_sensor)
         return p
 
     def _period(self) -> float:
@@ -124,6 +127,10 @@ class ImuChain:
             lo = hi
             i += 1
         return out
+
+    def rotation(self, ta: float, tb: float) -> float:
+        """An upper bound of the rotation over ``[ta, tb]`` [rad]: the integrated gyro rate's norm."""
+        return float(sum(np.linalg.norm(w) * dt for _, w, dt in self.samples(ta, tb)))
 
     def preintegrate(self, bias: gtsam.imuBias.ConstantBias, ta: float, tb: float
                      ) -> gtsam.PreintegratedImuMeasurements:

@@ -42,6 +42,8 @@ class Measurements:
         self.after_outage: set[int] = set()  # ids of the first fixes after a GNSS outage (not gated)
         self.current: tuple[int, int] | None = None  # the water current W(j): (first, newest) keyframe
         self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
+        self.arm: tuple[float, float, float] | None = None  # the GNSS antenna's lever arm (body frame, m)
+        self.log_yaw = 0.0  # [rad] the speed log's mounting yaw (its axis from the bow)
 
     def add(self, s: Step, k: int, due: list[tuple[int, Record]], pose_k: gtsam.Pose2,
             prev_cov: NDArray[np.float64] | None, prev: gtsam.Pose2 | None,
@@ -63,14 +65,16 @@ class Measurements:
             delta = offset(a, r.t, k) if cfg.compensate_attachment else None
             if isinstance(r, Gnss):
                 rx, ry = r.x, r.y
-                if delta is not None:  # the fix is of the pose at r.t = X_a * delta: move it back to X_a
-                    c, sn = math.cos(at(a).theta()), math.sin(at(a).theta())
-                    rx -= c * delta.x() - sn * delta.y()
-                    ry -= sn * delta.x() + c * delta.y()
+                arm = (0.0, 0.0) if self.arm is None else self.arm[:2]
+                if delta is not None:  # the fix is of the antenna of X_a * delta at r.t: move it back to X_a's
+                    pa = at(a)
+                    moved = F.antenna_position(pa.compose(delta), arm) - F.antenna_position(pa, arm)
+                    rx -= float(moved[0])
+                    ry -= float(moved[1])
                 gate_on = cfg.gnss_gate_online if cfg.gnss_gate_online is not None else not self.nav
                 if gate_on and cfg.gnss_gate is not None and prev_cov is not None and id(r) not in self.after_outage:
-                    pa = at(a)
-                    d = np.array([rx - pa.x(), ry - pa.y()])
+                    ant = F.antenna_position(at(a), arm)
+                    d = np.array([rx - ant[0], ry - ant[1]])
                     S = prev_cov[:2, :2] + (r.sigma**2) * np.eye(2)
                     if (float(d @ np.linalg.solve(S, d)) > cfg.gnss_gate**2
                             and self.consecutive_rejects < cfg.gnss_gate_max_rejects):
@@ -79,7 +83,7 @@ class Measurements:
                         continue
                 self.consecutive_rejects = 0
                 self.after_outage.discard(id(r))
-                s.add(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k), "gnss")
+                s.add(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k, self.arm), "gnss")
             elif isinstance(r, Heading):
                 sig = r.sigma * cfg.compass_sigma_scale
                 yaw = r.yaw - (delta.theta() if delta is not None else 0.0)
@@ -145,7 +149,9 @@ class Measurements:
         """Speed through water ``v`` along the bow at keyframe ``a``: ``V(a) - W(a) = v (cos yaw, sin yaw)``
         (velocity over ground minus the water current), a native ``BetweenFactorVector(W(a), V(a))``
         whose direction is the current heading estimate; along the bow the log's sigma, across it
-        the leeway ``hypot(water_leeway, water_leeway_rel |v|)`` (sideslip and the heading's error)."""
+        the leeway ``hypot(water_leeway, water_leeway_rel |v|)`` (sideslip and the heading's error).
+        A log mounted at ``log_yaw`` from the bow reads ``v cos(log_yaw)`` of a flow along the bow: its
+        reading is divided by that; its lever arm (``omega x r`` in a turn) is not modelled."""
         cfg = self.cfg
         if self.current is None:  # the first water speed starts the current: W(a) with its prior
             self.current = (a, a)
@@ -160,11 +166,14 @@ class Measurements:
         sv = r.sigma_v if math.isfinite(r.sigma_v) else cfg.water_speed_sigma
         if not math.isfinite(r.sigma_v):
             self.defaulted.add("water_speed")
-        lee = math.hypot(cfg.water_leeway, cfg.water_leeway_rel * abs(r.v))
+        v = r.v
+        if self.log_yaw:
+            v, sv = v / math.cos(self.log_yaw), sv / abs(math.cos(self.log_yaw))
+        lee = math.hypot(cfg.water_leeway, cfg.water_leeway_rel * abs(v))
         c, sn = math.cos(pa.theta()), math.sin(pa.theta())
         R = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
         cov = R @ np.diag([sv**2, lee**2, SURFACE_V**2]) @ R.T
-        s.add(gtsam.BetweenFactorVector(W(a), V(a), np.array([r.v * c, r.v * sn, 0.0]),
+        s.add(gtsam.BetweenFactorVector(W(a), V(a), np.array([v * c, v * sn, 0.0]),
                                         gtsam.noiseModel.Gaussian.Covariance(cov)), "water_speed")
 
     def current_step(self, s: Step, k: int) -> None:

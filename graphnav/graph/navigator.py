@@ -137,6 +137,13 @@ class Navigator:
         scans = bool(log.of("scan")) or (bool(log.of("cloud")) and (config is None or config.use_cloud)
                                          and kw.get("use_cloud", True))
         imu_model = log.meta.get("imu") if isinstance(log.meta.get("imu"), dict) else None
+        if log.meta.get("mounts") is not None:  # the log's mounts, the option's winning per sensor
+            from dataclasses import asdict
+
+            from .mounts import merged
+
+            given = kw.get("mounts", config.mounts if config is not None else {})
+            kw["mounts"] = {k: asdict(m) for k, m in merged(log.meta["mounts"], given).items()}
         v0 = log.meta.get("initial_velocity")
         if imu_model is not None or v0 is not None:
             imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}

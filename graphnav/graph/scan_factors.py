@@ -69,10 +69,44 @@ def default_matcher(options: dict[str, Any]) -> Matcher | None:
     return match
 
 
-def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any]) -> Any:
+def conjugate(pose: NDArray[np.float64], cov: NDArray[np.float64] | None, frame: gtsam.Pose2
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """A relative pose and its covariance expressed in ``frame`` instead: ``frame T frame^-1`` and
+    ``Ad(frame) cov Ad(frame)^T``. With ``frame`` the LiDAR's extrinsic (its pose in the body frame) a
+    sensor-frame match becomes the body's motion; with its inverse, the reverse."""
+    T = frame.compose(gtsam.Pose2(*pose)).compose(frame.inverse())
+    out = np.array([T.x(), T.y(), T.theta()])
+    if cov is None:
+        return out, None
+    A = frame.AdjointMap()
+    return out, A @ np.asarray(cov, dtype=float) @ A.T
+
+
+def mounted(matcher: Matcher | None, extrinsic: gtsam.Pose2 | None) -> Matcher | None:
+    """``matcher`` for a LiDAR mounted at ``extrinsic`` (body frame): its guess goes to the sensor frame,
+    its match (and covariance) comes back to the body frame (:func:`conjugate`); unchanged without one."""
+    if matcher is None or extrinsic is None:
+        return matcher
+    inv = extrinsic.inverse()
+
+    def match(cur: Scan, prev: Scan, init: NDArray[np.float64] | None,
+              init_cov: NDArray[np.float64] | None = None, guess_in_graph: bool = False):
+        if init is not None:
+            init, init_cov = conjugate(np.asarray(init, dtype=float), init_cov, inv)
+        ok, pose, cov = matcher(cur, prev, init, init_cov, guess_in_graph)
+        if not np.all(np.isfinite(pose)):
+            return ok, pose, cov
+        body, bcov = conjugate(np.asarray(pose, dtype=float), cov, extrinsic)
+        return ok, body, bcov
+
+    return match
+
+
+def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any], extrinsic: gtsam.Pose2 | None = None) -> Any:
     """The loop closer of :mod:`graphnav.graph.loops` with the weighted ICP as its refinement and the
     graph's ICP covariance treatment (the match's own, as the consecutive factors; the loop closer
-    adds its floor); ``None`` without the matcher."""
+    adds its floor); ``None`` without the matcher. With a LiDAR ``extrinsic`` the places' points are
+    moved into the body frame (the places are body poses)."""
     try:
         from ..scan.weighted_icp import IcpConfig, match_points
     except ImportError:
@@ -93,7 +127,12 @@ def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any]) -> Any:
         raise ValueError(f"unknown loop option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
     closer = LoopCloser(LoopConfig(**cfg.loop), refine,
                         lambda c: proper_cov(np.asarray(c, dtype=float), np.zeros(3)))
-    closer.points = lambda scan: scan_points_of(scan, icfg)
+    if extrinsic is None:
+        closer.points = lambda scan: scan_points_of(scan, icfg)
+    else:
+        c, s = math.cos(extrinsic.theta()), math.sin(extrinsic.theta())
+        rot, off = np.array([[c, s], [-s, c]]), np.array([extrinsic.x(), extrinsic.y()])
+        closer.points = lambda scan: scan_points_of(scan, icfg) @ rot + off
     return closer
 
 
@@ -125,8 +164,10 @@ class CloudPath:
     against the odometry like the 2D matches (``icp_gate``, ``icp_max_step``); z/roll/pitch of each
     match kept as diagnostics (docs/scan-matching-3d.md)."""
 
-    def __init__(self, cfg: SmootherConfig, lidar3d: dict[str, Any] | None) -> None:
+    def __init__(self, cfg: SmootherConfig, lidar3d: dict[str, Any] | None,
+                 extrinsic: gtsam.Pose2 | None = None) -> None:
         self.cfg = cfg
+        self.extrinsic = extrinsic  # the LiDAR's planar mount: matches conjugated to the body frame
         self.height = float(lidar3d["mast"]) if lidar3d and "mast" in lidar3d else None
         self.matcher: Any = None
         self.n = self.failed = self.gated = 0
@@ -146,7 +187,12 @@ class CloudPath:
             self.matcher = CloudMatcher(CloudMatchConfig.from_options(dict(cfg.cloud)), self.height)
         init = _vec(odo_rel if odo_rel is not None else last_rel)
         c0 = time.perf_counter()
-        ok, mp, mc = self.matcher(cur, prev, init)
+        if self.extrinsic is None:
+            ok, mp, mc = self.matcher(cur, prev, init)
+        else:
+            ok, mp, mc = self.matcher(cur, prev, conjugate(init, None, self.extrinsic.inverse())[0])
+            if ok and np.all(np.isfinite(mp)):
+                mp, mc = conjugate(np.asarray(mp, dtype=float), mc, self.extrinsic)
         s.icp_ms = (time.perf_counter() - c0) * 1e3
         self.n += 1
         floor = np.array([cfg.cloud_sigma_floor_xy] * 2 + [math.radians(cfg.cloud_sigma_floor_yaw_deg)])

@@ -103,8 +103,10 @@ class PlanarSpace:
             model = robustify(gtsam.noiseModel.Gaussian.Covariance(0.5 * (cov + cov.T)), robust, k)
         return gtsam.BetweenFactorPose2(k0, k1, gtsam.Pose2(*rel), model)
 
-    def gnss(self, key: int, x: float, y: float, sigma: float, robust: str | None, k: float | None):
-        return F.gnss_factor(key, x, y, sigma, robust=robust, k=k)
+    def gnss(self, key: int, x: float, y: float, sigma: float, robust: str | None, k: float | None,
+             arm: tuple[float, float, float] | None = None):
+        """A fix of the antenna at ``arm`` (body frame, m; ``None``: the body origin)."""
+        return F.gnss_factor(key, x, y, sigma, robust=robust, k=k, arm=None if arm is None else arm[:2])
 
     def compass(self, key: int, yaw: float, sigma: float, robust: str | None):
         return F.compass_factor(key, yaw, sigma, robust=robust)
@@ -186,8 +188,9 @@ class NavSpace(PlanarSpace):
             model = _embed_model(model)
         return gtsam.BetweenFactorPose3(k0, k1, F.planar_pose(*rel), model)
 
-    def gnss(self, key: int, x: float, y: float, sigma: float, robust: str | None, k: float | None):
-        return F.gnss3_factor(key, x, y, sigma, robust=robust, k=k)
+    def gnss(self, key: int, x: float, y: float, sigma: float, robust: str | None, k: float | None,
+             arm: tuple[float, float, float] | None = None):
+        return F.gnss3_factor(key, x, y, sigma, robust=robust, k=k, arm=arm)
 
     def compass(self, key: int, yaw: float, sigma: float, robust: str | None):
         return F.compass3_factor(key, yaw, sigma, robust=robust)

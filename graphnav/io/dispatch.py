@@ -1,6 +1,7 @@
 """Pick a reader or writer from a path: directory (marina, ROS 2 bag), .jsonl[.gz], .npz, ROS bags,
-CARMEN logs (.clf[.gz]; .log[.gz] and .txt[.gz] when their first lines are CARMEN messages) and
-NMEA (.nmea[.gz]; other .log/.txt files)."""
+CARMEN logs (.clf[.gz]; .log[.gz] and .txt[.gz] when their first lines are CARMEN messages), NMEA 2000
+text (.n2k, .raw, .data, .can [.gz]; .log/.txt whose first lines are N2K), Signal K deltas (.sk[.gz],
+and .json/.jsonl/.log/.txt whose first line is a delta) and NMEA 0183 (.nmea[.gz]; other .log/.txt files)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,25 @@ NMEA_SUFFIXES = (".nmea", ".nmea.gz", ".txt", ".log")
 JSONL_SUFFIXES = (".jsonl", ".jsonl.gz", ".ndjson")
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 CARMEN_SUFFIXES = (".clf", ".clf.gz")
-SNIFF_SUFFIXES = (".log", ".log.gz", ".txt", ".txt.gz")  # CARMEN or NMEA, told apart by content
+SNIFF_SUFFIXES = (".log", ".log.gz", ".txt", ".txt.gz")  # CARMEN, N2K, Signal K or NMEA, told apart by content
+N2K_SUFFIXES = (".n2k", ".n2k.gz", ".raw", ".raw.gz", ".data", ".data.gz", ".can", ".can.gz")
+SIGNALK_SUFFIXES = (".sk", ".sk.gz", ".signalk", ".signalk.gz")
+SIGNALK_SNIFF = (".json", ".json.gz", *JSONL_SUFFIXES, ".jsonl.gz", *SNIFF_SUFFIXES)
+
+
+def _head(p: Path, n: int = 8) -> list[str]:
+    """The first ``n`` lines of a (gzipped) text file, "" where unreadable (the readers say why)."""
+    from .textlines import Lines
+
+    out: list[str] = []
+    try:
+        for _, raw in Lines(p, lenient=True, quiet=True, max_line=65536):
+            out.append(raw.decode("utf-8", "replace"))
+            if len(out) >= n:
+                break
+    except Exception:  # noqa: BLE001 - a probe only: the chosen reader reports the problem
+        return out
+    return out
 
 
 def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None = None, **options) -> NavLog:
@@ -29,8 +48,17 @@ def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None =
         raise LogError("no such file or directory", file=str(p))
     if not (p.is_dir() or p.is_file() or stat.S_ISFIFO(p.stat().st_mode)):
         raise LogError("not a regular file, directory or pipe (a device or socket has no end)", file=str(p))
-    day = options.pop("date", None)  # the day of a dateless NMEA log (the only reader that needs one)
-    if day is not None and not (name.endswith(NMEA_SUFFIXES) or name.endswith(SNIFF_SUFFIXES)):
+    day = options.pop("date", None)  # the day of a dateless NMEA 0183 / time-of-day NMEA 2000 log
+    columns = options.pop("columns", None)  # a CSV's column mapping (the only reader that takes one)
+    if name.endswith((".csv", ".csv.gz", ".tsv", ".tsv.gz")):
+        from .csv_table import read_csv_log
+
+        return read_csv_log(p, columns=columns, lenient=lenient, limits=limits)
+    if columns is not None:
+        raise LogError("--columns maps the columns of a CSV log (.csv, .tsv); this is not one", file=str(p),
+                       field="--columns")
+    if day is not None and not (name.endswith(NMEA_SUFFIXES) or name.endswith(SNIFF_SUFFIXES)
+                                or name.endswith(N2K_SUFFIXES)):
         day = None
     if p.is_dir():
         from .marina import is_marina_dir, read_marina
@@ -55,6 +83,16 @@ def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None =
         raise LogError("directory is neither a marina dataset (ranges.mat, angles.mat, gps.mat), an MRCLAM "
                        "dataset (Barcodes.dat, Landmark_Groundtruth.dat), a ROS 2 bag (metadata.yaml) nor a "
                        "folder of point clouds (.bin, .pcd, .ply; KITTI velodyne/)", file=str(p))
+    if name.endswith(SIGNALK_SUFFIXES) or (name.endswith(SIGNALK_SNIFF) and p.is_file()):
+        from .signalk import is_signalk_text, read_signalk
+
+        if name.endswith(SIGNALK_SUFFIXES) or is_signalk_text(_head(p)):
+            return read_signalk(p, lenient=lenient, limits=limits, **options)
+    if name.endswith(N2K_SUFFIXES) or (name.endswith(SNIFF_SUFFIXES) and p.is_file()):
+        from .n2k import is_n2k_text, read_n2k
+
+        if name.endswith(N2K_SUFFIXES) or is_n2k_text(_head(p)):
+            return read_n2k(p, lenient=lenient, limits=limits, date=day, **options)
     if name.endswith(JSONL_SUFFIXES):
         from .jsonl import read_jsonl
 
@@ -77,7 +115,8 @@ def load_log(path: str | Path, *, lenient: bool = False, limits: Limits | None =
 
         return read_bag(p, lenient=lenient, limits=limits, **options)
     raise LogError("unknown log type (expected a marina directory, .jsonl[.gz], .npz, .nmea, a CARMEN .log/.clf, "
-                   "or a ROS bag)",
+                   "NMEA 2000 text (.n2k, .raw, .data), Signal K deltas (.sk), .csv/.tsv (with --columns) or a ROS "
+                   "bag)",
                    file=str(p))
 
 

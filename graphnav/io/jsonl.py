@@ -6,6 +6,7 @@ import gzip
 import io
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -17,6 +18,8 @@ from ..log import (
     MAX_CLOUD_POINTS,
     MAX_RING,
     RECORD_TYPES,
+    SOURCE_FIELD,
+    SOURCED_KINDS,
     BeaconObs,
     Cloud,
     Gnss,
@@ -201,6 +204,11 @@ def parse_record(obj: Any, frame: LocalFrame | None = None, limits: Limits | Non
     else:
         names = REQUIRED[kind] + OPTIONAL.get(kind, ())
         rec = RECORD_TYPES[kind](**{n: _num(obj, n) for n in names if n in obj})
+    if kind in SOURCED_KINDS and SOURCE_FIELD in obj:
+        src = obj[SOURCE_FIELD]
+        if isinstance(src, bool) or not isinstance(src, str | int):
+            raise LogError("source must be a string or an integer", field=SOURCE_FIELD)
+        rec = replace(rec, source=str(src))
     check_record(rec, limits)
     return rec
 
@@ -320,6 +328,8 @@ def record_to_obj(rec: Record | KnownBeacon) -> dict[str, Any]:
         obj[name] = v
     if isinstance(rec, Gnss):
         obj["x"], obj["y"] = rec.x, rec.y
+    if getattr(rec, SOURCE_FIELD, ""):
+        obj[SOURCE_FIELD] = rec.source
     return obj
 
 

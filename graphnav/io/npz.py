@@ -4,7 +4,8 @@ Layout: ``<kind>/<field>`` arrays per record type (scan beams concatenated, with
 ``scan/offsets``; cloud points concatenated as one flat float32 ``cloud/xyz`` split by
 ``cloud/offsets`` (in points), ``cloud/intensity`` float32 and ``cloud/ring`` uint16 over the same
 points, ``cloud/flags`` per cloud: bit 0 intensity given, bit 1 ring given),
-``order`` (kind code of every record, in log order) so that ties in time
+``<kind>/source`` (strings, only when a record of that kind states its source), ``order`` (kind code
+of every record, in log order) so that ties in time
 round-trip exactly, ``beacon_known/<field>``, and ``meta`` (a JSON string).
 """
 
@@ -23,6 +24,7 @@ from ..log import (
     OPTIONAL_SCALARS,
     RECORD_TYPES,
     SCALAR_FIELDS,
+    SOURCED_KINDS,
     Cloud,
     KnownBeacon,
     Limits,
@@ -40,6 +42,7 @@ KNOWN_MEMBERS = frozenset(
     ["version", "order", "meta", "scan/offsets", "scan/ranges", "scan/angles"]
     + ["cloud/offsets", "cloud/xyz", "cloud/intensity", "cloud/ring", "cloud/flags"]
     + [f"{k}/{f}" for k in KINDS for f in SCALAR_FIELDS[k]]
+    + [f"{k}/source" for k in SOURCED_KINDS]
     + [f"beacon_known/{f}" for f in ("id", "x", "y", "sigma")])
 #: Default bound on the decoded size of the arrays a log declares [bytes]: 4 GiB, a day of 10 Hz
 #: 360-beam scans (float32 ranges + angles, ~2.5 GB) with room to spare. ``read_npz(max_bytes=)``.
@@ -58,6 +61,8 @@ def write_npz(log: NavLog, path: str | Path) -> None:
         for name in SCALAR_FIELDS[kind]:
             vals = [getattr(r, name) for r in recs]
             arrays[f"{kind}/{name}"] = np.array(vals, dtype=str if name == "id" else float)
+        if kind in SOURCED_KINDS and any(r.source for r in recs):
+            arrays[f"{kind}/source"] = np.array([r.source for r in recs], dtype=str)
         if kind == "scan":
             lens = np.array([r.ranges.size for r in recs])
             arrays["scan/offsets"] = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
@@ -235,8 +240,10 @@ def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> N
             recs = _read_clouds(data, path, cols["t"], cols["roll"], cols["pitch"])
         else:
             cls = RECORD_TYPES[kind]
+            if f"{kind}/source" in data and kind in SOURCED_KINDS:
+                cols["source"] = _get(data, f"{kind}/source", path, numeric=False, length=n).tolist()
             for i in range(n):
-                recs.append(cls(**{k: (str(v[i]) if k == "id" else float(v[i])) for k, v in cols.items()}))
+                recs.append(cls(**{k: (str(v[i]) if k in ("id", "source") else float(v[i])) for k, v in cols.items()}))
         for i, r in enumerate(recs):
             try:
                 check_record(r, limits)

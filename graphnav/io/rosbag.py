@@ -41,6 +41,7 @@ topic is read only when there is no NavSatFix topic (they would repeat the same 
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
@@ -49,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import LogError, require
+from ..errors import GraphnavError, LogError, require
 from ..geodesy import LocalFrame
 from ..geometry import wrap_angle
 from ..log import (
@@ -456,10 +457,38 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
     gnss -> ``/fix`` NavSatFix, imu -> ``/imu`` Imu (6-axis records with their z/x/y axes), heading ->
     ``/heading`` Imu with orientation only, odometry -> ``/odom`` Odometry, gnss_velocity ->
     ``/gnss_vel`` TwistWithCovarianceStamped (ENU), ``nmea_sentences`` -> ``/nmea_sentence``. For tests,
-    demos and converting logs for ROS tools."""
-    from .nmea_out import frame_of
+    demos and converting logs for ROS tools.
+
+    All or nothing: the bag is written in a private directory beside ``path`` and renamed onto it when
+    complete; a failure (a record it cannot write) leaves nothing behind. ``path`` must not exist.
+    Beams count as uniformly spaced within :data:`BEAM_SPACING_TOL` (angles rounded to 1e-4 rad, as the
+    JSON Lines writer stores them, are)."""
+    import shutil
+
+    from .outputs import TMP_PREFIX, file_kind
 
     path = Path(path)
+    if file_kind(path) is not None:
+        raise GraphnavError("exists: a bag is never written over anything", where=str(path))
+    work = path.parent / f"{TMP_PREFIX}{os.getpid()}-{path.name}.d"
+    work.mkdir()
+    try:
+        _write_bag(log, work / path.name, storage=storage, origin=origin, nmea_sentences=nmea_sentences)
+        os.replace(work / path.name, path)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return path
+
+
+#: [rad] a scan's beams are uniformly spaced (a LaserScan) when every spacing is within this of the mean:
+#: three times the 0.5e-4 rad rounding of the JSON Lines writer
+BEAM_SPACING_TOL = 1.5e-4
+
+
+def _write_bag(log: NavLog, path: Path, *, storage: str, origin: tuple[float, float] | None,
+               nmea_sentences: list[tuple[float, str]] | None) -> None:
+    from .nmea_out import frame_of
+
     ros1 = path.suffix == ".bag"
     ts = typestore(ros1)
     T = ts.types
@@ -502,8 +531,10 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
             if isinstance(r, Scan):
                 a = r.angles
                 inc = float((a[-1] - a[0]) / (a.size - 1)) if a.size > 1 else 0.0
-                if a.size > 2 and not np.allclose(np.diff(a), inc, atol=1e-6):
-                    raise LogError("a LaserScan needs uniformly spaced beams", field="angles")
+                if a.size > 2 and not np.allclose(np.diff(a), inc, rtol=0.0, atol=BEAM_SPACING_TOL):
+                    raise LogError(f"a LaserScan needs uniformly spaced beams (within {BEAM_SPACING_TOL:g} rad); "
+                                   f"the scan at t={r.t:.9g} has spacings {np.diff(a).min():.6g} .. "
+                                   f"{np.diff(a).max():.6g} rad", field="angles")
                 ranges = np.where(r.valid(), r.ranges, np.inf).astype(np.float32)
                 put("/scan", "sensor_msgs/msg/LaserScan", r.t, T["sensor_msgs/msg/LaserScan"](
                     header=_header(ts, r.t, "laser", ros1), angle_min=float(a[0]) if a.size else 0.0,
@@ -551,4 +582,3 @@ def write_bag(log: NavLog, path: str | Path, *, storage: str = "sqlite3",
         for t, s in nmea_sentences or []:
             put("/nmea_sentence", "nmea_msgs/msg/Sentence", t, T["nmea_msgs/msg/Sentence"](
                 header=_header(ts, t, "gps", ros1), sentence=s))
-    return path

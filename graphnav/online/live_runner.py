@@ -9,6 +9,12 @@ transport (:mod:`.transport`), the clock and decoder (:mod:`.stream_clock`), the
   chart plotter's server) and reconnects every second when the link drops. Every line is checked
   (checksum required) and decoded by :class:`graphnav.io.nmea.NmeaDecoder`; a bad sentence is
   counted (``bad_sentences``) and logged (the first 20, then every 1000th), never fatal.
+* **NMEA 2000 and Signal K** -- ``n2k_sources`` (``udp://``/``tcp://``) carry an NMEA 2000 gateway's
+  text lines (canboat, Yacht Devices RAW, Actisense N2K ASCII: :mod:`graphnav.io.n2k`);
+  ``signalk_sources`` (``ws://HOST:PORT``, path default ``/signalk/v1/stream?subscribe=self``) a Signal
+  K server's delta stream (:mod:`graphnav.online.marine_feed`, :mod:`graphnav.io.signalk`). Their
+  records carry their own time stamps (checked by the stream clock); a bad line is counted
+  (``bad_marine_lines``), never fatal.
 * **Scans** -- ``scan_sources`` (``udp://HOST:PORT``) receive one scan per datagram: a JSON
   Lines ``scan`` record (docs/log-format.md: ``{"t", "type": "scan", "ranges", "angles"}`` or
   ``angle_min``/``angle_increment``; ``null``/0 = no return), ``t`` on the NMEA clock (POSIX s);
@@ -26,7 +32,8 @@ transport (:mod:`.transport`), the clock and decoder (:mod:`.stream_clock`), the
 * **Output** -- every estimate is appended to a new file per run, ``DIR/live-YYYYmmddTHHMMSSZ.tum``
   (UTC start time; + ``.cov``; an earlier run's file is never touched), flushed line by line
   (:class:`graphnav.io.tum.TrajectoryWriter`), and published as GGA, HDT, VTG, ROT
-  (valid checksums, one datagram per estimate) to ``publish`` (``udp://HOST:PORT``).
+  (valid checksums, one datagram per estimate) to ``publish`` (``udp://HOST:PORT``), and as one
+  Signal K delta per estimate (:func:`graphnav.io.signalk.solution_delta`) to ``publish_signalk``.
 * **Stopping** -- SIGINT/SIGTERM (or :meth:`LiveRunner.stop`, ``duration``, ``idle_exit``, the
   end of the scan replay) ends the loop; files are flushed and closed and ``summary()`` returns
   ``sentences_in``, ``bad_sentences``, ``estimates``, ``published``, ``latency_ms_median``,
@@ -43,6 +50,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from ..errors import LogError
 from ..log import Gnss, NavLog, Record
 from ..result import Estimate, OnlineEstimator
 from .scan_feed import ScanFeed
@@ -67,12 +75,16 @@ class LiveRunner:
                  duration: float | None = None, idle_exit: float | None = None,
                  scan_sources: list[str] | None = None,
                  restart: Callable[[], OnlineEstimator] | None = None,
-                 time_tolerance: float = TIME_TOLERANCE_S, resync_stamps: int = RESYNC_STAMPS) -> None:
-        self.transport = Transport(sources, scan_sources)
+                 time_tolerance: float = TIME_TOLERANCE_S, resync_stamps: int = RESYNC_STAMPS,
+                 n2k_sources: list[str] | None = None, signalk_sources: list[str] | None = None,
+                 publish_signalk: str | None = None) -> None:
+        self.transport = Transport(sources, scan_sources, n2k=n2k_sources, signalk=signalk_sources)
         self.nmea = NmeaInput(self._records, self._step_back, origin=origin, require_checksum=require_checksum,
                               time_tolerance=time_tolerance, resync_stamps=resync_stamps)
         self.scans = ScanFeed(scans_from)
-        self.sink = Sink(publish, out_dir)
+        self.sink = Sink(publish, out_dir, publish_signalk)
+        self.marine: Any = None  # MarineInput, made at the first NMEA 2000 / Signal K line
+        self.bad_marine = 0
         self.estimator = estimator
         self.restart = restart  # a fresh estimator, for a clock that steps back (a re-sync)
         self.duration, self.idle_exit = duration, idle_exit
@@ -104,6 +116,31 @@ class LiveRunner:
         self.scans.hold(scan)
         if self.nmea.t is not None:
             self._hand_over(self.nmea.t)
+
+    def feed_marine(self, kind: str, raw: bytes, arrival: float) -> None:
+        """One NMEA 2000 or Signal K line: its records, each stamped time checked by the stream clock
+        (an outlier is counted and dropped); a bad line is counted (``bad_marine``), never fatal."""
+        if self.marine is None:
+            from .marine_feed import MarineInput
+
+            self.marine = MarineInput(self.nmea.decoder.frame)
+        self.marine.frame = self.marine.frame or self.nmea.decoder.frame
+        try:
+            recs = self.marine.feed(kind, raw)
+        except LogError as err:
+            self.bad_marine += 1
+            if self.bad_marine <= 20 or self.bad_marine % 1000 == 0:
+                log_.warning("bad %s line #%d (%s): %r", kind, self.bad_marine, err, raw[:80])
+            return
+        if self.nmea.decoder.frame is None and self.marine.frame is not None:
+            self.nmea.decoder.frame = self.marine.frame  # the published solution's frame
+        for rec in recs:
+            if self.nmea.clock.check(rec.t, arrival) == "outlier":
+                self.nmea.time_outliers += 1
+                continue
+            for scan in self.scans.due_waiting(rec.t):
+                self._record(scan, None)
+            self._record(rec, arrival if isinstance(rec, Gnss) else None)
 
     def _records(self, recs: list[Record], arrival: float) -> None:
         """A sentence's records, after the scans the stream time reached (a GNSS fix is timed from ``arrival``)."""
@@ -172,7 +209,12 @@ class LiveRunner:
             if items:
                 last_input = time.monotonic()
             for kind, raw, arrival in items:
-                (self.feed_scan if kind == "scan" else self.feed_sentence)(raw, arrival)
+                if kind == "scan":
+                    self.feed_scan(raw, arrival)
+                elif kind == "nmea":
+                    self.feed_sentence(raw, arrival)
+                else:
+                    self.feed_marine(kind, raw, arrival)
                 if self._stop.is_set():
                     break
         self.stop_reason = self.stop_reason or "signal"
@@ -190,6 +232,9 @@ class LiveRunner:
             "stop_reason": self.stop_reason}
         if self.scans.replay is not None:
             out["scans_replayed"] = self.scans.replayed
+        if self.marine is not None:
+            out.update(self.marine.info())
+            out["bad_marine_lines"] = self.bad_marine
         if self.transport.has_scans:
             out["scans_in"], out["bad_scans"] = self.scans.scans_in, self.scans.bad_scans
         if nm.decoder.frame is not None:

@@ -6,11 +6,15 @@ forward, so a bad match cannot become the next pair's guess and run away. Modes:
 * ``cv``: constant velocity, the last good increment scaled to this pair's time step, when that
   match was the previous pair's; otherwise (after a flagged match) the odometry increment when
   the log has odometry, else the last good increment however old, else zero;
-* ``odometry``: the odometry increment (:func:`graphnav.geometry.increment`), else as ``cv``;
+* ``odometry``: the odometry increment (:func:`graphnav.geometry.increment`), else the IMU's
+  prediction when the log has an IMU, else as ``cv``;
+* ``imu``: the IMU's prediction (:class:`graphnav.scan.imu_guess.ImuGuess`: gyro yaw, strapdown
+  velocity corrected by every match) with its covariance, else as ``odometry``;
 * ``zero``: identity.
 
 :meth:`MotionGuess.bridge` gives what to chain instead of a flagged match: the odometry increment
-with its covariance, else the constant-velocity guess with a wide covariance.
+with its covariance, else the IMU's prediction with its covariance, else the constant-velocity
+guess with a wide covariance.
 """
 
 from __future__ import annotations
@@ -19,9 +23,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry import increment
+from .imu_guess import ImuGuess
 from .weighted_icp import GUESS_SIGMA, MatchResult
 
-INITS = ("cv", "zero", "odometry")
+INITS = ("cv", "zero", "odometry", "imu")
 # 1-sigma of a constant-velocity bridge (no odometry): x, y [m], yaw [rad]; the matcher's guess
 # without a covariance has the same (graphnav.scan.weighted_icp.GUESS_SIGMA)
 CV_BRIDGE_SIGMA = GUESS_SIGMA
@@ -32,14 +37,16 @@ class MotionGuess:
     match (``update``); ``odometry`` is an (N, 5) array from
     :func:`graphnav.log.odometry_samples` (or ``None``)."""
 
-    def __init__(self, mode: str = "cv", odometry: NDArray[np.float64] | None = None) -> None:
+    def __init__(self, mode: str = "cv", odometry: NDArray[np.float64] | None = None,
+                 imu: ImuGuess | None = None) -> None:
         if mode not in INITS:
             raise ValueError(f"unknown init {mode!r}; known: {', '.join(INITS)}")
         self.mode = mode
         self.odometry = odometry if odometry is not None and len(odometry) else None
+        self.imu = imu if imu else None
         self._last: tuple[NDArray[np.float64], float, float] | None = None  # increment, dt, end time
         self.source = "none"  # where the last guess came from: cv, odometry, stale-cv, none
-        self.cov: NDArray[np.float64] | None = None  # the last guess's covariance (odometry only, else None)
+        self.cov: NDArray[np.float64] | None = None  # the last guess's covariance (odometry, IMU; else None)
 
     def _cv(self, t0: float, t1: float, fresh_only: bool) -> NDArray[np.float64] | None:
         if self._last is None or self._last[1] <= 0:
@@ -68,25 +75,46 @@ class MotionGuess:
             return None
         fresh = ("cv", lambda: self._cv(t0, t1, fresh_only=True))
         odo = ("odometry", lambda: self._odo_guess(t0, t1))
+        imu = ("imu", lambda: self._imu_guess(t0, t1))
         stale = ("stale-cv", lambda: self._cv(t0, t1, fresh_only=False))
-        for source, make in (odo, fresh, stale) if self.mode == "odometry" else (fresh, odo, stale):
+        order = {"odometry": (odo, imu, fresh, stale), "imu": (imu, odo, fresh, stale)}.get(self.mode,
+                                                                                           (fresh, odo, stale))
+        for source, make in order:
             g = make()
             if g is not None:
                 self.source = source
                 return g
         return None
 
+    def _imu_guess(self, t0: float, t1: float) -> NDArray[np.float64] | None:
+        if self.imu is None:
+            return None
+        inc, self.cov = self.imu.guess(t0, t1)
+        return inc
+
     def update(self, result: MatchResult, t0: float, t1: float) -> None:
-        """Feed the match of the pair ``(t0, t1)``; only a good one (``ok``) is remembered."""
+        """Feed the match of the pair ``(t0, t1)``; only a good one (``ok``) is remembered. The IMU's
+        velocity is corrected by a good match, and by a degenerate one across its weak directions
+        (its covariance inflated along them), and carried to ``t1`` in any case."""
+        if self.imu is not None:
+            inflated = bool(result.quality.get("inflated"))
+            usable = result.ok or inflated
+            weak = result.quality.get("weak_projector") if inflated else None
+            self.imu.update(t0, t1, result.pose if usable else None, result.cov if usable else None,
+                            None if weak is None else np.asarray(weak, dtype=float))
         if result.ok:
             self._last = (np.asarray(result.pose, dtype=float).copy(), t1 - t0, t1)
 
     def bridge(self, t0: float, t1: float) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
-        """Increment, covariance and source (``odometry`` or ``cv``) to chain instead of a flagged
-        match: the odometry increment when the log has odometry, else the constant-velocity guess
-        with the wide covariance :data:`CV_BRIDGE_SIGMA`."""
+        """Increment, covariance and source (``odometry``, ``imu`` or ``cv``) to chain instead of a
+        flagged match: the odometry increment when the log has odometry, else the IMU's prediction,
+        else the constant-velocity guess with the wide covariance :data:`CV_BRIDGE_SIGMA`."""
         odo = self._odo(t0, t1)
         if odo is not None:
             return odo[0], odo[1], "odometry"
+        if self.imu is not None:  # the prediction made before the match (update has moved on to t1)
+            last = self.imu.last
+            inc, cov = (last[2], last[3]) if last is not None and last[:2] == (t0, t1) else self.imu.guess(t0, t1)
+            return inc, cov, "imu"
         g = self._cv(t0, t1, fresh_only=False)
         return (np.zeros(3) if g is None else g), np.diag(np.square(CV_BRIDGE_SIGMA)), "cv"

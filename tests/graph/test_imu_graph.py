@@ -240,3 +240,29 @@ def test_online_estimates_carry_the_velocity_states_sog_and_cog():
     last = ests[-1]
     assert last.sog == pytest.approx(math.hypot(2.0, 0.5), abs=0.05)
     assert last.cog == pytest.approx(math.atan2(0.5, 2.0), abs=math.radians(2.0))
+
+
+def test_keyframes_follow_the_motion_with_an_imu_and_every_scan_without():
+    """LIO-SAM's keyframe rule on the IMU graph (1 m, 0.2 rad, at least one a second): far fewer keyframes
+    than 10 Hz scans, the same accuracy as one per scan (a test of the rule, not of a tuned figure)."""
+    from graphnav.graph.builder import GraphBuilder
+    from graphnav.graph.smoother_config import SmootherConfig
+    from graphnav.sim.harbour import HarbourConfig, simulate_harbour
+
+    log = simulate_harbour(0, HarbourConfig(), duration=15.0)
+    scans = log.of("scan")
+    kf = {}
+    for motion in (None, False):
+        b = GraphBuilder(SmootherConfig(keyframe_motion=motion), scans=True, imu=True)  # no stepping: time, angle
+        for r in log.records:
+            if r.kind in ("scan", "imu", "pose_prior"):
+                b.push(r)
+        kf[motion] = np.array(b.kf_t)
+    assert len(kf[False]) == len(scans)
+    gaps = np.diff(kf[None])
+    assert len(kf[None]) < len(scans) / 5 and gaps.max() <= 1.0 + 0.1 + 1e-9
+    every, motion = (run_isam2(log, keyframe_motion=m, **FAST) for m in (False, None))
+    truth = log.truth()
+    e_every, e_motion = (ate(r.trajectory, truth)["rmse"] for r in (every, motion))
+    assert len(motion.trajectory) < len(every.trajectory) / 5
+    assert e_motion < 1.3 * e_every + 0.02, (e_motion, e_every)
