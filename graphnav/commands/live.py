@@ -11,9 +11,9 @@ import json
 import logging
 
 from ..errors import GraphnavError
+from ..estimators import make_online, online_names
 from ..io import load_log
 from ..io.outputs import ensure_dir, write_text_atomic
-from ..estimators import make_online, online_names
 from ..online.live_runner import LiveRunner
 from ._common import add_json_flag, emit, jsonable, options_for
 from .replay import parse_origin

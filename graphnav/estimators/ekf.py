@@ -31,9 +31,8 @@ from numpy.typing import NDArray
 
 from ..config import option
 from ..log import Gnss, GnssVelocity, Heading, Imu, NavLog, Odometry, PosePrior, Record, Scan, Truth, WaterSpeed
-from ..result import OnEstimate, OnlineEstimator, RunResult
+from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
-from .base import BatchEstimator
 from .gating import GATING_DEFAULTS, GateOptions
 from .ins_ekf import InsEkf
 from .pose_ekf import PoseEkf
@@ -391,25 +390,3 @@ class EkfConfig(ImuMotionOptions, GateOptions):
     sigma_acc: float = option(0.5, "speed state (speed=true): its random walk", unit="m/s^2")
     use_gnss: bool = option(True, "false: GNSS fixes are not used")
     use_heading: bool = option(True, "false: compass headings are not used")
-
-
-class Ekf(BatchEstimator):
-    """The EKF (:func:`run_ekf`); live: :class:`graphnav.estimators.ekf_online.EkfOnline`."""
-
-    description = ("EKF: odometry, IMU (INS/GNSS, bias + current states) or ICP motion; "
-                   "gated GNSS (+velocity), compass, water speed")
-    Config = EkfConfig
-    live = True
-    unmet = staticmethod(_unmet)
-    inputs = staticmethod(_inputs)
-
-    @classmethod
-    def online(cls, **options: Any) -> OnlineEstimator:
-        from .ekf_online import EkfOnline
-
-        return EkfOnline(**options)
-
-    batch = staticmethod(run_ekf)
-
-
-ESTIMATORS = {"ekf": Ekf}

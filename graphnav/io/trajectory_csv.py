@@ -14,7 +14,8 @@ COV_COLUMNS = ("cov_xx", "cov_xy", "cov_xyaw", "cov_yy", "cov_yyaw", "cov_yawyaw
 
 
 def write_trajectory_csv(traj: Trajectory, path: str | Path) -> None:
-    """Write ``traj`` as CSV ``t,x,y,yaw`` (+ :data:`COV_COLUMNS` with covariances), atomically."""
+    """Write ``traj`` as CSV ``t,x,y,yaw`` (+ :data:`COV_COLUMNS` with covariances), atomically, every value at
+    full precision (the shortest text that reads back to the same float: POSIX times keep their microseconds)."""
     cols = ["t", "x", "y", "yaw"] + (list(COV_COLUMNS) if traj.cov is not None else [])
     with atomic_open(path, "w", newline="") as fh:
         w = csv.writer(fh)
@@ -24,7 +25,7 @@ def write_trajectory_csv(traj: Trajectory, path: str | Path) -> None:
             if traj.cov is not None:
                 c = traj.cov[i]
                 row += [c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2]]
-            w.writerow([f"{v:.9g}" for v in row])
+            w.writerow([repr(float(v)) for v in row])
 
 
 def read_trajectory_csv(path: str | Path, name: str = "") -> Trajectory:

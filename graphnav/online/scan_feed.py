@@ -65,10 +65,15 @@ class ScanFeed:
             self.bad_scans += 1
         bisect.insort(self.waiting, scan, key=lambda r: r.t)
 
-    def due(self, t_stream: float) -> list[Scan]:
+    def due_waiting(self, t_stream: float) -> list[Scan]:
+        """The network scans the stream time ``t_stream`` has reached."""
         out = []
         while self.waiting and self.waiting[0].t <= t_stream + 1e-6:
             out.append(self.waiting.pop(0))
+        return out
+
+    def due(self, t_stream: float) -> list[Scan]:
+        out = self.due_waiting(t_stream)
         if self.replay is None:
             return out
         if self.shift is None and self.replay:

@@ -1,9 +1,11 @@
-"""Live mode's sink: each estimate published as NMEA (GGA, HDT, VTG, ROT; one UDP datagram), timed
+"""Live mode's sink: each estimate published as NMEA (GGA, HDT, VTG, ROT; one UDP datagram) and as a
+Signal K delta (:func:`graphnav.io.signalk.solution_delta`, uncertainties under meta), timed
 (GNSS sentence arrival -> solution sent, over the last :data:`LATENCY_WINDOW` fixes) and appended to
 a new TUM file per run (``DIR/live-YYYYmmddTHHMMSSZ.tum``, + ``.cov``, flushed line by line)."""
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import socket
@@ -43,15 +45,21 @@ def new_live_file(out_dir: Path, now: float | None = None) -> TrajectoryWriter:
 
 
 class Sink:
-    """Where the estimates go: ``publish`` (``udp://HOST:PORT``, NMEA) and ``out_dir`` (a new TUM file);
+    """Where the estimates go: ``publish`` (``udp://HOST:PORT``, NMEA), ``publish_signalk`` (``udp://``,
+    Signal K deltas) and ``out_dir`` (a new TUM file);
     ``emit(est, arrival, frame)`` sends, times and writes one (``frame``: the local frame of the NMEA
     output; ``None``: nothing published yet)."""
 
-    def __init__(self, publish: str | None = None, out_dir: str | Path | None = None) -> None:
+    def __init__(self, publish: str | None = None, out_dir: str | Path | None = None,
+                 publish_signalk: str | None = None) -> None:
         self.publish = parse_endpoint(publish, ("udp",)) if publish else None
+        self.publish_signalk = parse_endpoint(publish_signalk, ("udp",)) if publish_signalk else None
         self.out_dir = Path(out_dir) if out_dir else None
         self.sock: socket.socket | None = None
         self.addr: tuple[str, int] | None = None
+        self.sk_sock: socket.socket | None = None
+        self.sk_addr: tuple[str, int] | None = None
+        self.published_signalk = 0
         self.writer: TrajectoryWriter | None = None
         self.latency_ms = np.full(LATENCY_WINDOW, np.nan)  # ring buffer: constant memory
         self.n_latency = self.estimates = self.published = 0
@@ -64,12 +72,16 @@ class Sink:
         if self.publish is not None:
             self.addr = resolve(self.publish)
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        if self.publish_signalk is not None:
+            self.sk_addr = resolve(self.publish_signalk)
+            self.sk_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
 
     def close(self) -> None:
         if self.writer is not None:
             self.writer.close()
-        if self.sock is not None:
-            self.sock.close()
+        for s in (self.sock, self.sk_sock):
+            if s is not None:
+                s.close()
 
     def emit(self, est: Estimate, arrival: float | None, frame: LocalFrame | None) -> None:
         """Publish one estimate (NMEA), time its latency, append it to the output file."""
@@ -84,6 +96,15 @@ class Sink:
                 self.published += len(lines)
             except OSError as exc:
                 log_.warning("publish to %s failed: %s", self.publish, exc)
+        if self.sk_sock is not None and frame is not None:
+            from ..io.signalk import solution_delta
+
+            delta = solution_delta(est.t, est.vec, frame, cov=est.cov, sog=est.sog, cog_yaw=est.cog, w=est.w)
+            try:
+                self.sk_sock.sendto(json.dumps(delta).encode("utf-8"), self.sk_addr)
+                self.published_signalk += 1
+            except OSError as exc:
+                log_.warning("publish to %s failed: %s", self.publish_signalk, exc)
         if arrival is not None:  # the published solution is the latency-critical path; the file comes next
             self.latency_ms[self.n_latency % LATENCY_WINDOW] = (time.perf_counter() - arrival) * 1e3
             self.n_latency += 1
@@ -97,6 +118,8 @@ class Sink:
             "latency_ms_median": float(np.median(lat)) if lat.size else None,
             "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None,
             "latency_ms_max": float(lat.max()) if lat.size else None}
+        if self.publish_signalk is not None:
+            out["published_signalk"] = self.published_signalk
         if self.out_dir is not None:
             out["out"] = str(self.out_dir)
             if self.writer is not None:

@@ -1,8 +1,10 @@
-"""Live mode's transport: the NMEA (UDP/TCP) and scan (UDP) sockets behind one ``selectors`` poll.
+"""Live mode's transport: the NMEA 0183, NMEA 2000 gateway (UDP/TCP), Signal K (websocket) and scan
+(UDP) sources behind one ``selectors`` poll.
 
-``udp://HOST:PORT`` binds and receives datagrams (one or more sentences each; a scan source: one
-JSON scan record per datagram); ``tcp://HOST:PORT`` connects to an NMEA TCP server (a multiplexer
-such as kplex or a chart plotter's server) and reconnects every second when the link drops.
+``udp://HOST:PORT`` binds and receives datagrams (one or more lines each; a scan source: one JSON
+scan record per datagram); ``tcp://HOST:PORT`` connects to a TCP server (a multiplexer such as kplex
+or a chart plotter's server) and reconnects every second when the link drops; ``ws://HOST:PORT``
+reads a Signal K server's delta stream (:class:`graphnav.online.marine_feed.WebSocketLines`).
 """
 
 from __future__ import annotations
@@ -14,12 +16,14 @@ import selectors
 import socket
 import time
 from dataclasses import dataclass
+from typing import Any
 from urllib.parse import urlsplit
 
 from ..errors import AddressError
 
 log_ = logging.getLogger("graphnav.live")
 MAX_LINE = 4096  # a TCP line longer than this without a newline is garbage
+MAX_MESSAGE = 1 << 20  # a Signal K delta (one websocket message) longer than this is garbage
 
 
 @dataclass(frozen=True)
@@ -57,18 +61,32 @@ def resolve(ep: Endpoint) -> tuple[str, int]:
 
 
 class Source:
-    """One input: a bound UDP socket or a (re)connecting TCP client with a line buffer.
-    ``kind`` is ``"nmea"`` (lines) or ``"scan"`` (UDP, one JSON scan record per datagram)."""
+    """One input: a bound UDP socket or a (re)connecting TCP client with a line buffer, or a
+    websocket client (``ws://``: :class:`graphnav.online.marine_feed.WebSocketLines`, its messages as
+    lines). ``kind`` is ``"nmea"`` (lines), ``"n2k"`` (NMEA 2000 gateway lines), ``"signalk"`` (delta
+    JSON, one a line) or ``"scan"`` (UDP, one JSON scan record per datagram)."""
 
-    def __init__(self, ep: Endpoint, kind: str = "nmea") -> None:
+    def __init__(self, ep: Endpoint, kind: str = "nmea", url: str = "") -> None:
         self.ep = ep
         self.kind = kind
+        self.url = url
+        self.feed: Any = None  # the websocket client of a ws:// source
         self.sock: socket.socket | None = None
         self.buf = b""
         self.next_try = 0.0
         self.connecting: float | None = None  # when a non-blocking TCP connect started
 
     def open(self, sel: selectors.BaseSelector) -> None:
+        if self.ep.scheme in ("ws", "wss"):
+            if time.monotonic() < self.next_try:
+                return
+            self.next_try = time.monotonic() + 1.0
+            from .marine_feed import WebSocketLines
+
+            self.feed = WebSocketLines(self.url)
+            self.sock, self.buf = self.feed.sock, b""
+            sel.register(self.sock, selectors.EVENT_READ, self)
+            return
         if self.ep.scheme == "udp":
             addr = resolve(self.ep)
             s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -117,6 +135,9 @@ class Source:
             sel.unregister(self.sock)
             self.sock.close()
             self.sock = None
+        if self.feed is not None:
+            self.feed.close()
+            self.feed = None
 
     def read(self, sel: selectors.BaseSelector) -> list[bytes]:
         assert self.sock is not None
@@ -156,7 +177,7 @@ class Source:
             return lines
         lines = (self.buf + data).split(b"\n")
         self.buf = lines.pop()
-        if len(self.buf) > MAX_LINE:
+        if len(self.buf) > (MAX_LINE if self.kind in ("nmea", "n2k") else MAX_MESSAGE):
             lines.append(self.buf)
             self.buf = b""
         return lines
@@ -167,10 +188,16 @@ class Transport:
     datagrams (scans) that arrived, each ``(kind, data, arrival)`` (``arrival``: ``time.perf_counter``
     when its socket was read), and reopens sources whose TCP link dropped."""
 
-    def __init__(self, nmea: list[str], scans: list[str] | None = None) -> None:
+    def __init__(self, nmea: list[str], scans: list[str] | None = None, *, n2k: list[str] | None = None,
+                 signalk: list[str] | None = None) -> None:
         self.sources = [Source(parse_endpoint(s)) for s in nmea]
+        self.sources += [Source(parse_endpoint(s), "n2k") for s in n2k or []]
+        if signalk:
+            from .marine_feed import signalk_url
+
+            self.sources += [Source(parse_endpoint(s, ("ws", "wss")), "signalk", signalk_url(s)) for s in signalk]
         if not self.sources:
-            raise ValueError("at least one --nmea source is needed")
+            raise ValueError("at least one --nmea, --n2k or --signalk source is needed")
         self.sources += [Source(parse_endpoint(s, ("udp",)), "scan") for s in scans or []]
         self.sel: selectors.BaseSelector | None = None
 
