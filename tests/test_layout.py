@@ -153,7 +153,7 @@ KNOWN_LARGE = {
     "graphnav.io.nmea.NmeaDecoder",
     "graphnav.beacons._fast.propagate_truth", "graphnav.beacons.layout._propagate_block",
     "graphnav.estimators.ekf_slam.run_ekf_slam", "graphnav.estimators.icp_odometry.run_icp_dr",
-    "graphnav.estimators.scan_to_map.run_scan_to_map", "graphnav.estimators.ukf.run_nav_filter",
+    "graphnav.estimators.scan_to_map.run_scan_to_map",
     "graphnav.graph.builder.GraphBuilder.step", "graphnav.graph.navigator.Navigator._finish",
     "graphnav.scan._ndt_fast.derivs3", "graphnav.scan.weighted_icp.match_points", "graphnav.scan.weighted_icp._report",
 }

@@ -375,7 +375,6 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
     pix = np.ix_(pidx, pidx)
     has = ~np.isnan(z)
     all_idx = np.array([0, 1, 4])
-    vidx = np.array([2, 3])
     sel = {}
     for k in range(n):
         t0 = time.perf_counter()
@@ -400,19 +399,7 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
             R = adapter(k, ch, eps, HPH, r0k[ch]) if adapter is not None else r0k[ch]
             r_used[k, ch] = R
             f.update(idx, eps, HPH, np.diag(R))
-        if has[k, 3] and has[k, 4]:  # GNSS velocity over ground: H picks v_x, v_y
-            eps, HPH = f.innovation(vidx, z[k, 3:5])
-            R = np.diag(rk[k, 3:5])
-            verdict = gater.test("gnss_velocity", float(t[k]), eps, HPH, R)
-            if verdict == "accept":
-                f.update(vidx, eps, HPH, R)
-            elif verdict == "reinit":
-                reinit_block(f.x, f.P, vidx, z[k, 3:5].astype(float), R * gater.scale("gnss_velocity"))
-        if current and has[k, 5]:  # speed through water: (v - c) along the bow, unscented
-            eps, Pzz, Pxz = f.water_speed_innovation(float(z[k, 5]))
-            R = np.array([[rk[k, 5]]])
-            if gater.test("water_speed", float(t[k]), eps, Pzz, R) != "reject":
-                f.update_nonlinear(eps, Pzz, Pxz, R)
+        _velocity_updates(f, gater, float(t[k]), z[k], rk[k], has[k], current)
         if k:
             step_ms[k - 1] = (time.perf_counter() - t0) * 1e3
         poses[k] = f.x[pidx]
@@ -424,16 +411,36 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
     info: dict[str, Any] = {"options": {k: opts[k] for k in sorted(opts)}, "state_final": f.x.tolist(),
                             "r_used": r_used, "velocity": states[:, 2:4], **gater.info(),
                             "bias_states": bias, "bias_reason": bias_why if bias == auto_bias else "option",
-                            "current_states": current,
-                            "process_noise": {"q_acc": qn["q_acc"], "q_gyro": qn["q_gyro"],
-                                              "q_bias_acc": qn["q_bias_acc"], "q_bias_gyro": qn["q_bias_gyro"],
-                                              "source": qn["source"]}}
+                            "current_states": current, "process_noise": dict(qn)}
     if bias:
         info["bias_final"] = f.x[5:8].tolist()
     if current:
         info["current_final"] = f.x[f.ic:f.ic + 2].tolist()
         info["current"] = states[:, f.ic:f.ic + 2]
     return RunResult(traj, traj, step_ms, info=info)
+
+
+def _velocity_updates(f: UnscentedNav, gater: InnovationGate, t: float, zk: NDArray, rkk: NDArray, hk: NDArray,
+                      current: bool) -> None:
+    """The updates after the pose's at one time: GNSS velocity over ground (H picks v_x, v_y), and with
+    the current states the speed through water ((v - c) along the bow, unscented)."""
+    if hk[3] and hk[4]:
+        vidx = _VELOCITY
+        eps, HPH = f.innovation(vidx, zk[3:5])
+        R = np.diag(rkk[3:5])
+        verdict = gater.test("gnss_velocity", t, eps, HPH, R)
+        if verdict == "accept":
+            f.update(vidx, eps, HPH, R)
+        elif verdict == "reinit":
+            reinit_block(f.x, f.P, vidx, zk[3:5].astype(float), R * gater.scale("gnss_velocity"))
+    if current and hk[5]:
+        eps, Pzz, Pxz = f.water_speed_innovation(float(zk[5]))
+        R = np.array([[rkk[5]]])
+        if gater.test("water_speed", t, eps, Pzz, R) != "reject":
+            f.update_nonlinear(eps, Pzz, Pxz, R)
+
+
+_VELOCITY = np.array([2, 3])  # v_x, v_y: the state entries of the GNSS velocity channels
 
 
 _STATE = np.array([0, 1, 4])  # x, y, theta: the state entries of the GNSS x, GNSS y and compass channels
