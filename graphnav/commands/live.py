@@ -15,7 +15,7 @@ from ..estimators import make_online, online_names
 from ..io import load_log
 from ..io.outputs import ensure_dir, write_text_atomic
 from ..online.live_runner import LiveRunner
-from ._common import add_json_flag, emit, jsonable, options_for
+from ._common import add_drop_flag, add_json_flag, dropped_kinds, emit, jsonable, options_for
 from .replay import parse_origin
 
 log_ = logging.getLogger("graphnav.live")
@@ -50,6 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="accept sentences without a checksum (a wrong checksum is always rejected)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument("--idle-exit", type=float, metavar="S", help="stop when no input came for S seconds")
+    add_drop_flag(p)
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -61,13 +62,15 @@ def run(args: argparse.Namespace) -> int:
         number(flag, value, Range(lo=0.0, hi=1e9, lo_open=True, optional=True))
     if not (args.nmea or args.n2k or args.signalk):
         raise GraphnavError("give at least one source: --nmea, --n2k or --signalk", where="--nmea")
+    drop = dropped_kinds(args)
     if args.out:
         ensure_dir(args.out)
     options = options_for(args, args.estimator)
     estimator = make_online(args.estimator, **options)
     scans = load_log(args.scans_from) if args.scans_from else None
     runner = LiveRunner(args.nmea or [], estimator, n2k_sources=args.n2k, signalk_sources=args.signalk,
-                        publish_signalk=args.publish_signalk, publish=args.publish, out_dir=args.out, scans_from=scans,
+                        publish_signalk=args.publish_signalk, drop=drop, publish=args.publish, out_dir=args.out,
+                        scans_from=scans,
                         origin=parse_origin(args.origin), require_checksum=not args.no_checksum_required,
                         duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans,
                         restart=lambda: make_online(args.estimator, **options))

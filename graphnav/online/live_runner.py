@@ -64,6 +64,24 @@ __all__ = ["LATENCY_WINDOW", "RESYNC_STAMPS", "TIME_TOLERANCE_S", "Endpoint", "L
 log_ = logging.getLogger("graphnav.live")
 
 
+class Drop:
+    """Record kinds left out (``KIND`` or ``KIND@SOURCE``, as ``run --drop``); ``drops(rec)`` counts them."""
+
+    def __init__(self, kinds: list[str] | None) -> None:
+        from ..io.drop import parse_kinds
+
+        self.kinds = parse_kinds(kinds)
+        self.plain = {k for k in self.kinds if "@" not in k}
+        self.pairs = {tuple(k.split("@", 1)) for k in self.kinds if "@" in k}
+        self.dropped = 0
+
+    def drops(self, rec: Record) -> bool:
+        if self.kinds and (rec.kind in self.plain or (rec.kind, getattr(rec, "source", "")) in self.pairs):
+            self.dropped += 1
+            return True
+        return False
+
+
 class LiveRunner:
     """The live loop (see the module docstring): ``transport`` -> ``nmea`` (clock + decoder) and
     ``scans`` -> ``estimator`` -> ``sink``. ``run()`` blocks until stopped, then returns :meth:`summary`;
@@ -77,12 +95,13 @@ class LiveRunner:
                  restart: Callable[[], OnlineEstimator] | None = None,
                  time_tolerance: float = TIME_TOLERANCE_S, resync_stamps: int = RESYNC_STAMPS,
                  n2k_sources: list[str] | None = None, signalk_sources: list[str] | None = None,
-                 publish_signalk: str | None = None) -> None:
+                 publish_signalk: str | None = None, drop: list[str] | None = None) -> None:
         self.transport = Transport(sources, scan_sources, n2k=n2k_sources, signalk=signalk_sources)
         self.nmea = NmeaInput(self._records, self._step_back, origin=origin, require_checksum=require_checksum,
                               time_tolerance=time_tolerance, resync_stamps=resync_stamps)
         self.scans = ScanFeed(scans_from)
         self.sink = Sink(publish, out_dir, publish_signalk)
+        self.drop = Drop(drop)
         self.marine: Any = None  # MarineInput, made at the first NMEA 2000 / Signal K line
         self.bad_marine = 0
         self.estimator = estimator
@@ -165,6 +184,8 @@ class LiveRunner:
             self.estimator = self.restart()
 
     def _record(self, rec: Record, arrival: float | None) -> None:
+        if self.drop.drops(rec):
+            return
         self.records += 1
         est = self.estimator.add(rec)
         if est is not None:
@@ -235,6 +256,8 @@ class LiveRunner:
         if self.marine is not None:
             out.update(self.marine.info())
             out["bad_marine_lines"] = self.bad_marine
+        if self.drop.kinds:
+            out["dropped"], out["dropped_records"] = self.drop.kinds, self.drop.dropped
         if self.transport.has_scans:
             out["scans_in"], out["bad_scans"] = self.scans.scans_in, self.scans.bad_scans
         if nm.decoder.frame is not None:

@@ -236,3 +236,19 @@ def test_real_furuno_two_gnss_sources(tmp_path):
     d = np.hypot(np.interp(b[:, 0], a[:, 0], a[:, 1]) - b[:, 1], np.interp(b[:, 0], a[:, 0], a[:, 2]) - b[:, 2])
     assert np.median(d) < 10.0  # one boat: its two receivers within metres of each other
     assert {"odometry", "gnss_velocity", "attitude", "water_speed"} <= set(log.counts())
+
+
+def test_real_aava_head_isam2_follows_its_fixes(tmp_path):
+    """``graphnav run LOG -e isam2`` on the first ~40 s of aava-n2k: the track within 2 m (median)
+    of the log's own fixes (the whole log: 0.88 m, benchmarks/marine_n2k.py)."""
+    from graphnav import estimators
+
+    src = _marine("signalk/aava-n2k.data.gz")
+    part = tmp_path / "head.data"
+    with gzip.open(src, "rt") as fh:
+        part.write_text("".join(next(fh) for _ in range(1500)))
+    log = load_log(part)
+    tr = estimators.run("isam2", log).trajectory
+    g = np.array([[r.t, r.x, r.y] for r in log.of("gnss") if tr.t[0] <= r.t <= tr.t[-1]])
+    d = np.hypot(np.interp(g[:, 0], tr.t, tr.poses[:, 0]) - g[:, 1], np.interp(g[:, 0], tr.t, tr.poses[:, 1]) - g[:, 2])
+    assert len(g) > 60 and np.median(d) < 2.0

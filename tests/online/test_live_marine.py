@@ -156,13 +156,13 @@ def test_signalk_websocket_in_signalk_deltas_out(aava):
 
 
 def test_n2k_gateway_over_udp(aava):
-    lines = aava[0]
+    lines, log = aava
     probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     probe.bind(("127.0.0.1", 0))
     port = probe.getsockname()[1]
     probe.close()
     runner = LiveRunner([], make_online("fixed-lag"), n2k_sources=[f"udp://127.0.0.1:{port}"], idle_exit=1.0,
-                        duration=60.0)
+                        duration=60.0, drop=["water_speed", "gnss@99"])
 
     def send():
         time.sleep(0.5)
@@ -180,6 +180,8 @@ def test_n2k_gateway_over_udp(aava):
     assert summary["n2k_in"] == len(lines) + 1 and summary["bad_marine_lines"] == 1
     assert summary["n2k_pgns"]["129029"] > 30 and summary["estimates"] > 30
     assert summary["origin"]["lat"] == pytest.approx(59.725, abs=0.01)
+    assert summary["dropped"] == ["water_speed", "gnss@99"]  # as run --drop: a kind, a kind of one source
+    assert summary["dropped_records"] == log.counts()["water_speed"]
 
 
 def test_marine_input_errors_and_url():
