@@ -47,10 +47,9 @@ from scipy.stats import chi2
 from ..config import option
 from ..log import NavLog
 from ..result import OnEstimate, RunResult
-from .base import BatchEstimator
 from .fuzzy import FuzzyAlpha, Thresholds
 from .imu_model import resolve_flag, wants_bias
-from .ukf import DEFAULTS, UkfOptions, channel_variances, inputs, measurement_table, run_nav_filter, unmet
+from .ukf import DEFAULTS, Ukf, UkfOptions, channel_variances, measurement_table, run_nav_filter
 
 
 class FuzzyCovarianceMatcher:
@@ -203,14 +202,11 @@ class FuzzyUkfConfig(FuzzyUkfBiasConfig):
                               "fuzzy-ukf-bias), true, false (the paper's 5-state filter)")
 
 
-class FuzzyUkf(BatchEstimator):
-    """The UKF with fuzzy covariance-matching R adaptation (:func:`run_fuzzy_ukf`)."""
+class FuzzyUkf(Ukf):
+    """The UKF with fuzzy covariance-matching R adaptation (:func:`run_fuzzy_ukf`); the UKF's inputs."""
 
     description = "UKF with fuzzy covariance-matching R adaptation (Liu 2019)"
     Config = FuzzyUkfConfig
-    unmet = staticmethod(unmet)
-    inputs = staticmethod(inputs)
-
     batch = staticmethod(run_fuzzy_ukf)
 
 
@@ -219,7 +215,6 @@ class FuzzyUkfBias(FuzzyUkf):
 
     description = "fuzzy-ukf on the bias-augmented ukf-bias state (ours)"
     Config = FuzzyUkfBiasConfig
-
     batch = staticmethod(run_fuzzy_ukf_bias)
 
 

@@ -513,7 +513,6 @@ class Ukf(BatchEstimator):
     Config = UkfConfig
     unmet = staticmethod(unmet)
     inputs = staticmethod(inputs)
-
     batch = staticmethod(run_ukf)
 
 
@@ -522,7 +521,6 @@ class UkfBias(Ukf):
 
     description = "UKF with accelerometer/gyro bias states"
     Config = UkfOptions
-
     batch = staticmethod(run_ukf_bias)
 
 
