@@ -334,6 +334,12 @@ def _kind(msg: pynmea2.NMEASentence) -> str:
     return "PASHR" if isinstance(msg, ASHRATT) else getattr(msg, "sentence_type", type(msg).__name__)
 
 
+DECODER_STATE = ("frame", "clock_src", "back_ok", "day0", "days", "last_tod", "t", "sog", "variation", "fix_clock",
+                 "last_gga_t", "last_fix_t", "last_vel_t", "last_fix", "gst", "why")
+"""The attributes of :class:`NmeaDecoder` a sentence can change (each a scalar, a tuple or an immutable
+frame): its state, saved by ``snapshot()`` and put back by ``restore()``."""
+
+
 class NmeaDecoder:
     """Turns parsed sentences into records, one at a time (shared by the file reader and live mode).
 
@@ -347,9 +353,6 @@ class NmeaDecoder:
     undoes a sentence whose time stamp it rejects).
     """
 
-    #: the attributes a sentence can change (each a scalar, a tuple or an immutable frame): the decoder's state
-    STATE = ("frame", "clock_src", "back_ok", "day0", "days", "last_tod", "t", "sog", "variation", "fix_clock",
-             "last_gga_t", "last_fix_t", "last_vel_t", "last_fix", "gst", "why")
 
     def __init__(self, frame: LocalFrame | None = None, *, day0: float | None = None,
                  heading_sigma_deg: dict[str, float] | None = None, default_hdop: float = DEFAULT_HDOP,
@@ -384,12 +387,12 @@ class NmeaDecoder:
         self.out = NmeaParse()
 
     def snapshot(self) -> tuple[Any, ...]:
-        """The decoder's state (:data:`STATE`), for :meth:`restore`."""
-        return tuple(getattr(self, k) for k in self.STATE)
+        """The decoder's state (:data:`DECODER_STATE`), for :meth:`restore`."""
+        return tuple(getattr(self, k) for k in DECODER_STATE)
 
     def restore(self, state: tuple[Any, ...]) -> None:
         """Put back a :meth:`snapshot`: as if the sentences since were never fed (``out`` aside)."""
-        for k, v in zip(self.STATE, state, strict=True):
+        for k, v in zip(DECODER_STATE, state, strict=True):
             setattr(self, k, v)
 
     # -- time

@@ -9,7 +9,7 @@ import time
 import numpy as np
 from _harbour import harbour_trial
 
-from graphnav.io.nmea import NmeaDecoder, parse_sentence
+from graphnav.io.nmea import DECODER_STATE, NmeaDecoder, parse_sentence
 from graphnav.log import NavLog, Scan
 from graphnav.online.nmea_replay import log_sentences
 from graphnav.online.scan_feed import MAX_WAITING, ScanFeed
@@ -37,7 +37,7 @@ def test_restore_undoes_every_sentence():
         assert _state(dec) == before
         a, b = dec.feed(msg), ref.feed(msg)  # fed for real now: the same as a decoder never rolled back
         assert a == b and _state(dec).keys() == _state(ref).keys()
-    assert {"t", "frame", "last_fix_t", "clock_src"} <= changed <= set(NmeaDecoder.STATE)
+    assert {"t", "frame", "last_fix_t", "clock_src"} <= changed <= set(DECODER_STATE)
 
 
 def _scan(t: float) -> Scan:
