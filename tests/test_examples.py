@@ -173,7 +173,8 @@ def test_config_example_names_every_option_and_every_value_is_valid(tmp_path):
     for cls in (SmootherConfig, ImuConfig, IcpConfig, LoopConfig, CloudMatchConfig):
         missing = [f.name for f in fields(cls) if f.name != "solver"
                    and not re.search(rf"^(#? ?{f.name} =|\[options\.{f.name}[.\]])", text, re.M)]
-        assert not missing, (cls.__name__, missing)
+        assert not missing, (f"examples/config.toml lacks {cls.__name__} field(s) {missing}: regenerate it "
+                             "(PYTHONPATH=. python tools/config_example.py)")
     for path in (CONFIG, _all_uncommented(tmp_path)):
         pairs, options = _config(path)
         assert {a.dest for a, _ in pairs} >= {"estimator", "out"}

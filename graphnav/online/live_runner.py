@@ -37,7 +37,9 @@ transport (:mod:`.transport`), the clock and decoder (:mod:`.stream_clock`), the
 * **Stopping** -- SIGINT/SIGTERM (or :meth:`LiveRunner.stop`, ``duration``, ``idle_exit``, the
   end of the scan replay) ends the loop; files are flushed and closed and ``summary()`` returns
   ``sentences_in``, ``bad_sentences``, ``estimates``, ``published``, ``latency_ms_median``,
-  ``latency_ms_p99`` (GNSS sentence arrival -> solution sent, over the last 100 000 fixes) and more.
+  ``latency_ms_p99``, ``latency_ms_max`` (arrival of the sentence or datagram whose record produced the
+  estimate -> solution sent, every record kind, over the last 100 000 estimates; per kind in
+  ``latency_ms_by_kind``) and more.
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import LogError
-from ..log import Gnss, NavLog, Record
+from ..log import NavLog, Record
 from ..result import Estimate, OnlineEstimator
 from .scan_feed import ScanFeed
 from .sink import LATENCY_WINDOW, Sink, new_live_file
@@ -132,7 +134,7 @@ class LiveRunner:
         if not self.nmea.clock.fits(scan.t, time.perf_counter() if arrival is None else arrival):
             self.nmea.outlier("scan", scan.t)
             return
-        self.scans.hold(scan)
+        self.scans.hold(scan, time.perf_counter() if arrival is None else arrival)
         if self.nmea.t is not None:
             self._hand_over(self.nmea.t)
 
@@ -157,20 +159,23 @@ class LiveRunner:
             if self.nmea.clock.check(rec.t, arrival) == "outlier":
                 self.nmea.time_outliers += 1
                 continue
-            for scan in self.scans.due_waiting(rec.t):
-                self._record(scan, None)
-            self._record(rec, arrival if isinstance(rec, Gnss) else None)
+            for scan, _ in self.scans.due_waiting(rec.t):
+                self._record(scan, arrival)
+            self._record(rec, arrival)
 
     def _records(self, recs: list[Record], arrival: float) -> None:
-        """A sentence's records, after the scans the stream time reached (a GNSS fix is timed from ``arrival``)."""
+        """A sentence's records, after the scans the stream time reached; what they produce is timed
+        from the sentence's ``arrival``."""
         if self.nmea.t is not None:
-            self._hand_over(self.nmea.t)
+            self._hand_over(self.nmea.t, arrival)
         for rec in recs:
-            self._record(rec, arrival if isinstance(rec, Gnss) else None)
+            self._record(rec, arrival)
 
-    def _hand_over(self, t_stream: float) -> None:
-        for scan in self.scans.due(t_stream):
-            self._record(scan, None)
+    def _hand_over(self, t_stream: float, arrival: float | None = None) -> None:
+        """Scans the stream's time has reached go to the estimator; the latency of what they produce
+        counts from ``arrival`` (the sentence that released them) or else their own datagram's."""
+        for scan, came in self.scans.due(t_stream):
+            self._record(scan, came if arrival is None else arrival)
         if self.scans.done:
             self.stop_reason = "end of --scans-from replay"
             self._stop.set()
@@ -189,7 +194,7 @@ class LiveRunner:
         self.records += 1
         est = self.estimator.add(rec)
         if est is not None:
-            self.sink.emit(est, arrival, self.nmea.decoder.frame)
+            self.sink.emit(est, arrival, self.nmea.decoder.frame, rec.kind)
 
     # -- the loop
     def run(self) -> dict[str, Any]:
@@ -246,7 +251,7 @@ class LiveRunner:
         out: dict[str, Any] = {
             "sentences_in": nm.sentences_in, "bad_sentences": nm.bad,
             "estimates": sink.pop("estimates"), "published": sink.pop("published"),
-            **{k: sink.pop(k) for k in ("latency_ms_median", "latency_ms_p99", "latency_ms_max")},
+            **{k: sink.pop(k) for k in ("latency_ms_median", "latency_ms_p99", "latency_ms_max", "latency_ms_by_kind")},
             "ignored_sentences": nm.ignored, "time_outliers": nm.time_outliers, "clock_resyncs": nm.clock.resyncs,
             "records": self.records, "wall_s": self.wall_s,
             "sentences_per_s": nm.sentences_in / self.wall_s if self.wall_s > 0 else None,

@@ -26,11 +26,12 @@ MAX_WAITING = 100  # network scans held for the stream clock at most (the oldest
 
 
 class ScanFeed:
-    """``packet(data)``: one datagram -> a waiting scan (or a bad one, counted); ``due(t)``: the scans
-    the stream time ``t`` has reached, in time order (waiting ones first, then the replay's)."""
+    """``packet(data)``: one datagram -> a scan (or a bad one, counted); ``hold(scan, arrival)``: it waits;
+    ``due(t)``: the scans the stream time ``t`` has reached, each with its datagram's arrival (``None``:
+    replayed), in time order (waiting ones first, then the replay's)."""
 
     def __init__(self, replay: NavLog | None = None) -> None:
-        self.waiting: list[Scan] = []
+        self.waiting: list[tuple[Scan, float]] = []
         self.scans_in = self.bad_scans = 0
         self.replay = [r for r in replay.records if isinstance(r, Scan)] if replay is not None else None
         self.replayed = 0
@@ -58,22 +59,22 @@ class ScanFeed:
                 log_.warning("bad scan packet #%d (%s)", self.bad_scans, err)
             return None
 
-    def hold(self, scan: Scan) -> None:
-        """Keep a network scan until the stream's time reaches it."""
+    def hold(self, scan: Scan, arrival: float) -> None:
+        """Keep a network scan (that arrived at ``arrival``) until the stream's time reaches it."""
         if len(self.waiting) >= MAX_WAITING:
             self.waiting.pop(0)
             self.bad_scans += 1
-        bisect.insort(self.waiting, scan, key=lambda r: r.t)
+        bisect.insort(self.waiting, (scan, arrival), key=lambda sa: sa[0].t)
 
-    def due_waiting(self, t_stream: float) -> list[Scan]:
-        """The network scans the stream time ``t_stream`` has reached."""
+    def due_waiting(self, t_stream: float) -> list[tuple[Scan, float]]:
+        """The network scans the stream time ``t_stream`` has reached, with their arrival."""
         out = []
-        while self.waiting and self.waiting[0].t <= t_stream + 1e-6:
+        while self.waiting and self.waiting[0][0].t <= t_stream + 1e-6:
             out.append(self.waiting.pop(0))
         return out
 
-    def due(self, t_stream: float) -> list[Scan]:
-        out = self.due_waiting(t_stream)
+    def due(self, t_stream: float) -> list[tuple[Scan, float | None]]:
+        out: list[tuple[Scan, float | None]] = list(self.due_waiting(t_stream))
         if self.replay is None:
             return out
         if self.shift is None and self.replay:
@@ -82,5 +83,5 @@ class ScanFeed:
         while self.replayed < len(self.replay) and self.replay[self.replayed].t + self.shift <= t_stream:
             sc = self.replay[self.replayed]
             self.replayed += 1
-            out.append(replace(sc, t=sc.t + self.shift) if self.shift else sc)
+            out.append((replace(sc, t=sc.t + self.shift) if self.shift else sc, None))
         return out

@@ -21,11 +21,23 @@ from ..io.nmea import UERE_M
 from ..io.nmea_out import solution_sentences
 from ..io.outputs import ensure_dir
 from ..io.tum import TrajectoryWriter
+from ..log import RECORD_TYPES
 from ..result import Estimate
 from .transport import parse_endpoint, resolve
 
 log_ = logging.getLogger("graphnav.live")
 LATENCY_WINDOW = 100_000
+_KINDS = ("", *RECORD_TYPES)  # latency ring buffer: the record kind of each estimate ("": unknown)
+
+
+def _by_kind(lat: np.ndarray, kinds: np.ndarray) -> dict[str, dict[str, float | int]]:
+    """Latency median / p99 / max [ms] and count per record kind that produced estimates."""
+    out: dict[str, dict[str, float | int]] = {}
+    for code in np.unique(kinds):
+        v = lat[kinds == code]
+        out[_KINDS[int(code)] or "other"] = {"n": int(v.size), "median": float(np.median(v)),
+                                               "p99": float(np.percentile(v, 99)), "max": float(v.max())}
+    return out
 
 
 def new_live_file(out_dir: Path, now: float | None = None) -> TrajectoryWriter:
@@ -62,6 +74,7 @@ class Sink:
         self.published_signalk = 0
         self.writer: TrajectoryWriter | None = None
         self.latency_ms = np.full(LATENCY_WINDOW, np.nan)  # ring buffer: constant memory
+        self.latency_kind = np.zeros(LATENCY_WINDOW, dtype=np.int8)  # index into _KINDS of each
         self.n_latency = self.estimates = self.published = 0
         self.last: Estimate | None = None
         self.hdop = 1.0  # published HDOP: from the last estimate that carried a covariance
@@ -83,8 +96,9 @@ class Sink:
             if s is not None:
                 s.close()
 
-    def emit(self, est: Estimate, arrival: float | None, frame: LocalFrame | None) -> None:
-        """Publish one estimate (NMEA), time its latency, append it to the output file."""
+    def emit(self, est: Estimate, arrival: float | None, frame: LocalFrame | None, kind: str = "") -> None:
+        """Publish one estimate (NMEA), time its latency (``kind``: the record kind that produced it),
+        append it to the output file."""
         self.estimates += 1
         self.last = est
         if self.sock is not None and frame is not None:
@@ -106,7 +120,9 @@ class Sink:
             except OSError as exc:
                 log_.warning("publish to %s failed: %s", self.publish_signalk, exc)
         if arrival is not None:  # the published solution is the latency-critical path; the file comes next
-            self.latency_ms[self.n_latency % LATENCY_WINDOW] = (time.perf_counter() - arrival) * 1e3
+            i = self.n_latency % LATENCY_WINDOW
+            self.latency_ms[i] = (time.perf_counter() - arrival) * 1e3
+            self.latency_kind[i] = _KINDS.index(kind) if kind in _KINDS else 0
             self.n_latency += 1
         if self.writer is not None:
             self.writer.write(est.t, est.vec, est.cov)
@@ -117,7 +133,8 @@ class Sink:
             "estimates": self.estimates, "published": self.published,
             "latency_ms_median": float(np.median(lat)) if lat.size else None,
             "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None,
-            "latency_ms_max": float(lat.max()) if lat.size else None}
+            "latency_ms_max": float(lat.max()) if lat.size else None,
+            "latency_ms_by_kind": _by_kind(lat, self.latency_kind[: lat.size])}
         if self.publish_signalk is not None:
             out["published_signalk"] = self.published_signalk
         if self.out_dir is not None:

@@ -47,23 +47,24 @@ def _scan(t: float) -> Scan:
 def test_scan_feed_holds_scans_for_the_stream_clock():
     feed = ScanFeed()
     for t in (3.0, 1.0, 2.0):
-        feed.hold(_scan(t))
-    assert feed.due(0.5) == [] and [s.t for s in feed.due(2.0)] == [1.0, 2.0] and [s.t for s in feed.due(9)] == [3.0]
+        feed.hold(_scan(t), 100.0 + t)
+    assert feed.due(0.5) == [] and [(s.t, a) for s, a in feed.due(2.0)] == [(1.0, 101.0), (2.0, 102.0)]
+    assert [s.t for s, _ in feed.due(9)] == [3.0]
     pkt = {"t": 5.0, "type": "scan", "ranges": [1.0, 2.0], "angles": [0.0, 0.1]}
     assert feed.packet(json.dumps(pkt).encode()).t == 5.0
     assert feed.packet(b"{not json") is None and feed.packet(b'{"type": "gnss"}') is None
     assert (feed.scans_in, feed.bad_scans) == (3, 2)
     for k in range(MAX_WAITING + 3):
-        feed.hold(_scan(10.0 + k))
-    assert len(feed.waiting) == MAX_WAITING and feed.waiting[0].t == 13.0 and feed.bad_scans == 5
+        feed.hold(_scan(10.0 + k), 0.0)
+    assert len(feed.waiting) == MAX_WAITING and feed.waiting[0][0].t == 13.0 and feed.bad_scans == 5
     assert not feed.done
 
 
 def test_scan_feed_replays_a_log_on_the_stream_clock():
     log = NavLog([_scan(0.0), _scan(0.5), _scan(1.0)])
     feed = ScanFeed(log)
-    assert [s.t for s in feed.due(1.7e9)] == [1.7e9]  # 1.7e9 s apart: shifted onto the stream's time
-    assert [s.t for s in feed.due(1.7e9 + 0.6)] == [1.7e9 + 0.5] and not feed.done
+    assert [(s.t, a) for s, a in feed.due(1.7e9)] == [(1.7e9, None)]  # 1.7e9 s apart: shifted onto the stream
+    assert [s.t for s, _ in feed.due(1.7e9 + 0.6)] == [1.7e9 + 0.5] and not feed.done
     assert len(feed.due(1.7e9 + 2)) == 1 and feed.done
 
 
