@@ -26,7 +26,7 @@ class SmootherConfig:
 
     # -- solver ------------------------------------------------------------------------------
     solver: str = option("isam2", "\"isam2\" | \"fixed-lag\" | \"batch\" (set by the estimator's name on the CLI)")
-    lag: float = option(20.0, "fixed-lag window [s]")
+    lag: float = option(20.0, "fixed-lag window", unit="s")
     rebase_every: int | None = option(6000,
         "live mode (no history kept): re-anchor the fixed-lag smoother every N keyframes")
     relinearize_threshold: float = option(0.05, "poses: tangent-space change that triggers relinearization")
@@ -90,9 +90,10 @@ class SmootherConfig:
         "odometry records as between factors (false: the motion model ties the poses). None: on the Pose2 graph yes; "
         "on the Pose3 graph (an IMU) no: a record of speed along the bow and rate of turn is a unicycle, wrong for a "
         "boat in a current (Solent s1, 0.85 m/s current: isam2 3.36 m with it, 1.25 m without; the UKF 3.16 m)")
-    odo_sigma_v: float = option(0.02,
-        "when the log gives no odometry sigmas: noise densities [per sqrt(s)], so the integrated error does not depend"
-        " on the sample rate, hypot(floor, rel * |v|) and hypot(floor, rel * |w|) [m/s sqrt(s)] floor")
+    # when the log gives no odometry sigmas: noise densities [per sqrt(s)], so the integrated error
+    # does not depend on the sample rate, hypot(floor, rel * |v|) and hypot(floor, rel * |w|)
+    odo_sigma_v: float = option(0.02, "odometry speed noise density floor (when the log gives no sigmas): "
+                                "hypot(this, odo_sigma_v_rel * |v|)", unit="m/s sqrt(s)")
     odo_sigma_v_rel: float = option(0.1, "x |v|")
     odo_sigma_w_deg: float = option(1.0, "floor", unit="deg/s sqrt(s)")
     odo_sigma_w_rel: float = option(0.1, "x |w|")
