@@ -203,8 +203,8 @@ class LiveRunner:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 old[sig] = signal.signal(sig, self.stop)
         try:
+            self.transport.open()  # listening before the output file exists (what a caller waits for)
             self.sink.open()
-            self.transport.open()
             log_.info("listening on %s; publishing to %s", self.transport, self.sink.publish or "-")
             self._loop()
             flush = getattr(self.estimator, "flush", None)  # keyframes waiting for a later record
