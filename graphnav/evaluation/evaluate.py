@@ -8,7 +8,7 @@ import numpy as np
 
 from ..log import NavLog
 from ..result import RunResult
-from .metrics import ate, event_windows, heading_error, movement_errors, nees_stats, rpe, window_errors
+from .metrics import ate, event_windows, gnss_residuals, heading_error, movement_errors, nees_stats, rpe, window_errors
 
 
 def _median(a: np.ndarray) -> float:
@@ -35,6 +35,24 @@ def errors_by_event(result: RunResult, log: NavLog, *, max_dt: float = 0.02) -> 
                   "online_max_m": o["max"] if o else None})
         out[kind] = d
     return out
+
+
+def gnss_scores(traj: Any, log: NavLog) -> dict[str, Any]:
+    """What a log without truth can say about an estimate: its residuals to the log's GNSS fixes
+    (``gnss_residual_rms_m``, ``gnss_residual_median_m``) and their normalised innovation
+    (``gnss_nis_mean``: about 2 when the estimate's covariance and the fixes' sigma are honest; the
+    fixes the estimator used pull it below). ``{}`` without GNSS fixes."""
+    if not log.of("gnss"):
+        return {}
+    c = log.columns("gnss")
+    r = gnss_residuals(traj, c["t"], np.column_stack([c["x"], c["y"]]), c["sigma"])
+    e = r["residual_m"]
+    if not e.size:
+        return {}
+    nis = r["nis"]
+    return {"gnss_residual_rms_m": float(np.sqrt(np.mean(e ** 2))), "gnss_residual_median_m": float(np.median(e)),
+            "gnss_nis_mean": float(np.mean(nis)) if nis is not None and nis.size else None,
+            "gnss_fixes_scored": int(e.size)}
 
 
 def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
@@ -79,6 +97,7 @@ def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
             ns = nees_stats(result.online, ref, max_dt=max_dt)
             out["online_nees_mean"] = ns["mean"] if ns else None
         out["errors_by_event"] = errors_by_event(result, log, max_dt=max_dt)
+    out.update(gnss_scores(traj, log))
     for k in ("anchor", "loop_closures", "loop_candidates"):
         if k in result.info:
             out[k] = result.info[k]

@@ -76,14 +76,14 @@ from .step import Step
 
 #: sensor groups of the factors (the noise estimation scales ``SCALABLE`` ones)
 GROUPS = ("anchor", "odometry", "motion", "icp", "loop", "gnss", "compass", "bias", "beacon", "chart", "pose_prior",
-          "cloud", "imu", "imu_bias", "gnss_velocity", "water_speed", "current")
+          "cloud", "imu", "imu_bias", "gnss_velocity", "water_speed", "current", "attitude")
 SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon", "cloud")
 EPS = 1e-9  # [s] times closer than this are equal (as keyframes.schedule)
 MIN_IMU_DT = 1e-4  # [s] keyframes closer than this share their state (no ImuFactor: its covariance would vanish)
 V0_STATED_SIGMA = 0.2  # [m/s] 1-sigma of an initial velocity the log states (meta["initial_velocity"])
 #: the Pose3 graph's estimate of the previous keyframe: pose, nav-frame velocity, IMU bias, velocity covariance
 NavPrev = tuple[gtsam.Pose3, NDArray[np.float64], gtsam.imuBias.ConstantBias, NDArray[np.float64] | None]
-MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior", "gnss_velocity", "water_speed")
+MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior", "gnss_velocity", "water_speed", "attitude")
 
 
 class GraphBuilder:
@@ -552,7 +552,7 @@ class GraphBuilder:
             s.values.insert(IB(k), bias)
             s.stamps[V(k)] = s.stamps[IB(k)] = tb
             return gtsam.NavState(pose, vel), np.zeros(3), np.diag(floor)
-        pim = self.imu.preintegrate(bias, ta, tb)
+        pim = self.imu.preintegrate(bias, ta, tb, speed=float(np.hypot(vel[0], vel[1])))
         s.add(F.imu_factor(k - 1, k, pim), "imu")
         pred, rel, cov = relative_prediction(pim, pose, vel, bias, vel_cov)
         cov = cov + np.diag(np.square(self._motion_floor()))

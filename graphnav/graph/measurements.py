@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 import factors as F
 
-from ..log import BeaconObs, Gnss, GnssVelocity, Heading, KnownBeacon, PosePrior, Record, WaterSpeed
+from ..log import Attitude, BeaconObs, Gnss, GnssVelocity, Heading, KnownBeacon, PosePrior, Record, WaterSpeed
 from .smoother_config import SmootherConfig
 from .space import PlanarSpace, V, W
 from .step import Step
@@ -110,6 +110,14 @@ class Measurements:
                 if not math.isfinite(r.sigma):
                     self.defaulted.add("gnss_velocity")
                 s.add(self.space.velocity(a, r.vx, r.vy, sv, cfg.gnss_robust), "gnss_velocity")
+            elif isinstance(r, Attitude):
+                if not self.nav:  # the planar graph has no roll and pitch
+                    self.counts["ignored"] += 1
+                    continue
+                sa = r.sigma if math.isfinite(r.sigma) else math.radians(cfg.attitude_sigma_deg)
+                if not math.isfinite(r.sigma):
+                    self.defaulted.add("attitude")
+                s.add(self.space.attitude(xa, r.roll, r.pitch, sa), "attitude")
             elif isinstance(r, BeaconObs):
                 self._beacon(s, xa, at(a), r, delta)
             elif isinstance(r, PosePrior):

@@ -140,6 +140,9 @@ class SmootherConfig:
         "kernel and the batch's drop")
     gnss_gate_max_rejects: int = option(15, "...unless this many in a row were rejected (re-acquire after drift)")
     gnss_gate_outage: float = option(5.0, "...and the first fix after a gap this long is not gated (outage)", unit="s")
+    attitude_sigma_deg: float = option(
+        1.0, "an attitude record's roll/pitch 1-sigma when it states none (a MEMS AHRS datasheet's dynamic "
+        "accuracy); attitude records are used on the IMU graph only (Pose3)", unit="deg")
     gnss_velocity_sigma: float = option(0.1,
         "a GNSS velocity record's 1-sigma per axis when it states none", unit="m/s")
 
