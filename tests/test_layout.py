@@ -156,6 +156,7 @@ KNOWN_LARGE = {
     "graphnav.estimators.scan_to_map.run_scan_to_map",
     "graphnav.graph.builder.GraphBuilder.step", "graphnav.graph.navigator.Navigator._finish",
     "graphnav.scan._ndt_fast.derivs3", "graphnav.scan.weighted_icp.match_points", "graphnav.scan.weighted_icp._report",
+    "graphnav.scan._icp_fast.report_sums",
 }
 
 
