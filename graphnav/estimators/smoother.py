@@ -35,7 +35,7 @@ def _inputs(log: NavLog, options: dict[str, Any]) -> set[str]:
     if options.get("use_cloud", True):
         kinds.add("cloud")
     if nav:
-        kinds |= {"gnss_velocity", "water_speed"} | ({"imu"} if has_imu else set())
+        kinds |= {"gnss_velocity", "water_speed", "attitude"} | ({"imu"} if has_imu else set())
     return kinds
 
 
