@@ -29,7 +29,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from ..config import option
 from ..geometry import wrap_angle
@@ -37,6 +36,7 @@ from ..log import BeaconObs, NavLog, Odometry
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .base import BatchEstimator
+from .gating import chi2_ppf
 
 PAPER_SIGMAS = {                              # the paper's section 7, per record (white noise)
     "sigma_v": 0.5,                           # m/s
@@ -257,7 +257,7 @@ class EkfSlam:
 
 @lru_cache(maxsize=32)
 def _gate_threshold(gate: float) -> float:
-    return float(chi2.ppf(gate, 2))
+    return float(chi2_ppf(gate, 2))
 
 
 def _start(log: NavLog) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
