@@ -42,7 +42,7 @@ from ..geometry import cov_to_world, wrap_angle
 from ..log import KnownBeacon, NavLog, Record, validate_record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
-from . import noise, robust
+from . import gnc, noise
 from .builder import GraphBuilder, Matcher, NavPrev, Step
 from .smoother_config import SmootherConfig
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt, marginals
@@ -497,7 +497,7 @@ class Navigator:
             info["gnss_reconsidered"] = len(rejected)
         values, iters = levenberg_marquardt(graph, init, self.solver.lm)
         if cfg.robust_backend == "gnc":
-            graph, self.groups, values, info["switched_off"] = robust.switch_off(
+            graph, self.groups, values, info["switched_off"] = gnc.switch_off(
                 graph, values, self.groups, self.solver.lm, cfg.robust_prob, cfg.robust_groups)
         dropped = 0
         for _ in range(3 if cfg.gnss_gate is not None else 0):
@@ -517,7 +517,7 @@ class Navigator:
             graph, values, vce = noise.estimate_scales(graph, values, self.groups, scalable, cfg.noise_iterations,
                                                        self.solver.lm)
             info["noise_scale"] = vce
-        info["odometry_consistency"] = robust.odometry_consistency(graph, values, self.groups, cfg.robust_prob)
+        info["odometry_consistency"] = gnc.odometry_consistency(graph, values, self.groups, cfg.robust_prob)
         self.solver.graph = graph
         info["lm_iterations"] = iters
         info["converge_ms"] = (time.perf_counter() - c0) * 1e3

@@ -179,7 +179,7 @@ class SmootherConfig:
         "the yaw (a GNSS-only log); odometry and GNSS recover a start 180 deg off (square loop: online 0.80 m against "
         "0.68 m with pi)")
 
-    # -- a back end that cannot lose to its inputs (graphnav.graph.robust) ------------------------
+    # -- a back end that cannot lose to its inputs (graphnav.graph.gnc) ------------------------
     robust_backend: str = option(
         "gnc", "batch / isam2's closing step: scan-match and GNSS factors the data switch off (graduated "
         "non-convexity, truncated least squares) when any lies beyond its chi-square bound; \"off\"")

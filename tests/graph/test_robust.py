@@ -1,4 +1,4 @@
-"""The back end that cannot lose to its inputs (graphnav.graph.robust): GNC switches off a wrong scan
+"""The back end that cannot lose to its inputs (graphnav.graph.gnc): GNC switches off a wrong scan
 match and keeps the right ones; the odometry consistency check tells a smoothed track that follows
 the odometry within its noise from one a biased matcher has rotated."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from graphnav.graph.robust import odometry_consistency, switch_off
+from graphnav.graph.gnc import odometry_consistency, switch_off
 from graphnav.graph.solver import LmSettings, levenberg_marquardt
 
 ODO = np.array([0.05, 0.05, np.radians(1.0)])  # odometry sigmas per step
