@@ -102,3 +102,34 @@ def test_a_failed_command_leaves_nothing_in_out(tmp_path, bad_log, argv, existin
         assert list(out.iterdir()) == []  # the manifest too
     else:
         assert not out.exists()
+
+
+@pytest.mark.parametrize("fail_after", [0, 30])
+def test_a_run_that_dies_mid_way_keeps_only_its_online_estimates(tmp_path, monkeypatch, fail_after):
+    """The estimator raises after ``fail_after`` records: before any estimate nothing is left (no
+    header-only online.tum); after some, online.tum holds them, listed in the manifest, and nothing else."""
+    from graphnav.graph.navigator import Navigator
+    from graphnav.sim.square import square_loop
+
+    log = tmp_path / "sq.jsonl"
+    save_log(square_loop(0, side=20.0, laps=1), log)
+    add = Navigator.add
+    seen = [0]
+
+    def failing(self, rec):
+        seen[0] += 1
+        if seen[0] > fail_after:
+            raise RuntimeError("boom")
+        return add(self, rec)
+
+    monkeypatch.setattr(Navigator, "add", failing)
+    out = tmp_path / "o"
+    with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+        code = main(["run", str(log), "-e", "isam2", "--out", str(out)])
+    assert code == 1
+    if fail_after == 0:
+        assert not out.exists()
+    else:
+        names = sorted(p.name for p in out.iterdir())
+        assert "online.tum" in names and set(names) <= {"online.tum", "online.cov", ".graphnav-outputs.json"}
+        assert len((out / "online.tum").read_text().splitlines()) > 1

@@ -1,4 +1,9 @@
-"""``graphnav run LOG --estimator NAME --out DIR``: one estimator on one log, scored against truth."""
+"""``graphnav run LOG --estimator NAME --out DIR``: one estimator on one log, scored against truth.
+
+``graphnav run LOG [LOG ...] -e NAME --out DIR [--scheduler ADDR]``: a fleet of logs, in parallel on a
+Dask LocalCluster (loopback) or an existing scheduler (:mod:`graphnav.evaluation.sweep`), each log's
+outputs in ``DIR/<log name>/``, resumable (``DIR/fleet.jsonl``); one ``{"runs": [...]}`` object.
+"""
 
 from __future__ import annotations
 
@@ -35,7 +40,10 @@ log_ = logging.getLogger("graphnav.run")
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run one estimator on a log", description=__doc__)
     add_log_args(p)
-    next(a for a in p._actions if a.dest == "log").nargs = "?"  # (not needed with --list-options)
+    log_arg = next(a for a in p._actions if a.dest == "log")
+    log_arg.nargs = "*"  # (none with --list-options; several: a fleet, run in parallel)
+    log_arg.metavar = "LOG"
+    log_arg.help += "; several logs run in parallel on Dask (--out DIR needed: DIR/<log name>/ each)"
     p.add_argument("--estimator", "-e", help="one of: " + ", ".join(estimators.names()) + " (required)")
     p.add_argument("--list-options", metavar="ESTIMATOR",
                    help="print ESTIMATOR's -O options (default and meaning; one JSON object with --json) and exit")
@@ -47,6 +55,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--option", "-O", action="append", metavar="[ESTIMATOR.]KEY=VALUE",
                    help="estimator option (VALUE parsed as JSON when it can be), e.g. -O lag=10; repeatable; "
                         "--list-options ESTIMATOR lists them")
+    p.add_argument("--scheduler", metavar="ADDR",
+                   help="several logs: an existing Dask scheduler (tcp://host:8786), or 'serial' "
+                        "(default: a LocalCluster on 127.0.0.1 for the run)")
+    p.add_argument("--workers", type=int, default=2, help="several logs: LocalCluster worker processes (default 2)")
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -74,13 +86,17 @@ def list_options(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     if args.list_options:
         return list_options(args)
-    missing = [n for n, v in (("LOG", args.log), ("--estimator", args.estimator)) if not v]
+    logs = list(args.log) if isinstance(args.log, list) else [args.log] if args.log else []
+    missing = [n for n, v in (("LOG", logs), ("--estimator", args.estimator)) if not v]
     if missing:
         raise ValueError(f"graphnav run: the following arguments are required: {', '.join(missing)}")
     estimators.get(args.estimator)  # (an unknown name, option or kind fails before --out is touched)
     options = options_for(args, args.estimator)
     check_options(args.estimator, options)
     dropped = dropped_kinds(args)
+    if len(logs) > 1:
+        return _fleet(args, logs, options, dropped)
+    args.log = logs[0]
     if not args.out:
         return _run(args, options, dropped, None)
     out = OutDir(args.out, command="run", overwrite=args.overwrite)
@@ -95,6 +111,15 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, options: dict, dropped: list[str], out: OutDir | None,
          online: list[TrajectoryWriter] | None = None) -> int:
+    summary = _single(args, options, dropped, out, online)
+    human = "\n".join(f"{k:22s} {v}" for k, v in jsonable(summary).items())
+    emit(args, summary, human)
+    return 0
+
+
+def _single(args: argparse.Namespace, options: dict, dropped: list[str], out: OutDir | None,
+            online: list[TrajectoryWriter] | None = None) -> dict:
+    """One estimator on ``args.log``: the summary (the single run's JSON fields); files into ``out``."""
     log = drop_kinds(load_log(args.log, lenient=args.lenient, **log_options(args)), dropped)
     why = estimators.get(args.estimator).unmet(log)
     if why:
@@ -144,6 +169,105 @@ def _run(args: argparse.Namespace, options: dict, dropped: list[str], out: OutDi
         summary.update(write_wgs84(out, tracks, log.meta))  # WGS84 tracks, or "wgs84": None and why
         out.write_text("summary.json", json.dumps(jsonable({**summary, "info": result.info}), indent=2))
         summary["out"] = str(args.out)
-    human = "\n".join(f"{k:22s} {v}" for k, v in jsonable(summary).items())
-    emit(args, summary, human)
-    return 0
+    return summary
+
+
+# -- a fleet of logs ---------------------------------------------------------------------------------
+FLEET_RESULTS = "fleet.jsonl"  # DIR/fleet.jsonl: one finished log per line (the sweep's results file)
+
+
+def log_names(logs: list[str]) -> list[str]:
+    """``DIR/<name>/`` of each log: its file name without the log suffixes, made unique (``-2``, ...)."""
+    names: list[str] = []
+    for lg in logs:
+        name = Path(lg).name
+        for suffix in (".gz", ".bz2", ".jsonl", ".json", ".npz", ".nmea", ".log", ".txt", ".bag", ".csv"):
+            name = name.removesuffix(suffix)
+        name = name or "log"
+        base, i = name, 1
+        while name in names:
+            i += 1
+            name = f"{base}-{i}"
+        names.append(name)
+    return names
+
+
+def _fleet(args: argparse.Namespace, logs: list[str], options: dict, dropped: list[str]) -> int:
+    """Every log of ``logs`` through the estimator on Dask (:func:`graphnav.evaluation.sweep.run_sweep`;
+    a log already in ``DIR/fleet.jsonl`` with the same parameters is not run again); a failed log is
+    a run with an ``error``, the others go on. Exit 0 when every log ran, else 2."""
+    from ..evaluation.sweep import run_sweep
+    from ._common import progress_enabled
+
+    if not args.out:
+        raise ValueError("graphnav run: several logs need --out DIR (each log's outputs go to DIR/<log name>/)")
+    root = Path(args.out)
+    results = root / FLEET_RESULTS
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"--out {root}: not a directory")
+    if root.exists() and any(root.iterdir()) and not results.exists() and not args.overwrite:
+        raise ValueError(f"--out {root} is not empty and holds no {FLEET_RESULTS} to resume "
+                         "(--overwrite replaces graphnav's outputs there)")
+    root.mkdir(parents=True, exist_ok=True)
+    reader = {"lenient": bool(args.lenient), "max_speed": args.max_speed,
+              "date": args.date.isoformat() if getattr(args, "date", None) else None}
+    tasks = [{"key": name, "log": str(lg), "stamp": _stamp(lg), "estimator": args.estimator, "options": options,
+              "dropped": dropped, "reader": reader, "out": str(root / name)}
+             for lg, name in zip(logs, log_names(logs), strict=True)]
+    report: dict = {}
+    t0 = time.perf_counter()
+    runs = run_sweep(fleet_task, tasks, out=results, scheduler=args.scheduler, workers=args.workers,
+                     progress=progress_enabled(args), desc=f"{args.estimator} on {len(tasks)} logs", report=report,
+                     overwrite=bool(args.overwrite))
+    wall = time.perf_counter() - t0
+    failed = sum(1 for r in runs if r.get("error"))
+    obj = {"runs": runs, "logs": len(runs), "failed": failed, "scheduler": report.get("scheduler"),
+           "reused": len(runs) - report.get("pending", len(runs)), "wall_s": wall,
+           "runtime_s_sum": sum(float(r.get("runtime_s") or 0.0) for r in runs), "out": str(root)}
+    rows = [f"{'log':24s} {'ATE RMSE [m]':>12s} {'runtime [s]':>11s}  error"]
+    for r in runs:
+        ate, rt = r.get("ate_rmse_m"), r.get("runtime_s")
+        ate_s = "-" if ate is None else f"{ate:.3f}"
+        rt_s = "-" if rt is None else f"{rt:.1f}"
+        rows.append(f"{r['log'][-24:]:24s} {ate_s:>12s} {rt_s:>11s}  {r.get('error') or ''}")
+    rows.append(f"{len(runs)} logs ({failed} failed) in {wall:.1f} s wall on {obj['scheduler']}; outputs in {root}/")
+    emit(args, obj, "\n".join(rows))
+    return 2 if failed else 0
+
+
+def _stamp(path: str) -> list[int] | None:
+    """Size and modification time of a log (a directory: of its newest entry): a changed log is run again."""
+    try:
+        p = Path(path)
+        st = [p.stat(), *(c.stat() for c in p.iterdir())] if p.is_dir() else [p.stat()]
+    except OSError:
+        return None
+    return [sum(s.st_size for s in st), max(s.st_mtime_ns for s in st)]
+
+
+def fleet_task(task: dict) -> dict:
+    """One log of a fleet (runs in a Dask worker): the single run's summary, its files in
+    ``task["out"]``; any failure is the run's ``error`` (one line), never an exception."""
+    import datetime as dt
+    from dataclasses import replace
+
+    from ..errors import GraphnavError
+    from ..log import default_limits, set_default_limits
+
+    rd = task["reader"]
+    if rd.get("max_speed") is not None:
+        set_default_limits(replace(default_limits(), max_speed=float(rd["max_speed"])))
+    args = argparse.Namespace(log=task["log"], estimator=task["estimator"], lenient=rd["lenient"], json=True,
+                              quiet=True, date=dt.date.fromisoformat(rd["date"]) if rd.get("date") else None,
+                              out=Path(task["out"]))
+    head = {"log": task["log"], "estimator": task["estimator"]}
+    try:
+        out = OutDir(args.out, command="run", overwrite=True)  # the fleet's own sub-directory
+        online: list[TrajectoryWriter] = []
+        with out.discarded_on_error(lambda: []):
+            summary = _single(args, dict(task["options"]), list(task["dropped"]), out, online)
+        return jsonable({**head, **summary})
+    except (GraphnavError, OSError, ValueError, KeyError) as err:
+        return {**head, "error": " ".join(str(err).split())[:500]}
+    except Exception as err:  # noqa: BLE001 - a bug in one log's run must not stop the fleet
+        return {**head, "error": f"internal error: {type(err).__name__}: {' '.join(str(err).split())[:400]}"}

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..log import BeaconObs, Gnss, Heading, KnownBeacon, PosePrior, Record, Truth
-from .mounts import parse_mounts
+from .mounts import mount_of, parse_mounts
 from .smoother_config import SmootherConfig
 
 
@@ -47,7 +47,7 @@ def choose_anchor(held: list[Record], charted: dict[str, KnownBeacon], cfg: Smoo
         g = gnss[0]
         yaw = head[0].yaw if head else 0.0
         sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 3.0 * g.sigma
-        mount = parse_mounts(cfg.mounts).get("gnss")
+        mount = mount_of(parse_mounts(cfg.mounts), "gnss", g.source)
         x, y = g.x, g.y
         if mount is not None and (mount.x or mount.y):  # the fix is the antenna's: the body is an arm behind it
             c, s = math.cos(yaw), math.sin(yaw)

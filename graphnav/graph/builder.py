@@ -159,9 +159,9 @@ class GraphBuilder:
         # the measurement factors and their state (beacons, compass-bias frame, GNSS gate, water current)
         self.meas = Measurements(cfg, self.space, self.imu is not None, self.charted, self.kf_t, self.defaulted,
                                  self.counts)
-        if "gnss" in self.mounts:
-            g = self.mounts["gnss"]
-            self.meas.arm = (g.x, g.y, g.z)
+        for name, g in self.mounts.items():  # the GNSS antennas: the sensor's, and each source's
+            if name == "gnss" or name.startswith("gnss@"):
+                self.meas.arms[name.partition("@")[2]] = (g.x, g.y, g.z)
         if "water_speed" in self.mounts:
             self.meas.log_yaw = self.mounts["water_speed"].yaw
             if abs(math.cos(self.meas.log_yaw)) < 0.5:

@@ -42,7 +42,7 @@ class Measurements:
         self.after_outage: set[int] = set()  # ids of the first fixes after a GNSS outage (not gated)
         self.current: tuple[int, int] | None = None  # the water current W(j): (first, newest) keyframe
         self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
-        self.arm: tuple[float, float, float] | None = None  # the GNSS antenna's lever arm (body frame, m)
+        self.arms: dict[str, tuple[float, float, float]] = {}  # GNSS lever arms (body frame, m) by source ("": all)
         self.log_yaw = 0.0  # [rad] the speed log's mounting yaw (its axis from the bow)
 
     def add(self, s: Step, k: int, due: list[tuple[int, Record]], pose_k: gtsam.Pose2,
@@ -65,7 +65,8 @@ class Measurements:
             delta = offset(a, r.t, k) if cfg.compensate_attachment else None
             if isinstance(r, Gnss):
                 rx, ry = r.x, r.y
-                arm = (0.0, 0.0) if self.arm is None else self.arm[:2]
+                arm3 = self.arms.get(r.source) or self.arms.get("")
+                arm = (0.0, 0.0) if arm3 is None else arm3[:2]
                 if delta is not None:  # the fix is of the antenna of X_a * delta at r.t: move it back to X_a's
                     pa = at(a)
                     moved = F.antenna_position(pa.compose(delta), arm) - F.antenna_position(pa, arm)
@@ -83,7 +84,7 @@ class Measurements:
                         continue
                 self.consecutive_rejects = 0
                 self.after_outage.discard(id(r))
-                s.add(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k, self.arm), "gnss")
+                s.add(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k, arm3), "gnss")
             elif isinstance(r, Heading):
                 sig = r.sigma * cfg.compass_sigma_scale
                 yaw = r.yaw - (delta.theta() if delta is not None else 0.0)

@@ -5,7 +5,9 @@ the offset ``x, y, z`` [m] of the sensor's origin (the GNSS antenna's phase cent
 optical centre, the IMU's, the speed log's transducer) from the body origin, and its rotation
 ``roll, pitch, yaw`` [rad] (ZYX, REP-103). They come from the log's meta (``"mounts"``) and from the
 smoother's option ``mounts`` (``-O mounts='{"gnss": {"x": 3}}'``, ``[options.mounts.gnss]`` in a
-``--config`` file), the option winning per sensor. docs/mounts.md says what each factor does with them.
+``--config`` file), the option winning per sensor. ``SENSOR@SOURCE`` (``gnss@52``) is one source's
+mount (two receivers on one bus, each with its antenna; a record's ``source``), over the sensor's
+(used for GNSS). docs/mounts.md says what each factor does with them.
 """
 
 from __future__ import annotations
@@ -79,10 +81,17 @@ def parse_mounts(value: Any, where: str = "mounts") -> dict[str, Mount]:
                                  f"got {type(value).__name__}")
     out = {}
     for name, m in value.items():
-        if name not in SENSORS:
-            raise OptionError(f"{where}.{name}", f"{where}: unknown sensor {name!r}; known: {', '.join(SENSORS)}")
+        sensor, at, source = str(name).partition("@")
+        if sensor not in SENSORS or (at and not source):
+            raise OptionError(f"{where}.{name}", f"{where}: unknown sensor {name!r}; known: {', '.join(SENSORS)} "
+                                                 "(SENSOR@SOURCE: one source's, e.g. gnss@52)")
         out[str(name)] = parse_mount(m, f"{where}.{name}")
     return out
+
+
+def mount_of(mounts: dict[str, Mount], sensor: str, source: str = "") -> Mount | None:
+    """The mount of ``sensor``'s ``source`` (``SENSOR@SOURCE``), else the sensor's, else ``None``."""
+    return (mounts.get(f"{sensor}@{source}") if source else None) or mounts.get(sensor)
 
 
 def merged(meta: Any, option: Any) -> dict[str, Mount]:
@@ -90,4 +99,4 @@ def merged(meta: Any, option: Any) -> dict[str, Mount]:
     return {**parse_mounts(meta, "log meta mounts"), **parse_mounts(option, "mounts")}
 
 
-__all__ = ["FIELDS", "MAX_OFFSET", "SENSORS", "Mount", "merged", "parse_mount", "parse_mounts"]
+__all__ = ["FIELDS", "MAX_OFFSET", "SENSORS", "Mount", "merged", "mount_of", "parse_mount", "parse_mounts"]

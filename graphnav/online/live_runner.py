@@ -35,7 +35,9 @@ One single-threaded ``selectors`` loop (no locks, latency is measurable):
 * **Stopping** -- SIGINT/SIGTERM (or :meth:`LiveRunner.stop`, ``duration``, ``idle_exit``, the
   end of the scan replay) ends the loop; files are flushed and closed and ``summary()`` returns
   ``sentences_in``, ``bad_sentences``, ``estimates``, ``published``, ``latency_ms_median``,
-  ``latency_ms_p99`` (GNSS sentence arrival -> solution sent, over the last 100 000 fixes) and more.
+  ``latency_ms_p99``, ``latency_ms_max`` (arrival of the sentence or datagram whose record produced the
+  estimate -> solution sent, every record kind, over the last 100 000 estimates; per kind in
+  ``latency_ms_by_kind``) and more.
 """
 
 from __future__ import annotations
@@ -67,11 +69,22 @@ from ..io.nmea import UERE_M, NmeaDecoder, parse_sentence
 from ..io.nmea_out import solution_sentences
 from ..io.outputs import ensure_dir
 from ..io.tum import TrajectoryWriter
-from ..log import Gnss, NavLog, Scan
+from ..log import RECORD_TYPES, NavLog, Scan
 from ..result import Estimate, OnlineEstimator
 
 log_ = logging.getLogger("graphnav.live")
 LATENCY_WINDOW = 100_000
+_KINDS = ("", *RECORD_TYPES)  # latency ring buffer: the record kind of each estimate ("": unknown)
+
+
+def _by_kind(lat: np.ndarray, kinds: np.ndarray) -> dict[str, dict[str, float | int]]:
+    """Latency median / p99 / max [ms] and count per record kind that produced estimates."""
+    out: dict[str, dict[str, float | int]] = {}
+    for code in np.unique(kinds):
+        v = lat[kinds == code]
+        out[_KINDS[int(code)] or "other"] = {"n": int(v.size), "median": float(np.median(v)),
+                                               "p99": float(np.percentile(v, 99)), "max": float(v.max())}
+    return out
 MAX_LINE = 4096  # a TCP line longer than this without a newline is garbage
 MAX_MESSAGE = 1 << 20  # a Signal K delta (one websocket message) longer than this is garbage
 TIME_TOLERANCE_S = 10.0
@@ -350,7 +363,7 @@ class LiveRunner:
         self.bad_marine = 0
         self.sources += [_Source(parse_endpoint(s, ("udp",)), "scan") for s in scan_sources or []]
         self.scans_in = 0
-        self.scan_wait: list[Scan] = []  # network scans waiting for the NMEA clock
+        self.scan_wait: list[tuple[Scan, float]] = []  # network scans (and their arrival) waiting for the NMEA clock
         self.bad_scans = 0
         self.estimator = estimator
         self.restart = restart  # a fresh estimator, for a clock that steps back (a re-sync)
@@ -378,6 +391,7 @@ class LiveRunner:
         self.published = 0
         self.records = 0
         self.latency_ms = np.full(LATENCY_WINDOW, np.nan)  # ring buffer: constant memory
+        self.latency_kind = np.zeros(LATENCY_WINDOW, dtype=np.int8)  # index into _KINDS of each
         self.n_latency = 0
         self.wall_s = 0.0
         self.stop_reason = ""
@@ -428,11 +442,11 @@ class LiveRunner:
         if self.clock.run:  # an untimed sentence inside a run of outliers: replayed if the run re-syncs
             self.run_buf.append((s, arrival, False))
         if self.scan_wait and self.decoder.t is not None:
-            self._release_waiting(self.decoder.t)
+            self._release_waiting(self.decoder.t, arrival)
         if self.scans is not None and self.decoder.t is not None:
-            self._release_scans(self.decoder.t)
+            self._release_scans(self.decoder.t, arrival)
         for rec in recs:
-            self._record(rec, arrival if isinstance(rec, Gnss) else None)
+            self._record(rec, arrival)
 
     def _timed(self, t_before: float | None, day0_before: float | None, arrival: float, s: bytes,
                refeed: bool) -> str:
@@ -519,15 +533,19 @@ class LiveRunner:
         if len(self.scan_wait) >= 100:
             self.scan_wait.pop(0)
             self.bad_scans += 1
-        bisect.insort(self.scan_wait, rec, key=lambda r: r.t)
+        bisect.insort(self.scan_wait, (rec, time.perf_counter() if arrival is None else arrival),
+                      key=lambda ra: ra[0].t)
         if self.decoder.t is not None:
             self._release_waiting(self.decoder.t)
 
-    def _release_waiting(self, t_stream: float) -> None:
-        while self.scan_wait and self.scan_wait[0].t <= t_stream + 1e-6:
-            self._record(self.scan_wait.pop(0), None)
+    def _release_waiting(self, t_stream: float, arrival: float | None = None) -> None:
+        """Scans the stream's time has reached go to the estimator; the latency of what they produce
+        counts from ``arrival`` (the sentence that released them) or else their own datagram's."""
+        while self.scan_wait and self.scan_wait[0][0].t <= t_stream + 1e-6:
+            rec, came = self.scan_wait.pop(0)
+            self._record(rec, came if arrival is None else arrival)
 
-    def _release_scans(self, t_stream: float) -> None:
+    def _release_scans(self, t_stream: float, arrival: float | None = None) -> None:
         assert self.scans is not None
         if self.scan_shift is None and self.scans:
             d = t_stream - self.scans[0].t
@@ -535,7 +553,7 @@ class LiveRunner:
         while self.scan_i < len(self.scans) and self.scans[self.scan_i].t + self.scan_shift <= t_stream:
             sc = self.scans[self.scan_i]
             self.scan_i += 1
-            self._record(replace(sc, t=sc.t + self.scan_shift) if self.scan_shift else sc, None)
+            self._record(replace(sc, t=sc.t + self.scan_shift) if self.scan_shift else sc, arrival)
         if self.scan_i >= len(self.scans):
             self.stop_reason = "end of --scans-from replay"
             self._stop.set()
@@ -562,8 +580,8 @@ class LiveRunner:
                 self.time_outliers += 1
                 continue
             if self.scan_wait:
-                self._release_waiting(rec.t)
-            self._record(rec, arrival if isinstance(rec, Gnss) else None)
+                self._release_waiting(rec.t, arrival)
+            self._record(rec, arrival)
 
     def _record(self, rec, arrival: float | None) -> None:
         if self.drop and (rec.kind in self._drop_kinds or (rec.kind, getattr(rec, "source", "")) in self._drop_pairs):
@@ -572,9 +590,9 @@ class LiveRunner:
         self.records += 1
         est = self.estimator.add(rec)
         if est is not None:
-            self._emit(est, arrival)
+            self._emit(est, arrival, getattr(rec, "kind", ""))
 
-    def _emit(self, est: Estimate, arrival: float | None) -> None:
+    def _emit(self, est: Estimate, arrival: float | None, kind: str = "") -> None:
         """Publish one estimate (NMEA), time its latency, append it to the output file."""
         self.estimates += 1
         self.last_estimate = est
@@ -599,7 +617,9 @@ class LiveRunner:
             except OSError as exc:
                 log_.warning("publish to %s failed: %s", self.publish_signalk, exc)
         if arrival is not None:  # the published solution is the latency-critical path; the file comes next
-            self.latency_ms[self.n_latency % LATENCY_WINDOW] = (time.perf_counter() - arrival) * 1e3
+            i = self.n_latency % LATENCY_WINDOW
+            self.latency_ms[i] = (time.perf_counter() - arrival) * 1e3
+            self.latency_kind[i] = _KINDS.index(kind) if kind in _KINDS else 0
             self.n_latency += 1
         if self.writer is not None:
             self.writer.write(est.t, est.vec, est.cov)
@@ -690,6 +710,7 @@ class LiveRunner:
             "latency_ms_median": float(np.median(lat)) if lat.size else None,
             "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None,
             "latency_ms_max": float(lat.max()) if lat.size else None,
+            "latency_ms_by_kind": _by_kind(lat, self.latency_kind[: lat.size]),
             "ignored_sentences": self.ignored,
             "time_outliers": self.time_outliers,
             "clock_resyncs": self.clock.resyncs,

@@ -763,3 +763,90 @@ def hdl_match(sx, sy, ssig, use_ssig, tx, ty, tsig, use_tsig, sigma_alpha, sigma
                 max_corr, flat_pow, scale, dmax, False, w)
     return (th, t_x, t_y, it, converged, idx, px, py, w, sxx, sxy, syy, nrx, nry, fl, res, scale, dmax,
             rms_radius(sx, sy, sx.shape[0]), moved, src_r)
+
+
+# ----------------------------------------------------------------------------- the report's sums
+
+
+@njit(cache=True)
+def report_sums(px, py, qx, qy, w, sxx, sxy, syy, nx, ny, fl, spacing, scale, gate, tx, ty, c, s, radius, hdl,
+                block, samp_var):
+    """One pass over the final pairs for :func:`graphnav.scan.covariance.from_sums` (the sums of
+    :func:`graphnav.scan.covariance.between`): ``(k, n_inliers, H, B_lidar, B_sampling, rms, info,
+    inlier_fraction, points_used, median scale)`` with ``H = sum w J^T J``, ``B_lidar = sum w^2 J^T S
+    J``, ``B_sampling = sum w^2 (block samp_var spacing^2) J^T J`` (``B = k B_lidar + B_sampling``) and
+    ``info`` the point-to-line information of the flat inlier pairs (rotation column / ``radius``)."""
+    n = px.shape[0]
+    h = np.zeros((3, 3))
+    bl = np.zeros((3, 3))
+    bs = np.zeros((3, 3))
+    info = np.zeros((3, 3))
+    ksum = 0.0
+    n_inl = 0
+    n_gate = 0
+    used = 0
+    rss = 0.0
+    sw = 0.0
+    ja = np.empty(3)
+    jb = np.empty(3)
+    for i in range(n):
+        ex = px[i] - qx[i]
+        ey = py[i] - qy[i]
+        d = math.hypot(ex, ey)
+        inl = d / scale[i] <= gate
+        if inl:
+            n_gate += 1
+        wi = w[i]
+        if wi > 0:
+            used += 1
+        c2x = -(py[i] - ty)
+        c2y = px[i] - tx
+        r0 = nx[i] * c + ny[i] * s
+        r1 = -nx[i] * s + ny[i] * c
+        r2 = nx[i] * c2x + ny[i] * c2y
+        both = inl and wi > 0
+        if both:
+            f = fl[i]
+            r2s = r2 / radius
+            sc = (r0, r1, r2s)
+            for a in range(3):
+                for b in range(3):
+                    info[a, b] += f * sc[a] * sc[b]
+        samp = block * samp_var * spacing[i] ** 2
+        w2 = wi * wi
+        if hdl:
+            res = ex * nx[i] + ey * ny[i]
+            sv = sxx[i] * nx[i] ** 2 + 2 * sxy[i] * nx[i] * ny[i] + syy[i] * ny[i] ** 2
+            if both:
+                ksum += res * res / sv
+                n_inl += 1
+            rss += wi * res * res
+            ja[0], ja[1], ja[2] = r0, r1, r2
+            for a in range(3):
+                for b in range(3):
+                    jj = ja[a] * ja[b]
+                    h[a, b] += wi * jj
+                    bl[a, b] += w2 * sv * jj
+                    bs[a, b] += w2 * samp * jj
+        else:
+            if both:
+                det = sxx[i] * syy[i] - sxy[i] ** 2
+                ksum += (syy[i] * ex * ex - 2 * sxy[i] * ex * ey + sxx[i] * ey * ey) / det
+                n_inl += 1
+            rss += wi * (ex * ex + ey * ey)
+            ja[0], ja[1], ja[2] = c, -s, c2x  # the Jacobian's rows: d(x)/d xi, d(y)/d xi
+            jb[0], jb[1], jb[2] = s, c, c2y
+            for a in range(3):
+                for b in range(3):
+                    jtj = ja[a] * ja[b] + jb[a] * jb[b]
+                    jsj = sxx[i] * ja[a] * ja[b] + sxy[i] * (ja[a] * jb[b] + jb[a] * ja[b]) + syy[i] * jb[a] * jb[b]
+                    h[a, b] += wi * jtj
+                    bl[a, b] += w2 * jsj
+                    bs[a, b] += w2 * samp * jtj
+        sw += wi
+    dim = 1 if hdl else 2
+    k = ksum / max(dim * n_inl - 3, 1) if n_inl > 0 else np.nan
+    rms = math.sqrt(rss / sw) if sw > 0 else np.nan
+    big_d = np.median(scale) if n > 0 else np.nan
+    frac = n_gate / n if n > 0 else np.nan
+    return k, n_inl, h, bl, bs, rms, info, frac, used, big_d

@@ -141,3 +141,23 @@ def between(jac: NDArray, res: NDArray, w: NDArray, lidar: NDArray, spacing: NDA
     info = (line_rows * use).T @ line_rows
     deg = degeneracy.analyse(info, radius, cov, max_condition=max_condition, max_sigma=max_sigma, prior_cov=prior_cov)
     return Between(cov, k, rms, n_inl, deg)
+
+
+def from_sums(k: float, n_inl: int, h: NDArray, b_lidar: NDArray, b_sampling: NDArray, rms: float, info: NDArray,
+              radius: float, *, max_condition: float, max_sigma: float,
+              prior_cov: NDArray | None = None) -> Between:
+    """:func:`between` from its sums over the pairs, accumulated in one pass by the compiled matcher
+    (:func:`graphnav.scan._icp_fast.report_sums`): ``H = sum w J^T J``, ``B = k b_lidar + b_sampling``
+    (``b_lidar = sum w^2 J^T S J``, ``b_sampling = sum w^2 (block s^2 / 12) J^T J``), the same
+    covariance ``H^-1 B H^-1`` and degeneracy analysis."""
+    cov = np.full((3, 3), np.nan)
+    if np.isfinite(k):
+        try:
+            hi = np.linalg.inv(h)
+        except np.linalg.LinAlgError:
+            hi = None
+        if hi is not None:
+            cov = hi @ (k * b_lidar + b_sampling) @ hi.T
+            cov = 0.5 * (cov + cov.T)
+    deg = degeneracy.analyse(info, radius, cov, max_condition=max_condition, max_sigma=max_sigma, prior_cov=prior_cov)
+    return Between(cov, k, rms, n_inl, deg)

@@ -402,11 +402,11 @@ def _compiled() -> tuple[Any, Any] | ImportError:
     match (without numba it cost ~8 ms a call, as much as a match)."""
     if not _COMPILED:
         try:
-            from ._icp_fast import hdl_match, p2p_match
+            from ._icp_fast import hdl_match, p2p_match, report_sums
         except ImportError as exc:
             _COMPILED.append(exc)
         else:
-            _COMPILED.append((p2p_match, hdl_match))
+            _COMPILED.append((p2p_match, hdl_match, report_sums))
     return _COMPILED[0]
 
 
@@ -449,7 +449,11 @@ def _match_compiled(kernel: Any, cfg: IcpConfig, src_xy: NDArray, tgt_xy: NDArra
     final = _FinalPairs(np.column_stack([px, py]), tgt_xy[idx], w, np.column_stack([sxx, sxy, syy]),
                         np.column_stack([nrx[idx], nry[idx]]), fl[idx], res_t[idx], sc[idx], dmax, radius, moved,
                         src_r)
-    return _report(cfg, pose, final, it, converged, t0, ns, nt, init, init_cov)
+    c, s_ = math.cos(wrap_angle(th)), math.sin(wrap_angle(th))
+    sums = _compiled()[2](px, py, final.q[:, 0].copy(), final.q[:, 1].copy(), w, sxx, sxy, syy, final.n[:, 0].copy(),
+                           final.n[:, 1].copy(), final.flat, final.res, final.scale, dmax, tx, ty, c, s_, radius,
+                           cfg.variant == "HDL", cfg.normal_k, covariance.SAMPLING_VARIANCE)
+    return _report(cfg, pose, final, it, converged, t0, ns, nt, init, init_cov, sums)
 
 
 def _target_lines(tgt_xy: NDArray, cfg: IcpConfig, tree: cKDTree | None = None) -> tuple[NDArray, NDArray]:
@@ -650,9 +654,11 @@ def _finish(cfg, src, tgt, idx, pose, normals, flat, res_t, scale, dmax, moved, 
     return _report(cfg, pose, final, iters, converged, t0, ns, nt, init, init_cov)
 
 
-def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None):  # noqa: ANN001, ANN202, PLR0913
+def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None, sums=None):  # noqa: ANN001, ANN202, PLR0913
     """Covariance and degeneracy (:func:`graphnav.scan.covariance.between`, the one place), the weak
-    directions take ``init``'s pose, and the quality report. Shared by both matcher paths.
+    directions take ``init``'s pose, and the quality report. Shared by both matcher paths; the
+    compiled one hands over its one-pass ``sums`` (:func:`graphnav.scan._icp_fast.report_sums`, the
+    same quantities: :func:`graphnav.scan.covariance.from_sums`).
 
     Residuals and their Jacobians with respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)``
     (GTSAM's Pose2 tangent space): ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1],
@@ -660,33 +666,39 @@ def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None):  
     """
     pose[2] = wrap_angle(float(pose[2]))
     c, s_ = np.cos(pose[2]), np.sin(pose[2])
-    e = fp.p - fp.q
-    d = np.hypot(e[:, 0], e[:, 1])
-    jp = fp.p - pose[:2]
-    c2 = np.column_stack([-jp[:, 1], jp[:, 0]])  # J (p - t) = R J p_s
-    n = fp.n
-    rows = np.column_stack([n[:, 0] * c + n[:, 1] * s_, -n[:, 0] * s_ + n[:, 1] * c, np.einsum("ij,ij->i", n, c2)])
-    inl = d / fp.scale <= fp.gate
-    use = fp.w > 0
-    sxx, sxy, syy = fp.s.T
-    if cfg.variant == "HDL":
-        jac = rows[:, None, :]
-        res = np.einsum("ij,ij->i", e, n)[:, None]
-        lidar = (sxx * n[:, 0] ** 2 + 2 * sxy * n[:, 0] * n[:, 1] + syy * n[:, 1] ** 2)[:, None, None]
+    if sums is None:
+        e = fp.p - fp.q
+        d = np.hypot(e[:, 0], e[:, 1])
+        jp = fp.p - pose[:2]
+        c2 = np.column_stack([-jp[:, 1], jp[:, 0]])  # J (p - t) = R J p_s
+        n = fp.n
+        rows = np.column_stack([n[:, 0] * c + n[:, 1] * s_, -n[:, 0] * s_ + n[:, 1] * c, np.einsum("ij,ij->i", n, c2)])
+        inl = d / fp.scale <= fp.gate
+        use = fp.w > 0
+        sxx, sxy, syy = fp.s.T
+        if cfg.variant == "HDL":
+            jac = rows[:, None, :]
+            res = np.einsum("ij,ij->i", e, n)[:, None]
+            lidar = (sxx * n[:, 0] ** 2 + 2 * sxy * n[:, 0] * n[:, 1] + syy * n[:, 1] ** 2)[:, None, None]
+        else:
+            jac = np.empty((len(d), 2, 3))
+            jac[:, 0, :2] = (c, -s_)
+            jac[:, 1, :2] = (s_, c)
+            jac[:, :, 2] = c2
+            res = e
+            lidar = np.empty((len(d), 2, 2))
+            lidar[:, 0, 0], lidar[:, 0, 1], lidar[:, 1, 0], lidar[:, 1, 1] = sxx, sxy, sxy, syy
+        scaled = rows * np.array([1.0, 1.0, 1.0 / fp.radius])
+        big_d = float(np.median(fp.scale)) if len(fp.scale) else float("nan")
+        bt = covariance.between(jac, res, fp.w, lidar, fp.res, use & inl, scaled, fp.flat, fp.radius,
+                                block=cfg.normal_k, max_condition=cfg.max_condition, max_sigma=cfg.max_sigma * big_d,
+                                prior_cov=None if init is None else init_cov)
+        inlier_fraction = float(inl.mean())
+        points_used = int(use.sum())
     else:
-        jac = np.empty((len(d), 2, 3))
-        jac[:, 0, :2] = (c, -s_)
-        jac[:, 1, :2] = (s_, c)
-        jac[:, :, 2] = c2
-        res = e
-        lidar = np.empty((len(d), 2, 2))
-        lidar[:, 0, 0], lidar[:, 0, 1], lidar[:, 1, 0], lidar[:, 1, 1] = sxx, sxy, sxy, syy
-    scaled = rows * np.array([1.0, 1.0, 1.0 / fp.radius])
-    big_d = float(np.median(fp.scale)) if len(fp.scale) else float("nan")
-    bt = covariance.between(jac, res, fp.w, lidar, fp.res, use & inl, scaled, fp.flat, fp.radius,
-                            block=cfg.normal_k, max_condition=cfg.max_condition, max_sigma=cfg.max_sigma * big_d,
-                            prior_cov=None if init is None else init_cov)
-    inlier_fraction = float(inl.mean())
+        k, n_inl, h, b_lidar, b_samp, rms, info, inlier_fraction, points_used, big_d = sums
+        bt = covariance.from_sums(k, n_inl, h, b_lidar, b_samp, rms, info, fp.radius, max_condition=cfg.max_condition,
+                                  max_sigma=cfg.max_sigma * big_d, prior_cov=None if init is None else init_cov)
     cov = bt.cov
     deg = bt.degeneracy
     cond = deg.condition
@@ -740,7 +752,7 @@ def _report(cfg, pose, fp, iters, converged, t0, ns, nt, init, init_cov=None):  
             th0, t0_ = _pose_parts(init)
             pose = np.array([t0_[0], t0_[1], th0])
     quality = {
-        "points_used": int(use.sum()),
+        "points_used": int(points_used),
         "points_source": ns,
         "points_target": nt,
         "inlier_fraction": inlier_fraction,

@@ -31,8 +31,9 @@ def circle_pose(t: float) -> tuple[float, float, float]:
 
 
 def circle_log(arm: tuple[float, float] = (3.0, 0.0), duration: float = 40.0, sigma: float = 0.05,
-               meta: dict | None = None, seed: int = 0) -> NavLog:
-    """Odometry at 10 Hz, the antenna's fixes (noise ``sigma``) and a compass at 1 Hz, truth at 1 Hz."""
+               meta: dict | None = None, seed: int = 0, arm2: tuple[float, float] | None = None) -> NavLog:
+    """Odometry at 10 Hz, the antenna's fixes (noise ``sigma``) and a compass at 1 Hz, truth at 1 Hz;
+    with ``arm2`` a second receiver (source "B", the first "A") at 1 Hz half a second later."""
     rng = np.random.default_rng(seed)
     recs = []
     for i in range(int(duration * 10) + 1):
@@ -41,9 +42,13 @@ def circle_log(arm: tuple[float, float] = (3.0, 0.0), duration: float = 40.0, si
         recs.append(Odometry(t, SPEED + rng.normal(0, 0.01), OMEGA + rng.normal(0, 0.001), 0.01, 0.001))
         if i % 10 == 0:
             ax, ay = F.antenna_position(gtsam.Pose2(x, y, yaw), arm)
-            recs.append(Gnss(t, ax + rng.normal(0, sigma), ay + rng.normal(0, sigma), sigma))
+            recs.append(Gnss(t, ax + rng.normal(0, sigma), ay + rng.normal(0, sigma), sigma,
+                             source="A" if arm2 is not None else ""))
             recs.append(Heading(t, yaw + rng.normal(0, 0.005), 0.005))
             recs.append(Truth(t, x, y, yaw))
+        if arm2 is not None and i % 10 == 5:
+            bx, by = F.antenna_position(gtsam.Pose2(x, y, yaw), arm2)
+            recs.append(Gnss(t, bx + rng.normal(0, sigma), by + rng.normal(0, sigma), sigma, source="B"))
     return NavLog(recs, [], {"name": "circle", **(meta or {})})
 
 
@@ -70,6 +75,27 @@ def test_gnss_lever_arm_from_the_log_meta_and_on_the_pose3_graph():
     assert np.median(position_errors(log, motion="vessel")) < 0.07
     # the option wins over the meta, per sensor
     assert abs(np.median(position_errors(log, mounts={"gnss": {}})) - math.hypot(3.0, 1.0)) < 0.15
+
+
+def test_two_receivers_each_at_its_antenna():
+    """Two GNSS sources on one bus, antennas 3 m forward and 2 m aft + 1 m to port: per-source mounts
+    (gnss@A, gnss@B) bring both to the noise level and every fix is used; one mount for both leaves
+    the second receiver's fixes 5 m off: the gate and the batch's residual test throw them out."""
+    log = circle_log(arm=(3.0, 0.0), arm2=(-2.0, 1.0))
+    n_b = sum(1 for r in log.of("gnss") if r.source == "B")
+
+    def solve(mounts):
+        r = run(log, "isam2", compass_bias=False, mounts=mounts)
+        return r, r.info.get("gnss_rejected", 0) + r.info.get("gnss_dropped_after_lm", 0)
+
+    both, left_out = solve({"gnss@A": {"x": 3.0}, "gnss@B": {"x": -2.0, "y": 1.0}})
+    assert left_out == 0
+    truth = log.truth()
+    idx = [int(np.argmin(abs(both.trajectory.t - t))) for t in truth.t]
+    err = np.hypot(*(both.trajectory.poses[idx, :2] - truth.poses[:, :2]).T)
+    assert np.median(err) < 0.05
+    _, left_out = solve({"gnss": {"x": 3.0}})
+    assert left_out >= 0.9 * n_b
 
 
 def test_antenna_factor_jacobian_is_numerical_derivative():
@@ -141,6 +167,8 @@ def test_imu_mount_removes_the_centripetal_acceleration():
 
 @pytest.mark.parametrize("mounts,where", [
     ({"radar": {"x": 1}}, "mounts.radar"),
+    ({"gnss@": {"x": 1}}, "mounts.gnss@"),
+    ({"gnss@52": {"x": float("inf")}}, "mounts.gnss@52.x"),
     ({"gnss": {"forward": 1}}, "mounts.gnss.forward"),
     ({"gnss": {"x": float("nan")}}, "mounts.gnss.x"),
     ({"gnss": {"x": 1e9}}, "mounts.gnss.x"),

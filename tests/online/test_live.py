@@ -131,6 +131,10 @@ def test_udp_loopback_tracks_truth(tmp_path):
     assert 0.95 * sent["sentences_sent"] <= summary["sentences_in"] <= sent["sentences_sent"]
     assert 0 < summary["bad_sentences"] <= sent["corrupted"]
     assert summary["estimates"] >= 38 and summary["latency_ms_median"] is not None  # a 0.5 s keyframe grid
+    # every estimate but the end-of-input flush is timed from the arrival of the record that produced it
+    by_kind = summary["latency_ms_by_kind"]
+    assert sum(v["n"] for v in by_kind.values()) >= summary["estimates"] - 1 and "other" not in by_kind
+    assert 0 < summary["latency_ms_median"] <= summary["latency_ms_p99"] <= summary["latency_ms_max"]
     # every published sentence carries a valid checksum and parses
     msgs = [pynmea2.parse(s, check=True) for s in lines]
     kinds = {m.sentence_type for m in msgs}
