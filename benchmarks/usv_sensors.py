@@ -2,15 +2,18 @@
 
 Prints one table (or with ``--json`` one object) of the issue's targets:
 
-* the embedded harbour (data/harbour.npz, 1 Hz IMU) with odometry and beacons dropped, with and
-  without the LiDAR (the LiDAR must pay for itself: at least 2x better with it);
+* the robot-style harbour (``--profile legacy``: data/harbour.npz before issue 21, 1 Hz IMU) with
+  odometry and beacons dropped, with and without the LiDAR (the LiDAR must pay for itself: at least
+  2x better with it);
 * the default harbour of ``graphnav simulate harbour`` (seed 0: 100 Hz IMU, GNSS position +
   Doppler velocity, compass with a deviation, 10 Hz 2D LiDAR, a speed log through a tidal
   current, charted beacons, no odometer): isam2 smoothed / online ATE, NEES, SOG and ROT RMSE,
   the largest online error inside the GNSS outage, the water current's RMS error against the
-  simulator's, and the real-time factor of the run (wall clock; it depends on the machine's load).
+  simulator's, and the real-time factor of the run (wall clock; it depends on the machine's load);
+  and on the same log the baselines: icp-dr and scan-to-map (LiDAR + IMU, no GNSS) against the IMU's
+  dead reckoning, and every filter's ATE and NEES.
 
-    python benchmarks/usv_sensors.py [--json] [--seed 0] [--duration S] [--skip-old]
+    python benchmarks/usv_sensors.py [--json] [--seed 0] [--duration S] [--skip-old] [--skip-baselines]
 
 Figures: docs/smoother.md, "The USV's sensors in one graph".
 """
@@ -31,7 +34,6 @@ sys.path.insert(0, str(REPO))
 
 from graphnav import estimators  # noqa: E402
 from graphnav.evaluation.evaluate import summarize  # noqa: E402
-from graphnav.io.dispatch import load_log  # noqa: E402
 from graphnav.log import NavLog  # noqa: E402
 
 
@@ -68,11 +70,14 @@ def main() -> int:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--duration", type=float, default=None, help="[s] of the new harbour (default: all)")
-    ap.add_argument("--skip-old", action="store_true", help="skip the embedded harbour's ablation")
+    ap.add_argument("--skip-old", action="store_true", help="skip the legacy harbour's ablation")
+    ap.add_argument("--skip-baselines", action="store_true", help="skip the baselines on the new harbour")
     args = ap.parse_args()
     out: dict = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     if not args.skip_old:
-        old = load_log(REPO / "data" / "harbour.npz")
+        from graphnav.sim.harbour import HarbourConfig, simulate_harbour
+
+        old = simulate_harbour(0, HarbourConfig.legacy())
         usv = old.without(lambda r: r.kind in ("odometry", "beacon"))
         s_lidar, _ = _run("isam2", usv)
         s_nolidar, _ = _run("isam2", usv.without(lambda r: r.kind == "scan"))
@@ -87,6 +92,16 @@ def main() -> int:
     row["outage_online_max_m"] = (ev.get("gnss_outage") or {}).get("online_max_m")
     row["current_rmse_mps"] = current_error(res.info, new.meta)
     out["new_harbour_isam2"] = row
+    if not args.skip_baselines:
+        base = {}
+        for name in ("dead-reckoning", "icp-dr", "scan-to-map", "ekf", "ukf", "ukf-bias", "fuzzy-ukf",
+                     "fuzzy-ukf-bias"):
+            b, _ = _run(name, new)
+            base[name] = _row(b)
+        dr = base["dead-reckoning"]["ate_rmse_m"]
+        for name in ("icp-dr", "scan-to-map"):
+            base[name]["x_imu_dead_reckoning"] = round(base[name]["ate_rmse_m"] / dr, 4)
+        out["new_harbour_baselines"] = base
     if args.json:
         print(json.dumps(out))
         return 0

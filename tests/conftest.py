@@ -44,3 +44,21 @@ def marina_log(marina_dir):
     from graphnav.io.marina import read_marina
 
     return read_marina(marina_dir)
+
+
+@pytest.fixture(autouse=True)
+def _run_writes_no_report_by_default(monkeypatch):
+    """``graphnav run --out`` draws compare's figures for its estimator (~3 s each run); the suite runs
+    it some 70 times, so here it does so only when a test asks (``--report``)."""
+    import graphnav.commands.run as run_command
+
+    monkeypatch.setattr(run_command, "REPORT_DEFAULT", False)
+
+
+@pytest.fixture(scope="session")
+def legacy_harbour():
+    """The robot-style harbour log (seed 0, ``--profile legacy``: 10 Hz odometry, 1 Hz IMU, 5 Hz scans),
+    ``data/harbour.npz`` before issue 21, for the tests whose known answers are about that log."""
+    from graphnav.sim.harbour import HarbourConfig, simulate_harbour
+
+    return simulate_harbour(0, HarbourConfig.legacy())

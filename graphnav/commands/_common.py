@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +32,54 @@ def add_dashboard_flag(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dashboard", nargs="?", const="127.0.0.1:8787", default=None, metavar="HOST:PORT",
                    help="serve the embedded Dask LocalCluster's dashboard (default off; bare --dashboard: "
                         "127.0.0.1:8787, loopback only)")
+
+
+def add_holdout_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--holdout-gnss", metavar="EVERY,LENGTH", default=None,
+                   help="score without truth: every EVERY s of log time withhold the last LENGTH s of GNSS (fixes "
+                        "and velocity) from the estimators and score them against the withheld fixes, e.g. 300,60")
+
+
+def add_compare_flags(p: argparse.ArgumentParser) -> None:
+    """``compare``'s flags beyond the log, the estimators and their options."""
+    p.add_argument("--workers", "-j", type=int, default=0,
+                   help="processes for the estimators and the figures (the smoothers share one, with their "
+                        "weighted-ICP matches; runtimes then include contention); default 0: one per core, "
+                        "1: everything in this process")
+    p.add_argument("--no-icp-cache", dest="icp_cache", action="store_false",
+                   help="every estimator computes its own weighted-ICP matches (default: a match shared by "
+                        "several estimators is computed once; their runtimes then exclude it)")
+    p.add_argument("--tiles", metavar="URL", default=None,
+                   help="map.html draws map tiles from this {z}/{x}/{y} URL template under the tracks (loaded "
+                        "over the network when the page is opened; default: none, the page is self-contained)")
+    add_holdout_flag(p)
+
+
+@contextlib.contextmanager
+def progress_callback(args: argparse.Namespace, desc: str) -> Iterator[Callable[[str, int], None]]:
+    """A progress bar over estimators for :func:`graphnav.evaluation.pipeline.run_compare`: the callback
+    ``(name, total)`` advances it as each estimator starts; closed (and completed) when the block ends."""
+    state: dict[str, Any] = {}
+
+    def started(name: str, total: int) -> None:
+        bar = state.get("bar")
+        if bar is None:
+            bar = state["bar"] = progress_bar(args, total=total, desc=desc, unit="estimator")
+        else:
+            bar.update(1)
+        bar.set_postfix_str(name)
+        if bar.disable:
+            import logging
+
+            logging.getLogger(f"graphnav.{desc}").info("running %s", name)
+
+    try:
+        yield started
+        if "bar" in state:
+            state["bar"].update(1)
+    finally:
+        if "bar" in state:
+            state["bar"].close()
 
 
 def add_log_args(p: argparse.ArgumentParser) -> None:

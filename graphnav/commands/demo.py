@@ -16,9 +16,9 @@ import argparse
 import logging
 from pathlib import Path
 
+from ..evaluation.pipeline import CompareOptions, run_compare
 from ..io.outputs import OutDir, atomic_path
-from . import compare
-from ._common import add_overwrite_flag
+from ._common import add_overwrite_flag, emit, progress_callback
 
 log_ = logging.getLogger("graphnav.demo")
 EMBEDDED = Path(__file__).resolve().parents[2] / "data" / "harbour.npz"
@@ -54,10 +54,10 @@ def run(args: argparse.Namespace) -> int:
     out = OutDir(args.out, command="demo", overwrite=args.overwrite, own_ok=True)
     log_path = args.log or embedded_log(out)
     log_.info("graphnav demo: comparing every estimator on %s", log_path)
-    cargs = argparse.Namespace(log=str(log_path), lenient=False, out=args.out, out_dir=out, estimators=None,
-                               option=None, workers=args.workers, json=args.json, overwrite=args.overwrite,
-                               quiet=getattr(args, "quiet", False))
-    rc = compare.run(cargs)
+    opts = CompareOptions(log=str(log_path), out=args.out, workers=args.workers)
+    with progress_callback(args, "compare") as progress:
+        outcome = run_compare(opts, out, progress)
+    emit(args, outcome.json, outcome.text)
     log_.info("report: %s (self-contained, to send: %s)", (args.out / "report.md").resolve(),
               (args.out / "report.html").resolve())
-    return rc
+    return 0

@@ -1,4 +1,6 @@
-"""``graphnav run LOG --estimator NAME --out DIR``: one estimator on one log, scored against truth.
+"""``graphnav run LOG --estimator NAME --out DIR``: one estimator on one log, scored against truth (or,
+``--holdout-gnss EVERY,LENGTH``, against GNSS fixes withheld from it); ``--out`` also gets the report
+and map that ``graphnav compare`` writes, for this one estimator.
 
 ``graphnav run LOG [LOG ...] -e NAME --out DIR [--scheduler ADDR]``: a fleet of logs, in parallel on a
 Dask LocalCluster (loopback) or an existing scheduler (:mod:`graphnav.evaluation.sweep`), each log's
@@ -16,6 +18,7 @@ from pathlib import Path
 from .. import estimators
 from ..estimators.options import check as check_options
 from ..evaluation.evaluate import summarize
+from ..evaluation.holdout import HoldoutSpec, withhold
 from ..io import load_log
 from ..io.drop import drop_kinds
 from ..io.geo_out import record_origin, write_wgs84
@@ -23,6 +26,7 @@ from ..io.outputs import OutDir
 from ..io.tum import TrajectoryWriter, write_truth
 from ._common import (
     add_drop_flag,
+    add_holdout_flag,
     add_json_flag,
     add_log_args,
     add_overwrite_flag,
@@ -35,6 +39,9 @@ from ._common import (
 )
 
 log_ = logging.getLogger("graphnav.run")
+#: ``run --out`` writes compare's report, figures and map for its one estimator unless ``--no-report``
+#: (tests/conftest.py turns this default off for the suite: ~3 s of figures per run; report tests ask)
+REPORT_DEFAULT = True
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -48,10 +55,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--list-options", metavar="ESTIMATOR",
                    help="print ESTIMATOR's -O options (default and meaning; one JSON object with --json) and exit")
     p.add_argument("--out", type=Path,
-                   help="output directory (trajectory.tum, trajectory.csv, summary.json, truth.tum; "
-                        "trajectory.geojson/.gpx/.kml in WGS84 when the log has a geodetic origin)")
+                   help="output directory (trajectory.tum, trajectory.csv, summary.json, truth.tum, report.md, "
+                        "report.html, map.html, figures; trajectory.geojson/.gpx/.kml in WGS84 when the log has a "
+                        "geodetic origin)")
     add_overwrite_flag(p)
     add_drop_flag(p)
+    add_holdout_flag(p)
+    p.add_argument("--report", action=argparse.BooleanOptionalAction, default=REPORT_DEFAULT,
+                   help="with --out: also write compare's report (report.md, report.html), figures and map.html "
+                        "for this estimator (default on; --no-report: only the trajectories, truth.tum, WGS84 "
+                        "tracks and summary.json; a fleet of logs writes no report)")
     p.add_argument("--option", "-O", action="append", metavar="[ESTIMATOR.]KEY=VALUE",
                    help="estimator option (VALUE parsed as JSON when it can be), e.g. -O lag=10; repeatable; "
                         "--list-options ESTIMATOR lists them")
@@ -94,11 +107,12 @@ def run(args: argparse.Namespace) -> int:
     options = options_for(args, args.estimator)
     check_options(args.estimator, options)
     dropped = dropped_kinds(args)
+    spec = HoldoutSpec.parse(args.holdout_gnss) if getattr(args, "holdout_gnss", None) else None
     if len(logs) > 1:
         return _fleet(args, logs, options, dropped)
     args.log = logs[0]
     if not args.out:
-        return _run(args, options, dropped, None)
+        return _run(args, options, dropped, None, spec=spec)
     out = OutDir(args.out, command="run", overwrite=args.overwrite)
     online: list[TrajectoryWriter] = []  # (set once the run writes its online track)
 
@@ -106,21 +120,24 @@ def run(args: argparse.Namespace) -> int:
         return ["online.tum", "online.cov"] if online and online[0].count else []
 
     with out.discarded_on_error(keep):  # a failed run leaves nothing else in --out
-        return _run(args, options, dropped, out, online)
+        return _run(args, options, dropped, out, online, spec=spec)
 
 
 def _run(args: argparse.Namespace, options: dict, dropped: list[str], out: OutDir | None,
-         online: list[TrajectoryWriter] | None = None) -> int:
-    summary = _single(args, options, dropped, out, online)
+         online: list[TrajectoryWriter] | None = None, spec: HoldoutSpec | None = None) -> int:
+    summary = _single(args, options, dropped, out, online, spec)
     human = "\n".join(f"{k:22s} {v}" for k, v in jsonable(summary).items())
     emit(args, summary, human)
     return 0
 
 
 def _single(args: argparse.Namespace, options: dict, dropped: list[str], out: OutDir | None,
-            online: list[TrajectoryWriter] | None = None) -> dict:
-    """One estimator on ``args.log``: the summary (the single run's JSON fields); files into ``out``."""
-    log = drop_kinds(load_log(args.log, lenient=args.lenient, **log_options(args)), dropped)
+            online: list[TrajectoryWriter] | None = None, spec: HoldoutSpec | None = None) -> dict:
+    """One estimator on ``args.log`` (GNSS withheld as ``spec`` says): the summary (the single run's JSON
+    fields); files into ``out``."""
+    whole = drop_kinds(load_log(args.log, lenient=args.lenient, **log_options(args)), dropped)
+    plan = withhold(whole, spec) if spec is not None else None
+    log = plan.log if plan is not None else whole
     why = estimators.get(args.estimator).unmet(log)
     if why:
         after = f" (after --drop {','.join(dropped)})" if dropped else ""
@@ -159,17 +176,46 @@ def _single(args: argparse.Namespace, options: dict, dropped: list[str], out: Ou
     summary["dropped"] = dropped
     summary["inputs"] = estimators.inputs(args.estimator, log, options, result.info)
     summary["origin"] = record_origin(log.meta)  # the log's geodetic origin (None: none), for graphnav export
+    if plan is not None:
+        summary["holdout"] = {**plan.describe(), **plan.score(result.trajectory)}
+        summary["holdout_rmse_m"] = summary["holdout"]["rmse_m"]
     if out is not None:  # each file atomically (temporary file + rename)
         result.trajectory.to_tum(out.file("trajectory.tum"))
-        write_truth(log, out)  # truth.tum beside the estimate: evo_ape tum truth.tum trajectory.tum
         result.trajectory.to_csv(out.file("trajectory.csv"))
         if result.online is not None and result.online is not result.trajectory:
             result.online.to_tum(out.file("online_final.tum"))
-        tracks = {args.estimator: result.trajectory, **({"truth": log.truth()} if log.has_truth else {})}
-        summary.update(write_wgs84(out, tracks, log.meta))  # WGS84 tracks, or "wgs84": None and why
+        if getattr(args, "report", False):
+            summary.update(_report(args, whole, log, plan, result, summary, runtime, out))
+        else:
+            write_truth(log, out)  # truth.tum beside the estimate: evo_ape tum truth.tum trajectory.tum
+            tracks = {args.estimator: result.trajectory, **({"truth": log.truth()} if log.has_truth else {})}
+            summary.update(write_wgs84(out, tracks, log.meta))  # WGS84 tracks, or "wgs84": None and why
         out.write_text("summary.json", json.dumps(jsonable({**summary, "info": result.info}), indent=2))
         summary["out"] = str(args.out)
     return summary
+
+
+def _report(args: argparse.Namespace, whole, log, plan, result, summary: dict, runtime: float,  # noqa: ANN001
+            out: OutDir) -> dict:
+    """The report, figures, map, truth.tum and WGS84 tracks of ``graphnav compare`` for this one estimator
+    (truth.tum beside the estimate: ``evo_ape tum truth.tum trajectory.tum``); returns the summary's
+    ``wgs84`` entry (the tracks in WGS84, or ``"wgs84": None`` and why)."""
+    import shlex
+
+    from ..evaluation.comparison import Comparison, Entry
+    from ..evaluation.datacheck import data_checks
+    from ..evaluation.report import render
+    from ..evaluation.report.writer import write
+
+    spec = estimators.get(args.estimator)
+    entry = Entry(args.estimator, spec.kind, spec.description, summary.get("options") or {}, result, summary,
+                  runtime_s=runtime)
+    comp = Comparison([entry], log, log_name=str(args.log), whole_log=whole, holdout=plan,
+                      dropped=list(summary.get("dropped") or []), checks=data_checks(whole))
+    command = shlex.join(["graphnav", *args.argv]) if hasattr(args, "argv") else None
+    rep = render(comp, command=command, workers=1)
+    write(rep, out)
+    return rep.wgs84 or {}
 
 
 # -- a fleet of logs ---------------------------------------------------------------------------------

@@ -9,9 +9,9 @@ from __future__ import annotations
 import os
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -19,7 +19,11 @@ from .. import estimators
 from ..log import NavLog
 from ..result import RunResult
 from ..scan import icp_cache
+from ..trajectory import Trajectory
+from .datacheck import data_checks
 from .evaluate import summarize
+from .holdout import Holdout, HoldoutSpec, ranking, withhold
+from .metrics import associate
 
 
 @dataclass
@@ -42,6 +46,72 @@ class Entry:
     @property
     def ok(self) -> bool:
         return self.error is None and self.skipped is None
+
+
+@dataclass
+class Comparison(Sequence[Entry]):
+    """What :func:`compare` returns: the entries (a sequence of them, in the order asked) and what
+    they were run on. ``log`` is the log the estimators saw (under a hold-out: without the withheld
+    GNSS), ``whole_log`` the log as read; ``checks`` its gaps and GNSS jumps
+    (:func:`~graphnav.evaluation.datacheck.data_checks`); ``holdout`` the plan, when one was asked."""
+
+    entries: list[Entry]
+    log: NavLog
+    log_name: str = ""
+    whole_log: NavLog | None = None
+    holdout: Holdout | None = None
+    dropped: list[str] = field(default_factory=list)
+    checks: dict[str, Any] = field(default_factory=dict)
+    workers: int = 1
+    runtime_s: float = float("nan")
+    icp_cache_hits: int | None = None
+
+    @overload
+    def __getitem__(self, i: int) -> Entry: ...
+    @overload
+    def __getitem__(self, i: slice) -> list[Entry]: ...
+    def __getitem__(self, i: int | slice) -> Entry | list[Entry]:
+        return self.entries[i]
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def __iter__(self) -> Iterator[Entry]:
+        return iter(self.entries)
+
+    @property
+    def ran(self) -> list[Entry]:
+        """The entries that ran and gave a trajectory."""
+        return [e for e in self.entries if e.ok and e.result is not None]
+
+    def trajectories(self) -> dict[str, Trajectory]:
+        return {e.name: e.result.trajectory for e in self.ran}
+
+    def holdout_ranking(self) -> list[str]:
+        """Estimator names by hold-out RMSE (smallest first); empty without a hold-out."""
+        return ranking({e.name: e.summary["holdout"] for e in self.ran if "holdout" in (e.summary or {})})
+
+    def same_tracks(self, tol_m: float = 1e-3) -> dict[str, tuple[str, float]]:
+        """Estimators whose track equals an earlier one's (by the order given) within ``tol_m``
+        metres at every common time stamp: ``{name: (earlier name, largest difference [m])}``."""
+        out: dict[str, tuple[str, float]] = {}
+        ran = self.ran
+        for i, e in enumerate(ran):
+            for f in ran[:i]:
+                d = track_difference(e.result.trajectory, f.result.trajectory)
+                if d is not None and d <= tol_m and f.name not in out:
+                    out[e.name] = (f.name, d)
+                    break
+        return out
+
+
+def track_difference(a: Trajectory, b: Trajectory, max_dt: float = 1e-6) -> float | None:
+    """The largest position difference [m] between two tracks at their common time stamps (``None``
+    when they share fewer than 90 % of the shorter one's stamps)."""
+    ia, ib = associate(a, b, max_dt)
+    if len(ia) < max(2, 0.9 * min(len(a), len(b))):
+        return None
+    return float(np.max(np.hypot(a.x[ia] - b.x[ib], a.y[ia] - b.y[ib])))
 
 
 def _run(entry: Entry, est: str, log: NavLog) -> Entry:
@@ -71,7 +141,8 @@ def _run(entry: Entry, est: str, log: NavLog) -> Entry:
 def compare(log: NavLog, names: Sequence[str] | None = None, *,
             options: dict[str, dict[str, Any]] | None = None,
             progress: Callable[[str], None] | None = None, workers: int = 1,
-            cache: icp_cache.MatchCache | None = None) -> list[Entry]:
+            cache: icp_cache.MatchCache | None = None, holdout: HoldoutSpec | None = None,
+            log_name: str = "", dropped: Sequence[str] = ()) -> Comparison:
     """Run ``names`` (default: every registered estimator) on ``log``; each with its own
     ``options[name]``. An estimator the log cannot feed is not run but kept, with ``skipped`` saying
     why (its ``unmet(log)``); a failing one is recorded with its ``error``, not raised.
@@ -92,7 +163,16 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
     guess) is reused, so the later ones' ``runtime_s`` excludes it; each summary then carries
     ``icp_cache_hits``, and ``icp_ms_median`` is the matches' computation time (for a shared one,
     its first computation's). With ``workers > 1`` every process has its own copy.
+
+    ``holdout`` (:class:`~graphnav.evaluation.holdout.HoldoutSpec`) withholds GNSS windows from every
+    estimator and scores each against the withheld fixes (``summary["holdout"]``). Returns a
+    :class:`Comparison` (a sequence of the entries, in the order of ``names``).
     """
+    t_start = time.perf_counter()
+    whole = log
+    plan = withhold(log, holdout) if holdout is not None else None
+    if plan is not None:
+        log = plan.log
     names = list(names) if names is not None else estimators.names()
     options = options or {}
     out: list[Entry] = []
@@ -121,7 +201,17 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
         workers = os.cpu_count() or 1
     with icp_cache.active(cache):
         _run_all(out, todo, log, progress, workers)
-    return out
+    if plan is not None:
+        for e in out:
+            if e.ok and e.summary is not None and e.result is not None:
+                e.summary["holdout"] = plan.score(e.result.trajectory)
+                e.summary["holdout_rmse_m"] = e.summary["holdout"]["rmse_m"]
+                if e.result.online is not None and e.result.online is not e.result.trajectory:
+                    e.summary["holdout"]["online_rmse_m"] = plan.score(e.result.online)["rmse_m"]
+    hits = sum((e.summary or {}).get("icp_cache_hits", 0) for e in out) if cache is not None else None
+    return Comparison(out, log, log_name=log_name or str(whole.meta.get("name", "log")), whole_log=whole,
+                      holdout=plan, dropped=list(dropped), checks=data_checks(whole), workers=workers,
+                      runtime_s=time.perf_counter() - t_start, icp_cache_hits=hits)
 
 
 def _run_group(entries: list[Entry], ests: list[str], log: NavLog) -> list[Entry]:

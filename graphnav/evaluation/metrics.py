@@ -163,17 +163,25 @@ def movement(traj: Trajectory) -> dict[str, NDArray]:
 
 
 def movement_errors(
-    est: Trajectory, ref: Trajectory, *, min_speed: float = 0.2, max_dt: float = 0.02
+    est: Trajectory, ref: Trajectory, *, min_speed: float = 0.2, max_dt: float = 0.02,
+    windows: list[tuple[float, float]] | None = None,
 ) -> dict[str, dict[str, float]]:
     """Signed errors of SOG [m/s], COG [deg], ROT [deg/s] and heading [deg], estimate minus reference.
 
     Both trajectories are first associated by time, so the parameters are taken over the same
-    intervals. COG is scored only where the reference moves faster than ``min_speed``.
+    intervals. COG is scored only where the reference moves faster than ``min_speed``; with
+    ``windows`` (``[(t0, t1), ...]``) only the intervals whose midpoint lies inside one.
     Statistics of signed errors: ``mean``, ``std``, ``max`` (of |e|), ``rmse``.
     """
     ie, ir = associate(est, ref, max_dt)
     a = movement(Trajectory(est.t[ie], est.poses[ie]))
     b = movement(Trajectory(ref.t[ir], ref.poses[ir]))
+    if windows is not None:
+        inside = np.zeros(len(b["t"]), bool)
+        for t0, t1 in windows:
+            inside |= (b["t"] >= t0) & (b["t"] <= t1)
+        a = {k: v[inside] for k, v in a.items()}
+        b = {k: v[inside] for k, v in b.items()}
     moving = b["sog"] > min_speed
 
     def signed(e: NDArray) -> dict[str, float]:
@@ -220,3 +228,79 @@ def window_errors(est: Trajectory, ref: Trajectory, windows: list[tuple[float, f
     p, q = est.poses[ie[inside]], ref.poses[ir[inside]]
     s = _stats(np.hypot(p[:, 0] - q[:, 0], p[:, 1] - q[:, 1]))
     return {"rmse": s["rmse"], "max": s["max"], "n": s["n"]}
+
+
+# -- error series (what the figures draw; the same pairs as the statistics above) --------------------
+
+def paired(est: Trajectory, ref: Trajectory, max_dt: float = 0.02) -> tuple[Trajectory, Trajectory]:
+    """The estimate and the reference at the pairs of :func:`associate` (the estimate's covariance kept)."""
+    ie, ir = associate(est, ref, max_dt)
+    cov = None if est.cov is None else est.cov[ie]
+    return Trajectory(est.t[ie], est.poses[ie], cov), Trajectory(ref.t[ir], ref.poses[ir])
+
+
+def position_errors(est: Trajectory, ref: Trajectory, max_dt: float = 0.02) -> tuple[NDArray, NDArray]:
+    """Times and unaligned position errors [m] at the associated pairs (the samples of :func:`ate`)."""
+    e, r = paired(est, ref, max_dt)
+    return e.t, np.hypot(e.x - r.x, e.y - r.y)
+
+
+def heading_errors(est: Trajectory, ref: Trajectory, max_dt: float = 0.02) -> tuple[NDArray, NDArray]:
+    """Times and signed heading errors [deg] (estimate minus reference, wrapped) at the associated pairs."""
+    e, r = paired(est, ref, max_dt)
+    return e.t, np.degrees(wrap_angle(e.yaw - r.yaw))
+
+
+def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0.2,
+                          max_dt: float = 0.02) -> dict[str, NDArray]:
+    """Signed errors (estimate minus reference) versus interval mid-time: SOG [m/s], COG [deg] and
+    the weighted-ICP paper's ΔCOG [deg] (change of COG between consecutive intervals, Figs. 14-15),
+    COG and ΔCOG only while the reference moves faster than ``min_speed``."""
+    e, r = paired(est, ref, max_dt)
+    a, b = movement(e), movement(r)
+    moving = b["sog"] > min_speed
+    both = moving[1:] & moving[:-1]
+    dcog = np.degrees(wrap_angle(np.diff(a["cog"]) - np.diff(b["cog"])))
+    return {"t": a["t"], "sog": a["sog"] - b["sog"],
+            "t_cog": a["t"][moving], "cog": np.degrees(wrap_angle(a["cog"] - b["cog"]))[moving],
+            "t_dcog": a["t"][1:][both], "dcog": dcog[both]}
+
+
+def gnss_residuals(est: Trajectory, t: NDArray, xy: NDArray, sigma: NDArray, *,
+                   max_gap: float = 10.0) -> dict[str, Any]:
+    """The estimate against GNSS position fixes, for a log without truth: per fix, ``residual_m`` =
+    |fix - estimate| with the estimate at the fix's time: linear between the two estimates around
+    it when they are at most ``max_gap`` seconds apart, else the last estimate before it (what the
+    estimator had to say then: an estimate made after a gap is never used for a time inside it), and
+    ``nis`` = ``e^T (P + sigma^2 I)^-1 e`` (the normalised innovation, chi-square with 2 degrees of
+    freedom when the estimate's covariance ``P`` (the last estimate's) and the fix's ``sigma`` are
+    honest and the fix is independent of the estimate; ``None`` without covariance). Fixes before the
+    first estimate or more than ``max_gap`` after the last are not scored; ``i_fix``: those scored."""
+    t = np.asarray(t, float)
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    sigma = np.asarray(sigma, float)
+    n = len(est)
+    empty = {"t": np.zeros(0), "residual_m": np.zeros(0), "nis": None if est.cov is None else np.zeros(0),
+             "i_fix": np.zeros(0, int)}
+    if n == 0 or t.size == 0:
+        return empty
+    j = np.searchsorted(est.t, t, side="right")  # est.t[j-1] <= t < est.t[j]
+    ok = (j >= 1) & np.isfinite(xy).all(axis=1) & ((j < n) | (t - est.t[-1] <= max_gap))
+    i_fix = np.flatnonzero(ok)
+    if not i_fix.size:
+        return empty
+    t, xy, sigma, prev = t[ok], xy[ok], sigma[ok], j[ok] - 1
+    nxt = np.minimum(prev + 1, n - 1)
+    interp = (nxt > prev) & (est.t[nxt] - est.t[prev] <= max_gap)
+    p = np.column_stack([np.where(interp, np.interp(t, est.t, est.x), est.x[prev]),
+                         np.where(interp, np.interp(t, est.t, est.y), est.y[prev])])
+    e = xy - p
+    out: dict[str, Any] = {"t": t, "residual_m": np.hypot(e[:, 0], e[:, 1]), "nis": None, "i_fix": i_fix}
+    if est.cov is not None:
+        c = est.cov[prev][:, :2, :2] + (sigma ** 2)[:, None, None] * np.eye(2)
+        a, b, d = c[:, 0, 0], 0.5 * (c[:, 0, 1] + c[:, 1, 0]), c[:, 1, 1]
+        det = a * d - b * b
+        with np.errstate(divide="ignore", invalid="ignore"):
+            nis = (d * e[:, 0] ** 2 - 2.0 * b * e[:, 0] * e[:, 1] + a * e[:, 1] ** 2) / det
+        out["nis"] = nis[np.isfinite(nis) & (det > 0)]
+    return out

@@ -18,7 +18,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib as mpl
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
@@ -32,7 +31,14 @@ from scipy.stats import chi2
 from ..geometry import wrap_angle
 from ..io.outputs import atomic_path
 from ..trajectory import Trajectory
-from .metrics import associate, movement, position_nees
+from . import palette
+from .metrics import (  # noqa: F401  (the error series live in metrics; plots re-exports them)
+    heading_errors,
+    movement_error_series,
+    paired,
+    position_errors,
+    position_nees,
+)
 
 # (face colour, hatch, label): light fills/hatches, so they do not read as an estimator's line colour
 EVENT_STYLE = {"gnss_outage": ("#f2d64b", "", "GNSS outage"), "gnss_jump": ("#e8a0a0", "xx", "GNSS jump")}
@@ -42,8 +48,8 @@ NEES_BAND = tuple(float(v) for v in chi2.ppf([0.025, 0.975], 2))  # two-sided 95
 
 
 def colors(names: Sequence[str]) -> dict[str, Any]:
-    cmap = mpl.colormaps["tab10"]
-    return {n: cmap(i % 10) for i, n in enumerate(names)}
+    """One colour per estimator, the same in every figure and on map.html (:mod:`.palette`)."""
+    return palette.colors(names)
 
 
 def widths(names: Sequence[str], thick: float = 2.8, thin: float = 1.1) -> dict[str, float]:
@@ -97,38 +103,6 @@ def _as_dict(trajs: dict[str, Trajectory] | Trajectory) -> dict[str, Trajectory]
     return {trajs.name or "estimate": trajs} if isinstance(trajs, Trajectory) else dict(trajs)
 
 
-def paired(est: Trajectory, ref: Trajectory, max_dt: float = MAX_DT) -> tuple[Trajectory, Trajectory]:
-    ie, ir = associate(est, ref, max_dt)
-    cov = None if est.cov is None else est.cov[ie]
-    return Trajectory(est.t[ie], est.poses[ie], cov), Trajectory(ref.t[ir], ref.poses[ir])
-
-
-def position_errors(est: Trajectory, ref: Trajectory) -> tuple[np.ndarray, np.ndarray]:
-    """Times and unaligned position errors [m] at the associated pairs."""
-    e, r = paired(est, ref)
-    return e.t, np.hypot(e.x - r.x, e.y - r.y)
-
-
-def heading_errors(est: Trajectory, ref: Trajectory) -> tuple[np.ndarray, np.ndarray]:
-    """Times and signed heading errors [deg] (estimate minus reference, wrapped) at the associated pairs."""
-    e, r = paired(est, ref)
-    return e.t, np.degrees(wrap_angle(e.yaw - r.yaw))
-
-
-def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0.2) -> dict[str, np.ndarray]:
-    """Signed errors (estimate minus reference) versus interval mid-time: SOG [m/s], COG [deg] and
-    the weighted-ICP paper's ΔCOG [deg] (change of COG between consecutive intervals, Figs. 14-15),
-    COG and ΔCOG only while the reference moves faster than ``min_speed``."""
-    e, r = paired(est, ref)
-    a, b = movement(e), movement(r)
-    moving = b["sog"] > min_speed
-    both = moving[1:] & moving[:-1]
-    dcog = np.degrees(wrap_angle(np.diff(a["cog"]) - np.diff(b["cog"])))
-    return {"t": a["t"], "sog": a["sog"] - b["sog"],
-            "t_cog": a["t"][moving], "cog": np.degrees(wrap_angle(a["cog"] - b["cog"]))[moving],
-            "t_dcog": a["t"][1:][both], "dcog": dcog[both]}
-
-
 def _shade_events(ax, events: Sequence[dict], span: tuple[float, float] | None = None) -> list[Patch]:
     """Shade event intervals; one legend handle per kind. Events other than GNSS outages/jumps that
     cover most of ``span`` (a condition of the whole log, e.g. a compass bias) are not shaded."""
@@ -159,11 +133,46 @@ def _legend_right(ax: Axes, extra: Sequence[Any] = ()) -> None:
 
 # -- trajectories ---------------------------------------------------------------------------------
 
+def track_limits(trajs: dict[str, Trajectory], truth: Trajectory | None, gnss: np.ndarray | None = None, *,
+                 margin: float = 0.06, min_ratio: float = 0.25) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Axis limits that fit the data: the truth and the central 98 % of each estimate (a diverged
+    estimator does not stretch the view of the others; GNSS fixes count only without truth), with a
+    relative margin; the short side at least ``min_ratio`` of the long one (a straight track keeps
+    a readable band around it instead of hundreds of metres of empty axis)."""
+    pts = []
+    if truth is not None and len(truth):
+        pts.append(np.column_stack([truth.x, truth.y]))
+    elif gnss is not None and len(gnss):
+        g = np.asarray(gnss, float)
+        lo, hi = np.nanpercentile(g, [1, 99], axis=0)
+        pts.append(g[((g >= lo) & (g <= hi)).all(axis=1)])
+    for tr in trajs.values():
+        if len(tr):
+            xy = np.column_stack([tr.x, tr.y])
+            xy = xy[np.isfinite(xy).all(axis=1)]
+            if len(xy):
+                lo, hi = np.percentile(xy, [1, 99], axis=0)
+                pts.append(xy[((xy >= lo) & (xy <= hi)).all(axis=1)])
+    xy = np.vstack(pts) if pts else np.zeros((1, 2))
+    lo, hi = np.nanmin(xy, 0), np.nanmax(xy, 0)
+    span = np.maximum(hi - lo, 1.0)
+    span = np.maximum(span, min_ratio * span.max()) * (1 + 2 * margin)
+    c = 0.5 * (lo + hi)
+    return (c[0] - span[0] / 2, c[0] + span[0] / 2), (c[1] - span[1] / 2, c[1] + span[1] / 2)
+
+
 def plot_trajectories(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory | None,
                       gnss: np.ndarray | None = None, *, title: str = "", ax: Axes | None = None) -> Figure:
-    """Every trajectory over the truth (and the GNSS fixes), one axes."""
+    """Every trajectory over the truth (and the GNSS fixes), one axes whose limits fit the data
+    (:func:`track_limits`, equal scale; a new figure takes the data's shape)."""
     trajs = _as_dict(trajs)
-    fig, ax = _axes(ax, (8, 7))
+    (x0, x1), (y0, y1) = track_limits(trajs, truth, gnss)
+    own = ax is None
+    if own:
+        h = float(np.clip(6.5 * (y1 - y0) / (x1 - x0), 3.0, 9.0))
+        fig, ax = _axes(None, (8.5, h + 1.0))
+    else:
+        fig = ax.figure
     col = colors(list(trajs))
     if gnss is not None and len(gnss):
         ax.plot(gnss[:, 0], gnss[:, 1], ".", ms=2.5, color="0.6", label="GNSS fixes", zorder=1)
@@ -173,12 +182,18 @@ def plot_trajectories(trajs: dict[str, Trajectory] | Trajectory, truth: Trajecto
     lw = widths(list(trajs))
     for name, tr in trajs.items():
         ax.plot(tr.x, tr.y, "-", lw=lw[name], color=col[name], label=name, zorder=3)
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x (east) [m]")
     ax.set_ylabel("y (north) [m]")
-    ax.set_title(title or "Trajectories over the truth (start: black dot)")
+    ax.set_title(title or ("Trajectories over the truth (start: black dot)" if truth is not None else
+                           "Trajectories (no truth)"))
     ax.grid(alpha=0.3)
-    _legend_right(ax)
+    if own:  # (a figure legend: the constrained layout keeps it and the labels inside the figure)
+        fig.legend(handles=ax.get_legend_handles_labels()[0], loc="outside right upper", fontsize=9, frameon=False)
+    else:
+        _legend_right(ax)
     return fig
 
 
@@ -394,52 +409,87 @@ def plot_error_cdf(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory,
 
 def plot_sog_cog(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, events: Sequence[dict] = (), *,
                  fig: Figure | None = None) -> Figure:
-    """The weighted-ICP paper's Figs. 12-15: SOG, COG and ΔCOG differences versus time, and their
-    histograms."""
+    """The weighted-ICP paper's Figs. 12-15 as small multiples: one row per estimator (in its colour),
+    SOG, COG and ΔCOG errors versus time in three columns with one y-scale per column (the 98th
+    percentile of every estimator's error), each panel titled with its RMS; the log's events shaded."""
     trajs = _as_dict(trajs)
+    n = max(len(trajs), 1)
     if fig is None:
-        fig = Figure(figsize=(12, 10.5), layout="constrained")
-    axes = fig.subplots(3, 2, gridspec_kw={"width_ratios": [2.2, 1]}, squeeze=False)
+        fig = Figure(figsize=(13, 1.55 * n + 1.2), layout="constrained")
+    axes = fig.subplots(n, 3, sharex=True, squeeze=False)
     col = colors(list(trajs))
-    series = {n: movement_error_series(tr, truth) for n, tr in trajs.items()}
-
-    def robust_range(key: str, floor: float) -> float:
-        vals = np.concatenate([np.abs(s[key][np.isfinite(s[key])]) for s in series.values()] or [np.zeros(0)])
-        return max(float(np.percentile(vals, 98)) if len(vals) else floor, floor)
-
+    series = {name: movement_error_series(tr, truth) for name, tr in trajs.items()}
+    cols = [("sog", "t", "m/s", "SOG", "{:.3f}"), ("cog", "t_cog", "deg", "COG", "{:.2f}"),
+            ("dcog", "t_dcog", "deg", "ΔCOG", "{:.2f}")]
     shade: list[Patch] = []
-    rows = [("sog", "t", "m/s", "SOG"), ("cog", "t_cog", "deg", "COG"), ("dcog", "t_dcog", "deg", "ΔCOG")]
-    for row, (key, tkey, unit, label) in enumerate(rows):
-        ax_t, ax_h = axes[row]
-        lim = robust_range(key, 0.05 if key == "sog" else 0.2)
-        bins = np.linspace(-lim, lim, 41)
-
-        # the noisiest series first (underneath, faded), the most accurate on top
-        def rms(n: str, key: str = key) -> float:
-            v = series[n][key][np.isfinite(series[n][key])]
-            return float(np.sqrt(np.mean(v**2))) if len(v) else np.inf
-
-        order = sorted(series, key=rms, reverse=True)
-        for z, name in enumerate(order):
-            s = series[name]
-            alpha = 0.45 if z < len(order) - 3 else 0.95
-            ax_t.plot(s[tkey], s[key], "-", lw=0.9, color=col[name], alpha=alpha, zorder=2 + z)
-            v = s[key][np.isfinite(s[key])]
-            ax_h.hist(np.clip(v, -lim, lim), bins=bins, histtype="step", lw=1.4, color=col[name])
-        shade = _shade_events(ax_t, events, _span(truth))
-        ax_t.set_ylim(-1.1 * lim, 1.1 * lim)
-        ax_t.axhline(0, color="k", lw=0.6)
-        ax_t.set_xlabel("time [s]")
-        ax_t.set_ylabel(f"{label} error [{unit}]")
+    for j, (key, tkey, unit, label, fmt) in enumerate(cols):
+        vals = np.concatenate([np.abs(s[key][np.isfinite(s[key])]) for s in series.values()] or [np.zeros(0)])
+        floor = 0.05 if key == "sog" else 0.2
+        lim = max(float(np.percentile(vals, 98)) if len(vals) else floor, floor)
+        for i, (name, s) in enumerate(series.items()):
+            ax = axes[i, j]
+            v = s[key]
+            ok = np.isfinite(v)
+            ax.plot(s[tkey], v, "-", lw=0.8, color=col[name])
+            rms = float(np.sqrt(np.mean(v[ok] ** 2))) if ok.any() else float("nan")
+            shade = _shade_events(ax, events, _span(truth))
+            ax.set_ylim(-1.1 * lim, 1.1 * lim)
+            ax.axhline(0, color="k", lw=0.5)
+            ax.grid(alpha=0.3)
+            ax.tick_params(labelsize=7)
+            ax.set_title(f"{name}: {label} RMS {fmt.format(rms)} {unit}", fontsize=8, color=col[name], loc="left")
+            if j == 0:
+                ax.set_ylabel(f"[{unit}]", fontsize=8)
+            if i == n - 1:
+                ax.set_xlabel("time [s]", fontsize=8)
         moving = " (moving only)" if key != "sog" else ""
-        ax_t.set_title(f"{label}$_{{est}}$ − {label}$_{{truth}}${moving}")
-        ax_t.grid(alpha=0.3)
-        ax_h.set_xlabel(f"{label} error [{unit}] (clipped at ±{lim:.2g})")
-        ax_h.set_ylabel("count")
-        ax_h.set_title(f"Histogram of {label} error")
-        ax_h.grid(alpha=0.3)
-    handles = [Line2D([], [], color=col[n], lw=1.5, label=n) for n in trajs] + shade
-    fig.legend(handles=handles, loc="outside right center", fontsize=9, frameon=False)
+        axes[0, j].annotate(f"{label} estimate − truth{moving} [{unit}]", (0.5, 1.35), xycoords="axes fraction",
+                            ha="center", fontsize=10, annotation_clip=False)
+    if shade:
+        fig.legend(handles=shade, loc="outside lower center", fontsize=8, frameon=False, ncols=len(shade))
+    return fig
+
+
+def plot_gnss_residuals(trajs: dict[str, Trajectory] | Trajectory, gnss: dict[str, np.ndarray],
+                        windows: Sequence[tuple[float, float]] = (), *, fig: Figure | None = None) -> Figure | None:
+    """For a log without truth: each estimator's distance to the GNSS fixes versus time, one panel per
+    estimator (in its colour, one y-scale), the fixes' own 1σ dashed; ``windows``: hold-out windows
+    (their fixes withheld from the estimators) shaded. ``gnss``: the fixes' columns ``t``, ``x``,
+    ``y``, ``sigma``. ``None`` when no estimate meets a fix."""
+    from .metrics import gnss_residuals
+
+    trajs = _as_dict(trajs)
+    xy = np.column_stack([gnss["x"], gnss["y"]])
+    res = {n: gnss_residuals(tr, gnss["t"], xy, gnss["sigma"]) for n, tr in trajs.items()}
+    res = {n: r for n, r in res.items() if len(r["t"])}
+    if not res:
+        return None
+    n = len(res)
+    if fig is None:
+        fig = Figure(figsize=(11, 1.5 * n + 1.0), layout="constrained")
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+    col = colors(list(trajs))
+    top = max(float(np.percentile(np.concatenate([r["residual_m"] for r in res.values()]), 99)), 1.0)
+    sig = float(np.nanmedian(gnss["sigma"])) if len(gnss["sigma"]) else None
+    t0 = float(np.min(gnss["t"]))  # (NMEA logs count from 1970: time since the first fix reads better)
+    for ax, (name, r) in zip(axes, res.items(), strict=True):
+        for a, b in windows:
+            ax.axvspan(a - t0, b - t0, color="#f2d64b", alpha=0.35, lw=0)
+        ax.plot(r["t"] - t0, r["residual_m"], ".", ms=2, color=col[name])
+        if sig is not None and np.isfinite(sig):
+            ax.axhline(sig, color="0.3", lw=0.8, ls="--")
+        rms = float(np.sqrt(np.mean(r["residual_m"] ** 2)))
+        ax.set_title(f"{name}: RMS {rms:.2f} m over {len(r['t'])} fixes", fontsize=8, loc="left", color=col[name])
+        ax.set_ylim(0, 1.1 * top)
+        ax.set_ylabel("[m]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel(f"time since the first fix (t = {t0:.1f} s) [s]")
+    handles = [Line2D([], [], color="0.3", ls="--", label=f"fixes' 1σ (median {sig:.2g} m)")] if sig else []
+    if windows:
+        handles.append(Patch(facecolor="#f2d64b", alpha=0.35, label="hold-out windows (fixes withheld)"))
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", fontsize=8, frameon=False, ncols=len(handles))
     return fig
 
 

@@ -20,9 +20,8 @@ import numpy as np
 from ..geodesy import LocalFrame, origin_frame
 from ..io.outputs import write_text_atomic
 from ..trajectory import Trajectory
+from .palette import GNSS, colors
 
-PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22",
-           "#7f7f7f")
 MAX_POINTS = 4000  # per track, drawn (a stride keeps the file small; the GeoJSON has every pose)
 #: Graticule spacings to choose from, in arc-minutes.
 STEPS_MIN = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 30.0, 60.0, 120.0, 300.0, 600.0)
@@ -140,13 +139,37 @@ def _tiles(c: _Canvas, frame: LocalFrame, template: str) -> list[str]:
     return out
 
 
+def _track_svg(c: _Canvas, i: int, name: str, tr: Trajectory, col: str) -> str:
+    ok = np.isfinite(tr.x) & np.isfinite(tr.y)
+    x, y = tr.x[ok], tr.y[ok]
+    stride = max(1, math.ceil(len(x) / MAX_POINTS))
+    x, y = np.append(x[::stride], x[-1:]), np.append(y[::stride], y[-1:])
+    dash = ' stroke-dasharray="6 4"' if name == "truth" else ""
+    return (f'<g class="tk{i}"><polyline class="track" stroke="{col}"{dash} points="{c.points(x, y)}">'
+            f"<title>{escape(name)}</title></polyline>"
+            f'<circle cx="{float(c.px(x[0])):.1f}" cy="{float(c.py(y[0])):.1f}" r="3.5" fill="{col}"/></g>')
+
+
+def _gnss_svg(c: _Canvas, xy: np.ndarray) -> str:
+    """The fixes as dots (a zero-length segment per fix, round caps: one small path)."""
+    xy = xy[np.isfinite(xy).all(axis=1)]
+    xy = xy[:: max(1, math.ceil(len(xy) / MAX_POINTS))]
+    d = " ".join(f"M{a:.1f} {b:.1f}h0" for a, b in zip(c.px(xy[:, 0]), c.py(xy[:, 1]), strict=True))
+    return f'<g class="tkg"><path class="gnss" d="{d}"><title>GNSS fixes</title></path></g>'
+
+
 def track_map_html(trajectories: Mapping[str, Trajectory], meta: dict, *, title: str = "Tracks",
-                   tiles: str | None = None, width: int = 900, max_height: int = 800) -> str:
-    """The page (see the module docstring). ``trajectories``: name -> local-frame trajectory (a track
-    named ``truth`` is drawn black and dashed); ``meta``: the log's, for its geodetic origin."""
+                   tiles: str | None = None, width: int = 900, max_height: int = 800,
+                   gnss: np.ndarray | None = None) -> str:
+    """The page (see the module docstring). ``trajectories``: name -> local-frame trajectory, each in
+    its estimator's colour (:mod:`.palette`, as in the figures); a track named ``truth`` is drawn
+    black and dashed, on top of the others; ``gnss``: the fixes (N, 2), grey dots under the tracks;
+    ``meta``: the log's, for its geodetic origin. Each track can be hidden and shown again from the
+    legend (checkboxes and CSS: the page has no script)."""
     frame, reason = origin_frame(meta)
     tracks = {n: tr for n, tr in trajectories.items() if len(tr)}
     notes = []
+    fixes = np.asarray(gnss, float).reshape(-1, 2) if gnss is not None and len(gnss) else None
     if tracks:
         xs = np.concatenate([tr.x for tr in tracks.values()])
         ys = np.concatenate([tr.y for tr in tracks.values()])
@@ -168,19 +191,23 @@ def track_map_html(trajectories: Mapping[str, Trajectory], meta: dict, *, title:
         o = f"local metres only: {reason}"
         if tiles:
             notes.append("map tiles not drawn: the log has no geodetic origin to place them")
-    legend = []
-    colour = iter(PALETTE * 10)
+    col = colors(list(trajectories))  # (by the comparison's order, as in the figures)
+    order = [n for n in tracks if n != "truth"] + (["truth"] if "truth" in tracks else [])  # the truth on top
+    index = {n: i for i, n in enumerate(tracks)}
+    toggles, legend = [], []
+    if fixes is not None:
+        svg.append(_gnss_svg(c, fixes))
+        toggles.append('<input type="checkbox" id="tkg" checked>')
+        legend.append(f'<li><label for="tkg"><span class="dot" style="background:{GNSS}"></span>GNSS fixes '
+                      f"({len(fixes)})</label></li>")
+    for name in order:
+        i = index[name]
+        svg.append(_track_svg(c, i, name, tracks[name], col[name]))
     for name, tr in tracks.items():
-        ok = np.isfinite(tr.x) & np.isfinite(tr.y)
-        x, y = tr.x[ok], tr.y[ok]
-        stride = max(1, math.ceil(len(x) / MAX_POINTS))
-        x, y = np.append(x[::stride], x[-1:]), np.append(y[::stride], y[-1:])
-        col, dash = ("#000000", ' stroke-dasharray="6 4"') if name == "truth" else (next(colour), "")
-        svg.append(f'<polyline class="track" stroke="{col}"{dash} points="{c.points(x, y)}">'
-                   f"<title>{escape(name)}</title></polyline>")
-        svg.append(f'<circle cx="{float(c.px(x[0])):.1f}" cy="{float(c.py(y[0])):.1f}" r="3.5" fill="{col}"/>')
-        legend.append(f'<li><span class="sw" style="background:{col}"></span>{escape(name)} '
-                      f"({len(tr)} poses)</li>")
+        i = index[name]
+        toggles.append(f'<input type="checkbox" id="tk{i}" checked>')
+        legend.append(f'<li><label for="tk{i}"><span class="sw" style="background:{col[name]}"></span>'
+                      f"{escape(name)} ({len(tr)} poses)</label></li>")
     bar = _nice((c.x1 - c.x0) / 5.0)
     bx, by = c.w - bar * c.s - 12.0, c.h - 26.0  # above the longitude labels
     svg.append(f'<g class="scale"><line x1="{bx:.1f}" y1="{by:.1f}" x2="{bx + bar * c.s:.1f}" y2="{by:.1f}"/>'
@@ -188,19 +215,26 @@ def track_map_html(trajectories: Mapping[str, Trajectory], meta: dict, *, title:
     svg.append(f'<g class="north"><text x="{c.w - 22:.1f}" y="22">N</text>'
                f'<line x1="{c.w - 18:.1f}" y1="44" x2="{c.w - 18:.1f}" y2="26"/></g>')
     svg.append("</svg>")
+    ids = [f"tk{index[n]}" for n in tracks] + (["tkg"] if fixes is not None else [])
+    hide = "".join(f"#{k}:not(:checked)~svg .{k}{{display:none}}#{k}:not(:checked)~ul label[for={k}]{{opacity:.35;"
+                   "text-decoration:line-through}" for k in ids)
     style = ("body{font-family:sans-serif;margin:1.5em;color:#222}svg{border:1px solid #999}"
              ".sea{fill:#f4f8fb}.graticule polyline{fill:none;stroke:#9ab;stroke-width:0.6}"
              ".graticule text{font-size:10px;fill:#567}.track{fill:none;stroke-width:1.6}"
+             f".gnss{{fill:none;stroke:{GNSS};stroke-width:3;stroke-linecap:round;opacity:.55}}"
              ".scale line,.north line{stroke:#222;stroke-width:2}.scale text,.north text{font-size:11px}"
-             "ul{list-style:none;padding:0}.sw{display:inline-block;width:1.4em;height:0.3em;margin-right:0.5em;"
-             "vertical-align:middle}")
+             "input{display:none}ul{list-style:none;padding:0}label{cursor:pointer}"
+             ".sw{display:inline-block;width:1.4em;height:0.3em;margin-right:0.5em;vertical-align:middle}"
+             ".dot{display:inline-block;width:.5em;height:.5em;border-radius:50%;margin:0 .9em 0 .4em;"
+             "vertical-align:middle}" + hide)
     body = "".join(f"<p>{n}</p>" for n in notes)
     return (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>{escape(title)}</title>'
             f"<style>{style}</style></head><body><h1>{escape(title)}</h1><p>{escape(o)}</p>{body}"
+            "<p>Click a name to hide or show its track.</p>" + "".join(toggles)
             + "\n".join(svg) + f"<ul>{''.join(legend)}</ul></body></html>\n")
 
 
 def write_track_map(path: str | Path, trajectories: Mapping[str, Trajectory], meta: dict, *,
-                    title: str = "Tracks", tiles: str | None = None) -> Path:
+                    title: str = "Tracks", tiles: str | None = None, gnss: np.ndarray | None = None) -> Path:
     """Write :func:`track_map_html` to ``path`` atomically."""
-    return write_text_atomic(path, track_map_html(trajectories, meta, title=title, tiles=tiles))
+    return write_text_atomic(path, track_map_html(trajectories, meta, title=title, tiles=tiles, gnss=gnss))

@@ -48,7 +48,10 @@ class ImuConfig:
     # without IMU records (motion "vessel"): the velocity is a random walk in the world frame, driven by
     # white-noise acceleration, and the heading a random walk apart from it (course != heading)
     vessel_accel: float = 0.3  # [m/s^2/sqrt(s)] a vessel's manoeuvring acceleration density
-    vessel_yaw_rate_deg: float = 5.0  # [deg/s/sqrt(s)]
+    vessel_yaw_rate_deg: float = 5.0  # [deg/s/sqrt(s)] ... and yaw-rate density under way, growing at low speed:
+    vessel_steerage_speed: float = 1.0  # [m/s] below this the yaw-rate density is x (this / speed), at most x10:
+    #  a hull's yaw is damped in proportion to its speed through the water; stopped or drifting, wind and
+    #  waves turn it freely (and a boat going astern or drifting sideways is neither of the two)
 
 
 class ImuChain:
@@ -64,6 +67,7 @@ class ImuChain:
             self.source = "log"
         self.t: list[float] = []
         self.rows: list[tuple[float, ...]] = []  # ax, ay, az, wx, wy, wz
+        self.cum: list[float] = []  # the integrated gyro rate's norm up to each t [rad] (the keyframe rule)
         self.six: bool | None = None
         self.params: gtsam.PreintegrationParams | None = None
         self.body_P_sensor: gtsam.Pose3 | None = None  # the IMU's mount (graphnav.graph.mounts), when not at the origin
@@ -72,6 +76,22 @@ class ImuChain:
         p.setGyroscopeCovariance(np.eye(3) * math.radians(cfg.vessel_yaw_rate_deg) ** 2)
         p.setIntegrationCovariance(np.eye(3) * cfg.integration_sigma**2)
         self.vessel_params = p
+        self._vessel_by_scale: dict[float, gtsam.PreintegrationParams] = {1.0: p}
+
+    def _vessel(self, speed: float | None) -> gtsam.PreintegrationParams:
+        """The vessel model's parameters at ``speed``: the yaw-rate density x ``steerage / speed`` (1 to 10,
+        in steps of 0.5 so that a handful of parameter sets serve a whole log)."""
+        c = self.cfg
+        if speed is None or not math.isfinite(speed) or speed >= c.vessel_steerage_speed:
+            return self.vessel_params
+        scale = round(min(c.vessel_steerage_speed / max(speed, 1e-3), 10.0) * 2) / 2
+        if scale not in self._vessel_by_scale:
+            p = gtsam.PreintegrationParams.MakeSharedU(0.0)
+            p.setAccelerometerCovariance(np.eye(3) * c.vessel_accel**2)
+            p.setGyroscopeCovariance(np.eye(3) * (scale * math.radians(c.vessel_yaw_rate_deg)) ** 2)
+            p.setIntegrationCovariance(np.eye(3) * c.integration_sigma**2)
+            self._vessel_by_scale[scale] = p
+        return self._vessel_by_scale[scale]
 
     def __bool__(self) -> bool:
         return bool(self.t)
@@ -102,10 +122,14 @@ class ImuChain:
             row = (r.ax, r.ay, r.az, r.wx, r.wy, r.wz)
         else:
             row = (r.ax, r.ay, 0.0, 0.0, 0.0, r.wz)
+        rate = math.sqrt(row[3] ** 2 + row[4] ** 2 + row[5] ** 2)
         if self.t and r.t <= self.t[-1]:
             if r.t == self.t[-1]:
                 self.rows[-1] = row
+                if len(self.t) > 1:
+                    self.cum[-1] = self.cum[-2] + rate * (self.t[-1] - self.t[-2])
             return  # out of order: dropped (the interval it covers is held by its neighbour)
+        self.cum.append(self.cum[-1] + rate * (r.t - self.t[-1]) if self.t else 0.0)
         self.t.append(r.t)
         self.rows.append(row)
 
@@ -129,17 +153,28 @@ class ImuChain:
         return out
 
     def rotation(self, ta: float, tb: float) -> float:
-        """An upper bound of the rotation over ``[ta, tb]`` [rad]: the integrated gyro rate's norm."""
-        return float(sum(np.linalg.norm(w) * dt for _, w, dt in self.samples(ta, tb)))
+        """An upper bound of the rotation over ``[ta, tb]`` [rad]: the integrated gyro rate's norm (each
+        record held over the interval since the previous one, the last one beyond it)."""
+        return max(self._cum_at(tb) - self._cum_at(ta), 0.0) if self.t else 0.0
 
-    def preintegrate(self, bias: gtsam.imuBias.ConstantBias, ta: float, tb: float
+    def _cum_at(self, t: float) -> float:
+        i = bisect.bisect_left(self.t, t)
+        if i >= len(self.t):  # beyond the newest sample: held
+            r = self.rows[-1]
+            return self.cum[-1] + math.sqrt(r[3] ** 2 + r[4] ** 2 + r[5] ** 2) * (t - self.t[-1])
+        r = self.rows[i]
+        return self.cum[i] - math.sqrt(r[3] ** 2 + r[4] ** 2 + r[5] ** 2) * (self.t[i] - t)
+
+    def preintegrate(self, bias: gtsam.imuBias.ConstantBias, ta: float, tb: float, speed: float | None = None
                      ) -> gtsam.PreintegratedImuMeasurements:
         """GTSAM preintegration of ``[ta, tb]`` at ``bias`` (:func:`factors.imu.preintegrate`: planar
-        records with the acceleration at the mid-step attitude, second order as the constant-turn arc)."""
+        records with the acceleration at the mid-step attitude, second order as the constant-turn arc).
+        Without IMU records, the vessel model's white noise; ``speed`` [m/s] (the start's) scales its
+        yaw-rate density at low speed (:class:`ImuConfig`)."""
         if self.params is None and self.t and (len(self.t) >= 2 or self.std[2]):
             self.params = self._make_params()
         if self.params is None:  # no IMU: the white-noise acceleration model
-            pim = gtsam.PreintegratedImuMeasurements(self.vessel_params, bias)
+            pim = gtsam.PreintegratedImuMeasurements(self._vessel(speed), bias)
             if tb > ta:
                 pim.integrateMeasurement(np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope()), tb - ta)
             return pim
@@ -151,6 +186,7 @@ class ImuChain:
         if i > 1024:
             del self.t[:i - 1]
             del self.rows[:i - 1]
+            del self.cum[:i - 1]
 
     def _axes(self) -> NDArray[np.float64]:
         """Per bias axis (acc x, y, z, gyro x, y, z): 1 where the records measure it; a planar record

@@ -232,6 +232,14 @@ class NavSpace(PlanarSpace):
         bearing = gtsam.Unit3(np.array([math.cos(brg), math.sin(brg), 0.0]))
         return gtsam.BearingRangeFactor3D(key, lkey, bearing, float(rng), noise)
 
+    def attitude(self, key: int, roll: float, pitch: float, sigma: float):
+        """Roll and pitch (an AHRS, a satellite compass, PASHR/XDR, PGN 127257): GTSAM's
+        ``AttitudeFactorPose3``, the body's up direction ``Ry(pitch)^T Rx(roll)^T`` seen as the
+        navigation frame's up (2 DoF; the yaw is left free)."""
+        up_body = gtsam.Rot3.Ypr(0.0, pitch, roll).unrotate(gtsam.Point3(0.0, 0.0, 1.0))
+        return gtsam.AttitudeFactorPose3(key, gtsam.Unit3(np.array([0.0, 0.0, 1.0])),
+                                         gtsam.noiseModel.Isotropic.Sigma(2, sigma), gtsam.Unit3(up_body))
+
     def velocity(self, k: int, vx: float, vy: float, sigma: float, robust: str | None):
         """GNSS velocity over ground (nav frame) on ``V(k)``; the vertical held at the surface."""
         noise = robustify(gtsam.noiseModel.Diagonal.Sigmas(np.array([sigma, sigma, SURFACE_SIGMA_V])), robust, None)

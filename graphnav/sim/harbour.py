@@ -219,10 +219,10 @@ ORIGIN = {"lat": 54.515435, "lon": 18.551351, "h": 0.0}
 
 
 PROFILES = ("usv", "legacy")
-EMBEDDED_PROFILE = "legacy"
+EMBEDDED_PROFILE = "usv"
 """The profile ``data/harbour.npz`` was simulated with (seed 0, defaults otherwise): what ``graphnav
-demo`` simulates when the file is absent and what the regeneration test compares it against. Set it
-to ``"usv"`` when the file is regenerated with the default profile."""
+demo`` simulates when the file is absent and what the regeneration test compares it against (the
+USV's sensors since issue 21; ``--profile legacy`` makes the robot-style log it was before)."""
 
 LEGACY_CURRENT = TidalCurrent(speed=0.0, speed_amp=0.0)
 

@@ -58,6 +58,25 @@ def test_map_is_self_contained_and_draws_every_track():
     assert "isam2" in html and "43°30.000′N" in html  # the origin, in degrees and minutes
 
 
+def test_truth_on_top_gnss_under_colours_of_the_figures_and_toggles():
+    """The truth is drawn last (on top), the GNSS fixes first; each estimator has its figures' colour
+    (by its place in the comparison, the truth taking none); every track has a checkbox and a CSS rule
+    that hides it, and there is no script."""
+    from graphnav.evaluation.palette import PALETTE
+
+    trs = {**tracks(), "ekf": tracks()["isam2"]}
+    html = track_map_html(trs, {"origin": ORIGIN}, gnss=np.array([[0.0, 0.0], [10.0, 5.0], [np.nan, 1.0]]))
+    p = _Collect()
+    p.feed(html)
+    lines = [a for tag, a in p.tags if tag == "polyline" and a.get("class") == "track"]
+    assert [a["stroke"] for a in lines] == [PALETTE[0], PALETTE[1], "#000000"]  # isam2, ekf, then the truth
+    assert html.index('class="gnss"') < html.index('class="track"') and html.count("h0") == 2
+    boxes = [a["id"] for tag, a in p.tags if tag == "input" and a.get("type") == "checkbox"]
+    assert sorted(boxes) == ["tk0", "tk1", "tk2", "tkg"]
+    assert all(f"#{b}:not(:checked)~svg .{b}{{display:none}}" in html for b in boxes)
+    assert "<script" not in html and external_resources(html) == []
+
+
 def test_graticule_lines_sit_where_the_origin_puts_them():
     """A line of latitude drawn on the map passes through the pixel row of that latitude."""
     from graphnav.geodesy import LocalFrame
@@ -68,7 +87,8 @@ def test_graticule_lines_sit_where_the_origin_puts_them():
     grat = [a["points"] for tag, a in p.tags if tag == "polyline" and "class" not in a]
     assert len(grat) >= 4  # lines of latitude and of longitude
     # rows: the track's start (origin, y = 0) and end (y = 500 m) pixel rows bound the lines of latitude
-    track = [a["points"] for tag, a in p.tags if tag == "polyline" and a.get("class") == "track"][0].split()
+    track = [a["points"] for tag, a in p.tags if tag == "polyline" and a.get("class") == "track"
+             and a.get("stroke-dasharray")][0].split()  # the truth's
     y_start, y_end = float(track[0].split(",")[1]), float(track[-1].split(",")[1])
     scale = (y_start - y_end) / 500.0  # px per metre
     f = LocalFrame(ORIGIN["lat"], ORIGIN["lon"])

@@ -266,3 +266,57 @@ def test_keyframes_follow_the_motion_with_an_imu_and_every_scan_without():
     e_every, e_motion = (ate(r.trajectory, truth)["rmse"] for r in (every, motion))
     assert len(motion.trajectory) < len(every.trajectory) / 5
     assert e_motion < 1.3 * e_every + 0.02, (e_motion, e_every)
+
+
+def test_vessel_model_yaw_noise_grows_at_low_speed():
+    """Without an IMU (motion "vessel") the yaw-rate density is the configured one under way and grows as
+    steerage / speed below the steerage speed (x10 at most): a drifting boat's heading is free."""
+    chain = ImuChain(ImuConfig(vessel_yaw_rate_deg=2.0, vessel_steerage_speed=1.0))
+    bias = gtsam.imuBias.ConstantBias()
+
+    def yaw_var(speed):
+        return np.asarray(chain.preintegrate(bias, 0.0, 1.0, speed=speed).preintMeasCov())[2, 2]
+
+    under_way = yaw_var(2.0)
+    assert under_way == pytest.approx(math.radians(2.0) ** 2, rel=1e-6)
+    assert yaw_var(None) == under_way and yaw_var(1.0) == under_way
+    assert yaw_var(0.5) == pytest.approx(4 * under_way, rel=1e-6)
+    assert yaw_var(0.0) == pytest.approx(100 * under_way, rel=1e-6)
+
+
+@pytest.mark.parametrize("roll_deg,pitch_deg", [(0.0, 0.0), (5.0, 0.0), (0.0, -3.0), (4.0, 7.0)])
+def test_attitude_factor_is_zero_at_the_measured_roll_and_pitch_for_any_yaw(roll_deg, pitch_deg):
+    roll, pitch = math.radians(roll_deg), math.radians(pitch_deg)
+    f = NavSpace().attitude(F.X(0), roll, pitch, math.radians(1.0))
+    for yaw in (0.0, 1.0, -2.5):
+        v = gtsam.Values()
+        v.insert(F.X(0), gtsam.Pose3(gtsam.Rot3.Ypr(yaw, pitch, roll), np.zeros(3)))
+        assert f.error(v) < 1e-12
+        v.update(F.X(0), gtsam.Pose3(gtsam.Rot3.Ypr(yaw, pitch + math.radians(1.0), roll), np.zeros(3)))
+        assert f.error(v) == pytest.approx(0.5, rel=0.02)  # one sigma off: chi2 / 2
+
+
+def test_attitude_records_reach_the_imu_graph_and_not_the_planar_one():
+    from graphnav.log import Attitude
+
+    log = turn_log(n=20)
+    recs = list(log.records) + [Attitude(float(t), 0.02, -0.01, math.radians(0.5)) for t in range(1, 19)]
+    att = NavLog(sorted(recs, key=lambda r: r.t), log.beacons_known, log.meta)
+    base_nav, base_planar = run_isam2(log, **FAST), run_isam2(log, motion="odometry", **FAST)
+    nav, planar = run_isam2(att, **FAST), run_isam2(att, motion="odometry", **FAST)
+    assert nav.info["attitude"] == 18 and nav.info["ignored"] == base_nav.info["ignored"]
+    assert planar.info["ignored"] == base_planar.info["ignored"] + 18
+    # roll and pitch do not move the planar track (a levelled 3-axis IMU)
+    np.testing.assert_allclose(nav.trajectory.poses, base_nav.trajectory.poses, atol=1e-3)
+
+
+def test_imu_chain_rotation_is_the_integrated_rate_of_the_samples():
+    rng = np.random.default_rng(2)
+    chain = ImuChain(ImuConfig())
+    t = np.cumsum(rng.uniform(0.005, 0.02, 300))
+    w = rng.normal(0.0, 0.3, (300, 3))
+    for ti, wi in zip(t, w, strict=True):
+        chain.add(Imu(float(ti), 0.1, 0.0, float(wi[2]), 9.8, float(wi[0]), float(wi[1])))
+    for ta, tb in ((t[3], t[200]), (t[10] - 0.003, t[50] + 0.004), (t[250], t[-1] + 0.5)):
+        ref = sum(np.linalg.norm(om) * dt for _, om, dt in chain.samples(ta, tb))
+        assert chain.rotation(ta, tb) == pytest.approx(ref, rel=1e-9, abs=1e-12)

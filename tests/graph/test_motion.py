@@ -19,7 +19,6 @@ from graphnav.graph.builder import GraphBuilder
 from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
 from graphnav.graph.navigator import Navigator
 from graphnav.graph.smoother_config import SmootherConfig
-from graphnav.io import load_log
 from graphnav.log import Gnss, NavLog, Odometry, PosePrior, Scan, Truth
 from graphnav.sim.harbour import HarbourConfig, simulate_harbour
 from graphnav.sim.square import square_loop
@@ -152,7 +151,7 @@ def test_scans_without_returns_and_equal_times_in_the_grid():
     lg = NavLog(recs, log.beacons_known, log.meta)
     for run in RUNS:
         for motion in ("odometry", "auto"):
-            r = run(lg, covariances=False, motion=motion)
+            r = run(lg, covariances=False, motion=motion, keyframe_motion=False)  # a keyframe per scan
             assert r.info["icp_failed"] >= 10
             assert r.info["state"] == ("planar" if motion == "odometry" else "nav")
             assert r.info["motion_fallback"] >= 10 if motion == "odometry" else r.info["motion_fallback"] == 0
@@ -160,11 +159,11 @@ def test_scans_without_returns_and_equal_times_in_the_grid():
 
 
 # -- a GNSS-only log follows its fixes --------------------------------------------------------------
-def test_gnss_only_log_follows_its_fixes():
-    """The harbour log with everything but GNSS and truth removed (a 30 s outage, multipath near
+def test_gnss_only_log_follows_its_fixes(legacy_harbour):
+    """The (legacy) harbour log with everything but GNSS and truth removed (a 30 s outage, multipath near
     the quays): the fixes alone are 4.2 m off; the graph (GNSS velocity as the constant-velocity
     motion, the outage spanned by one motion factor) follows them closer, online and smoothed."""
-    log = load_log(REPO / "data" / "harbour.npz")
+    log = legacy_harbour
     gnss = log.without(lambda r: r.kind not in ("gnss", "truth"))
     gnss.beacons_known.clear()
     fixes = gnss.of("gnss")

@@ -132,13 +132,12 @@ def test_hdl_covariance_on_ray_cast_scans_is_not_overconfident(beams):
     assert 0.02 < np.mean(nees) < 3.0, np.mean(nees)
 
 
-def test_harbour_nees():
+def test_harbour_nees(legacy_harbour):
     """On the simulated harbour (exact truth; quays, piles, hulls, 1 deg beams to 40 m) the HDL
     covariance is consistent: mean NEES of the unflagged increments in [0.5, 3] (3 dof: 3 is exact)."""
-    from graphnav.io import load_log
     from graphnav.scan.icp_pairs import reference_increments, run_pairs
 
-    log = load_log(Path(__file__).resolve().parents[2] / "data" / "harbour.npz")
+    log = legacy_harbour  # its 5 Hz scans with the odometry as the guess
     scans = log.of("scan")[:600]
     log = NavLog([r for r in log.records if r.t <= scans[-1].t], log.beacons_known, log.meta)
     pr = run_pairs(log, IcpConfig(variant="HDL"), init="odometry", guess_cov=False)  # the matcher's own flags

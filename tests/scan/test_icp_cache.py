@@ -56,17 +56,14 @@ def test_compare_with_the_cache_gives_the_same_results(log):
     assert icp_cache.current() is None  # compare leaves no cache active
 
 
-def test_compare_command_without_the_flag_in_its_namespace(log, tmp_path, capsys):
-    """`graphnav demo` builds the compare command's Namespace itself (no icp_cache attribute)."""
-    import argparse
-    import json
-
-    from graphnav.commands import compare as cmd
+def test_the_library_compare_shares_matches_by_default(log, tmp_path):
+    """`graphnav demo` calls the library with default options: the cache is on, and counted."""
+    from graphnav.evaluation.pipeline import CompareOptions, run_compare
     from graphnav.io import save_log
+    from graphnav.io.outputs import OutDir
 
     path = tmp_path / "l.jsonl"
     save_log(log, path)
-    ns = argparse.Namespace(log=str(path), lenient=False, out=tmp_path / "o", estimators="dead-reckoning",
-                            option=None, workers=1, json=True)
-    assert cmd.run(ns) == 0
-    assert json.loads(capsys.readouterr().out)["icp_cache_hits"] == 0
+    opts = CompareOptions(log=str(path), out=tmp_path / "o", estimators=["dead-reckoning"], workers=1)
+    outcome = run_compare(opts, OutDir(opts.out, command="compare"))
+    assert outcome.json["icp_cache_hits"] == 0 and outcome.json["estimators"]["dead-reckoning"]["ate_rmse_m"] > 0

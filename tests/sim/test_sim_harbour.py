@@ -261,7 +261,8 @@ def test_isam2_with_weighted_icp_on_a_harbour_slice():
 
     log = simulate_harbour(0, HarbourConfig.legacy(), duration=8.0)
     r = run_isam2(log, covariances=False)
-    assert r.info["icp"] and r.info["icp_pairs"] == len(log.of("scan")) - 1
+    # its 1 Hz IMU: the IMU graph, keyframes by the motion rule, a match between consecutive keyframes
+    assert r.info["icp"] and r.info["icp_pairs"] == len(r.trajectory) - 1 >= len(log.of("scan")) / 5
     assert r.info["icp_failed"] < 0.2 * r.info["icp_pairs"]
     assert r.info["anchor"] == "pose_prior"
     ref = log.truth()

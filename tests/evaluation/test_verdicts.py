@@ -1,0 +1,49 @@
+"""The report's plain sentences: one per estimator saying what it used, what it is and why its figure
+looks as it does (equal tracks and why, degenerate registrations, over-confidence, skipped)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from graphnav.evaluation.comparison import Comparison, Entry
+from graphnav.evaluation.report.verdicts import data_lines, verdicts
+from graphnav.log import NavLog, Truth
+from graphnav.result import RunResult
+from graphnav.trajectory import Trajectory
+
+
+def _entry(name: str, poses: np.ndarray, kind: str = "odometry", summary: dict | None = None, info: dict | None = None,
+           description: str = "a test estimator") -> Entry:
+    t = np.arange(len(poses), dtype=float)
+    res = RunResult(Trajectory(t, poses), info=info or {})
+    return Entry(name, kind, description, result=res, summary={"inputs": ["odometry"], **(summary or {})})
+
+
+def test_equal_tracks_are_said_with_the_reason():
+    poses = np.column_stack([np.arange(50.0), np.zeros(50), np.zeros(50)])
+    log = NavLog([Truth(float(k), float(k), 0.0, 0.0) for k in range(50)])
+    dr = _entry("dead-reckoning", poses, summary={"ate_rmse_m": 3.0})
+    icp = _entry("icp-dr", poses + 1e-9, summary={"ate_rmse_m": 3.0},
+                 info={"degenerate_registrations": 49, "registrations": 50})
+    ukf = _entry("ukf", poses + [0.0, 5.0, 0.0], kind="filter", description="conventional UKF",
+                 summary={"inputs": ["imu", "gnss"], "ate_rmse_m": 5.0, "nees_mean": 15.2})
+    skipped = Entry("scan-to-map", "odometry", "LiDAR", skipped="needs at least two scans")
+    fused = _entry("fused", poses, info={"init": "odometry", "matches": 50, "failed_matches": 1})
+    v = verdicts(Comparison([dr, icp, ukf, skipped, fused], log))
+    assert v[0].startswith("**dead-reckoning** (odometry): a test estimator. Used: odometry.")
+    assert "Its track equals **dead-reckoning**'s within 1e-09 m" in v[1]
+    assert "98 % of its registrations were degenerate, so at every step it kept its guess" in v[1]
+    assert "Worse than **dead-reckoning** (3 m) although it uses GNSS." in v[2]
+    assert "Over-confident: its position NEES is 15.2" in v[2] and "models no IMU biases" in v[2]
+    assert v[3].endswith("Not run: needs at least two scans.")
+    assert "it starts every scan match from its odometry guess" in v[4]
+
+
+def test_data_lines_name_gaps_and_jumps():
+    comp = Comparison([], NavLog([]), checks={
+        "gaps": {"gnss": {"count": 2, "threshold_s": 5.0, "total_s": 90.0, "longest": [[10.0, 40.0], [50.0, 110.0]]}},
+        "gnss_jumps": {"count": 1, "speed_bound_mps": 12.0, "largest": [{"t0": 5.0, "t1": 6.0, "distance_m": 80.0}]}})
+    lines = data_lines(comp)
+    assert lines[0] == "GNSS: 2 gaps longer than 5 s, 90 s in all (longest: 10.0–40.0 s, 50.0–110.0 s)."
+    assert lines[1].startswith("GNSS jumps: 1 steps") and "80.0 m at 6.0 s" in lines[1]
+    assert data_lines(Comparison([], NavLog([]))) == ["No gaps in time and no GNSS jumps found."]
