@@ -43,6 +43,9 @@ def measure(path: Path, options: dict) -> dict:
         out[name] = {k: s.get(k) for k in ("ate_rmse_m", "ate_aligned_rmse_m", "online_ate_rmse_m", "rpe_rmse_m",
                                             "step_ms_median", "runtime_s")}
         out[name]["converge_ms"] = r.info.get("converge_ms")
+        for key in ("switched_off", "odometry_consistency", "loop_closures"):
+            if key in r.info:
+                out[name][key] = r.info[key]
     dr, isam, batch = out.get("dead-reckoning"), out.get("isam2"), out.get("batch")
     if isam and batch:
         diff = abs(isam["ate_rmse_m"] - batch["ate_rmse_m"])
@@ -90,7 +93,10 @@ def main(argv: list[str] | None = None) -> int:
     from graphnav.commands._common import parse_options
 
     options = parse_options(args.option)
-    rows = [measure(p, options) for p in args.logs]
+    rows = []
+    for p in args.logs:
+        rows.append(measure(p, options))
+        print(json.dumps(rows[-1]), file=sys.stderr, flush=True)  # progress: one JSON line per log
     if args.json:
         print(json.dumps({"options": options, "rows": rows}))
     else:

@@ -28,12 +28,12 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from ..geometry import wrap_angle
 from ..log import BeaconObs, NavLog, Odometry
 from ..trajectory import Trajectory
 from . import EstimatorSpec, OnEstimate, RunResult
+from .gating import chi2_ppf
 
 PAPER_SIGMAS = {                              # the paper's section 7, per record (white noise)
     "sigma_v": 0.5,                           # m/s
@@ -254,7 +254,7 @@ class EkfSlam:
 
 @lru_cache(maxsize=32)
 def _gate_threshold(gate: float) -> float:
-    return float(chi2.ppf(gate, 2))
+    return float(chi2_ppf(gate, 2))
 
 
 def _start(log: NavLog) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:

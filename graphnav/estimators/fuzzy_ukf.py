@@ -41,11 +41,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from ..log import NavLog
 from . import EstimatorSpec, OnEstimate, RunResult
 from .fuzzy import FuzzyAlpha, Thresholds
+from .gating import chi2_ppf
 from .imu_model import resolve_flag, wants_bias
 from .ukf import DEFAULTS, channel_variances, inputs, measurement_table, run_nav_filter, unmet
 
@@ -66,7 +66,7 @@ class FuzzyCovarianceMatcher:
             raise ValueError(f"mean_test must be a confidence level in (0, 1) or None, not {mean_test!r}")
         # the mean of N white innovations of variance C_T has variance C_T / N: its square over that
         # is chi-square(1) when the filter is consistent
-        self.mean_chi2 = None if mean_test is None else float(chi2.ppf(mean_test, 1))
+        self.mean_chi2 = None if mean_test is None else float(chi2_ppf(mean_test, 1))
         self.r0 = np.asarray(r0, dtype=float)
         self.r = self.r0.copy()
         self.N = int(window)

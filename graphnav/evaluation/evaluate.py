@@ -11,6 +11,10 @@ from ..result import RunResult
 from .metrics import ate, event_windows, gnss_residuals, heading_error, movement_errors, nees_stats, rpe, window_errors
 
 
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
 def _median(a: np.ndarray) -> float:
     return float(np.median(a)) if len(a) else float("nan")
 
@@ -18,7 +22,10 @@ def _median(a: np.ndarray) -> float:
 def errors_by_event(result: RunResult, log: NavLog, *, max_dt: float = 0.02) -> dict[str, dict[str, Any]]:
     """Position errors inside the log's ``meta["events"]`` windows, per event kind (gnss_outage,
     gnss_jump, gnss_multipath, ...): ``{kind: {"windows", "duration_s", "n", "rmse_m", "max_m",
-    "online_n", "online_rmse_m", "online_max_m"}}``. ``n``: the estimate/truth pairs inside the
+    "online_n", "online_rmse_m", "online_max_m", "sog_rmse_mps", "cog_rmse_deg", "rot_rmse_degps",
+    "online_sog_rmse_mps", "online_cog_rmse_deg", "online_rot_rmse_degps"}}`` (the movement parameters
+    between consecutive poses inside the windows: what the LiDAR gives through a GNSS outage).
+    ``n``: the estimate/truth pairs inside the
     kind's windows (:func:`~graphnav.evaluation.metrics.window_errors`, the pairs of the ATE); the
     ``online_*`` figures are the online trajectory's (the same as the others when the estimator
     has one trajectory; ``None`` without an online one). ``{}`` without truth or events."""
@@ -33,6 +40,10 @@ def errors_by_event(result: RunResult, log: NavLog, *, max_dt: float = 0.02) -> 
         o = window_errors(result.online, ref, wins, max_dt=max_dt) if result.online is not None else None
         d.update({"online_n": o["n"] if o else None, "online_rmse_m": o["rmse"] if o else None,
                   "online_max_m": o["max"] if o else None})
+        for prefix, tr in (("", result.trajectory), ("online_", result.online)):
+            m = movement_errors(tr, ref, max_dt=max_dt, windows=wins) if tr is not None else None
+            for key, name in (("sog", "sog_rmse_mps"), ("cog", "cog_rmse_deg"), ("rot", "rot_rmse_degps")):
+                d[prefix + name] = _finite(m[key]["rmse"]) if m is not None else None
         out[kind] = d
     return out
 
@@ -98,7 +109,7 @@ def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
             out["online_nees_mean"] = ns["mean"] if ns else None
         out["errors_by_event"] = errors_by_event(result, log, max_dt=max_dt)
     out.update(gnss_scores(traj, log))
-    for k in ("anchor", "loop_closures", "loop_candidates"):
+    for k in ("anchor", "loop_closures", "loop_candidates", "switched_off", "odometry_consistency"):
         if k in result.info:
             out[k] = result.info[k]
     return out

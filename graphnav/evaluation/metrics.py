@@ -163,17 +163,25 @@ def movement(traj: Trajectory) -> dict[str, NDArray]:
 
 
 def movement_errors(
-    est: Trajectory, ref: Trajectory, *, min_speed: float = 0.2, max_dt: float = 0.02
+    est: Trajectory, ref: Trajectory, *, min_speed: float = 0.2, max_dt: float = 0.02,
+    windows: list[tuple[float, float]] | None = None,
 ) -> dict[str, dict[str, float]]:
     """Signed errors of SOG [m/s], COG [deg], ROT [deg/s] and heading [deg], estimate minus reference.
 
     Both trajectories are first associated by time, so the parameters are taken over the same
-    intervals. COG is scored only where the reference moves faster than ``min_speed``.
+    intervals. COG is scored only where the reference moves faster than ``min_speed``; with
+    ``windows`` (``[(t0, t1), ...]``) only the intervals whose midpoint lies inside one.
     Statistics of signed errors: ``mean``, ``std``, ``max`` (of |e|), ``rmse``.
     """
     ie, ir = associate(est, ref, max_dt)
     a = movement(Trajectory(est.t[ie], est.poses[ie]))
     b = movement(Trajectory(ref.t[ir], ref.poses[ir]))
+    if windows is not None:
+        inside = np.zeros(len(b["t"]), bool)
+        for t0, t1 in windows:
+            inside |= (b["t"] >= t0) & (b["t"] <= t1)
+        a = {k: v[inside] for k, v in a.items()}
+        b = {k: v[inside] for k, v in b.items()}
     moving = b["sog"] > min_speed
 
     def signed(e: NDArray) -> dict[str, float]:

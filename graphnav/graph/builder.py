@@ -79,6 +79,7 @@ GROUPS = ("anchor", "odometry", "motion", "icp", "loop", "gnss", "compass", "bia
           "cloud", "imu", "imu_bias", "gnss_velocity", "water_speed", "current", "attitude")
 SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon", "cloud")
 EPS = 1e-9  # [s] times closer than this are equal (as keyframes.schedule)
+FIX_RESOLUTION_M = 1e-3  # [m] below any receiver's resolution: a fit's scatter under it says nothing of the noise
 MIN_IMU_DT = 1e-4  # [s] keyframes closer than this share their state (no ImuFactor: its covariance would vanish)
 V0_STATED_SIGMA = 0.2  # [m/s] 1-sigma of an initial velocity the log states (meta["initial_velocity"])
 #: the Pose3 graph's estimate of the previous keyframe: pose, nav-frame velocity, IMU bias, velocity covariance
@@ -418,7 +419,8 @@ class GraphBuilder:
         """Forward motion at the GNSS speed over ground: the least-squares velocity of the fixes of
         the last ``cv_gnss_window`` seconds before ``t`` (at least 3, spanning a third of it) as a
         body-frame twist ``(speed, 0, 0)``, and the speed's 1-sigma ``sigma / sqrt(sum (t_i -
-        mean t)^2)`` and its age [s]; zero speed when it is below 3 sigma (direction unknown). A fit
+        mean t)^2)`` and its age [s] (``sigma`` the fixes' stated one or, with at least 5 fixes and when
+        lower, their scatter about the fitted line); zero speed when it is below 3 sigma (direction unknown). A fit
         whose speed sigma exceeds ``cv_sigma_v`` (few fixes) is not used: through an outage the last
         good velocity is kept for ``cv_max_age`` seconds."""
         cfg = self.cfg
@@ -428,7 +430,13 @@ class GraphBuilder:
             tc = a[:, 0] - a[:, 0].mean()
             ss = float(tc @ tc)
             vx, vy = float(tc @ a[:, 1]) / ss, float(tc @ a[:, 2]) / ss
-            sv = float(np.sqrt(np.mean(a[:, 3] ** 2) / ss))
+            sig2 = float(np.mean(a[:, 3] ** 2))  # the fixes' stated variance per axis ...
+            if len(w) >= 5:  # ... or, when lower, the fit's own residual variance (2 axes, 4 parameters);
+                res = a[:, 1:3] - a[:, 1:3].mean(axis=0) - np.outer(tc, [vx, vy])  # no scatter at all (repeated
+                est = float(np.sum(res**2)) / (2 * len(w) - 4)  # or synthetic fixes) is no evidence of the noise
+                if est > FIX_RESOLUTION_M**2:
+                    sig2 = min(sig2, est)
+            sv = float(np.sqrt(sig2 / ss))
             speed = math.hypot(vx, vy)
             if sv <= cfg.cv_sigma_v:  # a fit worth having (else the last one is kept)
                 # below 3 sigma the direction is unknown: no motion, with the speed's sigma

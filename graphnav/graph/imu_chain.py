@@ -67,6 +67,7 @@ class ImuChain:
             self.source = "log"
         self.t: list[float] = []
         self.rows: list[tuple[float, ...]] = []  # ax, ay, az, wx, wy, wz
+        self.cum: list[float] = []  # the integrated gyro rate's norm up to each t [rad] (the keyframe rule)
         self.six: bool | None = None
         self.params: gtsam.PreintegrationParams | None = None
         self.body_P_sensor: gtsam.Pose3 | None = None  # the IMU's mount (graphnav.graph.mounts), when not at the origin
@@ -121,10 +122,14 @@ class ImuChain:
             row = (r.ax, r.ay, r.az, r.wx, r.wy, r.wz)
         else:
             row = (r.ax, r.ay, 0.0, 0.0, 0.0, r.wz)
+        rate = math.sqrt(row[3] ** 2 + row[4] ** 2 + row[5] ** 2)
         if self.t and r.t <= self.t[-1]:
             if r.t == self.t[-1]:
                 self.rows[-1] = row
+                if len(self.t) > 1:
+                    self.cum[-1] = self.cum[-2] + rate * (self.t[-1] - self.t[-2])
             return  # out of order: dropped (the interval it covers is held by its neighbour)
+        self.cum.append(self.cum[-1] + rate * (r.t - self.t[-1]) if self.t else 0.0)
         self.t.append(r.t)
         self.rows.append(row)
 
@@ -148,8 +153,17 @@ class ImuChain:
         return out
 
     def rotation(self, ta: float, tb: float) -> float:
-        """An upper bound of the rotation over ``[ta, tb]`` [rad]: the integrated gyro rate's norm."""
-        return float(sum(np.linalg.norm(w) * dt for _, w, dt in self.samples(ta, tb)))
+        """An upper bound of the rotation over ``[ta, tb]`` [rad]: the integrated gyro rate's norm (each
+        record held over the interval since the previous one, the last one beyond it)."""
+        return max(self._cum_at(tb) - self._cum_at(ta), 0.0) if self.t else 0.0
+
+    def _cum_at(self, t: float) -> float:
+        i = bisect.bisect_left(self.t, t)
+        if i >= len(self.t):  # beyond the newest sample: held
+            r = self.rows[-1]
+            return self.cum[-1] + math.sqrt(r[3] ** 2 + r[4] ** 2 + r[5] ** 2) * (t - self.t[-1])
+        r = self.rows[i]
+        return self.cum[i] - math.sqrt(r[3] ** 2 + r[4] ** 2 + r[5] ** 2) * (self.t[i] - t)
 
     def preintegrate(self, bias: gtsam.imuBias.ConstantBias, ta: float, tb: float, speed: float | None = None
                      ) -> gtsam.PreintegratedImuMeasurements:
@@ -172,6 +186,7 @@ class ImuChain:
         if i > 1024:
             del self.t[:i - 1]
             del self.rows[:i - 1]
+            del self.cum[:i - 1]
 
     def _axes(self) -> NDArray[np.float64]:
         """Per bias axis (acc x, y, z, gyro x, y, z): 1 where the records measure it; a planar record

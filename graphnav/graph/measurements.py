@@ -40,6 +40,9 @@ class Measurements:
         self.n_rejected = 0
         self.consecutive_rejects = 0
         self.after_outage: set[int] = set()  # ids of the first fixes after a GNSS outage (not gated)
+        #: the factors of the fixes the online gate rejected: the closing batch step reconsiders them
+        #: (a cold start's first fixes can be the wrong ones, and the gate then rejects every good fix)
+        self.rejected: list[gtsam.NonlinearFactor] = []
         self.current: tuple[int, int] | None = None  # the water current W(j): (first, newest) keyframe
         self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
         self.arms: dict[str, tuple[float, float, float]] = {}  # GNSS lever arms (body frame, m) by source ("": all)
@@ -81,6 +84,8 @@ class Measurements:
                             and self.consecutive_rejects < cfg.gnss_gate_max_rejects):
                         self.n_rejected += 1
                         self.consecutive_rejects += 1
+                        self.rejected.append(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k,
+                                                             arm3))
                         continue
                 self.consecutive_rejects = 0
                 self.after_outage.discard(id(r))

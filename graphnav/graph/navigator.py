@@ -42,7 +42,7 @@ from ..geometry import cov_to_world, wrap_angle
 from ..log import KnownBeacon, NavLog, Record, validate_record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
-from . import noise
+from . import gnc, noise
 from .builder import GraphBuilder, Matcher, NavPrev, Step
 from .smoother_config import SmootherConfig
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt, marginals
@@ -244,8 +244,12 @@ class Navigator:
         then observes that pose."""
         try:
             if loops is not None and loops.stale:
-                values = solver.current()
-                loops.refresh(lambda j: _vec(self.space.read(values, F.X(j))) if values.exists(F.X(j)) else None)
+                if solver.kind == "isam2":  # each place's pose alone: no full back-substitution of every state
+                    sp = self.space
+                    loops.refresh(lambda j: _vec(sp.pose2(solver.estimate(F.X(j), sp.pose_type))))
+                else:
+                    values = solver.current()
+                    loops.refresh(lambda j: _vec(self.space.read(values, F.X(j))) if values.exists(F.X(j)) else None)
             p = solver.estimate(F.X(k), self.space.pose_type)
             cov = self.space.world_cov(p, solver.marginal(F.X(k)))
             pose = self.space.pose2(p)
@@ -424,8 +428,8 @@ class Navigator:
                     values = self.solver.current()
                     if cfg.converge == "lm":
                         values = self._batch(values, info)
-                else:
-                    values = self._batch(self.solver.initial, info)
+                else:  # with a loop closer's iSAM2 front end, its estimate is the one LM solve's start
+                    values = self._batch(self.front.current() if self.front is not None else self.solver.initial, info)
                 p2 = [self.space.read(values, F.X(k)) for k in range(n)]
                 poses = [_vec(p) for p in p2]
                 if cfg.covariances:
@@ -484,7 +488,17 @@ class Navigator:
         cfg = self.cfg
         c0 = time.perf_counter()
         graph = self.solver.graph
+        rejected = self.builder.meas.rejected
+        if rejected and cfg.robust_backend == "gnc":  # the fixes the online gate rejected, reconsidered
+            graph = gtsam.NonlinearFactorGraph(graph)
+            for f in rejected:
+                graph.add(f)
+            self.groups = self.groups + ["gnss"] * len(rejected)
+            info["gnss_reconsidered"] = len(rejected)
         values, iters = levenberg_marquardt(graph, init, self.solver.lm)
+        if cfg.robust_backend == "gnc":
+            graph, self.groups, values, info["switched_off"] = gnc.switch_off(
+                graph, values, self.groups, self.solver.lm, cfg.robust_prob, cfg.robust_groups)
         dropped = 0
         for _ in range(3 if cfg.gnss_gate is not None else 0):
             keep = [i for i in range(graph.size()) if not (
@@ -503,6 +517,7 @@ class Navigator:
             graph, values, vce = noise.estimate_scales(graph, values, self.groups, scalable, cfg.noise_iterations,
                                                        self.solver.lm)
             info["noise_scale"] = vce
+        info["odometry_consistency"] = gnc.odometry_consistency(graph, values, self.groups, cfg.robust_prob)
         self.solver.graph = graph
         info["lm_iterations"] = iters
         info["converge_ms"] = (time.perf_counter() - c0) * 1e3

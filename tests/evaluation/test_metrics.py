@@ -176,3 +176,20 @@ def test_errors_by_event_smoothed_and_online():
     s = summarize("x", RunResult(smoothed, online, np.zeros(0)), log, runtime_s=0.0)
     assert s["errors_by_event"] == ev
     assert errors_by_event(RunResult(smoothed, online, np.zeros(0)), NavLog([], meta=log.meta)) == {}
+
+
+def test_errors_by_event_carry_the_movement_parameters_inside_the_windows():
+    """Truth at 1 m/s along x; the estimate exact except for a speed of 1.5 m/s inside 3-5 s (an outage):
+    the SOG error there is 0.5 m/s, outside the windows it does not count."""
+    from graphnav.evaluation.evaluate import errors_by_event
+    from graphnav.log import NavLog, Truth
+    from graphnav.result import RunResult
+
+    t = np.arange(0.0, 10.01, 0.5)
+    log = NavLog([Truth(float(s), float(s), 0.0, 0.0) for s in t],
+                 meta={"events": [{"kind": "gnss_outage", "t0": 3.0, "t1": 5.0}]})
+    x = np.where(t <= 3.0, t, np.where(t <= 5.0, 3.0 + 1.5 * (t - 3.0), t + 1.0))
+    est = Trajectory(t, np.column_stack([x, np.zeros_like(t), np.zeros_like(t)]))
+    o = errors_by_event(RunResult(est, None, np.zeros(0)), log)["gnss_outage"]
+    assert o["sog_rmse_mps"] == pytest.approx(0.5) and o["rot_rmse_degps"] == pytest.approx(0.0)
+    assert o["cog_rmse_deg"] == pytest.approx(0.0) and o["online_sog_rmse_mps"] is None

@@ -308,3 +308,15 @@ def test_attitude_records_reach_the_imu_graph_and_not_the_planar_one():
     assert planar.info["ignored"] == base_planar.info["ignored"] + 18
     # roll and pitch do not move the planar track (a levelled 3-axis IMU)
     np.testing.assert_allclose(nav.trajectory.poses, base_nav.trajectory.poses, atol=1e-3)
+
+
+def test_imu_chain_rotation_is_the_integrated_rate_of_the_samples():
+    rng = np.random.default_rng(2)
+    chain = ImuChain(ImuConfig())
+    t = np.cumsum(rng.uniform(0.005, 0.02, 300))
+    w = rng.normal(0.0, 0.3, (300, 3))
+    for ti, wi in zip(t, w, strict=True):
+        chain.add(Imu(float(ti), 0.1, 0.0, float(wi[2]), 9.8, float(wi[0]), float(wi[1])))
+    for ta, tb in ((t[3], t[200]), (t[10] - 0.003, t[50] + 0.004), (t[250], t[-1] + 0.5)):
+        ref = sum(np.linalg.norm(om) * dt for _, om, dt in chain.samples(ta, tb))
+        assert chain.rotation(ta, tb) == pytest.approx(ref, rel=1e-9, abs=1e-12)

@@ -63,7 +63,8 @@ def verdict(e: Entry, comp: Comparison, same: dict[str, tuple[str, float]]) -> s
                    "scans alone: -O guess_cov=false, where the estimator has it)")
         else:
             why = "it received the same information through the same motion model"
-        out.append(f"Its track equals **{other}**'s within {d:.1g} m at every common time: {why}.")
+        within = "exactly" if d == 0 else f"within {d:.1g} m"
+        out.append(f"Its track equals **{other}**'s {within} at every common time: {why}.")
     elif deg:
         out.append(f"{deg[0].upper() + deg[1:]}: along the weak directions it kept its motion guess, so its "
                    "track is mostly that guess.")

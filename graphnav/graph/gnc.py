@@ -1,0 +1,182 @@
+"""A back end that cannot lose to its own inputs: scan-match and loop factors the data switch off,
+and the check that the smoothed motion is as consistent with the odometry as the odometry's own
+noise allows.
+
+* :func:`switch_off`: graduated non-convexity (GTSAM's ``GncOptimizer``, truncated least squares;
+  Yang et al., RA-L 2020) over the solved graph, with every factor outside :data:`SWITCHABLE` a
+  known inlier. A switchable factor whose residual at the solution is within the chi-square bound
+  of its own covariance (``prob``) is an inlier and GNC does not run at all; otherwise GNC decides,
+  the factors it weighs out (weight < 0.5) are removed and Levenberg-Marquardt re-solves the
+  original graph (robust kernels kept) without them. The threshold is the chi-square quantile of the
+  factor's own dimension: nothing here is fitted to a dataset.
+* :func:`odometry_consistency`: the smoothed relative motion over windows of 1, 10, 100 and 1000
+  keyframes against the odometry composed over the same window, as a normalised error
+  ``e^T C^-1 e`` (``C`` the odometry's own compounded covariance), averaged per degree of freedom
+  over non-overlapping windows. The odometry agrees with itself by construction; the smoothed
+  local motion may differ from it by no more than its noise: ``consistent`` when the mean of the
+  1- and 10-keyframe windows is within the chi-square bound (``prob``) of that many windows (the
+  longer windows are reported only: there the smoothed track is meant to correct the odometry's
+  drift). Reported in the run's JSON (``odometry_consistency``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import gtsam
+import numpy as np
+from scipy.stats import chi2
+
+from . import noise
+from .solver import LmSettings, SolverError, _gtsam_message, levenberg_marquardt
+
+#: sensor groups whose factors the data may switch off (scan matches, 3D cloud matches, GNSS fixes: a cold
+#: start's jumps, multipath; the configuration's ``robust_groups``, which may add "loop")
+SWITCHABLE = ("icp", "cloud", "gnss")
+#: window lengths [keyframes] of the odometry consistency check: the verdict is on the short ones (the
+#: local motion); the long ones are reported, where a smoothed track corrects the odometry's drift and
+#: differs from it by more than its stated noise whenever that noise is optimistic over long windows
+SCALES = (1, 10, 100, 1000)
+VERDICT_SCALES = (1, 10)
+
+
+def _d2(f: gtsam.NonlinearFactor, values: gtsam.Values) -> float:
+    """The factor's squared Mahalanobis residual (its Gaussian part)."""
+    nm = f.noiseModel()
+    base = nm.noise() if hasattr(nm, "robust") else nm
+    return float(base.squaredMahalanobisDistance(f.unwhitenedError(values)))
+
+
+def group_scales(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: Sequence[str],
+                 which: Sequence[str]) -> dict[str, float]:
+    """Per group: the variance scale its residuals show, ``median(d2 / dim) / median(chi2_dim / dim)``
+    (robust to the outliers being sought), never below 1: a covariance is only ever found too small."""
+    out = {}
+    for g in which:
+        d = [(_d2(graph.at(i), values), graph.at(i).dim()) for i, gi in enumerate(groups) if gi == g]
+        if len(d) >= 10:
+            dims = np.array([x[1] for x in d])
+            ratio = np.array([x[0] for x in d]) / dims
+            out[g] = max(1.0, float(np.median(ratio) / np.median(chi2.median(dims) / dims)))
+    return out
+
+
+def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: list[str], lm: LmSettings,
+               prob: float = 0.99, switchable: Sequence[str] = SWITCHABLE
+               ) -> tuple[gtsam.NonlinearFactorGraph, list[str], gtsam.Values, dict[str, Any]]:
+    """GNC over ``graph`` solved at ``values`` (module docstring); returns the graph without the
+    switched-off factors, its groups, its solution and a report (per group: candidates and switched
+    off)."""
+    cand = [i for i, g in enumerate(groups) if g in switchable]
+    report: dict[str, Any] = {"method": "gnc-tls", "prob": prob,
+                              "candidates": {g: sum(groups[i] == g for i in cand) for g in switchable
+                                             if any(groups[i] == g for i in cand)}}
+    if not cand:
+        report.update(beyond_bound=0, switched_off={}, ran=False)
+        return graph, groups, values, report
+    scale = group_scales(graph, values, groups, sorted({groups[i] for i in cand}))
+    report["scale"] = scale
+    # each candidate's covariance times its group's scale and chi2_d(prob) / chi2_D(prob) (D the largest
+    # dimension), so that GNC's one threshold, chi2_D(prob) / 2, is every factor's own chi-square bound
+    dmax = max(graph.at(i).dim() for i in cand)
+    top = float(chi2.ppf(prob, dmax))
+    factor = {i: scale.get(groups[i], 1.0) * float(chi2.ppf(prob, graph.at(i).dim())) / top for i in cand}
+    suspects = [i for i in cand if _d2(graph.at(i), values) > top * factor[i]]
+    report["beyond_bound"] = len(suspects)
+    report["switched_off"] = {}
+    if not suspects:
+        report["ran"] = False
+        return graph, groups, values, report
+    gnc_graph = gtsam.NonlinearFactorGraph()
+    try:
+        for i in range(graph.size()):
+            gnc_graph.add(noise.scaled(graph.at(i), factor[i]) if i in factor else graph.at(i))
+    except RuntimeError:  # GNC re-weights by cloning every factor: a Python CustomFactor (a GNSS lever arm
+        report["ran"] = False  # on the Pose2 graph) cannot be cloned
+        report["skipped"] = "a factor GTSAM cannot clone (CustomFactor)"
+        return graph, groups, values, report
+    base = gtsam.LevenbergMarquardtParams()
+    base.setMaxIterations(lm.max_iterations)
+    base.setRelativeErrorTol(max(lm.tol, 1e-6))
+    base.setAbsoluteErrorTol(max(lm.tol, 1e-6))
+    params = gtsam.GncLMParams(base)
+    params.setLossType(gtsam.GncLossType.TLS)
+    cset = set(cand)
+    params.setKnownInliers([i for i in range(graph.size()) if i not in cset])
+    try:
+        opt = gtsam.GncLMOptimizer(gnc_graph, values, params)
+        opt.setInlierCostThresholds(0.5 * top)
+        opt.optimize()
+        w = np.asarray(opt.getWeights())
+    except RuntimeError as exc:
+        if "clone" in str(exc):
+            report["ran"] = False
+            report["skipped"] = "a factor GTSAM cannot clone (CustomFactor)"
+            return graph, groups, values, report
+        raise SolverError(_gtsam_message(exc)) from None
+    report["ran"] = True
+    off = {i for i in suspects if w[i] < 0.5}  # beyond its bound at the solution, and weighed out by GNC
+    for i in off:
+        report["switched_off"][groups[i]] = report["switched_off"].get(groups[i], 0) + 1
+    if not off:
+        return graph, groups, values, report
+    keep = [i for i in range(graph.size()) if i not in off]
+    new = gtsam.NonlinearFactorGraph()
+    for i in keep:
+        new.add(graph.at(i))
+    values, _ = levenberg_marquardt(new, values, lm)
+    return new, [groups[i] for i in keep], values, report
+
+
+def odometry_consistency(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: Sequence[str],
+                         prob: float = 0.99, scales: Sequence[int] = SCALES) -> dict[str, Any] | None:
+    """The smoothed motion against the odometry factors (``BetweenFactorPose2`` of group
+    ``odometry``) over windows of ``scales`` keyframes (module docstring); ``None`` without them."""
+    steps: dict[int, tuple[gtsam.Pose2, np.ndarray]] = {}  # first key -> (measured, covariance), consecutive keys
+    for i, g in enumerate(groups):
+        if g != "odometry":
+            continue
+        f = graph.at(i)
+        if not isinstance(f, gtsam.BetweenFactorPose2):
+            return None
+        k0, k1 = f.keys()
+        nm = f.noiseModel()
+        base = nm.noise() if hasattr(nm, "robust") else nm
+        R = np.asarray(base.R())
+        steps[int(k0)] = (f.measured(), np.linalg.inv(R.T @ R), int(k1))
+    if not steps:
+        return None
+    chains: list[list[int]] = []  # runs of consecutive odometry steps
+    for k0 in sorted(steps):
+        if chains and steps[chains[-1][-1]][2] == k0:
+            chains[-1].append(k0)
+        else:
+            chains.append([k0])
+    out: dict[str, Any] = {"prob": prob, "scales": []}
+    ok = True
+    for w in scales:
+        nees = []
+        for chain in chains:
+            for s in range(0, len(chain) - w + 1, w):
+                z, c = gtsam.Pose2(), np.zeros((3, 3))
+                for k0 in chain[s:s + w]:
+                    m, cm, _ = steps[k0]
+                    ad = np.asarray(m.inverse().AdjointMap())
+                    c = ad @ c @ ad.T + cm
+                    z = z.compose(m)
+                a, b = chain[s], steps[chain[s + w - 1]][2]
+                rel = values.atPose2(a).between(values.atPose2(b))
+                e = np.asarray(gtsam.Pose2.Logmap(z.between(rel)))
+                nees.append(float(e @ np.linalg.solve(c, e)))
+        if not nees:
+            continue
+        n = len(nees)
+        mean = float(np.mean(nees)) / 3.0
+        bound = float(chi2.ppf(prob, 3 * n)) / (3 * n)
+        if w in VERDICT_SCALES:
+            ok &= mean <= bound
+        out["scales"].append({"keyframes": w, "windows": n, "nees_per_dof": mean, "bound": bound,
+                              "consistent": mean <= bound})
+    out["consistent"] = bool(ok)
+    return out
