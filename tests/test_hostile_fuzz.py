@@ -218,6 +218,7 @@ def _extra(files: dict[str, Path]) -> dict[tuple[str, str], tuple[list[str], boo
         ("demo", "--workers"): (["demo", "--out", str(d / "demo"), "--workers", "VALUE"], False),
         ("register", "--init"): (["register", str(files["a"]), str(files["b"]), "--init", "VALUE"], True),
         ("run", "--max-speed"): (["run", log, "-e", "ekf", "--max-speed", "VALUE"], True),
+        ("run", "--workers"): (["run", log, "-e", "ekf", "--workers", "VALUE"], True),
         ("icp", "--max-speed"): (["icp", log, "--max-speed", "VALUE"], True),
         ("compare", "--max-speed"): (["compare", log, "--estimators", "ekf", "--max-speed", "VALUE"], True),
         ("replay", "--max-speed"): (["replay", log, "--nmea-out", "udp://127.0.0.1:9", "--speed", "0",
