@@ -243,9 +243,11 @@ def _fleet(args: argparse.Namespace, logs: list[str], options: dict, dropped: li
     """Every log of ``logs`` through the estimator on Dask (:func:`graphnav.evaluation.sweep.run_sweep`;
     a log already in ``DIR/fleet.jsonl`` with the same parameters is not run again); a failed log is
     a run with an ``error``, the others go on. Exit 0 when every log ran, else 2."""
+    from ..config import Range, number
     from ..evaluation.sweep import run_sweep
     from ._common import progress_enabled
 
+    number("--workers", args.workers, Range(lo=1, hi=256, integer=True))
     if not args.out:
         raise ValueError("graphnav run: several logs need --out DIR (each log's outputs go to DIR/<log name>/)")
     root = Path(args.out)

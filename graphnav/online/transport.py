@@ -177,7 +177,7 @@ class Source:
             return lines
         lines = (self.buf + data).split(b"\n")
         self.buf = lines.pop()
-        if len(self.buf) > (MAX_LINE if self.kind in ("nmea", "n2k") else MAX_MESSAGE):
+        if len(self.buf) > (MAX_LINE if self.kind == "nmea" else MAX_MESSAGE):  # a whole N2K ISO message: 5.4 kB
             lines.append(self.buf)
             self.buf = b""
         return lines
