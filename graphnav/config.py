@@ -1,18 +1,60 @@
-"""Estimator options (``-O key=value`` on the CLI, ``**options`` in Python) -> a config dataclass, and the
-declared ranges option and argument values are checked against (:func:`number`, :class:`Range`,
-:class:`OptionError`; docs/hostile-input.md)."""
+"""Estimator options (``-O key=value`` on the CLI, ``**options`` in Python) -> a config dataclass whose
+fields carry their help (:func:`option`, :func:`describe_config`), and the declared ranges option and
+argument values are checked against (:func:`number`, :class:`Range`, :class:`OptionError`;
+docs/hostile-input.md)."""
 
 from __future__ import annotations
 
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, TypeVar
 
 from .errors import GraphnavError
 
 T = TypeVar("T")
+
+
+def option(default: Any = MISSING, help: str = "", unit: str = "", *, factory: Any = None) -> Any:
+    """A config dataclass field with its help: ``help`` (what it means, reST allowed) and ``unit`` (SI,
+    e.g. ``"m/s"``; ``""``: none) as field metadata, read by :func:`describe_config` (``--list-options``,
+    TOML and ``-O`` checks). ``factory``: a default factory instead of ``default``."""
+    meta = {"help": help, "unit": unit}
+    if factory is not None:
+        return field(default_factory=factory, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+def field_default(f: Field) -> Any:
+    """A dataclass field's default (its factory's value; ``None`` when it has none)."""
+    if f.default is not MISSING:
+        return f.default
+    if f.default_factory is not MISSING:
+        return f.default_factory()
+    return None
+
+
+def describe_config(cls: type, skip: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+    """The fields of config dataclass ``cls`` as options: ``{"name", "type", "default", "unit", "meaning",
+    "group"}`` (``meaning``: the field's help as plain text, the unit in front as ``[unit]``; ``group``: the
+    ``group`` class attribute of the dataclass that declares the field, else that dataclass's name);
+    the class's own fields first, then each base's."""
+    out = []
+    for f in fields(cls):  # type: ignore[arg-type]
+        if f.name in skip:
+            continue
+        unit = f.metadata.get("unit", "")
+        meaning = plain_text(f.metadata.get("help", ""))
+        depth, owner = next((i, k) for i, k in enumerate(cls.__mro__)
+                            if f.name in k.__dict__.get("__annotations__", {}))
+        out.append({"name": f.name, "type": str(f.type), "default": field_default(f), "unit": unit,
+                    "meaning": f"[{unit}] {meaning}" if unit else meaning,
+                    "group": owner.__dict__.get("group") or owner.__name__, "_depth": depth})
+    out.sort(key=lambda o: o["_depth"])  # the class's own fields first, then its bases'
+    for o in out:
+        del o["_depth"]
+    return out
 
 
 def config_from_options(cls: type[T], options: Mapping[str, Any], what: str) -> T:

@@ -1,10 +1,9 @@
-"""The one trajectory type every estimator returns, and its TUM/CSV export."""
+"""The one trajectory type every estimator returns (its TUM and CSV files: :mod:`graphnav.io.tum`,
+:mod:`graphnav.io.trajectory_csv`)."""
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -89,76 +88,3 @@ class Trajectory:
         """The poses at the given indices (or boolean mask)."""
         cov = None if self.cov is None else self.cov[idx]
         return Trajectory(self.t[idx], self.poses[idx], cov, self.name, dict(self.meta))
-
-    # -- export / import -------------------------------------------------------------------------
-    def to_tum(self, path: str | Path) -> None:
-        """Write TUM format ``t x y z qx qy qz qw`` (z = 0, rotation about +z; the quaternion by
-        :class:`scipy.spatial.transform.Rotation`, scalar last) — evo reads it."""
-        from .io.outputs import atomic_path
-
-        arr = np.column_stack([self.t, self.x, self.y, np.zeros(len(self)), yaw_to_quat(self.yaw)])
-        with atomic_path(path) as tmp:  # written whole or not at all
-            np.savetxt(tmp, arr, fmt="%.9f", header="timestamp tx ty tz qx qy qz qw")
-
-    @classmethod
-    def from_tum(cls, path: str | Path, name: str = "") -> Trajectory:
-        """Read a TUM file written by :meth:`to_tum` (or any TUM trajectory: its yaw, the rotation's
-        first intrinsic Z-Y'-X'' angle)."""
-        arr = np.loadtxt(path, comments="#", ndmin=2)
-        return cls(arr[:, 0], np.column_stack([arr[:, 1], arr[:, 2], quat_to_yaw(arr[:, 4:8])]),
-                   name=name or Path(path).stem)
-
-    def to_csv(self, path: str | Path) -> None:
-        """Write CSV ``t,x,y,yaw`` plus the 6 unique covariance entries when present (atomically), every
-        value at full precision (the shortest text that reads back to the same float: POSIX times keep
-        their microseconds)."""
-        from .io.outputs import atomic_open
-
-        cols = ["t", "x", "y", "yaw"]
-        if self.cov is not None:
-            cols += ["cov_xx", "cov_xy", "cov_xyaw", "cov_yy", "cov_yyaw", "cov_yawyaw"]
-        with atomic_open(path, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(cols)
-            for i in range(len(self)):
-                row = [self.t[i], *self.poses[i]]
-                if self.cov is not None:
-                    c = self.cov[i]
-                    row += [c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2]]
-                w.writerow([repr(float(v)) for v in row])
-
-    @classmethod
-    def from_csv(cls, path: str | Path, name: str = "") -> Trajectory:
-        """Read a CSV written by :meth:`to_csv`."""
-        with open(path, newline="") as fh:
-            rows = list(csv.reader(fh))
-        head, body = rows[0], np.array(rows[1:], dtype=float).reshape(-1, len(rows[0]))
-        cov = None
-        if "cov_xx" in head:
-            xx, xy, xa, yy, ya, aa = (body[:, head.index(k)] for k in
-                                      ("cov_xx", "cov_xy", "cov_xyaw", "cov_yy", "cov_yyaw", "cov_yawyaw"))
-            cov = np.stack([np.stack([xx, xy, xa], -1), np.stack([xy, yy, ya], -1),
-                            np.stack([xa, ya, aa], -1)], axis=1)
-        return cls(body[:, 0], body[:, 1:4], cov, name=name or Path(path).stem)
-
-
-def yaw_to_quat(yaw: ArrayLike) -> NDArray[np.float64]:
-    """Yaw [rad] -> unit quaternions ``(qx, qy, qz, qw)`` of the rotation about +z, shape (N, 4)."""
-    from scipy.spatial.transform import Rotation
-
-    yaw = np.atleast_1d(np.asarray(yaw, dtype=float))
-    if yaw.size == 0:
-        return np.empty((0, 4))
-    return Rotation.from_euler("z", yaw.reshape(-1, 1)).as_quat()
-
-
-def quat_to_yaw(q: ArrayLike) -> NDArray[np.float64]:
-    """Quaternions ``(qx, qy, qz, qw)`` (N, 4) -> yaw [rad]: the first angle of the intrinsic Z-Y'-X''
-    decomposition (for a planar rotation, the rotation angle about +z). A zero quaternion raises
-    ValueError (scipy)."""
-    from scipy.spatial.transform import Rotation
-
-    q = np.asarray(q, dtype=float).reshape(-1, 4)
-    if q.shape[0] == 0:
-        return np.empty(0)
-    return Rotation.from_quat(q).as_euler("ZYX")[:, 0]

@@ -17,7 +17,7 @@ from graphnav.geodesy import LocalFrame
 from graphnav.geometry import yaw_to_heading_deg
 from graphnav.io import load_log
 from graphnav.io.nmea import KNOT
-from graphnav.trajectory import Trajectory
+from graphnav.io.tum import read_tum
 
 ORIGIN = {"lat": 59.91, "lon": 10.73, "h": 0.0}
 FRAME = LocalFrame(ORIGIN["lat"], ORIGIN["lon"])
@@ -112,7 +112,7 @@ def test_run_dir_exports_the_estimate_with_the_recorded_origin(tmp_path, capsys)
     out = tmp_path / "run.gpx"
     rc, obj = export(capsys, str(run_dir), "--to", "gpx", "--out", str(out))
     assert rc == 0 and obj["kind"] == "run" and obj["track"] == "dead-reckoning" and obj["origin"] == ORIGIN
-    est = Trajectory.from_tum(run_dir / "trajectory.tum")
+    est = read_tum(run_dir / "trajectory.tum")
     lat, lon = FRAME.to_geodetic(est.x, est.y)
     pts = gpxpy.parse(out.read_text()).tracks[0].segments[0].points
     assert np.max(np.abs(np.array([p.latitude for p in pts]) - lat)) < 1e-6

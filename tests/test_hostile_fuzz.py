@@ -164,10 +164,11 @@ INVALID = ["0", "-1", "nan", "inf", "-inf", "1e300", "1e9", str(2**63), "ten"]
                              ["beacons", "search", "--beacons", "1", "--p0-beacon"],
                              ["live", "--nmea", "udp://127.0.0.1:0", "-e", "ekf", "--duration"],
                              ["live", "--nmea", "udp://127.0.0.1:0", "-e", "ekf", "--idle-exit"],
-                             ["compare", "LOG", "--workers"]]),
+                             ["compare", "LOG", "--workers"],
+                             ["run", "LOG", "LOG", "-e", "dead-reckoning", "--out", "OUT", "--workers"]]),
        value=st.sampled_from(INVALID))
 def test_commands_that_start_work_refuse_invalid_counts(files, argv, value):
-    argv = [str(files["log"]) if a == "LOG" else a for a in argv]
+    argv = [str(files["log"]) if a == "LOG" else str(files["dir"] / "fleet") if a == "OUT" else a for a in argv]
     if argv[-1] in ("--p0-beacon", "--duration", "--idle-exit") and value in ("1e9", str(2**63)):
         value = "-" + value  # large but valid there
     if argv[-1] == "--workers" and argv[0] == "compare" and value == "0":
@@ -186,7 +187,7 @@ COVERED_ABOVE = {
     ("replay", "--speed"), ("replay", "--corrupt"), ("replay", "--seed"), ("montecarlo solent", "--runs"),
     ("montecarlo solent", "--workers"), ("beacons search", "--workers"), ("beacons search", "--chunk"),
     ("beacons search", "--limit"), ("beacons search", "--p0-beacon"), ("live", "--duration"),
-    ("live", "--idle-exit"), ("compare", "--workers")}
+    ("live", "--idle-exit"), ("compare", "--workers"), ("run", "--workers")}
 SEEDS = ["-1", "-9" * 30, "nan", "1e3", "inf", str(2**63), "x"]
 """``--seed`` values that argparse refuses naming the flag (exit 2, before any work)."""
 
@@ -217,6 +218,7 @@ def _extra(files: dict[str, Path]) -> dict[tuple[str, str], tuple[list[str], boo
         ("demo", "--workers"): (["demo", "--out", str(d / "demo"), "--workers", "VALUE"], False),
         ("register", "--init"): (["register", str(files["a"]), str(files["b"]), "--init", "VALUE"], True),
         ("run", "--max-speed"): (["run", log, "-e", "ekf", "--max-speed", "VALUE"], True),
+        ("run", "--workers"): (["run", log, "-e", "ekf", "--workers", "VALUE"], True),
         ("icp", "--max-speed"): (["icp", log, "--max-speed", "VALUE"], True),
         ("compare", "--max-speed"): (["compare", log, "--estimators", "ekf", "--max-speed", "VALUE"], True),
         ("replay", "--max-speed"): (["replay", log, "--nmea-out", "udp://127.0.0.1:9", "--speed", "0",

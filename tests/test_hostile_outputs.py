@@ -22,6 +22,7 @@ from graphnav.errors import GraphnavError
 from graphnav.io import load_log, save_log
 from graphnav.io.geo_out import GeoTrack, render
 from graphnav.io.outputs import OutDir, check_replaceable, file_kind
+from graphnav.io.tum import write_tum
 from graphnav.log import Gnss, NavLog
 from graphnav.trajectory import Trajectory
 
@@ -161,7 +162,7 @@ def test_export_onto_a_fifo_or_symlink_is_refused(tmp_path):
 def _run_dir(tmp_path: Path, t: np.ndarray, x: np.ndarray, name: str = "ekf") -> Path:
     d = tmp_path / "run"
     d.mkdir()
-    Trajectory(t, np.column_stack([x, np.zeros_like(x), np.zeros_like(x)]), name=name).to_tum(d / "trajectory.tum")
+    write_tum(Trajectory(t, np.column_stack([x, np.zeros_like(x), np.zeros_like(x)]), name=name), d / "trajectory.tum")
     (d / "summary.json").write_text(json.dumps({"estimator": name, "origin": {"lat": 54.5, "lon": 18.5, "h": 0.0}}))
     return d
 

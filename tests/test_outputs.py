@@ -11,6 +11,8 @@ import pytest
 
 from graphnav import cli
 from graphnav.io.outputs import MANIFEST, OutDir, atomic_open, atomic_path, write_text_atomic
+from graphnav.io.trajectory_csv import write_trajectory_csv
+from graphnav.io.tum import read_tum, write_tum
 from graphnav.online.live_runner import new_live_file
 from graphnav.trajectory import Trajectory
 
@@ -54,8 +56,8 @@ def test_atomic_path_keeps_the_suffix_for_format_inferring_writers(tmp_path):
     tr = Trajectory(np.arange(3.0), np.zeros((3, 3)))
     with atomic_path(tmp_path / "a.tum") as tmp:
         assert tmp.parent == tmp_path and tmp.name.endswith("a.tum") and tmp.name.startswith(".")
-        tr.to_tum(tmp)
-    assert Trajectory.from_tum(tmp_path / "a.tum").t.tolist() == [0.0, 1.0, 2.0]
+        write_tum(tr, tmp)
+    assert read_tum(tmp_path / "a.tum").t.tolist() == [0.0, 1.0, 2.0]
 
 
 def test_trajectory_writers_are_atomic(tmp_path, monkeypatch):
@@ -69,10 +71,10 @@ def test_trajectory_writers_are_atomic(tmp_path, monkeypatch):
 
     monkeypatch.setattr(np, "savetxt", boom)
     with pytest.raises(OSError):
-        tr.to_tum(tmp_path / "t.tum")
+        write_tum(tr, tmp_path / "t.tum")
     monkeypatch.setattr("csv.writer", boom)
     with pytest.raises(OSError):
-        tr.to_csv(tmp_path / "t.csv")
+        write_trajectory_csv(tr, tmp_path / "t.csv")
     assert (tmp_path / "t.tum").read_text() == "previous\n" and (tmp_path / "t.csv").read_text() == "previous\n"
     assert listing(tmp_path) == {"t.tum", "t.csv"}
 

@@ -1,4 +1,5 @@
-"""Write examples/config.toml from the option dataclasses (their defaults and source comments).
+"""Write examples/config.toml from the option dataclasses (their defaults and help: the fields' metadata
+(graphnav.config.option), else their source comments; group headers from the ``# -- name`` comments).
 
     PYTHONPATH=. python tools/config_example.py
 
@@ -17,6 +18,7 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
+from graphnav.config import plain_text
 from graphnav.estimators.options import describe
 from graphnav.graph.imu_chain import ImuConfig
 from graphnav.graph.loops import LoopConfig
@@ -81,6 +83,10 @@ def comments(cls: type) -> tuple[dict[str, str], dict[str, str], dict[str, str]]
         if m:
             note.append(m.group(1).strip())
             cur = None
+    for f in dataclasses.fields(cls):  # a field's help in its metadata wins (graphnav.config.option)
+        if f.metadata.get("help"):
+            unit = f.metadata.get("unit", "")
+            out[f.name] = (f"[{unit}] " if unit else "") + plain_text(f.metadata["help"])
     return out, groups, notes
 
 

@@ -62,7 +62,8 @@ def is_run_dir(path: Path) -> bool:
 
 def _from_run_dir(path: Path) -> tuple[Any, Any, dict[str, Any]]:
     from ..geodesy import origin_frame
-    from ..trajectory import Trajectory
+    from ..io.trajectory_csv import read_trajectory_csv
+    from ..io.tum import read_tum
 
     try:
         summary = json.loads((path / "summary.json").read_text(encoding="utf-8"))
@@ -72,7 +73,7 @@ def _from_run_dir(path: Path) -> tuple[Any, Any, dict[str, Any]]:
     name = str(summary.get("estimator", "trajectory")) if isinstance(summary, dict) else "trajectory"
     tum, csv = path / "trajectory.tum", path / "trajectory.csv"
     try:
-        traj = Trajectory.from_tum(tum, name) if tum.is_file() else Trajectory.from_csv(csv, name)
+        traj = read_tum(tum, name) if tum.is_file() else read_trajectory_csv(csv, name)
     except (OSError, ValueError, IndexError) as exc:
         raise GraphnavError(f"cannot read the trajectory ({exc})", where=str(tum if tum.is_file() else csv)) from None
     frame, reason = origin_frame({"origin": summary.get("origin")} if isinstance(summary, dict) else {})

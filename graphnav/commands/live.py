@@ -11,10 +11,10 @@ import json
 import logging
 
 from ..errors import GraphnavError
+from ..estimators import make_online, online_names
 from ..io import load_log
 from ..io.outputs import ensure_dir, write_text_atomic
 from ..online.live_runner import LiveRunner
-from ..online.runner import ONLINE_ESTIMATORS, make_online
 from ._common import add_drop_flag, add_json_flag, dropped_kinds, emit, jsonable, options_for
 from .replay import parse_origin
 
@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scans-from", metavar="LOG", help="replay this log's scans on the NMEA stream's clock; "
                    "the run ends with the last scan")
     p.add_argument("--estimator", "-e", default="fixed-lag",
-                   help=f"online estimator: {', '.join(sorted(ONLINE_ESTIMATORS))} (default fixed-lag)")
+                   help=f"online estimator: {', '.join(online_names())} (default fixed-lag)")
     p.add_argument("--option", "-O", action="append", metavar="[ESTIMATOR.]KEY=VALUE",
                    help="estimator option (VALUE parsed as JSON when it can be); repeatable")
     p.add_argument("--publish", metavar="udp://HOST:PORT", help="send the solution as NMEA here")
@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
                         duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans,
                         restart=lambda: make_online(args.estimator, **options))
     summary = runner.run()
-    if args.out and runner.writer is not None:  # beside this run's own TUM file, written atomically
-        write_text_atomic(runner.writer.path.with_suffix(".summary.json"), json.dumps(jsonable(summary), indent=2))
+    if args.out and runner.sink.writer is not None:  # beside this run's own TUM file, written atomically
+        write_text_atomic(runner.sink.writer.path.with_suffix(".summary.json"), json.dumps(jsonable(summary), indent=2))
     emit(args, summary)
     return 0

@@ -23,7 +23,8 @@ from ..io import load_log
 from ..io.drop import drop_kinds
 from ..io.geo_out import record_origin, write_wgs84
 from ..io.outputs import OutDir
-from ..io.tum import TrajectoryWriter, write_truth
+from ..io.trajectory_csv import write_trajectory_csv
+from ..io.tum import TrajectoryWriter, write_truth, write_tum
 from ._common import (
     add_drop_flag,
     add_holdout_flag,
@@ -87,7 +88,7 @@ def list_options(args: argparse.Namespace) -> int:
         if o["group"] != group:
             group = o["group"]
             lines.append(f"  [{group}]")
-        lines.append(f"  {o['name']:32s} {json.dumps(jsonable(o['default']))}")
+        lines.append(f"  {o['name']:32s} {json.dumps(jsonable(o['default'])):14s} {o['type']}")
         if o["meaning"]:
             lines.append(f"      {o['meaning']}")
     if not opts:
@@ -180,10 +181,10 @@ def _single(args: argparse.Namespace, options: dict, dropped: list[str], out: Ou
         summary["holdout"] = {**plan.describe(), **plan.score(result.trajectory)}
         summary["holdout_rmse_m"] = summary["holdout"]["rmse_m"]
     if out is not None:  # each file atomically (temporary file + rename)
-        result.trajectory.to_tum(out.file("trajectory.tum"))
-        result.trajectory.to_csv(out.file("trajectory.csv"))
+        write_tum(result.trajectory, out.file("trajectory.tum"))
+        write_trajectory_csv(result.trajectory, out.file("trajectory.csv"))
         if result.online is not None and result.online is not result.trajectory:
-            result.online.to_tum(out.file("online_final.tum"))
+            write_tum(result.online, out.file("online_final.tum"))
         if getattr(args, "report", False):
             summary.update(_report(args, whole, log, plan, result, summary, runtime, out))
         else:
@@ -242,9 +243,11 @@ def _fleet(args: argparse.Namespace, logs: list[str], options: dict, dropped: li
     """Every log of ``logs`` through the estimator on Dask (:func:`graphnav.evaluation.sweep.run_sweep`;
     a log already in ``DIR/fleet.jsonl`` with the same parameters is not run again); a failed log is
     a run with an ``error``, the others go on. Exit 0 when every log ran, else 2."""
+    from ..config import Range, number
     from ..evaluation.sweep import run_sweep
     from ._common import progress_enabled
 
+    number("--workers", args.workers, Range(lo=1, hi=256, integer=True))
     if not args.out:
         raise ValueError("graphnav run: several logs need --out DIR (each log's outputs go to DIR/<log name>/)")
     root = Path(args.out)

@@ -1,8 +1,10 @@
-"""Every estimator reads a :class:`NavLog` and returns a :class:`~graphnav.result.RunResult`.
+"""Every estimator, in one registry for batch runs and live mode.
 
-Estimator modules in this package declare ``ESTIMATORS = {"name": EstimatorSpec(...)}``;
-they are discovered here, so adding an estimator is adding a module. Comparing estimators is
-one loop over :func:`names`.
+An estimator is a class (:class:`~graphnav.estimators.base.Estimator`): a ``Config`` dataclass whose fields
+are its ``-O`` options with their help, ``add(record) -> Estimate | None`` and ``finish() -> RunResult``;
+``online(**options)`` gives its live form. Estimator modules in this package declare
+``ESTIMATORS = {"name": EstimatorClass}``; they are discovered here, so adding an estimator is adding a
+module. A batch run is one loop (:func:`run`); comparing estimators is one loop over :func:`names`.
 """
 
 from __future__ import annotations
@@ -11,48 +13,32 @@ import difflib
 import importlib
 import pkgutil
 import re
-from collections.abc import Callable, Iterable
-from typing import Any, NamedTuple, Protocol
+from collections.abc import Iterable
+from typing import Any
 
 from ..log import NavLog
-from ..result import OnEstimate, RunResult  # re-exported: estimator modules import them from here
+from ..result import OnEstimate, OnlineEstimator, RunResult  # re-exported: estimator modules import them from here
+from .base import BatchEstimator, Estimator, EstimatorSpec, RunFn
 
-__all__ = ["EstimatorSpec", "OnEstimate", "RunFn", "RunResult", "get", "inputs", "names", "registry", "run", "runnable",
-           "unknown_name"]
-
-
-class RunFn(Protocol):
-    def __call__(self, log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult: ...
+__all__ = ["BatchEstimator", "Estimator", "EstimatorSpec", "OnEstimate", "RunFn", "RunResult", "get", "inputs",
+           "make_online", "names", "registry", "run", "runnable", "unknown_name"]
 
 
-class EstimatorSpec(NamedTuple):
-    """``run(log, on_estimate=None, **options)``; ``unmet(log)`` returns why the log cannot feed
-    the estimator (``None`` if it can); a one-line ``description``; ``kind`` is
-    ``"smoother"``, ``"filter"`` or ``"odometry"``. ``inputs(log, options)``: the record kinds
-    ``run(log, **options)`` reads (measurements, controls, its start pose; :func:`inputs` keeps those
-    the log holds), ``None``: not declared."""
-
-    run: RunFn
-    unmet: Callable[[NavLog], str | None]
-    description: str
-    kind: str = "filter"
-    inputs: Callable[[NavLog, dict[str, Any]], Iterable[str]] | None = None
+_REGISTRY: dict[str, type[Estimator]] | None = None
 
 
-_REGISTRY: dict[str, EstimatorSpec] | None = None
-
-
-def registry() -> dict[str, EstimatorSpec]:
+def registry() -> dict[str, type[Estimator]]:
     """All estimators, discovered from the modules of this package."""
     global _REGISTRY
     if _REGISTRY is None:
         reg: dict[str, EstimatorSpec] = {}
         for mod in pkgutil.iter_modules(__path__):
             m = importlib.import_module(f"{__name__}.{mod.name}")
-            for name, spec in getattr(m, "ESTIMATORS", {}).items():
+            for name, cls in getattr(m, "ESTIMATORS", {}).items():
                 if name in reg:
                     raise RuntimeError(f"estimator {name!r} declared twice")
-                reg[name] = spec
+                cls.name = name
+                reg[name] = cls
         _REGISTRY = reg
     return _REGISTRY
 
@@ -69,7 +55,7 @@ def unknown_name(name: str, known: Iterable[str] | None = None) -> str:
     return f"unknown estimator {name!r}{hint} (known: {', '.join(known)})"
 
 
-def get(name: str) -> EstimatorSpec:
+def get(name: str) -> type[Estimator]:
     reg = registry()
     if name not in reg:
         raise KeyError(unknown_name(name, reg))
@@ -83,16 +69,16 @@ _ANCHOR_WORDS = {"truth": ("truth",), "gnss": ("gnss",), "pose_prior": ("pose_pr
 
 def inputs(name: str, log: NavLog, options: dict[str, Any] | None = None,
            info: dict[str, Any] | None = None) -> list[str] | None:
-    """The record kinds estimator ``name`` used on ``log`` with ``options``: the kinds its spec
-    declares (``EstimatorSpec.inputs``) that the log holds, plus the kinds its start pose came from
+    """The record kinds estimator ``name`` used on ``log`` with ``options``: the kinds its class
+    declares (``Estimator.inputs``) that the log holds, plus the kinds its start pose came from
     (``info["anchor"]`` of its result, e.g. ``truth`` when nothing else gave one), in
     :data:`graphnav.io.drop.KINDS` order. ``None`` when the spec declares nothing."""
     from ..io.drop import KINDS
 
-    spec = get(name)
-    if spec.inputs is None:
+    declared = get(name).inputs(log, dict(options or {}))
+    if declared is None:
         return None
-    used = set(spec.inputs(log, dict(options or {})))
+    used = set(declared)
     anchor = (info or {}).get("anchor")
     if isinstance(anchor, str):
         for word in re.split(r"[^a-z_]+", anchor.lower()):
@@ -102,12 +88,36 @@ def inputs(name: str, log: NavLog, options: dict[str, Any] | None = None,
 
 
 def run(name: str, log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
-    """Run one estimator by name."""
-    spec = get(name)
-    why = spec.unmet(log)
+    """Run one estimator by name on a whole log: every record through ``add``, then ``finish``."""
+    cls = get(name)
+    why = cls.unmet(log)
     if why:
         raise ValueError(f"estimator {name!r} cannot run on this log: {why}")
-    return spec.run(log, on_estimate=on_estimate, **options)
+    est = cls(log, on_estimate=on_estimate, **options)
+    for rec in log.records:
+        est.add(rec)
+    return est.finish()
+
+
+def online_names() -> list[str]:
+    """The estimators with a live (record-by-record) form."""
+    return [n for n in names() if registry()[n].live]
+
+
+def make_online(name: str, **options: Any) -> OnlineEstimator:
+    """The live form of estimator ``name`` (:meth:`Estimator.online`); a ``ValueError`` naming the
+    estimators that have one when it has none."""
+    have = online_names()
+    if name not in have:
+        close = difflib.get_close_matches(name, have, n=2, cutoff=0.6)
+        hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
+        raise ValueError(f"no online form of estimator {name!r} ({hint}have: {', '.join(have)})")
+    try:
+        est = get(name).online(**options)
+    except TypeError as exc:  # an unknown -O option
+        raise ValueError(f"estimator {name!r}: {exc}") from None
+    assert est is not None
+    return est
 
 
 def runnable(log: NavLog) -> list[str]:

@@ -16,8 +16,9 @@ import numpy as np
 
 from ..geometry import wrap_angle
 from ..log import Imu, NavLog, Odometry
+from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
-from . import EstimatorSpec, OnEstimate, RunResult
+from .base import BatchEstimator
 
 
 def unicycle_step(pose: np.ndarray, v: float, w: float, dt: float) -> np.ndarray:
@@ -114,8 +115,16 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
     return {motion, "pose_prior"}  # (the first truth pose without a prior: info["anchor"])
 
 
-ESTIMATORS = {
-    "dead-reckoning": EstimatorSpec(run_any_dead_reckoning, _unmet,
-                                    "odometry (SOG + ROT) integration, else the IMU's (planar strapdown)", "odometry",
-                                    _inputs),
-}
+class DeadReckoning(BatchEstimator):
+    """Odometry dead reckoning when the log has odometry, else the IMU's (:func:`run_any_dead_reckoning`);
+    no options."""
+
+    description = "odometry (SOG + ROT) integration, else the IMU's (planar strapdown)"
+    kind = "odometry"
+    unmet = staticmethod(_unmet)
+    inputs = staticmethod(_inputs)
+
+    batch = staticmethod(run_any_dead_reckoning)
+
+
+ESTIMATORS = {"dead-reckoning": DeadReckoning}

@@ -14,7 +14,7 @@ Updates use the Joseph form. With ``speed=True`` the state is [x, y, yaw, v]: v 
 
 :class:`~graphnav.estimators.pose_ekf.PoseEkf` is the filter algebra (:class:`~graphnav.estimators.ins_ekf.InsEkf`
 with the IMU motion); :class:`EkfStepper` the record-by-record cycle around it,
-shared by the batch :func:`run_ekf` and the live adapter :class:`graphnav.online.ekf_online.EkfOnline`.
+shared by the batch :func:`run_ekf` and the live adapter :class:`graphnav.estimators.ekf_online.EkfOnline`.
 """
 
 from __future__ import annotations
@@ -23,15 +23,17 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import option
 from ..log import Gnss, GnssVelocity, Heading, Imu, NavLog, Odometry, PosePrior, Record, Scan, Truth, WaterSpeed
+from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
-from . import EstimatorSpec, OnEstimate, RunResult
-from .gating import GATING_DEFAULTS
+from .gating import GATING_DEFAULTS, GateOptions
 from .ins_ekf import InsEkf
 from .pose_ekf import PoseEkf
 
@@ -101,7 +103,7 @@ MatchFn = Callable[..., Any]  # graphnav.scan.weighted_icp.match_scans(scan, pre
 
 class EkfStepper:
     """The EKF's record-by-record cycle, shared by the batch :func:`run_ekf` and the online
-    :class:`graphnav.online.ekf_online.EkfOnline`: ``step(record)`` predicts to the record's time
+    :class:`graphnav.estimators.ekf_online.EkfOnline`: ``step(record)`` predicts to the record's time
     (unicycle odometry, the beacon paper's eq. 3, with the last SOG/ROT control held; or the IMU,
     ``motion="imu"``, :class:`graphnav.estimators.ins_ekf.InsEkf`, each record over its own interval
     and the last one held up to a measurement between records) or composes an ICP increment
@@ -346,8 +348,45 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
     return kinds
 
 
-ESTIMATORS = {
-    "ekf": EstimatorSpec(run_ekf, _unmet,
-                         "EKF: odometry, IMU (INS/GNSS, bias + current states) or ICP motion; "
-                         "gated GNSS (+velocity), compass, water speed", "filter", _inputs),
-}
+@dataclass
+class ImuMotionOptions:
+    """The IMU motion's options (``motion=imu``); null: from the log (:func:`imu_options`)."""
+
+    group: ClassVar[str] = "IMU motion (motion=imu)"
+    acc_density: float | None = option(None, "accelerometer noise density (null: the log's meta['imu'])",
+                                       unit="m/s^2/sqrt(Hz)")
+    gyro_density: float | None = option(None, "gyro noise density (null: the log's meta['imu'])",
+                                        unit="rad/s/sqrt(Hz)")
+    acc_bias_rw: float | None = option(None, "accelerometer bias random walk (null: the log's meta['imu'])",
+                                       unit="m/s^2/sqrt(s)")
+    gyro_bias_rw: float | None = option(None, "gyro bias random walk (null: the log's meta['imu'])",
+                                        unit="rad/s/sqrt(s)")
+    bias: bool | str = option("auto", "bias states: auto (unless meta['imu'] says bias_free), true, false")
+    current: bool | str = option("auto", "water-current states: auto (when the log has water_speed), true, false")
+    sigma_bias_acc: float = option(0.01, "prior on the residual accelerometer bias", unit="m/s^2")
+    sigma_bias_gyro_deg: float = option(0.1, "prior on the residual gyro bias", unit="deg/s")
+    sigma_current0: float = option(0.5, "prior 1-sigma of the water current", unit="m/s")
+    q_current: float = option(0.005, "water-current random walk", unit="m/s/sqrt(s)")
+    v0: list[float] | None = option(None, "initial velocity [vx, vy, sigma] (null: meta initial_velocity, else the "
+                                    "first GNSS velocity)")
+    sigma_gnss_velocity: float = option(0.1, "GNSS velocity sigma when the record gives none", unit="m/s")
+    sigma_water_speed: float = option(0.1, "water-speed sigma when the record gives none", unit="m/s")
+    use_velocity: bool = option(True, "false: GNSS velocities are not used")
+    use_odometry: bool = option(True, "false: odometry speeds are not used as SOG updates")
+
+
+@dataclass
+class EkfConfig(ImuMotionOptions, GateOptions):
+    """The ``ekf`` estimator's options (:func:`run_ekf`)."""
+
+    group: ClassVar[str] = "ekf"
+    motion: str = option("auto", "odometry, imu, icp or auto (odometry if the log has it, else the IMU, else ICP "
+                         "on the scans)")
+    speed: bool = option(False, "true: the state is [x, y, yaw, v] (v a random walk, the odometry speed a "
+                         "measurement of it)")
+    sigma_v: float = option(0.5, "odometry speed sigma when the record gives none", unit="m/s")
+    sigma_w: float = option(math.radians(0.5), "odometry rate-of-turn sigma when the record gives none",
+                            unit="rad/s")
+    sigma_acc: float = option(0.5, "speed state (speed=true): its random walk", unit="m/s^2")
+    use_gnss: bool = option(True, "false: GNSS fixes are not used")
+    use_heading: bool = option(True, "false: compass headings are not used")

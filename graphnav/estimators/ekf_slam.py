@@ -23,16 +23,19 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import option
 from ..geometry import wrap_angle
 from ..log import BeaconObs, NavLog, Odometry
+from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
-from . import EstimatorSpec, OnEstimate, RunResult
+from .base import BatchEstimator
 from .gating import chi2_ppf
 
 PAPER_SIGMAS = {                              # the paper's section 7, per record (white noise)
@@ -463,7 +466,46 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
     return kinds
 
 
-ESTIMATORS = {
-    "ekf-slam": EstimatorSpec(run_ekf_slam, _unmet, "range-bearing EKF-SLAM (beacon paper, eq. 3-27): gated, "
-                              "FEJ, for real logs; paper=true: the paper's filter", "filter", _inputs),
-}
+@dataclass
+class EkfSlamConfig:
+    """The ``ekf-slam`` estimator's options (:func:`run_ekf_slam`; null: the mode's default)."""
+
+    paper: bool = option(False, "true: the beacon paper's filter exactly (no gate, its init and sigmas, a slot per "
+                         "beacon)")
+    sigma_v: float | None = option(None, "speed sigma when the record gives none (null: the mode's default)",
+                                   unit="m/s")
+    sigma_rot: float | None = option(None, "rate-of-turn sigma when the record gives none (null: the mode's "
+                                     "default)", unit="rad/s")
+    sigma_range: float | None = option(None, "range sigma when the record gives none (null: the mode's default)",
+                                       unit="m")
+    sigma_bearing: float | None = option(None, "bearing sigma when the record gives none (null: the mode's "
+                                         "default)", unit="rad")
+    gate: float | None | str = option("default", "chi-square probability of the gate on the Mahalanobis distance "
+                                      "(default: 0.999, none with paper=true; null: no gate)")
+    init: str | None = option(None, 'a beacon\'s first sighting: "inverse" (inverse observation, the default) or '
+                              '"paper"')
+    adaptive: bool | None = option(None, "motion noise scaled up from the innovations (null: on unless paper=true)")
+    window: int = option(20, "innovations in the adaptive motion-noise scale's window")
+    iterations: int = option(1, "iterations > 1: iterated EKF corrections")
+    fej: bool | None = option(None, "first-estimates Jacobians (Huang et al. 2008; null: on unless paper=true)")
+    reinit_after: int | None = option(3, "a beacon whose first sighting was never confirmed and whose next this "
+                                      "many re-sightings are all gated out is initialised again (null: never)")
+    p0_beacon: float = option(1e6, "a beacon's initial variance with init=paper (eq. 14)", unit="m^2")
+    p0_cross: str = option("zero", 'initial cross covariances: "zero" (a valid P0) or "paper" (eq. 14 as printed)')
+    w_second: str = option("rot", 'second column of W (eq. 22): "rot" = dg/dROT or "theta" as printed')
+    use_known: bool = option(True, "false: ignore the log's charted beacons (map every beacon)")
+
+
+class EkfSlamEstimator(BatchEstimator):
+    """EKF-SLAM on odometry and beacon range/bearing records (:func:`run_ekf_slam`)."""
+
+    description = ("range-bearing EKF-SLAM (beacon paper, eq. 3-27): gated, FEJ, for real logs; paper=true: the "
+                   "paper's filter")
+    Config = EkfSlamConfig
+    unmet = staticmethod(_unmet)
+    inputs = staticmethod(_inputs)
+
+    batch = staticmethod(run_ekf_slam)
+
+
+ESTIMATORS = {"ekf-slam": EkfSlamEstimator}

@@ -37,17 +37,19 @@ extension), and every option of ``ukf``.
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import option
 from ..log import NavLog
-from . import EstimatorSpec, OnEstimate, RunResult
+from ..result import OnEstimate, RunResult
 from .fuzzy import FuzzyAlpha, Thresholds
 from .gating import chi2_ppf
 from .imu_model import resolve_flag, wants_bias
-from .ukf import DEFAULTS, channel_variances, inputs, measurement_table, run_nav_filter, unmet
+from .ukf import DEFAULTS, Ukf, UkfOptions, channel_variances, measurement_table, run_nav_filter
 
 
 class FuzzyCovarianceMatcher:
@@ -176,9 +178,44 @@ def run_fuzzy_ukf_bias(log: NavLog, *, on_estimate: OnEstimate | None = None, **
     return _run(log, "fuzzy-ukf-bias", on_estimate, {**options, "bias": True})
 
 
-ESTIMATORS = {
-    "fuzzy-ukf": EstimatorSpec(run_fuzzy_ukf, unmet,
-                               "UKF with fuzzy covariance-matching R adaptation (Liu 2019)", "filter", inputs),
-    "fuzzy-ukf-bias": EstimatorSpec(run_fuzzy_ukf_bias, unmet,
-                                    "fuzzy-ukf on the bias-augmented ukf-bias state (ours)", "filter", inputs),
-}
+@dataclass
+class FuzzyUkfBiasConfig(UkfOptions):
+    """The ``fuzzy-ukf-bias`` estimator's options: the fuzzy adaptation's and the UKF's."""
+
+    group: ClassVar[str] = "fuzzy"
+    window: int = option(30, "innovations in the covariance-matching window (N)")
+    r_update: str = option("compound", "compound (R(k) adapts recursively) or scale_prior (alpha scales R_0)")
+    c_a: str = option("centered", "centered (C_A = the window's innovation covariance about its mean) or raw (eq. "
+                      "17's second moment, which also books model error as sensor noise)")
+    mean_test: float | None = option(None, "confidence level of the test of the innovations' window mean; when "
+                                     "significant the predicted covariance is inflated to cover it (null: off)")
+
+
+@dataclass
+class FuzzyUkfConfig(FuzzyUkfBiasConfig):
+    """The ``fuzzy-ukf`` estimator's options (``mean_test`` 0.95 unless the filter has bias states)."""
+
+    mean_test: float | None = option(0.95, "confidence level of the test of the innovations' window mean; when "
+                                     "significant the predicted covariance is inflated to cover it (null: off; "
+                                     "default null when the filter has bias states)")
+    bias: bool | str = option("auto", "IMU bias states: auto (unless meta['imu'] says bias_free; then as "
+                              "fuzzy-ukf-bias), true, false (the paper's 5-state filter)")
+
+
+class FuzzyUkf(Ukf):
+    """The UKF with fuzzy covariance-matching R adaptation (:func:`run_fuzzy_ukf`); the UKF's inputs."""
+
+    description = "UKF with fuzzy covariance-matching R adaptation (Liu 2019)"
+    Config = FuzzyUkfConfig
+    batch = staticmethod(run_fuzzy_ukf)
+
+
+class FuzzyUkfBias(FuzzyUkf):
+    """fuzzy-ukf on the bias-augmented state (:func:`run_fuzzy_ukf_bias`)."""
+
+    description = "fuzzy-ukf on the bias-augmented ukf-bias state (ours)"
+    Config = FuzzyUkfBiasConfig
+    batch = staticmethod(run_fuzzy_ukf_bias)
+
+
+ESTIMATORS = {"fuzzy-ukf": FuzzyUkf, "fuzzy-ukf-bias": FuzzyUkfBias}

@@ -37,18 +37,35 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.special import gammaincinv
 
+from ..config import option
 from ..geometry import wrap_angle
 
-GATING_DEFAULTS: dict[str, Any] = {"gate": 0.999, "reinit_n": 5, "confirm_n": 3, "confirm_s": 30.0,
-                                   "reinit_after_s": 300.0, "scale_window": 50}
-"""The gate's options (estimator options of the same names), documented in docs/ekf.md."""
+
+@dataclass
+class GateOptions:
+    """The innovation gate's options (estimator options of the same names; docs/ekf.md, Gating)."""
+
+    group: ClassVar[str] = "innovation gate"
+    gate: float | None = option(0.999, "chi-square probability of the gate (null: every measurement is accepted)")
+    reinit_n: int = option(5, "a run of this many measurements that agree with each other and not with the "
+                           "estimate re-initialises the filter on them")
+    confirm_n: int = option(3, "a jump on a tracking filter (it had accepted this many measurements of the sensor "
+                            "within confirm_s before the streak) is rejected until it lasts reinit_after_s")
+    confirm_s: float = option(30.0, "the window of confirm_n", unit="s")
+    reinit_after_s: float = option(300.0, "a confirmed jump is believed after this long", unit="s")
+    scale_window: int = option(50, "the gate's scale: the median of the last this many d2 / median(chi2(dof)), "
+                               "never below 1 (0: always 1)")
+
+
+GATING_DEFAULTS: dict[str, Any] = {f.name: f.default for f in fields(GateOptions)}
+"""The gate's options and their defaults (:class:`GateOptions`)."""
 
 
 def chi2_ppf(p: float, dof: int) -> float:

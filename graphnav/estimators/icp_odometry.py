@@ -23,19 +23,21 @@ directions, the guess along them) with its covariance (the match's across, the o
 from __future__ import annotations
 
 import time
-from dataclasses import fields
-from typing import Any
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar
 
 import numpy as np
 
+from ..config import option
 from ..geometry import cov_to_world, se2_adjoint_inv, se2_between, se2_compose
 from ..log import NavLog, odometry_samples
+from ..result import OnEstimate, RunResult
 from ..scan import icp_cache
 from ..scan.imu_guess import ImuGuess, imu_samples
 from ..scan.motion_guess import MotionGuess
 from ..scan.weighted_icp import IcpConfig, scan_points
 from ..trajectory import Trajectory
-from . import EstimatorSpec, OnEstimate, RunResult
+from .base import BatchEstimator
 from .dead_reckoning import start_pose
 
 _CONFIG_FIELDS = {f.name for f in fields(IcpConfig)}
@@ -180,6 +182,32 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
     return kinds
 
 
-ESTIMATORS = {
-    "icp-dr": EstimatorSpec(run_icp_dr, _unmet, "weighted-ICP scan-matching dead reckoning", "odometry", _inputs),
-}
+@dataclass
+class IcpDrConfig(IcpConfig):
+    """The ``icp-dr`` estimator's options: its own and every :class:`IcpConfig` field."""
+
+    group: ClassVar[str] = "icp-dr"
+    init: str = option("odometry", "the initial guess: odometry (the odometry increment when the log has odometry, "
+                       "else the IMU's prediction when it has an IMU, else constant velocity), imu, cv or zero")
+    guess_cov: bool = option(True, "false: the odometry guess goes without its covariance, so a match is not tested "
+                             "against it")
+    sigma_xy0: float = option(0.0, "the start pose's 1-sigma in x and y (a pose prior's own sigmas win)", unit="m")
+    sigma_yaw0: float = option(0.0, "the start pose's yaw 1-sigma (a pose prior's own sigmas win)", unit="rad")
+    keyframe_dist: float = option(1.0, "with the IMU's guess: a scan becomes a keyframe after the vessel moved "
+                                  "this far (the scan-to-map baseline's rule)", unit="m")
+    keyframe_angle_deg: float = option(10.0, "with the IMU's guess: ... or turned this much", unit="deg")
+
+
+class IcpDr(BatchEstimator):
+    """Weighted-ICP scan-matching dead reckoning (:func:`run_icp_dr`)."""
+
+    description = "weighted-ICP scan-matching dead reckoning"
+    kind = "odometry"
+    Config = IcpDrConfig
+    unmet = staticmethod(_unmet)
+    inputs = staticmethod(_inputs)
+
+    batch = staticmethod(run_icp_dr)
+
+
+ESTIMATORS = {"icp-dr": IcpDr}

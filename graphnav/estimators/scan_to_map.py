@@ -28,9 +28,10 @@ from typing import Any
 
 import numpy as np
 
-from ..config import config_from_options
+from ..config import config_from_options, option
 from ..geometry import increment, se2_adjoint_inv, se2_between, se2_compose, wrap_angle
 from ..log import NavLog, Scan, odometry_samples
+from ..result import OnEstimate, RunResult
 from ..scan.covariance import SAMPLING_VARIANCE, sandwich
 from ..scan.degeneracy import analyse, flatness, keep_constrained, line_information
 from ..scan.imu_guess import ImuGuess, imu_samples
@@ -45,7 +46,7 @@ from ..scan.registration import (
     voxel_downsample,
 )
 from ..trajectory import Trajectory
-from . import EstimatorSpec, OnEstimate, RunResult
+from .base import BatchEstimator
 from .dead_reckoning import start_pose
 
 
@@ -53,34 +54,35 @@ from .dead_reckoning import start_pose
 class ScanToMapConfig:
     """Scan-to-map settings (metres, degrees where the name says so)."""
 
-    backend: str = "small_gicp:VGICP"  # registration: small_gicp:VGICP|GICP, open3d:point_to_point|point_to_plane|gicp
-    keyframes: int = 10  # the local map: the last N keyframe scans
-    keyframe_dist: float = 1.0  # [m] a scan becomes a keyframe after the vessel moved this far ...
-    keyframe_angle_deg: float = 10.0  # ... or turned this much since the last keyframe
-    map_voxel: float = 0.25  # [m] voxel of the local map's downsampling
-    scan_voxel: float = 0.25  # [m] voxel of each scan's downsampling
-    min_range: float = 1.0  # [m] returns closer than this are dropped
-    max_range: float = 100.0  # [m] returns farther than this (or the scan's own maximum) are dropped
-    max_corr: float = 2.0  # [m] correspondence distance of the registration
-    voxel: float = 1.0  # [m] VGICP voxel size
-    neighbors: int = 10  # neighbours for the local covariances / normals
-    max_iter: int = 30  # registration iterations
-    planar: str = "constrain"  # "constrain": solve in SE(2); "project": 6-DoF, projected onto SE(2)
-    min_points: int = 20  # a scan with fewer points is not registered (the prediction is kept)
-    min_fitness: float = 0.3  # a registration below this inlier fraction is rejected
-    max_correction: float = 5.0  # [m] a registration farther than this from the prediction is rejected
-    threads: int = 1  # registration threads
-    # degeneracy of each registration (graphnav.scan.degeneracy; docs/weighted-icp.md): point-to-line
-    # pairs of the scan against the map's local lines within inlier_dist map voxels; the condition
-    # number is unit-free (measured on the harbour log, lower than the pair matcher's 200)
-    max_condition: float = 40.0
-    max_sigma: float = 1.0  # the registration's 1-sigma along the weakest direction above this x map_voxel
-    inlier_dist: float = 2.0  # [map voxels]
-    # a degenerate registration: "constrained" keeps it across the weak directions and takes the
-    # prediction along them; "predict" takes the prediction (either way the scan may join the map)
-    degenerate: str = "constrained"
-    predict: str = "odometry"  # initial guess: "odometry" (when the log has odometry, else the IMU's when it
-    #  has an IMU, else cv), "imu" or "cv"
+    backend: str = option("small_gicp:VGICP",
+        "registration: small_gicp:VGICP|GICP, open3d:point_to_point|point_to_plane|gicp")
+    keyframes: int = option(10, "the local map: the last N keyframe scans")
+    keyframe_dist: float = option(1.0, "a scan becomes a keyframe after the vessel moved this far", unit="m")
+    keyframe_angle_deg: float = option(10.0, "... or turned this much since the last keyframe", unit="deg")
+    map_voxel: float = option(0.25, "voxel of the local map's downsampling", unit="m")
+    scan_voxel: float = option(0.25, "voxel of each scan's downsampling", unit="m")
+    min_range: float = option(1.0, "returns closer than this are dropped", unit="m")
+    max_range: float = option(100.0, "returns farther than this (or the scan's own maximum) are dropped", unit="m")
+    max_corr: float = option(2.0, "correspondence distance of the registration", unit="m")
+    voxel: float = option(1.0, "VGICP voxel size", unit="m")
+    neighbors: int = option(10, "neighbours for the local covariances / normals")
+    max_iter: int = option(30, "registration iterations")
+    planar: str = option("constrain", "\"constrain\": solve in SE(2); \"project\": 6-DoF, projected onto SE(2)")
+    min_points: int = option(20, "a scan with fewer points is not registered (the prediction is kept)")
+    min_fitness: float = option(0.3, "a registration below this inlier fraction is rejected")
+    max_correction: float = option(5.0, "a registration farther than this from the prediction is rejected", unit="m")
+    threads: int = option(1, "registration threads")
+    # degeneracy of each registration (graphnav.scan.degeneracy; docs/weighted-icp.md): point-to-line pairs of
+    # the scan against the map's local lines within inlier_dist map voxels
+    max_condition: float = option(40.0, "a registration whose point-to-line condition number is above this is "
+                                  "degenerate (unit-free; measured on the harbour log)")
+    max_sigma: float = option(1.0, "the registration's 1-sigma along the weakest direction above this x map_voxel")
+    inlier_dist: float = option(2.0, "degeneracy check: pairs within this many map voxels", unit="map voxels")
+    degenerate: str = option("constrained",
+        "a degenerate registration: \"constrained\" keeps it across the weak directions and takes the prediction along "
+        "them; \"predict\" takes the prediction (either way the scan may join the map)")
+    predict: str = option("odometry", "initial guess: \"odometry\" (when the log has odometry, else the IMU's when "
+                          "it has an IMU, else cv), \"imu\" or \"cv\"")
 
     def params(self) -> Params:
         return Params(max_corr=self.max_corr, voxel=self.voxel, neighbors=self.neighbors,
@@ -280,8 +282,17 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
     return kinds
 
 
-ESTIMATORS = {
-    "scan-to-map": EstimatorSpec(
-        run_scan_to_map, _unmet, "LiDAR scan-to-local-map registration (small_gicp VGICP default)",
-        "odometry", _inputs),
-}
+class ScanToMap(BatchEstimator):
+    """LiDAR scan-to-local-map registration (:func:`run_scan_to_map`)."""
+
+    description = "LiDAR scan-to-local-map registration (small_gicp VGICP default)"
+    kind = "odometry"
+    Config = ScanToMapConfig
+    what = "scan-to-map"
+    unmet = staticmethod(_unmet)
+    inputs = staticmethod(_inputs)
+
+    batch = staticmethod(run_scan_to_map)
+
+
+ESTIMATORS = {"scan-to-map": ScanToMap}

@@ -1,4 +1,5 @@
-"""The factor-graph smoothers (:mod:`graphnav.graph.log_runs`) as estimators: ``isam2``, ``batch``, ``fixed-lag``.
+"""The factor-graph smoothers as estimators: ``isam2``, ``batch``, ``fixed-lag``, each the
+record-by-record :class:`~graphnav.graph.navigator.Navigator` with its solver.
 
 Options are the fields of :class:`graphnav.graph.smoother_config.SmootherConfig` (``-O key=value``). One graph
 for every log: ``motion`` (default ``auto``) picks its state -- ``Pose3`` + velocity + IMU bias with
@@ -8,11 +9,14 @@ otherwise (docs/smoother.md).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
-from ..graph.log_runs import run_batch, run_fixed_lag, run_isam2, unmet
-from ..log import NavLog
-from . import EstimatorSpec
+from ..graph.log_runs import unmet
+from ..graph.navigator import Navigator
+from ..graph.smoother_config import SmootherConfig
+from ..log import NavLog, Record
+from ..result import Estimate, OnEstimate, RunResult
+from .base import Estimator
 
 
 def _inputs(log: NavLog, options: dict[str, Any]) -> set[str]:
@@ -31,15 +35,71 @@ def _inputs(log: NavLog, options: dict[str, Any]) -> set[str]:
     if options.get("use_cloud", True):
         kinds.add("cloud")
     if nav:
-        kinds |= {"gnss_velocity", "water_speed"} | ({"imu"} if has_imu else set())
+        kinds |= {"gnss_velocity", "water_speed", "attitude"} | ({"imu"} if has_imu else set())
     return kinds
 
 
-ESTIMATORS = {
-    "isam2": EstimatorSpec(run_isam2, unmet, "iSAM2 factor-graph smoother: online + smoothed, all sensors", "smoother",
-                           _inputs),
-    "batch": EstimatorSpec(run_batch, unmet, "batch Levenberg-Marquardt over the whole factor graph", "smoother",
-                           _inputs),
-    "fixed-lag": EstimatorSpec(run_fixed_lag, unmet, "incremental fixed-lag smoother (bounded memory)", "smoother",
-                               _inputs),
-}
+def _solver_options(solver: str, options: dict[str, Any]) -> dict[str, Any]:
+    if options.get("solver", solver) != solver:
+        raise ValueError(f"option solver={options['solver']!r} contradicts the estimator ({solver!r})")
+    return {**options, "solver": solver}
+
+
+class Smoother(Estimator):
+    """The navigation graph with one solver (``solver``): every record into the
+    :class:`~graphnav.graph.navigator.Navigator`, its result at the end."""
+
+    kind = "smoother"
+    Config = SmootherConfig
+    live = True
+    what = "smoother"
+    solver: ClassVar[str] = "isam2"
+
+    def __init__(self, log: NavLog | None = None, *, on_estimate: OnEstimate | None = None, **options: Any) -> None:
+        super().__init__(log, on_estimate=on_estimate, **_solver_options(self.solver, options))
+        if log is not None:
+            self.nav = Navigator.for_log(log, self.config, on_estimate=on_estimate)
+        else:
+            self.nav = Navigator(self.config, on_estimate=on_estimate)
+
+    unmet = staticmethod(unmet)
+    inputs = staticmethod(_inputs)
+
+    @classmethod
+    def online(cls, **options: Any) -> Navigator:
+        """The navigation graph with this solver, bounded memory (no history kept)."""
+        return Navigator(history=False, **_solver_options(cls.solver, options))
+
+    def add(self, record: Record) -> Estimate | None:
+        return self.nav.add(record)
+
+    def finish(self) -> RunResult:
+        return self.nav.result()
+
+
+class Isam2(Smoother):
+    """One ``ISAM2.update`` per keyframe; online = the newest pose + its marginal; smoothed = the
+    closing LM step from the iSAM2 estimate (``converge``)."""
+
+    description = "iSAM2 factor-graph smoother: online + smoothed, all sensors"
+    solver = "isam2"
+
+
+class Batch(Smoother):
+    """Levenberg-Marquardt over the whole log (initialised by chaining the relative measurements);
+    GNSS fixes left with a residual beyond ``gnss_gate`` sigmas are dropped and LM re-run."""
+
+    description = "batch Levenberg-Marquardt over the whole factor graph"
+    solver = "batch"
+    live = False
+
+
+class FixedLag(Smoother):
+    """``IncrementalFixedLagSmoother`` with a ``lag`` [s] window: bounded memory on long runs. The
+    final trajectory holds each pose's estimate (and marginal) as it leaves the window."""
+
+    description = "incremental fixed-lag smoother (bounded memory)"
+    solver = "fixed-lag"
+
+
+ESTIMATORS = {"isam2": Isam2, "batch": Batch, "fixed-lag": FixedLag}

@@ -26,16 +26,19 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import option
 from ..geometry import wrap_angle
 from ..log import NavLog
+from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
-from . import EstimatorSpec, OnEstimate, RunResult
-from .gating import GATING_DEFAULTS, InnovationGate, reinit_block
+from .base import BatchEstimator
+from .gating import GATING_DEFAULTS, GateOptions, InnovationGate, reinit_block
 from .imu_model import imu_noise, resolve_flag, wants_bias
 
 # Table 2: the filters' a-priori noise (1-sigma)
@@ -293,19 +296,38 @@ def initial_state(log: NavLog, tab: dict[str, NDArray], n_bias: int,
     return np.array(x), np.diag(d)
 
 
-DEFAULTS: dict[str, Any] = {
-    # measurement noise: None = the records' sigmas (Table 2: r_gps_x=6, r_gps_y=7, r_com_deg=0.5)
-    "r_gps_x": None, "r_gps_y": None, "r_com_deg": None,
-    "sigma_gnss_velocity": 0.1, "sigma_water_speed": 0.1,  # [m/s] when a record gives no sigma
-    # IMU white noise per sample: None = the log's meta["imu"] (acc_std [m/s^2], gyro_std), else Table 2
-    "q_acc": None, "q_gyro_deg": None,
-    "alpha": 0.5, "beta": 2.0, "kappa": 0.0, "sigma_v0": 0.2,
-    **GATING_DEFAULTS,  # the innovation gate (gating.py)
-    # bias states: prior on the residual bias after calibration, and its random walk (None: meta["imu"]'s)
-    "sigma_bias_acc": 0.01, "sigma_bias_gyro_deg": 0.1, "q_bias_acc": None, "q_bias_gyro_deg": None,
-    # water current states (with water_speed records): prior [m/s] and random walk [m/s/sqrt(s)]
-    "current": "auto", "sigma_current0": 0.5, "q_current": 0.005,
-}
+@dataclass
+class UkfOptions(GateOptions):
+    """The UKF's options (:func:`run_nav_filter`) and its innovation gate's."""
+
+    group: ClassVar[str] = "ukf"
+    # measurement noise: null = the records' sigmas
+    r_gps_x: float | None = option(None, "GNSS x sigma (null: the records'; Table 2: 6)", unit="m")
+    r_gps_y: float | None = option(None, "GNSS y sigma (null: the records'; Table 2: 7)", unit="m")
+    r_com_deg: float | None = option(None, "compass sigma (null: the records'; Table 2: 0.5)", unit="deg")
+    sigma_gnss_velocity: float = option(0.1, "GNSS velocity sigma when the record gives none", unit="m/s")
+    sigma_water_speed: float = option(0.1, "water-speed sigma when the record gives none", unit="m/s")
+    q_acc: float | None = option(None, "IMU acceleration noise per sample (null: meta['imu'] acc_std, else Table "
+                                 "2's 0.0039)", unit="m/s^2")
+    q_gyro_deg: float | None = option(None, "IMU yaw-rate noise per sample (null: meta['imu'] gyro_std, else "
+                                      "Table 2's 0.033)", unit="deg/s")
+    alpha: float = option(0.5, "sigma-point spread (Merwe weights)")
+    beta: float = option(2.0, "sigma-point weight of the prior (2: Gaussian)")
+    kappa: float = option(0.0, "secondary sigma-point spread")
+    sigma_v0: float = option(0.2, "prior 1-sigma of the initial velocity", unit="m/s")
+    sigma_bias_acc: float = option(0.01, "bias states: prior on the residual accelerometer bias", unit="m/s^2")
+    sigma_bias_gyro_deg: float = option(0.1, "bias states: prior on the residual gyro bias", unit="deg/s")
+    q_bias_acc: float | None = option(None, "bias states: accelerometer bias random walk (null: the log's "
+                                      "meta['imu'])", unit="m/s^2/sqrt(s)")
+    q_bias_gyro_deg: float | None = option(None, "bias states: gyro bias random walk (null: the log's meta['imu'])",
+                                           unit="deg/s/sqrt(s)")
+    current: bool | str = option("auto", "water-current states: auto (when the log has water_speed), true, false")
+    sigma_current0: float = option(0.5, "prior 1-sigma of the water current", unit="m/s")
+    q_current: float = option(0.005, "water-current random walk", unit="m/s/sqrt(s)")
+
+
+DEFAULTS: dict[str, Any] = {f.name: f.default for f in fields(UkfOptions)}
+"""The UKF's options and their defaults (:class:`UkfOptions`)."""
 
 
 def _noise(log: NavLog, opts: dict[str, Any]) -> dict[str, float]:
@@ -353,7 +375,6 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
     pix = np.ix_(pidx, pidx)
     has = ~np.isnan(z)
     all_idx = np.array([0, 1, 4])
-    vidx = np.array([2, 3])
     sel = {}
     for k in range(n):
         t0 = time.perf_counter()
@@ -378,19 +399,7 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
             R = adapter(k, ch, eps, HPH, r0k[ch]) if adapter is not None else r0k[ch]
             r_used[k, ch] = R
             f.update(idx, eps, HPH, np.diag(R))
-        if has[k, 3] and has[k, 4]:  # GNSS velocity over ground: H picks v_x, v_y
-            eps, HPH = f.innovation(vidx, z[k, 3:5])
-            R = np.diag(rk[k, 3:5])
-            verdict = gater.test("gnss_velocity", float(t[k]), eps, HPH, R)
-            if verdict == "accept":
-                f.update(vidx, eps, HPH, R)
-            elif verdict == "reinit":
-                reinit_block(f.x, f.P, vidx, z[k, 3:5].astype(float), R * gater.scale("gnss_velocity"))
-        if current and has[k, 5]:  # speed through water: (v - c) along the bow, unscented
-            eps, Pzz, Pxz = f.water_speed_innovation(float(z[k, 5]))
-            R = np.array([[rk[k, 5]]])
-            if gater.test("water_speed", float(t[k]), eps, Pzz, R) != "reject":
-                f.update_nonlinear(eps, Pzz, Pxz, R)
+        _velocity_updates(f, gater, float(t[k]), z[k], rk[k], has[k], current)
         if k:
             step_ms[k - 1] = (time.perf_counter() - t0) * 1e3
         poses[k] = f.x[pidx]
@@ -402,16 +411,36 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
     info: dict[str, Any] = {"options": {k: opts[k] for k in sorted(opts)}, "state_final": f.x.tolist(),
                             "r_used": r_used, "velocity": states[:, 2:4], **gater.info(),
                             "bias_states": bias, "bias_reason": bias_why if bias == auto_bias else "option",
-                            "current_states": current,
-                            "process_noise": {"q_acc": qn["q_acc"], "q_gyro": qn["q_gyro"],
-                                              "q_bias_acc": qn["q_bias_acc"], "q_bias_gyro": qn["q_bias_gyro"],
-                                              "source": qn["source"]}}
+                            "current_states": current, "process_noise": dict(qn)}
     if bias:
         info["bias_final"] = f.x[5:8].tolist()
     if current:
         info["current_final"] = f.x[f.ic:f.ic + 2].tolist()
         info["current"] = states[:, f.ic:f.ic + 2]
     return RunResult(traj, traj, step_ms, info=info)
+
+
+def _velocity_updates(f: UnscentedNav, gater: InnovationGate, t: float, zk: NDArray, rkk: NDArray, hk: NDArray,
+                      current: bool) -> None:
+    """The updates after the pose's at one time: GNSS velocity over ground (H picks v_x, v_y), and with
+    the current states the speed through water ((v - c) along the bow, unscented)."""
+    if hk[3] and hk[4]:
+        vidx = _VELOCITY
+        eps, HPH = f.innovation(vidx, zk[3:5])
+        R = np.diag(rkk[3:5])
+        verdict = gater.test("gnss_velocity", t, eps, HPH, R)
+        if verdict == "accept":
+            f.update(vidx, eps, HPH, R)
+        elif verdict == "reinit":
+            reinit_block(f.x, f.P, vidx, zk[3:5].astype(float), R * gater.scale("gnss_velocity"))
+    if current and hk[5]:
+        eps, Pzz, Pxz = f.water_speed_innovation(float(zk[5]))
+        R = np.array([[rkk[5]]])
+        if gater.test("water_speed", t, eps, Pzz, R) != "reject":
+            f.update_nonlinear(eps, Pzz, Pxz, R)
+
+
+_VELOCITY = np.array([2, 3])  # v_x, v_y: the state entries of the GNSS velocity channels
 
 
 _STATE = np.array([0, 1, 4])  # x, y, theta: the state entries of the GNSS x, GNSS y and compass channels
@@ -469,8 +498,30 @@ def inputs(log: NavLog, options: dict) -> set[str]:
     return kinds
 
 
-ESTIMATORS = {
-    "ukf": EstimatorSpec(run_ukf, unmet, "conventional UKF, IMU-driven, GNSS + compass (Liu 2019)", "filter",
-                         inputs),
-    "ukf-bias": EstimatorSpec(run_ukf_bias, unmet, "UKF with accelerometer/gyro bias states", "filter", inputs),
-}
+@dataclass
+class UkfConfig(UkfOptions):
+    """The ``ukf`` estimator's options."""
+
+    bias: bool | str = option("auto", "IMU bias states: auto (unless meta['imu'] says bias_free), true, false (the "
+                              "paper's 5-state UKF)")
+
+
+class Ukf(BatchEstimator):
+    """The UKF at its best for the log (:func:`run_ukf`)."""
+
+    description = "conventional UKF, IMU-driven, GNSS + compass (Liu 2019)"
+    Config = UkfConfig
+    unmet = staticmethod(unmet)
+    inputs = staticmethod(inputs)
+    batch = staticmethod(run_ukf)
+
+
+class UkfBias(Ukf):
+    """The UKF with bias states (:func:`run_ukf_bias`)."""
+
+    description = "UKF with accelerometer/gyro bias states"
+    Config = UkfOptions
+    batch = staticmethod(run_ukf_bias)
+
+
+ESTIMATORS = {"ukf": Ukf, "ukf-bias": UkfBias}

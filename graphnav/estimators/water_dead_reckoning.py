@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import option
 from ..log import NavLog
+from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
-from . import EstimatorSpec, OnEstimate, RunResult
+from .base import BatchEstimator
 
 #: a heading or speed older than this [s] is not used (the position then stays, its covariance grows)
 STALE_S = 10.0
@@ -86,8 +89,27 @@ def _inputs(log: NavLog, options: dict) -> list[str]:
     return ["heading", "water_speed", "gnss"]
 
 
-ESTIMATORS = {
-    "water-dr": EstimatorSpec(run_water_dead_reckoning, _unmet,
-                              "dead reckoning on compass heading and speed through water (no current), restarted "
-                              "at each GNSS fix: the navigator's paper-chart baseline", "odometry", _inputs),
-}
+@dataclass
+class WaterDrConfig:
+    """The ``water-dr`` estimator's options (:func:`run_water_dead_reckoning`)."""
+
+    gnss_reset: bool = option(True, "put the position on every GNSS fix (false: from the first fix only)")
+    current_sigma: float = option(0.3, "the unknown water current's 1-sigma per axis: the covariance's growth",
+                                  unit="m/s")
+    heading_sigma: float = option(math.radians(3.0), "the compass's 1-sigma when a record gives none", unit="rad")
+    speed_sigma: float = option(0.1, "the speed log's 1-sigma when a record gives none", unit="m/s")
+
+
+class WaterDr(BatchEstimator):
+    """Dead reckoning on the compass and the speed log (:func:`run_water_dead_reckoning`)."""
+
+    description = ("dead reckoning on compass heading and speed through water (no current), restarted at each "
+                   "GNSS fix: the navigator's paper-chart baseline")
+    kind = "odometry"
+    Config = WaterDrConfig
+    unmet = staticmethod(_unmet)
+    inputs = staticmethod(_inputs)
+    batch = staticmethod(run_water_dead_reckoning)
+
+
+ESTIMATORS = {"water-dr": WaterDr}

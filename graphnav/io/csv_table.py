@@ -171,15 +171,15 @@ def read_csv_log(path: str | Path, *, columns: str | Mapping[str, str] | None = 
         if header is None:
             if delimiter == "," and text.count(";") > text.count(","):
                 delimiter = ";"
-            header = [h.strip() for h in next(csv.reader([text], delimiter=delimiter))]
+            header = [h.strip() for h in _cells(text, delimiter, path, lineno)]
             given = mapping or {h: h for h in header if h in TARGETS}
             src = _sources(given, header, path, flag)
             if "t" not in src:
                 raise LogError(f"no time column: map one ({flag} t=COLUMN[:s|ms|us|ns]); columns: "
                                f"{', '.join(header)[:400]}", file=str(path), line=lineno, field=flag)
             continue
-        cells = next(csv.reader([text], delimiter=delimiter))
         try:
+            cells = _cells(text, delimiter, path, lineno)
             vals = _row(cells, src, path, lineno)
             if vals["t"] < last_t:
                 raise LogError(f"time {vals['t']:.9g} before the previous row's {last_t:.9g} (rows must be in "
@@ -208,6 +208,15 @@ def read_csv_log(path: str | Path, *, columns: str | Mapping[str, str] | None = 
         meta["skipped"] = len(skipped) + bool(lines.truncated)
         meta["skipped_errors"] = (skipped + ([str(lines.truncated)] if lines.truncated else []))[:20]
     return NavLog(records, [], meta)
+
+
+def _cells(text: str, delimiter: str, path: Path, lineno: int) -> list[str]:
+    """One line's cells; a line the csv module cannot split (a lone carriage return inside a field)
+    is a :class:`LogError` naming it."""
+    try:
+        return next(csv.reader([text], delimiter=delimiter), [])
+    except csv.Error as exc:
+        raise LogError(f"not a CSV line: {exc}", file=str(path), line=lineno) from None
 
 
 def _row(cells: list[str], src: dict[str, Source], path: Path, lineno: int) -> dict[str, float]:

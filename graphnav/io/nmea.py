@@ -334,6 +334,12 @@ def _kind(msg: pynmea2.NMEASentence) -> str:
     return "PASHR" if isinstance(msg, ASHRATT) else getattr(msg, "sentence_type", type(msg).__name__)
 
 
+DECODER_STATE = ("frame", "clock_src", "back_ok", "day0", "days", "last_tod", "t", "sog", "variation", "fix_clock",
+                 "last_gga_t", "last_fix_t", "last_vel_t", "last_fix", "gst", "why")
+"""The attributes of :class:`NmeaDecoder` a sentence can change (each a scalar, a tuple or an immutable
+frame): its state, saved by ``snapshot()`` and put back by ``restore()``."""
+
+
 class NmeaDecoder:
     """Turns parsed sentences into records, one at a time (shared by the file reader and live mode).
 
@@ -343,8 +349,10 @@ class NmeaDecoder:
     day 0 (``None``: no date yet, ``t`` counts from midnight of the first day until a date arrives).
     ``variation_deg`` is the magnetic variation [deg, east positive] for HDG/HDM when neither they nor
     an RMC give one (``first_variation``: the file's first RMC variation, found by the file reader).
-    Every attribute but ``out`` is a scalar or a tuple (live mode saves and restores them).
+    :meth:`snapshot` / :meth:`restore` save and put back the state a sentence can change (live mode
+    undoes a sentence whose time stamp it rejects).
     """
+
 
     def __init__(self, frame: LocalFrame | None = None, *, day0: float | None = None,
                  heading_sigma_deg: dict[str, float] | None = None, default_hdop: float = DEFAULT_HDOP,
@@ -377,6 +385,15 @@ class NmeaDecoder:
         self.gst: tuple[float, float] | None = None  # (t, sigma m) of the last GST
         self.why: str | None = None  # why the current sentence gave nothing (None: it was read)
         self.out = NmeaParse()
+
+    def snapshot(self) -> tuple[Any, ...]:
+        """The decoder's state (:data:`DECODER_STATE`), for :meth:`restore`."""
+        return tuple(getattr(self, k) for k in DECODER_STATE)
+
+    def restore(self, state: tuple[Any, ...]) -> None:
+        """Put back a :meth:`snapshot`: as if the sentences since were never fed (``out`` aside)."""
+        for k, v in zip(DECODER_STATE, state, strict=True):
+            setattr(self, k, v)
 
     # -- time
     def _stamp(self, tod: float | None, kind: str = "fix") -> float | None:

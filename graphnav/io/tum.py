@@ -1,14 +1,33 @@
-"""Append estimates to a TUM file as they are computed (flushed), so an interrupted run keeps them;
-write a log's truth beside the estimates (``truth.tum``)."""
+"""TUM trajectory files (``t x y z qx qy qz qw``, read by evo): a whole :class:`Trajectory` written
+atomically or read back; estimates appended as they are computed (flushed), so an interrupted run keeps
+them; a log's truth beside the estimates (``truth.tum``)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from ..log import NavLog
-from .outputs import OutDir
+from ..trajectory import Trajectory
+from .outputs import OutDir, atomic_path
+
+
+def write_tum(traj: Trajectory, path: str | Path) -> None:
+    """Write ``traj`` as TUM ``t x y z qx qy qz qw`` (z = 0, rotation about +z; the quaternion by
+    :class:`scipy.spatial.transform.Rotation`, scalar last), whole or not at all."""
+    arr = np.column_stack([traj.t, traj.x, traj.y, np.zeros(len(traj)), yaw_to_quat(traj.yaw)])
+    with atomic_path(path) as tmp:
+        np.savetxt(tmp, arr, fmt="%.9f", header="timestamp tx ty tz qx qy qz qw")
+
+
+def read_tum(path: str | Path, name: str = "") -> Trajectory:
+    """Read a TUM file written by :func:`write_tum` (or any TUM trajectory: its yaw, the rotation's
+    first intrinsic Z-Y'-X'' angle); ``name`` defaults to the file's stem."""
+    arr = np.loadtxt(path, comments="#", ndmin=2)
+    return Trajectory(arr[:, 0], np.column_stack([arr[:, 1], arr[:, 2], quat_to_yaw(arr[:, 4:8])]),
+                      name=name or Path(path).stem)
 
 
 class TrajectoryWriter:
@@ -28,7 +47,7 @@ class TrajectoryWriter:
 
     def write(self, t: float, pose: np.ndarray, cov: np.ndarray | None = None) -> None:
         x, y, yaw = (float(v) for v in pose)
-        # the quaternion of trajectory.yaw_to_quat (scipy's Rotation, as Trajectory.to_tum writes), in
+        # the quaternion of yaw_to_quat (scipy's Rotation, as write_tum writes), in
         # closed form (0, 0, sin(yaw/2), cos(yaw/2)): scipy costs ~0.1 ms a call, once per estimate here
         # (tests/io/test_tum.py checks the two agree)
         self._fh.write(f"{t:.9f} {x:.9f} {y:.9f} 0 0 0 {np.sin(yaw / 2):.9f} {np.cos(yaw / 2):.9f}\n")
@@ -54,11 +73,33 @@ class TrajectoryWriter:
 
 def write_truth(log: NavLog, out: str | Path | OutDir) -> Path | None:
     """``out/truth.tum``: the log's truth in TUM, as the estimates are written (atomically, by
-    :meth:`graphnav.trajectory.Trajectory.to_tum`), so ``evo_ape tum truth.tum <estimate>.tum`` needs
+    :func:`write_tum`), so ``evo_ape tum truth.tum <estimate>.tum`` needs
     nothing hand-made; ``None`` (nothing written) when the log has no truth. An
     :class:`~graphnav.io.outputs.OutDir` records the name in its manifest first."""
     if not log.has_truth:
         return None
     p = out.file("truth.tum") if isinstance(out, OutDir) else Path(out) / "truth.tum"
-    log.truth().to_tum(p)
+    write_tum(log.truth(), p)
     return p
+
+
+def yaw_to_quat(yaw: ArrayLike) -> NDArray[np.float64]:
+    """Yaw [rad] -> unit quaternions ``(qx, qy, qz, qw)`` of the rotation about +z, shape (N, 4)."""
+    from scipy.spatial.transform import Rotation
+
+    yaw = np.atleast_1d(np.asarray(yaw, dtype=float))
+    if yaw.size == 0:
+        return np.empty((0, 4))
+    return Rotation.from_euler("z", yaw.reshape(-1, 1)).as_quat()
+
+
+def quat_to_yaw(q: ArrayLike) -> NDArray[np.float64]:
+    """Quaternions ``(qx, qy, qz, qw)`` (N, 4) -> yaw [rad]: the first angle of the intrinsic Z-Y'-X''
+    decomposition (for a planar rotation, the rotation angle about +z). A zero quaternion raises
+    ValueError (scipy)."""
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(q, dtype=float).reshape(-1, 4)
+    if q.shape[0] == 0:
+        return np.empty(0)
+    return Rotation.from_quat(q).as_euler("ZYX")[:, 0]

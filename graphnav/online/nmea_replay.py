@@ -22,7 +22,7 @@ import numpy as np
 from ..io.jsonl import record_to_obj
 from ..io.nmea_out import frame_of, log_to_nmea, trajectory_to_nmea
 from ..log import NavLog, Scan
-from .live_runner import parse_endpoint
+from .transport import parse_endpoint
 
 
 def log_sentences(log: NavLog, origin: tuple[float, float] | None = None) -> Iterator[tuple[float, str]]:

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ..config import option
 from ..errors import require
 from ..geometry import cov_to_world, se2_between, wrap_angle
 from ..log import MAX_STATED_RANGE
@@ -58,39 +59,38 @@ class IcpConfig:
     was fitted on one dataset (docs/weighted-icp.md, "Lengths relative to the scan").
     """
 
-    variant: str = "HDL"
-    max_iter: int = 50
-    tol: float = 5e-4  # stop when |change of mean pair distance| < tol D (Algorithm 1) ...
-    tol_step: float = 0.015  # ... and the last increment moved no point more than tol_step D
-    huber_c: float = 2.0138  # kHu = huber_c * median pair distance (Algorithm 1)
-    # the LiDAR's error model (eq. 5-8), a property of the sensor; default the paper's Scanse Sweep figure
-    # (sigma_r = 0.004258 r) and 0.2 deg (the paper gives none, see docs/weighted-icp.md)
-    sigma_r_rel: float = SIGMA_R_REL  # sigma_r = sigma_r_rel * r (eq. 7)
-    sigma_alpha: float = SIGMA_ALPHA  # angular 1-sigma [rad] (eq. 6)
-    max_range: float | None = None  # range gate [m]
-    min_range: float = 0.0
-    max_corr_dist: float | None = None  # pairs farther apart get weight 0 [m] (None: no fixed gate)
-    # HDL: Zhang's adaptive distance gate (Zhang 1994, sect. 4.3), initial value D_max^0 = gate0 resolutions;
-    # the pair distances are taken in units of the target's resolution at the match
-    gate0: float = 20.0
-    line_max_gap: float = 8.0  # beam neighbours more than this many resolutions apart are not one surface
-    line_flat_power: float = 4.0  # HDL: weight x flatness^power of the target's local line (0..1)
-    line_warmup: float = 1.0  # HDL: point-to-point steps until a step moves no point more than this x D (0: off)
-    matching: str = "kdtree"  # "kdtree" (cKDTree) or "delaunay" (the paper's nearest triangle apex)
-    equalize: bool = False  # randomly thin the larger cloud to the smaller's size (the paper)
-    seed: int = 0  # for equalize
-    weight_power: float = 0.5  # w = G^-weight_power; 0.5 is eq. 11
-    normal_k: int = 12  # neighbours of a target point for its line normal (HDL, degeneracy check)
-    normals: str = "knn"  # HDL normals: "knn" (PCA of the k nearest) or "scan" (k neighbours in beam order)
-    min_points: int = 20  # fewer valid points in either scan -> ok=False
-    min_inlier_fraction: float = 0.3  # pairs within the final gate; below -> ok=False
-    max_condition: float = 200.0  # condition number of the point-to-line information above -> degenerate
-    max_sigma: float = 1.0  # covariance's 1-sigma along the weakest direction above this x D -> degenerate
-    workers: int = 1  # cKDTree query threads
-    # "numba" = compiled loop with exact grid matching, the numpy loop's results to ~1e-12 (every variant,
-    # k-d tree matching; optional dependency, the first call compiles for 10-50 s, cached afterwards);
-    # "auto" = numba when importable, else numpy
-    backend: str = "auto"
+    variant: str = option("HDL", "the ICP variant: K, H, HM, HD or HDL (module docstring)")
+    max_iter: int = option(50, "at most this many iterations")
+    tol: float = option(5e-4, "stop when |change of mean pair distance| < tol D (Algorithm 1) ...")
+    tol_step: float = option(0.015, "and stop only when the last increment moved no point more than tol_step D")
+    huber_c: float = option(2.0138, "kHu = huber_c * median pair distance (Algorithm 1)")
+    # the LiDAR's error model (eq. 5-8), a property of the sensor: the paper's Scanse Sweep figure and 0.2 deg
+    sigma_r_rel: float = option(SIGMA_R_REL, "range 1-sigma per metre of range: sigma_r = sigma_r_rel * r (eq. 7; "
+                                "the paper's Scanse Sweep: 0.004258)")
+    sigma_alpha: float = option(SIGMA_ALPHA, "beam angle 1-sigma (eq. 6; the paper gives none)", unit="rad")
+    max_range: float | None = option(None, "returns farther than this are dropped (None: none)", unit="m")
+    min_range: float = option(0.0, "returns closer than this are dropped", unit="m")
+    max_corr_dist: float | None = option(None, "pairs farther apart get weight 0 (None: no fixed gate)", unit="m")
+    gate0: float = option(20.0,
+        "HDL: Zhang's adaptive distance gate (Zhang 1994, sect. 4.3), initial value D_max^0 = gate0 resolutions; the "
+        "pair distances are taken in units of the target's resolution at the match")
+    line_max_gap: float = option(8.0, "beam neighbours more than this many resolutions apart are not one surface")
+    line_flat_power: float = option(4.0, "HDL: weight x flatness^power of the target's local line (0..1)")
+    line_warmup: float = option(1.0,
+        "HDL: point-to-point steps until a step moves no point more than this x D (0: off)")
+    matching: str = option("kdtree", "\"kdtree\" (cKDTree) or \"delaunay\" (the paper's nearest triangle apex)")
+    equalize: bool = option(False, "randomly thin the larger cloud to the smaller's size (the paper)")
+    seed: int = option(0, "for equalize")
+    weight_power: float = option(0.5, "w = G^-weight_power; 0.5 is eq. 11")
+    normal_k: int = option(12, "neighbours of a target point for its line normal (HDL, degeneracy check)")
+    normals: str = option("knn", "HDL normals: \"knn\" (PCA of the k nearest) or \"scan\" (k neighbours in beam order)")
+    min_points: int = option(20, "fewer valid points in either scan -> ok=False")
+    min_inlier_fraction: float = option(0.3, "pairs within the final gate; below -> ok=False")
+    max_condition: float = option(200.0, "condition number of the point-to-line information above -> degenerate")
+    max_sigma: float = option(1.0, "covariance's 1-sigma along the weakest direction above this x D -> degenerate")
+    workers: int = option(1, "cKDTree query threads")
+    backend: str = option("auto", "\"numba\": the compiled loop (optional dependency; the numpy loop's results to "
+                          "~1e-12), \"numpy\", or \"auto\": numba when importable, else numpy")
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:

@@ -82,6 +82,7 @@ def test_header_names_are_fields_semicolons_and_time_units(tmp_path):
     (TABLE, "lat=Latitude", ["boat.csv:1", "no time column"]),
     (TABLE, "t=time,lat", ["expected FIELD=COLUMN"]),
     ("", MAPPING, ["boat.csv", "no header"]),
+    ("time,lat\n0,5\r4\n", "t=time,lat=lat", ["boat.csv:2", "not a CSV line"]),  # a lone CR (found by the fuzz)
     (TABLE.replace("1.2", "nan"), MAPPING, ["boat.csv:2", "column 'hdop' (sigma)", "not finite"]),
 ])
 def test_errors_name_file_line_and_column(tmp_path, text, mapping, words):

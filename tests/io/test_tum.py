@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from graphnav.geometry import wrap_angle
-from graphnav.io.tum import TrajectoryWriter
-from graphnav.trajectory import Trajectory, quat_to_yaw, yaw_to_quat
+from graphnav.io.tum import TrajectoryWriter, quat_to_yaw, read_tum, write_tum, yaw_to_quat
+from graphnav.trajectory import Trajectory
 
 YAWS = arrays(float, st.integers(1, 20), elements=st.floats(-np.pi, np.pi))
 
@@ -38,17 +38,17 @@ def test_writer_and_to_tum_write_the_same_rotation(tmp_path):
     rng = np.random.default_rng(3)
     t = np.arange(50) * 0.1
     poses = np.column_stack([rng.normal(size=50), rng.normal(size=50), rng.uniform(-np.pi, np.pi, 50)])
-    Trajectory(t, poses).to_tum(tmp_path / "a.tum")
+    write_tum(Trajectory(t, poses), tmp_path / "a.tum")
     with TrajectoryWriter(tmp_path / "b.tum") as w:
         for k in range(50):
             w.write(float(t[k]), poses[k])
     a, b = np.loadtxt(tmp_path / "a.tum"), np.loadtxt(tmp_path / "b.tum")
     np.testing.assert_allclose(a, b, atol=2e-9)
-    back = Trajectory.from_tum(tmp_path / "b.tum")
+    back = read_tum(tmp_path / "b.tum")
     assert np.max(np.abs(wrap_angle(back.yaw - poses[:, 2]))) < 1e-8
 
 
 def test_empty_and_single_pose(tmp_path):
     assert yaw_to_quat(np.empty(0)).shape == (0, 4) and quat_to_yaw(np.empty((0, 4))).shape == (0,)
-    Trajectory([1.0], [[2.0, 3.0, 0.5]]).to_tum(tmp_path / "one.tum")
-    assert abs(Trajectory.from_tum(tmp_path / "one.tum").yaw[0] - 0.5) < 1e-9
+    write_tum(Trajectory([1.0], [[2.0, 3.0, 0.5]]), tmp_path / "one.tum")
+    assert abs(read_tum(tmp_path / "one.tum").yaw[0] - 0.5) < 1e-9

@@ -1,4 +1,4 @@
-"""The ``ekf`` estimator online (graphnav.online.ekf_online.EkfOnline): the batch filter step for step,
+"""The ``ekf`` estimator online (graphnav.estimators.ekf_online.EkfOnline): the batch filter step for step,
 estimates per fix and through outages, and ``graphnav live --estimator ekf`` on loopback."""
 
 from __future__ import annotations
@@ -16,11 +16,11 @@ from _harbour import harbour_trial
 from _live import start_live
 
 from graphnav.estimators.ekf import run_ekf
+from graphnav.estimators.ekf_online import EkfOnline
 from graphnav.evaluation.metrics import ate
 from graphnav.geodesy import LocalFrame
 from graphnav.io import load_log
 from graphnav.log import Gnss, Heading, NavLog
-from graphnav.online.ekf_online import EkfOnline
 from graphnav.online.nmea_replay import replay
 from graphnav.online.runner import make_online, run_online
 

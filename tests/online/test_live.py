@@ -80,7 +80,7 @@ def start_runner(runner: LiveRunner) -> tuple[threading.Thread, dict]:
     th = threading.Thread(target=lambda: out.update(runner.run()), daemon=True)
     th.start()
     for _ in range(100):
-        if all(s.sock is not None for s in runner.sources):
+        if all(s.sock is not None for s in runner.transport.sources):
             break
         time.sleep(0.02)
     return th, out

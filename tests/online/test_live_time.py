@@ -36,10 +36,9 @@ def stream(duration: float = 12.1) -> tuple[NavLog, list[tuple[float, str]]]:
 def feed(sents: list[tuple[float, str]], estimator: str = "ekf", speed: float = 1.0, **kw) -> LiveRunner:
     """Every sentence through the live path (decode, clock, estimator), arriving ``speed`` x real time."""
     r = LiveRunner(["udp://127.0.0.1:9"], make_online(estimator), restart=lambda: make_online(estimator), **kw)
-    r.pub_sock = r.writer = None
     a0, t0 = time.perf_counter(), sents[0][0]
     for t, s in sents:
-        r._sentence(s.encode(), a0 + ((t - t0) / speed if speed else 0.0))
+        r.feed_sentence(s.encode(), a0 + ((t - t0) / speed if speed else 0.0))
     return r
 
 
@@ -161,10 +160,10 @@ def test_a_replay_as_fast_as_possible_has_no_outliers():
 def test_scan_far_from_the_clock_is_an_outlier():
     _, sents = stream(2.0)
     r = feed(sents, "fixed-lag")
-    t_now = r.clock.t0
+    t_now = r.nmea.clock.t0
     packet = {"t": t_now + 11 * HOUR, "type": "scan", "ranges": [10.0, 11.0, 12.0], "angles": [0.0, 0.1, 0.2]}
-    r._scan_packet(json.dumps(packet).encode(), r.clock.a0)
-    assert r.summary()["time_outliers"] == 1 and not r.scan_wait
+    r.feed_scan(json.dumps(packet).encode(), r.nmea.clock.a0)
+    assert r.summary()["time_outliers"] == 1 and not r.scans.waiting
 
 
 def test_constants_are_the_documented_ones():

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ...io.geo_out import write_wgs84
 from ...io.outputs import OutDir, atomic_path, write_text_atomic
-from ...io.tum import write_truth
+from ...io.tum import write_truth, write_tum
 from .rendered import Report
 
 
@@ -22,7 +22,7 @@ def write(report: Report, out: OutDir | str | Path) -> dict[str, Path]:
     files: dict[str, Path] = {}
     for name, tr in report.tum.items():
         p = out / name
-        tr.to_tum(p)
+        write_tum(tr, p)
         files[name] = p
     truth_path = write_truth(report.log, out)
     if truth_path is not None:

@@ -1,5 +1,6 @@
-"""The ``ekf`` estimator record by record: :class:`EkfOnline`, the :class:`graphnav.result.OnlineEstimator`
-adapter that ``graphnav live --estimator ekf`` runs.
+"""The ``ekf`` estimator (:class:`Ekf`: the batch :func:`~graphnav.estimators.ekf.run_ekf` and its live
+form) and that live form, :class:`EkfOnline`: the :class:`graphnav.result.OnlineEstimator` adapter that
+``graphnav live --estimator ekf`` runs.
 
 It is the batch ``ekf`` (:func:`graphnav.estimators.ekf.run_ekf`) step for step: the same
 :class:`~graphnav.estimators.ekf.EkfStepper`, initialised by the same rule
@@ -19,10 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from ..estimators.ekf import IMU_DEFAULTS, EkfStepper, initial_state
 from ..geometry import wrap_angle
 from ..log import Gnss, GnssVelocity, Heading, Odometry, PosePrior, Record
 from ..result import Estimate
+from .base import BatchEstimator
+from .ekf import IMU_DEFAULTS, EkfConfig, EkfStepper, _inputs, _unmet, initial_state, run_ekf
 
 
 class EkfOnline:
@@ -146,3 +148,23 @@ class EkfOnline:
         if st is not None:
             out.update(st.f.counts, icp_failed=st.icp_failed)
         return out
+
+
+class Ekf(BatchEstimator):
+    """The EKF (:func:`run_ekf`); live: :class:`graphnav.estimators.ekf_online.EkfOnline`."""
+
+    description = ("EKF: odometry, IMU (INS/GNSS, bias + current states) or ICP motion; "
+                   "gated GNSS (+velocity), compass, water speed")
+    Config = EkfConfig
+    live = True
+    unmet = staticmethod(_unmet)
+    inputs = staticmethod(_inputs)
+
+    batch = staticmethod(run_ekf)
+
+    @classmethod
+    def online(cls, **options: Any) -> EkfOnline:
+        return EkfOnline(**options)
+
+
+ESTIMATORS = {"ekf": Ekf}
