@@ -17,6 +17,7 @@ import numpy as np
 from ..geometry import wrap_angle
 from ..log import Imu, NavLog, Odometry
 from ..result import OnEstimate, RunResult
+from ..scan.imu_guess import strapdown_step
 from ..trajectory import Trajectory
 from .base import BatchEstimator
 
@@ -80,12 +81,7 @@ def imu_dead_reckoning(log: NavLog, *, on_estimate: OnEstimate | None = None) ->
         if dt <= 0:
             continue
         t0 = time.perf_counter()
-        mid = th + 0.5 * dt * r.wz
-        c, s = np.cos(mid), np.sin(mid)
-        acc = np.array([c * r.ax - s * r.ay, s * r.ax + c * r.ay])
-        pos = pos + dt * vel + 0.5 * dt * dt * acc
-        vel = vel + dt * acc
-        th = th + dt * r.wz
+        pos, vel, th = strapdown_step(pos, vel, th, r.ax, r.ay, r.wz, dt)
         step_ms.append((time.perf_counter() - t0) * 1e3)
         t_prev = r.t
         pose = np.array([pos[0], pos[1], wrap_angle(th)])

@@ -31,6 +31,17 @@ ACC_BIAS, GYRO_BIAS = 0.05, math.radians(0.1)
 V0_SIGMA = 5.0  # [m/s] the start velocity's 1-sigma when the log states none
 
 
+def strapdown_step(pos: NDArray[np.float64], vel: NDArray[np.float64], yaw: float, ax: float, ay: float,
+                   wz: float, dt: float) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """One planar strapdown step over ``dt`` of a sample held over it: the body-frame specific force
+    ``(ax, ay)`` rotated by the mid-step yaw, position and velocity integrated exactly for that
+    constant acceleration, the yaw by ``wz`` (the IMU dead reckoning's step and the guess's)."""
+    mid = yaw + 0.5 * dt * wz
+    c, s = np.cos(mid), np.sin(mid)
+    acc = np.array([c * ax - s * ay, s * ax + c * ay])
+    return pos + dt * vel + 0.5 * dt * dt * acc, vel + dt * acc, yaw + dt * wz
+
+
 def imu_samples(log: NavLog) -> NDArray[np.float64]:
     """The log's ``imu`` records as an (N, 4) array ``t, ax, ay, wz`` (time-ordered, unique)."""
     rows = np.array([[r.t, r.ax, r.ay, r.wz] for r in log.of("imu")], dtype=float).reshape(-1, 4)
@@ -76,12 +87,7 @@ class ImuGuess:
             hi = min(t[i], t1) if i < len(t) else t1
             dt = hi - lo
             if dt > 0:
-                mid = th + 0.5 * dt * row[3]
-                c, s = math.cos(mid), math.sin(mid)
-                a = np.array([c * row[1] - s * row[2], s * row[1] + c * row[2]])
-                p += dv * dt + 0.5 * a * dt * dt
-                dv += a * dt
-                th += row[3] * dt
+                p, dv, th = strapdown_step(p, dv, th, row[1], row[2], row[3], dt)
             lo = hi
             i += 1
         return p, dv, th
