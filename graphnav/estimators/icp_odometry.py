@@ -29,11 +29,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..config import option
-from ..geometry import cov_to_world, se2_adjoint_inv, se2_between, se2_compose
+from ..geometry import cov_to_world, se2_adjoint_inv, se2_compose
 from ..log import NavLog, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan import icp_cache
-from ..scan.imu_guess import ImuGuess, imu_samples
+from ..scan.imu_guess import ImuGuess, fuse_se2, imu_samples
 from ..scan.motion_guess import MotionGuess
 from ..scan.weighted_icp import IcpConfig, scan_points
 from ..trajectory import Trajectory
@@ -119,7 +119,9 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
                 inc, q, how = guesser.bridge(ta, tb)
                 bridged[how] += 1
             if lio and guess is not None and guesser.cov is not None and (res.ok or res.quality.get("inflated")):
-                inc, q = _fuse(guess, guesser.cov, res)
+                weak = res.quality.get("weak_projector")
+                inc, q = fuse_se2(guess, guesser.cov, np.asarray(res.pose, dtype=float), res.cov,
+                                  None if weak is None else np.asarray(weak, dtype=float))
         a = se2_adjoint_inv(inc)
         cov = a @ kf_cov @ a.T + q
         pose = se2_compose(kf_pose, inc)
@@ -135,22 +137,6 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
             "bridged_odometry": bridged["odometry"], "bridged_imu": bridged["imu"], "bridged_cv": bridged["cv"],
             "constrained": constrained, "matches": matches, "guess": _guess_source(guesser)}
     return RunResult(traj, traj, np.zeros(0), np.array(icp_ms), info=info)
-
-
-def _fuse(guess: np.ndarray, g_cov: np.ndarray, res: Any) -> tuple[np.ndarray, np.ndarray]:
-    """The IMU's prediction and the match, two independent estimates of one increment, combined by
-    their information (a loosely coupled LiDAR-inertial update): ``guess (+) K xi``, ``xi`` the match
-    in the guess's tangent space, ``K = P_g (P_g + P_m)^-1``. A degenerate match's weak directions
-    (where its pose and covariance are the guess's own) carry no information."""
-    p_m = np.asarray(res.cov, dtype=float)
-    weak = res.quality.get("weak_projector")
-    if weak is not None:
-        w = np.asarray(weak, dtype=float)
-        p_m = p_m + 1e8 * (w @ w.T)
-    k = g_cov @ np.linalg.inv(g_cov + p_m)
-    xi = se2_between(guess, np.asarray(res.pose, dtype=float))
-    cov = (np.eye(3) - k) @ g_cov
-    return se2_compose(guess, k @ xi), 0.5 * (cov + cov.T)
 
 
 def _imu_guess(log: NavLog, pose: np.ndarray) -> ImuGuess | None:

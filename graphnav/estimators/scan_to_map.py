@@ -34,7 +34,7 @@ from ..log import NavLog, Scan, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan.covariance import SAMPLING_VARIANCE, sandwich
 from ..scan.degeneracy import analyse, flatness, keep_constrained, line_information
-from ..scan.imu_guess import ImuGuess, imu_samples
+from ..scan.imu_guess import ImuGuess, fuse_se2, imu_samples
 from ..scan.registration import (
     Params,
     Target,
@@ -237,11 +237,7 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
             weak = deg.projector() if ok_reg and deg.weak.any() else None
             reg_inc = se2_between(poses[-1], pose)
             if ok_reg:  # the registration updates the predicted pose by the information of each
-                r = np.asarray(reg_cov, dtype=float) + (0.0 if weak is None else 1e8 * weak @ weak.T)
-                k = p_pose @ np.linalg.inv(p_pose + r)
-                pose = se2_compose(pred, k @ se2_between(pred, pose))
-                p_pose = (np.eye(3) - k) @ p_pose
-                p_pose = 0.5 * (p_pose + p_pose.T)
+                pose, p_pose = fuse_se2(pred, p_pose, pose, reg_cov, weak)
             # the velocity: corrected by the registration, carried to this scan
             imu.update(ts[-1], scan.t, reg_inc if ok_reg else None, reg_cov if ok_reg else None, weak)
         step_ms.append((time.perf_counter() - t_step) * 1e3 - this_icp)

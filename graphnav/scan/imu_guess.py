@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..geometry import se2_between, se2_compose
 from ..log import NavLog
 
 # a MEMS IMU's datasheet order where the log states no model (as graphnav.graph.imu_chain.ImuConfig)
@@ -40,6 +41,22 @@ def strapdown_step(pos: NDArray[np.float64], vel: NDArray[np.float64], yaw: floa
     c, s = np.cos(mid), np.sin(mid)
     acc = np.array([c * ax - s * ay, s * ax + c * ay])
     return pos + dt * vel + 0.5 * dt * dt * acc, vel + dt * acc, yaw + dt * wz
+
+
+def fuse_se2(prior: NDArray[np.float64], p_cov: NDArray[np.float64], meas: NDArray[np.float64],
+             m_cov: NDArray[np.float64], weak: NDArray[np.float64] | None = None
+             ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two independent estimates of one SE(2) pose (or increment) combined by their information, the
+    loosely coupled LiDAR-inertial update: ``prior (+) K xi``, ``xi`` the measurement in the prior's
+    tangent space, ``K = P_p (P_p + P_m)^-1``, covariance ``(I - K) P_p``. ``weak``: the projector onto a
+    degenerate measurement's weak directions (where it only repeats the prior): no information there."""
+    r = np.asarray(m_cov, dtype=float)
+    if weak is not None:
+        w = np.asarray(weak, dtype=float)
+        r = r + 1e8 * (w @ w.T)
+    k = p_cov @ np.linalg.inv(p_cov + r)
+    cov = (np.eye(3) - k) @ p_cov
+    return se2_compose(prior, k @ se2_between(prior, meas)), 0.5 * (cov + cov.T)
 
 
 def imu_samples(log: NavLog) -> NDArray[np.float64]:
