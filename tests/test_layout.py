@@ -155,8 +155,7 @@ KNOWN_LARGE = {
     "graphnav.estimators.ekf_slam.run_ekf_slam", "graphnav.estimators.icp_odometry.run_icp_dr",
     "graphnav.estimators.scan_to_map.run_scan_to_map",
     "graphnav.graph.builder.GraphBuilder.step", "graphnav.graph.navigator.Navigator._finish",
-    "graphnav.scan._ndt_fast.derivs3", "graphnav.scan.weighted_icp.match_points", "graphnav.scan.weighted_icp._report",
-    "graphnav.scan._icp_fast.report_sums",
+    "graphnav.scan._ndt_fast.derivs3",
 }
 
 
