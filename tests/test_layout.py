@@ -154,7 +154,6 @@ KNOWN_LARGE = {
     "graphnav.estimators.ekf_slam.run_ekf_slam", "graphnav.estimators.icp_odometry.run_icp_dr",
     "graphnav.estimators.scan_to_map.run_scan_to_map",
     "graphnav.graph.builder.GraphBuilder.step", "graphnav.graph.navigator.Navigator._finish",
-    "graphnav.scan._ndt_fast.derivs3",
 }
 
 
