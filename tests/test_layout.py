@@ -153,7 +153,6 @@ KNOWN_LARGE = {
     "graphnav.beacons._fast.propagate_truth", "graphnav.beacons.layout._propagate_block",
     "graphnav.estimators.scan_to_map.run_scan_to_map",
     "graphnav.graph.builder.GraphBuilder.step", "graphnav.graph.navigator.Navigator._finish",
-    "graphnav.scan._ndt_fast.derivs3",
 }
 
 
