@@ -151,10 +151,8 @@ def test_module_names_are_unique():
 KNOWN_LARGE = {
     "graphnav.graph.loops.LoopCloser", "graphnav.graph.navigator.Navigator",
     "graphnav.beacons._fast.propagate_truth", "graphnav.beacons.layout._propagate_block",
-    "graphnav.estimators.ekf_slam.run_ekf_slam", "graphnav.estimators.icp_odometry.run_icp_dr",
     "graphnav.estimators.scan_to_map.run_scan_to_map",
     "graphnav.graph.navigator.Navigator._finish",
-    "graphnav.scan._ndt_fast.derivs3",
 }
 
 
