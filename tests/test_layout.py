@@ -150,7 +150,6 @@ def test_module_names_are_unique():
 #: Config dataclasses (one attribute per option) and the simulators' and readers' functions are exempt.
 KNOWN_LARGE = {
     "graphnav.graph.loops.LoopCloser", "graphnav.graph.navigator.Navigator",
-    "graphnav.beacons._fast.propagate_truth", "graphnav.beacons.layout._propagate_block",
     "graphnav.estimators.scan_to_map.run_scan_to_map",
     "graphnav.graph.navigator.Navigator._finish",
 }
