@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..log import BeaconObs, Gnss, Heading, KnownBeacon, PosePrior, Record, Truth
+from .keyframes import EPS
 from .mounts import mount_of, parse_mounts
 from .smoother_config import SmootherConfig
 
@@ -79,3 +80,43 @@ def choose_anchor(held: list[Record], charted: dict[str, KnownBeacon], cfg: Smoo
         if isinstance(r, Truth):  # nothing absolute in the log: the frame is the reference's start
             return np.array([r.x, r.y, r.yaw]), np.array([1e-3, 1e-3, 1e-4]), "truth (first pose)"
     return np.zeros(3), np.array([1e-3, 1e-3, 1e-4]), "origin"
+
+
+class Anchor:
+    """The records held until the anchor can be chosen, then the anchor: the first keyframe's prior
+    (``pose``, 1-sigmas ``sigmas``) and how it was chosen (``name``)."""
+
+    def __init__(self, cfg: SmootherConfig) -> None:
+        self.cfg = cfg
+        self.held: list[Record] | None = []  # before the anchor is chosen
+        self.pose: NDArray[np.float64] | None = None
+        self.sigmas: NDArray[np.float64] | None = None
+        self.name: str | None = None
+
+    @property
+    def chosen(self) -> bool:
+        return self.held is None
+
+    def ready_for(self, rec: Record, charted: dict[str, KnownBeacon]) -> bool:
+        """Whether the anchor can be chosen before ``rec`` is taken: the records of the held time stamps
+        are all in (``rec`` is later) and they suffice (:func:`anchor_ready`)."""
+        held = self.held
+        assert held is not None
+        return bool(held) and rec.t > held[-1].t + EPS and anchor_ready(held, charted, self.cfg.anchor_wait, rec.t)
+
+    def hold(self, rec: Record) -> None:
+        assert self.held is not None
+        self.held.append(rec)
+
+    def choose(self, charted: dict[str, KnownBeacon]) -> tuple[float | None, list[Record]]:
+        """Choose the anchor from the held records (:func:`choose_anchor`); returns the first one's time
+        and the records in time order, the ``pose_prior`` that is the anchor left out, to be taken now."""
+        held, self.held = sorted(self.held or [], key=lambda r: r.t), None
+        self.pose, self.sigmas, self.name = choose_anchor(held, charted, self.cfg)
+        first_prior = next((r for r in held if isinstance(r, PosePrior)), None)
+        return (held[0].t if held else None), [r for r in held if r is not first_prior]
+
+    def cov(self) -> NDArray[np.float64]:
+        """The anchor's (x, y, yaw) covariance."""
+        assert self.sigmas is not None
+        return np.diag(np.square(self.sigmas))

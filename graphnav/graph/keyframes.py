@@ -15,12 +15,19 @@
 
 from __future__ import annotations
 
+import bisect
+import math
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..log import NavLog
+from ..log import NavLog, Record
+from .smoother_config import SmootherConfig
 
 DEFAULT_PERIOD = 0.5
+EPS = 1e-9  # [s] times closer than this are equal
 
 
 def keyframe_times(log: NavLog, period: float | None = None, scan_stride: int = 1) -> NDArray[np.float64]:
@@ -78,3 +85,175 @@ def attachment_error_bound(
         out["position_bound_m"] = float(v.max() * gap / 2)
         out["yaw_bound_rad"] = float(w.max() * gap / 2)
     return out
+
+
+class Keyframes:
+    """The keyframes placed online and the measurements waiting for theirs (the builder's policy,
+    as :func:`keyframe_times` and :func:`schedule` on a whole log).
+
+    One keyframe per scan (every ``scan_stride``-th; with the IMU's keyframe rule, see
+    :meth:`scan_is_keyframe`) once scans arrive, else a ``period`` grid from the first record, whose
+    slots inside a gap of more than ``grid_gap`` seconds without records are skipped. A measurement
+    between two keyframes waits for the later one, joins the nearer of the two (ties: the earlier)
+    and is added with the later keyframe's batch; a keyframe is ready once a later record arrived.
+    """
+
+    def __init__(self, cfg: SmootherConfig, scans: bool | None) -> None:
+        self.cfg = cfg
+        # keyframe policy: "grid" (fixed period) or "scan"; with keyframe_period set always the grid
+        self.grid_only = cfg.keyframe_period is not None
+        self.period = cfg.keyframe_period if cfg.keyframe_period is not None else DEFAULT_PERIOD
+        self.mode = "scan" if (scans and not self.grid_only) else "grid"
+        self.t: list[float] = []  # the keyframes' times
+        self.stepped = 0  # keyframes [0, stepped) have their batch
+        self.grid_t0: float | None = None
+        self.grid_i = 0  # the next grid slot
+        self.scans: dict[int, Record] = {}  # keyframe -> its scan or cloud (until the next has its batch)
+        self.n_scans = 0
+        self.lidar_kind: str | None = None  # "scan" or "cloud": the first LiDAR record's kind drives the keyframes
+        self.pending: list[Record] = []  # measurements after the newest keyframe
+        self.due: dict[int, list[tuple[int, Record]]] = {}  # step -> (attach, record)
+        self.late: list[tuple[int, Record]] = []  # after the last keyframe's batch (finish)
+        self.t_last: float | None = None
+        self.t_data: float | None = None
+        self.finished = False
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def start(self, t0: float) -> None:
+        """The grid starts at the first record, whatever it is (as :func:`keyframe_times`)."""
+        self.grid_t0 = t0
+
+    def behind(self, rec: Record) -> bool:
+        """Whether ``rec`` is late: its keyframe's batch is out already (a scan: it is older than the
+        newest keyframe)."""
+        t = rec.t
+        behind_batch = self.stepped > 0 and t < self.t[self.stepped - 1] - EPS
+        behind_scan = rec.kind == "scan" and self.mode == "scan" and bool(self.t) and t < self.t[-1] - EPS
+        return behind_batch or behind_scan
+
+    def clock(self, rec: Record) -> None:
+        """The newest record's time; on the grid, the keyframes it completes."""
+        t, kind = rec.t, rec.kind
+        prev_t = self.t_data  # the last record with data (truth is a reference, not an input)
+        if kind != "truth":
+            self.t_data = t if self.t_data is None else max(self.t_data, t)
+        self.t_last = t if self.t_last is None else max(self.t_last, t)
+        if self.mode != "grid":
+            return
+        if self.grid_t0 is None:
+            self.grid_t0 = t
+        gap = prev_t is not None and kind != "truth" and t - prev_t > self.cfg.grid_gap
+        while (kind != "truth" or prev_t is None or t - prev_t <= self.cfg.grid_gap) and (
+                ts := self.grid_t0 + self.period * self.grid_i) <= t + EPS * self.period:
+            # no record for grid_gap seconds: the slots more than a period from both sides are skipped,
+            # by index arithmetic (a jump of days must not walk its slots one by one)
+            if gap and prev_t + self.period + EPS < ts < t - self.period - EPS:
+                self.grid_i = max(self.grid_i + 1, math.ceil((t - self.period - EPS - self.grid_t0) / self.period))
+                continue
+            self.grid_i += 1
+            self.add(ts, None)
+
+    def is_lidar(self, kind: str) -> bool:
+        """Whether a LiDAR record of ``kind`` drives the keyframes: the first LiDAR record's kind does (a
+        log with 2D scans and 3D clouds)."""
+        if self.lidar_kind is None:
+            self.lidar_kind = kind
+        return kind == self.lidar_kind
+
+    def to_scans(self) -> bool:
+        """The first scan: one keyframe per scan from now on (unless the grid is asked for); whether the
+        policy changed."""
+        if self.mode == "grid" and not self.grid_only:
+            self.mode = "scan"
+            return True
+        return False
+
+    def scan_is_keyframe(self, t: float, speed: Callable[[], float], imu: Any) -> bool:
+        """Every ``scan_stride``-th scan; with an IMU (``keyframe_motion``), only once the vessel has
+        moved ``keyframe_distance`` (at the newest interval's ``speed``) or turned ``keyframe_angle_deg``
+        (the gyro) since the newest keyframe, or ``keyframe_max_dt`` has passed."""
+        cfg = self.cfg
+        if self.n_scans % cfg.scan_stride:
+            return False
+        use = cfg.keyframe_motion if cfg.keyframe_motion is not None else bool(imu)
+        if not use or not self.t or not imu:
+            return True
+        dt = t - self.t[-1]
+        if dt >= cfg.keyframe_max_dt - EPS:
+            return True
+        if speed() * dt >= cfg.keyframe_distance:
+            return True
+        return imu.rotation(self.t[-1], t) >= math.radians(cfg.keyframe_angle_deg)
+
+    def add(self, t: float, scan: Record | None) -> None:
+        """A new keyframe at ``t`` (with its scan); the pending measurements join it or the previous one."""
+        k = len(self.t)
+        self.t.append(t)
+        if scan is not None:
+            self.scans[k] = scan
+        for r in self.pending:  # they all lie in (t_{k-1}, t_k]: join the nearer keyframe, added now
+            a = k - 1 if k > 0 and r.t - self.t[k - 1] <= t - r.t else k
+            self.due.setdefault(k, []).append((a, r))
+        self.pending = []
+
+    def attach(self, rec: Record) -> bool:
+        """A measurement: due with the first keyframe at or after it (joining the nearer), or pending
+        until the next keyframe; ``False`` when that keyframe's batch is out already (late)."""
+        t = rec.t
+        if self.t and t <= self.t[-1] + EPS:  # at (or, late, before) the newest keyframe
+            j = bisect.bisect_left(self.t, t - EPS)  # the first keyframe at or after it: added there
+            if j < self.stepped:
+                return False
+            a = j - 1 if j > 0 and t - self.t[j - 1] <= self.t[j] - t else j
+            self.due.setdefault(j, []).append((a, rec))
+        else:
+            self.pending.append(rec)
+        return True
+
+    def finish(self) -> None:
+        """End of the records: measurements after the last keyframe join it (in a batch of their own,
+        :meth:`take_late`, when its batch is already out)."""
+        self.finished = True
+        if not self.t:
+            return
+        last = len(self.t) - 1
+        for r in self.pending:
+            if self.stepped > last:
+                self.late.append((last, r))
+            else:
+                self.due.setdefault(last, []).append((last, r))
+        self.pending = []
+
+    def ready(self, imu_until: float | None) -> list[int]:
+        """Keyframes whose batch can be built now (in order): every one after :meth:`finish`, else
+        those before the newest record (and, ``imu_until``, the newest IMU sample: the one closing a
+        keyframe's interval is awaited)."""
+        if self.finished:
+            return list(range(self.stepped, len(self.t)))
+        if self.t_last is None:
+            return []
+        t_ready = self.t_last - EPS
+        if imu_until is not None:
+            t_ready = min(t_ready, imu_until + EPS)
+        return [k for k in range(self.stepped, len(self.t)) if self.t[k] < t_ready]
+
+    def take(self, k: int) -> list[tuple[int, Record]]:
+        """Keyframe ``k``'s measurements (``(attach, record)``); it must be the next one in order."""
+        if k != self.stepped:
+            raise ValueError(f"keyframe {k} stepped out of order (next is {self.stepped})")
+        return self.due.pop(k, [])
+
+    def done(self, k: int) -> None:
+        """Keyframe ``k`` has its batch: ``k-1``'s scan is no longer needed."""
+        self.stepped = k + 1
+        self.scans.pop(k - 1, None)
+
+    def first_after(self, t: float) -> int:
+        """The first keyframe at or after ``t``."""
+        return bisect.bisect_left(self.t, t)
+
+    def take_late(self) -> list[tuple[int, Record]]:
+        late, self.late = self.late, []
+        return late

@@ -202,14 +202,15 @@ class LoopCloser:
 
     ``icp_match(src_xy, tgt_xy, init) -> (ok, pose, cov, quality)``: the weighted-ICP refinement;
     ``cov_of(cov)``: the covariance treatment of the graph's ICP factors (scale and floor);
-    ``min_time``: callable ``t -> oldest keyframe time still in the solver`` (fixed-lag) or ``None``.
+    ``points(scan)``: a scan's points in the body frame (:meth:`points`).
     """
 
     def __init__(self, cfg: LoopConfig, icp_match: Callable[..., tuple[bool, Vec, Vec, dict[str, Any]]],
-                 cov_of: Callable[[Vec], Vec | None]) -> None:
+                 cov_of: Callable[[Vec], Vec | None], points: Callable[[Any], Vec] | None = None) -> None:
         self.cfg = cfg
         self.icp_match = icp_match
         self.cov_of = cov_of
+        self._points = points
         self.ccfg = corr.CorrelativeConfig(**cfg.correlative)
         self.dcfg = desc.DescriptorConfig(**cfg.descriptor)
         self.places: list[Place] = []
@@ -229,9 +230,14 @@ class LoopCloser:
                        "loop_rejected_refine": 0, "loop_rejected_chain": 0, "loop_known": 0, "loop_unconfirmed": 0}
         self.accepted: list[tuple[int, int]] = []
         self.stale = False  # an accepted loop moved the estimate: refresh the places' poses
-        self.points: Callable[[Any], Vec] | None = None  # a Scan -> its points (set by the builder)
         self.last_place_s = -math.inf
         self.ms = 0.0  # [ms] spent in step()
+
+    def points(self, scan: Any) -> Vec:
+        """A scan's points in the body frame (the places' points)."""
+        if self._points is None:
+            raise ValueError("this loop closer was made without a scan -> points function")
+        return self._points(scan)
 
     # -- per keyframe ------------------------------------------------------------------------------
     def step(self, s: Any, k: int, pose: gtsam.Pose2, cov_w: Vec, rel: gtsam.Pose2 | None, q: Vec | None,

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -15,7 +16,9 @@ from numpy.typing import NDArray
 
 import factors as F
 
+from ..config import OptionError
 from ..log import Attitude, BeaconObs, Gnss, GnssVelocity, Heading, KnownBeacon, PosePrior, Record, WaterSpeed
+from .mounts import Mount
 from .smoother_config import SmootherConfig
 from .space import PlanarSpace, V, W
 from .step import Step
@@ -27,11 +30,13 @@ class Measurements:
     """The measurement factors and their state: the charted beacons and the beacons met so far, the
     compass-bias frame, the online GNSS gate's counters, the water current's variables.
 
-    ``charted``, ``defaulted`` and ``counts`` are the builder's (shared); ``kf_t`` its keyframe times.
+    ``charted``, ``defaulted`` and ``counts`` are the builder's (shared); ``kf_t`` its keyframe times;
+    ``mounts``: the sensors' mounts (the GNSS antennas' lever arms, the speed log's yaw).
     """
 
     def __init__(self, cfg: SmootherConfig, space: PlanarSpace, nav: bool, charted: dict[str, KnownBeacon],
-                 kf_t: list[float], defaulted: set[str], counts: dict[str, int]) -> None:
+                 kf_t: list[float], defaulted: set[str], counts: dict[str, int],
+                 mounts: dict[str, Mount] | None = None) -> None:
         self.cfg, self.space, self.nav = cfg, space, nav
         self.charted, self.kf_t, self.defaulted, self.counts = charted, kf_t, defaulted, counts
         self.beacon_ids: dict[str, int] = {}
@@ -47,6 +52,73 @@ class Measurements:
         self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
         self.arms: dict[str, tuple[float, float, float]] = {}  # GNSS lever arms (body frame, m) by source ("": all)
         self.log_yaw = 0.0  # [rad] the speed log's mounting yaw (its axis from the bow)
+        for name, g in (mounts or {}).items():  # the GNSS antennas: the sensor's, and each source's
+            if name == "gnss" or name.startswith("gnss@"):
+                self.arms[name.partition("@")[2]] = (g.x, g.y, g.z)
+        if mounts and "water_speed" in mounts:
+            self.log_yaw = mounts["water_speed"].yaw
+            if abs(math.cos(self.log_yaw)) < 0.5:
+                raise OptionError("mounts.water_speed.yaw", "mounts.water_speed.yaw: a speed log more than 60 deg "
+                                  f"off the bow measures no speed along it, got {self.log_yaw:g} rad")
+
+    def step(self, s: Step, k: int, due: list[tuple[int, Record]], pose_k: gtsam.Pose2,
+             gate_cov: NDArray[np.float64] | None, prev: gtsam.Pose2 | None,
+             offset: Callable[[int, float, int], gtsam.Pose2 | None]) -> None:
+        """Keyframe ``k``'s measurement factors (:meth:`add`), the water current's variables up to it,
+        and the time stamps of the variables still in use (compass-bias frame, beacons)."""
+        if self.bias_key is not None:
+            s.stamps[self.bias_key] = s.t
+        self.add(s, k, due, pose_k, gate_cov, prev, offset)
+        if self.current is not None:
+            self.current_step(s, k)
+        for i in self.beacon_ids.values():
+            s.stamps[F.L(i)] = s.t
+
+    def step_late(self, s: Step, k: int, due: list[tuple[int, Record]],
+                  offset: Callable[[int, float, int], gtsam.Pose2 | None], est: Callable[[int], gtsam.Pose2],
+                  prev_cov: NDArray[np.float64] | None) -> None:
+        """Measurements after the last keyframe's batch, at keyframe ``k`` (``est``: the solved poses)."""
+        self.add(s, k, due, est(k), prev_cov, None, offset, est=est)
+        for i in self.beacon_ids.values():
+            s.stamps[F.L(i)] = s.t
+
+    def carried_keys(self, k: int) -> list[int]:
+        """The variables a re-anchored fixed-lag smoother keeps besides keyframe ``k``'s state: the
+        compass-bias frame, the beacons, the water current at ``k``."""
+        keys = [self.bias_key] if self.bias_key is not None else []
+        keys += [F.L(i) for i in self.beacon_ids.values()]
+        return keys
+
+    def current_key(self, k: int) -> int | None:
+        """The water current's variable at keyframe ``k`` when it is the newest one."""
+        return W(k) if self.current is not None and self.current[1] == k else None
+
+    def report(self, values: gtsam.Values) -> dict[str, Any]:
+        """The measurement states in a solution: the compass bias [deg], the beacons' first and final
+        estimates."""
+        out: dict[str, Any] = {}
+        sp = self.space
+        if self.bias_key is not None and values.exists(self.bias_key):
+            out["compass_bias_deg"] = math.degrees(sp.compass_bias(sp.read_bias_frame(values, self.bias_key)))
+        out["beacon_init"] = {bid: p.tolist() for bid, p in self.beacon_init.items()}
+        out["beacon_estimates"] = {bid: sp.landmark_xy(values, F.L(i)).tolist()
+                                   for bid, i in self.beacon_ids.items() if values.exists(F.L(i))}
+        return out
+
+    def current_report(self, values: gtsam.Values, t: NDArray[np.float64]) -> dict[str, Any]:
+        """The water current [m/s] (east, north) in a solution (keyframe times ``t``): at the end, its
+        mean and its series (at most ~1000 samples)."""
+        if self.current is None:
+            return {}
+        js = [j for j in range(self.current[0], self.current[1] + 1) if values.exists(W(j))]
+        ws = np.array([np.asarray(values.atVector(W(j)))[:2] for j in js]).reshape(-1, 2)
+        if not len(js):
+            return {}
+        every = max(1, len(js) // 1000)  # the series: at most ~1000 samples
+        return {"water_current": {"vx": float(ws[-1, 0]), "vy": float(ws[-1, 1]),
+                                  "mean_vx": float(ws[:, 0].mean()), "mean_vy": float(ws[:, 1].mean()),
+                                  "series": [[float(t[j]), float(w[0]), float(w[1])]
+                                             for j, w in list(zip(js, ws, strict=True))[::every]]}}
 
     def add(self, s: Step, k: int, due: list[tuple[int, Record]], pose_k: gtsam.Pose2,
             prev_cov: NDArray[np.float64] | None, prev: gtsam.Pose2 | None,

@@ -111,7 +111,7 @@ class Navigator:
         self.builder = GraphBuilder(cfg, matcher=matcher, chart=chart, lidar=lidar, scans=scans, lidar3d=lidar3d,
                                     imu=imu, imu_model=imu_model)
         self.space = self.builder.space
-        self.nav = self.builder.imu is not None
+        self.nav = self.builder.nav
         self.last_state: NavPrev | None = None  # the Pose3 graph: the newest keyframe's full state
         self.solver = Solver(cfg.solver, graph_params(cfg, self.space), lag=cfg.lag,
                              lm=LmSettings(cfg.lm_tol, cfg.lm_max_iterations))
@@ -164,11 +164,14 @@ class Navigator:
         return nav
 
     # -- online ----------------------------------------------------------------------------------
-    def add(self, rec: Record | KnownBeacon) -> Estimate | None:
-        """Take one record; the newest online estimate when a keyframe was solved, else ``None``."""
+    def add(self, rec: Record | KnownBeacon, *, checked: bool = False) -> Estimate | None:
+        """Take one record; the newest online estimate when a keyframe was solved, else ``None``.
+        Each record is validated (a LogError naming it) unless ``checked`` says a reader already did
+        (:meth:`NavLog.checked_records <graphnav.log.NavLog.checked_records>`)."""
         if self._result is not None:
             raise RuntimeError("the navigator has finished (smoothed() was called)")
-        rec = validate_record(rec, index=self.n_records + 1)  # a LogError naming the record, before the graph
+        if not checked:
+            rec = validate_record(rec, index=self.n_records + 1)  # a LogError naming the record, before the graph
         self.n_records += 1
         self._rec = rec if not isinstance(rec, KnownBeacon) else self._rec
         self.builder.push(rec)
@@ -269,11 +272,11 @@ class Navigator:
             if self.nav:
                 vel = np.asarray(solver.estimate(V(k), "Vector"))
                 bias = solver.estimate(IB(k), "ConstantBias")
-                vel_cov = solver.marginal(V(k)) if self.builder.matcher is not None else None
+                vel_cov = solver.marginal(V(k)) if self.builder.wants_velocity_cov else None
                 self.last_state = (p, vel, bias, vel_cov)
-                cur = self.builder.current
-                if cur is not None and cur[1] == k:
-                    self.builder.current_guess = np.asarray(solver.estimate(W(k), "Vector"))
+                w = self.builder.current_key(k)
+                if w is not None:
+                    self.builder.observe_current(np.asarray(solver.estimate(w, "Vector")))
         except SolverError as exc:
             raise self._fail(exc, t) from None
         if loops is not None:
@@ -321,16 +324,13 @@ class Navigator:
             self.last_state = (values.atPose3(F.X(k)), np.asarray(values.atVector(V(k))),
                                values.atConstantBias(IB(k)), None)
             if values.exists(W(k)):
-                self.builder.current_guess = np.asarray(values.atVector(W(k)))
+                self.builder.observe_current(np.asarray(values.atVector(W(k))))
 
     def _rebase(self, k: int, t: float) -> None:
         """A fresh fixed-lag smoother with priors carrying the current marginals of the variables
         still in use: the newest pose, the compass-bias frame and the beacons (live mode)."""
         g, v, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
-        keys = [F.X(k)] + ([self.builder.bias_key] if self.builder.bias_key is not None else [])
-        keys += [F.L(i) for i in self.builder.beacon_ids.values()]
-        keys += [V(k), IB(k)] if self.nav else []
-        keys += [W(k)] if self.builder.current is not None and self.builder.current[1] == k else []
+        keys = [F.X(k), *self.builder.carried_keys(k)]
         sp = self.space
         try:
             for key in keys:
@@ -371,11 +371,9 @@ class Navigator:
         if self.nav and self.last_state is not None:  # the velocity over ground is a state
             v = self.last_state[1]
             return math.hypot(v[0], v[1]), math.atan2(v[1], v[0]), w
-        b = self.builder
-        odo = b.odometry
-        if odo and t - odo.t[-1] <= 2.0:
-            _, v, wr = odo.rows[-1][:3]
-            sog, w = abs(v), wr
+        odo = self.builder.recent_odometry(t)
+        if odo is not None:
+            sog, w = abs(odo[0]), odo[1]
         return sog, cog, w
 
     def info(self) -> dict[str, Any]:
@@ -462,25 +460,7 @@ class Navigator:
         info["final_ms"] = final_ms
         if info.get("loop_edges"):  # the accepted loops as (older, newer) keyframe times, for plots
             info["loop_edge_times"] = [[float(t[i]), float(t[k])] for i, k in info["loop_edges"]]
-        if b.bias_key is not None and values.exists(b.bias_key):
-            info["compass_bias_deg"] = math.degrees(self.space.compass_bias(self.space.read_bias_frame(values,
-                                                                                                         b.bias_key)))
-        info["beacon_init"] = {bid: p.tolist() for bid, p in b.beacon_init.items()}
-        info["beacon_estimates"] = {bid: self.space.landmark_xy(values, F.L(i)).tolist()
-                                    for bid, i in b.beacon_ids.items() if values.exists(F.L(i))}
-        if self.nav and values.exists(IB(n - 1)):
-            bias = values.atConstantBias(IB(n - 1))
-            info["imu_bias_final"] = [*np.asarray(bias.accelerometer()).tolist(),
-                                      *np.asarray(bias.gyroscope()).tolist()]
-        if b.current is not None:  # the water current [m/s] (east, north): at the end and its mean
-            js = [j for j in range(b.current[0], b.current[1] + 1) if values.exists(W(j))]
-            ws = np.array([np.asarray(values.atVector(W(j)))[:2] for j in js]).reshape(-1, 2)
-            if len(js):
-                every = max(1, len(js) // 1000)  # the series: at most ~1000 samples
-                info["water_current"] = {"vx": float(ws[-1, 0]), "vy": float(ws[-1, 1]),
-                                         "mean_vx": float(ws[:, 0].mean()), "mean_vy": float(ws[:, 1].mean()),
-                                         "series": [[float(t[j]), float(w[0]), float(w[1])]
-                                                    for j, w in list(zip(js, ws, strict=True))[::every]]}
+        info.update(b.report(values))  # compass bias, beacons, IMU bias, water current
         info.update(self.extra)
         if self.solver.online:
             info["step_cpu_ms_median"] = float(np.median(self.step_cpu)) if self.step_cpu else None
@@ -501,7 +481,7 @@ class Navigator:
         cfg = self.cfg
         c0 = time.perf_counter()
         graph = self.solver.graph
-        rejected = self.builder.meas.rejected
+        rejected = self.builder.rejected_fixes
         if rejected and cfg.robust_backend == "gnc":  # the fixes the online gate rejected, reconsidered
             graph = gtsam.NonlinearFactorGraph(graph)
             for f in rejected:

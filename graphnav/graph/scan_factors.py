@@ -125,15 +125,17 @@ def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any], extrinsic: g
     unknown = sorted(set(cfg.loop) - known)
     if unknown:
         raise ValueError(f"unknown loop option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-    closer = LoopCloser(LoopConfig(**cfg.loop), refine,
-                        lambda c: proper_cov(np.asarray(c, dtype=float), np.zeros(3)))
     if extrinsic is None:
-        closer.points = lambda scan: scan_points_of(scan, icfg)
+        def points(scan: Scan) -> NDArray[np.float64]:
+            return scan_points_of(scan, icfg)
     else:
         c, s = math.cos(extrinsic.theta()), math.sin(extrinsic.theta())
         rot, off = np.array([[c, s], [-s, c]]), np.array([extrinsic.x(), extrinsic.y()])
-        closer.points = lambda scan: scan_points_of(scan, icfg) @ rot + off
-    return closer
+
+        def points(scan: Scan) -> NDArray[np.float64]:
+            return scan_points_of(scan, icfg) @ rot + off
+    return LoopCloser(LoopConfig(**cfg.loop), refine, lambda c: proper_cov(np.asarray(c, dtype=float), np.zeros(3)),
+                      points)
 
 
 def scan_points_of(scan: Scan, icfg: Any) -> NDArray[np.float64]:
@@ -216,6 +218,97 @@ class CloudPath:
                 "cloud_sensor_height": self.height,
                 "cloud_dropped_rms": {"z_m": float(rms[0]), "roll_deg": float(np.degrees(rms[1])),
                                       "pitch_deg": float(np.degrees(rms[2]))}}
+
+
+class ScanFactors:
+    """The LiDAR's factors of the graph: each keyframe's scan matched to the previous keyframe's (the
+    weighted ICP, group ``icp``; 3D clouds through :class:`CloudPath`, group ``cloud``) and the loop
+    closer (:mod:`graphnav.graph.loops`, group ``loop``), which is fed every keyframe.
+
+    ``matcher``: replaces the weighted ICP (tests); ``lidar``: the log's LiDAR error model
+    (``sigma_r_rel``, ``sigma_alpha``); ``mount``: the LiDAR's mount (its planar part is the extrinsic)."""
+
+    def __init__(self, cfg: SmootherConfig, space: Any, *, matcher: Matcher | None = None,
+                 lidar: dict[str, Any] | None = None, lidar3d: dict[str, Any] | None = None, mount: Any = None) -> None:
+        self.cfg = cfg
+        self.space = space
+        self.extrinsic = None if mount is None or mount.is_identity else gtsam.Pose2(*mount.planar)
+        self.cloud3d = CloudPath(cfg, lidar3d, self.extrinsic)  # the 3D path (clouds): graphnav.scan.cloud_match
+        icp_opts = dict(cfg.icp)
+        for k in ("sigma_r_rel", "sigma_alpha"):  # the log's LiDAR error model, when it states one
+            if lidar and k in lidar and k not in icp_opts:
+                icp_opts[k] = float(lidar[k])
+        self._matcher_given = matcher
+        self._icp_opts = icp_opts
+        self.matcher: Matcher | None = None
+        self.loops: Any = None  # graphnav.graph.loops.LoopCloser, with scans and cfg.loops
+        self._loop_cov: NDArray[np.float64] | None = None  # the loop closer's covariance of the newest pose
+        self.n = self.failed = self.gated = 0
+
+    def want_matcher(self) -> None:
+        """Scans come: the matcher (unless ``use_icp`` is off) and the loop closer (``loops``)."""
+        if self.matcher is None and self.cfg.use_icp:
+            self.matcher = mounted(self._matcher_given if self._matcher_given is not None
+                                   else default_matcher(self._icp_opts), self.extrinsic)
+        if self.loops is None and self.cfg.loops:
+            self.loops = make_loop_closer(self.cfg, self._icp_opts, self.extrinsic)
+
+    def match(self, s: Step, k: int, cur: Any, prev: Any, odo_rel: gtsam.Pose2 | None,
+              odo_cov: NDArray[np.float64] | None, guess: tuple[Any, NDArray[np.float64], NDArray[np.float64]] | None,
+              last_rel: gtsam.Pose2, prior: Callable[[], tuple[gtsam.Pose2, NDArray[np.float64], str]]
+              ) -> tuple[gtsam.Pose2, NDArray[np.float64]] | None:
+        """The match factor of keyframe ``k``'s scan ``cur`` against ``k-1``'s ``prev`` (added to ``s``):
+        the relative pose and its covariance, or ``None`` when there is no usable match. The guess is
+        the odometry (``odo_rel``, ``odo_cov``); without it the IMU's prediction (``guess``: state,
+        relative pose, covariance), which is in the graph already (the ``ImuFactor``): along the
+        directions the match cannot see, its factor says nothing and the IMU and GNSS decide; else
+        the motion model's ``prior()`` (constant velocity from the last measured motion, random walk)."""
+        if odo_rel is None and guess is not None:
+            odo_rel, odo_cov = gtsam.Pose2(*guess[1]), guess[2]
+        if isinstance(cur, Cloud):
+            return self.cloud3d.factor(s, k, cur, prev, odo_rel, odo_cov, last_rel)
+        cfg = self.cfg
+        if self.matcher is None or cur is None or prev is None:
+            return None
+        if odo_rel is not None and odo_cov is not None:  # the guess and its covariance: the odometry or IMU ...
+            init, init_cov, in_graph = _vec(odo_rel), odo_cov, True
+        else:  # ... else the motion model's (constant velocity from the last measured motion, random walk)
+            mean, init_cov, _ = prior()
+            init, in_graph = _vec(mean), False
+        c0 = time.perf_counter()
+        ok, mp, mc = self.matcher(cur, prev, init, init_cov, in_graph)
+        s.icp_ms = (time.perf_counter() - c0) * 1e3
+        self.n += 1
+        cov = proper_cov(np.asarray(mc, dtype=float), np.zeros(3)) if ok else None  # the match's own, as is
+        verdict = screen_match(cfg, ok, mp, cov, init, odo_rel, odo_cov)
+        if verdict is not None:
+            self.failed += verdict == "failed"
+            self.gated += verdict == "gated"
+            return None
+        s.add(self.space.between(F.X(k - 1), F.X(k), mp, cov, robust=cfg.icp_robust), "icp")
+        return gtsam.Pose2(*mp), cov
+
+    def close_loops(self, s: Step, k: int, pose_k: gtsam.Pose2, prev: gtsam.Pose2 | None,
+                    prev_cov: NDArray[np.float64] | None, rel: gtsam.Pose2 | None,
+                    step_cov: NDArray[np.float64] | None, anchor_cov: NDArray[np.float64], scan: Any,
+                    oldest: int) -> None:
+        """Keyframe ``k`` to the loop closer: its predicted pose and world covariance (propagated from
+        the solver's marginal of ``k-1``, ``prev_cov``, when online, else from the closer's own chain;
+        keyframe 0's is the anchor's), its scan; ``oldest``: the oldest keyframe still in the solver."""
+        from .loops import propagate
+
+        if k == 0 or prev is None or rel is None or step_cov is None:
+            cov_w = anchor_cov
+        else:
+            base = prev_cov if prev_cov is not None else self._loop_cov
+            cov_w = propagate(base if base is not None else np.zeros((3, 3)), _vec(prev), rel, step_cov)
+        self._loop_cov = cov_w
+        xy = self.loops.points(scan) if isinstance(scan, Scan) else None  # 2D scans only (not 3D clouds)
+        self.loops.step(s, k, pose_k, cov_w, rel, step_cov, xy, oldest)
+
+    def info(self) -> dict[str, Any]:
+        return {"icp_pairs": self.n, "icp_failed": self.failed, "icp_gated": self.gated,
+                "icp": self.matcher is not None}
 
 
 def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:

@@ -37,7 +37,7 @@ def _sigmas(f: gtsam.NonlinearFactor) -> np.ndarray:
 @pytest.mark.parametrize("dt", [0.0, 0.5, 2.0])
 def test_random_walk_factor_grows_with_dt_and_stays_proper_at_zero(dt):
     cfg = SmootherConfig()
-    mean, cov, name = GraphBuilder(cfg).motion_prior(dt)
+    mean, cov, name = GraphBuilder(cfg).motion.prior(dt)
     assert name == "random-walk" and np.allclose(gtsam.Pose2.Logmap(mean), 0)
     floor = np.array([cfg.motion_floor_xy] * 2 + [math.radians(cfg.motion_floor_yaw_deg)])
     rate = np.array([cfg.rw_sigma_v] * 2 + [math.radians(cfg.rw_sigma_w_deg)])
@@ -48,14 +48,14 @@ def test_random_walk_factor_grows_with_dt_and_stays_proper_at_zero(dt):
 def test_constant_velocity_factor_extrapolates_the_last_twist():
     cfg = SmootherConfig()
     b = GraphBuilder(cfg)
-    b.twist = np.array([1.0, 0.0, 0.2])  # 1 m/s on a 5 m radius turn
-    mean, cov, name = b.motion_prior(2.0)
+    b.motion.twist = np.array([1.0, 0.0, 0.2])  # 1 m/s on a 5 m radius turn
+    mean, cov, name = b.motion.prior(2.0)
     assert name == "constant-velocity"
     np.testing.assert_allclose(gtsam.Pose2.Logmap(mean), [2.0, 0.0, 0.4], atol=1e-12)
     floor = np.array([cfg.motion_floor_xy] * 2 + [math.radians(cfg.motion_floor_yaw_deg)])
     rate = np.array([cfg.cv_sigma_v] * 2 + [math.radians(cfg.cv_sigma_w_deg)])
     np.testing.assert_allclose(cov, np.diag(floor**2 + (rate * 2.0) ** 2))
-    assert GraphBuilder(SmootherConfig(motion_model="random-walk")).motion_prior(1.0)[2] == "random-walk"
+    assert GraphBuilder(SmootherConfig(motion_model="random-walk")).motion.prior(1.0)[2] == "random-walk"
 
 
 def test_random_walk_posterior_between_a_prior_and_a_fix():
@@ -303,7 +303,7 @@ def test_solver_failure_names_the_record_and_time(monkeypatch):
 # -- the GNSS speed-over-ground fallback and the odometry over an interval: closed forms ------------
 def _fixes_along(b: GraphBuilder, ts: np.ndarray, vel: np.ndarray, sigma: float) -> None:
     for t in ts:
-        b.fixes.append((float(t), float(vel[0] * t), float(vel[1] * t), sigma))
+        b.motion.fixes.append((float(t), float(vel[0] * t), float(vel[1] * t), sigma))
 
 
 def test_gnss_speed_over_ground_constant_velocity_fallback():
@@ -316,13 +316,13 @@ def test_gnss_speed_over_ground_constant_velocity_fallback():
     ts = np.arange(0.0, 10.0 + 1e-9, 1.0)  # 11 fixes, 1 Hz, over the 10 s window
     _fixes_along(b, ts, np.array([1.2, 1.6]), 2.0)  # 2 m/s along a 53 deg course
     speed_sigma = 2.0 / math.sqrt(float(np.sum((ts - ts.mean()) ** 2)))
-    twist, sv, age = b.gnss_velocity(10.0)
+    twist, sv, age = b.motion.gnss_velocity(10.0)
     np.testing.assert_allclose(twist, [2.0, 0.0, 0.0], atol=1e-12)
     assert sv == pytest.approx(speed_sigma, rel=1e-12) and age == 0.0
     # 3 s after the last fix (an outage): refitted on the 8 fixes left in the window [3, 13] s,
     # 3 s old (the time since the last fix)
     dt = 0.5
-    mean, cov, name = b.motion_prior(dt, 13.0)
+    mean, cov, name = b.motion.prior(dt, 13.0)
     assert name == "constant-velocity"
     np.testing.assert_allclose(gtsam.Pose2.Logmap(mean), [2.0 * dt, 0.0, 0.0], atol=1e-12)
     age, tw = 3.0, ts[3:]
@@ -332,7 +332,7 @@ def test_gnss_speed_over_ground_constant_velocity_fallback():
     np.testing.assert_allclose(cov, np.diag(floor**2 + np.array([sxy, sxy, math.radians(cfg.cv_sigma_w_deg) * dt])
                                             ** 2), rtol=1e-12)
     # older than cv_max_age: nothing known, the random walk
-    assert b.motion_prior(dt, 10.0 + cfg.cv_max_age + 1.0)[2] == "random-walk"
+    assert b.motion.prior(dt, 10.0 + cfg.cv_max_age + 1.0)[2] == "random-walk"
 
 
 def test_gnss_speed_below_three_sigma_is_no_motion_and_few_fixes_are_not_used():
@@ -340,11 +340,11 @@ def test_gnss_speed_below_three_sigma_is_no_motion_and_few_fixes_are_not_used():
     b = GraphBuilder(cfg)
     ts = np.arange(0.0, 10.0 + 1e-9, 1.0)
     _fixes_along(b, ts, np.array([0.05, 0.0]), 2.0)  # 0.05 m/s with a 0.19 m/s speed sigma
-    twist, sv, _ = b.gnss_velocity(10.0)
+    twist, sv, _ = b.motion.gnss_velocity(10.0)
     assert 0.05 < 3 * sv and np.all(twist == 0.0)  # direction unknown: standing, with the speed's sigma
     few = GraphBuilder(cfg)
     _fixes_along(few, np.array([0.0, 1.0]), np.array([2.0, 0.0]), 2.0)  # two fixes: no fit
-    assert few.gnss_velocity(1.0) is None and few.motion_prior(0.5, 1.0)[2] == "random-walk"
+    assert few.motion.gnss_velocity(1.0) is None and few.motion.prior(0.5, 1.0)[2] == "random-walk"
 
 
 @pytest.mark.parametrize("rate", [10.0, 100.0])
@@ -358,9 +358,9 @@ def test_odometry_over_an_interval_closed_form_and_rate_independent(rate):
     for turn in (w, 0.0):
         b = GraphBuilder(cfg)
         for t in np.arange(0.0, 10.0, 1.0 / rate):
-            b.odometry.add(Odometry(float(t), v, turn, math.nan, math.nan))
+            b.motion.odometry.add(Odometry(float(t), v, turn, math.nan, math.nan))
         t0, t1 = 2.03, 6.53  # not on the samples: the first and last sub-arcs are partial
-        pose, cov = b.odometry.between(t0, t1)
+        pose, cov = b.motion.odometry.between(t0, t1)
         T = t1 - t0
         if turn:
             np.testing.assert_allclose([pose.x(), pose.y(), pose.theta()],

@@ -157,8 +157,8 @@ def test_imu_mount_removes_the_centripetal_acceleration():
     def velocity(mounts):
         b = GraphBuilder(SmootherConfig(motion="imu", mounts=mounts), imu=True)
         for i in range(201):
-            b.imu.add(Imu(0.01 * i, -w * w * r, 0.0, w))
-        pim = b.imu.preintegrate(gtsam.imuBias.ConstantBias(), 0.0, 2.0)
+            b.motion.imu.add(Imu(0.01 * i, -w * w * r, 0.0, w))
+        pim = b.motion.imu.preintegrate(gtsam.imuBias.ConstantBias(), 0.0, 2.0)
         return np.asarray(pim.predict(gtsam.NavState(), gtsam.imuBias.ConstantBias()).velocity())
 
     assert np.linalg.norm(velocity({"imu": {"x": r}})) < 0.01  # (the planar mid-step rotation: 4 mm/s)
