@@ -48,296 +48,78 @@ Which sentence gives which record (full description in docs/nmea.md):
 
 from __future__ import annotations
 
-import calendar
 import logging
 import math
-import re
 from collections import Counter
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field, replace
 from datetime import date
 from pathlib import Path
 from typing import Any
 
 import pynmea2
-from pynmea2.types.proprietary.ash import ASHRATT
 
 from ..errors import LogError
 from ..geodesy import LocalFrame
-from ..geometry import heading_deg_to_yaw
-from ..log import (
-    Attitude,
-    Gnss,
-    GnssVelocity,
-    Heading,
-    Limits,
-    NavLog,
-    Odometry,
-    Record,
-    WaterSpeed,
-    check_record,
-    default_limits,
+from ..log import Limits, NavLog, Record, check_record
+from .nmea_clock import SentenceClock
+from .nmea_fields import (  # noqa: F401  (the constants and field parsers are part of this module's API)
+    DAY,
+    DEFAULT_HDOP,
+    GGA_HOLD_S,
+    HANDLED,
+    HEADING_SIGMA_DEG,
+    KNOT,
+    MODE_QUALITY,
+    SOG_MAX_AGE_S,
+    THS,
+    UERE_M,
+    UNKNOWN_VARIATION_SIGMA_DEG,
+    UNTIMED,
+    VELOCITY_BAD_MODES,
+    VELOCITY_SIGMA_MPS,
+    WATER_SPEED_SIGMA_FRACTION,
+    WATER_SPEED_SIGMA_MPS,
+    field_at,
+    field_step,
+    num,
+    parse_date,
+    parse_latlon,
+    parse_sentence,
+    parse_time_of_day,
+    posix_midnight,
+    raw_field,
+    sentence_key,
+    sentence_kind,
+    time_of_day,
+    two_digit_year,
+    variation_field,
+    velocity_sigma,
+    water_speed_sigma,
+    zda_date,
 )
+from .nmea_heading import HeadingSentences
+from .nmea_motion import MotionSentences
+from .nmea_position import PositionSentences
+from .nmea_state import DecodeContext, NmeaParse
 from .textlines import Lines, note_truncation
 
 log_ = logging.getLogger(__name__)
 
-KNOT = 1852.0 / 3600.0  # m/s
-#: User-equivalent range error [m] per GGA fix quality: sigma per axis = HDOP * UERE.
-UERE_M: dict[int, float] = {1: 3.0, 2: 1.0, 3: 3.0, 4: 0.02, 5: 0.3, 6: 10.0, 7: 3.0, 8: 10.0, 9: 1.0}
-#: RMC/GLL/GNS mode indicator -> GGA quality (A autonomous, D differential, R RTK fixed, F float, E estimated).
-MODE_QUALITY = {"A": 1, "D": 2, "P": 3, "R": 4, "F": 5, "E": 6, "M": 7, "S": 8}
-DEFAULT_HDOP = 1.5
-HEADING_SIGMA_DEG = {"HDT": 0.5, "THS": 0.5, "HDG": 2.0, "HDM": 2.0}
-#: An HDG/HDM whose magnetic variation is unknown stands for the true heading with its sigma widened
-#: by this much [deg] (root sum of squares): |variation| is below 10 deg over most navigable water
-#: at mid latitudes, and can reach 20-30 deg at high latitudes.
-UNKNOWN_VARIATION_SIGMA_DEG = 10.0
-#: 1-sigma [m/s] per axis of a GNSS (Doppler) velocity: twice the 0.05 m/s speed accuracy that
-#: consumer receivers' datasheets state (u-blox M8/F9), for older receivers and multipath.
-VELOCITY_SIGMA_MPS = 0.1
-#: Modes whose SOG/COG is no GNSS measurement: N no fix, E dead reckoning, M manual input.
-VELOCITY_BAD_MODES = frozenset("NEM")
-#: 1-sigma of a speed log through water: an absolute part [m/s] and a part proportional to the speed
-#: (paddle-wheel and ultrasonic logs are calibrated to a few percent; fouling and heel add more).
-WATER_SPEED_SIGMA_MPS = 0.1
-WATER_SPEED_SIGMA_FRACTION = 0.05
-#: XDR transducer names (angular displacement, degrees) read as roll and as pitch.
-XDR_ROLL = frozenset({"ROLL", "HEEL"})
-XDR_PITCH = frozenset({"PTCH", "PITCH", "TRIM"})
-SOG_MAX_AGE_S = 2.0
-GGA_HOLD_S = 5.0
-#: A GST is used for a fix without one of its own time stamp when at most this old [s].
-GST_MAX_AGE_S = 2.0
-#: A fix time up to this far behind a ZDA-set clock is the fix's own epoch, not time going backwards
-#: (receivers send the ZDA of the coming second(s) before its GGA/RMC: 1 s on et-332, mr-350p, 2 s
-#: on the AC12 of the GPSD corpus).
-ZDA_MAX_LEAD_S = 2.0
-DAY = 86400.0
-#: The sentences graphnav reads (by pynmea2's sentence type; PASHR is pynmea2's ``ASHRATT``).
-HANDLED = {"GGA", "GNS", "RMC", "GLL", "GST", "ZDA", "VTG", "VHW", "HDT", "THS", "HDG", "HDM", "ROT", "XDR", "PASHR"}
-#: Sentences without a time of day: before the first timed sentence they wait for it.
-UNTIMED = ("VTG", "VHW", "HDT", "THS", "HDG", "HDM", "ROT", "XDR")
-
-
-def velocity_sigma(sog: float, sog_step: float, cog_step: float) -> float:
-    """1-sigma per axis [m/s] of a velocity from SOG [m/s] and COG: :data:`VELOCITY_SIGMA_MPS`
-    combined (root sum of squares) with the rounding of the fields: a uniform rounding error of step
-    ``q`` has sigma ``q / sqrt(12)``; ``sog_step`` [m/s] is the SOG field's last digit, ``cog_step``
-    [rad] the COG field's (across the course it moves the velocity by ``sog * cog_step``)."""
-    return math.sqrt(VELOCITY_SIGMA_MPS ** 2 + (sog_step ** 2 + (sog * cog_step) ** 2) / 12.0)
-
-
-def water_speed_sigma(v: float, step: float) -> float:
-    """1-sigma [m/s] of a speed through water ``v`` [m/s] whose field rounds to ``step`` [m/s]:
-    ``sqrt(WATER_SPEED_SIGMA_MPS^2 + (WATER_SPEED_SIGMA_FRACTION v)^2 + step^2 / 12)``."""
-    return math.sqrt(WATER_SPEED_SIGMA_MPS ** 2 + (WATER_SPEED_SIGMA_FRACTION * v) ** 2 + step ** 2 / 12.0)
-
-
-def field_step(raw: str) -> float:
-    """The step of a numeric field's last digit (``"04.7"`` -> 0.1, ``"310"`` -> 1)."""
-    raw = raw.strip()
-    if "." not in raw:
-        return 1.0
-    return 10.0 ** -len(raw.split(".", 1)[1])
-
-
-class THS(pynmea2.TalkerSentence):
-    """True heading and status (IEC 61162-1), not built into pynmea2."""
-
-    fields = (("Heading", "heading", float), ("Mode indicator", "mode"))
-
-
-# ----------------------------------------------------------------------------- field helpers
-
-def _float(raw: str, name: str, *, lo: float = -math.inf, hi: float = math.inf) -> float:
-    try:
-        v = float(raw)
-    except ValueError:
-        raise LogError(f"not a number: {raw[:20]!r}", field=name) from None
-    if not math.isfinite(v) or not lo <= v <= hi:
-        raise LogError(f"{raw[:20]!r} out of range [{lo}, {hi}]", field=name)
-    return v
-
-
-def _field(msg: pynmea2.NMEASentence, i: int) -> str:
-    return msg.data[i] if i < len(msg.data) else ""
-
-
-def _raw(msg: pynmea2.NMEASentence, name: str) -> str:
-    """The text of field ``name`` (pynmea2's attribute name) as it came, "" when absent."""
-    names = [f[1] for f in msg.fields]
-    return str(_field(msg, names.index(name))) if name in names else ""
-
-
-def _two_digit_year(msg: pynmea2.NMEASentence) -> bool:
-    return len(str(_raw(msg, "year")).strip()) <= 2
-
-
-def _num(msg: pynmea2.NMEASentence, name: str, *, lo: float = -math.inf, hi: float = math.inf) -> float | None:
-    """Numeric field ``name`` by pynmea2's attribute (its parsed number; None when empty; the raw
-    text when pynmea2 could not parse it, or the field has no type there), checked to be finite and
-    in ``[lo, hi]``; LogError naming the field otherwise."""
-    v = getattr(msg, name, None)
-    if v is None:
-        return None
-    if isinstance(v, str):
-        if v.strip() == "":
-            return None
-        return _float(v, name, lo=lo, hi=hi)
-    x = float(v)
-    if not math.isfinite(x) or not lo <= x <= hi:
-        raise LogError(f"{str(v)[:20]!r} out of range [{lo}, {hi}]", field=name)
-    return x
-
-
-def _tod(msg: pynmea2.NMEASentence) -> float | None:
-    """Seconds since midnight from the sentence's time field (GGA, RMC, ZDA: the first), by
-    :func:`parse_time_of_day`."""
-    return parse_time_of_day(_field(msg, 0))
-
-
-def _variation(msg: pynmea2.NMEASentence, value: str, direction: str) -> float | None:
-    """A magnetic variation or deviation [deg, east positive] from a value and an E/W field."""
-    v = _num(msg, value, lo=0.0, hi=180.0)
-    if v is None:
-        return None
-    e = str(getattr(msg, direction, "") or "").strip()
-    if e not in ("E", "W"):
-        raise LogError(f"direction {e[:5]!r} is not E/W", field=direction)
-    return v if e == "E" else -v
-
-
-def _zda_date(msg: pynmea2.NMEASentence) -> date | None:
-    """ZDA's day, month, year (pynmea2 integers; a two-digit year as RMC's: 69-99 -> 19xx, 00-68 ->
-    20xx); None when all three are empty."""
-    parts = [getattr(msg, n, None) for n in ("day", "month", "year")]
-    if all(p is None for p in parts):
-        return None
-    if any(not isinstance(p, int) for p in parts):
-        raise LogError(f"date {'/'.join(str(p) for p in parts)[:30]} is not numeric", field="day")
-    dd, mm, yy = parts
-    if 0 <= yy <= 99 and _two_digit_year(msg):  # a two-digit year (Navico GoFree): RMC's rule
-        yy += 1900 if yy >= 69 else 2000
-    if not 1900 <= yy <= 2200:
-        raise LogError(f"year {yy} out of range [1900, 2200]", field="year")
-    try:
-        return date(yy, mm, dd)
-    except (ValueError, OverflowError):  # OverflowError: a 40-digit day
-        raise LogError(f"date {str(dd)[:12]}/{str(mm)[:12]}/{yy} does not exist", field="day") from None
-
-
-_TIME = re.compile(r"^([0-9]{2})([0-9]{2})([0-9]{2})(\.[0-9]+)?$")
-_DDMM = {True: re.compile(r"^[0-9]{2}([0-9]{2}(?:\.[0-9]*)?)$"),  # ddmm[.mmm]: the minutes' group
-         False: re.compile(r"^[0-9]{3}([0-9]{2}(?:\.[0-9]*)?)$")}  # dddmm[.mmm]
-
-
-def parse_time_of_day(raw: str) -> float | None:
-    """``hhmmss[.sss]`` -> seconds since midnight (None when empty).
-
-    The value is pynmea2's (``nmea_utils.timestamp``, what ``msg.timestamp`` gives) once the text is
-    checked here, field by field: pynmea2 alone takes ``" 9"`` or ``"+9"`` as a number and gives no
-    message naming the field. A leap second (``ss`` = 60, which :class:`datetime.time` cannot hold)
-    is the 60th second of its minute."""
-    raw = raw.strip()
-    if raw == "":
-        return None
-    m = _TIME.match(raw)
-    if m is None:
-        raise LogError(f"time {raw[:20]!r} is not hhmmss[.sss]", field="timestamp")
-    h, mi, s = int(m[1]), int(m[2]), int(m[3])
-    if h > 23 or mi > 59 or s > 60:
-        raise LogError(f"time {raw[:20]!r} out of range", field="timestamp")
-    if s == 60:
-        return h * 3600.0 + mi * 60.0 + float(raw[4:])
-    ts = pynmea2.nmea_utils.timestamp(raw)
-    return ts.hour * 3600.0 + ts.minute * 60.0 + ts.second + ts.microsecond * 1e-6
-
-
-def parse_latlon(val: str, hemi: str, *, lat: bool) -> float | None:
-    """``ddmm.mmmm``/``dddmm.mmmm`` + N/S/E/W -> signed degrees (None when both empty).
-
-    The value is pynmea2's (``nmea_utils.dm_to_sd``, what ``msg.latitude``/``msg.longitude`` give)
-    once the text is checked here: pynmea2 alone reads an empty field or a missing hemisphere as 0 deg,
-    and accepts minutes >= 60 and latitudes beyond 90 deg. ``ddmm`` without decimals is accepted."""
-    name = "lat" if lat else "lon"
-    if val.strip() == "" and hemi.strip() == "":
-        return None
-    if hemi not in (("N", "S") if lat else ("E", "W")):
-        raise LogError(f"hemisphere {hemi[:5]!r} is not {'N/S' if lat else 'E/W'}", field=name + "_dir")
-    m = _DDMM[lat].match(val)
-    if m is None:
-        raise LogError(f"{val[:20]!r} is not {'dd' if lat else 'ddd'}mm.mmmm", field=name)
-    minutes = float(m[1])
-    if minutes >= 60.0:
-        raise LogError(f"minutes {minutes} >= 60", field=name)
-    d = pynmea2.nmea_utils.dm_to_sd(val + ("0" if val.endswith(".") else "" if "." in val else ".0"))
-    if d > (90.0 if lat else 180.0):
-        raise LogError(f"{d:.6f} deg out of range", field=name)
-    return -d if hemi in ("S", "W") else d
-
-
-def parse_date(raw: str, name: str = "datestamp") -> date | None:
-    """RMC ``ddmmyy`` -> a date by pynmea2 (``nmea_utils.datestamp``, what ``msg.datestamp`` gives:
-    ``strptime``'s years 69-99 -> 19xx, 00-68 -> 20xx) once the text is checked to be six digits
-    (``strptime`` alone also takes ``"1199"`` or ``" 11199"``)."""
-    raw = raw.strip()
-    if raw == "":
-        return None
-    if len(raw) != 6 or not raw.isdigit():
-        raise LogError(f"date {raw[:20]!r} is not ddmmyy", field=name)
-    try:
-        return pynmea2.nmea_utils.datestamp(raw)
-    except ValueError:
-        raise LogError(f"date {raw!r} does not exist", field=name) from None
-
-
-def _posix_midnight(d: date) -> float:
-    return float(calendar.timegm(d.timetuple()))
-
-
-def parse_sentence(line: str, *, require_checksum: bool = False) -> pynmea2.NMEASentence:
-    """Parse one sentence with pynmea2; any problem is a :class:`LogError` naming the field."""
-    try:
-        return pynmea2.parse(line, check=require_checksum)
-    except pynmea2.ChecksumError as exc:
-        raise LogError(str(exc.args[0]) if exc.args else "checksum error", field="checksum") from None
-    except pynmea2.SentenceTypeError as exc:
-        raise LogError(f"unknown sentence type: {str(exc.args[0])[:40]}", field="sentence") from None
-    except (pynmea2.ParseError, ValueError, TypeError, IndexError, AttributeError, KeyError) as exc:
-        raise LogError(f"not an NMEA sentence ({exc.__class__.__name__})", field="sentence") from None
-
 
 # ----------------------------------------------------------------------------- the decoder
 
-@dataclass
-class NmeaParse:
-    """Everything a stream of sentences gave: records, SOG/COG samples and counters."""
-
-    records: list[Record] = field(default_factory=list)
-    sog_cog: list[tuple[float, float, float]] = field(default_factory=list)  # (t, sog m/s, cog deg | nan)
-    counts: Counter = field(default_factory=Counter)
-
-
-def sentence_key(msg: pynmea2.NMEASentence) -> str:
-    """Talker + type of a parsed sentence (``"GPGGA"``, ``"IIHDG"``; ``"PASHR"``, ``"P"`` + maker
-    for other proprietary sentences)."""
-    if isinstance(msg, ASHRATT):
-        return "PASHR"
-    kind = getattr(msg, "sentence_type", None)
-    if kind is None:
-        return "P" + str(getattr(msg, "manufacturer", "") or type(msg).__name__)
-    return str(getattr(msg, "talker", "") or "") + kind
-
-
-def _kind(msg: pynmea2.NMEASentence) -> str:
-    return "PASHR" if isinstance(msg, ASHRATT) else getattr(msg, "sentence_type", type(msg).__name__)
-
-
-DECODER_STATE = ("frame", "clock_src", "back_ok", "day0", "days", "last_tod", "t", "sog", "variation", "fix_clock",
-                 "last_gga_t", "last_fix_t", "last_vel_t", "last_fix", "gst", "why")
-"""The attributes of :class:`NmeaDecoder` a sentence can change (each a scalar, a tuple or an immutable
-frame): its state, saved by ``snapshot()`` and put back by ``restore()``."""
+#: Which part of :class:`NmeaDecoder` reads which sentence (RMC and ZDA: the decoder itself).
+_READERS = {"GGA": ("positions", "gga"), "GNS": ("positions", "gns"), "GLL": ("positions", "gll"),
+            "GST": ("positions", "gst"), "VTG": ("motion", "vtg"), "VHW": ("motion", "vhw"),
+            "ROT": ("motion", "rot"), "HDT": ("headings", "hdt"), "THS": ("headings", "ths"),
+            "HDG": ("headings", "hdg"), "HDM": ("headings", "hdm"), "XDR": ("headings", "xdr"),
+            "PASHR": ("headings", "pashr")}
+_PARTS = ("ctx", "clock", "positions", "motion", "headings")
+DECODER_STATE = tuple(f"{part}.{k}" for part, cls in zip(
+    _PARTS, (DecodeContext, SentenceClock, PositionSentences, MotionSentences, HeadingSentences), strict=True)
+    for k in cls.STATE)
+"""The state a sentence can change, per part of :class:`NmeaDecoder` (``"clock.t"``): saved by
+``snapshot()`` and put back by ``restore()``."""
 
 
 class NmeaDecoder:
@@ -351,445 +133,148 @@ class NmeaDecoder:
     an RMC give one (``first_variation``: the file's first RMC variation, found by the file reader).
     :meth:`snapshot` / :meth:`restore` save and put back the state a sentence can change (live mode
     undoes a sentence whose time stamp it rejects).
-    """
 
+    The decoder coordinates its parts: the clock (:class:`~graphnav.io.nmea_clock.SentenceClock`),
+    positions (:class:`~graphnav.io.nmea_position.PositionSentences`), motion
+    (:class:`~graphnav.io.nmea_motion.MotionSentences`), heading and attitude
+    (:class:`~graphnav.io.nmea_heading.HeadingSentences`); it reads RMC (date, position, velocity and
+    variation at once) and ZDA itself.
+    """
 
     def __init__(self, frame: LocalFrame | None = None, *, day0: float | None = None,
                  heading_sigma_deg: dict[str, float] | None = None, default_hdop: float = DEFAULT_HDOP,
                  sog_max_age: float = SOG_MAX_AGE_S, keep: bool = True, limits: Limits | None = None,
                  drop_bad_fields: bool = False, keep_sog_cog: bool = True, variation_deg: float | None = None,
                  first_variation: float | None = None) -> None:
-        self.frame = frame
-        self.drop_bad_fields = drop_bad_fields  # lenient: a bad optional field is dropped, the sentence kept
-        self.clock_src = ""  # "fix" or "zda": what set the clock last
-        self.back_ok = False  # the last sentence moved the clock back by the ZDA rule
-        self.limits = limits  # physical validity of every record (graphnav.log.check_record)
-        self.keep = keep  # False (live mode): do not accumulate records/SOG samples
-        self.keep_sog_cog = keep_sog_cog  # False (read_nmea): count the SOG/COG samples, do not hold them
-        self.day0 = day0
-        self.days = 0
-        self.last_tod: float | None = None
-        self.t: float | None = None
-        self.heading_sigma_deg = {**HEADING_SIGMA_DEG, **(heading_sigma_deg or {})}
-        self.default_hdop = default_hdop
-        self.sog_max_age = sog_max_age
-        self.sog: tuple[float, float] | None = None  # (t, m/s)
-        self.variation: float | None = None  # deg, east positive (from RMC)
-        self.first_variation = first_variation
-        self.variation_deg = variation_deg
-        self.fix_clock = False  # a GGA, GNS or RMC time has set the clock
-        self.last_gga_t = -math.inf  # the last GGA/GNS fix (they carry HDOP: RMC/GLL positions wait)
-        self.last_fix_t = -math.inf
-        self.last_vel_t = -math.inf
-        self.last_fix: tuple[float, int] | None = None  # (t, index in out.records) of the last fix kept
-        self.gst: tuple[float, float] | None = None  # (t, sigma m) of the last GST
-        self.why: str | None = None  # why the current sentence gave nothing (None: it was read)
-        self.out = NmeaParse()
+        self.ctx = DecodeContext(keep=keep, keep_sog_cog=keep_sog_cog, limits=limits,
+                                 drop_bad_fields=drop_bad_fields)
+        self.clock = SentenceClock(self.ctx, day0)
+        self.positions = PositionSentences(self.ctx, self.clock, frame, default_hdop)
+        self.motion = MotionSentences(self.ctx, self.clock, sog_max_age)
+        self.headings = HeadingSentences(self.ctx, self.clock, sigma_deg=heading_sigma_deg,
+                                         variation_deg=variation_deg, first_variation=first_variation)
+        self.readers = {kind: getattr(getattr(self, part), name) for kind, (part, name) in _READERS.items()}
+        self.readers.update(RMC=self._rmc, ZDA=self._zda)
+
+    # -- what the reader and live mode ask
+    @property
+    def out(self) -> NmeaParse:
+        return self.ctx.out
+
+    @property
+    def t(self) -> float | None:
+        return self.clock.t
+
+    @property
+    def day0(self) -> float | None:
+        return self.clock.day0
+
+    @property
+    def back_ok(self) -> bool:
+        return self.clock.back_ok
+
+    @property
+    def frame(self) -> LocalFrame | None:
+        return self.positions.frame
+
+    @frame.setter
+    def frame(self, frame: LocalFrame | None) -> None:
+        self.positions.frame = frame
 
     def snapshot(self) -> tuple[Any, ...]:
         """The decoder's state (:data:`DECODER_STATE`), for :meth:`restore`."""
-        return tuple(getattr(self, k) for k in DECODER_STATE)
+        return tuple(getattr(self, part).snapshot() for part in _PARTS)
 
     def restore(self, state: tuple[Any, ...]) -> None:
         """Put back a :meth:`snapshot`: as if the sentences since were never fed (``out`` aside)."""
-        for k, v in zip(DECODER_STATE, state, strict=True):
-            setattr(self, k, v)
+        for part, s in zip(_PARTS, state, strict=True):
+            getattr(self, part).restore(s)
 
-    # -- time
-    def _stamp(self, tod: float | None, kind: str = "fix") -> float | None:
-        """Move the clock to the time of day ``tod`` of a ``"fix"`` (GGA/RMC) or ``"zda"`` sentence.
-
-        The time rule (docs/nmea.md): a time of day that drops by more than 12 h is the next day;
-        a fix time up to :data:`ZDA_MAX_LEAD_S` behind a clock that a ZDA set is the fix's own epoch
-        (receivers send the ZDA of the coming second before its GGA/RMC): the clock goes back to it
-        (``back_ok``, counted in ``zda_ahead``), across midnight too. A ZDA only moves the clock
-        forward (:meth:`_zda`)."""
-        self.back_ok = False
-        if tod is None:
-            return self.t
-        days, t = self._absolute(tod)
-        if self.t is not None and kind == "fix" and self.clock_src == "zda":
-            if t - self.t > DAY / 2:  # the ZDA crossed midnight before this fix of the old day
-                days -= 1
-                t -= DAY
-            if 0.0 < self.t - t <= ZDA_MAX_LEAD_S:
-                self.back_ok = True
-                self.out.counts["zda_ahead"] += 1
-        self.days, self.last_tod, self.t, self.clock_src = days, tod, t, kind
-        return self.t
-
-    def _absolute(self, tod: float) -> tuple[int, float]:
-        """(day count, time) of a time of day: the next day when it drops by more than 12 h."""
-        days = self.days
-        if self.last_tod is not None and tod < self.last_tod - DAY / 2:
-            days += 1
-        return days, (self.day0 or 0.0) + days * DAY + tod
-
-    def _own_time(self, tod: float | None) -> float | None:
-        """The time of a sentence that carries a time of day but does not move the clock (GST,
-        PASHR): the nearest day to the clock's; the clock's time when it has none."""
-        if tod is None:
-            return self.t
-        t = self._absolute(tod)[1]
-        if self.t is not None and t - self.t > DAY / 2:
-            t -= DAY
-        return t
-
-    def _set_date(self, d: date | None) -> None:
-        if d is not None:
-            self.day0 = _posix_midnight(d) - self.days * DAY
-            if self.last_tod is not None:
-                self.t = self.day0 + self.days * DAY + self.last_tod
-
-    def _optional(self, parse: Any, *args: Any, **kw: Any) -> Any:
-        """An optional field parsed by ``parse``: its value, or (``drop_bad_fields``) None when it is
-        bad, counted per field in ``dropped_field:<name>`` (the sentence is kept)."""
-        try:
-            return parse(*args, **kw)
-        except LogError as err:
-            if not self.drop_bad_fields:
-                raise
-            self.out.counts["dropped_field:" + (err.field or "?")] += 1
-            return None
-
-    def _skip(self, reason: str, counter: str | None = None) -> list[Record]:
-        """Nothing from this sentence, for ``reason`` (in ``meta["sentences"]``); ``counter`` also
-        counts it under that name (the older per-reason meta keys)."""
-        self.why = reason
-        if counter:
-            self.out.counts[counter] += 1
-        return []
-
-    def _speed_value(self, v: float, name: str, unit: float) -> float:
-        """A speed field's value [field unit] -> m/s, checked against the plausible speed
-        (:class:`graphnav.log.Limits`)."""
-        top = (self.limits or default_limits()).max_speed
-        if v * unit > top:
-            raise LogError(f"speed {v * unit:.4g} m/s beyond the plausible limit {top:g} m/s", field=name)
-        return v * unit
-
-    def _sog(self, msg: pynmea2.NMEASentence, name: str, unit: float) -> float | None:
-        """Speed [m/s] from field ``name`` (``unit`` m/s per field unit), checked against the
-        plausible speed."""
-        v = _num(msg, name, lo=0.0, hi=math.inf)
-        return None if v is None else self._speed_value(v, name, unit)
-
-    # -- records
-    def _fix(self, t: float | None, lat: float, lon: float, quality: int, hdop: float | None,
-             src: str) -> list[Record]:
-        if t is None:
-            raise LogError("a fix before any time stamp", field="timestamp")
-        if t <= self.last_fix_t:  # one fix per epoch (GGA and RMC of the same epoch)
-            return self._skip("duplicate fix (same time stamp)", "duplicate_fix")
-        if self.frame is None:
-            self.frame = LocalFrame(lat, lon, 0.0)
-        x, y = self.frame.to_local(lat, lon)
-        h = self.default_hdop if hdop is None or hdop <= 0 else hdop
-        sigma = h * UERE_M.get(quality, UERE_M[1])
-        if self.gst is not None and (abs(self.gst[0] - t) < 1e-3 or 0.0 <= t - self.gst[0] <= GST_MAX_AGE_S):
-            sigma = self.gst[1]
-            self.out.counts["fix_sigma_from_gst"] += 1
-        self.last_fix_t = t
-        self.out.counts[f"fix_{src}"] += 1
-        return [Gnss(t, float(x), float(y), float(sigma))]
+    def drop_since(self, n: int) -> None:
+        """Forget the records kept since there were ``n`` (a sentence that failed after them)."""
+        del self.out.records[n:]
+        last = self.positions.last_fix
+        if last is not None and last[1] >= len(self.out.records):
+            self.positions.last_fix = None
 
     def feed(self, msg: pynmea2.NMEASentence) -> list[Record]:
         """Decode one parsed sentence. Raises :class:`LogError` (with the field) if malformed."""
-        kind = _kind(msg)
+        kind = sentence_kind(msg)
         key = sentence_key(msg)
-        handler = getattr(self, "_" + kind.lower(), None) if kind in HANDLED else None
-        if handler is None:
-            self.out.counts["ignored:" + kind] += 1
-            self.out.counts["skip\x1f" + key + "\x1fnot read by graphnav"] += 1
+        counts = self.ctx.counts
+        reader = self.readers.get(kind) if kind in HANDLED else None
+        if reader is None:
+            counts["ignored:" + kind] += 1
+            counts["skip\x1f" + key + "\x1fnot read by graphnav"] += 1
             return []
-        self.back_ok = False
-        self.why = None
-        recs = handler(msg)
+        self.clock.back_ok = False
+        self.ctx.why = None
+        recs = reader(msg)
         for r in recs:
-            check_record(r, self.limits)
-        if self.keep:
+            check_record(r, self.ctx.limits)
+        if self.ctx.keep:
             self.out.records.extend(recs)
-            for i, r in enumerate(recs):
-                if isinstance(r, Gnss):
-                    self.last_fix = (r.t, len(self.out.records) - len(recs) + i)
-        if recs or self.why is None:
-            self.out.counts["read\x1f" + key] += 1
+            self.positions.kept(recs, len(self.out.records))
+        if recs or self.ctx.why is None:
+            counts["read\x1f" + key] += 1
         else:
-            self.out.counts["skip\x1f" + key + "\x1f" + self.why] += 1
+            counts["skip\x1f" + key + "\x1f" + self.ctx.why] += 1
         return recs
 
-    def _gga(self, msg) -> list[Record]:
-        tod = _tod(msg)
-        q = _num(msg, "gps_qual", lo=0, hi=9)
-        quality = 0 if q is None else int(q)
-        lat = parse_latlon(msg.lat, msg.lat_dir, lat=True)
-        lon = parse_latlon(msg.lon, msg.lon_dir, lat=False)
-        hdop = self._optional(_num, msg, "horizontal_dil", lo=0.0, hi=100.0)
-        t = self._stamp(tod)
-        self.fix_clock = self.fix_clock or tod is not None
-        if quality == 0 or lat is None or lon is None:
-            return self._skip("no fix", "no_fix")
-        if t is not None:
-            self.last_gga_t = t
-        return self._fix(t, lat, lon, quality, hdop, "gga")
+    def _stamp(self, tod: float | None) -> float | None:
+        return self.clock.stamp(tod)
 
-    def _gns(self, msg) -> list[Record]:
-        tod = _tod(msg)
-        mode = str(_field(msg, 5)).strip().upper()
-        if any(c not in MODE_QUALITY and c != "N" for c in mode):
-            raise LogError(f"mode indicator {mode[:8]!r} is not of A/D/P/R/F/E/M/S/N", field="mode_indicator")
-        lat = parse_latlon(msg.lat, msg.lat_dir, lat=True)
-        lon = parse_latlon(msg.lon, msg.lon_dir, lat=False)
-        hdop = self._optional(_num, msg, "hdop", lo=0.0, hi=100.0)
-        t = self._stamp(tod)
-        self.fix_clock = self.fix_clock or tod is not None
-        used = [c for c in mode if c != "N"]  # one character per constellation
-        if not used or lat is None or lon is None:
-            return self._skip("no fix", "no_fix")
-        if t is not None:
-            self.last_gga_t = t
-        quality = min((MODE_QUALITY[c] for c in used), key=lambda q: UERE_M[q])  # the best constellation's
-        return self._fix(t, lat, lon, quality, hdop, "gns")
-
-    def _rmc(self, msg) -> list[Record]:
-        tod = _tod(msg)
+    def _rmc(self, msg: pynmea2.NMEASentence) -> list[Record]:
+        """RMC: the date, the variation, the velocity and (when no GGA/GNS came) the position."""
+        ctx, clock = self.ctx, self.clock
+        tod = time_of_day(msg)
         status = str(msg.status).strip()
         if status not in ("A", "V"):
             raise LogError(f"status {status[:5]!r} is not A/V", field="status")
         lat = parse_latlon(msg.lat, msg.lat_dir, lat=True)
         lon = parse_latlon(msg.lon, msg.lon_dir, lat=False)
         mode = str(msg.mode_indicator).strip()[:1]
-        d = self._optional(parse_date, str(msg.data[8]) if len(msg.data) > 8 else "")
-        sog = self._optional(self._sog, msg, "spd_over_grnd", KNOT)
-        cog = self._optional(_num, msg, "true_course", lo=0.0, hi=360.0)
-        var = self._optional(_variation, msg, "mag_variation", "mag_var_dir")
+        d = ctx.optional(parse_date, str(msg.data[8]) if len(msg.data) > 8 else "")
+        sog = ctx.optional(self.motion.sog_field, msg, "spd_over_grnd", KNOT)
+        cog = ctx.optional(num, msg, "true_course", lo=0.0, hi=360.0)
+        var = ctx.optional(variation_field, msg, "mag_variation", "mag_var_dir")
         if tod is not None and d is not None:  # the date belongs to this sentence's time
-            self._stamp(tod)
-            self._set_date(d)
-        t = self._stamp(tod)
-        self.fix_clock = self.fix_clock or tod is not None
+            clock.stamp(tod)
+            clock.set_date(d)
+        t = clock.stamp(tod)
+        clock.fix_clock = clock.fix_clock or tod is not None
         if var is not None:
-            self.variation = var
+            self.headings.variation = var
         if status == "V" or mode == "N" or lat is None or lon is None:
-            return self._skip("no fix", "no_fix")
+            return ctx.skip("no fix", "no_fix")
         out: list[Record] = []
         if t is not None and sog is not None:
-            self._speed(t, sog, cog)
+            self.motion.speed(t, sog, cog)
             if mode not in VELOCITY_BAD_MODES:
-                out += self._velocity(t, sog, cog, field_step(_raw(msg, "spd_over_grnd")) * KNOT,
-                                      _raw(msg, "true_course"))
-        if t is not None and t - self.last_gga_t <= GGA_HOLD_S:
+                out += self.motion.velocity(t, sog, cog, field_step(raw_field(msg, "spd_over_grnd")) * KNOT,
+                                            raw_field(msg, "true_course"))
+        if t is not None and t - self.positions.last_gga_t <= GGA_HOLD_S:
             return out
+        quality = MODE_QUALITY.get(mode, 1)
         if out:
-            return out + self._fix_quiet(t, lat, lon, MODE_QUALITY.get(mode, 1), "rmc")
-        return self._fix(t, lat, lon, MODE_QUALITY.get(mode, 1), None, "rmc")
+            return out + self.positions.fix_quiet(t, lat, lon, quality, "rmc")
+        return self.positions.fix(t, lat, lon, quality, None, "rmc")
 
-    def _fix_quiet(self, t: float | None, lat: float, lon: float, quality: int, src: str) -> list[Record]:
-        """:meth:`_fix` for a sentence that gave another record already (a duplicate fix is then no
-        reason to call the sentence skipped)."""
-        why = self.why
-        recs = self._fix(t, lat, lon, quality, None, src)
-        self.why = why
-        return recs
-
-    def _gll(self, msg) -> list[Record]:
-        lat = parse_latlon(msg.lat, msg.lat_dir, lat=True)
-        lon = parse_latlon(msg.lon, msg.lon_dir, lat=False)
-        tod = parse_time_of_day(_field(msg, 4))
-        status = str(_field(msg, 5)).strip()
-        mode = str(_field(msg, 6)).strip()[:1]
-        # the clock is GGA/GNS/RMC's once they have set it (a GLL's time may differ from theirs by a few
-        # ms: eXplorist 210); before that (GLL-only logs, GLL + ZDA) a GLL sets it
-        t = self._own_time(tod) if self.fix_clock else self._stamp(tod)
-        if status != "A" or mode in ("N", "V") or lat is None or lon is None:  # eXplorist 110: status N, mode V
-            return self._skip("no fix", "no_fix")
-        if t is None:
-            return self._skip("no time (GLL without its time field)", "untimed")
-        if t - self.last_gga_t <= GGA_HOLD_S:
-            return self._skip("position from GGA/GNS")
-        return self._fix(t, lat, lon, MODE_QUALITY.get(mode, 1), None, "gll")
-
-    def _gst(self, msg) -> list[Record]:
-        tod = _tod(msg)
-        sd = [_num(msg, n, lo=0.0, hi=1e5) for n in ("std_dev_latitude", "std_dev_longitude")]
-        if None in sd:  # some receivers give the error ellipse only
-            sd = [_num(msg, n, lo=0.0, hi=1e5) for n in ("std_dev_major", "std_dev_minor")]
-        if None in sd or not (sd[0] > 0 and sd[1] > 0):
-            return self._skip("no standard deviations", "gst_empty")
-        t = self._own_time(tod)
-        if t is None:
-            return self._skip("before any time", "untimed")
-        sigma = math.sqrt(0.5 * (sd[0] ** 2 + sd[1] ** 2))
-        self.gst = (t, sigma)
-        if self.keep and self.last_fix is not None and abs(self.last_fix[0] - t) < 1e-3:
-            i = self.last_fix[1]  # the fix of this GST's epoch came first: it gets the GST's sigma
-            rec = self.out.records[i] if i < len(self.out.records) else None
-            if isinstance(rec, Gnss) and rec.t == self.last_fix[0] and rec.sigma != sigma:
-                new = replace(rec, sigma=float(sigma))
-                check_record(new, self.limits)
-                self.out.records[i] = new
-                self.out.counts["fix_sigma_from_gst"] += 1
-        return []
-
-    def _zda(self, msg) -> list[Record]:
-        tod = _tod(msg)
+    def _zda(self, msg: pynmea2.NMEASentence) -> list[Record]:
+        """ZDA: time and date; it moves the clock forward only."""
+        ctx, clock = self.ctx, self.clock
+        tod = time_of_day(msg)
         if tod is None:  # a receiver without time yet sends empty ZDAs: no time, not an error
-            return self._skip("no time yet (empty)", "zda_without_time")
-        d = self._optional(_zda_date, msg)
-        if d is not None and _two_digit_year(msg):
-            self.out.counts["zda_two_digit_year"] += 1
-        if self.t is not None and not 0.0 <= self._absolute(tod)[1] - self.t <= DAY / 2:
+            return ctx.skip("no time yet (empty)", "zda_without_time")
+        d = ctx.optional(zda_date, msg)
+        if d is not None and two_digit_year(msg):
+            ctx.counts["zda_two_digit_year"] += 1
+        if clock.t is not None and not 0.0 <= clock.absolute(tod)[1] - clock.t <= DAY / 2:
             # behind the clock (or before midnight of a day passed): no new time
-            return self._skip("behind the clock", "zda_behind")
-        self._stamp(tod, "zda")
-        self._set_date(d)
+            return ctx.skip("behind the clock", "zda_behind")
+        clock.stamp(tod, "zda")
+        clock.set_date(d)
         return []
-
-    def _speed(self, t: float, sog: float, cog_deg: float | None) -> None:
-        self.sog = (t, sog)
-        self.out.counts["sog_cog_samples"] += 1
-        if self.keep and self.keep_sog_cog:
-            self.out.sog_cog.append((t, sog, math.nan if cog_deg is None else cog_deg))
-
-    def _velocity(self, t: float, sog: float, cog_deg: float | None, sog_step: float,
-                  cog_raw: str) -> list[Record]:
-        """A :class:`GnssVelocity` from SOG [m/s] and COG [deg true] (one per time stamp; a SOG above
-        zero without a course gives none)."""
-        if t <= self.last_vel_t:
-            self.out.counts["duplicate_velocity"] += 1
-            return []
-        if cog_deg is None and sog > 0.0:
-            self.out.counts["sog_without_cog"] += 1
-            return []
-        c = math.radians(cog_deg or 0.0)
-        sigma = velocity_sigma(sog, sog_step, math.radians(field_step(cog_raw)) if cog_raw.strip() else math.pi)
-        self.last_vel_t = t
-        return [GnssVelocity(t, sog * math.sin(c), sog * math.cos(c), sigma)]
-
-    def _vtg(self, msg) -> list[Record]:
-        cog = self._optional(_num, msg, "true_track", lo=0.0, hi=360.0)
-        kts = self._optional(self._sog, msg, "spd_over_grnd_kts", KNOT)
-        kmh = self._optional(self._sog, msg, "spd_over_grnd_kmph", 1.0 / 3.6)
-        mode = str(msg.faa_mode).strip()[:1]
-        if mode == "N" or (kts is None and kmh is None):
-            return self._skip("no speed", "no_speed")
-        if self.t is None:
-            return self._skip("before any time", "untimed")
-        sog = kts if kts is not None else kmh
-        self._speed(self.t, sog, cog)
-        if mode in VELOCITY_BAD_MODES:
-            return self._skip(f"mode {mode}: not a GNSS velocity")
-        step = field_step(_raw(msg, "spd_over_grnd_kts")) * KNOT if kts is not None else \
-            field_step(_raw(msg, "spd_over_grnd_kmph")) / 3.6
-        recs = self._velocity(self.t, sog, cog, step, _raw(msg, "true_track") if cog is not None else "")
-        if not recs:
-            return self._skip("duplicate velocity (same time stamp)" if self.t <= self.last_vel_t
-                              else "speed without a course")
-        return recs
-
-    def _vhw(self, msg) -> list[Record]:
-        kts = self._optional(_num, msg, "water_speed_knots", lo=0.0, hi=math.inf)
-        kmh = self._optional(_num, msg, "water_speed_km", lo=0.0, hi=math.inf)
-        if kts is None and kmh is None:
-            return self._skip("no speed", "no_water_speed")
-        if self.t is None:
-            return self._skip("before any time", "untimed")
-        if kts is not None:
-            v = self._speed_value(kts, "water_speed_knots", KNOT)
-            step = field_step(_raw(msg, "water_speed_knots")) * KNOT
-        else:
-            v = self._speed_value(kmh, "water_speed_km", 1.0 / 3.6)
-            step = field_step(_raw(msg, "water_speed_km")) / 3.6
-        return [WaterSpeed(self.t, v, water_speed_sigma(v, step))]
-
-    def _heading(self, heading_deg: float, src: str, extra_sigma_deg: float = 0.0) -> list[Record]:
-        if self.t is None:
-            return self._skip("before any time", "untimed")
-        sigma = math.radians(math.hypot(self.heading_sigma_deg[src], extra_sigma_deg))
-        return [Heading(self.t, float(heading_deg_to_yaw(heading_deg % 360.0)), sigma)]
-
-    def _hdt(self, msg) -> list[Record]:
-        h = _num(msg, "heading", lo=0.0, hi=360.0)
-        return self._skip("empty") if h is None else self._heading(h, "HDT")
-
-    def _ths(self, msg) -> list[Record]:
-        h = _num(msg, "heading", lo=0.0, hi=360.0)
-        if h is None or str(msg.mode).strip()[:1] == "V":
-            return self._skip("invalid (mode V) or empty", "invalid_heading")
-        return self._heading(h, "THS")
-
-    def _known_variation(self) -> float | None:
-        """The variation for an HDG/HDM without one: the last RMC's, the file's first, the stated one."""
-        for v in (self.variation, self.first_variation, self.variation_deg):
-            if v is not None:
-                return v
-        return None
-
-    def _magnetic(self, h: float, var: float | None, src: str) -> list[Record]:
-        if var is None:
-            var = self._known_variation()
-        if var is None:  # no variation anywhere: the magnetic heading, its sigma widened
-            if self.t is not None:
-                self.out.counts["hdg_without_variation"] += 1
-            return self._heading(h, src, UNKNOWN_VARIATION_SIGMA_DEG)
-        return self._heading(h + var, src)
-
-    def _hdg(self, msg) -> list[Record]:
-        h = _num(msg, "heading", lo=0.0, hi=360.0)
-        if h is None:
-            return self._skip("empty")
-        dev = self._optional(_variation, msg, "deviation", "dev_dir")
-        var = self._optional(_variation, msg, "variation", "var_dir")
-        return self._magnetic(h + (dev or 0.0), var, "HDG")
-
-    def _hdm(self, msg) -> list[Record]:
-        h = _num(msg, "heading", lo=0.0, hi=360.0)
-        if h is None:
-            return self._skip("empty")
-        return self._magnetic(h, None, "HDM")
-
-    def _rot(self, msg) -> list[Record]:
-        rot = _num(msg, "rate_of_turn", lo=-1e5, hi=1e5)
-        if rot is None or str(msg.status).strip()[:1] == "V":
-            return self._skip("invalid (status V) or empty", "invalid_rot")
-        if self.t is None:
-            return self._skip("before any time", "untimed")
-        if self.sog is None or self.t - self.sog[0] > self.sog_max_age:
-            return self._skip("no recent SOG", "rot_without_sog")
-        return [Odometry(self.t, self.sog[1], -math.radians(rot) / 60.0)]
-
-    def _attitude(self, t: float | None, roll_deg: float | None, pitch_deg: float | None,
-                  sigma_deg: float = math.nan) -> list[Record]:
-        if roll_deg is None or pitch_deg is None:
-            return self._skip("no roll and pitch", "attitude_incomplete")
-        if t is None:
-            return self._skip("before any time", "untimed")
-        return [Attitude(t, math.radians(roll_deg), -math.radians(pitch_deg), math.radians(sigma_deg))]
-
-    def _xdr(self, msg) -> list[Record]:
-        roll = pitch = None
-        data = msg.data
-        for i in range(0, len(data) - 3, 4):
-            typ, raw, unit, name = (str(x).strip() for x in data[i:i + 4])
-            which = "roll" if name.upper() in XDR_ROLL else "pitch" if name.upper() in XDR_PITCH else None
-            if which is None or typ != "A" or raw == "":
-                continue
-            if unit != "D":
-                raise LogError(f"unit {unit[:5]!r} of an angle is not D (degrees)", field=name)
-            v = self._optional(_float, raw, name, lo=-90.0, hi=90.0)
-            if which == "roll":
-                roll = v
-            else:
-                pitch = v
-        return self._attitude(self.t, roll, pitch)
-
-    def _pashr(self, msg) -> list[Record]:
-        tod = parse_time_of_day(_field(msg, 1))
-        roll = _num(msg, "roll", lo=-90.0, hi=90.0)
-        pitch = _num(msg, "pitch", lo=-90.0, hi=90.0)
-        acc = [self._optional(_num, msg, n, lo=0.0, hi=90.0) for n in ("roll_accuracy", "pitch_accuracy")]
-        sigma = max((a for a in acc if a is not None and a > 0.0), default=math.nan)
-        return self._attitude(self._own_time(tod), roll, pitch, sigma)
 
 
 # ----------------------------------------------------------------------------- files
@@ -833,7 +318,7 @@ def _first_date_day0(lines: Iterable[bytes]) -> tuple[float | None, float | None
             msg = parse_sentence(_decode(raw))
             kind = msg.sentence_type
             if kind == "RMC":
-                var = _variation(msg, "mag_variation", "mag_var_dir")
+                var = variation_field(msg, "mag_variation", "mag_var_dir")
                 if day0 is None:
                     probe._rmc(msg)
                 if variation is None:
@@ -841,7 +326,7 @@ def _first_date_day0(lines: Iterable[bytes]) -> tuple[float | None, float | None
             elif kind == "ZDA":
                 probe._zda(msg)
             else:
-                probe._stamp(parse_time_of_day(_field(msg, 4 if kind == "GLL" else 0)))
+                probe._stamp(parse_time_of_day(field_at(msg, 4 if kind == "GLL" else 0)))
         except (LogError, AttributeError):
             continue
         if day0 is None:
@@ -926,7 +411,7 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
     day0, first_var = _first_date_day0(_Sentences(path, True, quiet=True))
     date_source = "log" if day0 is not None else "none"
     if day0 is None and given_date is not None:
-        day0, date_source = _posix_midnight(given_date), "--date"
+        day0, date_source = posix_midnight(given_date), "--date"
     decoder_options.setdefault("first_variation", first_var)
     dec = NmeaDecoder(frame, day0=day0, **decoder_options)
     pending: list[tuple[int, pynmea2.NMEASentence]] = []  # untimed sentences before the first time
@@ -934,7 +419,7 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
     for lineno, msg in sentences():
         n_before = len(dec.out.records)
         try:
-            if dec.t is None and _kind(msg) in UNTIMED:
+            if dec.t is None and sentence_kind(msg) in UNTIMED:
                 pending.append((lineno, msg))
                 continue
             dec.feed(msg)
@@ -951,12 +436,10 @@ def parse_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, 
                     raise LogError(f"time goes backwards ({dec.t!r} after {last_t!r})", field="timestamp")
                 last_t = dec.t
         except LogError as err:
-            del dec.out.records[n_before:]
-            if dec.last_fix is not None and dec.last_fix[1] >= len(dec.out.records):
-                dec.last_fix = None
+            dec.drop_since(n_before)
             bad(err, lineno, sentence_key(msg))
     for _ln, m in pending:  # no sentence carried a time at all
-        ignored["untimed:" + _kind(m)] += 1
+        ignored["untimed:" + sentence_kind(m)] += 1
         counts["skip\x1f" + sentence_key(m) + "\x1fno sentence in the log carries a time"] += 1
     out = dec.out
     meta: dict[str, Any] = {"source": str(path), "format": "nmea0183",

@@ -19,7 +19,7 @@ import pynmea2
 from ..geodesy import LocalFrame
 from ..geometry import wrap_angle, yaw_to_heading_deg
 from ..log import Gnss, Heading, NavLog, Odometry
-from .nmea import KNOT, UERE_M
+from .nmea_fields import KNOT, UERE_M
 
 #: Origin used when a log has no geodetic origin (meta["origin"]): documented, arbitrary.
 DEFAULT_ORIGIN = (43.5, 16.4)

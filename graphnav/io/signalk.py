@@ -57,7 +57,7 @@ from ..log import (
     WaterSpeed,
     check_record,
 )
-from .nmea import (
+from .nmea_fields import (
     DEFAULT_HDOP,
     HEADING_SIGMA_DEG,
     SOG_MAX_AGE_S,

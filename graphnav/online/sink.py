@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import GraphnavError
 from ..geodesy import LocalFrame
-from ..io.nmea import UERE_M
+from ..io.nmea_fields import UERE_M
 from ..io.nmea_out import solution_sentences
 from ..io.outputs import ensure_dir
 from ..io.tum import TrajectoryWriter

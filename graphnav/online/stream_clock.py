@@ -198,7 +198,7 @@ class NmeaInput:
             old = self.decoder
             base = old.day0
             if base is not None:
-                base += old.days * 86400.0
+                base += old.clock.days * 86400.0
             self.decoder = NmeaDecoder(old.frame, day0=base, keep=False)
             self.on_step_back()
         for raw, a, _ in buf:

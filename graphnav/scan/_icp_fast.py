@@ -1,25 +1,64 @@
-"""Compiled (numba) matcher of :mod:`graphnav.scan.weighted_icp`: every variant, from the points to the covariance.
+"""The weighted ICP of :mod:`graphnav.scan.weighted_icp` (Algorithm 1, eq. 5-22): its one implementation.
 
-The same algorithm as the numpy loop in :mod:`graphnav.scan.weighted_icp` (Algorithm 1, eq. 9-22), with an
-exact grid-based nearest-neighbour search instead of ``cKDTree``; tests check that both give
-the same matches. :func:`p2p_match` (K/H/HM/HD) and :func:`hdl_match` (HDL) run the whole
-numeric part of one match in one call (the LiDAR error model of eq. 5-8, the target's lines,
-the loop, the covariance and the point-to-line information); only the eigen-analysis of
-:mod:`graphnav.scan.degeneracy` and the report stay in Python. Imported lazily; absent numba,
-:mod:`graphnav.scan.weighted_icp` uses its numpy loop.
+Compiled by numba when importable, else run as plain Python (:mod:`graphnav.scan._jit`, the same code).
+:func:`match` runs the whole numeric part of one match in one call: the LiDAR error model of eq. 5-8,
+the target's resolution and lines, the loop (exact grid-based nearest neighbours, or the paper's
+Delaunay nearest apex), the final pairs' weights and the sums the covariance and degeneracy analysis
+need (:func:`report_sums`). The eigen-analysis (:mod:`graphnav.scan.degeneracy`) and the report stay in
+Python. The data travel in groups:
+
+* a cloud, ``(x, y, ux, uy, a2, b2, m2)`` (:func:`cloud_terms`: points, unit radial vectors, squared
+  semi-axes of eq. 6-7, squared mean error of eq. 5), one array each;
+* the target's grid, ``(xmin, ymin, h, nx, ny, start, items)`` (:func:`build_grid`);
+* the target's lines, ``(nx, ny, flat)`` per target point;
+* an iteration's pairs, ``(px, py, d, idx, w)``: moved source points, distance and index of the match,
+  weight;
+* the Delaunay triangulation, ``(transform, neighbors, simplices)`` (scipy's; empty when unused);
+* the settings, :class:`Params`.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+
+from ._jit import njit
 
 MAX_CELLS_PER_POINT = 16
 MIN_CELL_CAP = 1 << 16
 """A grid has at most ``max(MAX_CELLS_PER_POINT * n, MIN_CELL_CAP)`` cells: O(n) memory and work per
 query whatever the points' spread (one far point would otherwise size the grid by its bounding box)."""
+HDL = 4  # Params.variant: 0 K, 1 H, 2 HM, 3 HD, 4 HDL
+_TRI_EPS = 100 * np.finfo(float).eps  # scipy's find_simplex tolerance on barycentric coordinates
+
+
+class Params(NamedTuple):
+    """The settings of one match (:class:`graphnav.scan.weighted_icp.IcpConfig`'s, as the kernels take them)."""
+
+    variant: int  # 0 K, 1 H, 2 HM, 3 HD, 4 HDL
+    huber_c: float
+    wpow: float  # weight = G^-wpow
+    max_corr: float  # inf: no fixed gate
+    tol: float  # in units of D
+    tol_step: float  # in units of D
+    max_iter: int
+    cell: float  # [m] the grids' cell side
+    normal_k: int
+    knn: bool  # HDL: k-nearest line normals (else beam order)
+    max_gap: float
+    flat_pow: float
+    warmup: float
+    gate0: float
+    min_res: float
+    sigma_alpha: float
+    sigma_r_rel: float
+    delaunay: bool
+    samp_var: float  # variance of the sampling error per unit spacing^2 (covariance.SAMPLING_VARIANCE)
+
+
+# ----------------------------------------------------------------------------- nearest neighbours
 
 
 @njit(cache=True)
@@ -50,7 +89,7 @@ def cell_index(v, vmin, h, nv):
 @njit(cache=True)
 def build_grid(tx, ty, h):
     """Bucket target points into square cells (counting sort). The cell side is ``h`` or larger
-    (:func:`grid_cell`: at most O(n) cells); returns it with the grid."""
+    (:func:`grid_cell`: at most O(n) cells). Returns the grid ``(xmin, ymin, h, nx, ny, start, items)``."""
     n = tx.shape[0]
     xmin, ymin = tx.min(), ty.min()
     h = grid_cell(h, tx.max() - xmin, ty.max() - ymin, n)
@@ -73,7 +112,8 @@ def build_grid(tx, ty, h):
 
 
 @njit(cache=True)
-def _scan_cell(px, py, ix, iy, ny, start, items, tx, ty, best, bi):
+def _scan_cell(px, py, ix, iy, tx, ty, grid, best, bi):
+    ny, start, items = grid[4], grid[5], grid[6]
     c = ix * ny + iy
     for k in range(start[c], start[c + 1]):
         j = items[k]
@@ -87,9 +127,10 @@ def _scan_cell(px, py, ix, iy, ny, start, items, tx, ty, best, bi):
 
 
 @njit(cache=True)
-def nearest(px, py, tx, ty, xmin, ymin, h, nx, ny, start, items):
+def nearest(px, py, tx, ty, grid):
     """Exact nearest target point of (px, py): rings of cells around the (clamped) home cell until
     no unvisited cell can hold a closer point. Returns (distance, index)."""
+    xmin, ymin, h, nx, ny = grid[0], grid[1], grid[2], grid[3], grid[4]
     cx = cell_index(px, xmin, h, nx)
     cy = cell_index(py, ymin, h, ny)
     # distance from p to the home cell's box (0 inside); inside, the margin to its nearest edge
@@ -101,23 +142,22 @@ def nearest(px, py, tx, ty, xmin, ymin, h, nx, ny, start, items):
         off = -min(px - bx0, bx0 + h - px, py - by0, by0 + h - py)
     best = np.inf
     bi = -1
-    rmax = max(nx, ny)
-    for r in range(rmax + 1):
+    for r in range(max(nx, ny) + 1):
         if r == 0:
-            best, bi = _scan_cell(px, py, cx, cy, ny, start, items, tx, ty, best, bi)
+            best, bi = _scan_cell(px, py, cx, cy, tx, ty, grid, best, bi)
         else:
             x0, x1 = cx - r, cx + r
             y0, y1 = cy - r, cy + r
             for ix in range(max(x0, 0), min(x1, nx - 1) + 1):
                 if y0 >= 0:
-                    best, bi = _scan_cell(px, py, ix, y0, ny, start, items, tx, ty, best, bi)
+                    best, bi = _scan_cell(px, py, ix, y0, tx, ty, grid, best, bi)
                 if y1 <= ny - 1:
-                    best, bi = _scan_cell(px, py, ix, y1, ny, start, items, tx, ty, best, bi)
+                    best, bi = _scan_cell(px, py, ix, y1, tx, ty, grid, best, bi)
             for iy in range(max(y0 + 1, 0), min(y1 - 1, ny - 1) + 1):
                 if x0 >= 0:
-                    best, bi = _scan_cell(px, py, x0, iy, ny, start, items, tx, ty, best, bi)
+                    best, bi = _scan_cell(px, py, x0, iy, tx, ty, grid, best, bi)
                 if x1 <= nx - 1:
-                    best, bi = _scan_cell(px, py, x1, iy, ny, start, items, tx, ty, best, bi)
+                    best, bi = _scan_cell(px, py, x1, iy, tx, ty, grid, best, bi)
         bound = r * h - off  # any point in a ring beyond r is at least this far
         if bi >= 0 and bound > 0 and best < bound * bound:
             break
@@ -125,9 +165,10 @@ def nearest(px, py, tx, ty, xmin, ymin, h, nx, ny, start, items):
 
 
 @njit(cache=True)
-def nearest_from(px, py, j0, tx, ty, xmin, ymin, h, nx, ny, start, items):
+def nearest_from(px, py, j0, tx, ty, grid):
     """As :func:`nearest`, given a candidate ``j0``: the nearest point is no farther than ``j0``, so
     only the cells meeting the square around that disc are searched (exact, same tie rule)."""
+    xmin, ymin, h, nx, ny = grid[0], grid[1], grid[2], grid[3], grid[4]
     dx = tx[j0] - px
     dy = ty[j0] - py
     best = dx * dx + dy * dy
@@ -139,101 +180,118 @@ def nearest_from(px, py, j0, tx, ty, xmin, ymin, h, nx, ny, start, items):
     y1 = cell_index(py + r, ymin, h, ny)
     for ix in range(x0, x1 + 1):
         for iy in range(y0, y1 + 1):
-            best, bi = _scan_cell(px, py, ix, iy, ny, start, items, tx, ty, best, bi)
+            best, bi = _scan_cell(px, py, ix, iy, tx, ty, grid, best, bi)
     return math.sqrt(best), bi
 
 
 @njit(cache=True)
-def moved_pairs(sx, sy, tx, ty, idx, c, s, t_x, t_y, n):
-    """Source points moved by ``(R(c, s), t)`` and their distances to the matched target points."""
-    px = np.empty(n)
-    py = np.empty(n)
-    d = np.empty(n)
-    for i in range(n):
-        px[i] = c * sx[i] - s * sy[i] + t_x
-        py[i] = s * sx[i] + c * sy[i] + t_y
-        d[i] = math.sqrt((px[i] - tx[idx[i]]) ** 2 + (py[i] - ty[idx[i]]) ** 2)
-    return px, py, d
+def _barycentric(tri, s, px, py):
+    """Barycentric coordinates of (px, py) in simplex ``s`` (scipy's ``Delaunay.transform``)."""
+    t = tri[0]
+    dx, dy = px - t[s, 2, 0], py - t[s, 2, 1]
+    c0 = t[s, 0, 0] * dx + t[s, 0, 1] * dy
+    c1 = t[s, 1, 0] * dx + t[s, 1, 1] * dy
+    return c0, c1, 1.0 - c0 - c1
 
 
 @njit(cache=True)
-def rms_radius(sx, sy, n):
-    """RMS distance of the points from their centroid (1 for a degenerate cloud): the length that
-    makes rotation commensurate with translation in the degeneracy test."""
-    msx = msy = 0.0
-    for i in range(n):
-        msx += sx[i]
-        msy += sy[i]
-    msx /= n
-    msy /= n
-    lsc = 0.0
-    for i in range(n):
-        lsc += (sx[i] - msx) ** 2 + (sy[i] - msy) ** 2
-    lsc = math.sqrt(lsc / n)
-    if not lsc > 0:
-        lsc = 1.0
-    return lsc
+def locate(px, py, tri, s0):
+    """The Delaunay triangle holding (px, py), or -1 outside the hull: a visibility walk from ``s0``
+    (across the edge of the most negative coordinate; a hull edge there means outside), by brute
+    force if the walk does not end."""
+    nt = tri[0].shape[0]
+    s = s0 if 0 <= s0 < nt else 0
+    for _ in range(4 * nt + 4):
+        c0, c1, c2 = _barycentric(tri, s, px, py)
+        k, m = 0, c0
+        if c1 < m:
+            k, m = 1, c1
+        if c2 < m:
+            k, m = 2, c2
+        if m >= -_TRI_EPS:
+            return s
+        if not m == m:  # a degenerate simplex (NaN)
+            break
+        s = tri[1][s, k]
+        if s < 0:
+            return -1
+    for s in range(nt):
+        c0, c1, c2 = _barycentric(tri, s, px, py)
+        if c0 >= -_TRI_EPS and c1 >= -_TRI_EPS and c2 >= -_TRI_EPS:
+            return s
+    return -1
 
 
 @njit(cache=True)
-def weighted_align(px, py, tx, ty, idx, w, n, sw):
-    """Weighted SVD alignment of ``p`` onto ``t[idx]`` in closed form for 2D (eq. 15-20): the
-    rotation ``dth`` and translation ``(dtx, dty)`` with ``t ~ R(dth) p + d``; ``sw`` = sum of ``w``."""
-    mpx = mpy = mqx = mqy = 0.0
-    for i in range(n):
-        mpx += w[i] * px[i]
-        mpy += w[i] * py[i]
-        mqx += w[i] * tx[idx[i]]
-        mqy += w[i] * ty[idx[i]]
-    mpx /= sw
-    mpy /= sw
-    mqx /= sw
-    mqy /= sw
-    sxx = syy = sxy = syx = 0.0
-    for i in range(n):
-        ax, ay = px[i] - mpx, py[i] - mpy
-        bx2, by2 = tx[idx[i]] - mqx, ty[idx[i]] - mqy
-        sxx += w[i] * ax * bx2
-        syy += w[i] * ay * by2
-        sxy += w[i] * ax * by2
-        syx += w[i] * ay * bx2
-    dth = math.atan2(sxy - syx, sxx + syy)
-    cd, sd = math.cos(dth), math.sin(dth)
-    return dth, mqx - (cd * mpx - sd * mpy), mqy - (sd * mpx + cd * mpy)
-
-
-@njit(cache=True)
-def loop_start(sx, sy, tx, ty, h):
-    """What both loops set up: the target's grid (:func:`build_grid`), the work arrays ``d``, ``idx``,
-    ``w``, ``px``, ``py`` and the source's largest range (a step's bound on a point's motion)."""
-    n = sx.shape[0]
-    xmin, ymin, h, nx, ny, start, items = build_grid(tx, ty, h)
-    src_r = 0.0
-    for i in range(n):
-        src_r = max(src_r, math.sqrt(sx[i] * sx[i] + sy[i] * sy[i]))
-    return (xmin, ymin, h, nx, ny, start, items, np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n),
-            np.empty(n), src_r)
-
-
-@njit(cache=True)
-def move_and_match(sx, sy, c, s, t_x, t_y, first, tx, ty, xmin, ymin, h, nx, ny, start, items, px, py, d, idx):
-    """Source points moved by ``(R(c, s), t)`` into ``px``, ``py`` and their nearest target points
-    into ``d``, ``idx``: a full search on the ``first`` iteration, else bounded by the last match
-    (the points moved little)."""
+def move_and_match(src, tgt, grid, c, s, t_x, t_y, first, pairs, tri, sim):
+    """Source points moved by ``(R(c, s), t)`` into ``pairs``' ``px``, ``py`` and their matches into ``d``,
+    ``idx``: the nearest target point (a full search on the ``first`` iteration, else bounded by the
+    last match), or with a triangulation (the paper's matching) the nearest apex of the target
+    triangle holding the point (the nearest point outside the hull; ``sim``: each point's last triangle)."""
+    sx, sy, tx, ty = src[0], src[1], tgt[0], tgt[1]
+    px, py, d, idx = pairs[0], pairs[1], pairs[2], pairs[3]
+    simp = tri[2]
     for i in range(sx.shape[0]):
         px[i] = c * sx[i] - s * sy[i] + t_x
         py[i] = s * sx[i] + c * sy[i] + t_y
         if first:
-            d[i], idx[i] = nearest(px[i], py[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+            d[i], idx[i] = nearest(px[i], py[i], tx, ty, grid)
         else:
-            d[i], idx[i] = nearest_from(px[i], py[i], idx[i], tx, ty, xmin, ymin, h, nx, ny, start, items)
+            d[i], idx[i] = nearest_from(px[i], py[i], idx[i], tx, ty, grid)
+        if simp.shape[0] > 0:
+            k = locate(px[i], py[i], tri, sim[i])
+            if k >= 0:
+                sim[i] = k
+                best = np.inf
+                for a in range(3):
+                    v = simp[k, a]
+                    dd = math.sqrt((tx[v] - px[i]) ** 2 + (ty[v] - py[i]) ** 2)
+                    if dd < best:
+                        best = dd
+                        idx[i] = v
+                d[i] = best
+
+
+# ----------------------------------------------------------------------------- the scans' terms
 
 
 @njit(cache=True)
-def step_pose(th, t_x, t_y, dth, dtx, dty):
-    """Eq. 21-22: the pose after the left increment ``(dth, dtx, dty)``."""
-    cd, sd = math.cos(dth), math.sin(dth)
-    return th + dth, cd * t_x - sd * t_y + dtx, sd * t_x + cd * t_y + dty
+def cloud_terms(x, y, sig, prm):
+    """The cloud ``(x, y, ux, uy, a2, b2, m2)``: unit radial vector, squared semi-axes ``a^2, b^2``
+    (eq. 6-7; with ``sig`` (one per point, else empty), the caller's isotropic 1-sigma, a = b) and the
+    squared mean error ``M^2`` (eq. 5)."""
+    n = x.shape[0]
+    use_sig = sig.shape[0] > 0
+    ux = np.empty(n)
+    uy = np.empty(n)
+    a2 = np.empty(n)
+    b2 = np.empty(n)
+    m2 = np.empty(n)
+    for i in range(n):
+        r = math.hypot(x[i], y[i])
+        rs = r if r > 0 else 1.0
+        ux[i] = x[i] / rs
+        uy[i] = y[i] / rs
+        if use_sig:
+            a2[i] = sig[i] ** 2
+            b2[i] = a2[i]
+        else:
+            a2[i] = (prm.sigma_alpha * r) ** 2
+            b2[i] = (prm.sigma_r_rel * r) ** 2
+        m2[i] = a2[i] + b2[i]
+    return x, y, ux, uy, a2, b2, m2
+
+
+@njit(cache=True)
+def _wrap(k, n):
+    """``k % n`` (no division for ``-n <= k < 2 n``, the usual case)."""
+    if 0 <= k < n:
+        return k
+    if -n <= k < 0:
+        return k + n
+    if n <= k < 2 * n:
+        return k - n
+    return k % n
 
 
 @njit(cache=True)
@@ -268,11 +326,12 @@ def resolution(tx, ty, half):
 
 
 @njit(cache=True)
-def target_resolution(tx, ty, half, min_res, tm2):
+def target_resolution(tgt, half, min_res):
     """:func:`resolution` of the target, the distance a correct pair can have at each target point
-    (:func:`graphnav.scan.weighted_icp.pair_scale`: ``sqrt(res^2 + 2 M^2)`` floored at ``min_res``) and its
-    median ``D``."""
-    res = resolution(tx, ty, half)
+    (``sqrt(res^2 + 2 M^2)`` floored at ``min_res``: the unit of :func:`zhang_gate`'s distances) and
+    its median ``D``, the unit of the tolerances."""
+    res = resolution(tgt[0], tgt[1], half)
+    tm2 = tgt[6]
     scale = np.empty(res.shape[0])
     for i in range(res.shape[0]):
         scale[i] = max(math.sqrt(res[i] ** 2 + 2.0 * tm2[i]), min_res)
@@ -280,125 +339,32 @@ def target_resolution(tx, ty, half, min_res, tm2):
 
 
 @njit(cache=True)
-def zhang_gate(d, idx, res, n, dmax):
-    """:func:`graphnav.scan.weighted_icp.zhang_gate` on the distances ``d / res[idx]`` (``res``: pair scales)."""
-    u = np.empty(n)
-    m = 0
-    for i in range(n):
-        ui = d[i] / res[idx[i]]
-        if ui <= dmax:
-            u[m] = ui
-            m += 1
-    if m < 3:
-        return dmax
-    sel = u[:m]
-    mu = np.mean(sel)
-    sd = math.sqrt(np.mean((sel - mu) ** 2))
-    if mu < 1.0:
-        return mu + 3.0 * sd
-    if mu < 3.0:
-        return mu + 2.0 * sd
-    if mu < 6.0:
-        return mu + sd
-    return np.median(sel)
-
-
-@njit(cache=True)
-def p2p_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c,
-                wpow, max_corr, w):
-    """Pair weights of :func:`graphnav.scan.weighted_icp._weights` for K/H/HM/HD into ``w`` (eq. 11-13, Huber)."""
-    n = px.shape[0]
-    khu = huber_c * np.median(d)
-    anyw = False
-    for i in range(n):
-        j = idx[i]
-        if variant == 2:
-            wi = (sm2[i] + tm2[j]) ** (-wpow)
-        elif variant == 3:  # eq. 9, 11, 12 (inline: this is the hot loop)
-            if d[i] > 0:
-                bx = (tx[j] - px[i]) / d[i]
-                by = (ty[j] - py[i]) / d[i]
-            else:
-                bx, by = 1.0, 0.0
-            urx = c * sux[i] - s * suy[i]
-            ury = s * sux[i] + c * suy[i]
-            cs = urx * bx + ury * by
-            ct = tux[j] * bx + tuy[j] * by
-            g = sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)
-            wi = g ** (-wpow)
-        else:
-            wi = 1.0
-        if variant != 0 and khu > 0 and d[i] > khu:
-            wi *= khu / d[i]
-        if d[i] > max_corr:
-            wi = 0.0
-        w[i] = wi
-        if wi > 0:
-            anyw = True
-    if not anyw:
-        for i in range(n):
-            w[i] = 1.0
-
-
-@njit(cache=True)
-def p2p_loop(sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow,
-             max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, res, big_d, gate0):
-    """Algorithm 1 for variant 0=K, 1=H, 2=HM, 3=HD (tolerances in units of ``big_d``; Zhang's gate
-    tracked from ``gate0`` for the inlier test, not applied to the weights). Returns (theta, tx, ty,
-    idx, iterations, converged, gate)."""
-    n = sx.shape[0]
-    xmin, ymin, h, nx, ny, start, items, d, idx, w, px, py, src_r = loop_start(sx, sy, tx, ty, h)
-    t_x, t_y = t0x, t0y
-    old_res = -1.0
-    converged = False
-    it = 0
-    dmax = gate0
-    moved = np.inf
-    for it in range(1, max_iter + 1):  # noqa: B007
-        c, s = math.cos(th), math.sin(th)
-        move_and_match(sx, sy, c, s, t_x, t_y, it == 1, tx, ty, xmin, ymin, h, nx, ny, start, items, px, py, d, idx)
-        dmax = zhang_gate(d, idx, res, n, dmax)
-        p2p_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant,
-                    huber_c, wpow, max_corr, w)
-        sw = 0.0
-        for i in range(n):
-            sw += w[i]
-        dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)  # eq. 15-20
-        th, t_x, t_y = step_pose(th, t_x, t_y, dth, dtx, dty)
-        new_res, moved = residual_and_move(d, n, dth, dtx, dty, src_r)
-        if old_res >= 0 and abs(new_res - old_res) < tol * big_d and moved < tol_step * big_d:
-            converged = True
-            break
-        old_res = new_res
-    return th, t_x, t_y, idx, it, converged, dmax, moved, src_r
-
-
-@njit(cache=True)
-def residual_and_move(d, n, dth, dtx, dty, src_r):
-    """The convergence test's inputs: mean pair distance and how far the step moved the farthest
-    source point (rotation at radius ``src_r`` plus translation)."""
-    res = 0.0
-    for i in range(n):
-        res += d[i]
-    return res / n, abs(dth) * src_r + math.sqrt(dtx * dtx + dty * dty)
-
-
-@njit(cache=True)
-def _wrap(k, n):
-    """``k % n`` (no division for ``-n <= k < 2 n``, the usual case)."""
-    if 0 <= k < n:
-        return k
-    if -n <= k < 0:
-        return k + n
-    if n <= k < 2 * n:
-        return k - n
-    return k % n
+def _pca_line(xs, ys, pick, m):
+    """Normal, flatness ((l1 - l2) / (l1 + l2), 0..1) of points ``pick[:m]`` by PCA."""
+    mx = my = 0.0
+    for o in range(m):
+        mx += xs[pick[o]]
+        my += ys[pick[o]]
+    mx /= m
+    my /= m
+    cxx = cyy = cxy = 0.0
+    for o in range(m):
+        dx, dy = xs[pick[o]] - mx, ys[pick[o]] - my
+        cxx += dx * dx
+        cyy += dy * dy
+        cxy += dx * dy
+    phi = 0.5 * math.atan2(2 * cxy, cxx - cyy)  # direction of the line (major axis)
+    tr = cxx + cyy
+    disc = math.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy)
+    return -math.sin(phi), math.cos(phi), (2.0 * disc / tr if tr > 0 else 0.0)
 
 
 @njit(cache=True)
 def scan_order_normals(tx, ty, half, max_gap, res):
-    """As :func:`graphnav.scan.weighted_icp.scan_order_normals` (PCA of beam-order windows; a gap wider than
-    ``max_gap`` resolutions ``res`` (:func:`resolution`), the smaller of the two points', ends a surface)."""
+    """Normal and flatness of each target point from its ``2 half + 1`` neighbours in beam order (sorted
+    by bearing), by PCA; a window with a gap between beam neighbours wider than ``max_gap``
+    resolutions ``res`` (the smaller of the two points') spans two surfaces: flatness 0. (A surface
+    seen at incidence ``i`` has gaps of ``r da / cos i``: 8 resolutions is ``i`` > 83 deg.)"""
     n = tx.shape[0]
     order = np.argsort(np.arctan2(ty, tx), kind="mergesort")
     xs = tx[order]
@@ -413,200 +379,24 @@ def scan_order_normals(tx, ty, half, max_gap, res):
     ny_ = np.empty(n)
     fl = np.empty(n)
     m = 2 * half + 1
+    pick = np.empty(m, np.int64)
     for i in range(n):
-        mx = my = 0.0
         wide = False
         for o in range(-half, half + 1):
             k = _wrap(i + o, n)
-            mx += xs[k]
-            my += ys[k]
+            pick[o + half] = k
             if o < half and gap[k] > lim[k]:
                 wide = True
-        mx /= m
-        my /= m
-        cxx = cyy = cxy = 0.0
-        for o in range(-half, half + 1):
-            k = _wrap(i + o, n)
-            dx, dy = xs[k] - mx, ys[k] - my
-            cxx += dx * dx
-            cyy += dy * dy
-            cxy += dx * dy
-        phi = 0.5 * math.atan2(2 * cxy, cxx - cyy)
         j = order[i]
-        nx_[j] = -math.sin(phi)
-        ny_[j] = math.cos(phi)
-        tr = cxx + cyy
-        disc = math.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy)
-        fl[j] = 0.0 if (wide or not tr > 0) else 2.0 * disc / tr
+        nx_[j], ny_[j], f = _pca_line(xs, ys, pick, m)
+        fl[j] = 0.0 if wide else f
     return nx_, ny_, fl
 
 
 @njit(cache=True)
-def pair_cov(i, j, c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2):
-    """Eq. 8 covariance ``(sxx, sxy, syy)`` of pair ``(i, j)``: source point ``i`` rotated by
-    ``R(c, s)`` plus target point ``j`` (:func:`graphnav.scan.weighted_icp._pair_cov`)."""
-    ux = c * sux[i] - s * suy[i]
-    uy = s * sux[i] + c * suy[i]
-    dsv = sb2[i] - sa2[i]
-    dtv = tb2[j] - ta2[j]
-    a2 = sa2[i] + ta2[j]
-    sxx = a2 + dsv * ux * ux + dtv * tux[j] * tux[j]
-    syy = a2 + dsv * uy * uy + dtv * tuy[j] * tuy[j]
-    sxy = dsv * ux * uy + dtv * tux[j] * tuy[j]
-    return sxx, sxy, syy
-
-
-@njit(cache=True)
-def final_pairs(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, th, t_x, t_y, idx, model):
-    """The pairs at the solution for :func:`graphnav.scan.weighted_icp._report`: moved source points and the
-    eq. 8 pair covariance entries (``model`` False: identity, the unweighted variants)."""
-    n = sx.shape[0]
-    c, s = math.cos(th), math.sin(th)
-    px, py, d = moved_pairs(sx, sy, tx, ty, idx, c, s, t_x, t_y, n)
-    sxx = np.ones(n)
-    sxy = np.zeros(n)
-    syy = np.ones(n)
-    if model:
-        for i in range(n):
-            sxx[i], sxy[i], syy[i] = pair_cov(i, idx[i], c, s, sux, suy, sa2, sb2, tux, tuy, ta2, tb2)
-    return c, s, px, py, d, sxx, sxy, syy
-
-
-# ----------------------------------------------------------------------------- HDL (point-to-line)
-
-
-@njit(cache=True)
-def hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
-                huber_c, wpow, max_corr, flat_pow, res, dmax, p2p, w):
-    """Pair weights of :func:`graphnav.scan.weighted_icp._weights` for HDL into ``w`` (``p2p``: the HD weights
-    of the point-to-point warm-up): directional error along the target normal (eq. 9, 11), Huber
-    on the point-to-line distance, x flatness^power, 0 outside Zhang's gate ``d / res[idx] <= dmax``
-    (``res``: the target's pair scales, :func:`target_resolution`)."""
-    n = px.shape[0]
-    if p2p:
-        khu = huber_c * np.median(d)
-        for i in range(n):
-            j = idx[i]  # HD weight (eq. 9, 11, 12), inline as in p2p_weights
-            if d[i] > 0:
-                bx = (tx[j] - px[i]) / d[i]
-                by = (ty[j] - py[i]) / d[i]
-            else:
-                bx, by = 1.0, 0.0
-            cs = (c * sux[i] - s * suy[i]) * bx + (s * sux[i] + c * suy[i]) * by
-            ct = tux[j] * bx + tuy[j] * by
-            wi = (sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)) ** (-wpow)
-            if khu > 0 and d[i] > khu:
-                wi *= khu / d[i]
-            w[i] = wi if d[i] / res[idx[i]] <= dmax else 0.0
-    else:
-        dist = np.empty(n)
-        for i in range(n):
-            j = idx[i]
-            dist[i] = abs((px[i] - tx[j]) * nrx[j] + (py[i] - ty[j]) * nry[j])
-        khu = huber_c * np.median(dist)
-        for i in range(n):
-            j = idx[i]
-            bx, by = nrx[j], nry[j]
-            cs = (c * sux[i] - s * suy[i]) * bx + (s * sux[i] + c * suy[i]) * by
-            ct = tux[j] * bx + tuy[j] * by
-            g = sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)
-            wi = g ** (-wpow)
-            if khu > 0 and dist[i] > khu:
-                wi *= khu / dist[i]
-            wi = wi * fl[j] ** flat_pow
-            w[i] = wi if d[i] / res[j] <= dmax else 0.0
-    anyw = False
-    for i in range(n):
-        if d[i] > max_corr:
-            w[i] = 0.0
-        if w[i] > 0:
-            anyw = True
-    if not anyw:
-        for i in range(n):
-            w[i] = 1.0
-
-
-@njit(cache=True)
-def _solve3(h, b):
-    """``-(h + 1e-12 I)^-1 b`` as :func:`graphnav.scan.weighted_icp._p2l_step` (least squares when singular)."""
-    if not (np.all(np.isfinite(h)) and np.all(np.isfinite(b))):
-        return np.zeros(3)  # no step (numba's solvers raise on non-finite input, and a raise in the
-        # except branch below is a numba internal error, not an exception)
-    a = h.copy()
-    for k in range(3):
-        a[k, k] += 1e-12
-    try:
-        return -np.linalg.solve(a, b)
-    except Exception:  # noqa: BLE001
-        return -np.linalg.lstsq(h, b)[0]
-
-
-@njit(cache=True)
-def hdl_loop(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr,
-             tol, tol_step, max_iter, th, t0x, t0y, h, flat_pow, warmup, res, big_d, gate0):
-    """Algorithm 1 for HDL: HD point-to-point steps (eq. 15-20) while a step moves a point more than
-    ``warmup`` x ``big_d``, then Gauss-Newton steps of the point-to-line cost, both within Zhang's
-    gate (:func:`zhang_gate`, from ``gate0``). Returns (theta, tx, ty, idx, iterations, converged,
-    gate), as :func:`p2p_loop`."""
-    n = sx.shape[0]
-    xmin, ymin, h, nx, ny, start, items, d, idx, w, px, py, src_r = loop_start(sx, sy, tx, ty, h)
-    t_x, t_y = t0x, t0y
-    old_res = -1.0
-    converged = False
-    warm = warmup > 0
-    it = 0
-    dmax = gate0
-    moved = np.inf
-    hm = np.empty((3, 3))
-    bv = np.empty(3)
-    for it in range(1, max_iter + 1):  # noqa: B007
-        c, s = math.cos(th), math.sin(th)
-        move_and_match(sx, sy, c, s, t_x, t_y, it == 1, tx, ty, xmin, ymin, h, nx, ny, start, items, px, py, d, idx)
-        dmax = zhang_gate(d, idx, res, n, dmax)
-        hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl,
-                    huber_c, wpow, max_corr, flat_pow, res, dmax, warm, w)
-        if warm:  # eq. 15-20, 2D closed form
-            sw = 0.0
-            for i in range(n):
-                sw += w[i]
-            dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)
-        else:  # one Gauss-Newton step of sum w (n.(p' - q))^2 (graphnav.scan.weighted_icp._p2l_step)
-            hm[:] = 0.0
-            bv[:] = 0.0
-            for i in range(n):
-                j = idx[i]
-                a0, a1 = nrx[j], nry[j]
-                a2 = px[i] * nry[j] - py[i] * nrx[j]
-                rn = (px[i] - tx[j]) * a0 + (py[i] - ty[j]) * a1
-                wi = w[i]
-                hm[0, 0] += wi * a0 * a0
-                hm[0, 1] += wi * a0 * a1
-                hm[0, 2] += wi * a0 * a2
-                hm[1, 1] += wi * a1 * a1
-                hm[1, 2] += wi * a1 * a2
-                hm[2, 2] += wi * a2 * a2
-                bv[0] += wi * a0 * rn
-                bv[1] += wi * a1 * rn
-                bv[2] += wi * a2 * rn
-            hm[1, 0], hm[2, 0], hm[2, 1] = hm[0, 1], hm[0, 2], hm[1, 2]
-            x = _solve3(hm, bv)
-            dth, dtx, dty = x[2], x[0], x[1]
-        th, t_x, t_y = step_pose(th, t_x, t_y, dth, dtx, dty)
-        new_res, moved = residual_and_move(d, n, dth, dtx, dty, src_r)
-        if warm:
-            warm = moved > warmup * big_d
-            old_res = -1.0
-            continue
-        if old_res >= 0 and abs(new_res - old_res) < tol * big_d and moved < tol_step * big_d:
-            converged = True
-            break
-        old_res = new_res
-    return th, t_x, t_y, idx, it, converged, dmax, moved, src_r
-
-
-@njit(cache=True)
-def _scan_cell_k(px, py, ix, iy, ny, start, items, tx, ty, bd, bi, cnt):
+def _scan_cell_k(px, py, ix, iy, tx, ty, grid, bd, bi, cnt):
     """Insert the points of cell (ix, iy) into the sorted k-best lists ``bd``/``bi`` (``cnt`` filled)."""
+    ny, start, items = grid[4], grid[5], grid[6]
     k = bd.shape[0]
     c = ix * ny + iy
     for m in range(start[c], start[c + 1]):
@@ -630,223 +420,464 @@ def _scan_cell_k(px, py, ix, iy, ny, start, items, tx, ty, bd, bi, cnt):
 
 
 @njit(cache=True)
-def knn_line_normals(tx, ty, k, h):
-    """As :func:`graphnav.scan.weighted_icp.line_normals`: unit normal and flatness of the line through each
-    target point's ``k`` nearest neighbours (PCA; exact k nearest by rings of grid cells)."""
+def k_nearest(px, py, tx, ty, grid, bd, bi):
+    """The ``len(bd)`` nearest target points of (px, py), a target point, into ``bi`` (squared
+    distances ``bd``; exact, by rings of grid cells; ties by index)."""
+    xmin, ymin, h, nx, ny = grid[0], grid[1], grid[2], grid[3], grid[4]
+    k = bd.shape[0]
+    cx = cell_index(px, xmin, h, nx)
+    cy = cell_index(py, ymin, h, ny)
+    bx0, by0 = xmin + cx * h, ymin + cy * h
+    edge = max(min(px - bx0, bx0 + h - px, py - by0, by0 + h - py), 0.0)  # margin to the home cell's edge
+    cnt = 0
+    for r in range(max(nx, ny) + 1):
+        if r == 0:
+            cnt = _scan_cell_k(px, py, cx, cy, tx, ty, grid, bd, bi, cnt)
+        else:
+            x0, x1 = cx - r, cx + r
+            y0, y1 = cy - r, cy + r
+            for ix in range(max(x0, 0), min(x1, nx - 1) + 1):
+                if y0 >= 0:
+                    cnt = _scan_cell_k(px, py, ix, y0, tx, ty, grid, bd, bi, cnt)
+                if y1 <= ny - 1:
+                    cnt = _scan_cell_k(px, py, ix, y1, tx, ty, grid, bd, bi, cnt)
+            for iy in range(max(y0 + 1, 0), min(y1 - 1, ny - 1) + 1):
+                if x0 >= 0:
+                    cnt = _scan_cell_k(px, py, x0, iy, tx, ty, grid, bd, bi, cnt)
+                if x1 <= nx - 1:
+                    cnt = _scan_cell_k(px, py, x1, iy, tx, ty, grid, bd, bi, cnt)
+        bound = r * h + edge  # the query lies in its home cell: a point beyond ring r is at least this far
+        if cnt == k and bd[k - 1] < bound * bound:
+            break
+
+
+@njit(cache=True)
+def knn_line_normals(tx, ty, k, grid):
+    """Unit normal and flatness of the line through each target point's ``k`` nearest neighbours (PCA)."""
     n = tx.shape[0]
     k = min(k, n)
-    xmin, ymin, h, nx, ny, start, items = build_grid(tx, ty, h)
     bd = np.empty(k)
     bi = np.empty(k, np.int64)
     nrx = np.empty(n)
     nry = np.empty(n)
     fl = np.empty(n)
-    rmax = max(nx, ny)
     for i in range(n):
-        px, py = tx[i], ty[i]
-        cx = cell_index(px, xmin, h, nx)
-        cy = cell_index(py, ymin, h, ny)
-        bx0, by0 = xmin + cx * h, ymin + cy * h
-        edge = max(min(px - bx0, bx0 + h - px, py - by0, by0 + h - py), 0.0)  # margin to the home cell's edge
-        cnt = 0
-        for r in range(rmax + 1):
-            if r == 0:
-                cnt = _scan_cell_k(px, py, cx, cy, ny, start, items, tx, ty, bd, bi, cnt)
-            else:
-                x0, x1 = cx - r, cx + r
-                y0, y1 = cy - r, cy + r
-                for ix in range(max(x0, 0), min(x1, nx - 1) + 1):
-                    if y0 >= 0:
-                        cnt = _scan_cell_k(px, py, ix, y0, ny, start, items, tx, ty, bd, bi, cnt)
-                    if y1 <= ny - 1:
-                        cnt = _scan_cell_k(px, py, ix, y1, ny, start, items, tx, ty, bd, bi, cnt)
-                for iy in range(max(y0 + 1, 0), min(y1 - 1, ny - 1) + 1):
-                    if x0 >= 0:
-                        cnt = _scan_cell_k(px, py, x0, iy, ny, start, items, tx, ty, bd, bi, cnt)
-                    if x1 <= nx - 1:
-                        cnt = _scan_cell_k(px, py, x1, iy, ny, start, items, tx, ty, bd, bi, cnt)
-            bound = r * h + edge  # the query lies in its home cell: a point beyond ring r is at least this far
-            if cnt == k and bd[k - 1] < bound * bound:
-                break
-        mx = my = 0.0
-        for m in range(k):
-            mx += tx[bi[m]]
-            my += ty[bi[m]]
-        mx /= k
-        my /= k
-        cxx = cyy = cxy = 0.0
-        for m in range(k):
-            dx, dy = tx[bi[m]] - mx, ty[bi[m]] - my
-            cxx += dx * dx
-            cyy += dy * dy
-            cxy += dx * dy
-        phi = 0.5 * math.atan2(2 * cxy, cxx - cyy)
-        nrx[i] = -math.sin(phi)
-        nry[i] = math.cos(phi)
-        tr = cxx + cyy
-        disc = math.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy)
-        fl[i] = 2.0 * disc / tr if tr > 0 else 0.0
+        k_nearest(tx[i], ty[i], tx, ty, grid, bd, bi)
+        nrx[i], nry[i], fl[i] = _pca_line(tx, ty, bi, k)
     return nrx, nry, fl
 
 
-# ----------------------------------------------------------------------------- one whole match
+# ----------------------------------------------------------------------------- weights and steps
 
 
 @njit(cache=True)
-def cloud_terms(x, y, sig, use_sig, sigma_alpha, sigma_r_rel):
-    """As :class:`graphnav.scan.weighted_icp._Cloud`: unit radial vector, squared semi-axes ``a^2, b^2`` (eq. 6-7;
-    ``use_sig``: the caller's isotropic 1-sigma per point, a = b) and the mean error ``M^2`` (eq. 5)."""
-    n = x.shape[0]
-    ux = np.empty(n)
-    uy = np.empty(n)
-    a2 = np.empty(n)
-    b2 = np.empty(n)
-    m2 = np.empty(n)
-    for i in range(n):
-        r = math.hypot(x[i], y[i])
-        rs = r if r > 0 else 1.0
-        ux[i] = x[i] / rs
-        uy[i] = y[i] / rs
-        if use_sig:
-            a2[i] = sig[i] ** 2
-            b2[i] = a2[i]
+def _dir_weight(i, j, c, s, bx, by, src, tgt, wpow):
+    """Eq. 9, 11, 12: ``(sigma_beta_i^2 + sigma_beta_j^2)^-wpow`` along unit ``(bx, by)``, the source's
+    radial direction rotated by ``R(c, s)`` into the target frame."""
+    sux, suy, sa2, sb2 = src[2], src[3], src[4], src[5]
+    tux, tuy, ta2, tb2 = tgt[2], tgt[3], tgt[4], tgt[5]
+    urx = c * sux[i] - s * suy[i]
+    ury = s * sux[i] + c * suy[i]
+    cs = urx * bx + ury * by
+    ct = tux[j] * bx + tuy[j] * by
+    return (sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)) ** (-wpow)
+
+
+@njit(cache=True)
+def p2p_weights(pairs, c, s, src, tgt, prm, gate, dmax):
+    """Pair weights of Algorithm 1 into ``pairs``' ``w``: K 1, H 1, HM ``(M_i^2 + M_j^2)^-wpow`` (eq. 11,
+    13), HD the directional weight along the pair (eq. 9, 11, 12); x Huber (``kHu = huber_c`` x the
+    median distance); 0 beyond ``max_corr``; with ``gate`` (pair scales), 0 outside Zhang's gate
+    ``d / gate[idx] <= dmax`` (HDL's warm-up steps)."""
+    px, py, d, idx, w = pairs
+    tx, ty, sm2, tm2 = tgt[0], tgt[1], src[6], tgt[6]
+    variant = 3 if prm.variant == HDL else prm.variant
+    khu = prm.huber_c * np.median(d)
+    for i in range(px.shape[0]):
+        j = idx[i]
+        if variant == 2:
+            wi = (sm2[i] + tm2[j]) ** (-prm.wpow)
+        elif variant == 3:
+            if d[i] > 0:
+                wi = _dir_weight(i, j, c, s, (tx[j] - px[i]) / d[i], (ty[j] - py[i]) / d[i], src, tgt, prm.wpow)
+            else:
+                wi = _dir_weight(i, j, c, s, 1.0, 0.0, src, tgt, prm.wpow)
         else:
-            a2[i] = (sigma_alpha * r) ** 2
-            b2[i] = (sigma_r_rel * r) ** 2
-        m2[i] = a2[i] + b2[i]
-    return ux, uy, a2, b2, m2
+            wi = 1.0
+        if variant != 0 and khu > 0 and d[i] > khu:
+            wi *= khu / d[i]
+        if gate.shape[0] > 0 and not d[i] / gate[j] <= dmax:
+            wi = 0.0
+        w[i] = wi
+    _gate_fixed(pairs, prm.max_corr)
 
 
 @njit(cache=True)
-def p2p_match(sx, sy, ssig, use_ssig, tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel, variant, huber_c, wpow,
-              max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, half, max_gap, gate0, min_res):
-    """One K/H/HM/HD match (:func:`p2p_loop`), then its final pairs for the shared covariance and
-    report (:func:`graphnav.scan.weighted_icp._report`): ``(theta, tx, ty, iterations, converged, idx, px,
-    py, w, sxx, sxy, syy, nrx, nry, flat, res, gate, radius, last_moved, src_range)``, the normals
-    and flatness (beam order, :func:`scan_order_normals`) and resolution per target point, the
-    last step's largest point displacement and the source's largest range."""
-    sux, suy, sa2, sb2, sm2 = cloud_terms(sx, sy, ssig, use_ssig, sigma_alpha, sigma_r_rel)
-    tux, tuy, ta2, tb2, tm2 = cloud_terms(tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel)
-    res, scale, big_d = target_resolution(tx, ty, half, min_res, tm2)
-    nrx, nry, fl = scan_order_normals(tx, ty, half, max_gap, res)
-    th, t_x, t_y, idx, it, converged, dmax, moved, src_r = p2p_loop(
-        sx, sy, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c, wpow, max_corr, tol,
-        tol_step, max_iter, th, t0x, t0y, h, scale, big_d, gate0)
-    c, s, px, py, d, sxx, sxy, syy = final_pairs(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, th, t_x,
-                                                 t_y, idx, variant >= 2)
-    w = np.empty(sx.shape[0])
-    p2p_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, sm2, tx, ty, tux, tuy, ta2, tb2, tm2, variant, huber_c,
-                wpow, max_corr, w)
-    return (th, t_x, t_y, it, converged, idx, px, py, w, sxx, sxy, syy, nrx, nry, fl, res, scale, dmax,
-            rms_radius(sx, sy, sx.shape[0]), moved, src_r)
+def hdl_weights(pairs, c, s, src, tgt, lines, prm, gate, dmax):
+    """HDL's pair weights into ``w``: the directional weight along the target's normal (eq. 9, 11),
+    Huber on the point-to-line distance, x flatness^flat_pow, 0 outside Zhang's gate ``d / gate[idx] <=
+    dmax`` and beyond ``max_corr``."""
+    px, py, d, idx, w = pairs
+    tx, ty, nrx, nry, fl = tgt[0], tgt[1], lines[0], lines[1], lines[2]
+    n = px.shape[0]
+    dist = np.empty(n)
+    for i in range(n):
+        j = idx[i]
+        dist[i] = abs((px[i] - tx[j]) * nrx[j] + (py[i] - ty[j]) * nry[j])
+    khu = prm.huber_c * np.median(dist)
+    for i in range(n):
+        j = idx[i]
+        wi = _dir_weight(i, j, c, s, nrx[j], nry[j], src, tgt, prm.wpow)
+        if khu > 0 and dist[i] > khu:
+            wi *= khu / dist[i]
+        wi = wi * fl[j] ** prm.flat_pow
+        w[i] = wi if d[i] / gate[j] <= dmax else 0.0
+    _gate_fixed(pairs, prm.max_corr)
 
 
 @njit(cache=True)
-def hdl_match(sx, sy, ssig, use_ssig, tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel, knn, normal_k, max_gap,
-              huber_c, wpow, max_corr, tol, tol_step, max_iter, th, t0x, t0y, h, flat_pow, warmup, gate0, min_res):
-    """One HDL match: the target's lines (``knn``: :func:`knn_line_normals`, else beam order,
-    :func:`scan_order_normals`), :func:`hdl_loop`, the final pairs; returns as :func:`p2p_match`."""
-    sux, suy, sa2, sb2, _ = cloud_terms(sx, sy, ssig, use_ssig, sigma_alpha, sigma_r_rel)
-    tux, tuy, ta2, tb2, tm2 = cloud_terms(tx, ty, tsig, use_tsig, sigma_alpha, sigma_r_rel)
-    res, scale, big_d = target_resolution(tx, ty, normal_k // 2, min_res, tm2)
-    if knn:
-        nrx, nry, fl = knn_line_normals(tx, ty, normal_k, h)
+def _gate_fixed(pairs, max_corr):
+    """Weight 0 beyond ``max_corr``; all weights 1 when none is left."""
+    d, w = pairs[2], pairs[4]
+    anyw = False
+    for i in range(w.shape[0]):
+        if d[i] > max_corr:
+            w[i] = 0.0
+        if w[i] > 0:
+            anyw = True
+    if not anyw:
+        for i in range(w.shape[0]):
+            w[i] = 1.0
+
+
+@njit(cache=True)
+def zhang_gate(d, idx, scale, n, dmax):
+    """Zhang's adaptive distance gate (Z. Zhang, *Iterative point matching for registration of free-form
+    curves and surfaces*, IJCV 13(2), 1994, sect. 4.3; the weighted-ICP paper's ref. [14]) on the
+    distances ``u = d / scale[idx]`` in units of the distance a correct pair can have there: from the
+    mean ``mu`` and standard deviation ``sd`` of those within the previous gate ``dmax``, the next gate
+    is ``mu + 3 sd`` when ``mu < 1`` (registered), ``mu + 2 sd`` when ``mu < 3``, ``mu + sd`` when
+    ``mu < 6``, else the median (Zhang: the valley of the histogram). Fewer than 3 pairs: unchanged."""
+    u = np.empty(n)
+    m = 0
+    for i in range(n):
+        ui = d[i] / scale[idx[i]]
+        if ui <= dmax:
+            u[m] = ui
+            m += 1
+    if m < 3:
+        return dmax
+    sel = u[:m]
+    mu = np.mean(sel)
+    sd = math.sqrt(np.mean((sel - mu) ** 2))
+    if mu < 1.0:
+        return mu + 3.0 * sd
+    if mu < 3.0:
+        return mu + 2.0 * sd
+    if mu < 6.0:
+        return mu + sd
+    return np.median(sel)
+
+
+@njit(cache=True)
+def weighted_align(px, py, tx, ty, idx, w, n, sw):
+    """Weighted SVD alignment of ``p`` onto ``t[idx]`` in closed form for 2D (eq. 15-20): the
+    rotation ``dth`` and translation ``(dtx, dty)`` with ``t ~ R(dth) p + d``; ``sw`` = sum of ``w``."""
+    mpx = mpy = mqx = mqy = 0.0
+    for i in range(n):
+        mpx += w[i] * px[i]
+        mpy += w[i] * py[i]
+        mqx += w[i] * tx[idx[i]]
+        mqy += w[i] * ty[idx[i]]
+    mpx /= sw
+    mpy /= sw
+    mqx /= sw
+    mqy /= sw
+    sxx = syy = sxy = syx = 0.0
+    for i in range(n):
+        ax, ay = px[i] - mpx, py[i] - mpy
+        bx2, by2 = tx[idx[i]] - mqx, ty[idx[i]] - mqy
+        sxx += w[i] * ax * bx2
+        syy += w[i] * ay * by2
+        sxy += w[i] * ax * by2
+        syx += w[i] * ay * bx2
+    dth = math.atan2(sxy - syx, sxx + syy)
+    cd, sd = math.cos(dth), math.sin(dth)
+    return dth, mqx - (cd * mpx - sd * mpy), mqy - (sd * mpx + cd * mpy)
+
+
+@njit(cache=True)
+def _solve3(h, b):
+    """``-(h + 1e-12 I)^-1 b`` (least squares when singular; no step when not finite)."""
+    if not (np.all(np.isfinite(h)) and np.all(np.isfinite(b))):
+        return np.zeros(3)  # no step (numba's solvers raise on non-finite input, and a raise in the
+        # except branch below is a numba internal error, not an exception)
+    a = h.copy()
+    for k in range(3):
+        a[k, k] += 1e-12
+    try:
+        return -np.linalg.solve(a, b)
+    except Exception:  # noqa: BLE001
+        return -np.linalg.lstsq(h, b)[0]
+
+
+@njit(cache=True)
+def p2l_step(pairs, tgt, lines):
+    """One Gauss-Newton step of ``sum w (n.(p' - q))^2`` over a left increment ``p' = R(dth) p + dt``
+    (linearised as ``p + dt + dth J p``, applied as a rotation about the origin): ``(dth, dtx, dty)``."""
+    px, py, _, idx, w = pairs
+    tx, ty, nrx, nry = tgt[0], tgt[1], lines[0], lines[1]
+    hm = np.zeros((3, 3))
+    bv = np.zeros(3)
+    for i in range(px.shape[0]):
+        j = idx[i]
+        a0, a1 = nrx[j], nry[j]
+        a2 = px[i] * nry[j] - py[i] * nrx[j]
+        rn = (px[i] - tx[j]) * a0 + (py[i] - ty[j]) * a1
+        wi = w[i]
+        hm[0, 0] += wi * a0 * a0
+        hm[0, 1] += wi * a0 * a1
+        hm[0, 2] += wi * a0 * a2
+        hm[1, 1] += wi * a1 * a1
+        hm[1, 2] += wi * a1 * a2
+        hm[2, 2] += wi * a2 * a2
+        bv[0] += wi * a0 * rn
+        bv[1] += wi * a1 * rn
+        bv[2] += wi * a2 * rn
+    hm[1, 0], hm[2, 0], hm[2, 1] = hm[0, 1], hm[0, 2], hm[1, 2]
+    x = _solve3(hm, bv)
+    return x[2], x[0], x[1]
+
+
+@njit(cache=True)
+def step_pose(th, t_x, t_y, dth, dtx, dty):
+    """Eq. 21-22: the pose after the left increment ``(dth, dtx, dty)``."""
+    cd, sd = math.cos(dth), math.sin(dth)
+    return th + dth, cd * t_x - sd * t_y + dtx, sd * t_x + cd * t_y + dty
+
+
+# ----------------------------------------------------------------------------- the loop
+
+
+@njit(cache=True)
+def icp_loop(src, tgt, grid, lines, prm, pose0, scale, big_d, tri):
+    """Algorithm 1 from ``pose0 = (theta, tx, ty)``: match, Zhang's gate (tracked from ``gate0``; it
+    weighs HDL's pairs, and is the inlier test of all), weights, then the weighted SVD step (eq. 15-20;
+    HDL: while a step moves a point more than ``warmup`` x ``big_d``) or HDL's Gauss-Newton point-to-line
+    step, accumulated (eq. 21-22), until the mean pair distance changes less than ``tol`` D and the step
+    moves no point more than ``tol_step`` D. Returns the final pairs, pose, iterations, converged,
+    gate, the last step's largest point displacement and the source's largest range."""
+    sx, sy, tx, ty = src[0], src[1], tgt[0], tgt[1]
+    n = sx.shape[0]
+    pairs = (np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.int64), np.empty(n))
+    px, py, d, idx, w = pairs
+    sim = np.zeros(n, np.int64)
+    src_r = 0.0
+    for i in range(n):
+        src_r = max(src_r, math.sqrt(sx[i] * sx[i] + sy[i] * sy[i]))
+    hdl = prm.variant == HDL
+    th, t_x, t_y = pose0
+    old_res, converged, it, dmax, moved = -1.0, False, 0, prm.gate0, np.inf
+    warm = hdl and prm.warmup > 0
+    for it in range(1, prm.max_iter + 1):  # noqa: B007
+        c, s = math.cos(th), math.sin(th)
+        move_and_match(src, tgt, grid, c, s, t_x, t_y, it == 1, pairs, tri, sim)
+        dmax = zhang_gate(d, idx, scale, n, dmax)
+        if hdl and not warm:
+            hdl_weights(pairs, c, s, src, tgt, lines, prm, scale, dmax)
+            dth, dtx, dty = p2l_step(pairs, tgt, lines)
+        else:
+            p2p_weights(pairs, c, s, src, tgt, prm, scale if hdl else scale[:0], dmax)
+            sw = 0.0
+            for i in range(n):
+                sw += w[i]
+            dth, dtx, dty = weighted_align(px, py, tx, ty, idx, w, n, sw)
+        th, t_x, t_y = step_pose(th, t_x, t_y, dth, dtx, dty)
+        new_res = 0.0
+        for i in range(n):
+            new_res += d[i]
+        new_res /= n
+        moved = abs(dth) * src_r + math.sqrt(dtx * dtx + dty * dty)  # the farthest point's displacement
+        if warm:
+            warm = moved > prm.warmup * big_d
+            old_res = -1.0
+            continue
+        if old_res >= 0 and abs(new_res - old_res) < prm.tol * big_d and moved < prm.tol_step * big_d:
+            converged = True
+            break
+        old_res = new_res
+    return pairs, (th, t_x, t_y), it, converged, dmax, moved, src_r
+
+
+@njit(cache=True)
+def rms_radius(sx, sy, n):
+    """RMS distance of the points from their centroid (1 for a degenerate cloud): the length that
+    makes rotation commensurate with translation in the degeneracy test."""
+    msx = msy = 0.0
+    for i in range(n):
+        msx += sx[i]
+        msy += sy[i]
+    msx /= n
+    msy /= n
+    lsc = 0.0
+    for i in range(n):
+        lsc += (sx[i] - msx) ** 2 + (sy[i] - msy) ** 2
+    lsc = math.sqrt(lsc / n)
+    if not lsc > 0:
+        lsc = 1.0
+    return lsc
+
+
+@njit(cache=True)
+def pair_cov(i, j, c, s, src, tgt):
+    """Eq. 8 covariance ``(sxx, sxy, syy)`` of pair ``(i, j)``: source point ``i`` rotated by ``R(c, s)``
+    plus target point ``j``."""
+    sux, suy, sa2, sb2 = src[2], src[3], src[4], src[5]
+    tux, tuy, ta2, tb2 = tgt[2], tgt[3], tgt[4], tgt[5]
+    ux = c * sux[i] - s * suy[i]
+    uy = s * sux[i] + c * suy[i]
+    dsv = sb2[i] - sa2[i]
+    dtv = tb2[j] - ta2[j]
+    a2 = sa2[i] + ta2[j]
+    sxx = a2 + dsv * ux * ux + dtv * tux[j] * tux[j]
+    syy = a2 + dsv * uy * uy + dtv * tuy[j] * tuy[j]
+    sxy = dsv * ux * uy + dtv * tux[j] * tuy[j]
+    return sxx, sxy, syy
+
+
+@njit(cache=True)
+def final_pairs(src, tgt, lines, prm, pose, idx, scale, dmax):
+    """The pairs at the solution: the source moved by ``pose``, its last matches ``idx`` (the last step
+    moved no point more than ``tol_step``), their weights and eq. 8 covariances ``(sxx, sxy, syy)``
+    (identity for K and H, which have no error model)."""
+    th, t_x, t_y = pose
+    sx, sy, tx, ty = src[0], src[1], tgt[0], tgt[1]
+    n = sx.shape[0]
+    c, s = math.cos(th), math.sin(th)
+    px, py, d = np.empty(n), np.empty(n), np.empty(n)
+    sxx, sxy, syy = np.ones(n), np.zeros(n), np.ones(n)
+    for i in range(n):
+        px[i] = c * sx[i] - s * sy[i] + t_x
+        py[i] = s * sx[i] + c * sy[i] + t_y
+        d[i] = math.sqrt((px[i] - tx[idx[i]]) ** 2 + (py[i] - ty[idx[i]]) ** 2)
+        if prm.variant >= 2:
+            sxx[i], sxy[i], syy[i] = pair_cov(i, idx[i], c, s, src, tgt)
+    pairs = (px, py, d, idx, np.empty(n))
+    if prm.variant == HDL:
+        hdl_weights(pairs, c, s, src, tgt, lines, prm, scale, dmax)
     else:
-        nrx, nry, fl = scan_order_normals(tx, ty, normal_k // 2, max_gap, res)
-    th, t_x, t_y, idx, it, converged, dmax, moved, src_r = hdl_loop(
-        sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow, max_corr, tol, tol_step,
-        max_iter, th, t0x, t0y, h, flat_pow, warmup, scale, big_d, gate0)
-    c, s, px, py, d, sxx, sxy, syy = final_pairs(sx, sy, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, th, t_x,
-                                                 t_y, idx, True)
-    w = np.empty(sx.shape[0])
-    hdl_weights(px, py, d, idx, c, s, sux, suy, sa2, sb2, tx, ty, tux, tuy, ta2, tb2, nrx, nry, fl, huber_c, wpow,
-                max_corr, flat_pow, scale, dmax, False, w)
-    return (th, t_x, t_y, it, converged, idx, px, py, w, sxx, sxy, syy, nrx, nry, fl, res, scale, dmax,
-            rms_radius(sx, sy, sx.shape[0]), moved, src_r)
+        p2p_weights(pairs, c, s, src, tgt, prm, scale[:0], dmax)
+    return pairs, (sxx, sxy, syy)
 
 
 # ----------------------------------------------------------------------------- the report's sums
 
 
 @njit(cache=True)
-def report_sums(px, py, qx, qy, w, sxx, sxy, syy, nx, ny, fl, spacing, scale, gate, tx, ty, c, s, radius, hdl,
-                block, samp_var):
-    """One pass over the final pairs for :func:`graphnav.scan.covariance.from_sums` (the sums of
-    :func:`graphnav.scan.covariance.between`): ``(k, n_inliers, H, B_lidar, B_sampling, rms, info,
-    inlier_fraction, points_used, median scale)`` with ``H = sum w J^T J``, ``B_lidar = sum w^2 J^T S
-    J``, ``B_sampling = sum w^2 (block samp_var spacing^2) J^T J`` (``B = k B_lidar + B_sampling``) and
-    ``info`` the point-to-line information of the flat inlier pairs (rotation column / ``radius``)."""
+def _add_sums(h, bl, bs, ja, jb, wi, sv, samp, sxx, sxy, syy, hdl):
+    """One pair's terms of ``H = sum w J^T J``, ``B_lidar = sum w^2 J^T S J``, ``B_sampling = sum w^2
+    samp J^T J`` (HDL: the one row ``ja``, ``S = sv``; else the rows ``ja``, ``jb`` and ``S`` (2x2))."""
+    w2 = wi * wi
+    for a in range(3):
+        for b in range(3):
+            if hdl:
+                jj = ja[a] * ja[b]
+                h[a, b] += wi * jj
+                bl[a, b] += w2 * sv * jj
+                bs[a, b] += w2 * samp * jj
+            else:
+                jtj = ja[a] * ja[b] + jb[a] * jb[b]
+                jsj = sxx * ja[a] * ja[b] + sxy * (ja[a] * jb[b] + jb[a] * ja[b]) + syy * jb[a] * jb[b]
+                h[a, b] += wi * jtj
+                bl[a, b] += w2 * jsj
+                bs[a, b] += w2 * samp * jtj
+
+
+@njit(cache=True)
+def report_sums(pairs, cov, tgt, lines, res, scale, gate, pose, radius, prm):
+    """One pass over the final pairs for :func:`graphnav.scan.covariance.from_sums`: ``(k, n_inliers, H,
+    B_lidar, B_sampling, rms, info, inlier_fraction, points_used, median scale)`` (:func:`_add_sums`;
+    ``B = k B_lidar + B_sampling``, the sampling variance ``normal_k samp_var spacing^2``) and ``info`` the
+    point-to-line information of the flat inlier pairs (rotation column / ``radius``). Jacobians with
+    respect to the right perturbation at ``pose = (theta, tx, ty)``: ``[R, J (p - t)]``; HDL the row
+    ``n^T [R, J (p - t)]`` of the point-to-line residual."""
+    px, py, _, idx, w = pairs
+    tx, ty, nx, ny, fl = tgt[0], tgt[1], lines[0], lines[1], lines[2]
+    sxx, sxy, syy = cov
+    th, t_x, t_y = pose
+    c, s = math.cos(th), math.sin(th)
+    hdl = prm.variant == HDL
     n = px.shape[0]
-    h = np.zeros((3, 3))
-    bl = np.zeros((3, 3))
-    bs = np.zeros((3, 3))
-    info = np.zeros((3, 3))
-    ksum = 0.0
-    n_inl = 0
-    n_gate = 0
-    used = 0
-    rss = 0.0
-    sw = 0.0
-    ja = np.empty(3)
-    jb = np.empty(3)
+    h, bl, bs, info = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
+    ksum, rss, sw = 0.0, 0.0, 0.0
+    n_inl = n_gate = used = 0
+    ja, jb, sc = np.empty(3), np.empty(3), np.empty(3)
     for i in range(n):
-        ex = px[i] - qx[i]
-        ey = py[i] - qy[i]
-        d = math.hypot(ex, ey)
-        inl = d / scale[i] <= gate
+        j = idx[i]
+        ex, ey = px[i] - tx[j], py[i] - ty[j]
+        inl = math.hypot(ex, ey) / scale[j] <= gate
+        wi = w[i]
         if inl:
             n_gate += 1
-        wi = w[i]
         if wi > 0:
             used += 1
-        c2x = -(py[i] - ty)
-        c2y = px[i] - tx
-        r0 = nx[i] * c + ny[i] * s
-        r1 = -nx[i] * s + ny[i] * c
-        r2 = nx[i] * c2x + ny[i] * c2y
+        c2x, c2y = -(py[i] - t_y), px[i] - t_x
+        row0, row1, row2 = nx[j] * c + ny[j] * s, -nx[j] * s + ny[j] * c, nx[j] * c2x + ny[j] * c2y
         both = inl and wi > 0
         if both:
-            f = fl[i]
-            r2s = r2 / radius
-            sc = (r0, r1, r2s)
+            sc[0], sc[1], sc[2] = row0, row1, row2 / radius
             for a in range(3):
                 for b in range(3):
-                    info[a, b] += f * sc[a] * sc[b]
-        samp = block * samp_var * spacing[i] ** 2
-        w2 = wi * wi
+                    info[a, b] += fl[j] * sc[a] * sc[b]
+        samp = prm.normal_k * prm.samp_var * res[j] ** 2
         if hdl:
-            res = ex * nx[i] + ey * ny[i]
-            sv = sxx[i] * nx[i] ** 2 + 2 * sxy[i] * nx[i] * ny[i] + syy[i] * ny[i] ** 2
+            r = ex * nx[j] + ey * ny[j]
+            sv = sxx[i] * nx[j] ** 2 + 2 * sxy[i] * nx[j] * ny[j] + syy[i] * ny[j] ** 2
             if both:
-                ksum += res * res / sv
-                n_inl += 1
-            rss += wi * res * res
-            ja[0], ja[1], ja[2] = r0, r1, r2
-            for a in range(3):
-                for b in range(3):
-                    jj = ja[a] * ja[b]
-                    h[a, b] += wi * jj
-                    bl[a, b] += w2 * sv * jj
-                    bs[a, b] += w2 * samp * jj
+                ksum += r * r / sv
+            rss += wi * r * r
+            ja[0], ja[1], ja[2] = row0, row1, row2
         else:
             if both:
                 det = sxx[i] * syy[i] - sxy[i] ** 2
                 ksum += (syy[i] * ex * ex - 2 * sxy[i] * ex * ey + sxx[i] * ey * ey) / det
-                n_inl += 1
             rss += wi * (ex * ex + ey * ey)
+            sv = 0.0
             ja[0], ja[1], ja[2] = c, -s, c2x  # the Jacobian's rows: d(x)/d xi, d(y)/d xi
             jb[0], jb[1], jb[2] = s, c, c2y
-            for a in range(3):
-                for b in range(3):
-                    jtj = ja[a] * ja[b] + jb[a] * jb[b]
-                    jsj = sxx[i] * ja[a] * ja[b] + sxy[i] * (ja[a] * jb[b] + jb[a] * ja[b]) + syy[i] * jb[a] * jb[b]
-                    h[a, b] += wi * jtj
-                    bl[a, b] += w2 * jsj
-                    bs[a, b] += w2 * samp * jtj
+        if both:
+            n_inl += 1
+        _add_sums(h, bl, bs, ja, jb, wi, sv, samp, sxx[i], sxy[i], syy[i], hdl)
         sw += wi
-    dim = 1 if hdl else 2
-    k = ksum / max(dim * n_inl - 3, 1) if n_inl > 0 else np.nan
+    k = ksum / max((1 if hdl else 2) * n_inl - 3, 1) if n_inl > 0 else np.nan
     rms = math.sqrt(rss / sw) if sw > 0 else np.nan
-    big_d = np.median(scale) if n > 0 else np.nan
+    big_d = np.median(scale[idx]) if n > 0 else np.nan
     frac = n_gate / n if n > 0 else np.nan
     return k, n_inl, h, bl, bs, rms, info, frac, used, big_d
+
+
+# ----------------------------------------------------------------------------- one whole match
+
+
+@njit(cache=True)
+def match(sx, sy, ssig, tx, ty, tsig, prm, pose0, tri):
+    """One match of source ``(sx, sy)`` onto target ``(tx, ty)`` from ``pose0 = (theta, tx, ty)``
+    (``ssig``/``tsig``: the caller's 1-sigma per point, or empty for the LiDAR model): the clouds'
+    terms, the target's resolution, grid and lines (beam order, or HDL's k nearest), :func:`icp_loop`,
+    :func:`final_pairs` and :func:`report_sums` at the pose with its angle wrapped to [-pi, pi).
+    Returns ``(pose, iterations, converged, gate, moved, src_range, radius, sums)``."""
+    src = cloud_terms(sx, sy, ssig, prm)
+    tgt = cloud_terms(tx, ty, tsig, prm)
+    half = prm.normal_k // 2
+    res, scale, big_d = target_resolution(tgt, half, prm.min_res)
+    grid = build_grid(tx, ty, prm.cell)
+    if prm.variant == HDL and prm.knn:
+        lines = knn_line_normals(tx, ty, prm.normal_k, grid)
+    else:
+        lines = scan_order_normals(tx, ty, half, prm.max_gap, res)
+    pairs, pose, it, converged, dmax, moved, src_r = icp_loop(src, tgt, grid, lines, prm, pose0, scale, big_d, tri)
+    pairs, cov = final_pairs(src, tgt, lines, prm, pose, pairs[3], scale, dmax)
+    radius = rms_radius(sx, sy, sx.shape[0])
+    wrapped = ((pose[0] + math.pi) % (2.0 * math.pi) - math.pi, pose[1], pose[2])
+    sums = report_sums(pairs, cov, tgt, lines, res, scale, dmax, wrapped, radius, prm)
+    return wrapped, it, converged, dmax, moved, src_r, radius, sums

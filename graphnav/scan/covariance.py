@@ -1,8 +1,8 @@
 """The covariance of a scan match, derived from the match itself (the one place it is computed).
 
-Both matcher paths (the numpy loop of :mod:`graphnav.scan.weighted_icp` and the compiled
-:mod:`graphnav.scan._icp_fast`) hand the final pairs to :func:`between`, which returns the covariance
-of the between factor ``BetweenFactorPose2(prev, cur, Pose2(*pose), Gaussian.Covariance(cov))`` and the
+The matcher (:mod:`graphnav.scan._icp_fast`, ``report_sums``) hands the sums over its final pairs to
+:func:`from_sums`, which returns the covariance of the between factor
+``BetweenFactorPose2(prev, cur, Pose2(*pose), Gaussian.Covariance(cov))`` and the
 degeneracy analysis (:mod:`graphnav.scan.degeneracy`). The scan-to-map estimator uses the same
 sandwich (:func:`sandwich`) for its registrations. No consumer scales it afterwards.
 
@@ -70,22 +70,6 @@ def resolution(xy: NDArray[np.float64], half: int = 6) -> NDArray[np.float64]:
     return out
 
 
-def residual_scale(res: NDArray, lidar: NDArray, inlier: NDArray) -> tuple[float, int]:
-    """``(k, n)``: ``k = sum r^T S^-1 r / (d n - 3)`` over the ``n`` inlier pairs (NaN without any);
-    ``res`` (N, d), ``lidar`` (N, d, d)."""
-    n = int(inlier.sum())
-    if n == 0:
-        return float("nan"), 0
-    d = res.shape[1]
-    r, s = res[inlier], lidar[inlier]
-    if d == 1:
-        m = r[:, 0] ** 2 / s[:, 0, 0]
-    else:
-        sxx, sxy, syy = s[:, 0, 0], s[:, 0, 1], s[:, 1, 1]
-        m = (syy * r[:, 0] ** 2 - 2 * sxy * r[:, 0] * r[:, 1] + sxx * r[:, 1] ** 2) / (sxx * syy - sxy**2)
-    return float(m.sum() / max(d * n - 3, 1)), n
-
-
 def sandwich(jac: NDArray, w: NDArray, err_cov: NDArray) -> NDArray[np.float64]:
     """``H^-1 B H^-1`` with ``H = sum w J^T J`` and ``B = sum w^2 J^T C J`` for Jacobians ``jac``
     (N, d, 3), weights ``w`` (N,) and residual error covariances ``err_cov`` (N, d, d); NaN when
@@ -106,7 +90,7 @@ def sandwich(jac: NDArray, w: NDArray, err_cov: NDArray) -> NDArray[np.float64]:
 
 @dataclass
 class Between:
-    """What :func:`between` derives from a match."""
+    """What :func:`from_sums` derives from a match."""
 
     cov: NDArray[np.float64]  # (3, 3) right-perturbation covariance, before any degeneracy inflation
     residual_scale: float  # k
@@ -115,41 +99,14 @@ class Between:
     degeneracy: degeneracy.Degeneracy
 
 
-def between(jac: NDArray, res: NDArray, w: NDArray, lidar: NDArray, spacing: NDArray, inlier: NDArray,
-            line_rows: NDArray, flat: NDArray, radius: float, *, block: int, max_condition: float,
-            max_sigma: float, prior_cov: NDArray | None = None) -> Between:
-    """The between factor's covariance of a match and its degeneracy analysis.
-
-    ``jac`` (N, d, 3) Jacobians of the residuals ``res`` (N, d) of the final pairs (right
-    perturbation), ``w`` the matcher's weights, ``lidar`` (N, d, d) the LiDAR model's covariance of
-    each residual (eq. 8 projected; identity without a model), ``spacing`` (N,) the target's
-    resolution at each pair [m] (:func:`resolution`), ``inlier`` the pairs within the final gate.
-    ``line_rows`` (N, 3) point-to-line rows ``n^T [R, J (p - t)]`` with the rotation column divided
-    by ``radius`` and ``flat`` the line flatness: the geometry the degeneracy analysis looks at
-    (:func:`graphnav.scan.degeneracy.analyse`, thresholds ``max_condition`` and ``max_sigma`` [m]; with
-    ``prior_cov``, the initial guess's covariance, also the directions the guess knows better).
-    """
-    k, n_inl = residual_scale(res, lidar, inlier)
-    err = k * lidar
-    samp = (block * SAMPLING_VARIANCE) * spacing**2
-    for i in range(res.shape[1]):
-        err[:, i, i] += samp
-    cov = sandwich(jac, w, err) if np.isfinite(k) else np.full((3, 3), np.nan)
-    sw = float(w.sum())
-    rms = float(np.sqrt(np.sum(w * np.sum(res**2, axis=1)) / sw)) if sw > 0 else float("nan")
-    use = (inlier * flat)[:, None]
-    info = (line_rows * use).T @ line_rows
-    deg = degeneracy.analyse(info, radius, cov, max_condition=max_condition, max_sigma=max_sigma, prior_cov=prior_cov)
-    return Between(cov, k, rms, n_inl, deg)
-
-
 def from_sums(k: float, n_inl: int, h: NDArray, b_lidar: NDArray, b_sampling: NDArray, rms: float, info: NDArray,
               radius: float, *, max_condition: float, max_sigma: float,
               prior_cov: NDArray | None = None) -> Between:
-    """:func:`between` from its sums over the pairs, accumulated in one pass by the compiled matcher
-    (:func:`graphnav.scan._icp_fast.report_sums`): ``H = sum w J^T J``, ``B = k b_lidar + b_sampling``
-    (``b_lidar = sum w^2 J^T S J``, ``b_sampling = sum w^2 (block s^2 / 12) J^T J``), the same
-    covariance ``H^-1 B H^-1`` and degeneracy analysis."""
+    """The covariance ``H^-1 B H^-1`` of the module doc and the degeneracy analysis
+    (:func:`graphnav.scan.degeneracy.analyse` of the point-to-line information ``info``), from the sums over
+    the pairs accumulated in one pass by the matcher (:func:`graphnav.scan._icp_fast.report_sums`): ``H = sum
+    w J^T J``, ``B = k b_lidar + b_sampling`` (``b_lidar = sum w^2 J^T S J``, ``b_sampling = sum w^2 (block
+    s^2 / 12) J^T J``), ``k = sum r^T S^-1 r / (d n_inl - 3)`` over the inlier pairs."""
     cov = np.full((3, 3), np.nan)
     if np.isfinite(k):
         try:

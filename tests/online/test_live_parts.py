@@ -18,7 +18,9 @@ from graphnav.result import Estimate
 
 
 def _state(dec: NmeaDecoder) -> dict:
-    return {k: v for k, v in vars(dec).items() if k != "out"}
+    """Every attribute of the decoder's parts (``"clock.t"``), the output and configuration aside."""
+    return {f"{part}.{k}": v for part in ("ctx", "clock", "positions", "motion", "headings")
+            for k, v in vars(getattr(dec, part)).items() if k not in ("out", "ctx", "clock")}
 
 
 def test_restore_undoes_every_sentence():
@@ -37,7 +39,7 @@ def test_restore_undoes_every_sentence():
         assert _state(dec) == before
         a, b = dec.feed(msg), ref.feed(msg)  # fed for real now: the same as a decoder never rolled back
         assert a == b and _state(dec).keys() == _state(ref).keys()
-    assert {"t", "frame", "last_fix_t", "clock_src"} <= changed <= set(DECODER_STATE)
+    assert {"clock.t", "positions.frame", "positions.last_fix_t", "clock.clock_src"} <= changed <= set(DECODER_STATE)
 
 
 def _scan(t: float) -> Scan:

@@ -131,18 +131,18 @@ def test_grid_has_o_n_cells_and_exact_nearest():
         rng = np.random.default_rng(1)
         tx = np.concatenate([rng.uniform(-20, 20, 300), [1e5, -7e4]])
         ty = np.concatenate([rng.uniform(-20, 20, 300), [3e4, 1e5]])
-        xmin, ymin, h, nx, ny, start, items = f.build_grid(tx, ty, 1.0)
-        out["cells"] = int(nx * ny)
-        out["start_len"] = int(start.size)
+        grid = f.build_grid(tx, ty, 1.0)
+        out["cells"] = int(grid[3] * grid[4])
+        out["start_len"] = int(grid[5].size)
         q = np.concatenate([rng.uniform(-30, 30, (200, 2)), [[1e5, 1e5], [-1e9, 2e9], [1e150, -1e150]]])
         bad = 0
         for px, py in q:
-            d, j = f.nearest(px, py, tx, ty, xmin, ymin, h, nx, ny, start, items)
+            d, j = f.nearest(px, py, tx, ty, grid)
             dd = np.hypot(tx - px, ty - py)
             if j != int(np.argmin(dd)) and not np.isclose(d, dd.min(), rtol=1e-12):
                 bad += 1
         out["bad"] = bad
-        d, j = f.nearest(np.nan, 0.0, tx, ty, xmin, ymin, h, nx, ny, start, items)  # no crash
+        d, j = f.nearest(np.nan, 0.0, tx, ty, grid)  # no crash
     """)
     assert "error" not in out, out
     assert out["cells"] <= max(16 * 302, 1 << 16) and out["start_len"] == out["cells"] + 1
@@ -150,15 +150,19 @@ def test_grid_has_o_n_cells_and_exact_nearest():
     assert out["rss_mb"] < RSS_LIMIT_MB, out
 
 
-def test_far_points_match_the_numpy_backend():
-    """A real point far from the rest (within the 10 km bound): the compiled matcher (bounded grid)
-    gives the numpy/cKDTree loop's match."""
+def test_far_points_keep_the_match():
+    """A real point far from the rest (within the 10 km bound) in each scan: the bounded grid still finds
+    the exact pairs, and behind the 2 m correlation gate the far points leave the pose where it was (within
+    a millimetre: they shift the medians; the degeneracy test, whose length is the cloud's RMS radius, may
+    flag it)."""
     src, tgt = _pair(3)
-    s = np.vstack([polar_to_points(src.ranges, src.angles)[0], [[9000.0, -4000.0]]])
-    t = np.vstack([polar_to_points(tgt.ranges, tgt.angles)[0], [[-8000.0, 9500.0]]])
-    a = match_points(s, t, IcpConfig(backend="numba", max_corr_dist=2.0))
-    b = match_points(s, t, IcpConfig(backend="numpy", max_corr_dist=2.0))
-    assert np.allclose(a.pose, b.pose, atol=1e-9)
+    s0 = polar_to_points(src.ranges, src.angles)[0]
+    t0 = polar_to_points(tgt.ranges, tgt.angles)[0]
+    s = np.vstack([s0, [[9000.0, -4000.0]]])
+    t = np.vstack([t0, [[-8000.0, 9500.0]]])
+    a = match_points(s, t, IcpConfig(max_corr_dist=2.0))
+    b = match_points(s0, t0, IcpConfig(max_corr_dist=2.0))
+    assert b.ok and np.allclose(a.pose, b.pose, atol=1e-3)
 
 
 def test_points_beyond_any_lidar_range_are_dropped():
@@ -171,12 +175,11 @@ def test_points_beyond_any_lidar_range_are_dropped():
     assert np.allclose(res.pose, match_points(s, t, IcpConfig(backend="numba")).pose)
 
 
-@pytest.mark.parametrize("backend", ["numba", "numpy"])
-def test_absurd_initial_guess_is_a_failed_match(backend):
+def test_absurd_initial_guess_is_a_failed_match():
     """odometry ``v: 1e308`` made the motion guess move the scan ~1e307 m: the compiled loop ended
-    in a numba internal AssertionError. Now it is a failed match (ok False), for either backend."""
+    in a numba internal AssertionError. Now it is a failed match (ok False)."""
     src, tgt = _pair(5)
-    res = match_scans(src, tgt, IcpConfig(backend=backend), init=(1e307, 0.0, 0.0))
+    res = match_scans(src, tgt, IcpConfig(), init=(1e307, 0.0, 0.0))
     assert not res.ok and "beyond" in res.quality["reason"]
 
 
