@@ -41,14 +41,15 @@ def kitti_log(d: Path) -> NavLog:
 
 
 def table(res: dict) -> str:
-    rows = ["| method | 1-frame trans. RMSE [m] | 1-frame rot. RMSE [deg] | ms (median) | chained ATE [m] | ms/frame |",
-            "|---|---|---|---|---|---|"]
+    rows = ["| method | 1-frame trans. RMSE [m] | 1-frame rot. RMSE [deg] | ms (median) | chained ATE [m] | ms/frame "
+            "| CPU ms/frame |", "|---|---|---|---|---|---|---|"]
     for name, m in res["methods"].items():
         if "skipped" in m:
-            rows.append(f"| {name} | skipped: {m['skipped']} | | | | |")
+            rows.append(f"| {name} | skipped: {m['skipped']} | | | | | |")
             continue
         rows.append(f"| {name} | {m['single_trans_rmse_m']:.4f} | {m['single_rot_rmse_deg']:.4f} | "
-                    f"{m['single_ms_median']:.1f} | {m['continuous_ate_m']:.4f} | {m['continuous_ms_per_frame']:.1f} |")
+                    f"{m['single_ms_median']:.1f} | {m['continuous_ate_m']:.4f} | {m['continuous_ms_per_frame']:.1f} | "
+                    f"{m['continuous_cpu_ms_per_frame']:.1f} |")
     return "\n".join(rows)
 
 
