@@ -32,11 +32,11 @@ from numpy.typing import NDArray
 
 from ..config import option
 from ..geometry import wrap_angle
+from ..graph.chi2 import chi2_ppf
 from ..log import BeaconObs, NavLog, Odometry
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .base import BatchEstimator
-from .gating import chi2_ppf
 
 PAPER_SIGMAS = {                              # the paper's section 7, per record (white noise)
     "sigma_v": 0.5,                           # m/s

@@ -152,11 +152,14 @@ class Navigator:
         return cls(config, **log_inputs(log, config, kw))
 
     # -- online ----------------------------------------------------------------------------------
-    def add(self, rec: Record | KnownBeacon) -> Estimate | None:
-        """Take one record; the newest online estimate when a keyframe was solved, else ``None``."""
+    def add(self, rec: Record | KnownBeacon, *, checked: bool = False) -> Estimate | None:
+        """Take one record; the newest online estimate when a keyframe was solved, else ``None``.
+        Each record is validated (a LogError naming it) unless ``checked`` says a reader already did
+        (:meth:`NavLog.checked_records <graphnav.log.NavLog.checked_records>`)."""
         if self._result is not None:
             raise RuntimeError("the navigator has finished (smoothed() was called)")
-        rec = validate_record(rec, index=self.n_records + 1)  # a LogError naming the record, before the graph
+        if not checked:
+            rec = validate_record(rec, index=self.n_records + 1)  # a LogError naming the record, before the graph
         self.n_records += 1
         self._rec = rec if not isinstance(rec, KnownBeacon) else self._rec
         self.builder.push(rec)
