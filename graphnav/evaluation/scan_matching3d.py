@@ -113,7 +113,8 @@ class _Times:
         self.cpu.append((time.process_time() - self._p0) * 1e3)
 
 
-def _score(name: str, rels: list[NDArray | None], times: _Times, ref: NDArray, failed: int = 0) -> dict[str, Any]:
+def _score(name: str, rels: list[NDArray | None], times: _Times, ref: NDArray, failed: int = 0,
+           tracks: bool = False) -> dict[str, Any]:
     et, er = [], []
     pose = ref[0].copy()
     traj = [pose]
@@ -133,7 +134,8 @@ def _score(name: str, rels: list[NDArray | None], times: _Times, ref: NDArray, f
             "single_rot_rmse_deg": float(np.sqrt(np.mean(np.square(er)))),
             "single_ms_median": float(np.median(times.ms)), "continuous_ate_m": ate,
             "continuous_ms_per_frame": float(np.mean(times.ms)),
-            "continuous_cpu_ms_per_frame": float(np.mean(times.cpu)), "frames": len(ref), "failed": failed}
+            "continuous_cpu_ms_per_frame": float(np.mean(times.cpu)), "frames": len(ref), "failed": failed,
+            **({"track": tr.tolist(), "cpu_ms": times.cpu} if tracks else {})}
 
 
 def _pairwise(method: str, pts: list[NDArray], params: dict[str, Any]) -> tuple[list, _Times, int]:
@@ -217,10 +219,11 @@ def _kiss(pts: list[NDArray], max_range: float) -> tuple[list, _Times]:
 
 
 def compare(log: NavLog, frames: int = 100, methods: tuple[str, ...] = METHODS,
-            cloud: dict[str, Any] | None = None) -> dict[str, Any]:
+            cloud: dict[str, Any] | None = None, tracks: bool = False) -> dict[str, Any]:
     """Every method on the log's first ``frames`` clouds (see the module doc): ``methods`` keyed by
     name, each with its single-frame and continuous figures (``skipped`` with the reason when its
-    library is missing)."""
+    library is missing); with ``tracks`` also each method's chained poses (``track``, (x, y, yaw)
+    per frame), its CPU ms per frame (``cpu_ms``) and the reference poses (``reference``)."""
     bad = sorted(set(methods) - set(METHODS))
     if bad:
         raise ValueError(f"unknown method(s) {', '.join(bad)}; known: {', '.join(METHODS)}")
@@ -248,10 +251,11 @@ def compare(log: NavLog, frames: int = 100, methods: tuple[str, ...] = METHODS,
         except ImportError as exc:  # MissingExtra: the line naming the extra
             out[m] = {"skipped": str(exc)}
             continue
-        out[m] = {**_score(m, rels, times, ref, failed), "native_warnings": native.count}
+        out[m] = {**_score(m, rels, times, ref, failed, tracks), "native_warnings": native.count}
     res: dict[str, Any] = {"frames": len(clouds), "t0": clouds[0].t, "t1": clouds[-1].t,
                            "points_per_frame": float(np.mean([len(p) for p in pts])),
-                           "filter": asdict(cfg), "sensor_height": h, "methods": out}
+                           "filter": asdict(cfg), "sensor_height": h, "methods": out,
+                           **({"reference": ref.tolist()} if tracks else {})}
     k = out.get("kiss-icp", {})
     for name in S2M:
         s = out.get(name, {})

@@ -79,3 +79,15 @@ def test_cli_json_and_bad_options(tmp_path, log3, capsys):
     assert main(["run", str(p), "-e", "scan-to-map", "-O", 'cloud_map={"variant": "ndt"}', "--json"]) == 2
     err = json.loads(capsys.readouterr().out)
     assert "ndt" in err["error"] and "variant" in err["where"]
+
+
+def test_odometry_is_the_guess_when_the_log_has_it():
+    from graphnav.sim.harbour import HarbourConfig
+    from graphnav.sim.harbour3d import Lidar3dConfig, simulate_harbour3d
+
+    log = simulate_harbour3d(1, HarbourConfig(odometer=True), Lidar3dConfig(az_deg=0.5), duration=1.0)
+    log = log.without(lambda r: r.kind == "pose_prior")
+    res = estimators.run("scan-to-map", log)
+    assert res.info["guess_sources"] == {"odometry": 10} and res.info["failed_registrations"] == 0
+    assert ate(res.trajectory, log.truth())["rmse"] < 0.03
+    assert estimators.get("scan-to-map").inputs(log, {}) == {"cloud", "odometry", "pose_prior"}
