@@ -60,6 +60,16 @@ def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
     return np.array([p.x(), p.y(), p.theta()])
 
 
+def gnss_sigma_assumed(log: NavLog) -> bool:
+    """Whether the log's GNSS sigmas are known only up to scale: an NMEA log's fixes without a GST
+    of their own take HDOP x an assumed UERE (``graphnav.io.nmea.UERE_M``), so their group is
+    rescaled like a defaulted one by the noise estimation (issue #25: estimated where redundancy allows)."""
+    if log.meta.get("format") != "nmea0183":
+        return False
+    n = sum(1 for r in log.records if r.kind == "gnss")
+    return n > int(log.meta.get("fix_sigma_from_gst", 0) or 0)
+
+
 def graph_params(cfg: SmootherConfig, space: PlanarSpace | None = None) -> gtsam.ISAM2Params:
     """The iSAM2 parameters of the graph: thresholds per variable type (poses ``x``, beacons ``l``,
     compass-bias frame ``b``; in the Pose3 graph also velocities ``v`` and IMU biases ``i``)."""
@@ -147,8 +157,11 @@ class Navigator:
         v0 = log.meta.get("initial_velocity")
         if imu_model is not None or v0 is not None:
             imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}
-        return cls(config, chart=log.beacons_known, lidar=lidar, scans=scans, lidar3d=lidar3d,
-                   imu=any(r.kind == "imu" for r in log.records), imu_model=imu_model, **kw)
+        nav = cls(config, chart=log.beacons_known, lidar=lidar, scans=scans, lidar3d=lidar3d,
+                  imu=any(r.kind == "imu" for r in log.records), imu_model=imu_model, **kw)
+        if gnss_sigma_assumed(log):
+            nav.builder.defaulted.add("gnss")
+        return nav
 
     # -- online ----------------------------------------------------------------------------------
     def add(self, rec: Record | KnownBeacon, *, checked: bool = False) -> Estimate | None:
