@@ -31,10 +31,10 @@ from graphnav.evaluation.evaluate import summarize  # noqa: E402
 from graphnav.io import load_log  # noqa: E402
 
 
-def measure(path: Path, options: dict) -> dict:
+def measure(path: Path, options: dict, batch: bool = True) -> dict:
     log = load_log(path)
     out: dict = {"log": path.name.split(".")[0]}
-    for name in ("dead-reckoning", "isam2", "batch"):
+    for name in ("dead-reckoning", "isam2", "batch") if batch else ("dead-reckoning", "isam2"):
         if estimators.get(name).unmet(log):
             continue
         t0 = time.perf_counter()
@@ -89,13 +89,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("logs", nargs="+", type=Path)
     ap.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--no-batch", action="store_true", help="dead reckoning and isam2 only")
     args = ap.parse_args(argv)
     from graphnav.commands._common import parse_options
 
     options = parse_options(args.option)
     rows = []
     for p in args.logs:
-        rows.append(measure(p, options))
+        rows.append(measure(p, options, batch=not args.no_batch))
         print(json.dumps(rows[-1]), file=sys.stderr, flush=True)  # progress: one JSON line per log
     if args.json:
         print(json.dumps({"options": options, "rows": rows}))

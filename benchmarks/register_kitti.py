@@ -36,7 +36,6 @@ ROWS = [  # label, method, parameters (beyond the defaults: voxel 0.25 m, max_co
     ("o3d-p2plane", "o3d-p2plane", {}),
     ("o3d-gicp", "o3d-gicp", {}),
 ]
-NUMPY_ROW = ("ndt (numpy reference)", "ndt", {"backend": "numpy"})
 
 
 def default_dir() -> Path:
@@ -51,19 +50,16 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("dir", nargs="?", type=Path, default=default_dir())
     ap.add_argument("--repeat", type=int, default=10)
-    ap.add_argument("--no-numpy", action="store_true", help="skip the (slow) numpy-reference NDT row")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     src, tgt = read_cloud(args.dir / "source.ply"), read_cloud(args.dir / "target.ply")
     ref = read_transform(args.dir / "T_target_source.txt")
-    rows = ROWS + ([] if args.no_numpy else [NUMPY_ROW])
+    rows = ROWS
     runs: dict[str, list] = {label: [] for label, _, _ in rows}
     for _label, method, prm in rows:  # warm-up
         register(src, tgt, method, **prm)
-    for k in range(args.repeat):
+    for _ in range(args.repeat):
         for label, method, prm in rows:
-            if prm.get("backend") == "numpy" and k >= 2:
-                continue  # two runs of the reference are enough to time it
             r = register(src, tgt, method, **prm)
             runs[label].append((r, r.extra["cpu_ms"]))
     load = os.getloadavg()
@@ -96,8 +92,6 @@ def main() -> int:
     for label, v in table.items():
         lib = ("open3d" if v["method"].startswith("o3d") else "graphnav (numba)" if v["method"] == "ndt"
                else "small_gicp")
-        if v["params"].get("backend") == "numpy":
-            lib = "graphnav (numpy)"
         it = "-" if v["iterations"] is None else v["iterations"]
         print(f"| {label} | {lib} | {v['translation_error_m']:.4f} | {v['rotation_error_deg']:.3f} | "
               f"{v['fitness']:.3f} | {it} | {v['ms_median']:.1f} | {v['cpu_ms_median']:.1f} | "

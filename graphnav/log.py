@@ -329,55 +329,107 @@ _BOUNDED = {  # field -> (Limits attribute, what, unit)
 }
 
 
+# field codes of the record check plans (see _plan)
+_ID, _SOURCE, _TIME, _OPT_AXIS, _ATTITUDE, _RANGE_MAX, _SIGMA, _RANGE, _VALUE = range(9)
+_PLANS: dict[type, tuple[tuple[str, int, Any], ...]] = {}
+
+
+def _plan(cls: type) -> tuple[tuple[str, int, Any], ...]:
+    """What :func:`check_record` checks of each field of a record type, worked out once per type:
+    ``(name, code, argument)`` (the argument: the ``_BOUNDED`` entry, or whether a sigma is optional)."""
+    plan = []
+    for f in fields(cls):
+        n = f.name
+        if n == "id":
+            plan.append((n, _ID, None))
+        elif n in ARRAY_FIELDS:
+            continue
+        elif n == SOURCE_FIELD:
+            plan.append((n, _SOURCE, None))
+        elif n == "t":
+            plan.append((n, _TIME, _BOUNDED["t"]))
+        elif n in ("az", "wx", "wy"):
+            plan.append((n, _OPT_AXIS, _BOUNDED.get(n)))
+        elif n in ("roll", "pitch"):
+            plan.append((n, _ATTITUDE, issubclass(cls, Attitude)))
+        elif n == "range_max":
+            plan.append((n, _RANGE_MAX, None))
+        elif n.startswith("sigma"):
+            plan.append((n, _SIGMA, isinstance(f.default, float) and math.isnan(f.default)))
+        elif n == "range":
+            plan.append((n, _RANGE, None))
+        else:
+            plan.append((n, _VALUE, _BOUNDED.get(n)))
+    _PLANS[cls] = out = tuple(plan)
+    return out
+
+
+def _beyond(lim: Limits, bound: tuple[str, str, str], name: str, v: float) -> None:
+    attr, what, unit = bound
+    top = getattr(lim, attr)
+    if abs(v) > top:
+        hint = " (--max-speed)" if attr == "max_speed" else ""
+        raise LogError(f"{what} {v:g} {unit} beyond the plausible limit {top:g} {unit}{hint}", field=name)
+
+
 def check_record(rec: Record | KnownBeacon, limits: Limits | None = None) -> None:
     """Raise :class:`LogError` (with the offending field) if a record is not well formed or not
     physically valid (:class:`Limits`; ``None``: :func:`default_limits`)."""
     lim = limits or _LIMITS[0]
-    for f in fields(rec):
-        v = getattr(rec, f.name)
-        if f.name == "id":
+    cls = type(rec)
+    plan = _PLANS.get(cls) or _plan(cls)
+    isfinite = math.isfinite
+    for name, code, arg in plan:
+        v = getattr(rec, name)
+        if code == _ID:
             if not isinstance(v, str) or not v:
                 raise LogError("beacon id must be a non-empty string", field="id")
-        elif f.name in ARRAY_FIELDS:
             continue
-        elif f.name == SOURCE_FIELD:
+        if code == _SOURCE:
             if not isinstance(v, str) or len(v) > MAX_SOURCE_CHARS or not v.isprintable():
                 raise LogError(f"source must be a printable string of at most {MAX_SOURCE_CHARS} characters",
                                field=SOURCE_FIELD)
-        elif not isinstance(v, float):
-            raise LogError(f"expected a number, got {type(v).__name__}", field=f.name)
-        elif f.name == "t" and not math.isfinite(v):
-            raise LogError("timestamp must be finite", field="t")
-        elif f.name in ("az", "wx", "wy") and math.isnan(v):
-            continue  # the planar 3-axis IMU record
-        elif f.name in ("roll", "pitch"):
-            if isinstance(rec, Attitude) and not math.isfinite(v):
-                raise LogError(f"{f.name} must be finite", field=f.name)
-            if not (math.isnan(v) or abs(v) <= math.pi / 2):
-                raise LogError(f"{f.name} must be in [-pi/2, pi/2] rad (or absent)", field=f.name)
-        elif f.name == "range_max":
-            if not (math.isnan(v) or 0.0 < v <= MAX_STATED_RANGE):
-                raise LogError(f"range_max must be in (0, {MAX_STATED_RANGE:g}] m (or absent)", field="range_max")
-        elif f.name.startswith("sigma"):
-            optional = isinstance(f.default, float) and math.isnan(f.default)
-            if optional and math.isnan(v):
+            continue
+        if not isinstance(v, float):
+            raise LogError(f"expected a number, got {type(v).__name__}", field=name)
+        if code == _VALUE:
+            if not isfinite(v):
+                raise LogError("value must be finite", field=name)
+            if arg is not None and abs(v) > getattr(lim, arg[0]):
+                _beyond(lim, arg, name, v)
+        elif code == _TIME:
+            if not isfinite(v):
+                raise LogError("timestamp must be finite", field="t")
+            if abs(v) > lim.max_time:
+                _beyond(lim, arg, name, v)
+        elif code == _SIGMA:
+            if arg and math.isnan(v):
                 continue
-            if not (math.isfinite(v) and v > 0.0):
-                raise LogError("sigma must be finite and > 0", field=f.name)
+            if not (isfinite(v) and v > 0.0):
+                raise LogError("sigma must be finite and > 0", field=name)
             if not lim.min_sigma <= v <= lim.max_sigma:
                 raise LogError(f"sigma {v:g} outside the physical range [{lim.min_sigma:g}, {lim.max_sigma:g}]",
-                               field=f.name)
-        elif not math.isfinite(v):
-            raise LogError("value must be finite", field=f.name)
-        elif f.name == "range":
+                               field=name)
+        elif code == _OPT_AXIS:
+            if math.isnan(v):
+                continue  # the planar 3-axis IMU record
+            if not isfinite(v):
+                raise LogError("value must be finite", field=name)
+            if arg is not None and abs(v) > getattr(lim, arg[0]):
+                _beyond(lim, arg, name, v)
+        elif code == _ATTITUDE:
+            if arg and not isfinite(v):
+                raise LogError(f"{name} must be finite", field=name)
+            if not (math.isnan(v) or abs(v) <= math.pi / 2):
+                raise LogError(f"{name} must be in [-pi/2, pi/2] rad (or absent)", field=name)
+        elif code == _RANGE_MAX:
+            if not (math.isnan(v) or 0.0 < v <= MAX_STATED_RANGE):
+                raise LogError(f"range_max must be in (0, {MAX_STATED_RANGE:g}] m (or absent)", field="range_max")
+        else:  # _RANGE
+            if not isfinite(v):
+                raise LogError("value must be finite", field=name)
             if not 0.0 < v <= lim.max_beacon_range:
                 raise LogError(f"range {v:g} m outside (0, {lim.max_beacon_range:g}]", field="range")
-        elif f.name in _BOUNDED:
-            attr, what, unit = _BOUNDED[f.name]
-            top = getattr(lim, attr)
-            if abs(v) > top:
-                hint = " (--max-speed)" if attr == "max_speed" else ""
-                raise LogError(f"{what} {v:g} {unit} beyond the plausible limit {top:g} {unit}{hint}", field=f.name)
     if isinstance(rec, Scan):
         if rec.ranges.ndim != 1 or rec.angles.ndim != 1:
             raise LogError("ranges and angles must be 1-D arrays", field="ranges")
@@ -410,19 +462,29 @@ def validate_record(obj: Any, *, index: int | None = None, limits: Limits | None
         if isinstance(obj, tuple(RECORD_TYPES.values())):
             raise LogError(f"a {got} record is not taken here (takes: {names})", file=what)
         raise LogError(f"expected a record ({names}), got {got}", file=what)
-    ints = {f.name: float(v) for f in fields(obj) if f.name not in ARRAY_FIELDS
-            and isinstance(v := getattr(obj, f.name), int) and not isinstance(v, bool) and abs(v) < 2**53}
-    if ints:  # Gnss(t=0, ...) from Python: the same record in floats
-        from dataclasses import replace
-
-        obj = replace(obj, **ints)
     try:
-        check_record(obj, limits or API_LIMITS)
+        try:
+            check_record(obj, limits or API_LIMITS)
+        except LogError:
+            ints = {f.name: float(v) for f in fields(obj) if f.name not in ARRAY_FIELDS
+                    and isinstance(v := getattr(obj, f.name), int) and not isinstance(v, bool) and abs(v) < 2**53}
+            if not ints:
+                raise
+            from dataclasses import replace  # Gnss(t=0, ...) from Python: the same record in floats
+
+            obj = replace(obj, **ints)
+            check_record(obj, limits or API_LIMITS)
     except LogError as err:
         t = getattr(obj, "t", None)
         at = f" at t={t!r}" if t is not None else ""
         raise LogError(err.message, file=f"{what} ({type(obj).__name__}{at})", field=err.field) from None
     return obj
+
+
+def _tighter(a: Limits, b: Limits) -> bool:
+    """Whether every record within bounds ``a`` is within bounds ``b``."""
+    return all(getattr(a, f.name) >= getattr(b, f.name) if f.name.startswith("min_")
+               else getattr(a, f.name) <= getattr(b, f.name) for f in fields(Limits))
 
 
 def _check_cloud(rec: Cloud) -> None:
@@ -465,6 +527,9 @@ class NavLog:
     records: list[Record]
     beacons_known: list[KnownBeacon] = field(default_factory=list)
     meta: dict[str, Any] = field(default_factory=dict)
+    # the records a reader checked (the very objects, in order) and the bounds they passed
+    _checked: tuple[tuple[Record, ...], Limits | None] = field(default=((), None), init=False, repr=False,
+                                                              compare=False)
 
     def __post_init__(self) -> None:
         for i in range(1, len(self.records)):
@@ -541,11 +606,40 @@ class NavLog:
         """The records with ``t0 <= t <= t1`` (charted beacons and meta kept)."""
         lo = -math.inf if t0 is None else t0
         hi = math.inf if t1 is None else t1
-        return NavLog([r for r in self.records if lo <= r.t <= hi], list(self.beacons_known), dict(self.meta))
+        return NavLog([r for r in self.records if lo <= r.t <= hi], list(self.beacons_known),
+                      dict(self.meta)).checks_from(self)
 
     def without(self, predicate) -> NavLog:
         """A copy without the records for which ``predicate(record)`` is true."""
-        return NavLog([r for r in self.records if not predicate(r)], list(self.beacons_known), dict(self.meta))
+        return NavLog([r for r in self.records if not predicate(r)], list(self.beacons_known),
+                      dict(self.meta)).checks_from(self)
+
+    # -- validation once: what a reader checked is not checked again -----------------------------
+    def mark_checked(self, limits: Limits | None = None) -> NavLog:
+        """Note that every record now in ``records`` passed :func:`check_record` with ``limits``
+        (``None``: :func:`default_limits`); the readers call it. Returns the log."""
+        self._checked = (tuple(self.records), limits or _LIMITS[0])
+        return self
+
+    def checks_from(self, parent: NavLog) -> NavLog:
+        """Keep ``parent``'s checks when this log's records are a subsequence of the records
+        ``parent``'s reader checked (a copy with records left out). Returns the log."""
+        snap, lim = parent._checked
+        if snap:
+            it = iter(snap)
+            if all(any(r is s for s in it) for r in self.records):
+                self._checked = (tuple(self.records), lim)
+        return self
+
+    def checked_records(self, limits: Limits | None = None) -> Iterator[tuple[Record, bool]]:
+        """Each record with whether it already passed :func:`check_record` with bounds at least as tight
+        as ``limits`` (default :data:`API_LIMITS`): true only for the very object a reader checked, at
+        its place; a record added or replaced since then is false (and gets checked where it is used)."""
+        snap, lim = self._checked
+        ok = bool(snap) and lim is not None and _tighter(lim, limits or API_LIMITS)
+        n = len(snap) if ok else 0
+        for i, r in enumerate(self.records):
+            yield r, i < n and snap[i] is r
 
     # -- short summaries (the dataclass repr would print every record) ------------------------------
     def _span(self) -> str:

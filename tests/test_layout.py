@@ -149,10 +149,7 @@ def test_module_names_are_unique():
 #: classes over 300 lines or 25 attributes, functions over 80 lines, as of issue #26 (to split; no new ones).
 #: Config dataclasses (one attribute per option) and the simulators' and readers' functions are exempt.
 KNOWN_LARGE = {
-    "graphnav.beacons._fast.propagate_truth", "graphnav.beacons.layout._propagate_block",
-    "graphnav.estimators.ekf_slam.run_ekf_slam", "graphnav.estimators.icp_odometry.run_icp_dr",
     "graphnav.estimators.scan_to_map.run_scan_to_map",
-    "graphnav.scan._ndt_fast.derivs3",
 }
 
 

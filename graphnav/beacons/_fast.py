@@ -32,6 +32,83 @@ WIDTH = 128
 
 
 @njit(cache=True, error_model="numpy")
+def _predict(P, g0, g1, rq_k, n, wn):
+    """Eq. 23, P <- G P G^T + R on the upper triangle (G's only off-diagonal entries G[0, 2] = ``g0``,
+    G[1, 2] = ``g1``; ``rq_k`` the step's R), in the numpy path's order of operations."""
+    for w in range(wn):
+        r02 = P[0, 2, w] + g0 * P[2, 2, w]
+        r12 = P[1, 2, w] + g1 * P[2, 2, w]
+        P[0, 0, w] = P[0, 0, w] + g0 * P[0, 2, w] + g0 * r02
+        P[0, 1, w] = P[0, 1, w] + g0 * P[1, 2, w] + g1 * r02
+        P[1, 1, w] = P[1, 1, w] + g1 * P[1, 2, w] + g1 * r12
+        P[0, 2, w] = r02
+        P[1, 2, w] = r12
+    for m in range(3, n):
+        for w in range(wn):
+            P[0, m, w] += g0 * P[2, m, w]
+            P[1, m, w] += g1 * P[2, m, w]
+    for i in range(3):
+        for m in range(i, 3):
+            r = rq_k[i, m]
+            for w in range(wn):
+                P[i, m, w] += r
+
+
+@njit(cache=True, error_model="numpy")
+def _jacobian(h, bxj, byj, px, py, wn):
+    """H's position entries (eq. 25) per layout into ``h`` (4, W): the beacon at (``bxj``, ``byj``)
+    seen from the true position (``px``, ``py``)."""
+    for w in range(wn):
+        dx = bxj[w] - px
+        dy = byj[w] - py
+        q = dx * dx + dy * dy
+        r = math.sqrt(q)
+        h[0, w] = -dx / r
+        h[1, w] = -dy / r
+        h[2, w] = dy / q
+        h[3, w] = -dx / q
+
+
+@njit(cache=True, error_model="numpy")
+def _correct(P, h, b, q_r, q_b, n, wn, work):
+    """Eq. 24-26 for the beacon whose x column is ``b``: A = P H^T from the five columns H touches,
+    S = H P H^T + Q and its inverse, then P -= K A^T with K = A S^-1. ``work``: scratch arrays
+    (A's two columns, S^-1, a row of K, P's five columns)."""
+    a0, a1, si, k0, k1, col = work
+    for t in range(5):                      # the five columns H touches
+        cc = t if t < 3 else b + t - 3
+        for i in range(n):
+            lo, hi = (i, cc) if i <= cc else (cc, i)
+            for w in range(wn):
+                col[t, i, w] = P[lo, hi, w]
+    for i in range(n):                      # A = P H^T (H's beacon columns = -position)
+        for w in range(wn):
+            ddx = col[0, i, w] - col[3, i, w]
+            ddy = col[1, i, w] - col[4, i, w]
+            a0[i, w] = h[0, w] * ddx + h[1, w] * ddy
+            a1[i, w] = h[2, w] * ddx + h[3, w] * ddy - col[2, i, w]
+    for w in range(wn):                     # S = H P H^T + Q, its inverse
+        ex0 = a0[0, w] - a0[b, w]
+        ex1 = a1[0, w] - a1[b, w]
+        ey0 = a0[1, w] - a0[b + 1, w]
+        ey1 = a1[1, w] - a1[b + 1, w]
+        s00 = h[0, w] * ex0 + h[1, w] * ey0 + q_r
+        s01 = h[0, w] * ex1 + h[1, w] * ey1
+        s11 = h[2, w] * ex1 + h[3, w] * ey1 - a1[2, w] + q_b
+        det = s00 * s11 - s01 * s01
+        si[0, w] = s11 / det
+        si[1, w] = -s01 / det
+        si[2, w] = s00 / det
+    for i in range(n):                      # eq. 24 K = A S^-1; eq. 26 P -= K A^T
+        for w in range(wn):
+            k0[w] = a0[i, w] * si[0, w] + a1[i, w] * si[1, w]
+            k1[w] = a0[i, w] * si[1, w] + a1[i, w] * si[2, w]
+        for m in range(i, n):
+            for w in range(wn):
+                P[i, m, w] -= k0[w] * a0[m, w] + k1[w] * a1[m, w]
+
+
+@njit(cache=True, error_model="numpy")
 def propagate_truth(bx, by, track, p0, ga, gb, rq, q_r, q_b, keep, width):
     """EKF-SLAM covariance over the true track for each layout.
 
@@ -57,13 +134,9 @@ def propagate_truth(bx, by, track, p0, ga, gb, rq, q_r, q_b, keep, width):
     my = np.empty((n_cfg, steps))
     p_out = np.empty((n_cfg if keep else 0, n, n))
     P = np.empty((n, n, width))            # upper triangle (i <= m) used
-    a0 = np.empty((n, width))              # A = P H^T, columns 0 and 1
-    a1 = np.empty((n, width))
     h = np.empty((4, width))               # H's position entries (eq. 25)
-    si = np.empty((3, width))              # S^-1 (symmetric)
-    k0 = np.empty(width)                   # row i of K (eq. 24)
-    k1 = np.empty(width)
-    col = np.empty((5, n, width))          # P's columns x, y, theta, x_b, y_b
+    work = (np.empty((n, width)), np.empty((n, width)), np.empty((3, width)),  # A's columns, S^-1
+            np.empty(width), np.empty(width), np.empty((5, n, width)))        # a row of K, P's five columns
     for c0 in range(0, n_cfg, width):
         wn = min(width, n_cfg - c0)
         for i in range(n):
@@ -71,69 +144,10 @@ def propagate_truth(bx, by, track, p0, ga, gb, rq, q_r, q_b, keep, width):
                 for w in range(wn):
                     P[i, m, w] = p0[i, m]
         for k in range(1, steps + 1):
-            # ---- prediction, eq. 23: P <- G P G^T + R, in the numpy path's order of operations
-            g0, g1 = ga[k - 1], gb[k - 1]
-            for w in range(wn):
-                r02 = P[0, 2, w] + g0 * P[2, 2, w]
-                r12 = P[1, 2, w] + g1 * P[2, 2, w]
-                P[0, 0, w] = P[0, 0, w] + g0 * P[0, 2, w] + g0 * r02
-                P[0, 1, w] = P[0, 1, w] + g0 * P[1, 2, w] + g1 * r02
-                P[1, 1, w] = P[1, 1, w] + g1 * P[1, 2, w] + g1 * r12
-                P[0, 2, w] = r02
-                P[1, 2, w] = r12
-            for m in range(3, n):
-                for w in range(wn):
-                    P[0, m, w] += g0 * P[2, m, w]
-                    P[1, m, w] += g1 * P[2, m, w]
-            for i in range(3):
-                for m in range(i, 3):
-                    r = rq[k - 1, i, m]
-                    for w in range(wn):
-                        P[i, m, w] += r
-            px, py = track[k, 0], track[k, 1]
-            # ---- corrections, eq. 24-26, one beacon at a time
-            for j in range(n_b):
-                b = 3 + 2 * j
-                for w in range(wn):
-                    dx = bx[c0 + w, j] - px
-                    dy = by[c0 + w, j] - py
-                    q = dx * dx + dy * dy
-                    r = math.sqrt(q)
-                    h[0, w] = -dx / r
-                    h[1, w] = -dy / r
-                    h[2, w] = dy / q
-                    h[3, w] = -dx / q
-                for t in range(5):                      # the five columns H touches
-                    cc = t if t < 3 else b + t - 3
-                    for i in range(n):
-                        lo, hi = (i, cc) if i <= cc else (cc, i)
-                        for w in range(wn):
-                            col[t, i, w] = P[lo, hi, w]
-                for i in range(n):                      # A = P H^T (H's beacon columns = -position)
-                    for w in range(wn):
-                        ddx = col[0, i, w] - col[3, i, w]
-                        ddy = col[1, i, w] - col[4, i, w]
-                        a0[i, w] = h[0, w] * ddx + h[1, w] * ddy
-                        a1[i, w] = h[2, w] * ddx + h[3, w] * ddy - col[2, i, w]
-                for w in range(wn):                     # S = H P H^T + Q, its inverse
-                    ex0 = a0[0, w] - a0[b, w]
-                    ex1 = a1[0, w] - a1[b, w]
-                    ey0 = a0[1, w] - a0[b + 1, w]
-                    ey1 = a1[1, w] - a1[b + 1, w]
-                    s00 = h[0, w] * ex0 + h[1, w] * ey0 + q_r
-                    s01 = h[0, w] * ex1 + h[1, w] * ey1
-                    s11 = h[2, w] * ex1 + h[3, w] * ey1 - a1[2, w] + q_b
-                    det = s00 * s11 - s01 * s01
-                    si[0, w] = s11 / det
-                    si[1, w] = -s01 / det
-                    si[2, w] = s00 / det
-                for i in range(n):                      # eq. 24 K = A S^-1; eq. 26 P -= K A^T
-                    for w in range(wn):
-                        k0[w] = a0[i, w] * si[0, w] + a1[i, w] * si[1, w]
-                        k1[w] = a0[i, w] * si[1, w] + a1[i, w] * si[2, w]
-                    for m in range(i, n):
-                        for w in range(wn):
-                            P[i, m, w] -= k0[w] * a0[m, w] + k1[w] * a1[m, w]
+            _predict(P, ga[k - 1], gb[k - 1], rq[k - 1], n, wn)
+            for j in range(n_b):               # corrections, one beacon at a time
+                _jacobian(h, bx[c0:c0 + wn, j], by[c0:c0 + wn, j], track[k, 0], track[k, 1], wn)
+                _correct(P, h, 3 + 2 * j, q_r, q_b, n, wn, work)
             for w in range(wn):
                 mx[c0 + w, k - 1] = math.sqrt(max(P[0, 0, w], 0.0))
                 my[c0 + w, k - 1] = math.sqrt(max(P[1, 1, w], 0.0))

@@ -241,41 +241,42 @@ def _propagate_compiled(kernel: Any, layouts: NDArray[np.float64], fw: Fairway, 
     return out
 
 
-def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices, keep_state: bool,
-                     seeds: NDArray) -> dict[str, NDArray[np.float64]]:
-    # Layout (n, n, C): every matrix entry is a contiguous vector over configurations.
-    C, B, _ = layouts.shape
-    n = 3 + 2 * B
-    dt, steps = fw.dt, fw.steps
-    track = fw.track()
-    P = np.repeat(initial_covariance(B, ch)[:, :, None], C, axis=2)
-    tmp = np.empty_like(P)
-    est = ch.linearize == "estimate"
-    x = np.zeros((n, C))
-    x[:3] = fw.start[:, None]
-    if est:
-        noise = [draw_noise(fw, lay, int(sd)) for lay, sd in zip(layouts, seeds, strict=True)]
-        dv = np.array([d["dv"] for d in noise]).T               # (steps, C)
-        drot = np.array([d["drot"] for d in noise]).T
-        dr = np.array([d["dr"] for d in noise]).transpose(1, 2, 0)  # (steps, B, C)
-        db = np.array([d["db"] for d in noise]).transpose(1, 2, 0)
-        if ch.beacon_init == "truth":
-            x[3:] = layouts.reshape(C, -1).T
-    bx, by = layouts[:, :, 0].T, layouts[:, :, 1].T                # (B, C)
-    seen = np.zeros(B, dtype=bool)
-    q_r, q_b = fw.sigma_range**2, fw.sigma_bearing**2
-    m_v, m_rot = fw.sigma_v**2, fw.sigma_rot**2
-    mx = np.empty((steps, C))
-    my = np.empty((steps, C))
-    for k in range(1, steps + 1):
-        # ---- prediction, eq. 18-23: G = I + g e_theta^T (rows/cols 0, 1), R = W M W^T
-        if est:
-            v = fw.v + dv[k - 1]
+class _BlockFilter:
+    """The numpy EKF-SLAM of eq. 18-27 over a block of C layouts at once: P is (n, n, C), so every
+    matrix entry is a contiguous vector over layouts. With ``linearize="estimate"`` the state ``x``
+    (n, C) is estimated from each layout's own noise draw; on the truth only P is propagated."""
+
+    def __init__(self, layouts: NDArray[np.float64], fw: Fairway, ch: Choices, seeds: NDArray) -> None:
+        C, B, _ = layouts.shape
+        n = 3 + 2 * B
+        self.fw, self.ch, self.track = fw, ch, fw.track()
+        self.P = np.repeat(initial_covariance(B, ch)[:, :, None], C, axis=2)
+        self.tmp = np.empty_like(self.P)
+        self.est = ch.linearize == "estimate"
+        self.x = np.zeros((n, C))
+        self.x[:3] = fw.start[:, None]
+        if self.est:
+            noise = [draw_noise(fw, lay, int(sd)) for lay, sd in zip(layouts, seeds, strict=True)]
+            self.dv = np.array([d["dv"] for d in noise]).T               # (steps, C)
+            self.drot = np.array([d["drot"] for d in noise]).T
+            self.dr = np.array([d["dr"] for d in noise]).transpose(1, 2, 0)  # (steps, B, C)
+            self.db = np.array([d["db"] for d in noise]).transpose(1, 2, 0)
+            if ch.beacon_init == "truth":
+                self.x[3:] = layouts.reshape(C, -1).T
+        self.bx, self.by = layouts[:, :, 0].T, layouts[:, :, 1].T                # (B, C)
+        self.seen = np.zeros(B, dtype=bool)
+
+    def predict(self, k: int) -> None:
+        """Eq. 18-23 for step ``k``: G = I + g e_theta^T (rows/cols 0, 1), R = W M W^T."""
+        fw, P, x, C = self.fw, self.P, self.x, self.x.shape[1]
+        dt = fw.dt
+        if self.est:
+            v = fw.v + self.dv[k - 1]
             th = x[2].copy()
             c, s = np.cos(th), np.sin(th)
             zero, one = np.zeros(C), np.ones(C)
         else:  # on the true track G and R are the same for every layout: scalars, not vectors
-            v, th = fw.v, track[k - 1, 2]
+            v, th = fw.v, self.track[k - 1, 2]
             c, s = float(np.cos(th)), float(np.sin(th))
             zero, one = 0.0, 1.0
         ga, gb = -s * dt * v, c * dt * v
@@ -284,69 +285,85 @@ def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices, kee
         P[:, 0] += ga * P[:, 2]
         P[:, 1] += gb * P[:, 2]
         w0 = (c * dt, s * dt, zero)
-        w1 = (zero, zero, dt * one) if ch.w_second == "rot" else (ga, gb, one)
+        w1 = (zero, zero, dt * one) if self.ch.w_second == "rot" else (ga, gb, one)
+        m_v, m_rot = fw.sigma_v**2, fw.sigma_rot**2
         for a in range(3):
             for e in range(a, 3):
                 r = m_v * w0[a] * w0[e] + m_rot * w1[a] * w1[e]
                 P[a, e] += r
                 if e != a:
                     P[e, a] += r
-        if est:
+        if self.est:
             x[0] += v * dt * c
             x[1] += v * dt * s
-            x[2] = wrap_angle(x[2] + drot[k - 1] * dt)
-        # ---- corrections, eq. 24-27, one beacon at a time
-        for j in range(B):
-            b = 3 + 2 * j
-            if est:
-                tdx, tdy = bx[j] - track[k, 0], by[j] - track[k, 1]
-                z_r = np.hypot(tdx, tdy) + dr[k - 1, j]
-                z_b = wrap_angle(np.arctan2(tdy, tdx) - track[k, 2] + db[k - 1, j])
-                if not seen[j] and ch.beacon_init == "first-sighting":
-                    x[b] = x[0] + z_r * np.cos(z_b + x[2])
-                    x[b + 1] = x[1] + z_r * np.sin(z_b + x[2])
-                px, py, pth, lx, ly = x[0], x[1], x[2], x[b], x[b + 1]
-            else:
-                px, py, pth, lx, ly = track[k, 0], track[k, 1], track[k, 2], bx[j], by[j]
-            dx, dy = lx - px, ly - py
-            q = dx * dx + dy * dy
-            r = np.sqrt(q)
-            # H (eq. 25): the beacon columns are minus the position columns, so H P^T needs only
-            # D = P[:, (x, y)] - P[:, (xb, yb)] and P[:, theta]
-            hx0, hy0, hx1, hy1 = -dx / r, -dy / r, dy / q, -dx / q
-            Dx = P[:, 0] - P[:, b]
-            Dy = P[:, 1] - P[:, b + 1]
-            A = np.empty((n, 2, C))                                             # P H^T
-            A[:, 0] = hx0 * Dx + hy0 * Dy
-            A[:, 1] = hx1 * Dx + hy1 * Dy - P[:, 2]
-            ex, ey = A[0] - A[b], A[1] - A[b + 1]                               # (2, C)
-            s00 = hx0 * ex[0] + hy0 * ey[0] + q_r
-            s01 = hx0 * ex[1] + hy0 * ey[1]
-            s11 = hx1 * ex[1] + hy1 * ey[1] - A[2, 1] + q_b
-            det = s00 * s11 - s01 * s01
-            i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-            K = np.empty((n, 2, C))                                             # eq. 24
-            K[:, 0] = A[:, 0] * i00 + A[:, 1] * i01
-            K[:, 1] = A[:, 0] * i01 + A[:, 1] * i11
-            K0, K1 = K[:, 0], K[:, 1]
-            # P -= K H P = sum_m K_m (x) A_m (rank 2; K is optimal, so this equals the Joseph
-            # form up to rounding: see the dense Joseph-form reference in ekf_slam.EkfSlam)
-            np.einsum("ikc,jkc->ijc", K, A, out=tmp)
-            P -= tmp
-            if est:
-                nu0 = z_r - r
-                nu1 = wrap_angle(z_b - (np.arctan2(dy, dx) - pth))
-                x += K0 * nu0 + K1 * nu1
-                x[2] = wrap_angle(x[2])
-            seen[j] = True
-        mx[k - 1] = np.sqrt(np.maximum(P[0, 0], 0.0))
-        my[k - 1] = np.sqrt(np.maximum(P[1, 1], 0.0))
+            x[2] = wrap_angle(x[2] + self.drot[k - 1] * dt)
+
+    def correct(self, k: int, j: int) -> None:
+        """Eq. 24-27 for beacon ``j`` at step ``k``."""
+        P, x, track, b = self.P, self.x, self.track, 3 + 2 * j
+        n, C = x.shape
+        if self.est:
+            tdx, tdy = self.bx[j] - track[k, 0], self.by[j] - track[k, 1]
+            z_r = np.hypot(tdx, tdy) + self.dr[k - 1, j]
+            z_b = wrap_angle(np.arctan2(tdy, tdx) - track[k, 2] + self.db[k - 1, j])
+            if not self.seen[j] and self.ch.beacon_init == "first-sighting":
+                x[b] = x[0] + z_r * np.cos(z_b + x[2])
+                x[b + 1] = x[1] + z_r * np.sin(z_b + x[2])
+            px, py, pth, lx, ly = x[0], x[1], x[2], x[b], x[b + 1]
+        else:
+            px, py, pth, lx, ly = track[k, 0], track[k, 1], track[k, 2], self.bx[j], self.by[j]
+        dx, dy = lx - px, ly - py
+        q = dx * dx + dy * dy
+        r = np.sqrt(q)
+        # H (eq. 25): the beacon columns are minus the position columns, so H P^T needs only
+        # D = P[:, (x, y)] - P[:, (xb, yb)] and P[:, theta]
+        hx0, hy0, hx1, hy1 = -dx / r, -dy / r, dy / q, -dx / q
+        Dx = P[:, 0] - P[:, b]
+        Dy = P[:, 1] - P[:, b + 1]
+        A = np.empty((n, 2, C))                                             # P H^T
+        A[:, 0] = hx0 * Dx + hy0 * Dy
+        A[:, 1] = hx1 * Dx + hy1 * Dy - P[:, 2]
+        ex, ey = A[0] - A[b], A[1] - A[b + 1]                               # (2, C)
+        s00 = hx0 * ex[0] + hy0 * ey[0] + self.fw.sigma_range**2
+        s01 = hx0 * ex[1] + hy0 * ey[1]
+        s11 = hx1 * ex[1] + hy1 * ey[1] - A[2, 1] + self.fw.sigma_bearing**2
+        det = s00 * s11 - s01 * s01
+        i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+        K = np.empty((n, 2, C))                                             # eq. 24
+        K[:, 0] = A[:, 0] * i00 + A[:, 1] * i01
+        K[:, 1] = A[:, 0] * i01 + A[:, 1] * i11
+        # P -= K H P = sum_m K_m (x) A_m (rank 2; K is optimal, so this equals the Joseph
+        # form up to rounding: see the dense Joseph-form reference in ekf_slam.EkfSlam)
+        np.einsum("ikc,jkc->ijc", K, A, out=self.tmp)
+        P -= self.tmp
+        if self.est:
+            nu0 = z_r - r
+            nu1 = wrap_angle(z_b - (np.arctan2(dy, dx) - pth))
+            x += K[:, 0] * nu0 + K[:, 1] * nu1
+            x[2] = wrap_angle(x[2])
+        self.seen[j] = True
+
+
+def _propagate_block(layouts: NDArray[np.float64], fw: Fairway, ch: Choices, keep_state: bool,
+                     seeds: NDArray) -> dict[str, NDArray[np.float64]]:
+    """:func:`propagate`'s numpy path over one block of layouts (:class:`_BlockFilter`)."""
+    C, B, _ = layouts.shape
+    f = _BlockFilter(layouts, fw, ch, seeds)
+    mx = np.empty((fw.steps, C))
+    my = np.empty((fw.steps, C))
+    for k in range(1, fw.steps + 1):
+        f.predict(k)
+        for j in range(B):  # corrections, one beacon at a time
+            f.correct(k, j)
+        mx[k - 1] = np.sqrt(np.maximum(f.P[0, 0], 0.0))
+        my[k - 1] = np.sqrt(np.maximum(f.P[1, 1], 0.0))
     out = {"mx": mx.T.copy(), "my": my.T.copy()}
     if keep_state:
-        if not est:  # nothing is estimated: report the linearisation point (the truth)
-            x[:3] = track[-1][:, None]
+        x = f.x
+        if not f.est:  # nothing is estimated: report the linearisation point (the truth)
+            x[:3] = f.track[-1][:, None]
             x[3:] = layouts.reshape(C, -1).T
-        out["P"], out["x"] = P.transpose(2, 0, 1).copy(), x.T.copy()
+        out["P"], out["x"] = f.P.transpose(2, 0, 1).copy(), x.T.copy()
     return out
 
 

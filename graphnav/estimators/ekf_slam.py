@@ -32,11 +32,11 @@ from numpy.typing import NDArray
 
 from ..config import option
 from ..geometry import wrap_angle
+from ..graph.chi2 import chi2_ppf
 from ..log import BeaconObs, NavLog, Odometry
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .base import BatchEstimator
-from .gating import chi2_ppf
 
 PAPER_SIGMAS = {                              # the paper's section 7, per record (white noise)
     "sigma_v": 0.5,                           # m/s
@@ -301,6 +301,142 @@ class _NisScale:
             self.max_scale = max(self.max_scale, self.scale)
 
 
+@dataclass
+class _SlamSettings:
+    """The options of :func:`run_ekf_slam` resolved for one mode (the defaults filled in)."""
+
+    sv: float
+    sw: float
+    sr: float
+    sb: float
+    gate: float | None
+    init: str
+    adaptive: bool
+    density: bool  # the default motion sigmas are noise densities (real-log mode)
+    grow: bool  # slots added when a beacon is first seen (else one per beacon id from the start)
+    reinit_after: int | None
+    iterations: int
+    window: int
+
+    @classmethod
+    def of(cls, *, paper: bool, sigma_v: float | None, sigma_rot: float | None, sigma_range: float | None,
+           sigma_bearing: float | None, gate: float | None | str, init: str | None, adaptive: bool | None,
+           reinit_after: int | None, p0_cross: str, iterations: int, window: int) -> _SlamSettings:
+        defaults = PAPER_SIGMAS if paper else SENSOR_DEFAULTS
+        if gate == "default":
+            gate = None if paper else DEFAULT_GATE
+        if gate is not None and not 0.0 < float(gate) < 1.0:
+            raise ValueError(f"gate must be a probability in (0, 1) or None, not {gate!r}")
+        return cls(sv=defaults["sigma_v"] if sigma_v is None else sigma_v,
+                   sw=defaults["sigma_rot"] if sigma_rot is None else sigma_rot,
+                   sr=defaults["sigma_range"] if sigma_range is None else sigma_range,
+                   sb=defaults["sigma_bearing"] if sigma_bearing is None else sigma_bearing,
+                   gate=gate, init=init or ("paper" if paper else "inverse"),
+                   adaptive=(not paper) if adaptive is None else adaptive, density=not paper,
+                   grow=p0_cross != "paper" and not paper, reinit_after=None if paper else reinit_after,
+                   iterations=iterations, window=window)
+
+
+class _SlamRun:
+    """One EKF-SLAM pass, record by record: :meth:`add` predicts to the record's time with the held
+    control, then takes the odometry record as the new control or corrects with the sighting;
+    :meth:`emit` reports the estimate of a time; :meth:`result` the run."""
+
+    def __init__(self, f: EkfSlam, cfg: _SlamSettings, slot: dict[str, int], confirmed: dict[int, bool],
+                 t0: float, on_estimate: OnEstimate | None) -> None:
+        self.f, self.cfg, self.slot = f, cfg, slot
+        self.confirmed = confirmed  # a beacon slot whose first sighting was confirmed by a re-sighting
+        self.misses: dict[int, int] = {}
+        self.nis = _NisScale(cfg.window, _gate_threshold(cfg.gate) if cfg.gate is not None else math.inf) \
+            if cfg.adaptive else None
+        self.t_cur = t0
+        self.u: Odometry | None = None
+        self.on_estimate = on_estimate
+        self.ts: list[float] = []
+        self.poses: list[NDArray[np.float64]] = []
+        self.covs: list[NDArray[np.float64]] = []
+        self.counts = {"updates": 0, "rejected": 0, "invalid": 0, "reinitialised": 0}
+        self.defaulted: set[str] = set()
+
+    def add(self, r: Odometry | BeaconObs) -> None:
+        if r.t > self.t_cur:
+            if self.u is not None:
+                self._predict(self.u, r.t - self.t_cur)
+            self.t_cur = r.t
+        if isinstance(r, Odometry):
+            self.u = r
+            if not (_given(r.sigma_v) and _given(r.sigma_w)):
+                self.defaulted.add("odometry")
+        elif not (r.range > 0.0 and math.isfinite(r.range) and math.isfinite(r.bearing)):
+            self.counts["invalid"] += 1
+        else:
+            self._sighting(r)
+
+    def _predict(self, u: Odometry, dt: float) -> None:
+        """Eq. 3 and 19-23 over ``dt`` with the control ``u``: its own sigmas as per-record white noise,
+        else the defaults (noise densities in the real-log mode), times the innovation scale."""
+        cfg = self.cfg
+        k = self.nis.scale if self.nis is not None else 1.0
+        if _given(u.sigma_v):
+            a = u.sigma_v
+        else:
+            a = cfg.sv * math.sqrt(1.0 / dt) if cfg.density else cfg.sv
+        if _given(u.sigma_w):
+            c = u.sigma_w
+        else:
+            c = cfg.sw * math.sqrt(1.0 / dt) if cfg.density else cfg.sw
+        self.f.predict(u.v, u.w, dt, a * math.sqrt(k), c * math.sqrt(k))
+
+    def _sighting(self, r: BeaconObs) -> None:
+        """Eq. 6, 24-27 for one sighting: gated, the adaptive scale fed, a never-confirmed beacon
+        initialised again after ``reinit_after`` gated re-sightings in a row."""
+        f, cfg = self.f, self.cfg
+        if r.id not in self.slot:
+            self.slot[r.id] = f.add_beacon()
+        j = self.slot[r.id]
+        if not (_given(r.sigma_range) and _given(r.sigma_bearing)):
+            self.defaulted.add("beacon")
+        zr = r.sigma_range if _given(r.sigma_range) else cfg.sr
+        zb = r.sigma_bearing if _given(r.sigma_bearing) else cfg.sb
+        resight = bool(f.seen[j])
+        ok = f.update(j, r.range, r.bearing, zr, zb, cfg.gate, cfg.iterations)
+        if self.nis is not None and resight:
+            self.nis.add(f.last_nis)
+        if resight and ok:
+            self.confirmed[j], self.misses[j] = True, 0
+        elif resight:
+            self.misses[j] = self.misses.get(j, 0) + 1
+            if cfg.reinit_after is not None and not self.confirmed.get(j, False) and \
+                    self.misses[j] >= cfg.reinit_after:
+                f.forget(j)
+                ok = f.update(j, r.range, r.bearing, zr, zb, cfg.gate, cfg.iterations)
+                self.misses[j] = 0
+                self.counts["reinitialised"] += 1
+        self.counts["updates"] += ok
+        self.counts["rejected"] += not ok
+        if ok and not np.all(np.isfinite(f.x[:3])):
+            raise ValueError(f"ekf-slam diverged (non-finite state) at the beacon record of t = {r.t}")
+
+    def emit(self, t: float) -> None:
+        self.ts.append(t)
+        self.poses.append(self.f.x[:3].copy())
+        self.covs.append(self.f.P[:3, :3].copy())
+        if self.on_estimate is not None:
+            self.on_estimate(t, self.poses[-1], self.covs[-1])
+
+    def result(self, step_ms: list[float], info: dict[str, Any]) -> RunResult:
+        f, cfg = self.f, self.cfg
+        traj = Trajectory(np.array(self.ts), np.array(self.poses), np.array(self.covs), name="ekf-slam")
+        beacons = {i: f.x[3 + 2 * j: 5 + 2 * j].tolist() for i, j in self.slot.items() if f.seen[j]}
+        info = {"anchor": info.pop("anchor"), "beacons": beacons, **self.counts, **info,
+                "defaults_used": sorted(self.defaulted),
+                "sigmas": {"sigma_v": cfg.sv, "sigma_rot": cfg.sw, "sigma_range": cfg.sr, "sigma_bearing": cfg.sb,
+                           "density": cfg.density}}
+        if self.nis is not None:
+            info.update({"noise_scale_final": self.nis.scale, "noise_scale_max": self.nis.max_scale})
+        return RunResult(traj, traj, np.array(step_ms), info=info)
+
+
 def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: bool = False,
                  sigma_v: float | None = None, sigma_rot: float | None = None, sigma_range: float | None = None,
                  sigma_bearing: float | None = None, gate: float | None | str = "default",
@@ -335,32 +471,19 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
     cannot be gated): it is forgotten and initialised again from the current sighting (``None``:
     never; off in the paper's mode).
     """
-    defaults = PAPER_SIGMAS if paper else SENSOR_DEFAULTS
-    sv = defaults["sigma_v"] if sigma_v is None else sigma_v
-    sw = defaults["sigma_rot"] if sigma_rot is None else sigma_rot
-    sr = defaults["sigma_range"] if sigma_range is None else sigma_range
-    sb = defaults["sigma_bearing"] if sigma_bearing is None else sigma_bearing
-    if gate == "default":
-        gate = None if paper else DEFAULT_GATE
-    if gate is not None and not 0.0 < float(gate) < 1.0:
-        raise ValueError(f"gate must be a probability in (0, 1) or None, not {gate!r}")
-    init = init or ("paper" if paper else "inverse")
-    adaptive = (not paper) if adaptive is None else adaptive
-    density = not paper  # the defaults' meaning (see above); given sigmas are always per record
-    grow = p0_cross != "paper" and not paper
-    if paper:
-        reinit_after = None
-
+    cfg = _SlamSettings.of(paper=paper, sigma_v=sigma_v, sigma_rot=sigma_rot, sigma_range=sigma_range,
+                           sigma_bearing=sigma_bearing, gate=gate, init=init, adaptive=adaptive,
+                           reinit_after=reinit_after, p0_cross=p0_cross, iterations=iterations, window=window)
     known = {b.id for b in log.beacons_known} if use_known else set()
     slot: dict[str, int] = {}
-    if not grow:  # the paper's eq. 14-15: a slot per beacon of the log from the start
+    if not cfg.grow:  # the paper's eq. 14-15: a slot per beacon of the log from the start
         slot = {i: j for j, i in enumerate(sorted({r.id for r in log.of("beacon")} | known))}
     pose0, cov0, anchor = _start(log)
     fej = (not paper and iterations <= 1) if fej is None else fej
     if fej and iterations > 1:
         raise ValueError("fej and iterations > 1 exclude each other (the iterated update relinearises)")
     f = EkfSlam(pose0, len(slot), pose_cov0=cov0, p0_beacon=p0_beacon, p0_cross=p0_cross, w_second=w_second,
-                init=init, fej=fej)
+                init=cfg.init, fej=fej)
     if use_known:
         for kb in log.beacons_known:
             if kb.id not in slot:
@@ -369,86 +492,18 @@ def run_ekf_slam(log: NavLog, *, on_estimate: OnEstimate | None = None, paper: b
     recs = [r for r in log.records if isinstance(r, Odometry | BeaconObs)]
     if not recs:
         raise ValueError("ekf-slam needs odometry records")
-    nis = _NisScale(window, _gate_threshold(gate) if gate is not None else math.inf) if adaptive else None
-    t_cur = recs[0].t
-    u: Odometry | None = None
-    ts, poses, covs, step_ms = [], [], [], []
-    used = rejected = invalid = reinitialised = 0
-    defaulted: set[str] = set()
-    confirmed: dict[int, bool] = {slot[kb.id]: True for kb in log.beacons_known} if use_known else {}
-    misses: dict[int, int] = {}
-
-    def emit(t: float) -> None:
-        ts.append(t)
-        poses.append(f.x[:3].copy())
-        covs.append(f.P[:3, :3].copy())
-        if on_estimate is not None:
-            on_estimate(t, poses[-1], covs[-1])
-
+    confirmed = {slot[kb.id]: True for kb in log.beacons_known} if use_known else {}
+    run = _SlamRun(f, cfg, slot, confirmed, recs[0].t, on_estimate)
+    step_ms = []
     for i, r in enumerate(recs):
         t0 = time.perf_counter()
-        if r.t > t_cur:
-            if u is not None:
-                dt = r.t - t_cur
-                k = nis.scale if nis is not None else 1.0
-                if _given(u.sigma_v):
-                    a = u.sigma_v
-                else:
-                    a = sv * math.sqrt(1.0 / dt) if density else sv
-                if _given(u.sigma_w):
-                    c = u.sigma_w
-                else:
-                    c = sw * math.sqrt(1.0 / dt) if density else sw
-                f.predict(u.v, u.w, dt, a * math.sqrt(k), c * math.sqrt(k))
-            t_cur = r.t
-        if isinstance(r, Odometry):
-            u = r
-            if not (_given(r.sigma_v) and _given(r.sigma_w)):
-                defaulted.add("odometry")
-        else:
-            if not (r.range > 0.0 and math.isfinite(r.range) and math.isfinite(r.bearing)):
-                invalid += 1
-            else:
-                if r.id not in slot:
-                    slot[r.id] = f.add_beacon()
-                j = slot[r.id]
-                if not (_given(r.sigma_range) and _given(r.sigma_bearing)):
-                    defaulted.add("beacon")
-                zr = r.sigma_range if _given(r.sigma_range) else sr
-                zb = r.sigma_bearing if _given(r.sigma_bearing) else sb
-                resight = bool(f.seen[j])
-                ok = f.update(j, r.range, r.bearing, zr, zb, gate, iterations)
-                if nis is not None and resight:
-                    nis.add(f.last_nis)
-                if resight and ok:
-                    confirmed[j], misses[j] = True, 0
-                elif resight:
-                    misses[j] = misses.get(j, 0) + 1
-                    if reinit_after is not None and not confirmed.get(j, False) and misses[j] >= reinit_after:
-                        f.forget(j)
-                        ok = f.update(j, r.range, r.bearing, zr, zb, gate, iterations)
-                        misses[j] = 0
-                        reinitialised += 1
-                used += ok
-                rejected += not ok
-                if ok and not np.all(np.isfinite(f.x[:3])):
-                    raise ValueError(f"ekf-slam diverged (non-finite state) at the beacon record of t = {r.t}")
+        run.add(r)
         step_ms.append((time.perf_counter() - t0) * 1e3)
         if i + 1 == len(recs) or recs[i + 1].t > r.t:
-            emit(r.t)
-    traj = Trajectory(np.array(ts), np.array(poses), np.array(covs), name="ekf-slam")
-    beacons = {i: f.x[3 + 2 * j: 5 + 2 * j].tolist() for i, j in slot.items() if f.seen[j]}
-    info: dict[str, Any] = {"anchor": anchor, "beacons": beacons, "updates": used, "rejected": rejected,
-                            "invalid": invalid, "reinitialised": reinitialised,
-                            "mode": "paper" if paper else "robust", "gate": gate,
-                            "init": init, "fej": fej, "p0_beacon": p0_beacon, "p0_cross": p0_cross,
-                            "w_second": w_second,
-                            "defaults_used": sorted(defaulted),
-                            "sigmas": {"sigma_v": sv, "sigma_rot": sw, "sigma_range": sr, "sigma_bearing": sb,
-                                       "density": density}}
-    if nis is not None:
-        info.update({"noise_scale_final": nis.scale, "noise_scale_max": nis.max_scale})
-    return RunResult(traj, traj, np.array(step_ms), info=info)
+            run.emit(r.t)
+    return run.result(step_ms, {"anchor": anchor, "mode": "paper" if paper else "robust", "gate": cfg.gate,
+                                "init": cfg.init, "fej": fej, "p0_beacon": p0_beacon, "p0_cross": p0_cross,
+                                "w_second": w_second})
 
 
 def _unmet(log: NavLog) -> str | None:

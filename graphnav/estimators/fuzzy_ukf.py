@@ -44,10 +44,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import option
+from ..graph.chi2 import chi2_ppf
 from ..log import NavLog
 from ..result import OnEstimate, RunResult
 from .fuzzy import FuzzyAlpha, Thresholds
-from .gating import chi2_ppf
 from .imu_model import resolve_flag, wants_bias
 from .ukf import DEFAULTS, Ukf, UkfOptions, channel_variances, measurement_table, run_nav_filter
 

@@ -42,10 +42,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import gammaincinv
 
 from ..config import option
 from ..geometry import wrap_angle
+from ..graph.chi2 import chi2_ppf
 
 
 @dataclass
@@ -66,11 +66,6 @@ class GateOptions:
 
 GATING_DEFAULTS: dict[str, Any] = {f.name: f.default for f in fields(GateOptions)}
 """The gate's options and their defaults (:class:`GateOptions`)."""
-
-
-def chi2_ppf(p: float, dof: int) -> float:
-    """``scipy.stats.chi2.ppf(p, dof)`` (the same expression)."""
-    return float(2.0 * gammaincinv(dof / 2.0, p))
 
 
 @dataclass

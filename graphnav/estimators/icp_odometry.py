@@ -30,7 +30,7 @@ import numpy as np
 
 from ..config import option
 from ..geometry import cov_to_world, se2_adjoint_inv, se2_compose
-from ..log import NavLog, odometry_samples
+from ..log import NavLog, Scan, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan import icp_cache
 from ..scan.imu_guess import ImuGuess, fuse_se2, imu_samples
@@ -49,6 +49,94 @@ def _to_world(pose: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return cov_to_world(float(pose[2]), cov)
 
 
+class _KeyframeChain:
+    """icp-dr's chain: each scan matched against the newest keyframe (the match, the guess along the
+    directions it cannot see, or the bridge when it fails), its pose and covariance composed onto the
+    keyframe's. With the IMU's guess (``lio``), LiDAR-inertial keyframes: a scan's pose is the
+    keyframe's composed with the IMU's prediction, and a scan is matched (and becomes the keyframe) once
+    the predicted motion from the keyframe reaches ``keyframe_dist`` or ``keyframe_angle_deg`` (a pair
+    0.1 s apart measures the motion less well than the IMU does; over a metre the match carries the
+    information)."""
+
+    def __init__(self, cfg: IcpConfig, guesser: MotionGuess, scan0: Scan, pose: np.ndarray, cov: np.ndarray, *,
+                 guess_cov: bool, keyframe_dist: float, keyframe_angle_deg: float) -> None:
+        self.cfg, self.guesser, self.guess_cov = cfg, guesser, guess_cov
+        self.lio = guesser.imu is not None and guesser.odometry is None and guesser.mode in ("odometry", "imu")
+        self.keyframe_dist, self.keyframe_angle = keyframe_dist, np.radians(keyframe_angle_deg)
+        self.kf_t, self.kf_pose, self.kf_cov, self.kf_pts = scan0.t, pose, cov, scan_points(scan0, cfg)
+        self.icp_ms: list[float] = []
+        self.bridged = {"odometry": 0, "imu": 0, "cv": 0}
+        self.constrained = 0
+        self.matches = 0
+
+    def step(self, scan: Scan, last: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The pose and covariance (body frame) of ``scan``; ``last``: the log's last scan (matched)."""
+        ta, tb = self.kf_t, scan.t
+        guess = self.guesser.guess(ta, tb)
+        pts = None
+        if self.lio and not last and guess is not None and not (
+                np.hypot(guess[0], guess[1]) >= self.keyframe_dist or abs(guess[2]) >= self.keyframe_angle):
+            inc, q = guess, self.guesser.cov
+        else:
+            pts = scan_points(scan, self.cfg)
+            inc, q = self._match(pts, ta, tb, guess)
+        a = se2_adjoint_inv(inc)
+        cov = a @ self.kf_cov @ a.T + q
+        pose = se2_compose(self.kf_pose, inc)
+        if pts is not None:
+            self.kf_t, self.kf_pose, self.kf_cov, self.kf_pts = tb, pose, cov, pts
+        return pose, cov
+
+    def _match(self, pts: np.ndarray, ta: float, tb: float, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The increment from the keyframe at ``ta`` to the scan at ``tb`` and its covariance."""
+        guesser = self.guesser
+        t0 = time.perf_counter()
+        res = icp_cache.match_points(pts, self.kf_pts, self.cfg, init=guess,  # shared in compare
+                                     init_cov=guesser.cov if self.guess_cov else None)
+        self.icp_ms.append((time.perf_counter() - t0) * 1e3)
+        self.matches += 1
+        guesser.update(res, ta, tb)
+        if res.ok:
+            inc, q = res.pose, res.cov
+        elif res.quality.get("inflated") and guesser.cov is not None:
+            # degenerate only: the match across its weak directions, the odometry guess along them
+            # (keep_constrained), with the covariance of each where it is taken from
+            inc, q = res.pose, res.cov
+            self.constrained += 1
+        else:
+            inc, q, how = guesser.bridge(ta, tb)
+            self.bridged[how] += 1
+        if self.lio and guess is not None and guesser.cov is not None and (res.ok or res.quality.get("inflated")):
+            weak = res.quality.get("weak_projector")
+            inc, q = fuse_se2(guess, guesser.cov, np.asarray(res.pose, dtype=float), res.cov,
+                              None if weak is None else np.asarray(weak, dtype=float))
+        return inc, q
+
+    def info(self) -> dict[str, Any]:
+        b = self.bridged
+        return {"failed_matches": sum(b.values()), "bridged_odometry": b["odometry"], "bridged_imu": b["imu"],
+                "bridged_cv": b["cv"], "constrained": self.constrained, "matches": self.matches,
+                "guess": _guess_source(self.guesser)}
+
+
+def _first_scans(log: NavLog, sigma_xy0: float, sigma_yaw0: float) -> tuple[np.ndarray, str, np.ndarray, list[Scan]]:
+    """The start pose, where it came from, its covariance (a pose prior's own sigmas win) and the scans
+    from the one at the anchor's time (earlier scans have no pose)."""
+    pose, anchor = start_pose(log)
+    prior = log.pose_prior()
+    t_anchor = None
+    if prior is not None:
+        sigma_xy0, sigma_yaw0 = prior.sigma_xy, prior.sigma_yaw
+        t_anchor = prior.t
+    elif anchor == "truth":
+        t_anchor = log.of("truth")[0].t
+    scans = log.of("scan")
+    if t_anchor is not None:
+        first = int(np.searchsorted([s.t for s in scans], t_anchor - 1e-6))
+        scans = scans[min(first, len(scans) - 2):]
+    return pose, anchor, np.diag([sigma_xy0**2, sigma_xy0**2, sigma_yaw0**2]), scans
+
+
 def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: str = "HDL",
                init: str = "odometry", sigma_xy0: float = 0.0, sigma_yaw0: float = 0.0, guess_cov: bool = True,
                keyframe_dist: float = 1.0, keyframe_angle_deg: float = 10.0, **options: Any) -> RunResult:
@@ -63,80 +151,23 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
     if unknown:
         raise ValueError(f"unknown icp-dr options: {', '.join(sorted(unknown))}")
     cfg = IcpConfig(variant=variant, **options)
-    pose, anchor = start_pose(log)
-    prior = log.pose_prior()
-    t_anchor = None
-    if prior is not None:
-        sigma_xy0, sigma_yaw0 = prior.sigma_xy, prior.sigma_yaw
-        t_anchor = prior.t
-    elif anchor == "truth":
-        t_anchor = log.of("truth")[0].t
-    scans = log.of("scan")
-    if t_anchor is not None:  # chain from the scan at the anchor's time (earlier scans have no pose)
-        first = int(np.searchsorted([s.t for s in scans], t_anchor - 1e-6))
-        scans = scans[min(first, len(scans) - 2):]
-    cov = np.diag([sigma_xy0**2, sigma_xy0**2, sigma_yaw0**2])
-    t = [scans[0].t]
-    poses = [pose]
-    covs = [_to_world(pose, cov)]
-    if on_estimate is not None:
-        on_estimate(scans[0].t, pose, _to_world(pose, cov))
-    icp_ms = []
-    bridged = {"odometry": 0, "imu": 0, "cv": 0}
-    constrained = 0
+    pose, anchor, cov, scans = _first_scans(log, sigma_xy0, sigma_yaw0)
     guesser = MotionGuess(init, odometry_samples(log), _imu_guess(log, pose) if init in ("odometry", "imu") else None)
-    # with the IMU's guess, LiDAR-inertial keyframes: each scan's pose is the keyframe's composed with the
-    # IMU's prediction, and a scan is matched (and becomes the keyframe) once the predicted motion from
-    # the keyframe reaches keyframe_dist or keyframe_angle_deg (a pair 0.1 s apart measures the
-    # motion less well than the IMU does; over a metre the match carries the information)
-    lio = guesser.imu is not None and guesser.odometry is None and guesser.mode in ("odometry", "imu")
-    kf_t, kf_pose, kf_cov, kf_pts = scans[0].t, pose, cov, scan_points(scans[0], cfg)
-    matches = 0
+    chain = _KeyframeChain(cfg, guesser, scans[0], pose, cov, guess_cov=guess_cov, keyframe_dist=keyframe_dist,
+                           keyframe_angle_deg=keyframe_angle_deg)
+    t, poses, covs = [scans[0].t], [pose], [_to_world(pose, cov)]
+    if on_estimate is not None:
+        on_estimate(scans[0].t, pose, covs[0])
     for k in range(1, len(scans)):
-        ta, tb = kf_t, scans[k].t
-        guess = guesser.guess(ta, tb)
-        matched = False
-        if lio and k < len(scans) - 1 and guess is not None and not (
-                np.hypot(guess[0], guess[1]) >= keyframe_dist or abs(guess[2]) >= np.radians(keyframe_angle_deg)):
-            inc, q = guess, guesser.cov
-        else:
-            pts = scan_points(scans[k], cfg)
-            t0 = time.perf_counter()
-            res = icp_cache.match_points(pts, kf_pts, cfg, init=guess,  # shared in compare
-                                         init_cov=guesser.cov if guess_cov else None)
-            icp_ms.append((time.perf_counter() - t0) * 1e3)
-            matches += 1
-            matched = True
-            guesser.update(res, ta, tb)
-            if res.ok:
-                inc, q = res.pose, res.cov
-            elif res.quality.get("inflated") and guesser.cov is not None:
-                # degenerate only: the match across its weak directions, the odometry guess along them
-                # (keep_constrained), with the covariance of each where it is taken from
-                inc, q = res.pose, res.cov
-                constrained += 1
-            else:
-                inc, q, how = guesser.bridge(ta, tb)
-                bridged[how] += 1
-            if lio and guess is not None and guesser.cov is not None and (res.ok or res.quality.get("inflated")):
-                weak = res.quality.get("weak_projector")
-                inc, q = fuse_se2(guess, guesser.cov, np.asarray(res.pose, dtype=float), res.cov,
-                                  None if weak is None else np.asarray(weak, dtype=float))
-        a = se2_adjoint_inv(inc)
-        cov = a @ kf_cov @ a.T + q
-        pose = se2_compose(kf_pose, inc)
+        pose, cov = chain.step(scans[k], k == len(scans) - 1)
         t.append(scans[k].t)
         poses.append(pose)
         covs.append(_to_world(pose, cov))
         if on_estimate is not None:
             on_estimate(scans[k].t, pose, covs[-1])
-        if matched:
-            kf_t, kf_pose, kf_cov, kf_pts = tb, pose, cov, pts
     traj = Trajectory(np.array(t), np.array(poses), np.array(covs), name="icp-dr")
-    info = {"anchor": anchor, "variant": variant, "init": init, "failed_matches": sum(bridged.values()),
-            "bridged_odometry": bridged["odometry"], "bridged_imu": bridged["imu"], "bridged_cv": bridged["cv"],
-            "constrained": constrained, "matches": matches, "guess": _guess_source(guesser)}
-    return RunResult(traj, traj, np.zeros(0), np.array(icp_ms), info=info)
+    info = {"anchor": anchor, "variant": variant, "init": init, **chain.info()}
+    return RunResult(traj, traj, np.zeros(0), np.array(chain.icp_ms), info=info)
 
 
 def _imu_guess(log: NavLog, pose: np.ndarray) -> ImuGuess | None:

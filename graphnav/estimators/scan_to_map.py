@@ -48,6 +48,7 @@ from ..scan.registration import (
 from ..trajectory import Trajectory
 from .base import BatchEstimator
 from .dead_reckoning import start_pose
+from .scan_to_map3d import cloud_configs, run_scan_to_map3d, usable_clouds
 
 
 @dataclass(frozen=True)
@@ -83,6 +84,12 @@ class ScanToMapConfig:
         "them; \"predict\" takes the prediction (either way the scan may join the map)")
     predict: str = option("odometry", "initial guess: \"odometry\" (when the log has odometry, else the IMU's when "
                           "it has an IMU, else cv), \"imu\" or \"cv\"")
+    # 3D clouds (a log with cloud records and no scans: graphnav.estimators.scan_to_map3d)
+    cloud: dict[str, Any] = option(help="3D: the clouds' filter, graphnav.scan.cloud_match.CloudMatchConfig "
+                                   "(min_range, max_range, water_margin, sensor_height, ...)", factory=dict)
+    cloud_map: dict[str, Any] = option(help="3D: the local map and its registration, "
+                                       "graphnav.scan.cloud_map.CloudMapConfig (variant vgicp|gicp, voxel, "
+                                       "map_voxel, knn, max_corr, max_iter, horizon, rebuild, threads)", factory=dict)
 
     def params(self) -> Params:
         return Params(max_corr=self.max_corr, voxel=self.voxel, neighbors=self.neighbors,
@@ -98,6 +105,7 @@ def make_config(**options: Any) -> ScanToMapConfig:
         raise ValueError(f"degenerate must be 'constrained' or 'predict', got {cfg.degenerate!r}")
     if cfg.predict not in ("odometry", "imu", "cv"):
         raise ValueError(f"predict must be 'odometry', 'imu' or 'cv', got {cfg.predict!r}")
+    cloud_configs(cfg.cloud, cfg.cloud_map)  # fail early on a bad cloud or cloud_map option
     return ScanToMapConfig(**{**asdict(cfg), "backend": resolve_method(cfg.backend)})
 
 
@@ -135,6 +143,12 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
         t_anchor = log.pose_prior().t
     elif anchor == "truth":
         t_anchor = log.of("truth")[0].t
+    if _usable_scans(log) < 2 and usable_clouds(log) >= 2:
+        res = run_scan_to_map3d(log, pose0, predict=cfg.predict, max_correction=cfg.max_correction,
+                                min_fitness=cfg.min_fitness, cloud=cfg.cloud, cloud_map=cfg.cloud_map,
+                                t_anchor=t_anchor, on_estimate=on_estimate)
+        res.info = {"anchor": anchor, "config": asdict(cfg), **res.info}
+        return res
     scans: list[Scan] = [s for s in log.of("scan") if s.t >= t_anchor - 1e-6]
     skipped = len(log.of("scan")) - len(scans)
     params = cfg.params()
@@ -263,13 +277,18 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
     return RunResult(traj, traj, np.array(step_ms), np.array(icp_ms), info)
 
 
+def _usable_scans(log: NavLog) -> int:
+    return sum(1 for s in log.of("scan") if int(np.count_nonzero(s.valid())) >= ScanToMapConfig.min_points)
+
+
 def _unmet(log: NavLog) -> str | None:
-    n = sum(1 for s in log.of("scan") if int(np.count_nonzero(s.valid())) >= ScanToMapConfig.min_points)
-    return None if n >= 2 else f"needs at least two scans with >= {ScanToMapConfig.min_points} returns"
+    if _usable_scans(log) >= 2 or usable_clouds(log) >= 2:
+        return None
+    return f"needs at least two scans with >= {ScanToMapConfig.min_points} returns or two 3D clouds"
 
 
 def _inputs(log: NavLog, options: dict) -> set[str]:
-    kinds = {"scan", "pose_prior"}
+    kinds = {"cloud" if _usable_scans(log) < 2 and usable_clouds(log) >= 2 else "scan", "pose_prior"}
     predict = make_config(**options).predict
     if predict == "odometry" and len(log.of("odometry")) >= 2:
         kinds.add("odometry")  # the initial guess
@@ -281,7 +300,7 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
 class ScanToMap(BatchEstimator):
     """LiDAR scan-to-local-map registration (:func:`run_scan_to_map`)."""
 
-    description = "LiDAR scan-to-local-map registration (small_gicp VGICP default)"
+    description = "LiDAR scan-to-local-map registration (small_gicp VGICP; 3D clouds: a KISS-ICP style voxel map)"
     kind = "odometry"
     Config = ScanToMapConfig
     what = "scan-to-map"

@@ -61,6 +61,8 @@ class Smoother(Estimator):
             self.nav = Navigator.for_log(log, self.config, on_estimate=on_estimate)
         else:
             self.nav = Navigator(self.config, on_estimate=on_estimate)
+        # records that come in the order of the log's: those its reader checked are not checked again
+        self._checked = log.checked_records() if log is not None else None
 
     unmet = staticmethod(unmet)
     inputs = staticmethod(_inputs)
@@ -71,7 +73,14 @@ class Smoother(Estimator):
         return Navigator(history=False, **_solver_options(cls.solver, options))
 
     def add(self, record: Record) -> Estimate | None:
-        return self.nav.add(record)
+        checked = False
+        if self._checked is not None:
+            nxt = next(self._checked, None)
+            if nxt is not None and nxt[0] is record:
+                checked = nxt[1]
+            else:  # not the log's next record: every record from here on is checked
+                self._checked = None
+        return self.nav.add(record, checked=checked)
 
     def finish(self) -> RunResult:
         return self.nav.result()

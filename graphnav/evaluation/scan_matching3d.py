@@ -15,13 +15,15 @@ stands in for it in both figures.
 
 Methods: register3d's ``icp``, ``p2plane``, ``gicp``, ``vgicp``, ``ndt`` (frame to frame, each pair
 preprocessed from scratch, as ``graphnav register`` does); ``gicp-graph`` (the graph's
-:class:`~graphnav.scan.cloud_match.CloudMatcher`: each cloud preprocessed once); ``s2m`` (ours,
-scan-to-map: small_gicp VGICP of each frame against an incremental voxel-hashed local map,
-``GaussianVoxelMap`` with LRU expiry, KISS-ICP's structure); ``s2m-gicp`` (scan-to-map GICP against
-the points of an ``IncrementalVoxelMapCov`` local map, its KdTree and covariances rebuilt every
-``rebuild`` frames: more accurate, slower); ``kiss-icp`` (the ``kiss_icp`` Python
-pipeline, the reference, when installed: voxel 1 m (max range / 100, its rule), no deskewing, one
-thread).
+:class:`~graphnav.scan.cloud_match.CloudMatcher`: each cloud preprocessed once); ``s2m`` and
+``s2m-gicp`` (ours, scan-to-map in KISS-ICP's structure, :mod:`graphnav.scan.cloud_map` with the
+constant-velocity prediction: ``s2m`` VGICP against a ``GaussianVoxelMap``, ``s2m-gicp`` GICP
+against the local map's points downsampled and rebuilt every 10 frames, the ``scan-to-map``
+estimator's default on clouds); ``kiss-icp`` (the ``kiss_icp`` Python pipeline, the reference, when
+installed: voxel 1 m (max range / 100, its rule), no deskewing, one thread).
+
+Times: wall (``ms``) and CPU (``cpu_ms``, ``time.process_time``) per frame, each method one thread;
+``<method>_vs_kiss`` the ratios of ``s2m`` and ``s2m-gicp`` to KISS-ICP, measured in the same run.
 """
 
 from __future__ import annotations
@@ -36,11 +38,26 @@ from numpy.typing import NDArray
 
 from ..errors import GraphnavError
 from ..log import Cloud, NavLog
+from ..scan.cloud_map import CloudMapConfig, CloudOdometry
 from ..scan.cloud_match import CloudMatchConfig, CloudMatcher, filter_cloud, planar_matrix, project_se2
 from ..scan.native_stderr import NativeWarnings
 
 PAIR_METHODS = ("icp", "p2plane", "gicp", "vgicp", "ndt")
-METHODS = (*PAIR_METHODS, "gicp-graph", "s2m", "s2m-gicp", "kiss-icp")
+S2M = ("s2m", "s2m-gicp")
+METHODS = (*PAIR_METHODS, "gicp-graph", *S2M, "kiss-icp")
+
+
+def s2m_config(method: str, cfg: CloudMatchConfig) -> CloudMapConfig:
+    """The scan-to-map method's settings from the shared ones: ``s2m`` VGICP on a map of twice the
+    frames' voxel, LRU horizon 20; ``s2m-gicp`` :class:`~graphnav.scan.cloud_map.CloudMapConfig`'s
+    defaults (the ``scan-to-map`` estimator's: GICP on the map's points downsampled to 0.8 voxels,
+    rebuilt every 10 frames, map cells of two voxels, horizon 30); both correspondences within half
+    the pairwise methods' ``max_corr``."""
+    if method == "s2m":
+        return CloudMapConfig("vgicp", cfg.voxel, 2 * cfg.voxel, cfg.knn, cfg.max_corr / 2, horizon=20,
+                              target_voxel=None)
+    return CloudMapConfig("gicp", cfg.voxel, 2 * cfg.voxel, cfg.knn, cfg.max_corr / 2, horizon=30, rebuild=10,
+                          target_voxel=0.8 * cfg.voxel)
 
 
 def _frames(log: NavLog, n: int, cfg: CloudMatchConfig) -> tuple[list[Cloud], list[NDArray], NDArray]:
@@ -80,7 +97,24 @@ def _compose(a: NDArray, r: NDArray) -> NDArray:
     return np.array([a[0] + c * r[0] - s * r[1], a[1] + s * r[0] + c * r[1], a[2] + r[2]])
 
 
-def _score(name: str, rels: list[NDArray | None], ms: list[float], ref: NDArray, failed: int = 0) -> dict[str, Any]:
+class _Times:
+    """Wall and CPU (``time.process_time``: this process, every thread) ms of each timed block."""
+
+    def __init__(self) -> None:
+        self.ms: list[float] = []
+        self.cpu: list[float] = []
+
+    def __enter__(self) -> _Times:
+        self._c0, self._p0 = time.perf_counter(), time.process_time()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.ms.append((time.perf_counter() - self._c0) * 1e3)
+        self.cpu.append((time.process_time() - self._p0) * 1e3)
+
+
+def _score(name: str, rels: list[NDArray | None], times: _Times, ref: NDArray, failed: int = 0,
+           tracks: bool = False) -> dict[str, Any]:
     et, er = [], []
     pose = ref[0].copy()
     traj = [pose]
@@ -98,46 +132,46 @@ def _score(name: str, rels: list[NDArray | None], ms: list[float], ref: NDArray,
     ate = float(np.sqrt(np.mean(np.sum((tr[:, :2] - ref[:, :2]) ** 2, axis=1))))
     return {"single_trans_rmse_m": float(np.sqrt(np.mean(np.square(et)))),
             "single_rot_rmse_deg": float(np.sqrt(np.mean(np.square(er)))),
-            "single_ms_median": float(np.median(ms)), "continuous_ate_m": ate,
-            "continuous_ms_per_frame": float(np.mean(ms)), "frames": len(ref), "failed": failed}
+            "single_ms_median": float(np.median(times.ms)), "continuous_ate_m": ate,
+            "continuous_ms_per_frame": float(np.mean(times.ms)),
+            "continuous_cpu_ms_per_frame": float(np.mean(times.cpu)), "frames": len(ref), "failed": failed,
+            **({"track": tr.tolist(), "cpu_ms": times.cpu} if tracks else {})}
 
 
-def _pairwise(method: str, pts: list[NDArray], params: dict[str, Any]) -> tuple[list, list, int]:
+def _pairwise(method: str, pts: list[NDArray], params: dict[str, Any]) -> tuple[list, _Times, int]:
     """Frame to frame; a registration that reports no convergence (NDT) counts as failed and the
     prediction stands in for it."""
     from ..scan.register3d import register
 
-    rels, ms, failed = [], [], 0
+    rels, times, failed = [], _Times(), 0
     last = np.zeros(3)
     for a, b in zip(pts[:-1], pts[1:], strict=True):
-        c0 = time.perf_counter()
-        try:
-            r = register(b, a, method, planar_matrix(*last), **params)
-            p, _, _ = project_se2(r.T, r.cov) if r.converged is not False else (None, None, None)
-        except (ValueError, GraphnavError):  # too few points, beyond the bound: a failed match
-            p = None
-        ms.append((time.perf_counter() - c0) * 1e3)
+        with times:
+            try:
+                r = register(b, a, method, planar_matrix(*last), **params)
+                p, _, _ = project_se2(r.T, r.cov) if r.converged is not False else (None, None, None)
+            except (ValueError, GraphnavError):  # too few points, beyond the bound: a failed match
+                p = None
         if p is None:
             failed += 1
             p = last
         rels.append(p)
         last = p
-    return rels, ms, failed
+    return rels, times, failed
 
 
-def _graph_matcher(clouds: list[Cloud], cfg: CloudMatchConfig, h: float | None) -> tuple[list, list, int]:
+def _graph_matcher(clouds: list[Cloud], cfg: CloudMatchConfig, h: float | None) -> tuple[list, _Times, int]:
     m = CloudMatcher(cfg, h)
-    rels, ms, last, failed = [], [], np.zeros(3), 0
+    rels, times, last, failed = [], _Times(), np.zeros(3), 0
     for a, b in zip(clouds[:-1], clouds[1:], strict=True):
-        c0 = time.perf_counter()
-        ok, p, _ = m(b, a, last)
-        ms.append((time.perf_counter() - c0) * 1e3)
+        with times:
+            ok, p, _ = m(b, a, last)
         if not ok:
             failed += 1
             p = last
         rels.append(p)
         last = p
-    return rels, ms, failed
+    return rels, times, failed
 
 
 def _chain_to_rels(poses: list[NDArray]) -> list[NDArray]:
@@ -148,87 +182,21 @@ def _chain_to_rels(poses: list[NDArray]) -> list[NDArray]:
     return out
 
 
-MIN_FRAME_POINTS = 10
-"""A scan-to-map frame (or map) with fewer points is a failed match: the prediction stands in for it."""
+def _s2m(pts: list[NDArray], cfg: CloudMapConfig) -> tuple[list, _Times, int]:
+    """Scan-to-map odometry (:class:`graphnav.scan.cloud_map.CloudOdometry`: each frame aligned to the
+    local map from the constant-velocity prediction): the chained SE(2) increments, the times of
+    each aligned frame (the first, which starts the map, is not timed) and the failures."""
+    odo = CloudOdometry(cfg)
+    poses, times, failed = [odo.step(pts[0]).T.copy()], _Times(), 0
+    for p in pts[1:]:
+        with times:
+            m = odo.step(p)
+        failed += not m.matched
+        poses.append(m.T.copy())
+    return _chain_to_rels(poses), times, failed
 
 
-def _odometry_loop(pts: list[NDArray], voxel: float, knn: int, align: Any, vmap: Any) -> tuple[list, list, int]:
-    """The scan-to-map loop both variants share: each frame voxel-downsampled (GICP covariances),
-    aligned by ``align(k, frame, guess) -> T or None`` (None: no match) from the constant-velocity
-    prediction (not the first), inserted into ``vmap`` at its estimated pose; a frame of fewer than
-    :data:`MIN_FRAME_POINTS` points, or one ``align`` finds no match for, is failed: the prediction
-    stands in and it is not inserted. Returns the chained SE(2) increments, the ms per aligned frame
-    and the failures."""
-    import small_gicp
-
-    T, delta = np.eye(4), np.eye(4)
-    poses, ms, failed, mapped = [], [], 0, False
-    for k, p in enumerate(pts):
-        c0 = time.perf_counter()
-        pc = None
-        if len(p) >= MIN_FRAME_POINTS:
-            pc, _ = small_gicp.preprocess_points(p, voxel, num_neighbors=knn, num_threads=1)
-        matched = k == 0
-        if k:
-            new = align(k, pc, T @ delta) if pc is not None and mapped else None
-            matched = new is not None
-            if new is None:
-                failed += 1
-                new = T @ delta
-            delta, T = np.linalg.inv(T) @ new, new
-        if pc is not None and (matched or not mapped):  # (the first usable frame starts the map)
-            vmap.insert(pc, T)
-            mapped = True
-        if k:
-            ms.append((time.perf_counter() - c0) * 1e3)
-        poses.append(T.copy())
-    return _chain_to_rels(poses), ms, failed
-
-
-def _s2m(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr: float) -> tuple[list, list, int]:
-    """Scan-to-map: each frame (voxel-downsampled, GICP covariances) VGICP-aligned to a voxel-hashed
-    local map of the frames before it (inserted at their estimated poses; voxels unseen for 20
-    insertions expire) from the constant-velocity prediction."""
-    import small_gicp
-
-    vmap = small_gicp.GaussianVoxelMap(map_voxel)
-    vmap.set_lru(horizon=20, clear_cycle=10)
-
-    def align(k: int, pc: Any, guess: NDArray) -> NDArray | None:
-        r = small_gicp.align(vmap, pc, guess, max_correspondence_distance=max_corr, num_threads=1, max_iterations=30)
-        return np.asarray(r.T_target_source) if r.num_inliers > 0 else None
-
-    return _odometry_loop(pts, voxel, knn, align, vmap)
-
-
-def _s2m_gicp(pts: list[NDArray], voxel: float, map_voxel: float, knn: int, max_corr: float, rebuild: int = 10,
-              horizon: int = 30) -> tuple[list, list, int]:
-    """Scan-to-map GICP: the target is the local map's voxel points (``IncrementalVoxelMapCov``, LRU
-    expiry after ``horizon`` insertions) with fresh GICP covariances, rebuilt every ``rebuild`` frames."""
-    import small_gicp
-
-    vm = small_gicp.IncrementalVoxelMapCov(map_voxel)
-    vm.set_lru(horizon=horizon, clear_cycle=10)
-    built: list[Any] = []  # (target, tree), rebuilt every `rebuild` frames
-
-    def align(k: int, pc: Any, guess: NDArray) -> NDArray | None:
-        if not built or k % rebuild == 1:
-            points = np.asarray(vm.voxel_points())[:, :3]
-            if len(points) < MIN_FRAME_POINTS:
-                built.clear()
-                return None
-            target = small_gicp.PointCloud(points)
-            tree = small_gicp.KdTree(target)
-            small_gicp.estimate_normals_covariances(target, tree, num_neighbors=knn)
-            built[:] = [target, tree]
-        r = small_gicp.align(built[0], pc, built[1], guess, registration_type="GICP",
-                             max_correspondence_distance=max_corr, num_threads=1, max_iterations=30)
-        return np.asarray(r.T_target_source) if r.num_inliers > 0 else None
-
-    return _odometry_loop(pts, voxel, knn, align, vm)
-
-
-def _kiss(pts: list[NDArray], max_range: float) -> tuple[list, list]:
+def _kiss(pts: list[NDArray], max_range: float) -> tuple[list, _Times]:
     from ..errors import require
 
     KISSConfig = require("kiss_icp.config", "the kiss-icp reference").KISSConfig
@@ -241,21 +209,21 @@ def _kiss(pts: list[NDArray], max_range: float) -> tuple[list, list]:
     cfg.mapping.voxel_size = max_range / 100.0
     cfg.registration.max_num_threads = 1
     kiss = KissICP(cfg)
-    poses, ms = [], []
-    for k, p in enumerate(pts):
-        c0 = time.perf_counter()
-        kiss.register_frame(np.ascontiguousarray(p), np.zeros(len(p)))
-        if k:
-            ms.append((time.perf_counter() - c0) * 1e3)
+    kiss.register_frame(np.ascontiguousarray(pts[0]), np.zeros(len(pts[0])))
+    poses, times = [np.asarray(kiss.last_pose).copy()], _Times()
+    for p in pts[1:]:
+        with times:
+            kiss.register_frame(np.ascontiguousarray(p), np.zeros(len(p)))
         poses.append(np.asarray(kiss.last_pose).copy())
-    return _chain_to_rels(poses), ms
+    return _chain_to_rels(poses), times
 
 
 def compare(log: NavLog, frames: int = 100, methods: tuple[str, ...] = METHODS,
-            cloud: dict[str, Any] | None = None) -> dict[str, Any]:
+            cloud: dict[str, Any] | None = None, tracks: bool = False) -> dict[str, Any]:
     """Every method on the log's first ``frames`` clouds (see the module doc): ``methods`` keyed by
     name, each with its single-frame and continuous figures (``skipped`` with the reason when its
-    library is missing)."""
+    library is missing); with ``tracks`` also each method's chained poses (``track``, (x, y, yaw)
+    per frame), its CPU ms per frame (``cpu_ms``) and the reference poses (``reference``)."""
     bad = sorted(set(methods) - set(METHODS))
     if bad:
         raise ValueError(f"unknown method(s) {', '.join(bad)}; known: {', '.join(METHODS)}")
@@ -273,24 +241,27 @@ def compare(log: NavLog, frames: int = 100, methods: tuple[str, ...] = METHODS,
                         from ..scan.ndt import warm_up
 
                         warm_up()
-                    rels, ms, failed = _pairwise(m, pts, params)
+                    rels, times, failed = _pairwise(m, pts, params)
                 elif m == "gicp-graph":
-                    rels, ms, failed = _graph_matcher(clouds, cfg, h)
-                elif m == "s2m":
-                    rels, ms, failed = _s2m(pts, cfg.voxel, 2 * cfg.voxel, cfg.knn, cfg.max_corr / 2)
-                elif m == "s2m-gicp":
-                    rels, ms, failed = _s2m_gicp(pts, cfg.voxel, cfg.voxel, cfg.knn, cfg.max_corr / 2)
+                    rels, times, failed = _graph_matcher(clouds, cfg, h)
+                elif m in S2M:
+                    rels, times, failed = _s2m(pts, s2m_config(m, cfg))
                 else:
-                    rels, ms = _kiss(pts, cfg.max_range)
+                    rels, times = _kiss(pts, cfg.max_range)
         except ImportError as exc:  # MissingExtra: the line naming the extra
             out[m] = {"skipped": str(exc)}
             continue
-        out[m] = {**_score(m, rels, ms, ref, failed), "native_warnings": native.count}
+        out[m] = {**_score(m, rels, times, ref, failed, tracks), "native_warnings": native.count}
     res: dict[str, Any] = {"frames": len(clouds), "t0": clouds[0].t, "t1": clouds[-1].t,
                            "points_per_frame": float(np.mean([len(p) for p in pts])),
-                           "filter": asdict(cfg), "sensor_height": h, "methods": out}
-    if "kiss-icp" in out and "s2m" in out and "skipped" not in out["kiss-icp"] and "skipped" not in out["s2m"]:
-        k, s = out["kiss-icp"], out["s2m"]
-        res["s2m_vs_kiss"] = {"time_ratio": s["continuous_ms_per_frame"] / k["continuous_ms_per_frame"],
-                              "ate_ratio": s["continuous_ate_m"] / max(k["continuous_ate_m"], 1e-12)}
+                           "filter": asdict(cfg), "sensor_height": h, "methods": out,
+                           **({"reference": ref.tolist()} if tracks else {})}
+    k = out.get("kiss-icp", {})
+    for name in S2M:
+        s = out.get(name, {})
+        if k and s and "skipped" not in k and "skipped" not in s:
+            res[f"{name}_vs_kiss"] = {
+                "time_ratio": s["continuous_ms_per_frame"] / k["continuous_ms_per_frame"],
+                "cpu_ratio": s["continuous_cpu_ms_per_frame"] / k["continuous_cpu_ms_per_frame"],
+                "ate_ratio": s["continuous_ate_m"] / max(k["continuous_ate_m"], 1e-12)}
     return res

@@ -26,9 +26,9 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from scipy.stats import chi2
 
 from . import noise
+from .chi2 import chi2_median, chi2_ppf
 from .solver import LmSettings, SolverError, _gtsam_message, levenberg_marquardt
 
 #: sensor groups whose factors the data may switch off (scan matches, 3D cloud matches, GNSS fixes: a cold
@@ -58,7 +58,7 @@ def group_scales(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups
         if len(d) >= 10:
             dims = np.array([x[1] for x in d])
             ratio = np.array([x[0] for x in d]) / dims
-            out[g] = max(1.0, float(np.median(ratio) / np.median(chi2.median(dims) / dims)))
+            out[g] = max(1.0, float(np.median(ratio) / np.median(chi2_median(dims) / dims)))
     return out
 
 
@@ -80,8 +80,8 @@ def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: 
     # each candidate's covariance times its group's scale and chi2_d(prob) / chi2_D(prob) (D the largest
     # dimension), so that GNC's one threshold, chi2_D(prob) / 2, is every factor's own chi-square bound
     dmax = max(graph.at(i).dim() for i in cand)
-    top = float(chi2.ppf(prob, dmax))
-    factor = {i: scale.get(groups[i], 1.0) * float(chi2.ppf(prob, graph.at(i).dim())) / top for i in cand}
+    top = chi2_ppf(prob, dmax)
+    factor = {i: scale.get(groups[i], 1.0) * chi2_ppf(prob, graph.at(i).dim()) / top for i in cand}
     suspects = [i for i in cand if _d2(graph.at(i), values) > top * factor[i]]
     report["beyond_bound"] = len(suspects)
     report["switched_off"] = {}
@@ -173,7 +173,7 @@ def odometry_consistency(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
             continue
         n = len(nees)
         mean = float(np.mean(nees)) / 3.0
-        bound = float(chi2.ppf(prob, 3 * n)) / (3 * n)
+        bound = chi2_ppf(prob, 3 * n) / (3 * n)
         if w in VERDICT_SCALES:
             ok &= mean <= bound
         out["scales"].append({"keyframes": w, "windows": n, "nees_per_dof": mean, "bound": bound,

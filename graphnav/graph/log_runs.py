@@ -26,8 +26,8 @@ def run(log: NavLog, solver: str, *, on_estimate: OnEstimate | None = None, matc
         raise ValueError(f"option solver={options['solver']!r} contradicts the estimator ({solver!r})")
     options["solver"] = solver
     nav = Navigator.for_log(log, SmootherConfig.from_options(options), matcher=matcher, on_estimate=on_estimate)
-    for rec in log.records:
-        nav.add(rec)
+    for rec, checked in log.checked_records():  # a reader's records are not checked twice
+        nav.add(rec, checked=checked)
     return nav.result()
 
 

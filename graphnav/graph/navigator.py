@@ -43,7 +43,7 @@ from ..log import KnownBeacon, NavLog, Record, validate_record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
-from .online_track import OnlineTrack, differenced
+from .online_track import OnlineTrack, kinematics
 from .smoother_config import SmootherConfig
 from .solution import Closing, marginal_priors, refresh_places
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt
@@ -59,6 +59,16 @@ def world_cov(pose: gtsam.Pose2, cov: NDArray[np.float64]) -> NDArray[np.float64
 
 def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
     return np.array([p.x(), p.y(), p.theta()])
+
+
+def gnss_sigma_assumed(log: NavLog) -> bool:
+    """Whether the log's GNSS sigmas are known only up to scale: an NMEA log's fixes without a GST
+    of their own take HDOP x an assumed UERE (``graphnav.io.nmea.UERE_M``), so their group is
+    rescaled like a defaulted one by the noise estimation (issue #25: estimated where redundancy allows)."""
+    if log.meta.get("format") != "nmea0183":
+        return False
+    n = sum(1 for r in log.records if r.kind == "gnss")
+    return n > int(log.meta.get("fix_sigma_from_gst", 0) or 0)
 
 
 def graph_params(cfg: SmootherConfig, space: PlanarSpace | None = None) -> gtsam.ISAM2Params:
@@ -148,15 +158,21 @@ class Navigator:
     @classmethod
     def for_log(cls, log: NavLog, config: SmootherConfig | None = None, **kw: Any) -> Navigator:
         """A navigator for ``log``: its chart, LiDAR model, IMU, mounts and whether it has scans
-        (:func:`log_inputs`)."""
-        return cls(config, **log_inputs(log, config, kw))
+        (:func:`log_inputs`); an NMEA log's assumed GNSS sigmas (:func:`gnss_sigma_assumed`)."""
+        nav = cls(config, **log_inputs(log, config, kw))
+        if gnss_sigma_assumed(log):
+            nav.builder.assume_sigmas("gnss")
+        return nav
 
     # -- online ----------------------------------------------------------------------------------
-    def add(self, rec: Record | KnownBeacon) -> Estimate | None:
-        """Take one record; the newest online estimate when a keyframe was solved, else ``None``."""
+    def add(self, rec: Record | KnownBeacon, *, checked: bool = False) -> Estimate | None:
+        """Take one record; the newest online estimate when a keyframe was solved, else ``None``.
+        Each record is validated (a LogError naming it) unless ``checked`` says a reader already did
+        (:meth:`NavLog.checked_records <graphnav.log.NavLog.checked_records>`)."""
         if self._result is not None:
             raise RuntimeError("the navigator has finished (smoothed() was called)")
-        rec = validate_record(rec, index=self.n_records + 1)  # a LogError naming the record, before the graph
+        if not checked:
+            rec = validate_record(rec, index=self.n_records + 1)  # a LogError naming the record, before the graph
         self.n_records += 1
         self._rec = rec if not isinstance(rec, KnownBeacon) else self._rec
         self.builder.push(rec)
@@ -229,7 +245,9 @@ class Navigator:
             self._rebase(k, s.t)  # bounded: the fixed-lag smoother re-anchored
         if self.on_estimate is not None:
             self.on_estimate(s.t, vec, cov)
-        return Estimate(s.t, vec, cov, *self._kinematics(s.t, vec, prev_t, prev_p))
+        velocity = self.last_state[1] if self.nav and self.last_state is not None else None
+        return Estimate(s.t, vec, cov, *kinematics(s.t, vec, prev_t, prev_p, velocity,
+                                                   self.builder.recent_odometry(s.t)))
 
     def _newest(self, solver: Solver, k: int, t: float, loops: Any) -> tuple[gtsam.Pose2, NDArray[np.float64]]:
         """The newest pose's online estimate and world covariance from an incremental ``solver``;
@@ -308,20 +326,6 @@ class Navigator:
             raise self._fail(exc, t) from None
         self._base = k
         self.extra["rebases"] = self.extra.get("rebases", 0) + 1
-
-    def _kinematics(self, t: float, p: NDArray[np.float64], prev_t: float | None,
-                    prev_p: NDArray[np.float64] | None) -> tuple[float | None, float | None, float | None]:
-        """Speed over ground, course, yaw rate: on the Pose3 graph SOG and COG from the velocity
-        state (the yaw rate differenced); else from the latest odometry sample when recent, else
-        differenced from the previous keyframe."""
-        sog, cog, w = differenced(t, p, prev_t, prev_p)
-        if self.nav and self.last_state is not None:  # the velocity over ground is a state
-            v = self.last_state[1]
-            return math.hypot(v[0], v[1]), math.atan2(v[1], v[0]), w
-        odo = self.builder.recent_odometry(t)
-        if odo is not None:
-            sog, w = abs(odo[0]), odo[1]
-        return sog, cog, w
 
     def info(self) -> dict[str, Any]:
         """Counts and timings so far (live mode's summary)."""

@@ -61,3 +61,17 @@ def differenced(t: float, p: NDArray[np.float64], prev_t: float | None, prev_p: 
         sog, cog = math.hypot(dx, dy) / dt, math.atan2(dy, dx)
         w = float(wrap_angle(p[2] - prev_p[2])) / dt
     return sog, cog, w
+
+
+def kinematics(t: float, p: NDArray[np.float64], prev_t: float | None, prev_p: NDArray[np.float64] | None,
+               velocity: NDArray[np.float64] | None, odometry: tuple[float, float] | None
+               ) -> tuple[float | None, float | None, float | None]:
+    """Speed over ground, course, yaw rate: from the ``velocity`` state when there is one (the Pose3
+    graph; the yaw rate differenced); else from the latest ``odometry`` sample's speed and yaw rate when
+    recent, else differenced from the previous estimate."""
+    sog, cog, w = differenced(t, p, prev_t, prev_p)
+    if velocity is not None:  # the velocity over ground is a state
+        return math.hypot(velocity[0], velocity[1]), math.atan2(velocity[1], velocity[0]), w
+    if odometry is not None:
+        sog, w = abs(odometry[0]), odometry[1]
+    return sog, cog, w

@@ -54,4 +54,4 @@ def drop_kinds(log: NavLog, kinds: Iterable[str]) -> NavLog:
     pairs = {tuple(k.split("@", 1)) for k in items if "@" in k}
     known = [] if "beacon_known" in drop else list(log.beacons_known)
     return NavLog([r for r in log.records if r.kind not in drop
-                   and (r.kind, getattr(r, "source", "")) not in pairs], known, dict(log.meta))
+                   and (r.kind, getattr(r, "source", "")) not in pairs], known, dict(log.meta)).checks_from(log)

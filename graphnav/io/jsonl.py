@@ -269,7 +269,7 @@ def read_jsonl(path: str | Path, *, lenient: bool = False, limits: Limits | None
         note_truncation(meta, lines, skipped)
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
-    return NavLog(records, known, meta)
+    return NavLog(records, known, meta).mark_checked(limits)
 
 
 def _frame_from(meta: dict, first_fix: dict | None) -> LocalFrame:

@@ -280,6 +280,6 @@ def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> N
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
     try:
-        return NavLog(records, known, meta)
+        return NavLog(records, known, meta).mark_checked(limits)
     except LogError as err:
         raise err.located(file=str(path)) from None

@@ -1,12 +1,13 @@
-"""Compiled (numba) kernels of :mod:`graphnav.scan.ndt`: the voxel map and the NDT score's derivatives.
+"""The kernels of :mod:`graphnav.scan.ndt`, its one implementation: the voxel map and the NDT score's derivatives.
 
-The same arithmetic as the numpy reference in :mod:`graphnav.scan.ndt` (tests check that both give
-the same score, gradient and Hessian to rounding), with one difference of data structure: voxels are
-found through an open-addressing hash table (Teschner et al. 2003's spatial hash, as KISS-ICP's
-voxel map), where the reference uses a binary search of the sorted voxel keys. Memory is linear in
-the number of points and occupied voxels: no dense grid sized from the bounding box.
-
-Imported lazily by :mod:`graphnav.scan.ndt`; absent numba, the numpy reference runs instead.
+Compiled by numba when importable, else run as plain Python (:mod:`graphnav.scan._jit`, the same code).
+Voxels are found through an open-addressing hash table (Teschner et al. 2003's spatial hash, as
+KISS-ICP's voxel map): memory is linear in the number of points and occupied voxels, no dense grid sized
+from the bounding box. The tests check the derivatives against finite differences of the score and the
+voxel Gaussians against the points' mean and covariance. Arguments travel in groups: the voxel map
+``vox = (tkeys, tvals, means, icovs, inv_res)`` (hash table, Gaussians, 1 / voxel side), the 3D pose's
+rotation terms ``rot = (R, t, dR, d2R)``, a point's scratch ``work = (ja, ha, gq, Aq, Aja)`` and the sums
+``acc = (g, H, G, fse)`` (``fse``: f, sum e m, sum e).
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from ._jit import njit
 
 # voxel coordinate range: +-2^20 cells per axis (3D), +-2^28 (2D); points outside are dropped
 OFF3 = 1 << 20
@@ -170,29 +172,24 @@ def gaussians(pts, keys, min_points, eig_ratio):
 
 
 @njit(cache=True)
-def derivs3(pts, R, t, dR, d2R, tkeys, tvals, means, icovs, inv_res, offsets, d1, d2, hess):
+def derivs3(pts, rot, vox, offsets, d12, hess):
     """Magnusson's P2D-NDT objective f = sum d1 exp(-d2 m / 2) (the negated score of eq. 6.9-6.10;
     m = q' Sigma^-1 q, q = T(p) x - mu) over every point and every voxel at ``offsets`` from the
     voxel holding T(p) x, with its gradient (eq. 6.12) and, if ``hess``, Hessian (eq. 6.13).
 
-    p = (t_x, t_y, t_z, phi_x, phi_y, phi_z), T(p) x = R_x R_y R_z x + t (eq. 6.17); ``dR`` (3, 3, 3)
-    and ``d2R`` (6, 3, 3: xx, xy, xz, yy, yz, zz) are the first and second derivatives of R by the
-    angles, so ``dR[k] @ x`` and ``d2R[kl] @ x`` are the angular terms of eq. 6.18-6.21.
-    Returns f, g (6,), H (6, 6), G (6, 6) the Gauss-Newton part of H (sum c J' A J, c = -d1 d2 e:
-    positive semi-definite), points with at least one voxel, sum e*m, sum e (e = exp(-d2 m / 2)).
+    p = (t_x, t_y, t_z, phi_x, phi_y, phi_z), T(p) x = R_x R_y R_z x + t (eq. 6.17); in ``rot = (R, t, dR,
+    d2R)``, ``dR`` (3, 3, 3) and ``d2R`` (6, 3, 3: xx, xy, xz, yy, yz, zz) are the first and second
+    derivatives of R by the angles, so ``dR[k] @ x`` and ``d2R[kl] @ x`` are the angular terms of eq.
+    6.18-6.21; ``d12 = (d1, d2)``. Returns f, g (6,), H (6, 6), G (6, 6) the Gauss-Newton part of H (sum c
+    J' A J, c = -d1 d2 e: positive semi-definite), points with at least one voxel, sum e*m, sum e (e =
+    exp(-d2 m / 2)).
     """
-    g = np.zeros(6)
-    H = np.zeros((6, 6))
-    G = np.zeros((6, 6))
-    f = 0.0
+    R, t, dR, d2R = rot
+    inv_res = vox[4]
+    acc = (np.zeros(6), np.zeros((6, 6)), np.zeros((6, 6)), np.zeros(3))
+    work = (np.empty((3, 3)), np.empty((6, 3)), np.empty(6), np.empty(3), np.empty((3, 3)))
+    ja, ha = work[0], work[1]
     hits = 0
-    sem = 0.0
-    se = 0.0
-    ja = np.empty((3, 3))   # ja[k] = dR[k] x
-    ha = np.empty((6, 3))   # ha[kl] = d2R[kl] x
-    gq = np.empty(6)
-    Aq = np.empty(3)
-    Aja = np.empty((3, 3))
     for i in range(pts.shape[0]):
         x0, x1, x2 = pts[i, 0], pts[i, 1], pts[i, 2]
         xp0 = R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2 + t[0]
@@ -208,61 +205,77 @@ def derivs3(pts, R, t, dR, d2R, tkeys, tvals, means, icovs, inv_res, offsets, d1
         cx, cy, cz = cell(xp0 * inv_res), cell(xp1 * inv_res), cell(xp2 * inv_res)
         hit = False
         for o in range(offsets.shape[0]):
-            v = hash_find(pack3(cx + offsets[o, 0], cy + offsets[o, 1], cz + offsets[o, 2]), tkeys, tvals)
+            v = hash_find(pack3(cx + offsets[o, 0], cy + offsets[o, 1], cz + offsets[o, 2]), vox[0], vox[1])
             if v < 0:
                 continue
             hit = True
-            q0, q1, q2 = xp0 - means[v, 0], xp1 - means[v, 1], xp2 - means[v, 2]
-            A = icovs[v]
-            for a in range(3):
-                Aq[a] = A[a, 0] * q0 + A[a, 1] * q1 + A[a, 2] * q2
-            m = q0 * Aq[0] + q1 * Aq[1] + q2 * Aq[2]
-            e = math.exp(-0.5 * d2 * m)
-            f += d1 * e
-            sem += e * m
-            se += e
-            c = -d1 * d2 * e
-            gq[0], gq[1], gq[2] = Aq[0], Aq[1], Aq[2]
-            for k in range(3):
-                gq[3 + k] = Aq[0] * ja[k, 0] + Aq[1] * ja[k, 1] + Aq[2] * ja[k, 2]
-            for r in range(6):
-                g[r] += c * gq[r]
-            if hess:
-                # c (-d2 (q'A J_i)(q'A J_j) + J_j' A J_i + q' A d2x'/dp_i dp_j), upper triangle
-                for r in range(6):
-                    cr = -c * d2 * gq[r]
-                    for s in range(r, 6):
-                        H[r, s] += cr * gq[s]
-                for a in range(3):
-                    for b in range(a, 3):
-                        G[a, b] += c * A[a, b]
-                for k in range(3):
-                    for a in range(3):
-                        Aja[k, a] = A[a, 0] * ja[k, 0] + A[a, 1] * ja[k, 1] + A[a, 2] * ja[k, 2]
-                    for a in range(3):
-                        G[a, 3 + k] += c * Aja[k, a]
-                pi = 0
-                for k in range(3):
-                    for l2 in range(k, 3):  # pi enumerates xx, xy, xz, yy, yz, zz
-                        G[3 + k, 3 + l2] += c * (ja[k, 0] * Aja[l2, 0] + ja[k, 1] * Aja[l2, 1] + ja[k, 2] * Aja[l2, 2])
-                        H[3 + k, 3 + l2] += c * (Aq[0] * ha[pi, 0] + Aq[1] * ha[pi, 1] + Aq[2] * ha[pi, 2])
-                        pi += 1
+            _gaussian3(xp0 - vox[2][v, 0], xp1 - vox[2][v, 1], xp2 - vox[2][v, 2], vox[3][v], d12, hess, work, acc)
         if hit:
             hits += 1
-    for r in range(6):
-        for s in range(r, 6):
-            H[r, s] += G[r, s]
-    for r in range(6):
-        for s in range(r):
-            H[r, s] = H[s, r]
-            G[r, s] = G[s, r]
-    return f, g, H, G, hits, sem, se
+    g, H, G, fse = acc
+    _symmetric(H, G, 6)
+    return fse[0], g, H, G, hits, fse[1], fse[2]
 
 
 @njit(cache=True)
-def derivs2(pts, p, tkeys, tvals, means, icovs, inv_res, shifts):
+def _gaussian3(q0, q1, q2, A, d12, hess, work, acc):
+    """One point's terms against one voxel Gaussian (``q = T(p) x - mu``, ``A`` its inverse covariance) into
+    ``acc``: f, sum e m, sum e, the gradient and (``hess``) the upper triangles of H (without G) and G."""
+    d1, d2 = d12
+    ja, ha, gq, Aq, Aja = work
+    g, H, G, fse = acc
+    for a in range(3):
+        Aq[a] = A[a, 0] * q0 + A[a, 1] * q1 + A[a, 2] * q2
+    m = q0 * Aq[0] + q1 * Aq[1] + q2 * Aq[2]
+    e = math.exp(-0.5 * d2 * m)
+    fse[0] += d1 * e
+    fse[1] += e * m
+    fse[2] += e
+    c = -d1 * d2 * e
+    gq[0], gq[1], gq[2] = Aq[0], Aq[1], Aq[2]
+    for k in range(3):
+        gq[3 + k] = Aq[0] * ja[k, 0] + Aq[1] * ja[k, 1] + Aq[2] * ja[k, 2]
+    for r in range(6):
+        g[r] += c * gq[r]
+    if not hess:
+        return
+    # c (-d2 (q'A J_i)(q'A J_j) + J_j' A J_i + q' A d2x'/dp_i dp_j), upper triangle
+    for r in range(6):
+        cr = -c * d2 * gq[r]
+        for s in range(r, 6):
+            H[r, s] += cr * gq[s]
+    for a in range(3):
+        for b in range(a, 3):
+            G[a, b] += c * A[a, b]
+    for k in range(3):
+        for a in range(3):
+            Aja[k, a] = A[a, 0] * ja[k, 0] + A[a, 1] * ja[k, 1] + A[a, 2] * ja[k, 2]
+        for a in range(3):
+            G[a, 3 + k] += c * Aja[k, a]
+    pi = 0
+    for k in range(3):
+        for l2 in range(k, 3):  # pi enumerates xx, xy, xz, yy, yz, zz
+            G[3 + k, 3 + l2] += c * (ja[k, 0] * Aja[l2, 0] + ja[k, 1] * Aja[l2, 1] + ja[k, 2] * Aja[l2, 2])
+            H[3 + k, 3 + l2] += c * (Aq[0] * ha[pi, 0] + Aq[1] * ha[pi, 1] + Aq[2] * ha[pi, 2])
+            pi += 1
+
+
+@njit(cache=True)
+def _symmetric(H, G, n):
+    """H += G on the upper triangle, then both mirrored to the lower."""
+    for r in range(n):
+        for s in range(r, n):
+            H[r, s] += G[r, s]
+    for r in range(n):
+        for s in range(r):
+            H[r, s] = H[s, r]
+            G[r, s] = G[s, r]
+
+
+@njit(cache=True)
+def derivs2(pts, p, vox, shifts):
     """Biber & Strasser 2003's objective f = -sum exp(-m / 2) over every point and each of the
-    shifted grids (``shifts`` (G, 2), the grid origins), with its gradient and Hessian in
+    shifted grids (``shifts`` (G, 2), the grid origins) of the map ``vox``, with its gradient and Hessian in
     p = (t_x, t_y, phi), x' = R(phi) x + t. Returns f, g (3,), H (3, 3), points with at least one
     cell, sum e*m, sum e; and G, the Gauss-Newton part of H (sum e J' A J)."""
     g = np.zeros(3)
@@ -272,6 +285,7 @@ def derivs2(pts, p, tkeys, tvals, means, icovs, inv_res, shifts):
     hits = 0
     sem = 0.0
     se = 0.0
+    tkeys, tvals, means, icovs, inv_res = vox
     c, s = math.cos(p[2]), math.sin(p[2])
     for i in range(pts.shape[0]):
         x, y = pts[i, 0], pts[i, 1]
@@ -315,11 +329,5 @@ def derivs2(pts, p, tkeys, tvals, means, icovs, inv_res, shifts):
             H[2, 2] += e * (-gq2 * gq2 + a0 * h0 + a1 * h1)
         if hit:
             hits += 1
-    for r in range(3):
-        for s2 in range(r, 3):
-            H[r, s2] += G[r, s2]
-    for r in range(3):
-        for s2 in range(r):
-            H[r, s2] = H[s2, r]
-            G[r, s2] = G[s2, r]
+    _symmetric(H, G, 3)
     return f, g, H, G, hits, sem, se

@@ -31,9 +31,10 @@ inlier weight, D the dimension), ``cov = s^2 k H_f^-1``, mapped to the right-per
 the result: 3D ``T exp(delta)``, delta = (omega, v) (GTSAM Pose3 Local coordinates; small_gicp's
 convention); 2D ``T exp(delta)``, delta = (x, y, theta) (GTSAM Pose2).
 
-**Backends.** ``numba`` (compiled kernels in :mod:`._ndt_fast`, voxel hashing) and ``numpy`` (the
-reference here: sorted voxel keys and binary search); ``auto`` = numba when importable. Memory is
-linear in the points and occupied voxels (no dense grid from the bounding box).
+**Kernels.** The voxel map and the derivatives are the kernels of :mod:`._ndt_fast` (voxel hashing), the one
+implementation: compiled by numba when importable, else run as plain Python (:mod:`._jit`; the same code,
+slow). ``backend``: ``auto``, or ``numba`` (compiled or an error naming the extra). Memory is linear in the
+points and occupied voxels (no dense grid from the bounding box).
 """
 
 from __future__ import annotations
@@ -47,9 +48,6 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import require
 from ..geometry import wrap_angle
 
-_OFF3 = 1 << 20
-_OFF2 = 1 << 28
-
 
 def _fast():
     from . import _ndt_fast
@@ -58,17 +56,17 @@ def _fast():
 
 
 def resolve_backend(backend: str) -> str:
-    if backend not in ("auto", "numba", "numpy"):
-        raise ValueError(f"unknown NDT backend {backend!r}; known: auto, numba, numpy")
-    if backend == "numpy":
-        return "numpy"
+    """``"numba"`` when the kernels are compiled, ``"python"`` when they run interpreted (numba absent);
+    ``backend="numba"`` without numba raises :class:`graphnav.errors.MissingExtra`."""
+    if backend not in ("auto", "numba"):
+        raise ValueError(f"unknown NDT backend {backend!r}; known: auto, numba (one implementation: "
+                         "\"auto\" runs the kernels as plain Python when numba is absent)")
     try:
-        _fast()
+        import numba  # noqa: F401
     except ImportError:
         if backend == "numba":
             require("numba", 'NDT backend "numba"')
-            raise
-        return "numpy"
+        return "python"
     return "numba"
 
 
@@ -183,7 +181,7 @@ def euler_to_tangent(p: ArrayLike, T0: ArrayLike) -> NDArray[np.float64]:
 @dataclass
 class VoxelMap:
     """Voxel Gaussians of a target: sorted ``keys`` (V,), ``means`` (V, D), inverse covariances
-    ``icovs`` (V, D, D), ``counts`` (V,); ``tkeys``/``tvals`` the hash table (numba backend).
+    ``icovs`` (V, D, D), ``counts`` (V,); ``tkeys``/``tvals`` the hash table (:func:`._ndt_fast.hash_build`).
     2D maps hold Biber's four grids (``shifts`` (G, 2) their origins) in one key space."""
 
     resolution: float
@@ -199,55 +197,9 @@ class VoxelMap:
     def __len__(self) -> int:
         return int(self.keys.shape[0])
 
-    def find(self, keys: NDArray[np.int64]) -> NDArray[np.int64]:
-        """Rows of ``keys`` (any shape), -1 where absent (binary search: the reference lookup)."""
-        if len(self.keys) == 0:
-            return np.full(keys.shape, -1, np.int64)
-        i = np.searchsorted(self.keys, keys)
-        i = np.minimum(i, len(self.keys) - 1)
-        return np.where((self.keys[i] == keys) & (keys >= 0), i, -1)
-
-
-def _pack3(c: NDArray[np.int64]) -> NDArray[np.int64]:
-    a = c + _OFF3
-    ok = np.all((a >= 0) & (a < 2 * _OFF3), axis=-1)
-    a = np.where(ok[..., None], a, 0)
-    return np.where(ok, (a[..., 0] << 42) | (a[..., 1] << 21) | a[..., 2], -1)
-
-
-def _pack2(g: int, c: NDArray[np.int64]) -> NDArray[np.int64]:
-    a = c + _OFF2
-    ok = np.all((a >= 0) & (a < 2 * _OFF2), axis=-1)
-    a = np.where(ok[..., None], a, 0)
-    return np.where(ok, (np.int64(g) << 58) | (a[..., 0] << 29) | a[..., 1], -1)
-
-
-def _cells(x: NDArray[np.float64], inv_res: float) -> NDArray[np.int64]:
-    with np.errstate(invalid="ignore", over="ignore"):
-        c = np.floor(x * inv_res)
-    c = np.where(np.isfinite(c) & (np.abs(c) < 2.0 ** 40), c, 2.0 ** 40)  # out of range -> key -1
-    return c.astype(np.int64)
-
-
-def _gaussians_numpy(pts: NDArray, keys: NDArray, min_points: int, eig_ratio: float):
-    keep = keys >= 0
-    pts, keys = pts[keep], keys[keep]
-    d = pts.shape[1]
-    uk, inv, cnt = np.unique(keys, return_inverse=True, return_counts=True)
-    mu = np.stack([np.bincount(inv, pts[:, a], minlength=len(uk)) for a in range(d)], 1) / cnt[:, None]
-    dx = pts - mu[inv]
-    cov = np.zeros((len(uk), d, d))
-    for a in range(d):
-        for b in range(d):
-            cov[:, a, b] = np.bincount(inv, dx[:, a] * dx[:, b], minlength=len(uk))
-    ok = cnt >= min_points
-    uk, mu, cov, cnt = uk[ok], mu[ok], cov[ok] / (cnt[ok] - 1)[:, None, None], cnt[ok]
-    w, vec = np.linalg.eigh(cov) if len(uk) else (np.zeros((0, d)), np.zeros((0, d, d)))
-    ok = w[:, -1] > 0
-    w, vec = w[ok], vec[ok]
-    lam = np.maximum(w, eig_ratio * w[:, -1:])
-    icov = np.einsum("vae,ve,vbe->vab", vec, 1.0 / lam, vec)
-    return uk[ok], mu[ok], icov, cnt[ok]
+    def kernel_args(self) -> tuple:
+        """The map as the kernels take it: ``(tkeys, tvals, means, icovs, 1 / resolution)``."""
+        return self.tkeys, self.tvals, self.means, self.icovs, 1.0 / self.resolution
 
 
 def build_voxels3(points: ArrayLike, resolution: float = 1.0, min_points: int = 6, eig_ratio: float = 0.01,
@@ -257,13 +209,10 @@ def build_voxels3(points: ArrayLike, resolution: float = 1.0, min_points: int = 
         raise ValueError(f"resolution must be > 0, got {resolution}")
     pts = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 3))
     be = resolve_backend(backend)
-    if be == "numba":
-        fast = _fast()
-        k, mu, ic, cnt = fast.gaussians(pts, fast.keys3(pts, 1.0 / resolution), int(min_points), float(eig_ratio))
-        tk, tv = fast.hash_build(k)
-        return VoxelMap(float(resolution), k, mu, ic, cnt, be, None, tk, tv)
-    keys = _pack3(_cells(pts, 1.0 / resolution))
-    return VoxelMap(float(resolution), *_gaussians_numpy(pts, keys, min_points, eig_ratio), be)
+    fast = _fast()
+    k, mu, ic, cnt = fast.gaussians(pts, fast.keys3(pts, 1.0 / resolution), int(min_points), float(eig_ratio))
+    tk, tv = fast.hash_build(k)
+    return VoxelMap(float(resolution), k, mu, ic, cnt, be, None, tk, tv)
 
 
 def biber_shifts(resolution: float, grids: int = 4) -> NDArray[np.float64]:
@@ -283,14 +232,11 @@ def build_voxels2(points: ArrayLike, resolution: float = 1.0, min_points: int = 
     shifts = biber_shifts(resolution, grids)
     be = resolve_backend(backend)
     tiled = np.ascontiguousarray(np.tile(pts, (grids, 1)))
-    if be == "numba":
-        fast = _fast()
-        keys = np.concatenate([fast.keys2(pts, 1.0 / resolution, g, shifts[g, 0], shifts[g, 1]) for g in range(grids)])
-        k, mu, ic, cnt = fast.gaussians(tiled, keys, int(min_points), float(eig_ratio))
-        tk, tv = fast.hash_build(k)
-        return VoxelMap(float(resolution), k, mu, ic, cnt, be, shifts, tk, tv)
-    keys = np.concatenate([_pack2(g, _cells(pts - shifts[g], 1.0 / resolution)) for g in range(grids)])
-    return VoxelMap(float(resolution), *_gaussians_numpy(tiled, keys, min_points, eig_ratio), be, shifts)
+    fast = _fast()
+    keys = np.concatenate([fast.keys2(pts, 1.0 / resolution, g, shifts[g, 0], shifts[g, 1]) for g in range(grids)])
+    k, mu, ic, cnt = fast.gaussians(tiled, keys, int(min_points), float(eig_ratio))
+    tk, tv = fast.hash_build(k)
+    return VoxelMap(float(resolution), k, mu, ic, cnt, be, shifts, tk, tv)
 
 
 # -- objective ------------------------------------------------------------------------------------
@@ -309,86 +255,22 @@ class NdtEval:
 
 
 def derivatives3(points: NDArray, p: ArrayLike, vmap: VoxelMap, d1: float, d2: float,
-                 offsets: NDArray[np.int64], backend: str | None = None, hess: bool = True) -> NdtEval:
+                 offsets: NDArray[np.int64], hess: bool = True) -> NdtEval:
     """f, gradient (eq. 6.12) and Hessian (eq. 6.13) of the 3D objective at p (see the module doc);
-    ``hess=False``: the compiled kernel skips the Hessian (returned as zeros)."""
+    ``hess=False`` skips the Hessian (returned as zeros)."""
     p = np.asarray(p, dtype=float)
     R, dR, d2R = euler_derivatives(p[3:])
-    be = backend or vmap.backend
-    if be == "numba":
-        if vmap.tkeys is None:
-            raise ValueError("this voxel map was built without the numba hash table")
-        f, g, H, G, hits, sem, se = _fast().derivs3(np.ascontiguousarray(points, dtype=float), R, p[:3].copy(), dR,
-                                                    d2R, vmap.tkeys, vmap.tvals, vmap.means, vmap.icovs,
-                                                    1.0 / vmap.resolution, offsets, d1, d2, hess)
-        return NdtEval(float(f), g, H, G, int(hits), float(sem), float(se))
-    return _derivatives3_numpy(np.asarray(points, dtype=float), R, p[:3], dR, d2R, vmap, d1, d2, offsets)
+    f, g, H, G, hits, sem, se = _fast().derivs3(np.ascontiguousarray(points, dtype=float), (R, p[:3].copy(), dR, d2R),
+                                                vmap.kernel_args(), np.ascontiguousarray(offsets, dtype=np.int64),
+                                                (float(d1), float(d2)), hess)
+    return NdtEval(float(f), g, H, G, int(hits), float(sem), float(se))
 
 
-def _derivatives3_numpy(x, R, t, dR, d2R, vmap, d1, d2, offsets) -> NdtEval:
-    xp = x @ R.T + t                                    # (N, 3)
-    ja = np.einsum("kab,nb->nka", dR, x)                # (N, 3 angles, 3)
-    ha = np.einsum("pab,nb->npa", d2R, x)               # (N, 6 pairs, 3)
-    cell = _cells(xp, 1.0 / vmap.resolution)
-    rows = vmap.find(_pack3(cell[:, None, :] + offsets[None, :, :]))   # (N, K)
-    n_i, k_i = np.nonzero(rows >= 0)
-    v = rows[n_i, k_i]
-    q = xp[n_i] - vmap.means[v]
-    A = vmap.icovs[v]
-    Aq = np.einsum("mab,mb->ma", A, q)
-    m = np.einsum("ma,ma->m", q, Aq)
-    e = np.exp(-0.5 * d2 * m)
-    c = -d1 * d2 * e
-    J = np.zeros((len(v), 3, 6))                        # dx'/dp
-    J[:, :, :3] = np.eye(3)
-    J[:, :, 3:] = ja[n_i].transpose(0, 2, 1)
-    gq = np.einsum("ma,mai->mi", Aq, J)                 # q' A J_i
-    JAJ = np.einsum("mai,mab,mbj->mij", J, A, J)
-    qAH = np.zeros((len(v), 6, 6))
-    hq = np.einsum("ma,mpa->mp", Aq, ha[n_i])           # q' A d2x/dphi_k dphi_l (pairs)
-    for pi, (k, l2) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
-        qAH[:, 3 + k, 3 + l2] = hq[:, pi]
-        qAH[:, 3 + l2, 3 + k] = hq[:, pi]
-    G = np.einsum("m,mij->ij", c, JAJ)
-    H = G + np.einsum("m,mij->ij", c, -d2 * gq[:, :, None] * gq[:, None, :] + qAH)
-    return NdtEval(float(np.sum(d1 * e)), np.einsum("m,mi->i", c, gq), H, G, int(len(np.unique(n_i))),
-                   float(np.sum(e * m)), float(np.sum(e)))
-
-
-def derivatives2(points: NDArray, p: ArrayLike, vmap: VoxelMap, backend: str | None = None) -> NdtEval:
+def derivatives2(points: NDArray, p: ArrayLike, vmap: VoxelMap) -> NdtEval:
     """Biber's objective f = -sum exp(-m/2), its gradient and Hessian at p = (t_x, t_y, phi)."""
-    p = np.asarray(p, dtype=float)
-    be = backend or vmap.backend
-    if be == "numba":
-        if vmap.tkeys is None:
-            raise ValueError("this voxel map was built without the numba hash table")
-        f, g, H, G, hits, sem, se = _fast().derivs2(np.ascontiguousarray(points, dtype=float), p, vmap.tkeys,
-                                                    vmap.tvals, vmap.means, vmap.icovs, 1.0 / vmap.resolution,
-                                                    vmap.shifts)
-        return NdtEval(float(f), g, H, G, int(hits), float(sem), float(se))
-    x = np.asarray(points, dtype=float)
-    c, s = np.cos(p[2]), np.sin(p[2])
-    xp = x @ np.array([[c, -s], [s, c]]).T + p[:2]
-    jth = np.column_stack([-s * x[:, 0] - c * x[:, 1], c * x[:, 0] - s * x[:, 1]])
-    hth = np.column_stack([-c * x[:, 0] + s * x[:, 1], -s * x[:, 0] - c * x[:, 1]])
-    rows = np.stack([vmap.find(_pack2(g, _cells(xp - vmap.shifts[g], 1.0 / vmap.resolution)))
-                     for g in range(len(vmap.shifts))], 1)
-    n_i, g_i = np.nonzero(rows >= 0)
-    v = rows[n_i, g_i]
-    q = xp[n_i] - vmap.means[v]
-    A = vmap.icovs[v]
-    Aq = np.einsum("mab,mb->ma", A, q)
-    m = np.einsum("ma,ma->m", q, Aq)
-    e = np.exp(-0.5 * m)
-    J = np.zeros((len(v), 2, 3))
-    J[:, :, :2] = np.eye(2)
-    J[:, :, 2] = jth[n_i]
-    gq = np.einsum("ma,mai->mi", Aq, J)
-    Gm = np.einsum("mai,mab,mbj->mij", J, A, J)
-    Hm = Gm - gq[:, :, None] * gq[:, None, :]
-    Hm[:, 2, 2] += np.einsum("ma,ma->m", Aq, hth[n_i])
-    return NdtEval(float(-e.sum()), np.einsum("m,mi->i", e, gq), np.einsum("m,mij->ij", e, Hm),
-                   np.einsum("m,mij->ij", e, Gm), int(len(np.unique(n_i))), float(np.sum(e * m)), float(np.sum(e)))
+    f, g, H, G, hits, sem, se = _fast().derivs2(np.ascontiguousarray(points, dtype=float),
+                                                np.asarray(p, dtype=float), vmap.kernel_args(), vmap.shifts)
+    return NdtEval(float(f), g, H, G, int(hits), float(sem), float(se))
 
 
 # -- Newton's method ------------------------------------------------------------------------------
@@ -470,7 +352,7 @@ class NdtParams:
     """3D NDT settings (metres, radians). ``resolution`` voxel side; ``outlier_ratio`` of eq. 6.7-6.8;
     ``min_points`` per voxel (PCL: 6); ``eig_ratio`` eigenvalue floor of eq. 6.11 (PCL: 0.01);
     ``neighbors`` voxels searched per point (1, 7, 27); ``max_iter`` Newton iterations; ``eps_*``
-    convergence on the step; ``max_step_*`` step clamp; ``backend`` auto/numba/numpy."""
+    convergence on the step; ``max_step_*`` step clamp; ``backend`` auto/numba (:func:`resolve_backend`)."""
 
     resolution: float = 1.0
     outlier_ratio: float = 0.55
@@ -509,9 +391,9 @@ def ndt3d(source: ArrayLike, target: ArrayLike | VoxelMap, init: ArrayLike | Non
     """Register (N, 3) ``source`` points to ``target`` ((M, 3) points, or a :class:`VoxelMap` built
     with the same ``resolution``) from the 4x4 ``init`` (identity if None)."""
     prm = params or NdtParams()
-    be = resolve_backend(prm.backend)
+    resolve_backend(prm.backend)
     vmap = target if isinstance(target, VoxelMap) else build_voxels3(target, prm.resolution, prm.min_points,
-                                                                        prm.eig_ratio, be)
+                                                                        prm.eig_ratio, prm.backend)
     t0 = time.perf_counter()
     T0 = np.eye(4) if init is None else np.asarray(init, dtype=float).reshape(4, 4)
     src = np.asarray(source, dtype=float).reshape(-1, 3)
@@ -520,7 +402,7 @@ def ndt3d(source: ArrayLike, target: ArrayLike | VoxelMap, init: ArrayLike | Non
     offs = neighbor_offsets(prm.neighbors)
 
     def evaluate(p: NDArray, hess: bool) -> NdtEval:
-        return derivatives3(x, p, vmap, d1, d2, offs, vmap.backend, hess)
+        return derivatives3(x, p, vmap, d1, d2, offs, hess)
 
     p, ev, it, conv = _newton(evaluate, np.zeros(6), 3, prm.max_iter, prm.eps_trans, prm.eps_rot,
                               prm.max_step_trans, prm.max_step_rot)
@@ -571,14 +453,14 @@ def ndt2d(source: ArrayLike, target: ArrayLike | VoxelMap, init: ArrayLike = (0.
     """Biber's 2D NDT: register (N, 2) ``source`` points to ``target`` ((M, 2) points or a 2D
     :class:`VoxelMap`) from ``init`` = (x, y, yaw)."""
     prm = params or Ndt2Params()
-    be = resolve_backend(prm.backend)
+    resolve_backend(prm.backend)
     vmap = target if isinstance(target, VoxelMap) else build_voxels2(target, prm.resolution, prm.min_points,
-                                                                        prm.eig_ratio, prm.grids, be)
+                                                                        prm.eig_ratio, prm.grids, prm.backend)
     t0 = time.perf_counter()
     x = np.ascontiguousarray(np.asarray(source, dtype=float).reshape(-1, 2))
 
     def evaluate(p: NDArray, hess: bool) -> NdtEval:
-        return derivatives2(x, p, vmap, vmap.backend)
+        return derivatives2(x, p, vmap)
 
     p, ev, it, conv = _newton(evaluate, np.asarray(init, dtype=float), 2, prm.max_iter, prm.eps_trans, prm.eps_rot,
                               prm.max_step_trans, prm.max_step_rot)

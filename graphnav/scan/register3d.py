@@ -97,8 +97,8 @@ class Reg3Params:
         check_fields(self, _REG3_RANGES, "option")
         if self.neighbors not in (1, 7, 27):
             raise OptionError("option neighbors", f"must be 1, 7 or 27, got {self.neighbors!r}")
-        if self.backend not in ("auto", "numba", "numpy"):
-            raise OptionError("option backend", f"must be auto, numba or numpy, got {self.backend!r}")
+        if self.backend not in ("auto", "numba"):
+            raise OptionError("option backend", f"must be auto or numba, got {self.backend!r}")
 
     @classmethod
     def from_kwargs(cls, **params: Any) -> Reg3Params:

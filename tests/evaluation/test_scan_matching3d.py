@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 
 from graphnav.cli import main
@@ -58,3 +59,12 @@ def test_cli_json_and_errors(tmp_path, log3, capsys):
 
 def test_every_method_is_known():
     assert {"icp", "p2plane", "gicp", "vgicp", "ndt", "s2m", "kiss-icp"} <= set(METHODS)
+
+
+def test_tracks_for_the_figure(log3):
+    res = compare(log3, 4, ("s2m-gicp",), tracks=True)
+    m = res["methods"]["s2m-gicp"]
+    assert len(m["track"]) == len(res["reference"]) == 4 and len(m["cpu_ms"]) == 3
+    assert np.allclose(m["track"][0], res["reference"][0])  # chained from the first reference pose
+    assert abs(np.hypot(*(np.subtract(m["track"][-1], res["reference"][-1])[:2]))) < 0.05
+    assert "track" not in compare(log3, 4, ("s2m-gicp",))["methods"]["s2m-gicp"]

@@ -39,6 +39,17 @@ def test_equal_tracks_are_said_with_the_reason():
     assert "it starts every scan match from its odometry guess" in v[4]
 
 
+def test_an_odometry_off_by_its_start_heading_says_so():
+    poses = np.column_stack([np.arange(50.0), np.zeros(50), np.zeros(50)])
+    log = NavLog([Truth(float(k), float(k), 0.0, 0.0) for k in range(50)])
+    s2m = _entry("scan-to-map", poses, summary={"inputs": ["cloud"], "ate_rmse_m": 4.1, "ate_aligned_rmse_m": 0.015},
+                 info={"anchor": "pose_prior"})
+    drift = _entry("dead-reckoning", poses, summary={"ate_rmse_m": 10.0, "ate_aligned_rmse_m": 2.0})
+    v = verdicts(Comparison([s2m, drift], log))
+    assert "Its shape is right (aligned ATE 0.015 m against 4.1 m): the error is its start pose's (pose prior)" in v[0]
+    assert "shape is right" not in v[1]
+
+
 def test_data_lines_name_gaps_and_jumps():
     comp = Comparison([], NavLog([]), checks={
         "gaps": {"gnss": {"count": 2, "threshold_s": 5.0, "total_s": 90.0, "longest": [[10.0, 40.0], [50.0, 110.0]]}},

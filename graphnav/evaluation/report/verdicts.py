@@ -13,6 +13,8 @@ from ..comparison import Comparison, Entry
 
 #: a mean NEES (2 dof) outside this band gets a sentence saying what it means
 NEES_BAND = (0.3, 5.0)
+#: an odometry whose aligned ATE is below this share of its ATE: its error is the start pose (a sentence)
+START_SHARE = 0.2
 #: a share of degenerate or flagged registrations above this gets a sentence
 DEGENERATE_SHARE = 0.5
 
@@ -69,6 +71,11 @@ def verdict(e: Entry, comp: Comparison, same: dict[str, tuple[str, float]]) -> s
         out.append(f"{deg[0].upper() + deg[1:]}: along the weak directions it kept its motion guess, so its "
                    "track is mostly that guess.")
     ate, dr = _num(s.get("ate_rmse_m")), _dead_reckoning_ate(comp)
+    aligned = _num(s.get("ate_aligned_rmse_m"))
+    if e.kind == "odometry" and ate is not None and aligned is not None and aligned < START_SHARE * ate:
+        anchor = (e.result.info if e.result is not None else {}).get("anchor") or "its start pose"
+        out.append(f"Its shape is right (aligned ATE {aligned:.3g} m against {ate:.3g} m): the error is its start "
+                   f"pose's ({anchor.replace('_', ' ')}), mostly the heading, which odometry never corrects.")
     if ate is not None and dr is not None and ate > dr[1] and used is not None and "gnss" in used:
         out.append(f"Worse than **{dr[0]}** ({dr[1]:.3g} m) although it uses GNSS.")
     nees = _num(s.get("nees_mean"))
