@@ -301,7 +301,7 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
 class ScanToMap(BatchEstimator):
     """LiDAR scan-to-local-map registration (:func:`run_scan_to_map`)."""
 
-    description = "LiDAR scan-to-local-map registration (small_gicp VGICP; 3D clouds: a KISS-ICP style voxel map)"
+    description = "LiDAR scan-to-local-map registration (2D: small_gicp VGICP; 3D: GICP to a KISS-ICP style voxel map)"
     kind = "odometry"
     Config = ScanToMapConfig
     what = "scan-to-map"
