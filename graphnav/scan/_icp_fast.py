@@ -74,7 +74,7 @@ def grid_cell(h, ex, ey, n):
     return h
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def cell_index(v, vmin, h, nv):
     """``floor((v - vmin) / h)`` clamped to ``[0, nv - 1]`` (in floating point first, so a far or
     non-finite coordinate cannot overflow the integer conversion)."""
@@ -111,7 +111,7 @@ def build_grid(tx, ty, h):
     return xmin, ymin, h, nx, ny, start, items
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _scan_cell(px, py, ix, iy, tx, ty, grid, best, bi):
     ny, start, items = grid[4], grid[5], grid[6]
     c = ix * ny + iy
@@ -164,7 +164,7 @@ def nearest(px, py, tx, ty, grid):
     return math.sqrt(best), bi
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def nearest_from(px, py, j0, tx, ty, grid):
     """As :func:`nearest`, given a candidate ``j0``: the nearest point is no farther than ``j0``, so
     only the cells meeting the square around that disc are searched (exact, same tie rule)."""
@@ -282,7 +282,7 @@ def cloud_terms(x, y, sig, prm):
     return x, y, ux, uy, a2, b2, m2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _wrap(k, n):
     """``k % n`` (no division for ``-n <= k < 2 n``, the usual case)."""
     if 0 <= k < n:
@@ -295,30 +295,35 @@ def _wrap(k, n):
 
 
 @njit(cache=True)
-def resolution(tx, ty, half):
+def bearing_order(tx, ty):
+    """The points' bearings and their indices sorted by bearing (stable): the beam order of a scan."""
+    a = np.arctan2(ty, tx)
+    return a, np.argsort(a, kind="mergesort")
+
+
+@njit(cache=True)
+def resolution(tx, ty, half, bearing):
     """As :func:`graphnav.scan.covariance.resolution`: ``r da`` per point, ``da`` the median of the
-    ``2 half`` bearing gaps around it (bearing order, circular)."""
+    ``2 half`` bearing gaps around it (``bearing``: :func:`bearing_order`; circular; the window's gaps
+    kept sorted as it slides)."""
     n = tx.shape[0]
     out = np.zeros(n)
     if n < 2:
         return out
-    a = np.arctan2(ty, tx)
-    order = np.argsort(a, kind="mergesort")
-    srt = a[order]
+    order = bearing[1]
+    srt = bearing[0][order]
     gaps = np.empty(n)
     for i in range(n - 1):
         gaps[i] = srt[i + 1] - srt[i]
     gaps[n - 1] = srt[0] + 2.0 * np.pi - srt[n - 1]
     m = 2 * half
     win = np.empty(m)
+    for o in range(m):  # the first window, by insertion
+        _insert(win, o, gaps[_wrap(-half + o, n)])
     for i in range(n):
-        for o in range(m):  # insertion sort of the window's gaps
-            v = gaps[_wrap(i - half + o, n)]
-            k = o
-            while k > 0 and win[k - 1] > v:
-                win[k] = win[k - 1]
-                k -= 1
-            win[k] = v
+        if i > 0:  # slide: drop gaps[i - 1 - half], take gaps[i - 1 + half]
+            _remove(win, m, gaps[_wrap(i - 1 - half, n)])
+            _insert(win, m - 1, gaps[_wrap(i - 1 + half, n)])
         med = win[m // 2] if m % 2 else 0.5 * (win[m // 2 - 1] + win[m // 2])  # as np.median
         j = order[i]
         out[j] = math.hypot(tx[j], ty[j]) * med
@@ -326,11 +331,30 @@ def resolution(tx, ty, half):
 
 
 @njit(cache=True)
-def target_resolution(tgt, half, min_res):
+def _insert(win, k, v):
+    """Insert ``v`` into the sorted ``win[:k]``."""
+    while k > 0 and win[k - 1] > v:
+        win[k] = win[k - 1]
+        k -= 1
+    win[k] = v
+
+
+@njit(cache=True)
+def _remove(win, m, v):
+    """Remove one element equal to ``v`` from the sorted ``win[:m]``."""
+    k = 0
+    while k < m - 1 and win[k] != v:
+        k += 1
+    for a in range(k, m - 1):
+        win[a] = win[a + 1]
+
+
+@njit(cache=True)
+def target_resolution(tgt, half, min_res, bearing):
     """:func:`resolution` of the target, the distance a correct pair can have at each target point
     (``sqrt(res^2 + 2 M^2)`` floored at ``min_res``: the unit of :func:`zhang_gate`'s distances) and
     its median ``D``, the unit of the tolerances."""
-    res = resolution(tgt[0], tgt[1], half)
+    res = resolution(tgt[0], tgt[1], half, bearing)
     tm2 = tgt[6]
     scale = np.empty(res.shape[0])
     for i in range(res.shape[0]):
@@ -338,7 +362,7 @@ def target_resolution(tgt, half, min_res):
     return res, scale, np.median(scale)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _pca_line(xs, ys, pick, m):
     """Normal, flatness ((l1 - l2) / (l1 + l2), 0..1) of points ``pick[:m]`` by PCA."""
     mx = my = 0.0
@@ -360,13 +384,13 @@ def _pca_line(xs, ys, pick, m):
 
 
 @njit(cache=True)
-def scan_order_normals(tx, ty, half, max_gap, res):
+def scan_order_normals(tx, ty, half, max_gap, res, order):
     """Normal and flatness of each target point from its ``2 half + 1`` neighbours in beam order (sorted
     by bearing), by PCA; a window with a gap between beam neighbours wider than ``max_gap``
-    resolutions ``res`` (the smaller of the two points') spans two surfaces: flatness 0. (A surface
+    resolutions ``res`` (the smaller of the two points') spans two surfaces: flatness 0 (``order``:
+    :func:`bearing_order`). (A surface
     seen at incidence ``i`` has gaps of ``r da / cos i``: 8 resolutions is ``i`` > 83 deg.)"""
     n = tx.shape[0]
-    order = np.argsort(np.arctan2(ty, tx), kind="mergesort")
     xs = tx[order]
     ys = ty[order]
     gap = np.empty(n)
@@ -393,7 +417,7 @@ def scan_order_normals(tx, ty, half, max_gap, res):
     return nx_, ny_, fl
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _scan_cell_k(px, py, ix, iy, tx, ty, grid, bd, bi, cnt):
     """Insert the points of cell (ix, iy) into the sorted k-best lists ``bd``/``bi`` (``cnt`` filled)."""
     ny, start, items = grid[4], grid[5], grid[6]
@@ -470,7 +494,7 @@ def knn_line_normals(tx, ty, k, grid):
 # ----------------------------------------------------------------------------- weights and steps
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _dir_weight(i, j, c, s, bx, by, src, tgt, wpow):
     """Eq. 9, 11, 12: ``(sigma_beta_i^2 + sigma_beta_j^2)^-wpow`` along unit ``(bx, by)``, the source's
     radial direction rotated by ``R(c, s)`` into the target frame."""
@@ -535,7 +559,7 @@ def hdl_weights(pairs, c, s, src, tgt, lines, prm, gate, dmax):
     _gate_fixed(pairs, prm.max_corr)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _gate_fixed(pairs, max_corr):
     """Weight 0 beyond ``max_corr``; all weights 1 when none is left."""
     d, w = pairs[2], pairs[4]
@@ -728,7 +752,7 @@ def rms_radius(sx, sy, n):
     return lsc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pair_cov(i, j, c, s, src, tgt):
     """Eq. 8 covariance ``(sxx, sxy, syy)`` of pair ``(i, j)``: source point ``i`` rotated by ``R(c, s)``
     plus target point ``j``."""
@@ -773,24 +797,26 @@ def final_pairs(src, tgt, lines, prm, pose, idx, scale, dmax):
 # ----------------------------------------------------------------------------- the report's sums
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _add_sums(h, bl, bs, ja, jb, wi, sv, samp, sxx, sxy, syy, hdl):
     """One pair's terms of ``H = sum w J^T J``, ``B_lidar = sum w^2 J^T S J``, ``B_sampling = sum w^2
     samp J^T J`` (HDL: the one row ``ja``, ``S = sv``; else the rows ``ja``, ``jb`` and ``S`` (2x2))."""
     w2 = wi * wi
-    for a in range(3):
-        for b in range(3):
-            if hdl:
+    if hdl:
+        for a in range(3):
+            for b in range(3):
                 jj = ja[a] * ja[b]
                 h[a, b] += wi * jj
                 bl[a, b] += w2 * sv * jj
                 bs[a, b] += w2 * samp * jj
-            else:
-                jtj = ja[a] * ja[b] + jb[a] * jb[b]
-                jsj = sxx * ja[a] * ja[b] + sxy * (ja[a] * jb[b] + jb[a] * ja[b]) + syy * jb[a] * jb[b]
-                h[a, b] += wi * jtj
-                bl[a, b] += w2 * jsj
-                bs[a, b] += w2 * samp * jtj
+        return
+    for a in range(3):
+        for b in range(3):
+            jtj = ja[a] * ja[b] + jb[a] * jb[b]
+            jsj = sxx * ja[a] * ja[b] + sxy * (ja[a] * jb[b] + jb[a] * ja[b]) + syy * jb[a] * jb[b]
+            h[a, b] += wi * jtj
+            bl[a, b] += w2 * jsj
+            bs[a, b] += w2 * samp * jtj
 
 
 @njit(cache=True)
@@ -869,12 +895,13 @@ def match(sx, sy, ssig, tx, ty, tsig, prm, pose0, tri):
     src = cloud_terms(sx, sy, ssig, prm)
     tgt = cloud_terms(tx, ty, tsig, prm)
     half = prm.normal_k // 2
-    res, scale, big_d = target_resolution(tgt, half, prm.min_res)
+    bearing = bearing_order(tx, ty)
+    res, scale, big_d = target_resolution(tgt, half, prm.min_res, bearing)
     grid = build_grid(tx, ty, prm.cell)
     if prm.variant == HDL and prm.knn:
         lines = knn_line_normals(tx, ty, prm.normal_k, grid)
     else:
-        lines = scan_order_normals(tx, ty, half, prm.max_gap, res)
+        lines = scan_order_normals(tx, ty, half, prm.max_gap, res, bearing[1])
     pairs, pose, it, converged, dmax, moved, src_r = icp_loop(src, tgt, grid, lines, prm, pose0, scale, big_d, tri)
     pairs, cov = final_pairs(src, tgt, lines, prm, pose, pairs[3], scale, dmax)
     radius = rms_radius(sx, sy, sx.shape[0])

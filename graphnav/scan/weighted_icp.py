@@ -262,11 +262,10 @@ def _finite(xy: NDArray, sigma: NDArray | None) -> tuple[NDArray, NDArray | None
     """Rows of ``xy`` (and ``sigma``) with finite coordinates within
     :data:`graphnav.log.MAX_STATED_RANGE` of the sensor on each axis (no copy when all are): a
     point farther away is no LiDAR return, and bounding them bounds the matcher's grid and work."""
-    with np.errstate(invalid="ignore"):
-        ok = np.abs(xy) <= MAX_STATED_RANGE  # False for NaN
-    if ok.all():
+    if len(xy) == 0 or np.abs(xy).max() <= MAX_STATED_RANGE:  # (NaN: False)
         return xy, sigma
-    keep = ok.all(axis=1)
+    with np.errstate(invalid="ignore"):
+        keep = (np.abs(xy) <= MAX_STATED_RANGE).all(axis=1)  # False for NaN
     return xy[keep], None if sigma is None else sigma[keep]
 
 
@@ -274,12 +273,17 @@ def _finite(xy: NDArray, sigma: NDArray | None) -> tuple[NDArray, NDArray | None
 def _kernels(backend: str = "auto") -> Any:
     """The kernel module :mod:`graphnav.scan._icp_fast` (compiled when numba is importable, else plain
     Python); ``backend="numba"`` insists on the compiled one."""
-    from . import _icp_fast
-    from ._jit import HAVE_NUMBA
+    if not _KERNELS:
+        from . import _icp_fast
+        from ._jit import HAVE_NUMBA
 
-    if backend == "numba" and not HAVE_NUMBA:
+        _KERNELS.extend([_icp_fast, HAVE_NUMBA])
+    if backend == "numba" and not _KERNELS[1]:
         require("numba", 'ICP backend "numba"')
-    return _icp_fast
+    return _KERNELS[0]
+
+
+_KERNELS: list[Any] = []  # [the kernel module, numba importable], after the first call
 
 
 def _params(cfg: IcpConfig) -> Any:
