@@ -210,6 +210,27 @@ def markdown(report: dict[str, Any]) -> str:
     return "\n".join(out)
 
 
+def _v(x: Any) -> str:
+    return f"{x:g}" if isinstance(x, float) else str(x)
+
+
+def summary(report: dict[str, Any]) -> str:
+    """One row per parameter: the values chosen with each log held out, and what they cost."""
+    out = []
+    for metric, params in report["tables"].items():
+        out += [f"**{metric}** ({report['estimator']}, {len(report['logs'])} logs)", "",
+                "| parameter | default | chosen on all | chosen without each log | m(default) / m(all) | "
+                "m(without) / m(all): mean, worst | across kinds |", "|---|---|---|---|---|---|---|"]
+        for p, a in params.items():
+            held = ", ".join(_v(r["chosen_without"]) for r in a["rows"])
+            across = "; ".join(f"{c['chosen_on']} -> {c['applied_to']} x{c['mean_rel']:.3f}" for c in a["across"])
+            out.append(f"| {p} | {_v(a['default'])} | {_v(a['chosen_on_all'])} | {held} | "
+                       f"{a['mean_default_over_all']:.3f} | {a['mean_without_over_all']:.3f}, "
+                       f"{a['worst_without_over_all']:.3f} | {across or '-'} |")
+        out.append("")
+    return "\n".join(out)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("logs", nargs="+", type=Path)
@@ -221,6 +242,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--results", type=Path, help="JSON-lines cache of runs (resumes; --table-only reads it)")
     ap.add_argument("--table-only", action="store_true", help="no runs: the table from --results")
     ap.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    ap.add_argument("--summary", action="store_true", help="one row per parameter (the per-log rows left out)")
     args = ap.parse_args(argv)
     from graphnav.commands._common import parse_options
 
@@ -253,7 +275,7 @@ def main(argv: list[str] | None = None) -> int:
             table = value_table(logs, p, vals, args.estimator, base, cache, metric)
             if table:
                 report["tables"][metric][p] = analyse(table, vals, default_of(p, args.estimator))
-    print(json.dumps(report, allow_nan=False) if args.json else markdown(report))
+    print(json.dumps(report, allow_nan=False) if args.json else summary(report) if args.summary else markdown(report))
     return 0
 
 

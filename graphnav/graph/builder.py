@@ -140,6 +140,11 @@ class GraphBuilder:
         """The factors of the fixes the online GNSS gate rejected (the closing batch step reconsiders them)."""
         return self.meas.rejected
 
+    def assume_sigmas(self, group: str) -> None:
+        """The log's sigmas of ``group`` are assumed, known only up to scale: the noise estimation
+        rescales the group like a defaulted one."""
+        self.defaulted.add(group)
+
     def carried_keys(self, k: int) -> list[int]:
         """The variables besides the pose ``X(k)`` a re-anchored fixed-lag smoother keeps at keyframe ``k``."""
         keys = self.meas.carried_keys(k) + ([V(k), IB(k)] if self.nav else [])

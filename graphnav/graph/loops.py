@@ -33,7 +33,8 @@
    covariances compounded). Both then become ``BetweenFactorPose2`` with a robust kernel (Cauchy,
    ``kernel_k``), so even a wrong pair that passed cannot pull with more than bounded weight.
 
-docs/loops.md has what it does on the CARMEN logs and the harbour.
+docs/loops.md has what it does on the CARMEN logs and the harbour. The place database (positions,
+ring keys, submaps) and the motion chain are :mod:`graphnav.graph.loop_places`'s.
 
 Everything is bounded: one place per ``spacing`` metres, at most ``max_candidates`` verifications
 per place, k-d trees rebuilt when the unindexed tail exceeds a quarter of the database (amortised
@@ -44,7 +45,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -52,13 +52,21 @@ from typing import Any
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 from scipy.special import gammaincinv
 
 import factors as F
 
 from ..scan import correlative as corr
 from ..scan import descriptor as desc
+from .loop_places import (  # noqa: F401  (propagate, compound: the loop closer's public names)
+    MotionChain,
+    Place,
+    Places,
+    _pose,
+    _vec,
+    compound,
+    propagate,
+)
 
 Vec = NDArray[np.float64]
 
@@ -100,16 +108,6 @@ class LoopConfig:
 
 
 @dataclass
-class Place:
-    k: int
-    s: float  # [m] path length
-    pose: Vec  # estimate (x, y, yaw), world
-    cov: Vec  # world (x, y, yaw) covariance
-    xy: Vec  # scan points, sensor frame, scan order
-    d: desc.Descriptor | None
-
-
-@dataclass
 class Loop:
     i: int  # place keyframe (older)
     k: int  # current keyframe
@@ -119,77 +117,6 @@ class Loop:
     cov: Vec  # its covariance (GTSAM tangent convention)
     source: str  # "gate" or "descriptor"
     accepted: bool = False
-
-
-def propagate(cov_w: Vec, pose_prev: Vec, rel: gtsam.Pose2, q: Vec) -> Vec:
-    """World covariance of ``pose_prev * rel`` from ``cov_w`` (pose_prev's, world x, y, yaw) and the
-    relative motion's body-frame covariance ``q`` (first order)."""
-    c, s = math.cos(pose_prev[2]), math.sin(pose_prev[2])
-    dx = c * rel.x() - s * rel.y()
-    dy = s * rel.x() + c * rel.y()
-    J = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
-    th = pose_prev[2] + rel.theta()
-    R = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0.0, 0.0, 1.0]])
-    return J @ cov_w @ J.T + R @ q @ R.T
-
-
-def compound(steps: list[tuple[gtsam.Pose2, Vec]]) -> tuple[gtsam.Pose2, Vec]:
-    """The relative pose of a chain of steps and its covariance (tangent at the end, GTSAM's
-    right-perturbation convention): ``C <- Ad(step^-1) C Ad(step^-1)^T + Q_step``."""
-    T, C = gtsam.Pose2(), np.zeros((3, 3))
-    for rel, q in steps:
-        A = rel.inverse().AdjointMap()
-        C = A @ C @ A.T + q
-        T = T.compose(rel)
-    return T, C
-
-
-def _pose(v: Vec) -> gtsam.Pose2:
-    return gtsam.Pose2(float(v[0]), float(v[1]), float(v[2]))
-
-
-def _vec(p: gtsam.Pose2) -> Vec:
-    return np.array([p.x(), p.y(), p.theta()])
-
-
-class _Index:
-    """Points that grow one at a time: a k-d tree over the first ``n_tree`` and a linear scan
-    over the rest, rebuilt when the rest exceeds a quarter of all (amortised O(log n))."""
-
-    def __init__(self) -> None:
-        self.rows: list[Vec] = []
-        self.tree: cKDTree | None = None
-        self.n_tree = 0
-
-    def add(self, v: Vec) -> None:
-        self.rows.append(np.asarray(v, dtype=float))
-        if len(self.rows) - self.n_tree > max(32, len(self.rows) // 4):
-            self.rebuild()
-
-    def rebuild(self) -> None:
-        self.n_tree = len(self.rows)
-        self.tree = cKDTree(np.array(self.rows)) if self.rows else None
-
-    def replace(self, rows: list[Vec]) -> None:
-        self.rows = [np.asarray(r, dtype=float) for r in rows]
-        self.rebuild()
-
-    def nearest(self, q: Vec, n: int, valid: int) -> list[tuple[float, int]]:
-        """Up to ``n`` nearest rows among the first ``valid`` ones: (distance, index)."""
-        out: list[tuple[float, int]] = []
-        if self.tree is not None and self.n_tree:
-            kk = min(n + max(0, self.n_tree - valid), self.n_tree)
-            d, idx = self.tree.query(q, k=kk)
-            for dd, ii in zip(np.atleast_1d(d), np.atleast_1d(idx), strict=True):
-                if np.isfinite(dd) and ii < valid:
-                    out.append((float(dd), int(ii)))
-        lo, hi = self.n_tree, min(len(self.rows), valid)
-        if hi > lo:
-            rest = np.array(self.rows[lo:hi])
-            d = np.linalg.norm(rest - q, axis=1)
-            out.extend((float(dd), lo + j) for j, dd in enumerate(d))
-        out.sort()
-        return out[:n]
 
 
 def _chi2_ppf(p: float, dof: int) -> float:
@@ -213,15 +140,8 @@ class LoopCloser:
         self._points = points
         self.ccfg = corr.CorrelativeConfig(**cfg.correlative)
         self.dcfg = desc.DescriptorConfig(**cfg.descriptor)
-        self.places: list[Place] = []
-        self.place_of: dict[int, int] = {}  # keyframe -> place index
-        self.pos_index = _Index()
-        self.key_index = _Index()
-        self.key_rows: list[int] = []  # key_index row -> place index
-        self.grids: OrderedDict[int, corr.LikelihoodGrid] = OrderedDict()
-        self.steps: list[tuple[gtsam.Pose2, Vec]] = []  # per keyframe: the motion from k-1 and its covariance
-        self.adj: list[Vec] = []  # per keyframe: Ad(step^-1) (covariance compounding)
-        self.s_of: list[float] = []  # per keyframe: path length
+        self.places = Places(self.ccfg, cfg.submap, cfg.refine_submap)  # the place database
+        self.chain = MotionChain()  # per keyframe: the motion from k-1, its covariance, the path length
         self.loops: list[Loop] = []  # verified (pending or accepted)
         self.chi_gate = _chi2_ppf(cfg.gate_prob, 2)
         self.chi_pair = _chi2_ppf(cfg.consistency_prob, 3)
@@ -255,22 +175,15 @@ class LoopCloser:
     def _step(self, s: Any, k: int, pose: gtsam.Pose2, cov_w: Vec, rel: gtsam.Pose2 | None, q: Vec | None,
               xy: Vec | None, oldest: int) -> None:
         cfg = self.cfg
-        if k == 0 or rel is None:
-            self.steps.append((gtsam.Pose2(), np.zeros((3, 3))))
-            self.adj.append(np.eye(3))
-            self.s_of.append(self.s_of[-1] if self.s_of else 0.0)
-        else:
-            self.steps.append((rel, np.asarray(q, dtype=float)))
-            self.adj.append(rel.inverse().AdjointMap())
-            self.s_of.append(self.s_of[-1] + math.hypot(rel.x(), rel.y()))
-        sk = self.s_of[k]
+        self.chain.add(None if k == 0 else rel, q)
+        sk = self.chain.s[k]
         if xy is None or len(xy) < self.ccfg.min_points or sk - self.last_place_s < cfg.spacing:
             return
         self.last_place_s = sk
         pk = _vec(pose)
         place = Place(k, sk, pk, np.asarray(cov_w, dtype=float), np.asarray(xy, dtype=float),
                       desc.describe(xy, self.dcfg))
-        valid = self._valid(sk)
+        valid = self.places.valid(sk, cfg.skip_recent)
         cands = self._candidates(place, valid, oldest)
         for src, pi, guess, ywin, win in cands[: cfg.max_candidates]:
             self.counts["loop_candidates"] += 1
@@ -278,35 +191,18 @@ class LoopCloser:
             if loop is not None:
                 self._consider(s, loop)
         self._expire(sk)
-        self._add_place(place)
+        self.places.add(place)
 
     def observe(self, k: int, pose: Vec, cov_w: Vec | None) -> None:
         """The solved estimate of keyframe ``k`` (replaces the prediction of its place)."""
-        j = self.place_of.get(k)
-        if j is not None:
-            self.places[j].pose = np.asarray(pose, dtype=float)
-            self.pos_index.rows[j] = self.places[j].pose[:2].copy()
-            if cov_w is not None:
-                self.places[j].cov = np.asarray(cov_w, dtype=float)
+        self.places.observe(k, pose, cov_w)
 
     def refresh(self, estimate: Callable[[int], Vec | None]) -> None:
         """New estimates of every place (after an accepted loop moved the graph)."""
-        for p in self.places:
-            v = estimate(p.k)
-            if v is not None:
-                p.pose = np.asarray(v, dtype=float)
-        self.pos_index.replace([p.pose[:2] for p in self.places])
-        self.grids.clear()
+        self.places.refresh(estimate)
         self.stale = False
 
     # -- stages --------------------------------------------------------------------------------------
-    def _valid(self, sk: float) -> int:
-        """Number of places at least ``skip_recent`` metres of path back."""
-        n = len(self.places)
-        while n > 0 and sk - self.places[n - 1].s < self.cfg.skip_recent:
-            n -= 1
-        return n
-
     def _candidates(self, q: Place, valid: int, oldest: int) -> list[tuple[str, int, Vec, float, float]]:
         """(source, place index, guess of q's pose in the place's frame, yaw half-window [deg], window [m]),
         best first: proximity ones by Mahalanobis distance, then appearance ones by descriptor."""
@@ -315,7 +211,7 @@ class LoopCloser:
             return []
         out: list[tuple[float, str, int, Vec, float, float]] = []
         seen: set[int] = set()
-        for _, j in self.pos_index.nearest(q.pose[:2], cfg.gate_neighbours, valid):
+        for _, j in self.places.near(q.pose[:2], cfg.gate_neighbours, valid):
             p = self.places[j]
             if p.k < oldest:
                 continue
@@ -327,8 +223,7 @@ class LoopCloser:
                 out.append((d2 / self.chi_gate, "gate", j, guess, 0.0, 0.0))
                 seen.add(j)
         if q.d is not None:
-            for _, r in self.key_index.nearest(q.d.key, cfg.descriptor_neighbours, self._valid_keys(valid)):
-                j = self.key_rows[r]
+            for j in self.places.similar(q.d.key, cfg.descriptor_neighbours, valid):
                 p = self.places[j]
                 if j in seen or p.k < oldest or p.d is None:
                     continue
@@ -339,71 +234,36 @@ class LoopCloser:
         out.sort(key=lambda c: c[0])
         return [(src, j, g, yw, w) for _, src, j, g, yw, w in out]
 
-    def _valid_keys(self, valid: int) -> int:
-        n = len(self.key_rows)
-        while n > 0 and self.key_rows[n - 1] >= valid:
-            n -= 1
-        return n
-
-    def _grid(self, j: int) -> corr.LikelihoodGrid:
-        g = self.grids.get(j)
-        if g is not None:
-            self.grids.move_to_end(j)
-            return g
-        cfg = self.cfg
-        base = _pose(self.places[j].pose)
-        lines = []
-        for m in range(max(0, j - cfg.submap), min(len(self.places), j + cfg.submap + 1)):
-            pm = self.places[m]
-            T = base.between(_pose(pm.pose))
-            c, s = math.cos(T.theta()), math.sin(T.theta())
-            xy = pm.xy[np.hypot(pm.xy[:, 0], pm.xy[:, 1]) <= self.ccfg.max_range]
-            lines.append(xy @ np.array([[c, s], [-s, c]]) + np.array([T.x(), T.y()]))
-        g = corr.LikelihoodGrid(lines, self.ccfg)
-        lo = j - max(0, j - cfg.submap)  # the ICP refinement's target: the place and its nearest neighbours
-        g.points = np.vstack(lines[max(0, lo - cfg.refine_submap):lo + cfg.refine_submap + 1])
-        self.grids[j] = g
-        while len(self.grids) > 32:
-            self.grids.popitem(last=False)
-        return g
-
     def _verify(self, q: Place, p: Place, guess: Vec, yaw_window: float, window: float, source: str) -> Loop | None:
         cfg = self.cfg
         S_rel = self.relative_cov(p, q)
         if source == "gate" and float(np.linalg.eigvalsh(S_rel[:2, :2])[-1]) < cfg.min_sigma**2:
             self.counts["loop_known"] += 1  # the relative position is known already: nothing to gain
             #                                 (a descriptor candidate: the estimate cannot be that far off)
-            self.why = "known"
             return None
         if source == "descriptor":  # "the same place": must the estimate have drifted that far?
             T = _pose(p.pose).between(_pose(q.pose))
             e = np.array([T.x(), T.y()])
             if float(e @ np.linalg.solve(S_rel[:2, :2] + (window / 3) ** 2 * np.eye(2), e)) > self.chi_gate:
                 self.counts["loop_known"] += 1
-                self.why = "known"
                 return None
         if source == "gate":  # the search spans 3 sigma of the relative pose (within the bounds)
             sxy = math.sqrt(max(float(np.linalg.eigvalsh(S_rel[:2, :2])[-1]), 0.0))
             window = float(np.clip(3 * sxy, cfg.window, cfg.max_window))
             yaw_window = min(3 * math.degrees(math.sqrt(max(S_rel[2, 2], 0.0))), 180.0)
         yaw_window = min(yaw_window + cfg.yaw_margin_deg, 180.0)
-        grid = self._grid(self.place_of[p.k])
+        grid, target = self.places.submap_of(self.places.of[p.k])
         r = corr.correlative_match(q.xy, grid,
                                    guess, window=window, yaw_window_deg=yaw_window,
                                    second_above=cfg.max_ambiguity, cfg=self.ccfg)
-        self.last_match = r
-        self.why = "match"
         if not r.ok or r.hits < cfg.min_hits or r.second > cfg.max_ambiguity * r.score:
             self.counts["loop_rejected_match"] += 1
             return None
-        self.why = "chain"
         if not self._plausible(p, q, r.pose, S_rel + np.diag([self.ccfg.resolution**2] * 2
                                                              + [math.radians(1.0) ** 2])):
             self.counts["loop_rejected_chain"] += 1
             return None
-        self.why = "refine"
-        ok, pose, cov, quality = self.icp_match(q.xy, grid.points, r.pose)
-        self.last_refine = (ok, pose, quality)
+        ok, pose, cov, quality = self.icp_match(q.xy, target, r.pose)
         cov2 = self.cov_of(cov) if ok else None
         if (not ok or cov2 is None or quality.get("degenerate", False)
                 or math.hypot(pose[0] - r.pose[0], pose[1] - r.pose[1]) > cfg.refine_agree
@@ -423,10 +283,7 @@ class LoopCloser:
         R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # world -> the place's frame
         best = R @ (p.cov + q.cov) @ R.T
         if 0 < q.k - p.k <= self.cfg.max_chain:
-            C = np.zeros((3, 3))
-            for k in range(p.k + 1, q.k + 1):
-                A = self.adj[k]
-                C = A @ C @ A.T + self.steps[k][1]
+            C = self.chain.covariance(p.k, q.k)
             T = _pose(p.pose).between(_pose(q.pose))
             A = T.AdjointMap()  # tangent at q -> p's frame
             C = A @ C @ A.T
@@ -442,21 +299,13 @@ class LoopCloser:
         e = np.asarray(gtsam.Pose2.Logmap(est.between(_pose(z))))
         return float(e @ np.linalg.solve(S, e)) <= self.chi_chain
 
-    def chain(self, a: int, b: int) -> tuple[gtsam.Pose2, Vec]:
-        """The chain's relative pose from keyframe ``a`` to ``b`` (either order) and its covariance."""
-        if a <= b:
-            return compound(self.steps[a + 1:b + 1])
-        T, C = compound(self.steps[b + 1:a + 1])
-        A = T.AdjointMap()
-        return T.inverse(), A @ C @ A.T
-
     def consistent(self, l1: Loop, l2: Loop) -> bool:
         """The cycle ``i1 -> k1 (loop 1) -> k2 (chain) -> i2 (loop 2 inverted) -> i1 (chain)`` closes
         within the chi-square bound of its covariance (first order, every term at the identity's
         frame: the cycle is short)."""
         z1, z2 = _pose(l1.z), _pose(l2.z)
-        ck, Ck = self.chain(l1.k, l2.k)
-        ci, Ci = self.chain(l2.i, l1.i)
+        ck, Ck = self.chain.between(l1.k, l2.k)
+        ci, Ci = self.chain.between(l2.i, l1.i)
         cyc = z1.compose(ck).compose(z2.inverse()).compose(ci)
         e = np.asarray(gtsam.Pose2.Logmap(cyc))
         S = l1.cov + l2.cov + Ck + Ci
@@ -497,14 +346,6 @@ class LoopCloser:
             elif not m.accepted:
                 self.counts["loop_unconfirmed"] += 1
         self.loops = keep
-
-    def _add_place(self, place: Place) -> None:
-        self.place_of[place.k] = len(self.places)
-        self.places.append(place)
-        self.pos_index.add(place.pose[:2])
-        if place.d is not None:
-            self.key_rows.append(len(self.places) - 1)
-            self.key_index.add(place.d.key)
 
     def info(self) -> dict[str, Any]:
         return {**self.counts, "places": len(self.places), "loop_ms": self.ms,

@@ -38,14 +38,15 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..errors import GraphnavError
-from ..geometry import cov_to_world, wrap_angle
+from ..geometry import cov_to_world
 from ..log import KnownBeacon, NavLog, Record, validate_record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
-from . import gnc, noise
 from .builder import GraphBuilder, Matcher, NavPrev, Step
+from .online_track import OnlineTrack, kinematics
 from .smoother_config import SmootherConfig
-from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt, marginals
+from .solution import Closing, marginal_priors, refresh_places
+from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt
 from .space import IB, PlanarSpace, V, W
 
 BATCH_INIT_FIRST = 32  # batch_init="incremental": the first solve at this many keyframes
@@ -60,6 +61,16 @@ def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:
     return np.array([p.x(), p.y(), p.theta()])
 
 
+def gnss_sigma_assumed(log: NavLog) -> bool:
+    """Whether the log's GNSS sigmas are known only up to scale: an NMEA log's fixes without a GST
+    of their own take HDOP x an assumed UERE (``graphnav.io.nmea.UERE_M``), so their group is
+    rescaled like a defaulted one by the noise estimation (issue #25: estimated where redundancy allows)."""
+    if log.meta.get("format") != "nmea0183":
+        return False
+    n = sum(1 for r in log.records if r.kind == "gnss")
+    return n > int(log.meta.get("fix_sigma_from_gst", 0) or 0)
+
+
 def graph_params(cfg: SmootherConfig, space: PlanarSpace | None = None) -> gtsam.ISAM2Params:
     """The iSAM2 parameters of the graph: thresholds per variable type (poses ``x``, beacons ``l``,
     compass-bias frame ``b``; in the Pose3 graph also velocities ``v`` and IMU biases ``i``)."""
@@ -72,6 +83,27 @@ def graph_params(cfg: SmootherConfig, space: PlanarSpace | None = None) -> gtsam
                        partial_check=cfg.partial_relinearization_check,
                        wildfire=cfg.wildfire_threshold, factorization=cfg.isam_factorization,
                        optimizer=cfg.isam_optimizer)
+
+
+def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -> dict[str, Any]:
+    """The :class:`Navigator`'s arguments from ``log``: its chart, LiDAR models, whether it has scans and
+    an IMU, the IMU model and initial velocity, the mounts (the log's, the option's ``kw["mounts"]``
+    winning per sensor), with the other arguments ``kw``."""
+    lidar = log.meta.get("lidar") if isinstance(log.meta.get("lidar"), dict) else None
+    lidar3d = log.meta.get("lidar3d") if isinstance(log.meta.get("lidar3d"), dict) else None
+    scans = bool(log.of("scan")) or (bool(log.of("cloud")) and (config is None or config.use_cloud)
+                                     and kw.get("use_cloud", True))
+    imu_model = log.meta.get("imu") if isinstance(log.meta.get("imu"), dict) else None
+    if log.meta.get("mounts") is not None:  # the log's mounts, the option's winning per sensor
+        from .mounts import merged
+
+        given = kw.get("mounts", config.mounts if config is not None else {})
+        kw["mounts"] = {k: asdict(m) for k, m in merged(log.meta["mounts"], given).items()}
+    v0 = log.meta.get("initial_velocity")
+    if imu_model is not None or v0 is not None:
+        imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}
+    return {"chart": log.beacons_known, "lidar": lidar, "scans": scans, "lidar3d": lidar3d,
+            "imu": any(r.kind == "imu" for r in log.records), "imu_model": imu_model, **kw}
 
 
 class Navigator:
@@ -108,15 +140,9 @@ class Navigator:
         self.groups: list[str] = []  # sensor group of every factor in solver.graph
         self.on_estimate = on_estimate
         self.history = history
-        self.on_t: list[float] = []
-        self.on_p: list[NDArray[np.float64]] = []
-        self.on_c: list[NDArray[np.float64] | None] = []
-        self.step_ms: list[float] = []
-        self.step_cpu: list[float] = []
-        self.icp_ms: list[float] = []
+        self.track = OnlineTrack(history)  # the online estimates and step times
         self.last_pose: gtsam.Pose2 | None = None
         self.last_cov: NDArray[np.float64] | None = None
-        self._prev: tuple[float | None, NDArray[np.float64] | None] = (None, None)
         self._base = 0  # the keyframe the fixed-lag smoother was last re-anchored at
         self._next_init = BATCH_INIT_FIRST  # batch: the keyframe count of the next incremental solve
         self.n_records = 0
@@ -131,24 +157,12 @@ class Navigator:
 
     @classmethod
     def for_log(cls, log: NavLog, config: SmootherConfig | None = None, **kw: Any) -> Navigator:
-        """A navigator for ``log``: its chart, LiDAR model and whether it has scans."""
-        lidar = log.meta.get("lidar") if isinstance(log.meta.get("lidar"), dict) else None
-        lidar3d = log.meta.get("lidar3d") if isinstance(log.meta.get("lidar3d"), dict) else None
-        scans = bool(log.of("scan")) or (bool(log.of("cloud")) and (config is None or config.use_cloud)
-                                         and kw.get("use_cloud", True))
-        imu_model = log.meta.get("imu") if isinstance(log.meta.get("imu"), dict) else None
-        if log.meta.get("mounts") is not None:  # the log's mounts, the option's winning per sensor
-            from dataclasses import asdict
-
-            from .mounts import merged
-
-            given = kw.get("mounts", config.mounts if config is not None else {})
-            kw["mounts"] = {k: asdict(m) for k, m in merged(log.meta["mounts"], given).items()}
-        v0 = log.meta.get("initial_velocity")
-        if imu_model is not None or v0 is not None:
-            imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}
-        return cls(config, chart=log.beacons_known, lidar=lidar, scans=scans, lidar3d=lidar3d,
-                   imu=any(r.kind == "imu" for r in log.records), imu_model=imu_model, **kw)
+        """A navigator for ``log``: its chart, LiDAR model, IMU, mounts and whether it has scans
+        (:func:`log_inputs`); an NMEA log's assumed GNSS sigmas (:func:`gnss_sigma_assumed`)."""
+        nav = cls(config, **log_inputs(log, config, kw))
+        if gnss_sigma_assumed(log):
+            nav.builder.assume_sigmas("gnss")
+        return nav
 
     # -- online ----------------------------------------------------------------------------------
     def add(self, rec: Record | KnownBeacon, *, checked: bool = False) -> Estimate | None:
@@ -209,7 +223,7 @@ class Navigator:
         s = self.builder.step(k, self.last_pose, self.last_cov if self.solver.online or self.front else None,
                               self.last_state)
         if s.icp_ms is not None:
-            self.icp_ms.append(s.icp_ms)
+            self.track.icp_ms.append(s.icp_ms)
         c0, p0 = time.perf_counter(), time.process_time()
         self._update(s)
         loops = self.builder.loops
@@ -222,24 +236,18 @@ class Navigator:
                 self._initialise(k, s.t)
             return None
         pose, cov = self._newest(self.solver, k, s.t, loops)
-        self.step_ms.append((time.perf_counter() - c0) * 1e3)
-        self.step_cpu.append((time.process_time() - p0) * 1e3)
-        prev_t, prev_p = self._prev
+        self.track.timing((time.perf_counter() - c0) * 1e3, (time.process_time() - p0) * 1e3)
         self.last_pose, self.last_cov = pose, cov
         vec = _vec(pose)
-        self._prev = (s.t, vec)
-        if self.history:
-            self.on_t.append(s.t)
-            self.on_p.append(vec)
-            self.on_c.append(cov)
-        else:  # bounded: the last 10 000 step times only, and the fixed-lag smoother re-anchored
-            del self.step_ms[:-10_000], self.step_cpu[:-10_000], self.icp_ms[:-10_000]
-            if (self.cfg.solver == "fixed-lag" and self.cfg.rebase_every
-                    and k - self._base >= self.cfg.rebase_every):
-                self._rebase(k, s.t)
+        prev_t, prev_p = self.track.add(s.t, vec, cov)
+        if not self.history and (self.cfg.solver == "fixed-lag" and self.cfg.rebase_every
+                                 and k - self._base >= self.cfg.rebase_every):
+            self._rebase(k, s.t)  # bounded: the fixed-lag smoother re-anchored
         if self.on_estimate is not None:
             self.on_estimate(s.t, vec, cov)
-        return Estimate(s.t, vec, cov, *self._kinematics(s.t, vec, prev_t, prev_p))
+        velocity = self.last_state[1] if self.nav and self.last_state is not None else None
+        return Estimate(s.t, vec, cov, *kinematics(s.t, vec, prev_t, prev_p, velocity,
+                                                   self.builder.recent_odometry(s.t)))
 
     def _newest(self, solver: Solver, k: int, t: float, loops: Any) -> tuple[gtsam.Pose2, NDArray[np.float64]]:
         """The newest pose's online estimate and world covariance from an incremental ``solver``;
@@ -247,12 +255,7 @@ class Navigator:
         then observes that pose."""
         try:
             if loops is not None and loops.stale:
-                if solver.kind == "isam2":  # each place's pose alone: no full back-substitution of every state
-                    sp = self.space
-                    loops.refresh(lambda j: _vec(sp.pose2(solver.estimate(F.X(j), sp.pose_type))))
-                else:
-                    values = solver.current()
-                    loops.refresh(lambda j: _vec(self.space.read(values, F.X(j))) if values.exists(F.X(j)) else None)
+                refresh_places(loops, solver, self.space)
             p = solver.estimate(F.X(k), self.space.pose_type)
             cov = self.space.world_cov(p, solver.marginal(F.X(k)))
             pose = self.space.pose2(p)
@@ -316,57 +319,18 @@ class Navigator:
     def _rebase(self, k: int, t: float) -> None:
         """A fresh fixed-lag smoother with priors carrying the current marginals of the variables
         still in use: the newest pose, the compass-bias frame and the beacons (live mode)."""
-        g, v, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
         keys = [F.X(k), *self.builder.carried_keys(k)]
-        sp = self.space
         try:
-            for key in keys:
-                cov = self.solver.marginal(key)
-                model = gtsam.noiseModel.Gaussian.Covariance(cov)
-                ch = chr(gtsam.Symbol(key).chr())
-                if ch == "l":
-                    p = self.solver.estimate(key, sp.point_type)
-                    g.add(sp.landmark_prior_cov(key, p, cov))
-                elif ch in "vw":
-                    p = self.solver.estimate(key, "Vector")
-                    g.add(gtsam.PriorFactorVector(key, p, model))
-                elif ch == "i":
-                    p = self.solver.estimate(key, "ConstantBias")
-                    g.add(gtsam.PriorFactorConstantBias(key, p, model))
-                else:
-                    p = self.solver.estimate(key, sp.pose_type)
-                    g.add(sp.prior_cov(key, p, cov))
-                v.insert(key, p)
-                stamps[key] = t
-            self.solver.rebase(g, v, stamps)
+            self.solver.rebase(*marginal_priors(self.solver, self.space, keys, t))
         except SolverError as exc:
             raise self._fail(exc, t) from None
         self._base = k
         self.extra["rebases"] = self.extra.get("rebases", 0) + 1
 
-    def _kinematics(self, t: float, p: NDArray[np.float64], prev_t: float | None,
-                    prev_p: NDArray[np.float64] | None) -> tuple[float | None, float | None, float | None]:
-        """Speed over ground, course, yaw rate: on the Pose3 graph SOG and COG from the velocity
-        state (the yaw rate differenced); else from the latest odometry sample when recent, else
-        differenced from the previous keyframe."""
-        sog = cog = w = None
-        if prev_t is not None and prev_p is not None and t > prev_t:
-            dt = t - prev_t
-            dx, dy = p[0] - prev_p[0], p[1] - prev_p[1]
-            sog, cog = math.hypot(dx, dy) / dt, math.atan2(dy, dx)
-            w = float(wrap_angle(p[2] - prev_p[2])) / dt
-        if self.nav and self.last_state is not None:  # the velocity over ground is a state
-            v = self.last_state[1]
-            return math.hypot(v[0], v[1]), math.atan2(v[1], v[0]), w
-        odo = self.builder.recent_odometry(t)
-        if odo is not None:
-            sog, w = abs(odo[0]), odo[1]
-        return sog, cog, w
-
     def info(self) -> dict[str, Any]:
         """Counts and timings so far (live mode's summary)."""
-        s = np.asarray(self.step_ms)
-        icp = np.asarray(self.icp_ms)
+        s = np.asarray(self.track.step_ms)
+        icp = np.asarray(self.track.icp_ms)
         return {"estimator": f"navigator ({self.cfg.solver})", **self.builder.info(), **self.extra,
                 "keyframes_solved": self.builder.stepped,
                 "icp_ms_median": float(np.median(icp)) if icp.size else None,
@@ -377,9 +341,7 @@ class Navigator:
         """The online estimates so far (``None`` for batch)."""
         if not self.solver.online:
             return None
-        cov = np.array(self.on_c) if self.on_c else None
-        return Trajectory(np.array(self.on_t), np.array(self.on_p).reshape(-1, 3), cov,
-                          name=f"{self.cfg.solver}-online")
+        return self.track.trajectory(f"{self.cfg.solver}-online")
 
     # -- the end ---------------------------------------------------------------------------------
     def smoothed(self) -> Trajectory:
@@ -402,43 +364,16 @@ class Navigator:
         t = np.array(b.kf_t)
         if n == 0:
             empty = Trajectory(np.zeros(0), np.zeros((0, 3)), name=cfg.solver)
-            return RunResult(empty, self.online(), np.zeros(0), np.array(self.icp_ms), info)
-        covs: list[NDArray[np.float64]] | None = None
+            return RunResult(empty, self.online(), np.zeros(0), np.array(self.track.icp_ms), info)
         c0, p0 = time.perf_counter(), time.process_time()
+        closing = Closing(cfg, self.solver, self.space, self.groups, b.rejected_fixes, b.defaulted)
         try:
-            if cfg.solver == "fixed-lag":
-                values = self.solver.current()
-                poses, covs = [], []
-                for k in range(n):
-                    fr = self.solver.frozen.get(F.X(k))
-                    if fr is None:
-                        p = self.space.read(values, F.X(k))
-                        c = self.space.world_cov(p, self.solver.marginal(F.X(k))) if cfg.covariances else None
-                    else:
-                        p, c = fr
-                    poses.append(_vec(p))
-                    covs.append(c)
-                if not cfg.covariances:
-                    covs = None
-            else:
-                if cfg.solver == "isam2":
-                    self.solver.relinearize(cfg.final_updates)
-                    values = self.solver.current()
-                    if cfg.converge == "lm":
-                        values = self._batch(values, info)
-                else:  # with a loop closer's iSAM2 front end, its estimate is the one LM solve's start
-                    values = self._batch(self.front.current() if self.front is not None else self.solver.initial, info)
-                p2 = [self.space.read(values, F.X(k)) for k in range(n)]
-                poses = [_vec(p) for p in p2]
-                if cfg.covariances:
-                    if cfg.solver == "isam2" and cfg.converge != "lm":
-                        covs = [self.space.world_cov(p2[k], self.solver.marginal(F.X(k))) for k in range(n)]
-                    else:
-                        m = marginals(self.solver.graph, values)
-                        covs = [self.space.world_cov(p2[k], m(F.X(k))) for k in range(n)]
+            values, poses, covs = closing.solve(n, self.front, info)
         except SolverError as exc:
             raise GraphnavError(f"the navigation graph could not be solved at the end of the log: {exc}",
                                 where=f"record {self.n_records}") from None
+        finally:
+            self.groups = closing.groups
         final_ms = (time.perf_counter() - c0) * 1e3
         final_cpu = (time.process_time() - p0) * 1e3
         self._final = values
@@ -450,8 +385,8 @@ class Navigator:
         info.update(b.report(values))  # compass bias, beacons, IMU bias, water current
         info.update(self.extra)
         if self.solver.online:
-            info["step_cpu_ms_median"] = float(np.median(self.step_cpu)) if self.step_cpu else None
-            step_ms = np.array(self.step_ms)
+            info["step_cpu_ms_median"] = float(np.median(self.track.step_cpu)) if self.track.step_cpu else None
+            step_ms = np.array(self.track.step_ms)
         else:
             solve_ms = final_ms + self.extra.get("batch_init_ms", 0.0)  # with the incremental initialisation
             info["solve_ms"] = solve_ms
@@ -460,45 +395,4 @@ class Navigator:
             if self.on_estimate is not None:
                 for k in range(n):
                     self.on_estimate(float(t[k]), traj.poses[k], None if traj.cov is None else traj.cov[k])
-        return RunResult(traj, self.online(), step_ms, np.array(self.icp_ms), info)
-
-    def _batch(self, init: gtsam.Values, info: dict[str, Any]) -> gtsam.Values:
-        """LM over the whole graph from ``init``; gross GNSS outliers (residual beyond ``gnss_gate``
-        sigmas) dropped and LM re-run (up to 3 times); then the noise estimation when configured."""
-        cfg = self.cfg
-        c0 = time.perf_counter()
-        graph = self.solver.graph
-        rejected = self.builder.rejected_fixes
-        if rejected and cfg.robust_backend == "gnc":  # the fixes the online gate rejected, reconsidered
-            graph = gtsam.NonlinearFactorGraph(graph)
-            for f in rejected:
-                graph.add(f)
-            self.groups = self.groups + ["gnss"] * len(rejected)
-            info["gnss_reconsidered"] = len(rejected)
-        values, iters = levenberg_marquardt(graph, init, self.solver.lm)
-        if cfg.robust_backend == "gnc":
-            graph, self.groups, values, info["switched_off"] = gnc.switch_off(
-                graph, values, self.groups, self.solver.lm, cfg.robust_prob, cfg.robust_groups)
-        dropped = 0
-        for _ in range(3 if cfg.gnss_gate is not None else 0):
-            keep = [i for i in range(graph.size()) if not (
-                self.groups[i] == "gnss" and noise.whitened_norm(graph.at(i), values, robust=False) > cfg.gnss_gate)]
-            if len(keep) == graph.size():
-                break
-            dropped += graph.size() - len(keep)
-            graph = noise.subgraph(graph, keep)
-            self.groups = [self.groups[i] for i in keep]
-            values, it = levenberg_marquardt(graph, values, self.solver.lm)
-            iters += it
-        info["gnss_dropped_after_lm"] = dropped
-        if cfg.noise_estimation != "off":
-            scalable = noise.SCALABLE if cfg.noise_estimation == "all" else tuple(
-                g for g in noise.SCALABLE if g in self.builder.defaulted)
-            graph, values, vce = noise.estimate_scales(graph, values, self.groups, scalable, cfg.noise_iterations,
-                                                       self.solver.lm)
-            info["noise_scale"] = vce
-        info["odometry_consistency"] = gnc.odometry_consistency(graph, values, self.groups, cfg.robust_prob)
-        self.solver.graph = graph
-        info["lm_iterations"] = iters
-        info["converge_ms"] = (time.perf_counter() - c0) * 1e3
-        return values
+        return RunResult(traj, self.online(), step_ms, np.array(self.track.icp_ms), info)

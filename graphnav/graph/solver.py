@@ -119,6 +119,8 @@ class Solver:
         self.graph = gtsam.NonlinearFactorGraph()  # everything (batch, and iSAM2 with keep_graph)
         self.initial = gtsam.Values()
         self.frozen: dict[int, tuple[Any, NDArray[np.float64] | None]] = {}  # fixed-lag: left the window
+        self._fresh: set[int] = set()  # iSAM2: the variables the last update inserted (see `estimate`)
+        self._marginals: dict[int, NDArray[np.float64]] = {}  # ... their marginal covariances, once computed
         self._stamps: dict[int, float] = {}  # fixed-lag: tracked key -> time
         self.updates = 0
         if kind == "isam2":
@@ -146,6 +148,8 @@ class Solver:
         try:
             if self.kind == "isam2":
                 self.s.update(graph, values)
+                self._fresh = set(values.keys())
+                self._marginals = {}
             elif self.kind == "fixed-lag":
                 if t is not None and track is not None:
                     for key, ts in list(self._stamps.items()):
@@ -188,21 +192,46 @@ class Solver:
                 self.s.update()
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
+        self._marginals = {}
 
     def estimate(self, key: int, type_name: str = "Pose2") -> Any:
-        """The current estimate of ``key`` (iSAM2: partial back-substitution, cheap for the newest
-        variables; batch: the initial guess)."""
+        """The current estimate of ``key`` (batch: the initial guess).
+
+        iSAM2: a variable the last update inserted (the newest keyframe's state) is read from its
+        marginal factor -- the linearisation point moved by the Gauss-Newton step of its clique (the
+        root's, or one near it), exact, with its marginal covariance on the way -- without the
+        back-substitution of the whole Bayes tree that ``calculateEstimate`` runs first. That
+        back-substitution re-solves every clique whose separator moved by more than the wildfire
+        threshold, and each GNSS fix moves the whole (rigid) trajectory a little: its cost grew with
+        the log (docs/performance.md). Older variables: ``calculateEstimate``."""
         if self.kind == "batch":
             return getattr(self.initial, f"at{type_name}")(key)
         try:
+            if self.kind == "isam2" and key in self._fresh:
+                return self._newest(key, type_name)
             return getattr(self.s, f"calculateEstimate{type_name}")(key)
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
+
+    def _newest(self, key: int, type_name: str) -> Any:
+        """A freshly inserted variable's estimate from its marginal (``estimate``); the marginal
+        covariance is kept for :meth:`marginal`."""
+        cond = self.s.marginalFactor(key)
+        info = np.asarray(cond.information())
+        delta = np.asarray(cond.solve(gtsam.VectorValues()).at(key))
+        self._marginals[key] = np.linalg.inv(info)
+        theta = getattr(self.s.getLinearizationPoint(), f"at{type_name}")(key)
+        if type_name in ("Vector", "Point2", "Point3", "Double"):
+            return np.asarray(theta) + delta
+        return theta.retract(delta)
 
     def marginal(self, key: int) -> NDArray[np.float64] | None:
         """Marginal covariance of ``key`` in GTSAM's tangent space (``None`` for batch)."""
         if self.kind == "batch":
             return None
+        cached = self._marginals.get(key)
+        if cached is not None:
+            return cached.copy()
         try:
             return np.asarray(self.s.marginalCovariance(key))
         except RuntimeError as exc:

@@ -223,13 +223,15 @@ def locate(px, py, tri, s0):
 
 
 @njit(cache=True)
-def move_and_match(src, tgt, grid, c, s, t_x, t_y, first, pairs, tri, sim):
-    """Source points moved by ``(R(c, s), t)`` into ``pairs``' ``px``, ``py`` and their matches into ``d``,
-    ``idx``: the nearest target point (a full search on the ``first`` iteration, else bounded by the
-    last match), or with a triangulation (the paper's matching) the nearest apex of the target
-    triangle holding the point (the nearest point outside the hull; ``sim``: each point's last triangle)."""
+def move_and_match(src, tgt, grid, motion, first, pairs, tri, sim):
+    """Source points moved by ``motion = (c, s, tx, ty)`` (``R(c, s)``, ``t``) into ``pairs``' ``px``, ``py``
+    and their matches into ``d``, ``idx``: the nearest target point (a full search on the ``first``
+    iteration, else bounded by the last match), or with a triangulation (the paper's matching) the nearest
+    apex of the target triangle holding the point (the nearest point outside the hull; ``sim``: each
+    point's last triangle)."""
     sx, sy, tx, ty = src[0], src[1], tgt[0], tgt[1]
     px, py, d, idx = pairs[0], pairs[1], pairs[2], pairs[3]
+    c, s, t_x, t_y = motion
     simp = tri[2]
     for i in range(sx.shape[0]):
         px[i] = c * sx[i] - s * sy[i] + t_x
@@ -705,7 +707,7 @@ def icp_loop(src, tgt, grid, lines, prm, pose0, scale, big_d, tri):
     warm = hdl and prm.warmup > 0
     for it in range(1, prm.max_iter + 1):  # noqa: B007
         c, s = math.cos(th), math.sin(th)
-        move_and_match(src, tgt, grid, c, s, t_x, t_y, it == 1, pairs, tri, sim)
+        move_and_match(src, tgt, grid, (c, s, t_x, t_y), it == 1, pairs, tri, sim)
         dmax = zhang_gate(d, idx, scale, n, dmax)
         if hdl and not warm:
             hdl_weights(pairs, c, s, src, tgt, lines, prm, scale, dmax)
@@ -798,9 +800,13 @@ def final_pairs(src, tgt, lines, prm, pose, idx, scale, dmax):
 
 
 @njit(cache=True, inline="always")
-def _add_sums(h, bl, bs, ja, jb, wi, sv, samp, sxx, sxy, syy, hdl):
-    """One pair's terms of ``H = sum w J^T J``, ``B_lidar = sum w^2 J^T S J``, ``B_sampling = sum w^2
-    samp J^T J`` (HDL: the one row ``ja``, ``S = sv``; else the rows ``ja``, ``jb`` and ``S`` (2x2))."""
+def _add_sums(sums, ja, jb, wi, samp, cov, hdl):
+    """One pair's terms of ``sums = (H, B_lidar, B_sampling)``: ``H = sum w J^T J``, ``B_lidar = sum w^2 J^T S
+    J``, ``B_sampling = sum w^2 samp J^T J`` (HDL: the one row ``ja``, ``S = cov[0]``, the residual's
+    variance; else the rows ``ja``, ``jb`` and ``S = cov = (sxx, sxy, syy)``, 2x2)."""
+    h, bl, bs = sums
+    sxx, sxy, syy = cov
+    sv = sxx
     w2 = wi * wi
     if hdl:
         for a in range(3):
@@ -873,7 +879,7 @@ def report_sums(pairs, cov, tgt, lines, res, scale, gate, pose, radius, prm):
             jb[0], jb[1], jb[2] = s, c, c2y
         if both:
             n_inl += 1
-        _add_sums(h, bl, bs, ja, jb, wi, sv, samp, sxx[i], sxy[i], syy[i], hdl)
+        _add_sums((h, bl, bs), ja, jb, wi, samp, (sv, 0.0, 0.0) if hdl else (sxx[i], sxy[i], syy[i]), hdl)
         sw += wi
     k = ksum / max((1 if hdl else 2) * n_inl - 3, 1) if n_inl > 0 else np.nan
     rms = math.sqrt(rss / sw) if sw > 0 else np.nan

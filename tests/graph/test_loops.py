@@ -237,14 +237,14 @@ def test_pairwise_consistency_refuses_a_wrong_loop():
     closer, _ = _closer()
     q = np.diag([0.02**2, 0.02**2, math.radians(0.3) ** 2])
     for k in range(30):  # a straight chain, 1 m steps
-        closer.steps.append((gtsam.Pose2(1.0, 0.0, 0.0) if k else gtsam.Pose2(), q if k else np.zeros((3, 3))))
+        closer.chain.steps.append((gtsam.Pose2(1.0, 0.0, 0.0) if k else gtsam.Pose2(), q if k else np.zeros((3, 3))))
     cov = np.diag([0.05**2, 0.05**2, math.radians(0.5) ** 2])
     # keyframe 20 is beside keyframe 2 (one metre to the left), 22 beside 4: a straight revisit
     l1 = LP.Loop(2, 20, 2.0, 20.0, np.array([0.0, 1.0, 0.0]), cov, "gate")
     l2 = LP.Loop(4, 22, 4.0, 22.0, np.array([0.0, 1.0, 0.0]), cov, "gate")
     bad = LP.Loop(4, 22, 4.0, 22.0, np.array([3.0, 1.0, 0.0]), cov, "gate")  # a look-alike 3 m on
     # the chains 20 -> 22 and 4 -> 2 are both 2 m: the cycle closes for l2 and not for bad
-    closer.steps[20:23] = [(gtsam.Pose2(1.0, 0.0, 0.0), q)] * 3
+    closer.chain.steps[20:23] = [(gtsam.Pose2(1.0, 0.0, 0.0), q)] * 3
     assert closer.consistent(l1, l2)
     assert not closer.consistent(l1, bad)
 

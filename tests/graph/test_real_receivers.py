@@ -78,24 +78,43 @@ def test_cold_start_jump_follows_the_good_fixes(tmp_path, jumped):
 
 
 
+def _gga_capture(tmp_path, *, n: int = 40, v: float = 5.5, cog: float = 30.0, noise: float = 1.0,
+                 hdop: float = 9.0, seed: int = 1):
+    """GGA only at 1 Hz: ``n`` fixes along a line at ``v`` m/s with ``noise`` m of scatter per axis."""
+    rng = np.random.default_rng(seed)
+    lines = []
+    for i in range(n):
+        north = v * i * math.cos(math.radians(cog)) + rng.normal(0, noise)
+        east = v * i * math.sin(math.radians(cog)) + rng.normal(0, noise)
+        lat = LAT0 + north / 1852 / 60
+        lon = LON0 + east / (1852 * math.cos(math.radians(LAT0))) / 60
+        la = f"{int(lat):02d}{(lat - int(lat)) * 60:09.6f}"
+        lo = f"{int(lon):03d}{(lon - int(lon)) * 60:09.6f}"
+        lines.append(_sentence(f"GPGGA,10{i // 60:02d}{i % 60:02d}.00,{la},N,{lo},E,1,05,{hdop:.1f},,,,,,"))
+    p = tmp_path / "moving.nmea"
+    p.write_text("\n".join(lines) + "\n")
+    return load_log(p, date="2026-12-03")
+
+
 def test_moving_receiver_with_large_hdop_follows_its_fixes(tmp_path):
     """GGA only at 1 Hz, 5.5 m/s, HDOP 9 (27 m sigmas) but 1 m of real scatter: the GNSS velocity fit
     takes the fixes' scatter about the fitted line when it is below the stated sigma, so the constant
     velocity carries the track; with the stated 27 m the fit was refused and a zero-mean random walk
     held the track back by tens of metres."""
-    rng = np.random.default_rng(1)
-    lines = []
-    v, cog = 5.5, 30.0
-    for i in range(40):
-        north = v * i * math.cos(math.radians(cog)) + rng.normal(0, 1.0)
-        east = v * i * math.sin(math.radians(cog)) + rng.normal(0, 1.0)
-        lat = LAT0 + north / 1852 / 60
-        lon = LON0 + east / (1852 * math.cos(math.radians(LAT0))) / 60
-        la = f"{int(lat):02d}{(lat - int(lat)) * 60:09.6f}"
-        lo = f"{int(lon):03d}{(lon - int(lon)) * 60:09.6f}"
-        lines.append(_sentence(f"GPGGA,10{i // 60:02d}{i % 60:02d}.00,{la},N,{lo},E,1,05,9.0,,,,,,"))
-    p = tmp_path / "moving.nmea"
-    p.write_text("\n".join(lines) + "\n")
-    log = load_log(p, date="2026-12-03")
+    log = _gga_capture(tmp_path)
     r = estimators.run("isam2", log)
     assert np.median(_distances(log, r.trajectory)) < 3.0
+
+
+@pytest.mark.parametrize(("noise", "hdop", "lo", "hi"), [(1.0, 9.0, 0.015, 0.08), (3.0, 1.0, 0.5, 1.5)])
+def test_hdop_sigmas_are_rescaled_from_the_fixes(tmp_path, noise, hdop, lo, hi):
+    """HDOP x an assumed UERE is a sigma known up to scale: the smoothed result rescales the GNSS group
+    from the residuals (variance-component estimation). 1 m of scatter under 27 m HDOP sigmas gives a
+    factor about 1/27 (0.024 here), 3 m under HDOP 1 x UERE 3 m about 1 (0.68: the motion takes its
+    share); without the estimation nothing is rescaled."""
+    log = _gga_capture(tmp_path, noise=noise, hdop=hdop, v=2.0)
+    r = estimators.run("isam2", log)
+    assert "gnss" in r.info["defaulted_sigmas"]
+    assert lo < r.info["noise_scale"]["gnss"]["sigma_factor"] < hi
+    r0 = estimators.run("isam2", log, noise_estimation="off")
+    assert "noise_scale" not in r0.info

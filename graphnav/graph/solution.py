@@ -1,0 +1,165 @@
+"""What a navigator reads out of its solver beyond the online estimate: the smoothed solution at the
+end of a run, and the marginals carried as priors when the fixed-lag smoother is re-anchored.
+
+The end (:class:`Closing`): fixed-lag takes each pose as it left the window (the window's own at the
+end); iSAM2 relinearises ``final_updates`` times and, with ``converge="lm"``, closes with a
+Levenberg-Marquardt step from its estimate over the whole graph -- the problem batch solves from its
+initial guess --; the LM solutions reconsider the fixes the online gate rejected and switch off
+outliers (GNC, :mod:`graphnav.graph.gnc`), drop gross GNSS outliers by their residual and re-solve,
+and estimate a noise scale per sensor group when ``noise_estimation`` asks (:mod:`graphnav.graph.noise`).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+import factors as F
+
+from . import gnc, noise
+from .smoother_config import SmootherConfig
+from .solver import Solver, levenberg_marquardt, marginals
+from .space import PlanarSpace
+
+Vec = NDArray[np.float64]
+
+
+class Closing:
+    """The smoothed solution of a run's graph (module docstring). ``groups``: the sensor group of every
+    factor in ``solver.graph`` (kept parallel as factors are added or dropped); ``rejected``: the
+    factors of the fixes the online GNSS gate rejected; ``defaulted``: the groups whose sigmas came
+    from the configuration (``noise_estimation="defaulted"`` scales only those)."""
+
+    def __init__(self, cfg: SmootherConfig, solver: Solver, space: PlanarSpace, groups: list[str],
+                 rejected: list[gtsam.NonlinearFactor], defaulted: set[str]) -> None:
+        self.cfg, self.solver, self.space = cfg, solver, space
+        self.groups = groups
+        self.rejected, self.defaulted = rejected, defaulted
+
+    def solve(self, n: int, front: Solver | None, info: dict[str, Any]
+              ) -> tuple[gtsam.Values, list[Vec], list[Vec | None] | None]:
+        """The solution of keyframes ``0..n-1``: the values, the poses (x, y, yaw) and their world
+        covariances (``None`` without ``covariances``). ``front``: batch's iSAM2 front end (loops),
+        whose estimate is the one LM solve's start. Facts about the solve go into ``info``."""
+        cfg, solver, sp = self.cfg, self.solver, self.space
+        if cfg.solver == "fixed-lag":
+            return self._window(n)
+        if cfg.solver == "isam2":
+            solver.relinearize(cfg.final_updates)
+            values = solver.current()
+            if cfg.converge == "lm":
+                values = self.batch(values, info)
+        else:  # with a loop closer's iSAM2 front end, its estimate is the one LM solve's start
+            values = self.batch(front.current() if front is not None else solver.initial, info)
+        p2 = [sp.read(values, F.X(k)) for k in range(n)]
+        poses = [_vec(p) for p in p2]
+        covs: list[Vec | None] | None = None
+        if cfg.covariances:
+            if cfg.solver == "isam2" and cfg.converge != "lm":
+                covs = [sp.world_cov(p2[k], solver.marginal(F.X(k))) for k in range(n)]
+            else:
+                m = marginals(solver.graph, values)
+                covs = [sp.world_cov(p2[k], m(F.X(k))) for k in range(n)]
+        return values, poses, covs
+
+    def _window(self, n: int) -> tuple[gtsam.Values, list[Vec], list[Vec | None] | None]:
+        """Fixed-lag: each pose as it left the window, the window's estimate for the rest."""
+        cfg, solver, sp = self.cfg, self.solver, self.space
+        values = solver.current()
+        poses: list[Vec] = []
+        covs: list[Vec | None] = []
+        for k in range(n):
+            fr = solver.frozen.get(F.X(k))
+            if fr is None:
+                p = sp.read(values, F.X(k))
+                c = sp.world_cov(p, solver.marginal(F.X(k))) if cfg.covariances else None
+            else:
+                p, c = fr
+            poses.append(_vec(p))
+            covs.append(c)
+        return values, poses, covs if cfg.covariances else None
+
+    def batch(self, init: gtsam.Values, info: dict[str, Any]) -> gtsam.Values:
+        """LM over the whole graph from ``init``; gross GNSS outliers (residual beyond ``gnss_gate``
+        sigmas) dropped and LM re-run (up to 3 times); then the noise estimation when configured.
+        The solver's graph becomes the one solved."""
+        cfg, lm = self.cfg, self.solver.lm
+        c0 = time.perf_counter()
+        graph = self.solver.graph
+        if self.rejected and cfg.robust_backend == "gnc":  # the fixes the online gate rejected, reconsidered
+            graph = gtsam.NonlinearFactorGraph(graph)
+            for f in self.rejected:
+                graph.add(f)
+            self.groups = self.groups + ["gnss"] * len(self.rejected)
+            info["gnss_reconsidered"] = len(self.rejected)
+        values, iters = levenberg_marquardt(graph, init, lm)
+        if cfg.robust_backend == "gnc":
+            graph, self.groups, values, info["switched_off"] = gnc.switch_off(
+                graph, values, self.groups, lm, cfg.robust_prob, cfg.robust_groups)
+        dropped = 0
+        for _ in range(3 if cfg.gnss_gate is not None else 0):
+            keep = [i for i in range(graph.size()) if not (
+                self.groups[i] == "gnss" and noise.whitened_norm(graph.at(i), values, robust=False) > cfg.gnss_gate)]
+            if len(keep) == graph.size():
+                break
+            dropped += graph.size() - len(keep)
+            graph = noise.subgraph(graph, keep)
+            self.groups = [self.groups[i] for i in keep]
+            values, it = levenberg_marquardt(graph, values, lm)
+            iters += it
+        info["gnss_dropped_after_lm"] = dropped
+        if cfg.noise_estimation != "off":
+            scalable = noise.SCALABLE if cfg.noise_estimation == "all" else tuple(
+                g for g in noise.SCALABLE if g in self.defaulted)
+            graph, values, vce = noise.estimate_scales(graph, values, self.groups, scalable, cfg.noise_iterations, lm)
+            info["noise_scale"] = vce
+        info["odometry_consistency"] = gnc.odometry_consistency(graph, values, self.groups, cfg.robust_prob)
+        self.solver.graph = graph
+        info["lm_iterations"] = iters
+        info["converge_ms"] = (time.perf_counter() - c0) * 1e3
+        return values
+
+
+def marginal_priors(solver: Solver, space: PlanarSpace, keys: list[int], t: float
+                    ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values, dict[int, float]]:
+    """Priors carrying the current estimates and marginals of ``keys`` (poses, beacons ``l``,
+    velocities ``v``, water current ``w``, IMU biases ``i``), their values and time stamps ``t``:
+    a fresh fixed-lag smoother's start."""
+    g, v, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
+    for key in keys:
+        cov = solver.marginal(key)
+        model = gtsam.noiseModel.Gaussian.Covariance(cov)
+        ch = chr(gtsam.Symbol(key).chr())
+        if ch == "l":
+            p = solver.estimate(key, space.point_type)
+            g.add(space.landmark_prior_cov(key, p, cov))
+        elif ch in "vw":
+            p = solver.estimate(key, "Vector")
+            g.add(gtsam.PriorFactorVector(key, p, model))
+        elif ch == "i":
+            p = solver.estimate(key, "ConstantBias")
+            g.add(gtsam.PriorFactorConstantBias(key, p, model))
+        else:
+            p = solver.estimate(key, space.pose_type)
+            g.add(space.prior_cov(key, p, cov))
+        v.insert(key, p)
+        stamps[key] = t
+    return g, v, stamps
+
+
+def refresh_places(loops: Any, solver: Solver, space: PlanarSpace) -> None:
+    """The loop closer's places re-estimated from ``solver`` (after a loop moved the graph): on iSAM2
+    each place's pose alone (no full back-substitution of every state), else from the current values."""
+    if solver.kind == "isam2":
+        loops.refresh(lambda j: _vec(space.pose2(solver.estimate(F.X(j), space.pose_type))))
+    else:
+        values = solver.current()
+        loops.refresh(lambda j: _vec(space.read(values, F.X(j))) if values.exists(F.X(j)) else None)
+
+
+def _vec(p: gtsam.Pose2) -> Vec:
+    return np.array([p.x(), p.y(), p.theta()])
