@@ -117,11 +117,11 @@ def test_a_run_that_dies_mid_way_keeps_only_its_online_estimates(tmp_path, monke
     add = Navigator.add
     seen = [0]
 
-    def failing(self, rec):
+    def failing(self, rec, **kw):
         seen[0] += 1
         if seen[0] > fail_after:
             raise RuntimeError("boom")
-        return add(self, rec)
+        return add(self, rec, **kw)
 
     monkeypatch.setattr(Navigator, "add", failing)
     out = tmp_path / "o"

@@ -88,8 +88,9 @@ class ScanToMapConfig:
     cloud: dict[str, Any] = option(help="3D: the clouds' filter, graphnav.scan.cloud_match.CloudMatchConfig "
                                    "(min_range, max_range, water_margin, sensor_height, ...)", factory=dict)
     cloud_map: dict[str, Any] = option(help="3D: the local map and its registration, "
-                                       "graphnav.scan.cloud_map.CloudMapConfig (variant vgicp|gicp, voxel, "
-                                       "map_voxel, knn, max_corr, max_iter, horizon, rebuild, threads)", factory=dict)
+                                       "graphnav.scan.cloud_map.CloudMapConfig (variant gicp|vgicp, voxel, "
+                                       "map_voxel, knn, max_corr, max_iter, horizon, rebuild, target_voxel, threads)",
+                                       factory=dict)
 
     def params(self) -> Params:
         return Params(max_corr=self.max_corr, voxel=self.voxel, neighbors=self.neighbors,
@@ -300,7 +301,7 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
 class ScanToMap(BatchEstimator):
     """LiDAR scan-to-local-map registration (:func:`run_scan_to_map`)."""
 
-    description = "LiDAR scan-to-local-map registration (small_gicp VGICP; 3D clouds: a KISS-ICP style voxel map)"
+    description = "LiDAR scan-to-local-map registration (2D: small_gicp VGICP; 3D: GICP to a KISS-ICP style voxel map)"
     kind = "odometry"
     Config = ScanToMapConfig
     what = "scan-to-map"
