@@ -208,7 +208,10 @@ class Solver:
             return getattr(self.initial, f"at{type_name}")(key)
         try:
             if self.kind == "isam2" and key in self._fresh:
-                return self._newest(key, type_name)
+                try:
+                    return self._newest(key, type_name)
+                except RuntimeError:  # a marginal not defined yet (e.g. an IMU bias at the start)
+                    pass
             return getattr(self.s, f"calculateEstimate{type_name}")(key)
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
