@@ -136,6 +136,140 @@ def _degeneracy(xy: np.ndarray, pose: np.ndarray, target: Target, map_lines: Any
                    prior_cov=pred_cov), cov
 
 
+class _ScanMap2d:
+    """The 2D scan-to-map pass, scan by scan: predict the pose (IMU, odometry, constant velocity),
+    register the scan against the local map of the last keyframes, keep the prediction along the
+    directions the registration cannot see, update the map; with the IMU, fuse the registration with
+    the prediction by information and correct the IMU's velocity."""
+
+    def __init__(self, cfg: ScanToMapConfig, pose0: np.ndarray, odo: np.ndarray, imu: ImuGuess | None) -> None:
+        self.cfg, self.params, self.pose0, self.odo, self.imu = cfg, cfg.params(), pose0, odo, imu
+        self.ts: list[float] = []
+        self.poses: list[np.ndarray] = []
+        self.icp_ms: list[float] = []
+        self.stats: dict[str, list[float]] = {"rmse": [], "fitness": [], "iters": [], "conds": []}
+        self.failed = self.degenerate = 0
+        self.map_lines: tuple[np.ndarray, np.ndarray] | None = None  # normals, flatness of the map points
+        self.keyframes: deque[tuple[np.ndarray, np.ndarray, Any]] = deque(maxlen=cfg.keyframes)
+        self.vgicp = cfg.backend == "small_gicp:VGICP"  # the voxel map is built from the keyframes' own clouds
+        self.last_kf: np.ndarray | None = None
+        self.target: Target | None = None
+        self.p_pose = np.zeros((3, 3))  # with the IMU: the pose's covariance relative to the map (body frame)
+
+    def predict(self, t: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """The predicted pose at ``t`` and the odometry's covariance of the increment (None otherwise)."""
+        ts, poses = self.ts, self.poses
+        inc = increment(self.odo, ts[-1], t) if len(self.odo) else None
+        imu_inc = self.imu.guess(ts[-1], t) if self.imu is not None else None
+        if imu_inc is not None:  # the IMU's prediction of the filter (see the module docstring)
+            a = se2_adjoint_inv(imu_inc[0])
+            self.p_pose = a @ self.p_pose @ a.T + imu_inc[1]
+            return se2_compose(poses[-1], imu_inc[0]), None
+        if inc is not None:
+            return se2_compose(poses[-1], inc[0]), inc[1]
+        if len(poses) >= 2:
+            return predict_constant_velocity(poses[-2], poses[-1], ts[-1] - ts[-2], t - ts[-1]), None
+        return poses[-1].copy(), None
+
+    def register(self, xy: np.ndarray, pred: np.ndarray, pred_cov: np.ndarray | None) -> tuple[Any, ...]:
+        """(pose, registered, source, covariance, degeneracy) of ``xy`` registered from ``pred``; a
+        rejected registration leaves the prediction (not registered)."""
+        cfg = self.cfg
+        t_icp = time.perf_counter()
+        source = prepare_source(xy, cfg.backend, self.params)  # kept: a keyframe reuses it
+        res = self.target.align(xy, pred, source)
+        self.icp_ms.append((time.perf_counter() - t_icp) * 1e3)
+        self.stats["rmse"].append(res.rmse)
+        self.stats["fitness"].append(res.fitness)
+        self.stats["iters"].append(res.iterations)
+        jump = np.hypot(*(res.pose[:2] - pred[:2]))
+        if not (np.all(np.isfinite(res.pose)) and jump <= cfg.max_correction and res.fitness >= cfg.min_fitness):
+            self.failed += 1
+            return pred, False, source, None, None
+        deg, reg_cov = _degeneracy(xy, res.pose, self.target, self.map_lines, cfg, pred_cov)
+        self.stats["conds"].append(deg.condition)
+        if not deg.degenerate:
+            return res.pose, True, source, reg_cov, deg
+        self.degenerate += 1  # the prediction (along the weak directions only: "constrained")
+        pose = keep_constrained(res.pose, pred, deg) if cfg.degenerate == "constrained" else pred
+        return pose, True, source, reg_cov, deg
+
+    def update_map(self, xy: np.ndarray, pose: np.ndarray, source: Any) -> None:
+        """A keyframe once the vessel moved ``keyframe_dist`` or turned ``keyframe_angle_deg``; the
+        local map rebuilt from the last keyframes."""
+        cfg, last = self.cfg, self.last_kf
+        if not (last is None or np.hypot(*(pose[:2] - last[:2])) >= cfg.keyframe_dist
+                or abs(wrap_angle(pose[2] - last[2])) >= np.radians(cfg.keyframe_angle_deg)):
+            return
+        if source is None and self.vgicp:
+            source = prepare_source(xy, cfg.backend, self.params)
+        self.keyframes.append((xy, pose.copy(), source))
+        self.last_kf = pose.copy()
+        world = voxel_downsample(np.vstack([transform2(p, k) for k, p, _ in self.keyframes]), cfg.map_voxel)
+        parts = [(c, p) for _, p, c in self.keyframes] if self.vgicp else None
+        self.target = Target(world, cfg.backend, self.params, parts)
+        nrm, ev = local_frames_2d(world, cfg.neighbors, self.params.normal_radius)
+        self.map_lines = (nrm, flatness(ev))
+
+    def step(self, scan: Scan) -> float:
+        """One scan: its pose appended; returns the registration's time [ms]."""
+        cfg = self.cfg
+        n_icp = len(self.icp_ms)
+        xy = scan_points(scan.ranges, scan.angles, min_range=cfg.min_range,
+                         max_range=min(cfg.max_range, scan.max_range))
+        xy = voxel_downsample(xy, cfg.scan_voxel)
+        enough = len(xy) >= cfg.min_points
+        source = reg_cov = deg = None
+        registered = self.target is None  # no map yet: this scan starts it at the (predicted) pose
+        if not self.poses:
+            pose = np.array(self.pose0, dtype=float)
+        else:
+            pred, pred_cov = self.predict(scan.t)
+            pose = pred
+            if self.target is not None and enough:
+                pose, registered, source, reg_cov, deg = self.register(xy, pred, pred_cov)
+            else:
+                self.failed += 1
+        # keyframe and local-map update (timed as the step; registration time is icp_ms); a scan
+        # whose registration was rejected does not enter the map
+        if enough and registered:
+            self.update_map(xy, pose, source)
+        if self.imu is not None and self.poses:
+            ok_reg = registered and source is not None and reg_cov is not None and np.all(np.isfinite(reg_cov))
+            weak = deg.projector() if ok_reg and deg.weak.any() else None
+            reg_inc = se2_between(self.poses[-1], pose)
+            if ok_reg:  # the registration updates the predicted pose by the information of each
+                pose, self.p_pose = fuse_se2(pred, self.p_pose, pose, reg_cov, weak)
+            # the velocity: corrected by the registration, carried to this scan
+            self.imu.update(self.ts[-1], scan.t, reg_inc if ok_reg else None, reg_cov if ok_reg else None, weak)
+        self.ts.append(scan.t)
+        self.poses.append(np.array(pose, dtype=float))
+        return self.icp_ms[-1] if len(self.icp_ms) > n_icp else 0.0
+
+    def info(self) -> dict[str, Any]:
+        st = self.stats
+        return {
+            "registrations": len(self.icp_ms),
+            "failed_registrations": self.failed,
+            "degenerate_registrations": self.degenerate,
+            "condition_number_median": float(np.median(st["conds"])) if st["conds"] else float("nan"),
+            "registration_rmse_m_mean": float(np.nanmean(st["rmse"])) if st["rmse"] else float("nan"),
+            "registration_fitness_mean": float(np.mean(st["fitness"])) if st["fitness"] else float("nan"),
+            "iterations_median": float(np.median(st["iters"])) if st["iters"] else float("nan"),
+        }
+
+
+def _imu_guess(log: NavLog, cfg: ScanToMapConfig, pose0: np.ndarray, odo: np.ndarray) -> ImuGuess | None:
+    """The IMU's prediction when ``predict`` asks for it (or for odometry the log does not have)."""
+    if not (cfg.predict == "imu" or (cfg.predict == "odometry" and not len(odo))):
+        return None
+    meta = log.meta if isinstance(log.meta, dict) else {}
+    v0 = meta.get("initial_velocity")
+    imu = ImuGuess(imu_samples(log), meta.get("imu"), None if v0 is None else np.asarray(v0, dtype=float)[:2],
+                   float(pose0[2]))
+    return imu if imu else None
+
+
 def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
     cfg = make_config(**options)
     pose0, anchor = start_pose(log)
@@ -151,131 +285,19 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
         res.info = {"anchor": anchor, "config": asdict(cfg), **res.info}
         return res
     scans: list[Scan] = [s for s in log.of("scan") if s.t >= t_anchor - 1e-6]
-    skipped = len(log.of("scan")) - len(scans)
-    params = cfg.params()
-
-    ts: list[float] = []
-    poses: list[np.ndarray] = []
-    icp_ms: list[float] = []
-    step_ms: list[float] = []
-    rmse: list[float] = []
-    fitness: list[float] = []
-    iters: list[int] = []
-    conds: list[float] = []
-    failed = degenerate = 0
     odo = odometry_samples(log) if cfg.predict == "odometry" else np.zeros((0, 5))
-    imu = None
-    if cfg.predict == "imu" or (cfg.predict == "odometry" and not len(odo)):
-        meta = log.meta if isinstance(log.meta, dict) else {}
-        v0 = meta.get("initial_velocity")
-        imu = ImuGuess(imu_samples(log), meta.get("imu"), None if v0 is None else np.asarray(v0, dtype=float)[:2],
-                       float(pose0[2]))
-        imu = imu if imu else None
-    map_lines: tuple[np.ndarray, np.ndarray] | None = None  # normals, flatness of the map points
-    keyframes: deque[tuple[np.ndarray, np.ndarray, Any]] = deque(maxlen=cfg.keyframes)
-    vgicp = cfg.backend == "small_gicp:VGICP"  # the voxel map is built from the keyframes' own clouds
-    last_kf: np.ndarray | None = None
-    target: Target | None = None
-    p_pose = np.zeros((3, 3))  # with the IMU: the pose's covariance relative to the map (body frame)
-
+    run = _ScanMap2d(cfg, pose0, odo, _imu_guess(log, cfg, pose0, odo))
+    step_ms: list[float] = []
     for scan in scans:
         t_step = time.perf_counter()
-        this_icp = 0.0
-        xy = scan_points(scan.ranges, scan.angles, min_range=cfg.min_range,
-                         max_range=min(cfg.max_range, scan.max_range))
-        xy = voxel_downsample(xy, cfg.scan_voxel)
-        enough = len(xy) >= cfg.min_points
-        source = None
-        reg_cov = None
-        registered = target is None  # no map yet: this scan starts it at the (predicted) pose
-        if not poses:
-            pose = np.array(pose0, dtype=float)
-        else:
-            inc = increment(odo, ts[-1], scan.t) if len(odo) else None
-            pred_cov = None
-            imu_inc = imu.guess(ts[-1], scan.t) if imu is not None else None
-            if imu_inc is not None:  # the IMU's prediction of the filter (see the module docstring)
-                pred = se2_compose(poses[-1], imu_inc[0])
-                a = se2_adjoint_inv(imu_inc[0])
-                p_pose = a @ p_pose @ a.T + imu_inc[1]
-            elif inc is not None:
-                pred = se2_compose(poses[-1], inc[0])
-                pred_cov = inc[1]
-            elif len(poses) >= 2:
-                pred = predict_constant_velocity(poses[-2], poses[-1], ts[-1] - ts[-2], scan.t - ts[-1])
-            else:
-                pred = poses[-1].copy()
-            pose = pred
-            if target is not None and enough:
-                t_icp = time.perf_counter()
-                source = prepare_source(xy, cfg.backend, params)  # kept: a keyframe reuses it
-                res = target.align(xy, pred, source)
-                this_icp = (time.perf_counter() - t_icp) * 1e3
-                icp_ms.append(this_icp)
-                rmse.append(res.rmse)
-                fitness.append(res.fitness)
-                iters.append(res.iterations)
-                jump = np.hypot(*(res.pose[:2] - pred[:2]))
-                ok = np.all(np.isfinite(res.pose)) and jump <= cfg.max_correction
-                if ok and res.fitness >= cfg.min_fitness:
-                    deg, reg_cov = _degeneracy(xy, res.pose, target, map_lines, cfg, pred_cov)
-                    conds.append(deg.condition)
-                    if not deg.degenerate:
-                        pose = res.pose
-                        registered = True
-                    else:
-                        degenerate += 1  # the prediction (along the weak directions only: "constrained")
-                        pose = keep_constrained(res.pose, pred, deg) if cfg.degenerate == "constrained" else pred
-                        registered = True
-                else:
-                    failed += 1
-            else:
-                failed += 1
-        # keyframe and local-map update (timed as the step; registration time is icp_ms); a scan
-        # whose registration was rejected does not enter the map
-        if enough and registered and (
-            last_kf is None
-            or np.hypot(*(pose[:2] - last_kf[:2])) >= cfg.keyframe_dist
-            or abs(wrap_angle(pose[2] - last_kf[2])) >= np.radians(cfg.keyframe_angle_deg)
-        ):
-            if source is None and vgicp:
-                source = prepare_source(xy, cfg.backend, params)
-            keyframes.append((xy, pose.copy(), source))
-            last_kf = pose.copy()
-            world = voxel_downsample(np.vstack([transform2(p, k) for k, p, _ in keyframes]), cfg.map_voxel)
-            parts = [(c, p) for _, p, c in keyframes] if vgicp else None
-            target = Target(world, cfg.backend, params, parts)
-            nrm, ev = local_frames_2d(world, cfg.neighbors, params.normal_radius)
-            map_lines = (nrm, flatness(ev))
-        if imu is not None and poses:
-            ok_reg = registered and source is not None and reg_cov is not None and np.all(np.isfinite(reg_cov))
-            weak = deg.projector() if ok_reg and deg.weak.any() else None
-            reg_inc = se2_between(poses[-1], pose)
-            if ok_reg:  # the registration updates the predicted pose by the information of each
-                pose, p_pose = fuse_se2(pred, p_pose, pose, reg_cov, weak)
-            # the velocity: corrected by the registration, carried to this scan
-            imu.update(ts[-1], scan.t, reg_inc if ok_reg else None, reg_cov if ok_reg else None, weak)
+        this_icp = run.step(scan)
         step_ms.append((time.perf_counter() - t_step) * 1e3 - this_icp)
-        ts.append(scan.t)
-        poses.append(np.array(pose, dtype=float))
         if on_estimate is not None:
-            on_estimate(scan.t, poses[-1], None)
-
-    traj = Trajectory(np.array(ts), np.array(poses).reshape(-1, 3), name="scan-to-map")
-    info = {
-        "anchor": anchor,
-        "config": asdict(cfg),
-        "scans": len(scans),
-        "scans_skipped_before_anchor": skipped,
-        "registrations": len(icp_ms),
-        "failed_registrations": failed,
-        "degenerate_registrations": degenerate,
-        "condition_number_median": float(np.median(conds)) if conds else float("nan"),
-        "registration_rmse_m_mean": float(np.nanmean(rmse)) if rmse else float("nan"),
-        "registration_fitness_mean": float(np.mean(fitness)) if fitness else float("nan"),
-        "iterations_median": float(np.median(iters)) if iters else float("nan"),
-    }
-    return RunResult(traj, traj, np.array(step_ms), np.array(icp_ms), info)
+            on_estimate(scan.t, run.poses[-1], None)
+    traj = Trajectory(np.array(run.ts), np.array(run.poses).reshape(-1, 3), name="scan-to-map")
+    info = {"anchor": anchor, "config": asdict(cfg), "scans": len(scans),
+            "scans_skipped_before_anchor": len(log.of("scan")) - len(scans), **run.info()}
+    return RunResult(traj, traj, np.array(step_ms), np.array(run.icp_ms), info)
 
 
 def _usable_scans(log: NavLog) -> int:
