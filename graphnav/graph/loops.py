@@ -52,12 +52,12 @@ from typing import Any
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import gammaincinv
 
 import factors as F
 
 from ..scan import correlative as corr
 from ..scan import descriptor as desc
+from .chi2 import chi2_ppf
 from .loop_places import (  # noqa: F401  (propagate, compound: the loop closer's public names)
     MotionChain,
     Place,
@@ -119,11 +119,6 @@ class Loop:
     accepted: bool = False
 
 
-def _chi2_ppf(p: float, dof: int) -> float:
-    """``scipy.stats.chi2.ppf(p, dof)`` without importing scipy.stats (~1 s and 40 MB at start-up)."""
-    return float(2.0 * gammaincinv(dof / 2.0, p))
-
-
 class LoopCloser:
     """Place database, candidate search, verification and pairwise consistency (module docstring).
 
@@ -143,9 +138,9 @@ class LoopCloser:
         self.places = Places(self.ccfg, cfg.submap, cfg.refine_submap)  # the place database
         self.chain = MotionChain()  # per keyframe: the motion from k-1, its covariance, the path length
         self.loops: list[Loop] = []  # verified (pending or accepted)
-        self.chi_gate = _chi2_ppf(cfg.gate_prob, 2)
-        self.chi_pair = _chi2_ppf(cfg.consistency_prob, 3)
-        self.chi_chain = _chi2_ppf(cfg.chain_prob, 3)
+        self.chi_gate = chi2_ppf(cfg.gate_prob, 2)
+        self.chi_pair = chi2_ppf(cfg.consistency_prob, 3)
+        self.chi_chain = chi2_ppf(cfg.chain_prob, 3)
         self.counts = {"loop_candidates": 0, "loop_verified": 0, "loop_closures": 0, "loop_rejected_match": 0,
                        "loop_rejected_refine": 0, "loop_rejected_chain": 0, "loop_known": 0, "loop_unconfirmed": 0}
         self.accepted: list[tuple[int, int]] = []
