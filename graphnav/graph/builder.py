@@ -61,7 +61,8 @@ __all__ = ["GROUPS", "SCALABLE", "GraphBuilder", "Matcher", "NavPrev", "Step", "
 
 #: sensor groups of the factors (the noise estimation scales ``SCALABLE`` ones)
 GROUPS = ("anchor", "odometry", "motion", "icp", "loop", "gnss", "compass", "bias", "beacon", "chart", "pose_prior",
-          "cloud", "imu", "imu_bias", "gnss_velocity", "water_speed", "current", "attitude")
+          "cloud", "imu", "imu_bias", "gnss_velocity", "water_speed", "current", "attitude",
+          "level")
 SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon", "cloud")
 MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior", "gnss_velocity", "water_speed", "attitude")
 ODOMETRY_FRESH_S = 2.0  # [s] the newest odometry sample gives the speed and yaw rate when at most this old

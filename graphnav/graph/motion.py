@@ -173,15 +173,25 @@ class Motion:
             s.values.insert(V(k), vel)
             s.values.insert(IB(k), bias)
             s.stamps[V(k)] = s.stamps[IB(k)] = tb
+            self._level(s, k)
             return gtsam.NavState(pose, vel), np.zeros(3), np.diag(floor)
         pim = self.imu.preintegrate(bias, ta, tb, speed=float(np.hypot(vel[0], vel[1])))
         s.add(F.imu_factor(k - 1, k, pim), "imu")
+        self._level(s, k)
         pred, rel, cov = relative_prediction(pim, pose, vel, bias, vel_cov)
         cov = cov + np.diag(np.square(self.floor()))
         s.values.insert(V(k), pred.velocity())
         s.values.insert(IB(k), bias)
         s.stamps[V(k)] = s.stamps[IB(k)] = tb
         return pred, rel, cov
+
+    def _level(self, s: Step, k: int) -> None:
+        """Roll = pitch = 0 on keyframe ``k`` (``AttitudeFactorPose3``, ``level_sigma_deg``) when the IMU is
+        planar or absent: its records are the levelled frame's and observe neither, so without it they
+        wander with the gyro's noise (and a rolled body turns the planar acceleration out of the plane)."""
+        assert self.imu is not None
+        if not self.imu.six and self.cfg.level_sigma_deg > 0:
+            s.add(self.space.attitude(F.X(k), 0.0, 0.0, math.radians(self.cfg.level_sigma_deg)), "level")
 
     @staticmethod
     def lift(p3: gtsam.Pose3, p2: gtsam.Pose2) -> gtsam.Pose3:

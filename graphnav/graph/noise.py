@@ -63,17 +63,39 @@ def scaled(f: gtsam.NonlinearFactor, s: float) -> gtsam.NonlinearFactor:
     return f.cloneWithNewNoiseModel(new)
 
 
-def _residual_rows(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, idx: Sequence[int]) -> np.ndarray:
+#: Pose3 rows (tangent order roll, pitch, yaw, x, y, z) that measure something, by group, where the factor
+#: embeds a planar measurement in Pose3 (graphnav.graph.space): the rest are the graph's own pseudo-rows
+#: (:data:`~graphnav.graph.space.LOOSE`, a compass's 1e-8 precisions) whose residuals are not sensor noise
+PLANAR_ROWS = {"icp": [2, 3, 4], "odometry": [2, 3, 4], "motion": [2, 3, 4], "loop": [2, 3, 4], "compass": [2]}
+
+
+def _measured(f: gtsam.NonlinearFactor, group: str) -> np.ndarray:
+    """The rows of ``f`` that measure something (their residual is the sensor's noise): a GNSS fix's
+    horizontal (its height is the sea surface's pseudo-measurement, z = 0), an embedded planar
+    measurement's x, y, yaw (:data:`PLANAR_ROWS`), else every row with nonzero precision."""
+    nm = f.noiseModel()
+    base = nm.noise() if hasattr(nm, "robust") else nm
+    mask = np.any(np.asarray(base.R()) != 0.0, axis=1)
+    if isinstance(f, (gtsam.GPSFactor, gtsam.GPSFactorArm)):
+        mask[2:] = False
+    elif group in PLANAR_ROWS and isinstance(f, (gtsam.BetweenFactorPose3, gtsam.PriorFactorPose3)):
+        keep = np.zeros_like(mask)
+        keep[PLANAR_ROWS[group]] = True
+        mask &= keep
+    return mask
+
+
+def _residual_rows(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, idx: Sequence[int],
+                   groups: Sequence[str]) -> np.ndarray:
     """The whitened residuals of the factors ``idx`` (their Gaussian part, no robust weight), row by
-    row; rows with zero precision (a yaw-only compass) are left out."""
+    row; only the rows that measure something (:func:`_measured`)."""
     out = []
     for i in idx:
         f = graph.at(i)
         nm = f.noiseModel()
         base = nm.noise() if hasattr(nm, "robust") else nm
         e = np.asarray(base.whiten(f.unwhitenedError(values)))
-        R = np.asarray(base.R())
-        out.append(e[np.any(R != 0.0, axis=1)])
+        out.append(e[_measured(f, groups[i])])
     return np.concatenate(out) if out else np.zeros(0)
 
 
@@ -98,7 +120,13 @@ def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gr
     for i, g in enumerate(groups):
         row_group[starts[i]:starts[i + 1]] = g
     row_group = row_group[:m_rows]
-    active = np.asarray(np.abs(A).sum(axis=1)).ravel() > 0  # zero-precision rows observe nothing
+    measured = np.ones(int(starts[-1]), dtype=bool)  # rows of the groups asked about that measure something
+    wanted = set(which)
+    for i, g in enumerate(groups):
+        if g in wanted:
+            measured[starts[i]:starts[i + 1]] = _measured(graph.at(i), g)
+    # zero-precision rows observe nothing; pseudo-rows (a fix's height, LOOSE) measure no sensor's noise
+    active = (np.asarray(np.abs(A).sum(axis=1)).ravel() > 0) & measured[:m_rows]
     N = (A.T @ A).tocsc()
     lu = spla.splu(N + sp.identity(n_cols, format="csc") * 1e-12 * max(1.0, float(N.diagonal().max())),
                    permc_spec="MMD_AT_PLUS_A")
@@ -110,7 +138,7 @@ def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gr
             continue
         AZ = np.asarray(A[sel].T @ rng.choice([-1.0, 1.0], size=(sel.size, probes)))
         tr = float(np.einsum("ij,ij->", AZ, lu.solve(AZ))) / probes
-        e = _residual_rows(graph, values, [i for i, gi in enumerate(groups) if gi == g])
+        e = _residual_rows(graph, values, [i for i, gi in enumerate(groups) if gi == g], groups)
         out[g] = {"chi2": float(b[sel] @ b[sel]), "m": float(sel.size), "redundancy": float(sel.size - tr),
                   "median_e2": float(np.median(e**2)) if e.size else float("nan")}
     return out

@@ -145,6 +145,11 @@ class SmootherConfig:
     attitude_sigma_deg: float = option(
         1.0, "an attitude record's roll/pitch 1-sigma when it states none (a MEMS AHRS datasheet's dynamic "
         "accuracy); attitude records are used on the IMU graph only (Pose3)", unit="deg")
+    level_sigma_deg: float = option(
+        1.0, "roll/pitch 1-sigma of the level constraint on every keyframe of the Pose3 graph when the IMU is planar "
+        "(3-axis: levelled horizontal specific force and yaw rate) or absent: such records define a level body "
+        "frame and observe no roll or pitch, which would otherwise wander freely and rotate the planar motion; "
+        "0 turns it off", unit="deg")
     gnss_velocity_sigma: float = option(0.1,
         "a GNSS velocity record's 1-sigma per axis when it states none", unit="m/s")
 

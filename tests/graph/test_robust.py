@@ -7,7 +7,9 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from graphnav.graph.gnc import odometry_consistency, switch_off
+from graphnav.graph.chi2 import chi2_median
+from graphnav.graph.gnc import factor_scales, group_scales, odometry_consistency, significant_scale, switch_off
+from graphnav.graph.noise import _measured
 from graphnav.graph.solver import LmSettings, levenberg_marquardt
 
 ODO = np.array([0.05, 0.05, np.radians(1.0)])  # odometry sigmas per step
@@ -87,3 +89,53 @@ def test_robust_options_are_checked():
         with pytest.raises(ValueError):
             SmootherConfig(**bad)
     assert SmootherConfig(robust_groups=["icp", "loop"]).robust_groups == ["icp", "loop"]
+
+
+def _fixes(sigmas: list[float], stated: float = 1.0, seed: int = 0):
+    """Pose2 keyframes 1 m apart tied by exact odometry, each with a fix of true noise ``sigmas[k]``
+    under a stated ``stated``."""
+    rng = np.random.default_rng(seed)
+    g, groups, v = gtsam.NonlinearFactorGraph(), [], gtsam.Values()
+    for k, s in enumerate(sigmas):
+        if k:
+            g.add(gtsam.BetweenFactorPose2(k - 1, k, gtsam.Pose2(1.0, 0.0, 0.0),
+                                           gtsam.noiseModel.Diagonal.Sigmas(np.array([0.05, 0.05, 0.01]))))
+            groups.append("odometry")
+        g.add(gtsam.PoseTranslationPrior2D(k, np.array([k, 0.0]) + rng.normal(0.0, s, 2),
+                                           gtsam.noiseModel.Isotropic.Sigma(2, stated)))
+        groups.append("gnss")
+        v.insert(k, gtsam.Pose2(float(k), 0.0, 0.0))
+    values, _ = levenberg_marquardt(g, v, LmSettings(1e-10, 100))
+    return g, groups, values
+
+
+def test_factor_scales_follow_a_receiver_whose_noise_changes():
+    """100 fixes as stated, then 100 three times noisier: each fix's scale is its neighbourhood's,
+    ~1 (never below) in the first half and ~9 in the second; the whole log's median says neither."""
+    g, groups, values = _fixes([1.0] * 100 + [3.0] * 100)
+    sc = factor_scales(g, values, groups, ["gnss"])
+    idx = [i for i, gi in enumerate(groups) if gi == "gnss"]
+    first, second = [sc[i] for i in idx[:75]], [sc[i] for i in idx[125:]]
+    assert min(first) >= 1.0 and np.median(first) < 1.5
+    assert 5.0 < np.median(second) < 13.0
+    whole = group_scales(g, values, groups, ["gnss"])["gnss"]
+    assert np.median(first) < whole < np.median(second)
+
+
+def test_significant_scale_is_the_quantile_of_a_window_median():
+    """Against Monte Carlo: the median of 50 samples of chi2_2 / 2 over chi2's median exceeds
+    ``significant_scale(2, 0.99)`` in about 1 % of windows."""
+    rng = np.random.default_rng(1)
+    med = np.median(rng.chisquare(2, size=(20000, 50)) / 2, axis=1) / (chi2_median(np.array([2]))[0] / 2)
+    q = float(np.quantile(med, 0.99))
+    assert abs(significant_scale(2, 0.99) - q) < 0.06 * q
+
+
+def test_measured_rows_leave_out_the_graphs_own_pseudo_rows():
+    gps = gtsam.GPSFactor(0, np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, 1.0))
+    assert _measured(gps, "gnss").tolist() == [True, True, False]  # the height is the surface's
+    emb = gtsam.BetweenFactorPose3(0, 1, gtsam.Pose3(), gtsam.noiseModel.Isotropic.Sigma(6, 0.1))
+    assert np.flatnonzero(_measured(emb, "icp")).tolist() == [2, 3, 4]  # yaw, x, y
+    assert _measured(emb, "cloud").all()  # a 3D match measures all six
+    p2 = gtsam.PoseRotationPrior2D(0, gtsam.Rot2(0.0), gtsam.noiseModel.Isotropic.Sigma(1, 0.1))
+    assert _measured(p2, "compass").tolist() == [True]
