@@ -43,6 +43,8 @@ VERDICT_SCALES = (1, 10)
 #: [factors] the neighbourhood of a factor's noise scale (:func:`factor_scales`): 50 s of 1 Hz fixes, as the
 #: filters' innovation scale (docs/ekf.md)
 SCALE_WINDOW = 50
+#: the groups judged in their neighbours' scatter rather than the whole log's
+LOCAL_SCALE = ("gnss",)
 
 
 def _d2(f: gtsam.NonlinearFactor, values: gtsam.Values) -> float:
@@ -129,12 +131,15 @@ def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: 
         return graph, groups, values, report
     which = sorted({groups[i] for i in cand})
     report["scale"] = group_scales(graph, values, groups, which)
-    scale = factor_scales(graph, values, groups, which)
-    # each candidate's covariance times its local scale and chi2_d(prob) / chi2_D(prob) (D the largest
+    # GNSS: each fix in its neighbours' scatter (a receiver's noise changes along a mission); a scan match
+    # in its group's (a run of bad matches in a look-alike corridor must not widen its own bound)
+    local = factor_scales(graph, values, groups, [g for g in which if g in LOCAL_SCALE])
+    # each candidate's covariance times its scale and chi2_d(prob) / chi2_D(prob) (D the largest
     # dimension), so that GNC's one threshold, chi2_D(prob) / 2, is every factor's own chi-square bound
     dmax = max(graph.at(i).dim() for i in cand)
     top = chi2_ppf(prob, dmax)
-    factor = {i: scale.get(i, 1.0) * chi2_ppf(prob, graph.at(i).dim()) / top for i in cand}
+    factor = {i: local.get(i, report["scale"].get(groups[i], 1.0)) * chi2_ppf(prob, graph.at(i).dim()) / top
+              for i in cand}
     suspects = [i for i in cand if _d2(graph.at(i), values) > top * factor[i]]
     report["beyond_bound"] = len(suspects)
     report["switched_off"] = {}
