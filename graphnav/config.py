@@ -145,6 +145,11 @@ class Sectioned:
         if post is not None:
             post()
 
+    def __getattr__(self, name: str) -> Any:  # only for names that are not attributes: a flat name's hint
+        path = option_names(type(self)).get(name) if not name.startswith("__") else None
+        hint = f"; the options are in sections: read .{path} (or .value({name!r}))" if path else ""
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}{hint}")
+
     def value(self, name: str) -> Any:
         """The value of the option ``name`` (a flat name or a path; a ``KeyError`` for an unknown one)."""
         path = option_names(type(self))[name]

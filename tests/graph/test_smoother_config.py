@@ -76,3 +76,10 @@ def test_section_checks_name_the_flat_option():
                      ({"batch_init_growth": 1.0}, "batch_init_growth"), ({"robust.prob": 1.0}, "robust_prob")):
         with pytest.raises(ValueError, match=name):
             SmootherConfig(**kw)
+
+
+def test_a_flat_attribute_names_its_section():
+    with pytest.raises(AttributeError, match=r"read \.gnss\.gate"):
+        SmootherConfig().gnss_gate  # noqa: B018
+    with pytest.raises(AttributeError, match="'nope'$"):
+        SmootherConfig().nope  # noqa: B018
