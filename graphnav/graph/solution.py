@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from . import gnc, noise
+from .chi2 import significant_scale
 from .smoother_config import SmootherConfig
 from .solver import Solver, levenberg_marquardt, marginals
 from .space import PlanarSpace
@@ -136,7 +137,7 @@ class Closing:
         scale = gnc.factor_scales(graph, values, self.groups, ["gnss"])
         if not scale:
             return graph, values
-        bound = gnc.significant_scale(2, self.cfg.robust_prob)  # a fix measures 2 axes (its height is the surface)
+        bound = significant_scale(2, self.cfg.robust_prob)  # a fix measures 2 axes (its height is the surface)
         big = {i: s for i, s in scale.items() if s > bound}
         info["gnss_inflated"] = {"fixes": len(big), "of": len(scale),
                                  "median_scale": float(np.median(list(big.values()))) if big else 1.0}
