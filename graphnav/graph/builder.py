@@ -341,6 +341,7 @@ class GraphBuilder:
             "keyframes": len(kf),
             "keyframe_policy": "scan" if kf.mode == "scan" else f"grid {kf.period:g} s",
             "gnss_rejected": self.meas.n_rejected,
+            "gnss_online_scale": {"final": self.meas.gnss_scale.scale, "max": self.meas.gnss_scale.max_scale},
             **self.scans.info(),
             "beacons": sorted(self.meas.beacon_ids),
             **self.scans.cloud3d.info(),

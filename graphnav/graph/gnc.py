@@ -21,7 +21,6 @@ noise allows.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -29,7 +28,7 @@ import gtsam
 import numpy as np
 
 from . import noise
-from .chi2 import chi2_median, chi2_ppf
+from .chi2 import SCALE_WINDOW, chi2_median, chi2_ppf
 from .solver import LmSettings, SolverError, _gtsam_message, levenberg_marquardt
 
 #: sensor groups whose factors the data may switch off (scan matches, 3D cloud matches, GNSS fixes: a cold
@@ -40,9 +39,6 @@ SWITCHABLE = ("icp", "cloud", "gnss")
 #: differs from it by more than its stated noise whenever that noise is optimistic over long windows
 SCALES = (1, 10, 100, 1000)
 VERDICT_SCALES = (1, 10)
-#: [factors] the neighbourhood of a factor's noise scale (:func:`factor_scales`): 50 s of 1 Hz fixes, as the
-#: filters' innovation scale (docs/ekf.md)
-SCALE_WINDOW = 50
 #: the groups judged in their neighbours' scatter rather than the whole log's
 LOCAL_SCALE = ("gnss",)
 
@@ -102,18 +98,6 @@ def factor_scales(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, group
         scale = np.maximum(1.0, np.median(win, axis=1) / np.median(rwin, axis=1))
         out.update(zip(idx, scale.tolist(), strict=True))
     return out
-
-
-def significant_scale(dim: int, prob: float, window: int = SCALE_WINDOW) -> float:
-    """The variance scale :func:`factor_scales` exceeds by chance with probability ``1 - prob`` on
-    consistent data: ``1 + z_prob sd``, ``sd`` the relative standard deviation of the median of
-    ``window`` samples of ``chi2_dim / dim`` (asymptotically ``1 / (2 f(m) sqrt(n))``, ``f`` the
-    density at the median ``m``): 1.47 for 2-D fixes, 50 of them and ``prob`` 0.99."""
-    from scipy import stats
-
-    m = chi2_median(np.array([dim]))[0] / dim
-    f = stats.chi2.pdf(m * dim, dim) * dim
-    return 1.0 + float(stats.norm.ppf(prob)) / (2.0 * f * math.sqrt(window)) / m
 
 
 def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: list[str], lm: LmSettings,

@@ -7,6 +7,7 @@ with the water current's state, and later ``pose_prior`` records -- each in the 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -18,12 +19,45 @@ import factors as F
 
 from ..config import OptionError
 from ..log import Attitude, BeaconObs, Gnss, GnssVelocity, Heading, KnownBeacon, PosePrior, Record, WaterSpeed
+from .chi2 import SCALE_WINDOW, chi2_median, significant_scale
 from .mounts import Mount
 from .smoother_config import SmootherConfig
 from .space import PlanarSpace, V, W
 from .step import Step
 
 SURFACE_V = 0.1  # [m/s] the vertical of a water-speed factor (no vertical water velocity)
+MEDIAN_CHI2_2 = float(chi2_median(np.array([2.0]))[0])  # |d|^2 / sigma^2 of a 2-D fix: its median
+
+
+class GnssScale:
+    """The online variance scale of the GNSS fixes: ``max(1, median(x) / median(chi2_2))`` over the last
+    :data:`~graphnav.graph.chi2.SCALE_WINDOW` fixes, ``x = (|d|^2 - tr P) / sigma^2`` the innovation's
+    energy beyond the prediction's own variance ``P`` per stated variance of the fix (a moment
+    estimate; the median shields it from fewer than half the window's fixes in a jump). Used -- on
+    the factor and in the gate -- only where it exceeds chance (:func:`~graphnav.graph.chi2.significant_scale`
+    at ``prob``): as the closing step's :func:`~graphnav.graph.gnc.factor_scales`, a stated sigma the
+    fixes refute, never deflated (Solent s2 states 7 m for 20 m fixes)."""
+
+    def __init__(self, prob: float) -> None:
+        self.prob = prob
+        self.x: deque[float] = deque(maxlen=SCALE_WINDOW)
+        self.scale = 1.0
+        self.max_scale = 1.0
+        self._bound: dict[int, float] = {}
+
+    def add(self, d: NDArray[np.float64], cov: NDArray[np.float64], sigma: float) -> None:
+        """One innovation ``d`` of a fix of stated ``sigma`` against a prediction of covariance ``cov``."""
+        if not (sigma > 0 and math.isfinite(sigma)):
+            return
+        self.x.append((float(d @ d) - float(np.trace(cov))) / sigma**2)
+        n = len(self.x)
+        if n < 10:
+            return
+        if n not in self._bound:
+            self._bound[n] = significant_scale(2, self.prob, n)
+        est = float(np.median(self.x)) / MEDIAN_CHI2_2
+        self.scale = est if est > self._bound[n] else 1.0
+        self.max_scale = max(self.max_scale, self.scale)
 
 
 class Measurements:
@@ -43,6 +77,7 @@ class Measurements:
         self.beacon_init: dict[str, NDArray[np.float64]] = {}
         self.bias_key: int | None = None
         self.n_rejected = 0
+        self.gnss_scale = GnssScale(cfg.robust.prob)  # the fixes' online variance scale
         self.consecutive_rejects = 0
         self.after_outage: set[int] = set()  # ids of the first fixes after a GNSS outage (not gated)
         #: the factors of the fixes the online gate rejected: the closing batch step reconsiders them
@@ -139,29 +174,7 @@ class Measurements:
             xa = F.X(a)
             delta = offset(a, r.t, k) if cfg.keyframe.compensate_attachment else None
             if isinstance(r, Gnss):
-                rx, ry = r.x, r.y
-                arm3 = self.arms.get(r.source) or self.arms.get("")
-                arm = (0.0, 0.0) if arm3 is None else arm3[:2]
-                if delta is not None:  # the fix is of the antenna of X_a * delta at r.t: move it back to X_a's
-                    pa = at(a)
-                    moved = F.antenna_position(pa.compose(delta), arm) - F.antenna_position(pa, arm)
-                    rx -= float(moved[0])
-                    ry -= float(moved[1])
-                gate_on = cfg.gnss.gate_online if cfg.gnss.gate_online is not None else not self.nav
-                if gate_on and cfg.gnss.gate is not None and prev_cov is not None and id(r) not in self.after_outage:
-                    ant = F.antenna_position(at(a), arm)
-                    d = np.array([rx - ant[0], ry - ant[1]])
-                    S = prev_cov[:2, :2] + (r.sigma**2) * np.eye(2)
-                    if (float(d @ np.linalg.solve(S, d)) > cfg.gnss.gate**2
-                            and self.consecutive_rejects < cfg.gnss.gate_max_rejects):
-                        self.n_rejected += 1
-                        self.consecutive_rejects += 1
-                        self.rejected.append(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss.robust, cfg.gnss.k,
-                                                             arm3))
-                        continue
-                self.consecutive_rejects = 0
-                self.after_outage.discard(id(r))
-                s.add(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss.robust, cfg.gnss.k, arm3), "gnss")
+                self._gnss(s, xa, r, at(a), prev_cov, delta)
             elif isinstance(r, Heading):
                 sig = r.sigma * cfg.compass.sigma_scale
                 yaw = r.yaw - (delta.theta() if delta is not None else 0.0)
@@ -200,6 +213,43 @@ class Measurements:
             elif isinstance(r, PosePrior):
                 sig = np.array([r.sigma_xy, r.sigma_xy, r.sigma_yaw])
                 s.add(self.space.prior(xa, np.array([r.x, r.y, r.yaw]), sig), "pose_prior")
+
+    def _gnss(self, s: Step, xa: int, r: Gnss, pa: gtsam.Pose2, prev_cov: NDArray[np.float64] | None,
+              delta: gtsam.Pose2 | None) -> None:
+        """A GNSS fix on keyframe ``xa`` (pose ``pa``; ``delta``: the motion from it to the fix's time):
+        moved back to the keyframe, its online variance scale (:class:`GnssScale`) applied, gated online
+        against the prediction of covariance ``prev_cov`` (the Pose2 graph; ``None``: no gate). The closing
+        step gets the fix at its stated sigma (and judges it in its own way: ``graph.solution``)."""
+        cfg = self.cfg
+        rx, ry = r.x, r.y
+        arm3 = self.arms.get(r.source) or self.arms.get("")
+        arm = (0.0, 0.0) if arm3 is None else arm3[:2]
+        if delta is not None:  # the fix is of the antenna of X_a * delta at r.t: move it back to X_a's
+            moved = F.antenna_position(pa.compose(delta), arm) - F.antenna_position(pa, arm)
+            rx -= float(moved[0])
+            ry -= float(moved[1])
+        gate_on = cfg.gnss.gate_online if cfg.gnss.gate_online is not None else not self.nav
+        scale = self.gnss_scale.scale
+        sigma = r.sigma * math.sqrt(scale)  # the stated sigma, unless the fixes refute it
+        stated = self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss.robust, cfg.gnss.k, arm3)
+        if prev_cov is not None and id(r) not in self.after_outage:
+            ant = F.antenna_position(pa, arm)
+            d = np.array([rx - ant[0], ry - ant[1]])
+            self.gnss_scale.add(d, prev_cov[:2, :2], r.sigma)
+            if gate_on and cfg.gnss.gate is not None:
+                S = prev_cov[:2, :2] + (sigma**2) * np.eye(2)
+                if (float(d @ np.linalg.solve(S, d)) > cfg.gnss.gate**2
+                        and self.consecutive_rejects < cfg.gnss.gate_max_rejects):
+                    self.n_rejected += 1
+                    self.consecutive_rejects += 1
+                    self.rejected.append(stated)
+                    return
+        self.consecutive_rejects = 0
+        self.after_outage.discard(id(r))
+        if scale == 1.0:
+            s.add(stated, "gnss")
+        else:
+            s.add(self.space.gnss(xa, rx, ry, sigma, cfg.gnss.robust, cfg.gnss.k, arm3), "gnss", closing=stated)
 
     def _beacon(self, s: Step, xa: int, pa: gtsam.Pose2, r: BeaconObs, delta: gtsam.Pose2 | None) -> None:
         cfg = self.cfg

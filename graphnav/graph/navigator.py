@@ -208,7 +208,7 @@ class Navigator:
     def _update(self, s: Step) -> None:
         try:
             self.solver.update(s.graph, s.values, s.stamps, t=s.t, track=self._freeze if self.history else None,
-                               tracked=(F.X(s.k),) if s.new_keyframe else ())
+                               tracked=(F.X(s.k),) if s.new_keyframe else (), kept=s.kept())
             self.solver.relinearize(self.cfg.optimizer.isam_extra_updates)
         except SolverError as exc:
             raise self._fail(exc, s.t) from None

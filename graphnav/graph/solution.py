@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from . import gnc, noise
+from .chi2 import significant_scale
 from .smoother_config import SmootherConfig
 from .solver import Solver, levenberg_marquardt, marginals
 from .space import PlanarSpace
@@ -120,8 +121,7 @@ class Closing:
             scalable = noise.SCALABLE if cfg.robust.noise_estimation == "all" else tuple(
                 g for g in noise.SCALABLE if g in self.defaulted)
             graph, values, vce = noise.estimate_scales(graph, values, self.groups, scalable,
-                                                       cfg.robust.noise_iterations,
-                                                       lm)
+                                                       cfg.robust.noise_iterations, lm)
             info["noise_scale"] = vce
         info["odometry_consistency"] = gnc.odometry_consistency(graph, values, self.groups, cfg.robust.prob)
         self.solver.graph = graph
@@ -138,7 +138,7 @@ class Closing:
         scale = gnc.factor_scales(graph, values, self.groups, ["gnss"])
         if not scale:
             return graph, values
-        bound = gnc.significant_scale(2, self.cfg.robust.prob)  # a fix measures 2 axes (its height is the surface)
+        bound = significant_scale(2, self.cfg.robust.prob)  # a fix measures 2 axes (its height is the surface)
         big = {i: s for i, s in scale.items() if s > bound}
         info["gnss_inflated"] = {"fixes": len(big), "of": len(scale),
                                  "median_scale": float(np.median(list(big.values()))) if big else 1.0}

@@ -7,8 +7,8 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from graphnav.graph.chi2 import chi2_median
-from graphnav.graph.gnc import factor_scales, group_scales, odometry_consistency, significant_scale, switch_off
+from graphnav.graph.chi2 import chi2_median, significant_scale
+from graphnav.graph.gnc import factor_scales, group_scales, odometry_consistency, switch_off
 from graphnav.graph.noise import _measured
 from graphnav.graph.solver import LmSettings, levenberg_marquardt
 
@@ -139,3 +139,17 @@ def test_measured_rows_leave_out_the_graphs_own_pseudo_rows():
     assert _measured(emb, "cloud").all()  # a 3D match measures all six
     p2 = gtsam.PoseRotationPrior2D(0, gtsam.Rot2(0.0), gtsam.noiseModel.Isotropic.Sigma(1, 0.1))
     assert _measured(p2, "compass").tolist() == [True]
+
+
+def test_online_gnss_scale_finds_a_receiver_noisier_than_stated():
+    """Innovations of fixes 3x noisier than stated (prediction covariance P = 1 m^2 per axis): the
+    online scale is the variance ratio 9 within sampling error; fixes as stated keep scale 1."""
+    from graphnav.graph.measurements import GnssScale
+
+    rng = np.random.default_rng(3)
+    P = np.eye(2)
+    for true, lo, hi in ((3.0, 7.0, 11.5), (1.0, 1.0, 1.0)):
+        sc = GnssScale(0.99)
+        for _ in range(200):
+            sc.add(rng.normal(0.0, 1.0, 2) + rng.normal(0.0, true, 2), P, 1.0)
+        assert lo <= sc.scale <= hi
