@@ -153,3 +153,20 @@ def test_online_gnss_scale_finds_a_receiver_noisier_than_stated():
         for _ in range(200):
             sc.add(rng.normal(0.0, 1.0, 2) + rng.normal(0.0, true, 2), P, 1.0)
         assert lo <= sc.scale <= hi
+
+
+def test_gnc_leaves_chance_exceedances_of_gnss_alone_and_catches_a_gross_fix():
+    """300 consistent fixes: a few lie beyond the 99 % bound by chance (about 3), GNC does not run; one
+    fix 30 sigma off lies beyond the family-wise bound and GNC switches it off."""
+    g, groups, values = _fixes([1.0] * 300, seed=5)
+    _, _, _, rep = switch_off(g, values, list(groups), LmSettings(1e-10, 100))
+    assert rep["beyond_bound"] <= rep["chance_bound"] and rep["ran"] is False
+    g2 = gtsam.NonlinearFactorGraph(g)
+    i = [k for k, gi in enumerate(groups) if gi == "gnss"][150]
+    g2.replace(i, gtsam.PoseTranslationPrior2D(150, np.array([150.0, 30.0]), gtsam.noiseModel.Isotropic.Sigma(2, 1.0)))
+    values2, _ = levenberg_marquardt(g2, values, LmSettings(1e-10, 100))
+    out, _, _, rep2 = switch_off(g2, values2, list(groups), LmSettings(1e-10, 100))
+    assert rep2["ran"] is True and 1 <= rep2["switched_off"]["gnss"] <= 3
+    kept = [np.asarray(out.at(k).measured()) for k in range(out.size())
+            if isinstance(out.at(k), gtsam.PoseTranslationPrior2D)]
+    assert not any(np.allclose(m, [150.0, 30.0]) for m in kept)  # the gross fix is among those let go
