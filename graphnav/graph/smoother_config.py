@@ -45,12 +45,12 @@ class KeyframeConfig:
         "less CPU")
     distance: float = option(1.0, "keyframe_motion: the distance that makes a keyframe", unit="m")
     angle_deg: float = option(11.46, "keyframe_motion: the turn that makes a keyframe (0.2 rad)", unit="deg")
-    max_dt: float = option(1.0, "keyframe_motion: at least one keyframe this often (the online output "
-                                    "rate)", unit="s")
-    grid_gap: float = option(5.0, "grid slots inside a gap without any record longer than this are skipped", unit="s",
-        flat="grid_gap")
-    compensate_attachment: bool = option(True, "move each measurement to its keyframe's time by the motion between",
-        flat="compensate_attachment")
+    max_dt: float = option(1.0, "keyframe_motion: at least one keyframe this often (the online output rate)",
+                           unit="s")
+    grid_gap: float = option(5.0, "grid slots inside a gap without any record longer than this are skipped",
+                             unit="s", flat="grid_gap")
+    compensate_attachment: bool = option(
+        True, "move each measurement to its keyframe's time by the motion between", flat="compensate_attachment")
 
     def __post_init__(self) -> None:
         if self.scan_stride < 1:
@@ -91,7 +91,7 @@ class OdometryConfig:
         "boat in a current (Solent s1, 0.85 m/s current: isam2 3.36 m with it, 1.25 m without; the UKF 3.16 m)",
         flat="use_odometry")
     sigma_v: float = option(0.02, "odometry speed noise density floor (when the log gives no sigmas): "
-                                "hypot(this, odo_sigma_v_rel * |v|)", unit="m/s sqrt(s)")
+                            "hypot(this, odo_sigma_v_rel * |v|)", unit="m/s sqrt(s)")
     sigma_v_rel: float = option(0.1, "x |v|")
     sigma_w_deg: float = option(1.0, "floor", unit="deg/s sqrt(s)")
     sigma_w_rel: float = option(0.1, "x |w|")
