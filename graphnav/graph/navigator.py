@@ -378,6 +378,8 @@ class Navigator:
         final_ms = (time.perf_counter() - c0) * 1e3
         final_cpu = (time.process_time() - p0) * 1e3
         self._final = values
+        if closing.kept is not None:  # fixed-lag without a history: the window only
+            t = t[closing.kept]
         traj = Trajectory(t, np.array(poses).reshape(-1, 3), np.array(covs) if covs is not None else None,
                           name=cfg.solver)
         info["final_ms"] = final_ms

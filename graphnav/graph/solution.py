@@ -40,6 +40,7 @@ class Closing:
         self.cfg, self.solver, self.space = cfg, solver, space
         self.groups = groups
         self.rejected, self.defaulted = rejected, defaulted
+        self.kept: list[int] | None = None  # fixed-lag: the keyframes the solution holds (the window only in live mode)
 
     def solve(self, n: int, front: Solver | None, info: dict[str, Any]
               ) -> tuple[gtsam.Values, list[Vec], list[Vec | None] | None]:
@@ -68,20 +69,25 @@ class Closing:
         return values, poses, covs
 
     def _window(self, n: int) -> tuple[gtsam.Values, list[Vec], list[Vec | None] | None]:
-        """Fixed-lag: each pose as it left the window, the window's estimate for the rest."""
+        """Fixed-lag: each pose as it left the window, the window's estimate for the rest; without a history
+        (``Navigator(history=False)``) the poses that left it are gone: the keyframes kept are ``kept``."""
         cfg, solver, sp = self.cfg, self.solver, self.space
         values = solver.current()
         poses: list[Vec] = []
         covs: list[Vec | None] = []
+        self.kept = []
         for k in range(n):
             fr = solver.frozen.get(F.X(k))
             if fr is None:
+                if not values.exists(F.X(k)):  # left the window without a history (live mode): not kept
+                    continue
                 p = sp.read(values, F.X(k))
                 c = sp.world_cov(p, solver.marginal(F.X(k))) if cfg.optimizer.covariances else None
             else:
                 p, c = fr
             poses.append(_vec(p))
             covs.append(c)
+            self.kept.append(k)
         return values, poses, covs if cfg.optimizer.covariances else None
 
     def batch(self, init: gtsam.Values, info: dict[str, Any]) -> gtsam.Values:
