@@ -88,7 +88,7 @@ def test_robust_options_are_checked():
                 {"robust_backend": "dcs"}):
         with pytest.raises(ValueError):
             SmootherConfig(**bad)
-    assert SmootherConfig(robust_groups=["icp", "loop"]).robust_groups == ["icp", "loop"]
+    assert SmootherConfig(robust_groups=["icp", "loop"]).robust.groups == ["icp", "loop"]
 
 
 def _fixes(sigmas: list[float], stated: float = 1.0, seed: int = 0):
