@@ -110,7 +110,7 @@ def default_of(name: str, estimator: str = "isam2") -> Any:
         return SENSOR_DEFAULTS[name] if v is None else v
     if name.startswith("loop."):
         return getattr(LoopConfig(), name.split(".", 1)[1])
-    return getattr(SmootherConfig(), name)
+    return SmootherConfig().value(name)
 
 
 def sweep(paths: list[Path], grid: dict[str, dict[str, list[Any]]], estimator: str, base: dict[str, Any],

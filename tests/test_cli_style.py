@@ -113,6 +113,48 @@ def test_scopes_per_command():
         parse_options(["isam2.lag=3"])
 
 
+def test_section_paths_and_flat_names(tmp_path):
+    """-O SECTION.KEY (the smoother's sections), ESTIMATOR.SECTION.KEY and TOML [options.SECTION] reach
+    the field the flat name does; the later spelling wins; a typo names the closest."""
+    from graphnav.estimators.options import check
+    from graphnav.graph.smoother_config import SmootherConfig
+
+    assert parse_option("isam2.gnss.gate=3") == ("isam2", "gnss.gate", 3)
+    ns = argparse.Namespace(option=["gnss.gate=3", "isam2.keyframe.period=0.5", "scan.icp-gate=null"])
+    opts = options_for(ns, "isam2")
+    assert opts == {"gnss.gate": 3, "keyframe.period": 0.5, "scan.icp_gate": None}
+    check("isam2", opts)
+    cfg = SmootherConfig.from_options(opts)
+    assert (cfg.gnss.gate, cfg.keyframe.period, cfg.scan.icp_gate) == (3, 0.5, None)
+    for items, want in ((["gnss_gate=5", "gnss.gate=3"], 3), (["gnss.gate=3", "gnss_gate=5"], 5)):
+        assert SmootherConfig.from_options(options_for(argparse.Namespace(option=items), "isam2")).gnss.gate == want
+    with pytest.raises(ValueError, match=r"unknown isam2 option.*did you mean 'gnss.gate'"):
+        check("isam2", options_for(argparse.Namespace(option=["gnss.gat=3"]), "isam2"))
+    with pytest.raises(KeyError, match="unknown estimator 'isam3'"):  # not a section: an estimator's name
+        options_for(argparse.Namespace(option=["isam3.lag=3"]), "isam2")
+    toml = tmp_path / "c.toml"
+    toml.write_text("[options.gnss]\ngate = 3.5\n[options.isam2.keyframe]\nperiod = 0.25\n")
+    from graphnav.commands._common import config_defaults
+
+    run_parser = next(p for p in leaf_parsers(build_parser()) if p.prog == "graphnav run")
+    _, file_opts = config_defaults(run_parser, toml, argparse.Namespace(estimator="isam2", estimators=None))
+    opts = options_for(argparse.Namespace(option=None, config_options=file_opts), "isam2")
+    check("isam2", opts)
+    cfg = SmootherConfig.from_options(opts)
+    assert cfg.gnss.gate == 3.5 and cfg.keyframe.period == 0.25
+
+
+def test_list_options_by_section(capsys):
+    assert main(["run", "--list-options", "isam2"]) == 0
+    text = capsys.readouterr().out
+    assert re.search(r"^  \[gnss\] GNSS fixes", text, re.M)
+    assert re.search(r"^  gate +4\.0 +float \| None  \(gnss_gate\)$", text, re.M)
+    assert main(["run", "--list-options", "isam2", "--json"]) == 0
+    opts = {o["name"]: o for o in _json(capsys)["options"]}
+    assert opts["gnss_gate"]["path"] == "gnss.gate" and opts["gnss_gate"]["group"] == "gnss"
+    assert opts["keyframe_period"]["path"] == "keyframe.period" and opts["unknown_beacons"]["path"] == "beacon.unknown"
+
+
 def test_montecarlo_defaults_and_seed(parser):
     args = parser.parse_args(["montecarlo", "solent"])
     assert args.scenario == 2 and args.seed == 0 and args.runs == 50
@@ -193,7 +235,7 @@ def test_list_options(capsys):
     opts = {o["name"]: o for o in obj["options"]}
     from graphnav.graph.smoother_config import SmootherConfig
 
-    assert opts["lag"]["default"] == SmootherConfig().lag and "fixed-lag window" in opts["lag"]["meaning"]
+    assert opts["lag"]["default"] == SmootherConfig().optimizer.lag and "fixed-lag window" in opts["lag"]["meaning"]
     assert opts["converge"]["meaning"].endswith('"updates" (final_updates only), "none"')  # continuation lines
     assert "motion" in opts and "imu" in opts and "water_speed_sigma" in opts  # the Pose3 graph's options too
     assert main(["run", "--list-options", "ukf"]) == 0

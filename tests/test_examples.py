@@ -161,6 +161,7 @@ def test_config_example_names_every_option_and_every_value_is_valid(tmp_path):
     switched on the file still loads, and each table builds its config (so no comment lies)."""
     from dataclasses import fields
 
+    from graphnav.config import sections
     from graphnav.estimators.options import check
     from graphnav.graph.imu_chain import ImuConfig
     from graphnav.graph.loops import LoopConfig
@@ -170,20 +171,26 @@ def test_config_example_names_every_option_and_every_value_is_valid(tmp_path):
     from graphnav.scan.weighted_icp import IcpConfig
 
     text = CONFIG.read_text()
-    for cls in (SmootherConfig, ImuConfig, IcpConfig, LoopConfig, CloudMatchConfig):
-        missing = [f.name for f in fields(cls) if f.name != "solver"
-                   and not re.search(rf"^(#? ?{f.name} =|\[options\.{f.name}[.\]])", text, re.M)]
-        assert not missing, (f"examples/config.toml lacks {cls.__name__} field(s) {missing}: regenerate it "
+    tables = dict(re.findall(r"^\[options\.?([^\]]*)\][^\n]*\n(.*?)(?=^\[|\Z)", text, re.M | re.S))
+    secs = sections(SmootherConfig)
+    wanted = {"": [f.name for f in fields(SmootherConfig) if f.name not in ("solver", "imu", "mounts", *secs)],
+              **{n: [f.name for f in fields(c) if f.name not in ("icp", "loop", "cloud")] for n, c in secs.items()},
+              "imu": ImuConfig, "scan.icp": IcpConfig, "scan.loop": LoopConfig, "scan.cloud": CloudMatchConfig}
+    for name, want in wanted.items():  # each field in its own table
+        names = want if isinstance(want, list) else [f.name for f in fields(want)]
+        missing = [n for n in names if not re.search(rf"^#? ?{n} =", tables.get(name, ""), re.M)]
+        assert not missing, (f"examples/config.toml [options.{name}] lacks {missing}: regenerate it "
                              "(PYTHONPATH=. python tools/config_example.py)")
     for path in (CONFIG, _all_uncommented(tmp_path)):
         pairs, options = _config(path)
         assert {a.dest for a, _ in pairs} >= {"estimator", "out"}
         graph = {**options[None], **options.get("isam2", {})}
         cfg = SmootherConfig.from_options(graph)
+        assert cfg.gnss.gate == 4.0 and cfg.robust.noise_estimation == "defaulted"  # the two set
         ImuConfig(**cfg.imu)
-        IcpConfig(**cfg.icp)
-        LoopConfig(**cfg.loop)
-        CloudMatchConfig.from_options(dict(cfg.cloud))
+        IcpConfig(**cfg.scan.icp)
+        LoopConfig(**cfg.scan.loop)
+        CloudMatchConfig.from_options(dict(cfg.scan.cloud))
         assert set(parse_mounts(cfg.mounts)) >= {"gnss"}
         check("isam2", graph)
         check("ekf", options.get("ekf", {}))

@@ -3,7 +3,7 @@
 
     PYTHONPATH=. python tools/config_example.py
 
-Run it after adding an option to SmootherConfig, ImuConfig, IcpConfig, LoopConfig or CloudMatchConfig:
+Run it after adding an option to SmootherConfig (its sections), ImuConfig, IcpConfig, LoopConfig or CloudMatchConfig:
 tests/test_examples.py checks that the example lists every field and that every commented value loads.
 """
 
@@ -18,7 +18,7 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
-from graphnav.config import plain_text
+from graphnav.config import plain_text, sections
 from graphnav.estimators.options import describe
 from graphnav.graph.imu_chain import ImuConfig
 from graphnav.graph.loops import LoopConfig
@@ -28,14 +28,15 @@ from graphnav.scan.weighted_icp import IcpConfig
 
 NONE = "...   (default: none; leave it out)"
 SUBTABLES = (
+    ("scan.icp", IcpConfig, "the weighted ICP between 2D scans (graphnav.scan.weighted_icp.IcpConfig; "
+                            "docs/weighted-icp.md)"),
+    ("scan.loop", LoopConfig, "loop closures on 2D scans (graphnav.graph.loops.LoopConfig; docs/loops.md)"),
+    ("scan.cloud", CloudMatchConfig, "3D clouds: GICP projected to SE(2) (graphnav.scan.cloud_match.CloudMatchConfig; "
+                                     "docs/scan-matching-3d.md)"),
     ("imu", ImuConfig, "the IMU's error model where the log states none (graphnav.graph.imu_chain.ImuConfig): "
                        "set it from the datasheet, docs/tuning.md"),
-    ("icp", IcpConfig, "the weighted ICP between 2D scans (graphnav.scan.weighted_icp.IcpConfig; "
-                       "docs/weighted-icp.md)"),
-    ("loop", LoopConfig, "loop closures on 2D scans (graphnav.graph.loops.LoopConfig; docs/loops.md)"),
-    ("cloud", CloudMatchConfig, "3D clouds: GICP projected to SE(2) (graphnav.scan.cloud_match.CloudMatchConfig; "
-                                "docs/scan-matching-3d.md)"),
 )
+SET = {"gnss": {"gate": "4.0"}, "robust": {"noise_estimation": '"defaulted"'}}  # two set, as an example
 
 
 def toml_value(v: Any) -> str | None:
@@ -154,12 +155,15 @@ overwrite = true             # --overwrite: replace the files a previous graphna
 # json = false               # --json: one JSON object on stdout
 
 [options]
-# The factor graph (graphnav.graph.smoother_config.SmootherConfig), group by group. Options whose
+# The factor graph (graphnav.graph.smoother_config.SmootherConfig): the state here, then one table per
+# section ([options.gnss] gate = 4.0 is -O gnss.gate=4.0). Every option also answers to its flat name
+# here in [options] (gnss_gate = 4.0; `graphnav run --list-options isam2` gives both). Options whose
 # default is "none" have no TOML spelling: leave them out (or use -O KEY=null).'''
-    body = block(SmootherConfig, skip=("solver", "imu", "icp", "loop", "cloud", "mounts"),
-                 setv={"noise_estimation": '"defaulted"', "gnss_gate": "4.0"})
-    subs = [f"\n[options.{name}]\n# " + "\n# ".join(textwrap.wrap(what, 96, break_on_hyphens=False)) + "\n"
-            + block(cls).lstrip("\n") for name, cls, what in SUBTABLES]
+    secs = sections(SmootherConfig)
+    body = block(SmootherConfig, skip=("solver", "imu", "mounts", *secs))
+    what = {f.name: plain_text(f.metadata.get("help", "")) for f in dataclasses.fields(SmootherConfig)}
+    tables = [table(name, cls, what[name], SET.get(name)) for name, cls in secs.items()]
+    subs = [table(name, cls, what) for name, cls, what in SUBTABLES if "." not in name]
     mounts = '''
 # Sensor mounts: where each sensor sits in the body frame (x forward, y left, z up; m and rad,
 # ZYX roll/pitch/yaw). They override the log meta's "mounts" per sensor (docs/mounts.md).
@@ -192,7 +196,15 @@ z = 0.0                      # (its height is not used: the graph observes no he
 [options.isam2]              # isam2 only (the [options] above apply to every graph smoother)
 # converge = "lm"
 '''
-    return head + "\n" + body + "\n" + "\n".join(subs) + "\n" + mounts + est
+    return head + "\n" + body + "\n" + "\n".join(tables) + "\n" + "\n".join(subs) + "\n" + mounts + est
+
+
+def table(name: str, cls: type, what: str, setv: dict[str, str] | None = None) -> str:
+    """``[options.NAME]``: its meaning, then its fields (:func:`block`), then its sub-tables (SUBTABLES)."""
+    subs = [(n, c, w) for n, c, w in SUBTABLES if n.startswith(name + ".")]
+    return (f"\n[options.{name}]\n# " + "\n# ".join(textwrap.wrap(what, 96, break_on_hyphens=False)) + "\n"
+            + block(cls, skip=tuple(n.rpartition(".")[2] for n, _, _ in subs), setv=setv).lstrip("\n")
+            + "".join("\n" + table(n, c, w) for n, c, w in subs))
 
 
 if __name__ == "__main__":

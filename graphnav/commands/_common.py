@@ -6,7 +6,7 @@ import argparse
 import contextlib
 import json
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -194,28 +194,37 @@ def depth(value: Any, limit: int = 10_000) -> int:
 
 def parse_option(item: str) -> tuple[str | None, str, Any]:
     """The one ``-O`` grammar, ``[ESTIMATOR.]KEY=VALUE``: ``"fuzzy-ukf.window=50"`` ->
-    ``("fuzzy-ukf", "window", 50)``, ``"lag=10"`` -> ``(None, "lag", 10)``. VALUE is parsed as JSON when
-    it can be (``true``, ``null``, ``0.5``, ``'{"tol": 1e-3}'``), else kept as text; dashes in KEY
-    become underscores. The old ``ESTIMATOR:KEY=VALUE`` form is an error naming the new one."""
+    ``("fuzzy-ukf", "window", 50)``, ``"lag=10"`` -> ``(None, "lag", 10)``; KEY may be a path
+    (``"isam2.gnss.gate=4"`` -> ``("isam2", "gnss.gate", 4)``; ``"gnss.gate=4"`` -> ``("gnss", "gate", 4)``,
+    which :func:`options_for` reads as the path when ``gnss`` is a section of the estimator's options).
+    VALUE is parsed as JSON when it can be (``true``, ``null``, ``0.5``, ``'{"tol": 1e-3}'``), else kept
+    as text; dashes in KEY become underscores. The old ``ESTIMATOR:KEY=VALUE`` form is an error naming the new one."""
     head, sep, value = item.partition("=")
     head = head.strip()
     if ":" in head:
         scope, _, key = head.partition(":")
         raise ValueError(f"option {item!r}: the ESTIMATOR:KEY form is gone; write "
                          f"{scope.strip()}.{key.strip()}={value} ({OPTION_FORM})")
-    scope, dot, key = head.rpartition(".")
-    key = key.strip().replace("-", "_")
-    if not sep or not key or (dot and not scope.strip()) or not key.isidentifier():
+    scope, dot, key = head.partition(".")
+    if not dot:
+        scope, key = "", scope
+    key = ".".join(k.strip().replace("-", "_") for k in key.split("."))
+    if not sep or not key or (dot and not scope.strip()) or not all(k.isidentifier() for k in key.split(".")):
         raise ValueError(f"option {item!r} is not {OPTION_FORM}")
     return (scope.strip() or None), key, _value(value, item)
 
 
-def scoped_options(items: list[str] | None) -> dict[str | None, dict[str, Any]]:
-    """``-O`` items -> ``{ESTIMATOR or None: {KEY: VALUE}}`` (later items win)."""
+def scoped_options(items: list[str] | None, sections: Iterable[str | None] = ()) -> dict[str | None, dict[str, Any]]:
+    """``-O`` items -> ``{ESTIMATOR or None: {KEY: VALUE}}`` (later items win, last in order);
+    ``SECTION.KEY=VALUE`` for one of ``sections`` is the unscoped path ``SECTION.KEY``."""
     out: dict[str | None, dict[str, Any]] = {}
     for item in items or []:
         scope, key, value = parse_option(item)
-        out.setdefault(scope, {})[key] = value
+        if scope in sections:
+            scope, key = None, f"{scope}.{key}"
+        opts = out.setdefault(scope, {})
+        opts.pop(key, None)
+        opts[key] = value
     return out
 
 
@@ -227,7 +236,7 @@ def options_for(args: argparse.Namespace, name: str) -> dict[str, Any]:
     """The options of a one-estimator command (``run -e NAME``, ``live``): ``KEY=VALUE`` and
     ``NAME.KEY=VALUE``. A ``-O`` scoped to another estimator is an error; a ``--config`` file's
     ``[options.OTHER]`` tables are ignored (one file can serve several commands)."""
-    given = scoped_options(getattr(args, "option", None))
+    given = scoped_options(getattr(args, "option", None), _sections(name) - {name})
     other = sorted(s for s in given if s not in (None, name))
     if other:
         from .. import estimators
@@ -239,8 +248,20 @@ def options_for(args: argparse.Namespace, name: str) -> dict[str, Any]:
     files = _file_options(args)
     out: dict[str, Any] = {}
     for src in (files.get(None, {}), files.get(name, {}), given.get(None, {}), given.get(name, {})):
-        out.update(src)
+        for key, value in src.items():  # (a later spelling of one option, gnss_gate after gnss.gate, wins)
+            out.pop(key, None)
+            out[key] = value
     return out
+
+
+def _sections(name: str) -> set[str | None]:
+    """The sections of estimator ``name``'s options (:func:`graphnav.config.sections`), not estimator names."""
+    from .. import estimators
+    from ..config import sections
+
+    if name not in estimators.registry() or estimators.get(name).Config is None:
+        return set()
+    return set(sections(estimators.get(name).Config)) - set(estimators.registry())
 
 
 def options_by_estimator(args: argparse.Namespace) -> dict[str, dict[str, Any]]:

@@ -83,12 +83,17 @@ def list_options(args: argparse.Namespace) -> int:
     opts = describe(args.list_options)
     obj = {"estimator": args.list_options, "options": opts}
     lines = [f"-O options of {args.list_options} (graphnav run LOG -e {args.list_options} -O KEY=VALUE):"]
+    if any("path" in o for o in opts):
+        lines.append("  in sections: -O SECTION.KEY=VALUE, TOML [options.SECTION] KEY = VALUE; or by the flat "
+                     "name, -O FLAT=VALUE (in parentheses where it is not KEY)")
     group = None
     for o in opts:
         if o["group"] != group:
             group = o["group"]
-            lines.append(f"  [{group}]")
-        lines.append(f"  {o['name']:32s} {json.dumps(jsonable(o['default'])):14s} {o['type']}")
+            lines.append(f"  [{group}]" + (f" {o['group_help']}" if o.get("group_help") else ""))
+        name = o.get("path", o["name"]).rpartition(".")[2]
+        flat = f"  ({o['name']})" if name != o["name"] else ""
+        lines.append(f"  {name:32s} {json.dumps(jsonable(o['default'])):14s} {o['type']}{flat}")
         if o["meaning"]:
             lines.append(f"      {o['meaning']}")
     if not opts:

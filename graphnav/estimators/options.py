@@ -73,29 +73,45 @@ def _by_annotation(option: str, value: Any, ann: str) -> bool:
 
 
 def check(name: str, options: dict[str, Any]) -> None:
-    """A ``ValueError`` naming the unknown option(s) of estimator ``name`` and the known ones; an
-    :class:`~graphnav.config.OptionError` naming an option whose value is not of its kind
+    """A ``ValueError`` naming the unknown option(s) of estimator ``name`` ("did you mean") and the known
+    ones; an :class:`~graphnav.config.OptionError` naming an option whose value is not of its kind
     (:func:`check_value` against its default, and its type), and a ``cloud`` table checked as the
-    cloud matcher's options. An estimator without a ``Config`` takes any option."""
-    from ..config import OptionError
+    cloud matcher's options. An estimator without a ``Config`` takes any option. A config in sections
+    (the smoother's) takes each option by its flat name, its path (``gnss.gate``) or in its section's
+    table (``gnss = {gate = 4}``, :func:`graphnav.config.spell_options`)."""
+    from ..config import OptionError, sections, spell_options, unknown_options
     from . import get
 
-    if not options or get(name).Config is None:
+    cls = get(name).Config
+    if not options or cls is None:
         return
-    described = {o["name"]: o for o in describe(name)}
-    bad = sorted(set(options) - set(described))
-    if bad:
-        raise ValueError(f"unknown {name} option(s) {bad}; known: {', '.join(sorted(described)) or 'none'} "
-                         f"(graphnav run --list-options {name})")
-    for key, value in options.items():
-        ann = described[key]["type"]
+    opts = describe(name)
+    hint = f" (graphnav run --list-options {name})"
+    if sections(cls):
+        by_path = {o["path"]: o for o in opts}
+        names = [n for o in opts for n in (o["name"], o["path"])]
+        spelled = [(key, path, value) for key, path, value in spell_options(cls, options)
+                   if path not in sections(cls)]  # a section object (Python) is checked as it is built
+        bad = [key for key, path, _ in spelled if path not in by_path]
+        if bad:
+            raise ValueError(unknown_options(name, bad, list(by_path), hint, names))
+        items = [(key, value, by_path[str(path)]) for key, path, value in spelled]
+    else:
+        described = {o["name"]: o for o in opts}
+        bad = sorted(set(options) - set(described))
+        if bad:
+            raise ValueError(unknown_options(name, bad, list(described), hint))
+        items = [(key, value, described[key]) for key, value in options.items()]
+    for key, value, o in items:
+        ann = o["type"]
         if value is None and "None" in ann:
             continue
         if not (isinstance(value, list | tuple) and re.search(r"\b(list|tuple)\b", ann)):
-            check_value(key, value, described[key]["default"])
+            check_value(key, value, o["default"])
         if ann and not _by_annotation(key, value, ann):
             raise OptionError(f"option {key}", f"must be of type {ann}, got {value!r:.60}")
-    if isinstance(options.get("cloud"), dict) and get(name).kind == "smoother":
+    cloud = next((value for _, value, o in items if o.get("path", o["name"]) in ("cloud", "scan.cloud")), None)
+    if isinstance(cloud, dict) and get(name).kind == "smoother":
         from ..scan.cloud_match import CloudMatchConfig
 
-        CloudMatchConfig.from_options(dict(options["cloud"]))
+        CloudMatchConfig.from_options(dict(cloud))

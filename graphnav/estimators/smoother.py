@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
+from ..config import given_option
 from ..graph.log_runs import unmet
 from ..graph.navigator import Navigator
 from ..graph.smoother_config import SmootherConfig
@@ -23,16 +24,16 @@ def _inputs(log: NavLog, options: dict[str, Any]) -> set[str]:
     """The kinds the graph reads (its state space as :class:`graphnav.graph.builder.GraphBuilder`
     picks it). Keep in step with graphnav/graph/ (tests/estimators/test_inputs.py drops each kind and
     checks the output changes exactly when it is listed)."""
-    motion = options.get("motion", "auto")
+    motion = given_option(SmootherConfig, options, "motion", "auto")
     has_imu = bool(log.of("imu"))
     nav = motion in ("imu", "vessel") or (motion == "auto" and has_imu)
     kinds = {"scan", "gnss", "heading", "beacon", "pose_prior"}
     if log.of("beacon"):
         kinds.add("beacon_known")  # the chart, for the beacons the log observes
-    use_odo = options.get("use_odometry")
+    use_odo = given_option(SmootherConfig, options, "odometry.use")
     if use_odo or (use_odo is None and not nav):
         kinds.add("odometry")
-    if options.get("use_cloud", True):
+    if given_option(SmootherConfig, options, "scan.use_cloud", True):
         kinds.add("cloud")
     if nav:
         kinds |= {"gnss_velocity", "water_speed", "attitude"} | ({"imu"} if has_imu else set())

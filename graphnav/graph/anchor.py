@@ -7,6 +7,7 @@ the first keyframe from them (the same priority as a look at the whole log).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -16,7 +17,7 @@ import factors as F
 from ..log import BeaconObs, Gnss, Heading, KnownBeacon, PosePrior, Record, Truth
 from .keyframes import EPS
 from .mounts import mount_of, parse_mounts
-from .smoother_config import SmootherConfig
+from .smoother_config import AnchorConfig
 
 
 def anchor_ready(held: list[Record], charted: dict[str, KnownBeacon], anchor_wait: float, t_next: float) -> bool:
@@ -32,7 +33,7 @@ def anchor_ready(held: list[Record], charted: dict[str, KnownBeacon], anchor_wai
     return t_next - held[0].t > anchor_wait
 
 
-def choose_anchor(held: list[Record], charted: dict[str, KnownBeacon], cfg: SmootherConfig
+def choose_anchor(held: list[Record], charted: dict[str, KnownBeacon], cfg: AnchorConfig, mounts: dict[str, Any]
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], str]:
     """The first pose's prior (pose, 1-sigmas, name) from the held records, in this order: the
     ``pose_prior``; the first GNSS fix (+ the first compass reading); charted beacons (two sighted
@@ -40,15 +41,15 @@ def choose_anchor(held: list[Record], charted: dict[str, KnownBeacon], cfg: Smoo
     for r in held:
         if isinstance(r, PosePrior):
             return np.array([r.x, r.y, r.yaw]), np.array([r.sigma_xy, r.sigma_xy, r.sigma_yaw]), "pose_prior"
-    yaw_sig = math.radians(cfg.anchor_sigma_yaw_deg)
-    yaw_unknown = math.radians(cfg.anchor_sigma_yaw_unknown_deg)
+    yaw_sig = math.radians(cfg.sigma_yaw_deg)
+    yaw_unknown = math.radians(cfg.sigma_yaw_unknown_deg)
     gnss = [r for r in held if isinstance(r, Gnss)]
     head = [r for r in held if isinstance(r, Heading)]
     if gnss:
         g = gnss[0]
         yaw = head[0].yaw if head else 0.0
-        sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 3.0 * g.sigma
-        mount = mount_of(parse_mounts(cfg.mounts), "gnss", g.source)
+        sxy = cfg.sigma_xy if cfg.sigma_xy is not None else 3.0 * g.sigma
+        mount = mount_of(parse_mounts(mounts), "gnss", g.source)
         x, y = g.x, g.y
         if mount is not None and (mount.x or mount.y):  # the fix is the antenna's: the body is an arm behind it
             c, s = math.cos(yaw), math.sin(yaw)
@@ -64,7 +65,7 @@ def choose_anchor(held: list[Record], charted: dict[str, KnownBeacon], cfg: Smoo
             if r.t > t0 + 1e-6:
                 break
             first.setdefault(r.id, r)
-        sxy = cfg.anchor_sigma_xy if cfg.anchor_sigma_xy is not None else 10.0
+        sxy = cfg.sigma_xy if cfg.sigma_xy is not None else 10.0
         if len(first) >= 2:
             a, b = list(first.values())[:2]
             ca, cb = charted[a.id], charted[b.id]
@@ -86,8 +87,8 @@ class Anchor:
     """The records held until the anchor can be chosen, then the anchor: the first keyframe's prior
     (``pose``, 1-sigmas ``sigmas``) and how it was chosen (``name``)."""
 
-    def __init__(self, cfg: SmootherConfig) -> None:
-        self.cfg = cfg
+    def __init__(self, cfg: AnchorConfig, mounts: dict[str, Any]) -> None:
+        self.cfg, self.mounts = cfg, mounts
         self.held: list[Record] | None = []  # before the anchor is chosen
         self.pose: NDArray[np.float64] | None = None
         self.sigmas: NDArray[np.float64] | None = None
@@ -102,7 +103,7 @@ class Anchor:
         are all in (``rec`` is later) and they suffice (:func:`anchor_ready`)."""
         held = self.held
         assert held is not None
-        return bool(held) and rec.t > held[-1].t + EPS and anchor_ready(held, charted, self.cfg.anchor_wait, rec.t)
+        return bool(held) and rec.t > held[-1].t + EPS and anchor_ready(held, charted, self.cfg.wait, rec.t)
 
     def hold(self, rec: Record) -> None:
         assert self.held is not None
@@ -112,7 +113,7 @@ class Anchor:
         """Choose the anchor from the held records (:func:`choose_anchor`); returns the first one's time
         and the records in time order, the ``pose_prior`` that is the anchor left out, to be taken now."""
         held, self.held = sorted(self.held or [], key=lambda r: r.t), None
-        self.pose, self.sigmas, self.name = choose_anchor(held, charted, self.cfg)
+        self.pose, self.sigmas, self.name = choose_anchor(held, charted, self.cfg, self.mounts)
         first_prior = next((r for r in held if isinstance(r, PosePrior)), None)
         return (held[0].t if held else None), [r for r in held if r is not first_prior]
 

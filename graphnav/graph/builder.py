@@ -93,13 +93,13 @@ class GraphBuilder:
         self.space: PlanarSpace = NavSpace() if nav else PlanarSpace()
         mounts = parse_mounts(cfg.mounts)
         self.motion = Motion(cfg, self.space, nav, imu_model, mounts["imu"].pose3() if "imu" in mounts else None)
-        self.scans = ScanFactors(cfg, self.space, matcher=matcher, lidar=lidar, lidar3d=lidar3d,
+        self.scans = ScanFactors(cfg.scan, self.space, matcher=matcher, lidar=lidar, lidar3d=lidar3d,
                                  mount=mounts.get("lidar"))
         self.charted = {b.id: b for b in chart}
-        self.keyframes = Keyframes(cfg, scans)
+        self.keyframes = Keyframes(cfg.keyframe, scans)
         if self.keyframes.mode == "scan":
             self.scans.want_matcher()
-        self.anchor = Anchor(cfg)
+        self.anchor = Anchor(cfg.anchor, cfg.mounts)
         self.counts = {"records": 0, "late": 0, "ignored": 0, "motion_fallback": 0}
         self.defaulted: set[str] = set()  # groups whose sigmas came from the configuration
         # the measurement factors and their state (beacons, compass-bias frame, GNSS gate, water current)
@@ -221,7 +221,7 @@ class GraphBuilder:
             return
         kf.clock(rec)
         self.counts[kind] = self.counts.get(kind, 0) + 1
-        if kind == "scan" or (kind == "cloud" and self.cfg.use_cloud):
+        if kind == "scan" or (kind == "cloud" and self.cfg.scan.use_cloud):
             self._lidar(rec)
         elif kind == "odometry":
             if self.motion.uses_odometry:
@@ -275,7 +275,7 @@ class GraphBuilder:
         if self.scans.loops is not None:
             oldest = 0
             if self.cfg.solver == "fixed-lag":  # only keyframes still in the window (minus a margin of 10 %)
-                oldest = kf.first_after(kf.t[k] - 0.9 * self.cfg.lag)
+                oldest = kf.first_after(kf.t[k] - 0.9 * self.cfg.optimizer.lag)
             self.scans.close_loops(s, k, pose_k, prev, prev_cov, rel, step_cov, self.anchor.cov(),
                                    kf.scans.get(k), oldest)
         gate_cov = prev_cov
@@ -341,6 +341,7 @@ class GraphBuilder:
             "keyframes": len(kf),
             "keyframe_policy": "scan" if kf.mode == "scan" else f"grid {kf.period:g} s",
             "gnss_rejected": self.meas.n_rejected,
+            "gnss_online_scale": {"final": self.meas.gnss_scale.scale, "max": self.meas.gnss_scale.max_scale},
             **self.scans.info(),
             "beacons": sorted(self.meas.beacon_ids),
             **self.scans.cloud3d.info(),

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..log import NavLog, Record
-from .smoother_config import SmootherConfig
+from .smoother_config import KeyframeConfig
 
 DEFAULT_PERIOD = 0.5
 EPS = 1e-9  # [s] times closer than this are equal
@@ -98,11 +98,11 @@ class Keyframes:
     and is added with the later keyframe's batch; a keyframe is ready once a later record arrived.
     """
 
-    def __init__(self, cfg: SmootherConfig, scans: bool | None) -> None:
+    def __init__(self, cfg: KeyframeConfig, scans: bool | None) -> None:
         self.cfg = cfg
         # keyframe policy: "grid" (fixed period) or "scan"; with keyframe_period set always the grid
-        self.grid_only = cfg.keyframe_period is not None
-        self.period = cfg.keyframe_period if cfg.keyframe_period is not None else DEFAULT_PERIOD
+        self.grid_only = cfg.period is not None
+        self.period = cfg.period if cfg.period is not None else DEFAULT_PERIOD
         self.mode = "scan" if (scans and not self.grid_only) else "grid"
         self.t: list[float] = []  # the keyframes' times
         self.stepped = 0  # keyframes [0, stepped) have their batch
@@ -177,15 +177,15 @@ class Keyframes:
         cfg = self.cfg
         if self.n_scans % cfg.scan_stride:
             return False
-        use = cfg.keyframe_motion if cfg.keyframe_motion is not None else bool(imu)
+        use = cfg.motion if cfg.motion is not None else bool(imu)
         if not use or not self.t or not imu:
             return True
         dt = t - self.t[-1]
-        if dt >= cfg.keyframe_max_dt - EPS:
+        if dt >= cfg.max_dt - EPS:
             return True
-        if speed() * dt >= cfg.keyframe_distance:
+        if speed() * dt >= cfg.distance:
             return True
-        return imu.rotation(self.t[-1], t) >= math.radians(cfg.keyframe_angle_deg)
+        return imu.rotation(self.t[-1], t) >= math.radians(cfg.angle_deg)
 
     def add(self, t: float, scan: Record | None) -> None:
         """A new keyframe at ``t`` (with its scan); the pending measurements join it or the previous one."""

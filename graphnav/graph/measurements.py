@@ -7,6 +7,7 @@ with the water current's state, and later ``pose_prior`` records -- each in the 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -18,12 +19,45 @@ import factors as F
 
 from ..config import OptionError
 from ..log import Attitude, BeaconObs, Gnss, GnssVelocity, Heading, KnownBeacon, PosePrior, Record, WaterSpeed
+from .chi2 import SCALE_WINDOW, chi2_median, significant_scale
 from .mounts import Mount
 from .smoother_config import SmootherConfig
 from .space import PlanarSpace, V, W
 from .step import Step
 
 SURFACE_V = 0.1  # [m/s] the vertical of a water-speed factor (no vertical water velocity)
+MEDIAN_CHI2_2 = float(chi2_median(np.array([2.0]))[0])  # |d|^2 / sigma^2 of a 2-D fix: its median
+
+
+class GnssScale:
+    """The online variance scale of the GNSS fixes: ``max(1, median(x) / median(chi2_2))`` over the last
+    :data:`~graphnav.graph.chi2.SCALE_WINDOW` fixes, ``x = (|d|^2 - tr P) / sigma^2`` the innovation's
+    energy beyond the prediction's own variance ``P`` per stated variance of the fix (a moment
+    estimate; the median shields it from fewer than half the window's fixes in a jump). Used -- on
+    the factor and in the gate -- only where it exceeds chance (:func:`~graphnav.graph.chi2.significant_scale`
+    at ``prob``): as the closing step's :func:`~graphnav.graph.gnc.factor_scales`, a stated sigma the
+    fixes refute, never deflated (Solent s2 states 7 m for 20 m fixes)."""
+
+    def __init__(self, prob: float) -> None:
+        self.prob = prob
+        self.x: deque[float] = deque(maxlen=SCALE_WINDOW)
+        self.scale = 1.0
+        self.max_scale = 1.0
+        self._bound: dict[int, float] = {}
+
+    def add(self, d: NDArray[np.float64], cov: NDArray[np.float64], sigma: float) -> None:
+        """One innovation ``d`` of a fix of stated ``sigma`` against a prediction of covariance ``cov``."""
+        if not (sigma > 0 and math.isfinite(sigma)):
+            return
+        self.x.append((float(d @ d) - float(np.trace(cov))) / sigma**2)
+        n = len(self.x)
+        if n < 10:
+            return
+        if n not in self._bound:
+            self._bound[n] = significant_scale(2, self.prob, n)
+        est = float(np.median(self.x)) / MEDIAN_CHI2_2
+        self.scale = est if est > self._bound[n] else 1.0
+        self.max_scale = max(self.max_scale, self.scale)
 
 
 class Measurements:
@@ -43,6 +77,7 @@ class Measurements:
         self.beacon_init: dict[str, NDArray[np.float64]] = {}
         self.bias_key: int | None = None
         self.n_rejected = 0
+        self.gnss_scale = GnssScale(cfg.robust.prob)  # the fixes' online variance scale
         self.consecutive_rejects = 0
         self.after_outage: set[int] = set()  # ids of the first fixes after a GNSS outage (not gated)
         #: the factors of the fixes the online gate rejected: the closing batch step reconsiders them
@@ -137,43 +172,21 @@ class Measurements:
 
         for a, r in due:
             xa = F.X(a)
-            delta = offset(a, r.t, k) if cfg.compensate_attachment else None
+            delta = offset(a, r.t, k) if cfg.keyframe.compensate_attachment else None
             if isinstance(r, Gnss):
-                rx, ry = r.x, r.y
-                arm3 = self.arms.get(r.source) or self.arms.get("")
-                arm = (0.0, 0.0) if arm3 is None else arm3[:2]
-                if delta is not None:  # the fix is of the antenna of X_a * delta at r.t: move it back to X_a's
-                    pa = at(a)
-                    moved = F.antenna_position(pa.compose(delta), arm) - F.antenna_position(pa, arm)
-                    rx -= float(moved[0])
-                    ry -= float(moved[1])
-                gate_on = cfg.gnss_gate_online if cfg.gnss_gate_online is not None else not self.nav
-                if gate_on and cfg.gnss_gate is not None and prev_cov is not None and id(r) not in self.after_outage:
-                    ant = F.antenna_position(at(a), arm)
-                    d = np.array([rx - ant[0], ry - ant[1]])
-                    S = prev_cov[:2, :2] + (r.sigma**2) * np.eye(2)
-                    if (float(d @ np.linalg.solve(S, d)) > cfg.gnss_gate**2
-                            and self.consecutive_rejects < cfg.gnss_gate_max_rejects):
-                        self.n_rejected += 1
-                        self.consecutive_rejects += 1
-                        self.rejected.append(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k,
-                                                             arm3))
-                        continue
-                self.consecutive_rejects = 0
-                self.after_outage.discard(id(r))
-                s.add(self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss_robust, cfg.gnss_k, arm3), "gnss")
+                self._gnss(s, xa, r, at(a), prev_cov, delta)
             elif isinstance(r, Heading):
-                sig = r.sigma * cfg.compass_sigma_scale
+                sig = r.sigma * cfg.compass.sigma_scale
                 yaw = r.yaw - (delta.theta() if delta is not None else 0.0)
-                if cfg.compass_bias and self.bias_key is None:  # the bias frame, with the first reading
+                if cfg.compass.bias and self.bias_key is None:  # the bias frame, with the first reading
                     self.bias_key = F.B(0)
                     s.values.insert(self.bias_key, self.space.bias_frame())
                     s.stamps[self.bias_key] = s.t
-                    s.add(self.space.bias_prior(self.bias_key, math.radians(cfg.compass_bias_sigma_deg)), "bias")
+                    s.add(self.space.bias_prior(self.bias_key, math.radians(cfg.compass.bias_sigma_deg)), "bias")
                 if self.bias_key is not None:
-                    s.add(self.space.biased_compass(self.bias_key, xa, yaw, sig, cfg.compass_robust), "compass")
+                    s.add(self.space.biased_compass(self.bias_key, xa, yaw, sig, cfg.compass.robust), "compass")
                 else:
-                    s.add(self.space.compass(xa, yaw, sig, cfg.compass_robust), "compass")
+                    s.add(self.space.compass(xa, yaw, sig, cfg.compass.robust), "compass")
             elif isinstance(r, WaterSpeed):
                 if not self.nav:  # the planar graph has no velocity variable
                     self.counts["ignored"] += 1
@@ -183,15 +196,15 @@ class Measurements:
                 if not self.nav:  # the planar graph has no velocity variable
                     self.counts["ignored"] += 1
                     continue
-                sv = r.sigma if math.isfinite(r.sigma) else cfg.gnss_velocity_sigma
+                sv = r.sigma if math.isfinite(r.sigma) else cfg.gnss.velocity_sigma
                 if not math.isfinite(r.sigma):
                     self.defaulted.add("gnss_velocity")
-                s.add(self.space.velocity(a, r.vx, r.vy, sv, cfg.gnss_robust), "gnss_velocity")
+                s.add(self.space.velocity(a, r.vx, r.vy, sv, cfg.gnss.robust), "gnss_velocity")
             elif isinstance(r, Attitude):
                 if not self.nav:  # the planar graph has no roll and pitch
                     self.counts["ignored"] += 1
                     continue
-                sa = r.sigma if math.isfinite(r.sigma) else math.radians(cfg.attitude_sigma_deg)
+                sa = r.sigma if math.isfinite(r.sigma) else math.radians(cfg.compass.attitude_sigma_deg)
                 if not math.isfinite(r.sigma):
                     self.defaulted.add("attitude")
                 s.add(self.space.attitude(xa, r.roll, r.pitch, sa), "attitude")
@@ -201,10 +214,47 @@ class Measurements:
                 sig = np.array([r.sigma_xy, r.sigma_xy, r.sigma_yaw])
                 s.add(self.space.prior(xa, np.array([r.x, r.y, r.yaw]), sig), "pose_prior")
 
+    def _gnss(self, s: Step, xa: int, r: Gnss, pa: gtsam.Pose2, prev_cov: NDArray[np.float64] | None,
+              delta: gtsam.Pose2 | None) -> None:
+        """A GNSS fix on keyframe ``xa`` (pose ``pa``; ``delta``: the motion from it to the fix's time):
+        moved back to the keyframe, its online variance scale (:class:`GnssScale`) applied, gated online
+        against the prediction of covariance ``prev_cov`` (the Pose2 graph; ``None``: no gate). The closing
+        step gets the fix at its stated sigma (and judges it in its own way: ``graph.solution``)."""
+        cfg = self.cfg
+        rx, ry = r.x, r.y
+        arm3 = self.arms.get(r.source) or self.arms.get("")
+        arm = (0.0, 0.0) if arm3 is None else arm3[:2]
+        if delta is not None:  # the fix is of the antenna of X_a * delta at r.t: move it back to X_a's
+            moved = F.antenna_position(pa.compose(delta), arm) - F.antenna_position(pa, arm)
+            rx -= float(moved[0])
+            ry -= float(moved[1])
+        gate_on = cfg.gnss.gate_online if cfg.gnss.gate_online is not None else not self.nav
+        scale = self.gnss_scale.scale
+        sigma = r.sigma * math.sqrt(scale)  # the stated sigma, unless the fixes refute it
+        stated = self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss.robust, cfg.gnss.k, arm3)
+        if prev_cov is not None and id(r) not in self.after_outage:
+            ant = F.antenna_position(pa, arm)
+            d = np.array([rx - ant[0], ry - ant[1]])
+            self.gnss_scale.add(d, prev_cov[:2, :2], r.sigma)
+            if gate_on and cfg.gnss.gate is not None:
+                S = prev_cov[:2, :2] + (sigma**2) * np.eye(2)
+                if (float(d @ np.linalg.solve(S, d)) > cfg.gnss.gate**2
+                        and self.consecutive_rejects < cfg.gnss.gate_max_rejects):
+                    self.n_rejected += 1
+                    self.consecutive_rejects += 1
+                    self.rejected.append(stated)
+                    return
+        self.consecutive_rejects = 0
+        self.after_outage.discard(id(r))
+        if scale == 1.0:
+            s.add(stated, "gnss")
+        else:
+            s.add(self.space.gnss(xa, rx, ry, sigma, cfg.gnss.robust, cfg.gnss.k, arm3), "gnss", closing=stated)
+
     def _beacon(self, s: Step, xa: int, pa: gtsam.Pose2, r: BeaconObs, delta: gtsam.Pose2 | None) -> None:
         cfg = self.cfg
         charted = self.charted.get(r.id)
-        if charted is None and not cfg.unknown_beacons:
+        if charted is None and not cfg.beacon.unknown:
             return
         rng_, brg = r.range, r.bearing
         if delta is not None:  # the sighting from X_a * delta, as seen from X_a
@@ -225,10 +275,10 @@ class Measurements:
                 s.add(self.space.landmark_prior(lk, float(p0[0]), float(p0[1]), 1e4), "chart")
         if not (math.isfinite(r.sigma_range) and math.isfinite(r.sigma_bearing)):
             self.defaulted.add("beacon")
-        sr = r.sigma_range if math.isfinite(r.sigma_range) else math.hypot(cfg.beacon_sigma_range,
-                                                                           cfg.beacon_sigma_range_rel * r.range)
-        sb = r.sigma_bearing if math.isfinite(r.sigma_bearing) else math.radians(cfg.beacon_sigma_bearing_deg)
-        s.add(self.space.beacon(xa, F.L(self.beacon_ids[r.id]), rng_, brg, sr, sb, cfg.beacon_robust, cfg.beacon_k),
+        sr = r.sigma_range if math.isfinite(r.sigma_range) else math.hypot(cfg.beacon.sigma_range,
+                                                                           cfg.beacon.sigma_range_rel * r.range)
+        sb = r.sigma_bearing if math.isfinite(r.sigma_bearing) else math.radians(cfg.beacon.sigma_bearing_deg)
+        s.add(self.space.beacon(xa, F.L(self.beacon_ids[r.id]), rng_, brg, sr, sb, cfg.beacon.robust, cfg.beacon.k),
               "beacon")
 
     def water_speed(self, s: Step, a: int, pa: gtsam.Pose2, r: WaterSpeed) -> None:
@@ -243,19 +293,19 @@ class Measurements:
             self.current = (a, a)
             s.values.insert(W(a), np.zeros(3))
             s.stamps[W(a)] = self.kf_t[a]
-            sc = cfg.current_sigma
+            sc = cfg.water.current_sigma
             s.add(gtsam.PriorFactorVector(W(a), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(
                 np.array([sc, sc, 1e-3]))), "current")
         if a < self.current[0]:
             self.counts["ignored"] += 1
             return
-        sv = r.sigma_v if math.isfinite(r.sigma_v) else cfg.water_speed_sigma
+        sv = r.sigma_v if math.isfinite(r.sigma_v) else cfg.water.speed_sigma
         if not math.isfinite(r.sigma_v):
             self.defaulted.add("water_speed")
         v = r.v
         if self.log_yaw:
             v, sv = v / math.cos(self.log_yaw), sv / abs(math.cos(self.log_yaw))
-        lee = math.hypot(cfg.water_leeway, cfg.water_leeway_rel * abs(v))
+        lee = math.hypot(cfg.water.leeway, cfg.water.leeway_rel * abs(v))
         c, sn = math.cos(pa.theta()), math.sin(pa.theta())
         R = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
         cov = R @ np.diag([sv**2, lee**2, SURFACE_V**2]) @ R.T
@@ -269,7 +319,7 @@ class Measurements:
         first, last = self.current
         for j in range(last + 1, k + 1):
             dt = max(self.kf_t[j] - self.kf_t[j - 1], 1e-9)
-            sig = self.cfg.current_rw * math.sqrt(dt)
+            sig = self.cfg.water.current_rw * math.sqrt(dt)
             s.values.insert(W(j), self.current_guess)
             s.stamps[W(j)] = self.kf_t[j]
             s.add(gtsam.BetweenFactorVector(W(j - 1), W(j), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(

@@ -51,7 +51,7 @@ class Motion:
         if self.imu is not None and imu_mount is not None:  # GTSAM's body_P_sensor (docs/mounts.md)
             self.imu.body_P_sensor = imu_mount
         self.imu_model = imu_model
-        self.odometry = OdometryBuffer(cfg)  # the odometry samples (graphnav.graph.odometry_buffer)
+        self.odometry = OdometryBuffer(cfg.odometry)  # the odometry samples (graphnav.graph.odometry_buffer)
         self.last_rel = gtsam.Pose2()  # relative motion of the newest interval
         self.last_gap = 0.0
         self.twist: NDArray[np.float64] | None = None  # [m/s, m/s, rad/s] of the last measured motion
@@ -63,7 +63,8 @@ class Motion:
     @property
     def uses_odometry(self) -> bool:
         """Odometry feeds the graph when asked, or (``use_odometry`` unset) on the planar graph."""
-        return bool(self.cfg.use_odometry or (self.cfg.use_odometry is None and self.imu is None))
+        use = self.cfg.odometry.use
+        return bool(use or (use is None and self.imu is None))
 
     def add_odometry(self, rec: Odometry) -> bool:
         """One odometry sample; whether its sigmas came from the configuration."""
@@ -75,7 +76,7 @@ class Motion:
 
     def add_fix(self, rec: Gnss) -> bool:
         """One GNSS fix (the GNSS velocity's window); whether it is the first after an outage."""
-        outage = bool(self.fixes) and rec.t - self.fixes[-1][0] > self.cfg.gnss_gate_outage
+        outage = bool(self.fixes) and rec.t - self.fixes[-1][0] > self.cfg.gnss.gate_outage
         self.fixes.append((rec.t, rec.x, rec.y, rec.sigma))
         return outage
 
@@ -106,7 +107,7 @@ class Motion:
         """Velocity and IMU-bias variables of keyframe 0 with their priors: the velocity at rest
         within ``v0_sigma`` (GNSS velocity and fixes make it), the bias the IMU model's residual."""
         assert self.imu is not None
-        v0, sv = np.zeros(3), self.cfg.v0_sigma
+        v0, sv = np.zeros(3), self.cfg.dynamics.v0_sigma
         stated = self.imu_model.get("initial_velocity") if self.imu_model else None
         if stated is not None and len(stated) >= 2:  # the log states it (a simulator's meta): within 0.2 m/s
             v0, sv = np.array([float(stated[0]), float(stated[1]), 0.0]), V0_STATED_SIGMA
@@ -190,8 +191,8 @@ class Motion:
         planar or absent: its records are the levelled frame's and observe neither, so without it they
         wander with the gyro's noise (and a rolled body turns the planar acceleration out of the plane)."""
         assert self.imu is not None
-        if not self.imu.six and self.cfg.level_sigma_deg > 0:
-            s.add(self.space.attitude(F.X(k), 0.0, 0.0, math.radians(self.cfg.level_sigma_deg)), "level")
+        if not self.imu.six and self.cfg.dynamics.level_sigma_deg > 0:
+            s.add(self.space.attitude(F.X(k), 0.0, 0.0, math.radians(self.cfg.dynamics.level_sigma_deg)), "level")
 
     @staticmethod
     def lift(p3: gtsam.Pose3, p2: gtsam.Pose2) -> gtsam.Pose3:
@@ -202,8 +203,8 @@ class Motion:
 
     def floor(self) -> NDArray[np.float64]:
         """[m, m, rad] added in quadrature to every motion factor (``dt = 0`` stays proper)."""
-        c = self.cfg
-        return np.array([c.motion_floor_xy, c.motion_floor_xy, math.radians(c.motion_floor_yaw_deg)])
+        c = self.cfg.dynamics
+        return np.array([c.floor_xy, c.floor_xy, math.radians(c.floor_yaw_deg)])
 
     # -- motion models ---------------------------------------------------------------------------
     def offset(self, ta: float, t: float, gap: float | None) -> gtsam.Pose2 | None:
@@ -235,11 +236,11 @@ class Motion:
 
         both with the floor in quadrature (``dt = 0`` stays proper). Returns the mean, its
         covariance and the model's name."""
-        cfg = self.cfg
+        cfg = self.cfg.dynamics
         dt = max(dt, 0.0)
         floor = self.floor()
         twist, extra, age = None, 0.0, 0.0
-        if cfg.motion_model == "constant-velocity":
+        if cfg.model == "constant-velocity":
             if self.twist is not None and (t is None or self.twist_t is None or t - self.twist_t <= cfg.cv_max_age):
                 twist = self.twist
                 age = 0.0 if t is None or self.twist_t is None else max(t - dt - self.twist_t, 0.0)
@@ -266,7 +267,7 @@ class Motion:
         lower, their scatter about the fitted line); zero speed when it is below 3 sigma (direction unknown). A fit
         whose speed sigma exceeds ``cv_sigma_v`` (few fixes) is not used: through an outage the last
         good velocity is kept for ``cv_max_age`` seconds."""
-        cfg = self.cfg
+        cfg = self.cfg.dynamics
         w = [f for f in self.fixes if t - cfg.cv_gnss_window <= f[0] <= t + EPS]
         if len(w) >= 3 and w[-1][0] - w[0][0] >= cfg.cv_gnss_window / 3:
             a = np.array(w)

@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 import factors as F
 
+from ..config import given_option
 from ..errors import GraphnavError
 from ..geometry import cov_to_world
 from ..log import KnownBeacon, NavLog, Record, validate_record
@@ -44,7 +45,7 @@ from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
 from .online_track import OnlineTrack, kinematics
-from .smoother_config import SmootherConfig
+from .smoother_config import SmootherConfig, SolverConfig
 from .solution import Closing, marginal_priors, refresh_places
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt
 from .space import IB, PlanarSpace, V, W
@@ -71,7 +72,7 @@ def gnss_sigma_assumed(log: NavLog) -> bool:
     return n > int(log.meta.get("fix_sigma_from_gst", 0) or 0)
 
 
-def graph_params(cfg: SmootherConfig, space: PlanarSpace | None = None) -> gtsam.ISAM2Params:
+def graph_params(cfg: SolverConfig, space: PlanarSpace | None = None) -> gtsam.ISAM2Params:
     """The iSAM2 parameters of the graph: thresholds per variable type (poses ``x``, beacons ``l``,
     compass-bias frame ``b``; in the Pose3 graph also velocities ``v`` and IMU biases ``i``)."""
     space = space or PlanarSpace()
@@ -91,8 +92,8 @@ def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -
     winning per sensor), with the other arguments ``kw``."""
     lidar = log.meta.get("lidar") if isinstance(log.meta.get("lidar"), dict) else None
     lidar3d = log.meta.get("lidar3d") if isinstance(log.meta.get("lidar3d"), dict) else None
-    scans = bool(log.of("scan")) or (bool(log.of("cloud")) and (config is None or config.use_cloud)
-                                     and kw.get("use_cloud", True))
+    scans = bool(log.of("scan")) or (bool(log.of("cloud")) and (config is None or config.scan.use_cloud)
+                                     and given_option(SmootherConfig, kw, "scan.use_cloud", True))
     imu_model = log.meta.get("imu") if isinstance(log.meta.get("imu"), dict) else None
     if log.meta.get("mounts") is not None:  # the log's mounts, the option's winning per sensor
         from .mounts import merged
@@ -135,8 +136,8 @@ class Navigator:
         self.space = self.builder.space
         self.nav = self.builder.nav
         self.last_state: NavPrev | None = None  # the Pose3 graph: the newest keyframe's full state
-        self.solver = Solver(cfg.solver, graph_params(cfg, self.space), lag=cfg.lag,
-                             lm=LmSettings(cfg.lm_tol, cfg.lm_max_iterations))
+        self.solver = Solver(cfg.solver, graph_params(cfg.optimizer, self.space), lag=cfg.optimizer.lag,
+                             lm=LmSettings(cfg.optimizer.lm_tol, cfg.optimizer.lm_max_iterations))
         self.groups: list[str] = []  # sensor group of every factor in solver.graph
         self.on_estimate = on_estimate
         self.history = history
@@ -207,8 +208,8 @@ class Navigator:
     def _update(self, s: Step) -> None:
         try:
             self.solver.update(s.graph, s.values, s.stamps, t=s.t, track=self._freeze if self.history else None,
-                               tracked=(F.X(s.k),) if s.new_keyframe else ())
-            self.solver.relinearize(self.cfg.isam_extra_updates)
+                               tracked=(F.X(s.k),) if s.new_keyframe else (), kept=s.kept())
+            self.solver.relinearize(self.cfg.optimizer.isam_extra_updates)
         except SolverError as exc:
             raise self._fail(exc, s.t) from None
         if self.solver.keep:
@@ -216,7 +217,7 @@ class Navigator:
 
     def _freeze(self, key: int) -> tuple[gtsam.Pose2, NDArray[np.float64] | None]:
         p = self.solver.estimate(key, self.space.pose_type)
-        cov = self.space.world_cov(p, self.solver.marginal(key)) if self.cfg.covariances else None
+        cov = self.space.world_cov(p, self.solver.marginal(key)) if self.cfg.optimizer.covariances else None
         return self.space.pose2(p), cov
 
     def _step(self, k: int) -> Estimate | None:
@@ -232,7 +233,7 @@ class Navigator:
                 self._front_step(s, k, loops)
                 return None
             self._take(s.values, k)
-            if self.cfg.batch_init == "incremental" and k + 1 >= self._next_init:
+            if self.cfg.optimizer.batch_init == "incremental" and k + 1 >= self._next_init:
                 self._initialise(k, s.t)
             return None
         pose, cov = self._newest(self.solver, k, s.t, loops)
@@ -240,8 +241,8 @@ class Navigator:
         self.last_pose, self.last_cov = pose, cov
         vec = _vec(pose)
         prev_t, prev_p = self.track.add(s.t, vec, cov)
-        if not self.history and (self.cfg.solver == "fixed-lag" and self.cfg.rebase_every
-                                 and k - self._base >= self.cfg.rebase_every):
+        if not self.history and (self.cfg.solver == "fixed-lag" and self.cfg.optimizer.rebase_every
+                                 and k - self._base >= self.cfg.optimizer.rebase_every):
             self._rebase(k, s.t)  # bounded: the fixed-lag smoother re-anchored
         if self.on_estimate is not None:
             self.on_estimate(s.t, vec, cov)
@@ -278,11 +279,11 @@ class Navigator:
         when the first scan brings the loop closer), and the loop closer observes its estimate."""
         try:
             if self.front is None:
-                self.front = Solver("isam2", graph_params(self.cfg, self.space), keep_graph=False)
+                self.front = Solver("isam2", graph_params(self.cfg.optimizer, self.space), keep_graph=False)
                 self.front.update(self.solver.graph, self.solver.initial)
             else:
                 self.front.update(s.graph, s.values)
-            self.front.relinearize(self.cfg.isam_extra_updates)
+            self.front.relinearize(self.cfg.optimizer.isam_extra_updates)
         except SolverError as exc:
             raise self._fail(exc, s.t) from None
         self.last_pose, self.last_cov = self._newest(self.front, k, s.t, loops)
@@ -301,7 +302,7 @@ class Navigator:
             raise self._fail(exc, t) from None
         self.solver.initial = values
         self._take(values, k)
-        self._next_init = max(k + 2, math.ceil((k + 1) * self.cfg.batch_init_growth))
+        self._next_init = max(k + 2, math.ceil((k + 1) * self.cfg.optimizer.batch_init_growth))
         e = self.extra
         e["batch_init_solves"] = e.get("batch_init_solves", 0) + 1
         e["batch_init_iterations"] = e.get("batch_init_iterations", 0) + it
@@ -359,7 +360,7 @@ class Navigator:
         cfg, b = self.cfg, self.builder
         n = len(b.kf_t)
         info = b.info()
-        info["config"] = asdict(cfg)
+        info["config"] = cfg.flat()
         info["solver"] = cfg.solver
         t = np.array(b.kf_t)
         if n == 0:
@@ -377,6 +378,8 @@ class Navigator:
         final_ms = (time.perf_counter() - c0) * 1e3
         final_cpu = (time.process_time() - p0) * 1e3
         self._final = values
+        if closing.kept is not None:  # fixed-lag without a history: the window only
+            t = t[closing.kept]
         traj = Trajectory(t, np.array(poses).reshape(-1, 3), np.array(covs) if covs is not None else None,
                           name=cfg.solver)
         info["final_ms"] = final_ms

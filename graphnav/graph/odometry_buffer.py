@@ -12,14 +12,14 @@ from numpy.typing import NDArray
 
 from ..geometry import increment
 from ..log import Odometry
-from .smoother_config import SmootherConfig
+from .smoother_config import OdometryConfig
 
 
 class OdometryBuffer:
     """Odometry samples ``t, v, w, sigma_v, sigma_w, density`` (``density`` 1: the sigmas are the
     configuration's noise densities, the record gave none)."""
 
-    def __init__(self, cfg: SmootherConfig) -> None:
+    def __init__(self, cfg: OdometryConfig) -> None:
         self.cfg = cfg
         self.t: list[float] = []
         self.rows: list[tuple[float, float, float, float, float, float]] = []
@@ -35,10 +35,10 @@ class OdometryBuffer:
         if not defaulted:
             row = (r.t, r.v, r.w, sv, sw, 0.0)
         else:  # the defaults: noise densities, relative to the speed and turn rate plus a floor
-            w_floor = math.radians(cfg.odo_sigma_w_deg)
+            w_floor = math.radians(cfg.sigma_w_deg)
             row = (r.t, r.v, r.w,
-                   sv if math.isfinite(sv) else math.hypot(cfg.odo_sigma_v, cfg.odo_sigma_v_rel * r.v),
-                   sw if math.isfinite(sw) else math.hypot(w_floor, cfg.odo_sigma_w_rel * r.w), 1.0)
+                   sv if math.isfinite(sv) else math.hypot(cfg.sigma_v, cfg.sigma_v_rel * r.v),
+                   sw if math.isfinite(sw) else math.hypot(w_floor, cfg.sigma_w_rel * r.w), 1.0)
         if self.t and r.t == self.t[-1]:
             self.rows[-1] = row  # the newest sample at a time holds (as searchsorted right does)
         elif self.t and r.t < self.t[-1]:  # a little late: in its place
@@ -68,7 +68,7 @@ class OdometryBuffer:
         lo = max(bisect.bisect_right(self.t, max(t0, self.t[0])) - 1, 0)
         hi = bisect.bisect_right(self.t, t1)
         samples = np.array(self.rows[lo:max(hi, lo + 1)], dtype=float)
-        inc = increment(samples, max(t0, self.t[0]), t1, lateral=self.cfg.odo_lateral)
+        inc = increment(samples, max(t0, self.t[0]), t1, lateral=self.cfg.lateral)
         if inc is None:
             return None
         return gtsam.Pose2(*inc[0]), inc[1]

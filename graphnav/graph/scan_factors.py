@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..log import Cloud, Scan
-from .smoother_config import SmootherConfig
+from .smoother_config import ScanConfig
 from .step import Step
 
 #: ``matcher(cur, prev, init, init_cov, guess_in_graph) -> (usable, pose, cov)``: ``init`` the motion
@@ -102,7 +102,7 @@ def mounted(matcher: Matcher | None, extrinsic: gtsam.Pose2 | None) -> Matcher |
     return match
 
 
-def make_loop_closer(cfg: SmootherConfig, icp_opts: dict[str, Any], extrinsic: gtsam.Pose2 | None = None) -> Any:
+def make_loop_closer(cfg: ScanConfig, icp_opts: dict[str, Any], extrinsic: gtsam.Pose2 | None = None) -> Any:
     """The loop closer of :mod:`graphnav.graph.loops` with the weighted ICP as its refinement and the
     graph's ICP covariance treatment (the match's own, as the consecutive factors; the loop closer
     adds its floor); ``None`` without the matcher. With a LiDAR ``extrinsic`` the places' points are
@@ -144,7 +144,7 @@ def scan_points_of(scan: Scan, icfg: Any) -> NDArray[np.float64]:
     return scan_points(scan, icfg)
 
 
-def screen_match(cfg: SmootherConfig, ok: bool, mp: Any, cov: NDArray[np.float64] | None, init: NDArray[np.float64],
+def screen_match(cfg: ScanConfig, ok: bool, mp: Any, cov: NDArray[np.float64] | None, init: NDArray[np.float64],
                  odo_rel: gtsam.Pose2 | None, odo_cov: NDArray[np.float64] | None) -> str | None:
     """Whether a scan or cloud match becomes a factor: ``"failed"`` (not usable, no proper
     covariance, not finite, or farther than ``icp_max_step`` from the guess), ``"gated"`` (beyond
@@ -166,7 +166,7 @@ class CloudPath:
     against the odometry like the 2D matches (``icp_gate``, ``icp_max_step``); z/roll/pitch of each
     match kept as diagnostics (docs/scan-matching-3d.md)."""
 
-    def __init__(self, cfg: SmootherConfig, lidar3d: dict[str, Any] | None,
+    def __init__(self, cfg: ScanConfig, lidar3d: dict[str, Any] | None,
                  extrinsic: gtsam.Pose2 | None = None) -> None:
         self.cfg = cfg
         self.extrinsic = extrinsic  # the LiDAR's planar mount: matches conjugated to the body frame
@@ -228,7 +228,7 @@ class ScanFactors:
     ``matcher``: replaces the weighted ICP (tests); ``lidar``: the log's LiDAR error model
     (``sigma_r_rel``, ``sigma_alpha``); ``mount``: the LiDAR's mount (its planar part is the extrinsic)."""
 
-    def __init__(self, cfg: SmootherConfig, space: Any, *, matcher: Matcher | None = None,
+    def __init__(self, cfg: ScanConfig, space: Any, *, matcher: Matcher | None = None,
                  lidar: dict[str, Any] | None = None, lidar3d: dict[str, Any] | None = None, mount: Any = None) -> None:
         self.cfg = cfg
         self.space = space

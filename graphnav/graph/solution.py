@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from . import gnc, noise
+from .chi2 import significant_scale
 from .smoother_config import SmootherConfig
 from .solver import Solver, levenberg_marquardt, marginals
 from .space import PlanarSpace
@@ -39,6 +40,7 @@ class Closing:
         self.cfg, self.solver, self.space = cfg, solver, space
         self.groups = groups
         self.rejected, self.defaulted = rejected, defaulted
+        self.kept: list[int] | None = None  # fixed-lag: the keyframes the solution holds (the window only in live mode)
 
     def solve(self, n: int, front: Solver | None, info: dict[str, Any]
               ) -> tuple[gtsam.Values, list[Vec], list[Vec | None] | None]:
@@ -49,17 +51,17 @@ class Closing:
         if cfg.solver == "fixed-lag":
             return self._window(n)
         if cfg.solver == "isam2":
-            solver.relinearize(cfg.final_updates)
+            solver.relinearize(cfg.optimizer.final_updates)
             values = solver.current()
-            if cfg.converge == "lm":
+            if cfg.optimizer.converge == "lm":
                 values = self.batch(values, info)
         else:  # with a loop closer's iSAM2 front end, its estimate is the one LM solve's start
             values = self.batch(front.current() if front is not None else solver.initial, info)
         p2 = [sp.read(values, F.X(k)) for k in range(n)]
         poses = [_vec(p) for p in p2]
         covs: list[Vec | None] | None = None
-        if cfg.covariances:
-            if cfg.solver == "isam2" and cfg.converge != "lm":
+        if cfg.optimizer.covariances:
+            if cfg.solver == "isam2" and cfg.optimizer.converge != "lm":
                 covs = [sp.world_cov(p2[k], solver.marginal(F.X(k))) for k in range(n)]
             else:
                 m = marginals(solver.graph, values)
@@ -67,21 +69,26 @@ class Closing:
         return values, poses, covs
 
     def _window(self, n: int) -> tuple[gtsam.Values, list[Vec], list[Vec | None] | None]:
-        """Fixed-lag: each pose as it left the window, the window's estimate for the rest."""
+        """Fixed-lag: each pose as it left the window, the window's estimate for the rest; without a history
+        (``Navigator(history=False)``) the poses that left it are gone: the keyframes kept are ``kept``."""
         cfg, solver, sp = self.cfg, self.solver, self.space
         values = solver.current()
         poses: list[Vec] = []
         covs: list[Vec | None] = []
+        self.kept = []
         for k in range(n):
             fr = solver.frozen.get(F.X(k))
             if fr is None:
+                if not values.exists(F.X(k)):  # left the window without a history (live mode): not kept
+                    continue
                 p = sp.read(values, F.X(k))
-                c = sp.world_cov(p, solver.marginal(F.X(k))) if cfg.covariances else None
+                c = sp.world_cov(p, solver.marginal(F.X(k))) if cfg.optimizer.covariances else None
             else:
                 p, c = fr
             poses.append(_vec(p))
             covs.append(c)
-        return values, poses, covs if cfg.covariances else None
+            self.kept.append(k)
+        return values, poses, covs if cfg.optimizer.covariances else None
 
     def batch(self, init: gtsam.Values, info: dict[str, Any]) -> gtsam.Values:
         """LM over the whole graph from ``init``; gross GNSS outliers (residual beyond ``gnss_gate``
@@ -90,23 +97,23 @@ class Closing:
         cfg, lm = self.cfg, self.solver.lm
         c0 = time.perf_counter()
         graph = self.solver.graph
-        if self.rejected and cfg.robust_backend == "gnc":  # the fixes the online gate rejected, reconsidered
+        if self.rejected and cfg.robust.backend == "gnc":  # the fixes the online gate rejected, reconsidered
             graph = gtsam.NonlinearFactorGraph(graph)
             for f in self.rejected:
                 graph.add(f)
             self.groups = self.groups + ["gnss"] * len(self.rejected)
             info["gnss_reconsidered"] = len(self.rejected)
         values, iters = levenberg_marquardt(graph, init, lm)
-        if cfg.robust_backend == "gnc":
+        if cfg.robust.backend == "gnc":
             graph, self.groups, values, info["switched_off"] = gnc.switch_off(
-                graph, values, self.groups, lm, cfg.robust_prob, cfg.robust_groups)
+                graph, values, self.groups, lm, cfg.robust.prob, cfg.robust.groups)
         dropped = 0
-        for _ in range(3 if cfg.gnss_gate is not None else 0):
+        for _ in range(3 if cfg.gnss.gate is not None else 0):
             # the gate in the fixes' own scatter nearby (a receiver's stated sigma may be optimistic: Solent s2
             # states 7 m for 20 m fixes, and a gate on the stated sigma dropped 210 of 555 correct fixes)
             scale = gnc.factor_scales(graph, values, self.groups, ["gnss"])
             keep = [i for i in range(graph.size()) if not (self.groups[i] == "gnss" and noise.whitened_norm(
-                graph.at(i), values, robust=False) > cfg.gnss_gate * np.sqrt(scale.get(i, 1.0)))]
+                graph.at(i), values, robust=False) > cfg.gnss.gate * np.sqrt(scale.get(i, 1.0)))]
             if len(keep) == graph.size():
                 break
             dropped += graph.size() - len(keep)
@@ -116,12 +123,13 @@ class Closing:
             iters += it
         info["gnss_dropped_after_lm"] = dropped
         graph, values = self._inflate_gnss(graph, values, info)
-        if cfg.noise_estimation != "off":
-            scalable = noise.SCALABLE if cfg.noise_estimation == "all" else tuple(
+        if cfg.robust.noise_estimation != "off":
+            scalable = noise.SCALABLE if cfg.robust.noise_estimation == "all" else tuple(
                 g for g in noise.SCALABLE if g in self.defaulted)
-            graph, values, vce = noise.estimate_scales(graph, values, self.groups, scalable, cfg.noise_iterations, lm)
+            graph, values, vce = noise.estimate_scales(graph, values, self.groups, scalable,
+                                                       cfg.robust.noise_iterations, lm)
             info["noise_scale"] = vce
-        info["odometry_consistency"] = gnc.odometry_consistency(graph, values, self.groups, cfg.robust_prob)
+        info["odometry_consistency"] = gnc.odometry_consistency(graph, values, self.groups, cfg.robust.prob)
         self.solver.graph = graph
         info["lm_iterations"] = iters
         info["converge_ms"] = (time.perf_counter() - c0) * 1e3
@@ -136,7 +144,7 @@ class Closing:
         scale = gnc.factor_scales(graph, values, self.groups, ["gnss"])
         if not scale:
             return graph, values
-        bound = gnc.significant_scale(2, self.cfg.robust_prob)  # a fix measures 2 axes (its height is the surface)
+        bound = significant_scale(2, self.cfg.robust.prob)  # a fix measures 2 axes (its height is the surface)
         big = {i: s for i, s in scale.items() if s > bound}
         info["gnss_inflated"] = {"fixes": len(big), "of": len(scale),
                                  "median_scale": float(np.median(list(big.values()))) if big else 1.0}

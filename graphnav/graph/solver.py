@@ -138,12 +138,13 @@ class Solver:
     def update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                stamps: Mapping[int, float] | None = None, *, t: float | None = None,
                track: Callable[[int], tuple[Any, NDArray[np.float64] | None]] | None = None,
-               tracked: tuple[int, ...] = ()) -> None:
+               tracked: tuple[int, ...] = (), kept: gtsam.NonlinearFactorGraph | None = None) -> None:
         """Add new factors and variables. Fixed-lag: ``stamps`` are the keys' times, ``t`` the
         newest time; before the update, each key of ``tracked`` (registered in earlier updates) older
-        than ``t - lag`` is frozen with ``track(key)`` (its last estimate and marginal)."""
+        than ``t - lag`` is frozen with ``track(key)`` (its last estimate and marginal). ``kept``: the
+        same factors as the closing step is to solve them (default ``graph``)."""
         if self.keep:
-            self.graph.push_back(graph)
+            self.graph.push_back(graph if kept is None else kept)
             self.initial.insert(values)
         try:
             if self.kind == "isam2":

@@ -23,7 +23,21 @@ class Step:
     icp_ms: float | None = None
     new_keyframe: bool = True  # False: late measurements after the last keyframe (finish)
     space: PlanarSpace = field(default_factory=PlanarSpace)  # the variables' types (graphnav.graph.space)
+    #: factors the closing step solves instead of the online one at the same index (a GNSS fix at its stated
+    #: sigma where the online estimate inflated it): batch and the closing of iSAM2 solve one problem
+    closing: dict[int, gtsam.NonlinearFactor] = field(default_factory=dict)
 
-    def add(self, factor: gtsam.NonlinearFactor, group: str) -> None:
+    def add(self, factor: gtsam.NonlinearFactor, group: str, closing: gtsam.NonlinearFactor | None = None) -> None:
+        if closing is not None:
+            self.closing[self.graph.size()] = closing
         self.graph.add(factor)
         self.groups.append(group)
+
+    def kept(self) -> gtsam.NonlinearFactorGraph:
+        """The factors as the closing step solves them (:attr:`closing` substituted)."""
+        if not self.closing:
+            return self.graph
+        out = gtsam.NonlinearFactorGraph()
+        for i in range(self.graph.size()):
+            out.add(self.closing.get(i, self.graph.at(i)))
+        return out

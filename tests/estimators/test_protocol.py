@@ -39,11 +39,14 @@ def test_list_options_text_is_the_field_metadata(name, capsys):
     opts = describe(name)
     if not opts:
         assert lines[1:] == ["  (none)"]
-    for o in opts:  # each option: its name, default (JSON), type, then its unit and meaning on the next line
-        i = next(k for k, line in enumerate(lines) if line.split()[:1] == [o["name"]])
-        rest = lines[i].strip().removeprefix(o["name"]).strip()
+    for o in opts:  # each option under its group: its name (in a section: its key, the flat name at the end),
+        # default (JSON), type, then its unit and meaning on the next line
+        key = o.get("path", o["name"]).rpartition(".")[2]
+        start = next(k for k, line in enumerate(lines) if line.startswith(f"  [{o['group']}]"))
+        i = next(k for k, line in enumerate(lines) if k > start and line.split()[:1] == [key])
+        rest = lines[i].strip().removeprefix(key).strip()
         assert rest.startswith(json.dumps(list(o["default"]) if isinstance(o["default"], tuple) else o["default"]))
-        assert rest.endswith(" " + o["type"])
+        assert rest.endswith(" " + o["type"] + (f"  ({o['name']})" if key != o["name"] else ""))
         assert lines[i + 1].strip() == (f"[{o['unit']}] " if o["unit"] else "") + o["meaning"].removeprefix(
             f"[{o['unit']}] " if o["unit"] else "")
         assert "``" not in lines[i + 1] and ":class:" not in lines[i + 1]  # plain text, no reST
@@ -120,7 +123,7 @@ def test_a_smoother_publishes_estimates_as_records_arrive():
 def test_one_registry_for_batch_and_live():
     assert estimators.online_names() == ["ekf", "fixed-lag", "isam2"]
     nav = estimators.make_online("fixed-lag", lag=3.0)
-    assert isinstance(nav, Navigator) and nav.cfg.solver == "fixed-lag" and nav.cfg.lag == 3.0
+    assert isinstance(nav, Navigator) and nav.cfg.solver == "fixed-lag" and nav.cfg.optimizer.lag == 3.0
     with pytest.raises(ValueError, match="no online form of estimator 'ukf'.*have: ekf, fixed-lag, isam2"):
         estimators.make_online("ukf")
     with pytest.raises(ValueError, match="contradicts"):

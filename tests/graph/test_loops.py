@@ -120,7 +120,7 @@ def _corridor_with_doors(period: float = 6.0, length: float = 120.0) -> np.ndarr
 
 def _closer(**loop):
     cfg = SmootherConfig(loop=loop)
-    return make_loop_closer(cfg, {}), cfg
+    return make_loop_closer(cfg.scan, {}), cfg
 
 
 def _step():

@@ -39,8 +39,8 @@ def test_random_walk_factor_grows_with_dt_and_stays_proper_at_zero(dt):
     cfg = SmootherConfig()
     mean, cov, name = GraphBuilder(cfg).motion.prior(dt)
     assert name == "random-walk" and np.allclose(gtsam.Pose2.Logmap(mean), 0)
-    floor = np.array([cfg.motion_floor_xy] * 2 + [math.radians(cfg.motion_floor_yaw_deg)])
-    rate = np.array([cfg.rw_sigma_v] * 2 + [math.radians(cfg.rw_sigma_w_deg)])
+    floor = np.array([cfg.dynamics.floor_xy] * 2 + [math.radians(cfg.dynamics.floor_yaw_deg)])
+    rate = np.array([cfg.dynamics.rw_sigma_v] * 2 + [math.radians(cfg.dynamics.rw_sigma_w_deg)])
     np.testing.assert_allclose(cov, np.diag(floor**2 + (rate * dt) ** 2))
     assert np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0)
 
@@ -52,8 +52,8 @@ def test_constant_velocity_factor_extrapolates_the_last_twist():
     mean, cov, name = b.motion.prior(2.0)
     assert name == "constant-velocity"
     np.testing.assert_allclose(gtsam.Pose2.Logmap(mean), [2.0, 0.0, 0.4], atol=1e-12)
-    floor = np.array([cfg.motion_floor_xy] * 2 + [math.radians(cfg.motion_floor_yaw_deg)])
-    rate = np.array([cfg.cv_sigma_v] * 2 + [math.radians(cfg.cv_sigma_w_deg)])
+    floor = np.array([cfg.dynamics.floor_xy] * 2 + [math.radians(cfg.dynamics.floor_yaw_deg)])
+    rate = np.array([cfg.dynamics.cv_sigma_v] * 2 + [math.radians(cfg.dynamics.cv_sigma_w_deg)])
     np.testing.assert_allclose(cov, np.diag(floor**2 + (rate * 2.0) ** 2))
     assert GraphBuilder(SmootherConfig(motion_model="random-walk")).motion.prior(1.0)[2] == "random-walk"
 
@@ -68,7 +68,7 @@ def test_random_walk_posterior_between_a_prior_and_a_fix():
     nav.add(Gnss(1.0, 3.0, -1.0, 2.0))
     traj = nav.smoothed()
     np.testing.assert_allclose(traj.t, [0.0, 0.5, 1.0])
-    q = 2 * (cfg.motion_floor_xy**2 + (cfg.rw_sigma_v * 0.5) ** 2)
+    q = 2 * (cfg.dynamics.floor_xy**2 + (cfg.dynamics.rw_sigma_v * 0.5) ** 2)
     k = q / (q + 4.0)
     np.testing.assert_allclose(traj.poses[2, :2], [3.0 * k, -1.0 * k], atol=1e-6)
     # (+0.16 %: the yaw random walk of the middle pose turns its 1 m step a little)
@@ -327,12 +327,12 @@ def test_gnss_speed_over_ground_constant_velocity_fallback():
     np.testing.assert_allclose(gtsam.Pose2.Logmap(mean), [2.0 * dt, 0.0, 0.0], atol=1e-12)
     age, tw = 3.0, ts[3:]
     speed_sigma = 2.0 / math.sqrt(float(np.sum((tw - tw.mean()) ** 2)))
-    sxy = math.sqrt(cfg.cv_sigma_v**2 + speed_sigma**2 + (cfg.cv_accel * age) ** 2) * dt
-    floor = np.array([cfg.motion_floor_xy] * 2 + [math.radians(cfg.motion_floor_yaw_deg)])
-    np.testing.assert_allclose(cov, np.diag(floor**2 + np.array([sxy, sxy, math.radians(cfg.cv_sigma_w_deg) * dt])
-                                            ** 2), rtol=1e-12)
+    sxy = math.sqrt(cfg.dynamics.cv_sigma_v**2 + speed_sigma**2 + (cfg.dynamics.cv_accel * age) ** 2) * dt
+    floor = np.array([cfg.dynamics.floor_xy] * 2 + [math.radians(cfg.dynamics.floor_yaw_deg)])
+    sw = math.radians(cfg.dynamics.cv_sigma_w_deg) * dt
+    np.testing.assert_allclose(cov, np.diag(floor**2 + np.array([sxy, sxy, sw]) ** 2), rtol=1e-12)
     # older than cv_max_age: nothing known, the random walk
-    assert b.motion.prior(dt, 10.0 + cfg.cv_max_age + 1.0)[2] == "random-walk"
+    assert b.motion.prior(dt, 10.0 + cfg.dynamics.cv_max_age + 1.0)[2] == "random-walk"
 
 
 def test_gnss_speed_below_three_sigma_is_no_motion_and_few_fixes_are_not_used():
@@ -368,8 +368,8 @@ def test_odometry_over_an_interval_closed_form_and_rate_independent(rate):
         else:
             np.testing.assert_allclose([pose.x(), pose.y(), pose.theta()], [v * T, 0.0, 0.0], atol=1e-12)
             n = len([s for s in np.arange(0.0, 10.0, 1.0 / rate) if t0 < s < t1 - 1e-12]) + 1  # sub-arcs
-            sv = math.hypot(cfg.odo_sigma_v, cfg.odo_sigma_v_rel * v)
-            sw = math.radians(cfg.odo_sigma_w_deg)
+            sv = math.hypot(cfg.odometry.sigma_v, cfg.odometry.sigma_v_rel * v)
+            sw = math.radians(cfg.odometry.sigma_w_deg)
             assert cov[0, 0] == pytest.approx(sv**2 * T + n * 1e-8, rel=1e-9)
             assert cov[2, 2] == pytest.approx(sw**2 * T + n * 1e-8, rel=1e-9)
 

@@ -170,3 +170,18 @@ def test_navigator_gives_graphnav_runs_online_ate_on_the_embedded_harbour():
     assert a == pytest.approx(b, rel=0.05)
     assert ate(nav.smoothed(), truth, max_dt=0.02)["rmse"] == pytest.approx(
         ate(ref.trajectory, truth, max_dt=0.02)["rmse"], rel=0.05)
+
+
+def test_fixed_lag_without_history_returns_its_window():
+    """Live mode (history=False) keeps neither the online track nor the poses that left the fixed-lag
+    window: the result is the window (it failed with "x0 does not exist" before)."""
+    from graphnav.sim.solent import simulate_solent
+
+    log = simulate_solent(scenario=1, seed=0, max_steps=80)
+    nav = Navigator.for_log(log, solver="fixed-lag", lag=10.0, history=False, covariances=False)
+    for r in log:
+        nav.add(r)
+    res = nav.result()
+    t = res.trajectory.t
+    assert len(res.online) == 0 and 5 <= len(t) <= 25
+    assert t[-1] >= log.t1 - 1.0 and t[0] >= log.t1 - 10.0 - 2.0

@@ -7,8 +7,8 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from graphnav.graph.chi2 import chi2_median
-from graphnav.graph.gnc import factor_scales, group_scales, odometry_consistency, significant_scale, switch_off
+from graphnav.graph.chi2 import chi2_median, significant_scale
+from graphnav.graph.gnc import factor_scales, group_scales, odometry_consistency, switch_off
 from graphnav.graph.noise import _measured
 from graphnav.graph.solver import LmSettings, levenberg_marquardt
 
@@ -88,7 +88,7 @@ def test_robust_options_are_checked():
                 {"robust_backend": "dcs"}):
         with pytest.raises(ValueError):
             SmootherConfig(**bad)
-    assert SmootherConfig(robust_groups=["icp", "loop"]).robust_groups == ["icp", "loop"]
+    assert SmootherConfig(robust_groups=["icp", "loop"]).robust.groups == ["icp", "loop"]
 
 
 def _fixes(sigmas: list[float], stated: float = 1.0, seed: int = 0):
@@ -139,3 +139,34 @@ def test_measured_rows_leave_out_the_graphs_own_pseudo_rows():
     assert _measured(emb, "cloud").all()  # a 3D match measures all six
     p2 = gtsam.PoseRotationPrior2D(0, gtsam.Rot2(0.0), gtsam.noiseModel.Isotropic.Sigma(1, 0.1))
     assert _measured(p2, "compass").tolist() == [True]
+
+
+def test_online_gnss_scale_finds_a_receiver_noisier_than_stated():
+    """Innovations of fixes 3x noisier than stated (prediction covariance P = 1 m^2 per axis): the
+    online scale is the variance ratio 9 within sampling error; fixes as stated keep scale 1."""
+    from graphnav.graph.measurements import GnssScale
+
+    rng = np.random.default_rng(3)
+    P = np.eye(2)
+    for true, lo, hi in ((3.0, 7.0, 11.5), (1.0, 1.0, 1.0)):
+        sc = GnssScale(0.99)
+        for _ in range(200):
+            sc.add(rng.normal(0.0, 1.0, 2) + rng.normal(0.0, true, 2), P, 1.0)
+        assert lo <= sc.scale <= hi
+
+
+def test_gnc_leaves_chance_exceedances_of_gnss_alone_and_catches_a_gross_fix():
+    """300 consistent fixes: a few lie beyond the 99 % bound by chance (about 3), GNC does not run; one
+    fix 30 sigma off lies beyond the family-wise bound and GNC switches it off."""
+    g, groups, values = _fixes([1.0] * 300, seed=5)
+    _, _, _, rep = switch_off(g, values, list(groups), LmSettings(1e-10, 100))
+    assert rep["beyond_bound"] <= rep["chance_bound"] and rep["ran"] is False
+    g2 = gtsam.NonlinearFactorGraph(g)
+    i = [k for k, gi in enumerate(groups) if gi == "gnss"][150]
+    g2.replace(i, gtsam.PoseTranslationPrior2D(150, np.array([150.0, 30.0]), gtsam.noiseModel.Isotropic.Sigma(2, 1.0)))
+    values2, _ = levenberg_marquardt(g2, values, LmSettings(1e-10, 100))
+    out, _, _, rep2 = switch_off(g2, values2, list(groups), LmSettings(1e-10, 100))
+    assert rep2["ran"] is True and 1 <= rep2["switched_off"]["gnss"] <= 3
+    kept = [np.asarray(out.at(k).measured()) for k in range(out.size())
+            if isinstance(out.at(k), gtsam.PoseTranslationPrior2D)]
+    assert not any(np.allclose(m, [150.0, 30.0]) for m in kept)  # the gross fix is among those let go

@@ -195,7 +195,7 @@ def test_run_cli_json(tmp_path):
 def test_unknown_option_is_an_error(square):
     with pytest.raises(ValueError, match="unknown smoother option"):
         estimators.run("isam2", square, lagg=3)
-    assert SmootherConfig.from_options({"lag": 3.0}).lag == 3.0
+    assert SmootherConfig.from_options({"lag": 3.0}).optimizer.lag == 3.0
 
 
 def test_keyframe_policy():
@@ -293,7 +293,7 @@ def test_batch_incremental_initialisation_is_causal_better_and_reaches_the_same_
     np.testing.assert_allclose(inc_r.trajectory.poses, ch_r.trajectory.poses, atol=1e-5)
     n, solves, nxt = len(inc.builder.kf_t), 0, BATCH_INIT_FIRST
     while nxt <= n:
-        solves, nxt = solves + 1, max(nxt + 1, math.ceil(nxt * inc.cfg.batch_init_growth))
+        solves, nxt = solves + 1, max(nxt + 1, math.ceil(nxt * inc.cfg.optimizer.batch_init_growth))
     assert solves >= 3 and inc_r.info["batch_init_solves"] == solves and "batch_init_solves" not in ch_r.info
     # causal: a run on the log cut at t_cut has the very guess the full run had at that time
     cut = Navigator.for_log(log, solver="batch", covariances=False)
