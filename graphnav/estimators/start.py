@@ -53,7 +53,8 @@ def _source_time(held: list[Record], name: str, charted: set[str]) -> float:
 
 def log_start(log: NavLog) -> Start:
     """The start pose of ``log`` by the graph's anchor rule (the module docstring)."""
-    anchor = Anchor(SmootherConfig())
+    cfg = SmootherConfig()  # the graph's defaults (graphnav.graph.builder.GraphBuilder takes the same two parts)
+    anchor = Anchor(cfg.anchor, cfg.mounts)
     charted = {b.id: b for b in log.beacons_known}
     for rec in log.records:  # as the graph's builder takes them (graphnav.graph.builder.GraphBuilder.push)
         if anchor.ready_for(rec, charted):

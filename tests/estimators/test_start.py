@@ -36,7 +36,8 @@ def test_the_prior_wins_at_its_own_time():
 def test_gnss_and_compass_not_the_truth():
     g, h = Gnss(0.3, 1.0, 2.0, 3.0), Heading(0.6, 0.2, 0.03)
     s = log_start(_log(Truth(0.0, 5.0, 6.0, 0.7), g, h, Gnss(1.0, 9.0, 9.0, 3.0), Heading(1.0, 1.5, 0.03)))
-    pose, sigmas, name = choose_anchor([g, h], {}, SmootherConfig())  # the graph's, from the same two
+    cfg = SmootherConfig()
+    pose, sigmas, name = choose_anchor([g, h], {}, cfg.anchor, cfg.mounts)  # the graph's, from the same two
     assert s.name == name == "first GNSS+compass" and s.t == 0.3
     np.testing.assert_array_equal(s.pose, [1.0, 2.0, 0.2])
     np.testing.assert_array_equal(s.pose, pose)
