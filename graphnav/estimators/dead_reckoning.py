@@ -1,7 +1,8 @@
 """Dead reckoning from the ship's log and rate-of-turn sensor (odometry records), else from the IMU.
 
 The simplest baseline: integrate ``v`` and ``w`` with the unicycle model (the beacon paper's
-motion model, eq. 3), starting at the log's pose prior, else the first truth pose, else the origin.
+motion model, eq. 3), starting where the graph's anchor does (:mod:`graphnav.estimators.start`: the log's
+pose prior, else the first GNSS fix and compass reading, ...).
 A log without odometry but with an IMU (a USV's) is dead-reckoned from the IMU alone: planar
 strapdown integration of the body-frame specific force and yaw rate (each record the mean over the
 interval since the previous one), from the same start pose and ``meta["initial_velocity"]`` (zero
@@ -20,6 +21,7 @@ from ..result import OnEstimate, RunResult
 from ..scan.imu_guess import strapdown_step
 from ..trajectory import Trajectory
 from .base import BatchEstimator
+from .start import start_pose
 
 
 def unicycle_step(pose: np.ndarray, v: float, w: float, dt: float) -> np.ndarray:
@@ -31,17 +33,6 @@ def unicycle_step(pose: np.ndarray, v: float, w: float, dt: float) -> np.ndarray
     r = v / w
     return np.array([x + r * (np.sin(th2) - np.sin(th)), y - r * (np.cos(th2) - np.cos(th)),
                      wrap_angle(th2)])
-
-
-def start_pose(log: NavLog) -> tuple[np.ndarray, str]:
-    """Initial pose and where it came from (``pose_prior``, ``truth`` or ``origin``)."""
-    prior = log.pose_prior()
-    if prior is not None:
-        return np.array([prior.x, prior.y, prior.yaw]), "pose_prior"
-    for r in log.records:
-        if r.kind == "truth":
-            return np.array([r.x, r.y, r.yaw]), "truth"
-    return np.zeros(3), "origin"
 
 
 def run_dead_reckoning(log: NavLog, *, on_estimate: OnEstimate | None = None) -> RunResult:

@@ -7,8 +7,8 @@ constant velocity) and the
 increment is composed onto the previous pose; the covariance is propagated to first order
 (``P' = Ad P Ad^T + Q`` in the body frame, GTSAM's convention) and reported in the world frame
 (the :class:`~graphnav.trajectory.Trajectory` convention).
-The start pose is the log's pose prior, else the first truth pose, else the origin
-(:func:`graphnav.estimators.dead_reckoning.start_pose`). Initial guesses come from
+The start pose is the graph's anchor: the log's pose prior, else the first GNSS fix and compass
+reading, ... (:func:`graphnav.estimators.start.log_start`). Initial guesses come from
 :class:`~graphnav.scan.motion_guess.MotionGuess` (never from a flagged match). A flagged match (``ok``
 False: degenerate geometry, too few points or inliers, not converged, or beyond the odometry guess's
 99.9 % bound) is bridged by the odometry increment with its
@@ -33,12 +33,12 @@ from ..geometry import cov_to_world, se2_adjoint_inv, se2_compose
 from ..log import NavLog, Scan, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan import icp_cache
-from ..scan.imu_guess import ImuGuess, fuse_se2, imu_samples
+from ..scan.imu_guess import ImuGuess, fuse_se2, log_imu_guess
 from ..scan.motion_guess import MotionGuess
 from ..scan.weighted_icp import IcpConfig, scan_points
 from ..trajectory import Trajectory
 from .base import BatchEstimator
-from .dead_reckoning import start_pose
+from .start import log_start
 
 _CONFIG_FIELDS = {f.name for f in fields(IcpConfig)}
 
@@ -120,21 +120,17 @@ class _KeyframeChain:
 
 
 def _first_scans(log: NavLog, sigma_xy0: float, sigma_yaw0: float) -> tuple[np.ndarray, str, np.ndarray, list[Scan]]:
-    """The start pose, where it came from, its covariance (a pose prior's own sigmas win) and the scans
-    from the one at the anchor's time (earlier scans have no pose)."""
-    pose, anchor = start_pose(log)
-    prior = log.pose_prior()
-    t_anchor = None
-    if prior is not None:
-        sigma_xy0, sigma_yaw0 = prior.sigma_xy, prior.sigma_yaw
-        t_anchor = prior.t
-    elif anchor == "truth":
-        t_anchor = log.of("truth")[0].t
+    """The start pose (:func:`graphnav.estimators.start.log_start`), where it came from, its covariance
+    (the anchor's own sigmas win unless it is only a frame) and the scans from the one at the anchor's
+    time (earlier scans have no pose)."""
+    start = log_start(log)
+    if not start.is_frame:
+        sigma_xy0, sigma_yaw0 = float(start.sigmas[0]), float(start.sigmas[2])
     scans = log.of("scan")
-    if t_anchor is not None:
-        first = int(np.searchsorted([s.t for s in scans], t_anchor - 1e-6))
+    if np.isfinite(start.t):
+        first = int(np.searchsorted([s.t for s in scans], start.t - 1e-6))
         scans = scans[min(first, len(scans) - 2):]
-    return pose, anchor, np.diag([sigma_xy0**2, sigma_xy0**2, sigma_yaw0**2]), scans
+    return start.pose, start.name, np.diag([sigma_xy0**2, sigma_xy0**2, sigma_yaw0**2]), scans
 
 
 def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: str = "HDL",
@@ -145,8 +141,8 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
     "zero"; :class:`~graphnav.scan.motion_guess.MotionGuess`),
     any :class:`IcpConfig` field, ``guess_cov`` (False: the odometry guess goes without its covariance,
     so a match is not tested against it), the start pose's 1-sigma (``sigma_xy0``, ``sigma_yaw0``;
-    a pose prior's own sigmas win), and with the IMU's guess the keyframe rule (``keyframe_dist`` [m],
-    ``keyframe_angle_deg``: the scan-to-map baseline's)."""
+    the anchor's own sigmas win: a pose prior's, the first GNSS fix's, ...), and with the IMU's guess the
+    keyframe rule (``keyframe_dist`` [m], ``keyframe_angle_deg``: the scan-to-map baseline's)."""
     unknown = set(options) - _CONFIG_FIELDS
     if unknown:
         raise ValueError(f"unknown icp-dr options: {', '.join(sorted(unknown))}")
@@ -172,14 +168,7 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
 
 def _imu_guess(log: NavLog, pose: np.ndarray) -> ImuGuess | None:
     """The IMU's prediction for a log without odometry (the log's IMU model and start velocity)."""
-    if len(log.of("odometry")) >= 2:
-        return None
-    samples = imu_samples(log)
-    meta = log.meta if isinstance(log.meta, dict) else {}
-    v0 = meta.get("initial_velocity")
-    guess = ImuGuess(samples, meta.get("imu"), None if v0 is None else np.asarray(v0, dtype=float)[:2],
-                     float(pose[2]))
-    return guess if guess else None
+    return None if len(log.of("odometry")) >= 2 else log_imu_guess(log, float(pose[2]))
 
 
 def _guess_source(g: MotionGuess) -> str:
@@ -208,8 +197,9 @@ class IcpDrConfig(IcpConfig):
                        "else the IMU's prediction when it has an IMU, else constant velocity), imu, cv or zero")
     guess_cov: bool = option(True, "false: the odometry guess goes without its covariance, so a match is not tested "
                              "against it")
-    sigma_xy0: float = option(0.0, "the start pose's 1-sigma in x and y (a pose prior's own sigmas win)", unit="m")
-    sigma_yaw0: float = option(0.0, "the start pose's yaw 1-sigma (a pose prior's own sigmas win)", unit="rad")
+    sigma_xy0: float = option(0.0, "the start pose's 1-sigma in x and y (the anchor's own sigmas win: a pose "
+                              "prior's, the first GNSS fix's, ...)", unit="m")
+    sigma_yaw0: float = option(0.0, "the start pose's yaw 1-sigma (the anchor's own sigmas win)", unit="rad")
     keyframe_dist: float = option(1.0, "with the IMU's guess: a scan becomes a keyframe after the vessel moved "
                                   "this far (the scan-to-map baseline's rule)", unit="m")
     keyframe_angle_deg: float = option(10.0, "with the IMU's guess: ... or turned this much", unit="deg")

@@ -34,7 +34,7 @@ from ..log import NavLog, Scan, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan.covariance import SAMPLING_VARIANCE, sandwich
 from ..scan.degeneracy import analyse, flatness, keep_constrained, line_information
-from ..scan.imu_guess import ImuGuess, fuse_se2, imu_samples
+from ..scan.imu_guess import ImuGuess, fuse_se2, log_imu_guess
 from ..scan.registration import (
     Params,
     Target,
@@ -47,8 +47,8 @@ from ..scan.registration import (
 )
 from ..trajectory import Trajectory
 from .base import BatchEstimator
-from .dead_reckoning import start_pose
 from .scan_to_map3d import cloud_configs, run_scan_to_map3d, usable_clouds
+from .start import log_start
 
 
 @dataclass(frozen=True)
@@ -263,21 +263,13 @@ def _imu_guess(log: NavLog, cfg: ScanToMapConfig, pose0: np.ndarray, odo: np.nda
     """The IMU's prediction when ``predict`` asks for it (or for odometry the log does not have)."""
     if not (cfg.predict == "imu" or (cfg.predict == "odometry" and not len(odo))):
         return None
-    meta = log.meta if isinstance(log.meta, dict) else {}
-    v0 = meta.get("initial_velocity")
-    imu = ImuGuess(imu_samples(log), meta.get("imu"), None if v0 is None else np.asarray(v0, dtype=float)[:2],
-                   float(pose0[2]))
-    return imu if imu else None
+    return log_imu_guess(log, float(pose0[2]))
 
 
 def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
     cfg = make_config(**options)
-    pose0, anchor = start_pose(log)
-    t_anchor = -np.inf
-    if anchor == "pose_prior":
-        t_anchor = log.pose_prior().t
-    elif anchor == "truth":
-        t_anchor = log.of("truth")[0].t
+    start = log_start(log)  # the graph's anchor: the pose prior, else the first GNSS fix and compass reading, ...
+    pose0, anchor, t_anchor = start.pose, start.name, start.t
     if _usable_scans(log) < 2 and usable_clouds(log) >= 2:
         res = run_scan_to_map3d(log, pose0, predict=cfg.predict, max_correction=cfg.max_correction,
                                 min_fitness=cfg.min_fitness, cloud=cfg.cloud, cloud_map=cfg.cloud_map,

@@ -9,8 +9,10 @@ increment when the log has odometry (``predict="odometry"``), else the IMU's
 (:class:`graphnav.scan.imu_guess.ImuGuess`, its velocity corrected by every match), else constant
 velocity. A match farther than ``max_correction`` from the prediction, or with an inlier fraction
 below ``min_fitness``, is rejected: the prediction stands and the cloud stays out of the map. The
-map's frame is the first cloud's levelled frame placed at the start pose; the trajectory is each
-cloud's planar pose ``(x, y, yaw)`` in it -- odometry, so it drifts.
+map's frame is the first cloud's levelled frame placed at the start pose (the graph's anchor:
+:func:`graphnav.estimators.start.log_start`; the IMU's start velocity is taken into the body frame
+of its yaw); the trajectory is each cloud's planar pose ``(x, y, yaw)`` in it -- odometry, so it
+drifts, and the start pose's error (its heading's above all) stays in it.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from ..log import Cloud, NavLog, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan.cloud_map import MIN_FRAME_POINTS, CloudMap, CloudMapConfig, MapMatch
 from ..scan.cloud_match import CloudMatchConfig, filter_cloud, planar_matrix, project_se2
-from ..scan.imu_guess import ImuGuess, imu_samples
+from ..scan.imu_guess import ImuGuess, log_imu_guess
 from ..scan.native_stderr import NativeWarnings
 from ..trajectory import Trajectory
 
@@ -64,11 +66,7 @@ class CloudGuess:
         self.odo = odometry_samples(log) if predict == "odometry" else np.zeros((0, 5))
         self.imu: ImuGuess | None = None
         if predict == "imu" or (predict == "odometry" and not len(self.odo)):
-            meta = log.meta if isinstance(log.meta, dict) else {}
-            v0 = meta.get("initial_velocity")
-            imu = ImuGuess(imu_samples(log), meta.get("imu"), None if v0 is None else np.asarray(v0, dtype=float)[:2],
-                           yaw0)
-            self.imu = imu if imu else None
+            self.imu = log_imu_guess(log, yaw0)
         self.sources: dict[str, int] = {}
 
     def guess(self, ts: list[float], rel: list[np.ndarray], t: float) -> np.ndarray:

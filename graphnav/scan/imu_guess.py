@@ -145,3 +145,14 @@ class ImuGuess:
         self.P = rot_t @ self.P @ rot_t.T + np.eye(2) * (self.q_acc * dt + (self.b_acc * dt) ** 2)
         self.P = 0.5 * (self.P + self.P.T)
         self._pred = None
+
+
+def log_imu_guess(log: NavLog, yaw0: float) -> ImuGuess | None:
+    """The IMU's prediction on ``log`` (None without two IMU records): its ``meta["imu"]`` model and
+    ``meta["initial_velocity"]`` (world frame, over ground), taken into the body frame of the start
+    pose's yaw ``yaw0`` -- the frame the odometry starts in."""
+    meta = log.meta if isinstance(log.meta, dict) else {}
+    v0 = meta.get("initial_velocity")
+    guess = ImuGuess(imu_samples(log), meta.get("imu"), None if v0 is None else np.asarray(v0, dtype=float)[:2],
+                     float(yaw0))
+    return guess if guess else None

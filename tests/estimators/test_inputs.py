@@ -94,7 +94,11 @@ def test_inputs_follow_the_options_and_the_anchor(log):
     assert {"imu", "gnss", "heading", "scan", "gnss_velocity", "water_speed"} <= set(nav) and "odometry" not in nav
     assert "odometry" in estimators.inputs("isam2", log, {"motion": "imu", "use_odometry": True})
     assert "odometry" in estimators.inputs("isam2", log, {"motion": "odometry"})
-    no_prior = drop_kinds(log, ["pose_prior"])
+    no_prior = drop_kinds(log, ["pose_prior"])  # the graph's anchor: the first GNSS fix and compass reading
     info = estimators.run("dead-reckoning", no_prior).info
-    assert info["anchor"] == "truth"
-    assert estimators.inputs("dead-reckoning", no_prior, {}, info) == ["odometry", "truth"]
+    assert info["anchor"] == "first GNSS+compass"
+    assert estimators.inputs("dead-reckoning", no_prior, {}, info) == ["gnss", "heading", "odometry"]
+    relative = drop_kinds(log, ["pose_prior", "gnss", "heading", "beacon"])  # nothing absolute: the truth's frame
+    info = estimators.run("dead-reckoning", relative).info
+    assert info["anchor"] == "truth (first pose)"
+    assert estimators.inputs("dead-reckoning", relative, {}, info) == ["odometry", "truth"]

@@ -17,18 +17,26 @@ from graphnav.scan.cloud_map import CloudMap, CloudMapConfig, CloudOdometry
 pytest.importorskip("open3d")  # the 3D harbour's ray casting
 
 
+ABSOLUTE = ("pose_prior", "gnss", "heading", "beacon")  # the records an anchor is chosen from
+
+
 @pytest.fixture(scope="module")
-def log3():
+def full():
     from graphnav.sim.harbour3d import Lidar3dConfig, simulate_harbour3d
 
-    log = simulate_harbour3d(0, lidar=Lidar3dConfig(az_deg=0.5), duration=2.0)
-    return log.without(lambda r: r.kind == "pose_prior")  # anchored at the first truth pose
+    return simulate_harbour3d(0, lidar=Lidar3dConfig(az_deg=0.5), duration=2.0)
+
+
+@pytest.fixture(scope="module")
+def log3(full):
+    return full.without(lambda r: r.kind in ABSOLUTE)  # nothing absolute: the frame is the first truth pose
 
 
 def test_3d_log_runs_against_truth(log3):
     res = estimators.run("scan-to-map", log3)
     info = res.info
-    assert info["dimension"] == "3d" and info["anchor"] == "truth" and info["cloud_map"]["variant"] == "gicp"
+    assert info["dimension"] == "3d" and info["anchor"] == "truth (first pose)"
+    assert info["cloud_map"]["variant"] == "gicp"
     assert len(res.trajectory) == len(log3.of("cloud")) == 21
     assert info["failed_registrations"] == 0 and info["guess_sources"] == {"imu": 20}
     assert ate(res.trajectory, log3.truth())["rmse"] < 0.03
@@ -86,8 +94,50 @@ def test_odometry_is_the_guess_when_the_log_has_it():
     from graphnav.sim.harbour3d import Lidar3dConfig, simulate_harbour3d
 
     log = simulate_harbour3d(1, HarbourConfig(odometer=True), Lidar3dConfig(az_deg=0.5), duration=1.0)
-    log = log.without(lambda r: r.kind == "pose_prior")
+    log = log.without(lambda r: r.kind in ABSOLUTE)
     res = estimators.run("scan-to-map", log)
     assert res.info["guess_sources"] == {"odometry": 10} and res.info["failed_registrations"] == 0
     assert ate(res.trajectory, log.truth())["rmse"] < 0.03
     assert estimators.get("scan-to-map").inputs(log, {}) == {"cloud", "odometry", "pose_prior"}
+
+
+def _with_prior(log, pose):  # noqa: ANN001, ANN202
+    from graphnav.log import NavLog, PosePrior
+
+    return NavLog([PosePrior(r.t, *map(float, pose), r.sigma_xy, r.sigma_yaw) if isinstance(r, PosePrior) else r
+                   for r in log.records], log.beacons_known, log.meta)
+
+
+def test_the_start_is_the_pose_prior_and_its_error_the_only_frame_error(full):
+    """The track starts exactly at the log's pose prior; its whole unaligned error is that start's:
+    from a prior 0.5 m and 2 deg off the first truth pose, moved by the one transform that takes the
+    prior onto that pose it is the truth within the aligned figure; from a prior at that pose the
+    unaligned ATE is the aligned one."""
+    from graphnav.geometry import se2_compose, se2_inverse
+    from graphnav.trajectory import Trajectory
+
+    truth = full.truth()
+    p0 = se2_compose(truth.poses[0], [0.3, -0.4, np.radians(2.0)])
+    res = estimators.run("scan-to-map", _with_prior(full, p0))
+    assert res.info["anchor"] == "pose_prior"
+    np.testing.assert_allclose(res.trajectory.poses[0], p0, atol=1e-9)
+    aligned = ate(res.trajectory, truth, align=True)["rmse"]
+    assert aligned < 0.03 and ate(res.trajectory, truth)["rmse"] > 10 * aligned  # the 0.5 m and 2 deg
+    fix = se2_compose(truth.poses[0], se2_inverse(p0))
+    moved = Trajectory(res.trajectory.t, np.array([se2_compose(fix, p) for p in res.trajectory.poses]))
+    assert ate(moved, truth)["rmse"] < aligned + 0.01
+
+    res = estimators.run("scan-to-map", _with_prior(full, truth.poses[0]))
+    assert abs(ate(res.trajectory, truth)["rmse"] - ate(res.trajectory, truth, align=True)["rmse"]) < 0.01
+
+
+def test_without_a_prior_it_starts_where_the_graph_anchors(full):
+    """No pose prior: the first GNSS fix and the first compass reading (the graph's anchor), never the
+    truth; the report's inputs say so."""
+    log = full.without(lambda r: r.kind == "pose_prior")
+    g, h = log.of("gnss")[0], log.of("heading")[0]
+    res = estimators.run("scan-to-map", log)
+    assert res.info["anchor"] == "first GNSS+compass"
+    np.testing.assert_allclose(res.trajectory.poses[0], [g.x, g.y, h.yaw], atol=1e-9)
+    used = estimators.inputs("scan-to-map", log, {}, res.info)
+    assert {"gnss", "heading", "cloud", "imu"} <= set(used) and "truth" not in used

@@ -40,13 +40,14 @@ def test_equal_tracks_are_said_with_the_reason():
 
 
 def test_an_odometry_off_by_its_start_heading_says_so():
-    poses = np.column_stack([np.arange(50.0), np.zeros(50), np.zeros(50)])
+    poses = np.column_stack([np.arange(50.0), np.zeros(50), np.full(50, np.radians(1.95))])
     log = NavLog([Truth(float(k), float(k), 0.0, 0.0) for k in range(50)])
     s2m = _entry("scan-to-map", poses, summary={"inputs": ["cloud"], "ate_rmse_m": 4.1, "ate_aligned_rmse_m": 0.015},
                  info={"anchor": "pose_prior"})
     drift = _entry("dead-reckoning", poses, summary={"ate_rmse_m": 10.0, "ate_aligned_rmse_m": 2.0})
     v = verdicts(Comparison([s2m, drift], log))
     assert "Its shape is right (aligned ATE 0.015 m against 4.1 m): the error is its start pose's (pose prior)" in v[0]
+    assert "mostly the heading (1.95 deg off the truth's at its first pose)" in v[0]
     assert "shape is right" not in v[1]
 
 

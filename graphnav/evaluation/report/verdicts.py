@@ -43,6 +43,16 @@ def _degenerate(e: Entry) -> str | None:
     return None
 
 
+def _start_heading_error(e: Entry, comp: Comparison) -> float | None:
+    """How far [deg] the estimate's first heading is from the truth's at that time (None without)."""
+    tr = e.result.trajectory if e.result is not None else None
+    truth = comp.log.truth() if comp.log.has_truth else None
+    if tr is None or truth is None or not len(tr.t) or not truth.t[0] <= tr.t[0] <= truth.t[-1]:
+        return None
+    d = float(tr.poses[0][2] - truth.interpolate([tr.t[0]])[0][2])
+    return abs(math.degrees(math.atan2(math.sin(d), math.cos(d))))
+
+
 def verdict(e: Entry, comp: Comparison, same: dict[str, tuple[str, float]]) -> str:
     """One estimator in plain words: what it is, what it used, and why its figures look as they do."""
     head = f"**{e.name}** ({e.kind or '?'}): {e.description or 'no description'}."
@@ -74,8 +84,11 @@ def verdict(e: Entry, comp: Comparison, same: dict[str, tuple[str, float]]) -> s
     aligned = _num(s.get("ate_aligned_rmse_m"))
     if e.kind == "odometry" and ate is not None and aligned is not None and aligned < START_SHARE * ate:
         anchor = (e.result.info if e.result is not None else {}).get("anchor") or "its start pose"
+        off = _start_heading_error(e, comp)
         out.append(f"Its shape is right (aligned ATE {aligned:.3g} m against {ate:.3g} m): the error is its start "
-                   f"pose's ({anchor.replace('_', ' ')}), mostly the heading, which odometry never corrects.")
+                   f"pose's ({anchor.replace('_', ' ')}), mostly the heading"
+                   + (f" ({off:.2f} deg off the truth's at its first pose)" if off is not None else "")
+                   + ", which odometry never corrects.")
     if ate is not None and dr is not None and ate > dr[1] and used is not None and "gnss" in used:
         out.append(f"Worse than **{dr[0]}** ({dr[1]:.3g} m) although it uses GNSS.")
     nees = _num(s.get("nees_mean"))
