@@ -105,6 +105,25 @@ def factor_scales(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, group
     return out
 
 
+def _beyond_chance(graph: gtsam.NonlinearFactorGraph, groups: Sequence[str], cand: list[int], suspects: list[int],
+                   d2: dict[int, float], factor: dict[int, float], top: float, prob: float,
+                   report: dict[str, Any]) -> bool:
+    """Whether the ``suspects`` (beyond their bound) are more than chance makes. GNSS fixes: of ``n``
+    consistent ones about ``n (1 - prob)`` lie beyond their bound by chance, and a mild outlier among
+    hundreds of fixes moves nothing; GNC runs for them when more do (beyond the binomial's ``prob``
+    quantile, normal approximation) or when one lies beyond the family-wise bound, the chi-square
+    quantile ``1 - (1 - prob) / n`` (Bonferroni: any of ``n`` exceeds it by chance with probability
+    ``1 - prob`` at most) -- a gross outlier. Any scan match beyond its bound makes it run: a wrong
+    relative pose bends the chain after it (CARMEN orebro: 2 matches beyond, 0.54 m with them, 0.40 m
+    without)."""
+    n, q = len(cand), 1.0 - prob
+    chance = n * q + float(ndtri(prob)) * math.sqrt(n * q * prob)
+    gross = [i for i in suspects if d2[i] > top * factor[i] / chi2_ppf(prob, graph.at(i).dim())
+             * chi2_ppf(1.0 - q / n, graph.at(i).dim())]
+    report.update(chance_bound=chance, beyond_family_bound=len(gross))
+    return bool(gross) or len(suspects) > chance or any(groups[i] not in CHANCE_GROUPS for i in suspects)
+
+
 def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: list[str], lm: LmSettings,
                prob: float = 0.99, switchable: Sequence[str] = SWITCHABLE
                ) -> tuple[gtsam.NonlinearFactorGraph, list[str], gtsam.Values, dict[str, Any]]:
@@ -136,18 +155,7 @@ def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: 
     if not suspects:
         report["ran"] = False
         return graph, groups, values, report
-    # GNSS fixes: of n consistent ones about n (1 - prob) lie beyond their bound by chance, and a mild
-    # outlier among hundreds of fixes moves nothing; GNC runs for them when more do (beyond the binomial's
-    # prob quantile, normal approximation) or when one lies beyond the family-wise bound, the chi-square
-    # quantile 1 - (1 - prob) / n (Bonferroni: any of n exceeds it by chance with probability 1 - prob at
-    # most) -- a gross outlier. Any scan match beyond its bound makes it run: a wrong relative pose bends
-    # the chain after it (CARMEN orebro: 2 matches beyond, 0.54 m with them, 0.40 m without)
-    n, q = len(cand), 1.0 - prob
-    chance = n * q + float(ndtri(prob)) * math.sqrt(n * q * prob)
-    gross = [i for i in suspects if d2[i] > top * factor[i] / chi2_ppf(prob, graph.at(i).dim())
-             * chi2_ppf(1.0 - q / n, graph.at(i).dim())]
-    report.update(chance_bound=chance, beyond_family_bound=len(gross))
-    if not gross and len(suspects) <= chance and all(groups[i] in CHANCE_GROUPS for i in suspects):
+    if not _beyond_chance(graph, groups, cand, suspects, d2, factor, top, prob, report):
         report["ran"] = False
         return graph, groups, values, report
     gnc_graph = gtsam.NonlinearFactorGraph()
