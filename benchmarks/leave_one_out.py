@@ -45,9 +45,12 @@ GRIDS: dict[str, dict[str, list[Any]]] = {
         "odo_sigma_v": [0.01, 0.02, 0.04],
         "odo_sigma_w_deg": [0.5, 1.0, 2.0],
     },
-    "isam2:carmen": {
+    "isam2:carmen": {  # the loop closer's thresholds chosen on CARMEN (docs/defaults.md), then its rules
         "odo_lateral": [0.05, 0.1, 0.2],
         "icp_gate": [2.0, 4.0, 8.0],
+        "loop.descriptor_max": [0.175, 0.35, 0.7],
+        "loop.min_hits": [0.2, 0.4, 0.8],
+        "loop.max_ambiguity": [0.8, 0.9, 0.95],  # a ratio <= 1: its margin 1 - x doubled and halved
         "loop.kernel_k": [0.5, 1.0, 2.0],
         "loop.min_sigma": [0.25, 0.5, 1.0],
     },
