@@ -32,6 +32,10 @@ def test_value_chosen_without_a_log_and_its_cost(loo):
     assert rows["mrclam6-r1"]["chosen_without"] == 2.0
     assert a["worst_without_over_all"] == pytest.approx(1.0)
     assert a["mean_default_over_all"] == pytest.approx((1.0 / 0.8 + 2.0 / 1.7 + 0.5 / 0.45 + 0.5 / 0.55) / 4)
+    # held out, each log gets 2: against its default run 0.8, 0.85, 0.9, 1.1 (r4 loses 10 %)
+    assert a["mean_without_over_default"] == pytest.approx((0.8 + 1.7 / 2.0 + 0.45 / 0.5 + 0.55 / 0.5) / 4)
+    assert a["min_without_over_default"] == pytest.approx(0.8)
+    assert a["max_without_over_default"] == pytest.approx(1.1)
 
 
 def test_ties_keep_the_default_and_kinds_cross(loo):
