@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 from ..config import given_option
 from ..graph.log_runs import unmet
 from ..graph.navigator import Navigator
-from ..graph.smoother_config import SmootherConfig
+from ..graph.smoother_config import SmootherConfig, auto_motion
 from ..log import NavLog, Record
 from ..result import Estimate, OnEstimate, RunResult
 from .base import Estimator
@@ -26,7 +26,7 @@ def _inputs(log: NavLog, options: dict[str, Any]) -> set[str]:
     checks the output changes exactly when it is listed)."""
     motion = given_option(SmootherConfig, options, "motion", "auto")
     has_imu = bool(log.of("imu"))
-    nav = motion in ("imu", "vessel") or (motion == "auto" and has_imu)
+    nav = motion in ("imu", "vessel") or (motion == "auto" and auto_motion(log.counts()) != "odometry")
     kinds = {"scan", "gnss", "heading", "beacon", "pose_prior"}
     if log.of("beacon"):
         kinds.add("beacon_known")  # the chart, for the beacons the log observes

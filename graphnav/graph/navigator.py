@@ -45,7 +45,7 @@ from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
 from .online_track import OnlineTrack, kinematics
-from .smoother_config import SmootherConfig, SolverConfig
+from .smoother_config import SmootherConfig, SolverConfig, auto_motion
 from .solution import Closing, marginal_priors, refresh_places
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt
 from .space import IB, PlanarSpace, V, W
@@ -100,6 +100,9 @@ def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -
 
         given = kw.get("mounts", config.mounts if config is not None else {})
         kw["mounts"] = {k: asdict(m) for k, m in merged(log.meta["mounts"], given).items()}
+    motion = kw.get("motion", config.motion if config is not None else "auto")
+    if motion == "auto" and auto_motion(log.counts()) == "vessel":  # a vessel's instruments, no IMU
+        kw["motion"] = "vessel"
     v0 = log.meta.get("initial_velocity")
     if imu_model is not None or v0 is not None:
         imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}

@@ -15,6 +15,7 @@ from graphnav import estimators
 from graphnav.evaluation.metrics import ate, heading_error
 from graphnav.graph.imu_chain import ImuChain, ImuConfig
 from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
+from graphnav.graph.smoother_config import auto_motion
 from graphnav.graph.space import NavSpace
 from graphnav.log import Gnss, GnssVelocity, Heading, Imu, NavLog, PosePrior, Truth
 from graphnav.sim.solent import simulate_solent
@@ -205,10 +206,13 @@ def test_vessel_model_without_imu_lets_course_and_heading_differ():
     ref = log.truth()
     ves = run_isam2(log, motion="vessel", **FAST)
     assert ves.info["state"] == "nav"
-    planar = run_isam2(log, **FAST)
+    planar = run_isam2(log, motion="odometry", **FAST)
     assert planar.info["state"] == "planar"
     assert ate(ves.trajectory, ref)["rmse"] < ate(planar.trajectory, ref)["rmse"]
     assert ate(ves.online, ref)["rmse"] < ate(planar.online, ref)["rmse"]
+    # a compass with GNSS velocity and nothing else: "auto" is the vessel graph; without the compass, Pose2
+    assert auto_motion(log.counts()) == "vessel"
+    assert auto_motion(log.without(lambda r: r.kind == "heading").counts()) == "odometry"
 
 
 def test_water_current_is_estimated_from_water_speed_and_gnss():
