@@ -65,7 +65,7 @@ def files(tmp_path_factory) -> dict[str, Path]:
 
 
 @FUZZ
-@given(flag=st.sampled_from(["--duration", "--laps", "--fix-hz", "--lidar-hz", "--t0", "--seed"]),
+@given(flag=st.sampled_from(["--duration", "--laps", "--fix-hz", "--lidar-hz", "--t0", "--seed", "--lidar-sweep"]),
        value=st.sampled_from(NUMERIC))
 def test_simulate_harbour(files, flag, value):
     base = [] if flag == "--duration" else ["--duration", "2"]
@@ -180,7 +180,8 @@ def test_commands_that_start_work_refuse_invalid_counts(files, argv, value):
 # The tests above drive these (command, flag) pairs; EXTRA below drives the rest. The inventory test
 # fails when a command gains a numeric argument that neither drives.
 COVERED_ABOVE = {
-    ("simulate harbour", f) for f in ("--duration", "--laps", "--fix-hz", "--lidar-hz", "--t0", "--seed")} | {
+    ("simulate harbour", f) for f in ("--duration", "--laps", "--fix-hz", "--lidar-hz", "--t0", "--seed",
+                                      "--lidar-sweep")} | {
     ("simulate solent", "--current-speed"), ("simulate solent", "--calib-residual"), ("simulate solent", "--seed"),
     ("simulate degrade", "--yaw-rate-bias"), ("register", "--voxel"), ("info", "--max-speed"),
     ("scan-matching", "--frames"), ("convert carmen", "--scan-dt"), ("convert carmen", "--max-range"),

@@ -103,6 +103,10 @@ def _register_harbour(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fix-hz", type=float, default=1.0, help="GNSS and compass rate [Hz] (default 1)")
     p.add_argument("--lidar-hz", type=float, default=None,
                    help="LiDAR rate [Hz] (default 10; 5 with --profile legacy; 0: no scans)")
+    p.add_argument("--lidar-sweep", type=float, default=0.0, metavar="S",
+                   help="2D LiDAR sweep duration [s]: beam i of N is taken at stamp + i*S/N along the true track "
+                        "and meta lidar states sweep_s (default 0: every beam at the stamp; 1/lidar-hz for a "
+                        "spinning LiDAR, e.g. 0.1 at 10 Hz)")
     p.add_argument("--lidar", choices=("2d", "3d"), default="2d",
                    help="2d: 360-beam scans (default); 3d: a 16-beam VLP-16-like cloud ray-cast against the "
                         "extruded harbour, with wave roll/pitch, water returns and spray (graphnav.sim.harbour3d)")
@@ -130,6 +134,14 @@ def harbour_config(args: argparse.Namespace) -> harbour.HarbourConfig:
     if not (math.isfinite(args.t0) and abs(args.t0) <= top):  # every record's time must stay a valid time
         raise ValueError(f"--t0 must be finite and within +-{top:g} s, got {args.t0}")
     kw: dict = {"fix_hz": args.fix_hz, "t0": args.t0}
+    sweep = getattr(args, "lidar_sweep", 0.0)
+    if sweep:
+        hz = args.lidar_hz if args.lidar_hz is not None else harbour.HarbourConfig.for_profile(args.profile).lidar_hz
+        if not (math.isfinite(sweep) and 0.0 < sweep <= (1.0 / hz if hz > 0 else 1.0)):
+            raise ValueError(f"--lidar-sweep must be >= 0 and at most a scan period (1/lidar-hz), got {sweep}")
+        if args.lidar != "2d":
+            raise ValueError("--lidar-sweep is for the 2D LiDAR (--lidar 2d)")
+        kw["lidar_sweep"] = sweep
     if args.lidar_hz is not None:
         kw["lidar_hz"] = args.lidar_hz
     elif args.lidar == "3d":

@@ -33,6 +33,7 @@ from ..geometry import cov_to_world, se2_adjoint_inv, se2_compose
 from ..log import NavLog, Scan, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan import icp_cache
+from ..scan.deskew import sweep_of
 from ..scan.imu_guess import ImuGuess, fuse_se2, log_imu_guess
 from ..scan.motion_guess import MotionGuess
 from ..scan.weighted_icp import IcpConfig, scan_points
@@ -59,8 +60,9 @@ class _KeyframeChain:
     information)."""
 
     def __init__(self, cfg: IcpConfig, guesser: MotionGuess, scan0: Scan, pose: np.ndarray, cov: np.ndarray, *,
-                 guess_cov: bool, keyframe_dist: float, keyframe_angle_deg: float) -> None:
+                 guess_cov: bool, keyframe_dist: float, keyframe_angle_deg: float, sweep_s: float = 0.0) -> None:
         self.cfg, self.guesser, self.guess_cov = cfg, guesser, guess_cov
+        self.sweep_s = sweep_s  # [s] the LiDAR's sweep: each matched scan de-skewed with its guess's twist
         self.lio = guesser.imu is not None and guesser.odometry is None and guesser.mode in ("odometry", "imu")
         self.keyframe_dist, self.keyframe_angle = keyframe_dist, np.radians(keyframe_angle_deg)
         self.kf_t, self.kf_pose, self.kf_cov, self.kf_pts = scan0.t, pose, cov, scan_points(scan0, cfg)
@@ -78,7 +80,7 @@ class _KeyframeChain:
                 np.hypot(guess[0], guess[1]) >= self.keyframe_dist or abs(guess[2]) >= self.keyframe_angle):
             inc, q = guess, self.guesser.cov
         else:
-            pts = scan_points(scan, self.cfg)
+            pts = self._points(scan, guess, tb - ta)
             inc, q = self._match(pts, ta, tb, guess)
         a = se2_adjoint_inv(inc)
         cov = a @ self.kf_cov @ a.T + q
@@ -86,6 +88,15 @@ class _KeyframeChain:
         if pts is not None:
             self.kf_t, self.kf_pose, self.kf_cov, self.kf_pts = tb, pose, cov, pts
         return pose, cov
+
+    def _points(self, scan: Scan, guess: np.ndarray | None, dt: float) -> np.ndarray:
+        """The scan's points; with a sweep, de-skewed to its stamp with the guess's constant twist since the
+        keyframe (the keyframe's own points were de-skewed when it was matched)."""
+        if not self.sweep_s or guess is None or not dt > 0.0 or not np.all(np.isfinite(guess)):
+            return scan_points(scan, self.cfg)
+        from ..scan.deskew import twist_of
+
+        return scan_points(scan, self.cfg, sweep_s=self.sweep_s, twist=twist_of(guess, dt))
 
     def _match(self, pts: np.ndarray, ta: float, tb: float, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """The increment from the keyframe at ``ta`` to the scan at ``tb`` and its covariance."""
@@ -135,14 +146,17 @@ def _first_scans(log: NavLog, sigma_xy0: float, sigma_yaw0: float) -> tuple[np.n
 
 def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: str = "HDL",
                init: str = "odometry", sigma_xy0: float = 0.0, sigma_yaw0: float = 0.0, guess_cov: bool = True,
-               keyframe_dist: float = 1.0, keyframe_angle_deg: float = 10.0, **options: Any) -> RunResult:
+               keyframe_dist: float = 1.0, keyframe_angle_deg: float = 10.0, deskew: bool = True,
+               **options: Any) -> RunResult:
     """Options: ``variant`` (K, H, HM, HD, HDL), ``init`` ("odometry": the odometry increment when the log
     has odometry, else the IMU's prediction when it has an IMU, else constant velocity; "imu", "cv" or
     "zero"; :class:`~graphnav.scan.motion_guess.MotionGuess`),
     any :class:`IcpConfig` field, ``guess_cov`` (False: the odometry guess goes without its covariance,
     so a match is not tested against it), the start pose's 1-sigma (``sigma_xy0``, ``sigma_yaw0``;
     the anchor's own sigmas win: a pose prior's, the first GNSS fix's, ...), and with the IMU's guess the
-    keyframe rule (``keyframe_dist`` [m], ``keyframe_angle_deg``: the scan-to-map baseline's)."""
+    keyframe rule (``keyframe_dist`` [m], ``keyframe_angle_deg``: the scan-to-map baseline's); ``deskew``: each
+    matched scan de-skewed with its guess's twist when the log states the LiDAR's sweep
+    (``meta["lidar"]["sweep_s"]``)."""
     unknown = set(options) - _CONFIG_FIELDS
     if unknown:
         raise ValueError(f"unknown icp-dr options: {', '.join(sorted(unknown))}")
@@ -150,7 +164,7 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
     pose, anchor, cov, scans = _first_scans(log, sigma_xy0, sigma_yaw0)
     guesser = MotionGuess(init, odometry_samples(log), _imu_guess(log, pose) if init in ("odometry", "imu") else None)
     chain = _KeyframeChain(cfg, guesser, scans[0], pose, cov, guess_cov=guess_cov, keyframe_dist=keyframe_dist,
-                           keyframe_angle_deg=keyframe_angle_deg)
+                           keyframe_angle_deg=keyframe_angle_deg, sweep_s=sweep_of(log) if deskew else 0.0)
     t, poses, covs = [scans[0].t], [pose], [_to_world(pose, cov)]
     if on_estimate is not None:
         on_estimate(scans[0].t, pose, covs[0])
@@ -203,6 +217,8 @@ class IcpDrConfig(IcpConfig):
     keyframe_dist: float = option(1.0, "with the IMU's guess: a scan becomes a keyframe after the vessel moved "
                                   "this far (the scan-to-map baseline's rule)", unit="m")
     keyframe_angle_deg: float = option(10.0, "with the IMU's guess: ... or turned this much", unit="deg")
+    deskew: bool = option(True, "de-skew each matched scan with its guess's twist when the log states the LiDAR's "
+                          "sweep (meta lidar sweep_s > 0)")
 
 
 class IcpDr(BatchEstimator):

@@ -34,6 +34,7 @@ from ..log import NavLog, Scan, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan.covariance import SAMPLING_VARIANCE, sandwich
 from ..scan.degeneracy import analyse, flatness, keep_constrained, line_information
+from ..scan.deskew import sweep_of
 from ..scan.imu_guess import ImuGuess, fuse_se2, log_imu_guess
 from ..scan.registration import (
     Params,
@@ -58,6 +59,8 @@ class ScanToMapConfig:
     backend: str = option("small_gicp:VGICP",
         "registration: small_gicp:VGICP|GICP, open3d:point_to_point|point_to_plane|gicp")
     keyframes: int = option(10, "the local map: the last N keyframe scans")
+    deskew: bool = option(True, "de-skew each scan with the prediction's twist when the log states the LiDAR's "
+                          "sweep (meta lidar sweep_s > 0)")
     keyframe_dist: float = option(1.0, "a scan becomes a keyframe after the vessel moved this far", unit="m")
     keyframe_angle_deg: float = option(10.0, "... or turned this much since the last keyframe", unit="deg")
     map_voxel: float = option(0.25, "voxel of the local map's downsampling", unit="m")
@@ -155,6 +158,7 @@ class _ScanMap2d:
         self.last_kf: np.ndarray | None = None
         self.target: Target | None = None
         self.p_pose = np.zeros((3, 3))  # with the IMU: the pose's covariance relative to the map (body frame)
+        self.sweep_s = 0.0  # [s] the LiDAR's sweep (meta lidar sweep_s, when cfg.deskew): scans are de-skewed
 
     def predict(self, t: float) -> tuple[np.ndarray, np.ndarray | None]:
         """The predicted pose at ``t`` and the odometry's covariance of the increment (None otherwise)."""
@@ -211,20 +215,33 @@ class _ScanMap2d:
         nrm, ev = local_frames_2d(world, cfg.neighbors, self.params.normal_radius)
         self.map_lines = (nrm, flatness(ev))
 
+    def points(self, scan: Scan, pred: np.ndarray | None) -> np.ndarray:
+        """The scan's points; with a LiDAR sweep (``sweep_s``) de-skewed to its stamp with the prediction's
+        constant twist since the previous scan (:mod:`graphnav.scan.deskew`)."""
+        cfg = self.cfg
+        top = min(cfg.max_range, scan.max_range)
+        xy = scan_points(scan.ranges, scan.angles, min_range=cfg.min_range, max_range=top)
+        dt = scan.t - self.ts[-1] if self.ts else 0.0
+        if not self.sweep_s or pred is None or not dt > 0.0:
+            return xy
+        from ..scan.deskew import deskew_mask_points, twist_of
+        from ..scan.lidar import valid_returns
+
+        keep = valid_returns(scan.ranges, scan.angles, min_range=cfg.min_range, max_range=top)
+        return deskew_mask_points(xy, keep, self.sweep_s, twist_of(se2_between(self.poses[-1], pred), dt))
+
     def step(self, scan: Scan) -> float:
         """One scan: its pose appended; returns the registration's time [ms]."""
         cfg = self.cfg
         n_icp = len(self.icp_ms)
-        xy = scan_points(scan.ranges, scan.angles, min_range=cfg.min_range,
-                         max_range=min(cfg.max_range, scan.max_range))
-        xy = voxel_downsample(xy, cfg.scan_voxel)
+        pred, pred_cov = self.predict(scan.t) if self.poses else (None, None)
+        xy = voxel_downsample(self.points(scan, pred), cfg.scan_voxel)
         enough = len(xy) >= cfg.min_points
         source = reg_cov = deg = None
         registered = self.target is None  # no map yet: this scan starts it at the (predicted) pose
-        if not self.poses:
+        if pred is None:
             pose = np.array(self.pose0, dtype=float)
         else:
-            pred, pred_cov = self.predict(scan.t)
             pose = pred
             if self.target is not None and enough:
                 pose, registered, source, reg_cov, deg = self.register(xy, pred, pred_cov)
@@ -279,6 +296,7 @@ def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **opt
     scans: list[Scan] = [s for s in log.of("scan") if s.t >= t_anchor - 1e-6]
     odo = odometry_samples(log) if cfg.predict == "odometry" else np.zeros((0, 5))
     run = _ScanMap2d(cfg, pose0, odo, _imu_guess(log, cfg, pose0, odo))
+    run.sweep_s = sweep_of(log) if cfg.deskew else 0.0
     step_ms: list[float] = []
     for scan in scans:
         t_step = time.perf_counter()

@@ -35,7 +35,7 @@ Matcher = Callable[
 UNOBSERVED_COV = np.diag([1e4, 1e4, 10.0])
 
 
-def default_matcher(options: dict[str, Any]) -> Matcher | None:
+def default_matcher(options: dict[str, Any], sweep_s: float = 0.0) -> Matcher | None:
     """The weighted-ICP matcher of :mod:`graphnav.scan.weighted_icp`, or ``None`` when it is not available.
     A match is usable when it converged, or when it was flagged degenerate only (its covariance is
     then inflated along the unobserved directions, which the factor keeps weak).
@@ -44,7 +44,10 @@ def default_matcher(options: dict[str, Any]) -> Matcher | None:
     both covariances from the guess fails (another minimum), and a direction the guess knows better
     is weak. Along weak directions the matcher returns the guess with the guess's covariance; when
     the guess is a factor of the graph already (``guess_in_graph``: the odometry) the match's
-    factor gets :data:`UNOBSERVED_COV` there instead, so the odometry is not counted twice."""
+    factor gets :data:`UNOBSERVED_COV` there instead, so the odometry is not counted twice.
+
+    With a LiDAR ``sweep_s`` (``meta["lidar"]``, 0: instantaneous scans) both scans' points are de-skewed to
+    their stamps with the guess's constant twist ``Log(init) / (cur.t - prev.t)`` (:mod:`graphnav.scan.deskew`)."""
     try:
         from ..scan.icp_cache import match_points  # shared between estimators inside icp_cache.active()
         from ..scan.weighted_icp import IcpConfig, scan_points
@@ -55,9 +58,15 @@ def default_matcher(options: dict[str, Any]) -> Matcher | None:
 
     def match(cur: Scan, prev: Scan, init: NDArray[np.float64] | None,
               init_cov: NDArray[np.float64] | None = None, guess_in_graph: bool = False):
-        prev_xy = last[1] if prev is last[0] else scan_points(prev, cfg)  # consecutive pairs: each scan once
-        cur_xy = scan_points(cur, cfg)
-        last[:] = [cur, cur_xy]
+        twist = _sweep_twist(sweep_s, cur, prev, init)
+        if twist is not None:  # de-skewed with this pair's twist: nothing to share with the next pair
+            prev_xy = scan_points(prev, cfg, sweep_s=sweep_s, twist=twist)
+            cur_xy = scan_points(cur, cfg, sweep_s=sweep_s, twist=twist)
+            last[:] = [None, None]
+        else:
+            prev_xy = last[1] if prev is last[0] else scan_points(prev, cfg)  # consecutive pairs: each scan once
+            cur_xy = scan_points(cur, cfg)
+            last[:] = [cur, cur_xy]
         r = match_points(cur_xy, prev_xy, cfg, init=init, init_cov=init_cov)
         inflated = bool(r.quality.get("inflated", False))
         cov = np.asarray(r.cov, dtype=float)
@@ -67,6 +76,18 @@ def default_matcher(options: dict[str, Any]) -> Matcher | None:
         return bool(r.ok) or inflated, np.asarray(r.pose, dtype=float), cov
 
     return match
+
+
+def _sweep_twist(sweep_s: float, cur: Scan, prev: Scan, init: NDArray[np.float64] | None
+                 ) -> NDArray[np.float64] | None:
+    """The constant twist (vx, vy, wz) the guess ``init`` (prev -> cur) implies over ``cur.t - prev.t``, or
+    ``None`` (no sweep, no finite guess, no time between the scans): the de-skew's input."""
+    dt = float(cur.t) - float(prev.t)
+    if not sweep_s or init is None or not dt > 0.0 or not np.all(np.isfinite(init)):
+        return None
+    from ..scan.deskew import twist_of
+
+    return twist_of(np.asarray(init, dtype=float), dt)
 
 
 def conjugate(pose: NDArray[np.float64], cov: NDArray[np.float64] | None, frame: gtsam.Pose2
@@ -240,6 +261,8 @@ class ScanFactors:
                 icp_opts[k] = float(lidar[k])
         self._matcher_given = matcher
         self._icp_opts = icp_opts
+        #: [s] the LiDAR's sweep (meta["lidar"]["sweep_s"]); scans are de-skewed when it is stated and cfg.deskew
+        self.sweep_s = float(lidar.get("sweep_s", 0.0) or 0.0) if lidar and cfg.deskew else 0.0
         self.matcher: Matcher | None = None
         self.loops: Any = None  # graphnav.graph.loops.LoopCloser, with scans and cfg.loops
         self._loop_cov: NDArray[np.float64] | None = None  # the loop closer's covariance of the newest pose
@@ -249,7 +272,7 @@ class ScanFactors:
         """Scans come: the matcher (unless ``use_icp`` is off) and the loop closer (``loops``)."""
         if self.matcher is None and self.cfg.use_icp:
             self.matcher = mounted(self._matcher_given if self._matcher_given is not None
-                                   else default_matcher(self._icp_opts), self.extrinsic)
+                                   else default_matcher(self._icp_opts, self.sweep_s), self.extrinsic)
         if self.loops is None and self.cfg.loops:
             self.loops = make_loop_closer(self.cfg, self._icp_opts, self.extrinsic)
 
@@ -308,7 +331,7 @@ class ScanFactors:
 
     def info(self) -> dict[str, Any]:
         return {"icp_pairs": self.n, "icp_failed": self.failed, "icp_gated": self.gated,
-                "icp": self.matcher is not None}
+                "icp": self.matcher is not None, **({"icp_deskew_sweep_s": self.sweep_s} if self.sweep_s else {})}
 
 
 def _vec(p: gtsam.Pose2) -> NDArray[np.float64]:

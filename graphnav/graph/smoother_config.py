@@ -165,6 +165,9 @@ class ScanConfig:
     icp_max_step: float = option(5.0, "an ICP step farther than this from the prediction is rejected", unit="m")
     icp_gate: float | None = option(4.0, "reject a match whose Mahalanobis distance to the odometry exceeds it")
     icp: dict[str, Any] = option(help="options for graphnav.scan.weighted_icp.IcpConfig", factory=dict)
+    deskew: bool = option(
+        True, "de-skew both scans of a match with the guess's twist (IMU, odometry or motion model) when the log "
+        "states the LiDAR's sweep (meta lidar sweep_s > 0; docs/weighted-icp.md \"De-skewing a sweep\")")
     loops: bool = option(True, "close loops when the log has scans")
     loop: dict[str, Any] = option(help="options for graphnav.graph.loops.LoopConfig", factory=dict)
     use_cloud: bool = option(True, "one keyframe per cloud (every scan_stride-th) and a GICP factor to the previous")

@@ -4,7 +4,10 @@ Message types and what they become (details and conventions in docs/live.md, "RO
 
 ==========================  =================================================================
 ``sensor_msgs/LaserScan``   ``scan``: angles ``angle_min + i * angle_increment``; ranges outside
-                            ``[range_min, range_max]`` or non-finite become NaN (no return)
+                            ``[range_min, range_max]`` or non-finite become NaN (no return);
+                            a non-zero ``time_increment`` gives ``meta["lidar"]["sweep_s"] =
+                            time_increment * len(ranges)`` (median over the scans; the stamp is
+                            the first beam's, docs/log-format.md "LiDAR sweep")
 ``sensor_msgs/NavSatFix``   ``gnss`` in the local tangent frame (origin: ``origin`` or the first
                             fix, in ``meta["origin"]``); ``sigma = sqrt(mean(cov_xx, cov_yy))``
                             when the covariance is known, else ``DEFAULT_GNSS_SIGMA``; status
@@ -162,6 +165,7 @@ class _Converter:
         self.nmea = NmeaDecoder(self.frame, keep=False, limits=limits)
         self.counts: dict[str, int] = {}
         self.attitude: list[tuple[float, float, float]] = []  # (t, roll, pitch) of IMU orientations
+        self.sweeps: list[float] = []  # [s] time_increment x beams of each LaserScan that states a time_increment
 
     def count(self, k: str) -> None:
         self.counts[k] = self.counts.get(k, 0) + 1
@@ -170,6 +174,8 @@ class _Converter:
         r = np.asarray(m.ranges, dtype=float).copy()
         r[~np.isfinite(r) | (r < m.range_min) | (r > m.range_max)] = np.nan
         a = m.angle_min + m.angle_increment * np.arange(r.size)
+        if math.isfinite(m.time_increment) and m.time_increment != 0.0:  # a sweeping sensor: its beams' times
+            self.sweeps.append(float(m.time_increment) * r.size)
         top = float(m.range_max)  # the sensor's stated range, when it is one a log may state
         return [Scan(t, r, a, top if 0.0 < top <= MAX_STATED_RANGE else math.nan)]
 
@@ -430,6 +436,8 @@ def read_bag(path: str | Path, topics: dict[str, str] | None = None, *,
         meta["origin"] = {"lat": conv.frame.lat0, "lon": conv.frame.lon0, "h": conv.frame.h0}
     if conv.counts:
         meta.update(conv.counts)
+    if conv.sweeps:  # the LiDAR's sweep (docs/log-format.md "LiDAR sweep"): beam i of N at stamp + i * sweep_s / N
+        meta["lidar"] = {"sweep_s": float(np.median(conv.sweeps))}
     if any(isinstance(r, Cloud) for r in records):
         meta["clouds_with_imu_attitude"] = attach_attitude(records, conv.attitude)
     if lenient:
@@ -527,6 +535,8 @@ def _write_bag(log: NavLog, path: Path, *, storage: str, origin: tuple[float, fl
                 angular_velocity=V3(x=wx, y=wy, z=wz), angular_velocity_covariance=acov,
                 linear_acceleration=V3(x=ax, y=ay, z=az), linear_acceleration_covariance=acov)
 
+        lidar = log.meta.get("lidar") if isinstance(log.meta.get("lidar"), dict) else {}
+        sweep = float(lidar.get("sweep_s", 0.0) or 0.0)
         for r in log.records:
             if isinstance(r, Scan):
                 a = r.angles
@@ -538,8 +548,9 @@ def _write_bag(log: NavLog, path: Path, *, storage: str, origin: tuple[float, fl
                 ranges = np.where(r.valid(), r.ranges, np.inf).astype(np.float32)
                 put("/scan", "sensor_msgs/msg/LaserScan", r.t, T["sensor_msgs/msg/LaserScan"](
                     header=_header(ts, r.t, "laser", ros1), angle_min=float(a[0]) if a.size else 0.0,
-                    angle_max=float(a[-1]) if a.size else 0.0, angle_increment=inc, time_increment=0.0,
-                    scan_time=0.0, range_min=0.0, range_max=float(r.max_range), ranges=ranges,
+                    angle_max=float(a[-1]) if a.size else 0.0, angle_increment=inc,
+                    time_increment=sweep / a.size if a.size else 0.0, scan_time=0.0, range_min=0.0,
+                    range_max=float(r.max_range), ranges=ranges,
                     intensities=np.zeros(0, dtype=np.float32)))
             elif isinstance(r, Cloud):
                 put("/points", "sensor_msgs/msg/PointCloud2", r.t,

@@ -28,13 +28,23 @@ def polar_to_points(
     """
     r = np.asarray(ranges, dtype=float).ravel()
     a = np.asarray(angles, dtype=float).ravel()
+    keep = valid_returns(r, a, min_range=min_range, max_range=max_range)
+    r, a = r[keep], a[keep]
+    return np.column_stack([r * np.cos(a), r * np.sin(a)]), r, a
+
+
+def valid_returns(
+    ranges: ArrayLike, angles: ArrayLike, *, min_range: float = 0.0, max_range: float | None = None
+) -> NDArray[np.bool_]:
+    """The beams :func:`polar_to_points` keeps: finite, ``> 0`` and within ``[min_range, max_range]``."""
+    r = np.asarray(ranges, dtype=float).ravel()
+    a = np.asarray(angles, dtype=float).ravel()
     if r.shape != a.shape:
         raise ValueError(f"ranges {r.shape} and angles {a.shape} differ in length")
     with np.errstate(invalid="ignore"):
         keep = np.isfinite(r) & np.isfinite(a) & (r > 0.0) & (r >= min_range)
         keep &= r <= (DEFAULT_MAX_RANGE if max_range is None else max_range)
-    r, a = r[keep], a[keep]
-    return np.column_stack([r * np.cos(a), r * np.sin(a)]), r, a
+    return keep
 
 
 def sigma_range(r: ArrayLike, sigma_r_rel: float = SIGMA_R_REL) -> NDArray[np.float64]:

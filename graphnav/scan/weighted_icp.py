@@ -403,14 +403,23 @@ def _weak_from_guess(pose: NDArray, cov: NDArray, deg: Any, init: ArrayLike | No
     return pose, cov
 
 
-def scan_points(scan: Any, config: IcpConfig | None = None) -> NDArray[np.float64]:
+def scan_points(scan: Any, config: IcpConfig | None = None, *, sweep_s: float = 0.0,
+                twist: ArrayLike | None = None) -> NDArray[np.float64]:
     """Points of a :class:`graphnav.log.Scan` (eq. 10), missing returns dropped, range-gated by the
-    config's ``max_range`` and the scan's own maximum (:attr:`graphnav.log.Scan.max_range`)."""
+    config's ``max_range`` and the scan's own maximum (:attr:`graphnav.log.Scan.max_range`). With a
+    ``sweep_s`` and the body's ``twist`` (vx, vy, wz) the points are de-skewed to the scan's stamp (its
+    first beam; :mod:`graphnav.scan.deskew`)."""
     cfg = config or IcpConfig()
     top = getattr(scan, "max_range", None)
     if cfg.max_range is not None:
         top = cfg.max_range if top is None else min(top, cfg.max_range)
     pts, _, _ = polar_to_points(scan.ranges, scan.angles, min_range=cfg.min_range, max_range=top)
+    if sweep_s and twist is not None:
+        from .deskew import deskew_mask_points
+        from .lidar import valid_returns
+
+        keep = valid_returns(scan.ranges, scan.angles, min_range=cfg.min_range, max_range=top)
+        pts = deskew_mask_points(pts, keep, sweep_s, twist)
     return pts
 
 

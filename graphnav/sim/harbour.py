@@ -172,6 +172,49 @@ def raycast(
     return np.where(t <= max_range, t, np.nan)
 
 
+def raycast_from(
+    segs: NDArray[np.float64], origin: NDArray[np.float64], directions: NDArray[np.float64], max_range: float
+) -> NDArray[np.float64]:
+    """:func:`raycast` from one ``origin`` (2,) or from one origin per beam (B, 2) (a sweeping sensor)."""
+    origin = np.asarray(origin, dtype=float)
+    if origin.ndim == 1:
+        return raycast(segs, origin, directions, max_range)
+    return _raycast_each(segs, origin, directions, max_range)
+
+
+def _raycast_each(segs: NDArray[np.float64], origins: NDArray[np.float64], directions: NDArray[np.float64],
+                  max_range: float) -> NDArray[np.float64]:
+    """:func:`raycast` with an origin per beam (B, 2)."""
+    c = origins.mean(axis=0)
+    spread = float(np.max(np.hypot(*(origins - c).T)))
+    lo = np.minimum(segs[:, :2], segs[:, 2:]) - c
+    hi = np.maximum(segs[:, :2], segs[:, 2:]) - c
+    reach = max_range + spread
+    segs = segs[np.all((lo <= reach) & (hi >= -reach), axis=1)]
+    if len(segs) == 0:
+        return np.full(len(directions), np.nan)
+    p = segs[None, :, :2] - origins[:, None, :]  # (B, M, 2)
+    e = segs[None, :, 2:] - segs[None, :, :2]
+    d = directions[:, None, :]
+    den = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tt = (p[..., 0] * e[..., 1] - p[..., 1] * e[..., 0]) / den
+        u = (p[..., 0] * d[..., 1] - p[..., 1] * d[..., 0]) / den
+    hit = (np.abs(den) > 1e-12) & (tt > 0) & (u >= 0) & (u <= 1)
+    tt = np.where(hit, tt, np.inf).min(axis=1)
+    return np.where(tt <= max_range, tt, np.nan)
+
+
+def sweep_poses(p: NDArray[np.float64], f: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Positions (B, 2) and headings (B,) of the track ``p`` (N, 3) at fractional sample indices ``f`` (B,),
+    linear between samples (heading along the shorter way round)."""
+    i0 = np.minimum(np.floor(f).astype(int), len(p) - 2)
+    w = f - i0
+    a, b = p[i0], p[i0 + 1]
+    dyaw = np.arctan2(np.sin(b[:, 2] - a[:, 2]), np.cos(b[:, 2] - a[:, 2]))
+    return a[:, :2] + w[:, None] * (b[:, :2] - a[:, :2]), a[:, 2] + w * dyaw
+
+
 def distance_to_segments(segs: NDArray[np.float64], pts: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
     """Distance from each point (N, 2) to the nearest segment, and the unit vector from it to the point."""
     a, b = segs[:, :2], segs[:, 2:]
@@ -237,6 +280,7 @@ class HarbourConfig:
     max_rot: float = math.radians(6.0)
     dt: float = 0.01  # truth integration step [s] (1/imu_hz, 1/lidar_hz, ... multiples of it)
     lidar_hz: float = 10.0
+    lidar_sweep: float = 0.0  # [s] beam i of N taken at stamp + i * lidar_sweep / N on the true track (0: all at once)
     beam_deg: float = 1.0
     max_range: float = 40.0
     sigma_alpha: float = math.radians(0.5)
@@ -432,12 +476,16 @@ def simulate_harbour(
 
     nb = int(round(360.0 / cfg.beam_deg))
     angles = np.radians(np.arange(nb) * cfg.beam_deg) - math.pi
+    sweep_steps = np.arange(nb) * (cfg.lidar_sweep / (nb * cfg.dt))  # each beam's time after the stamp [steps]
     for i in range(0, len(t) if cfg.lidar_hz > 0 else 0, step(max(cfg.lidar_hz, 1e-9))):
-        x, y, yaw = p[i]
-        true_dir = yaw + angles + rng_lidar.normal(0.0, cfg.sigma_alpha, nb)
-        r = raycast(
-            segs, np.array([x, y]), np.column_stack([np.cos(true_dir), np.sin(true_dir)]), cfg.max_range
-        )
+        if cfg.lidar_sweep > 0.0:  # each beam from the true pose at its own time (the sweep's skew)
+            if i + sweep_steps[-1] > len(t) - 1:
+                break  # the track ends inside this sweep
+            origin, yaw_b = sweep_poses(p, i + sweep_steps)
+        else:
+            origin, yaw_b = p[i, :2], p[i, 2]
+        true_dir = yaw_b + angles + rng_lidar.normal(0.0, cfg.sigma_alpha, nb)
+        r = raycast_from(segs, origin, np.column_stack([np.cos(true_dir), np.sin(true_dir)]), cfg.max_range)
         r = r + rng_lidar.normal(0.0, 1.0, nb) * SIGMA_R_REL * np.nan_to_num(r)
         r[rng_lidar.random(nb) < cfg.dropout] = np.nan
         recs.append(Scan(float(ts[i]), r.astype(float), angles.copy()))
@@ -512,6 +560,7 @@ def simulate_harbour(
             "max_range": cfg.max_range,
             "hz": cfg.lidar_hz,
             "beam_deg": cfg.beam_deg,
+            **({"sweep_s": cfg.lidar_sweep} if cfg.lidar_sweep > 0.0 else {}),
         },
         "frame": "local harbour frame: x east, y north, origin at the basin's south-west corner (meta.origin)",
         "origin": dict(ORIGIN),
