@@ -129,7 +129,8 @@ def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gr
     active = (np.asarray(np.abs(A).sum(axis=1)).ravel() > 0) & measured[:m_rows]
     N = (A.T @ A).tocsc()
     lu = spla.splu(N + sp.identity(n_cols, format="csc") * 1e-12 * max(1.0, float(N.diagonal().max())),
-                   permc_spec="MMD_AT_PLUS_A")
+                   permc_spec="COLAMD")  # MMD on A^T + A filled the Pose3 + velocity graphs' factors 5x (psaros33
+    # 900 s: 1.75 s a factorisation, 2400 s: 38 s); COLAMD 0.09 s, the solves equal to 2e-9 relative
     rng = np.random.default_rng(seed)
     out: dict[str, dict[str, float]] = {}
     for g in which:
