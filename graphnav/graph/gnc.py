@@ -56,11 +56,9 @@ def _d2(f: gtsam.NonlinearFactor, values: gtsam.Values) -> float:
 
 
 def _measured_d2(f: gtsam.NonlinearFactor, values: gtsam.Values, group: str) -> tuple[float, int]:
-    """The squared whitened residual over the rows that measure something (``noise._measured``: not a
-    fix's height, not the LOOSE rows of an embedded planar match) and their number."""
-    nm = f.noiseModel()
-    base = nm.noise() if hasattr(nm, "robust") else nm
-    e = np.asarray(base.whiten(f.unwhitenedError(values)))[noise._measured(f, group)]
+    """The squared whitened residual over the rows that measure something (``noise.measured_residual``:
+    not a fix's height, not the LOOSE rows of an embedded planar match) and their number."""
+    e = noise.measured_residual(f, values, group)
     return float(e @ e), int(e.size)
 
 

@@ -33,7 +33,8 @@ import scipy.sparse.linalg as spla
 from .builder import SCALABLE
 from .solver import LmSettings, levenberg_marquardt
 
-__all__ = ["SCALABLE", "estimate_scales", "group_statistics", "scaled", "subgraph", "whitened_norm"]
+__all__ = ["SCALABLE", "estimate_scales", "group_statistics", "measured_residual", "scaled", "subgraph",
+           "whitened_norm"]
 
 
 def whitened_norm(f: gtsam.NonlinearFactor, values: gtsam.Values, *, robust: bool = True) -> float:
@@ -85,17 +86,18 @@ def _measured(f: gtsam.NonlinearFactor, group: str) -> np.ndarray:
     return mask
 
 
+def measured_residual(f: gtsam.NonlinearFactor, values: gtsam.Values, group: str) -> np.ndarray:
+    """``f``'s whitened residual (its Gaussian part, no robust weight) on the rows that measure
+    something (:func:`_measured`)."""
+    nm = f.noiseModel()
+    base = nm.noise() if hasattr(nm, "robust") else nm
+    return np.asarray(base.whiten(f.unwhitenedError(values)))[_measured(f, group)]
+
+
 def _residual_rows(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, idx: Sequence[int],
                    groups: Sequence[str]) -> np.ndarray:
-    """The whitened residuals of the factors ``idx`` (their Gaussian part, no robust weight), row by
-    row; only the rows that measure something (:func:`_measured`)."""
-    out = []
-    for i in idx:
-        f = graph.at(i)
-        nm = f.noiseModel()
-        base = nm.noise() if hasattr(nm, "robust") else nm
-        e = np.asarray(base.whiten(f.unwhitenedError(values)))
-        out.append(e[_measured(f, groups[i])])
+    """The measured whitened residuals of the factors ``idx`` (:func:`measured_residual`), row by row."""
+    out = [measured_residual(graph.at(i), values, groups[i]) for i in idx]
     return np.concatenate(out) if out else np.zeros(0)
 
 

@@ -138,7 +138,7 @@ class Closing:
     def _inflate_gnss(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, info: dict[str, Any]
                       ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
         """The fixes whose scatter nearby (:func:`gnc.factor_scales`) shows their stated sigma too small
-        beyond chance (:func:`gnc.significant_scale`, ``robust_prob``) get their covariance times that
+        beyond chance (:func:`~graphnav.graph.chi2.significant_scale`, ``robust.prob``) get their covariance times that
         scale, and LM re-solves: a receiver's stated sigma is a claim the log can refute (Solent s2 states
         7 m for 20 m fixes: NEES 7.6 and 2.7 m before, see docs/smoother.md). Never deflated."""
         scale = gnc.factor_scales(graph, values, self.groups, ["gnss"])
