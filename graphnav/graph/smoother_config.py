@@ -27,7 +27,9 @@ def auto_motion(kinds: Collection[str]) -> str:
     is a state) for a vessel's instruments -- a compass and GNSS velocity or water speed -- without an
     IMU, an odometer or a LiDAR; else ``"odometry"`` (Pose2: odometry, ICP, constant velocity). Without
     a compass nothing tells heading from course, and a lone receiver's track stays the Pose2 graph's
-    (the NMEA corpus: 48 of 48 within 1.5 m of their fixes, 41 with the vessel graph). Measured on
+    (the NMEA corpus: 48 of 48 within 1.5 m of their fixes, 41 with the vessel graph; with this rule
+    47: hemi.log, a still satellite compass whose fixes jump 3 m against its own 0.00 kn, is held still
+    at their HDOP-weighted mean, 1.97 m from them, docs/smoother.md). Measured on
     real boats' logs with their fixes degraded to 2.5 m at 1 Hz, a 60 s outage and a 20 m jump
     (docs/smoother.md, "A real boat's instruments"): the vessel graph 0.22-0.46x the degraded fixes
     interpolated, the Pose2 graph 0.36-0.86x, online 1.9-2.5 m against 3.9-7.8 m."""
