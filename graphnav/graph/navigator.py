@@ -140,7 +140,8 @@ class Navigator:
         self.nav = self.builder.nav
         self.last_state: NavPrev | None = None  # the Pose3 graph: the newest keyframe's full state
         self.solver = Solver(cfg.solver, graph_params(cfg.optimizer, self.space), lag=cfg.optimizer.lag,
-                             lm=LmSettings(cfg.optimizer.lm_tol, cfg.optimizer.lm_max_iterations))
+                             lm=LmSettings(cfg.optimizer.lm_tol, cfg.optimizer.lm_max_iterations,
+                                           cfg.optimizer.lm_abs_tol))
         self.groups: list[str] = []  # sensor group of every factor in solver.graph
         self.on_estimate = on_estimate
         self.history = history
@@ -300,7 +301,7 @@ class Navigator:
         lm = self.solver.lm
         try:
             values, it = levenberg_marquardt(self.solver.graph, self.solver.initial,
-                                             LmSettings(max(lm.tol, 1e-8), lm.max_iterations))
+                                             replace(lm, tol=max(lm.tol, 1e-8)))
         except SolverError as exc:
             raise self._fail(exc, t) from None
         self.solver.initial = values

@@ -23,6 +23,7 @@ and the trace is estimated with Hutchinson's estimator (Rademacher probes, one s
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import gtsam
@@ -164,7 +165,7 @@ def estimate_scales(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gro
     1-2 % gross), which inflate the chi-square, and robust kernels, which deflate it."""
     total = {g: 1.0 for g in which}
     report: dict[str, Any] = {}
-    lm_vce = LmSettings(max(lm.tol if lm else 0.0, 1e-8), lm.max_iterations if lm else 100)
+    lm_vce = replace(lm, tol=max(lm.tol, 1e-8)) if lm else LmSettings(1e-8, 100)
     for _ in range(max(iterations, 0)):
         stats = group_statistics(graph, values, groups, which)
         step = {}

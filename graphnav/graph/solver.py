@@ -72,6 +72,8 @@ class LmSettings:
 
     tol: float = 1e-14  # relative and absolute error-decrease tolerance
     max_iterations: int = 100
+    #: an iteration that lowers the cost (1/2 chi^2) by less than this ends the solve (at least ``tol``)
+    abs_tol: float = 0.0
 
 
 def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, init: gtsam.Values,
@@ -81,7 +83,7 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, init: gtsam.Values,
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(lm.max_iterations)
     params.setRelativeErrorTol(lm.tol)
-    params.setAbsoluteErrorTol(lm.tol)
+    params.setAbsoluteErrorTol(max(lm.tol, lm.abs_tol))
     try:
         opt = gtsam.LevenbergMarquardtOptimizer(graph, init, params)
         return opt.optimize(), int(opt.iterations())
