@@ -31,6 +31,7 @@ factor carries its sensor group (:data:`GROUPS`), which the noise estimation use
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -297,10 +298,12 @@ class GraphBuilder:
         """Keyframe 0: the anchor's prior (and the Pose3 graph's velocity and bias priors)."""
         a = self.anchor
         assert a.pose is not None and a.sigmas is not None
-        s.add(self.space.prior(F.X(0), a.pose, a.sigmas), "anchor")
+        rp = self.motion.imu.tilt(s.t) if self.nav and self.motion.imu is not None else None
+        tilt = None if rp is None else (*rp, math.radians(self.cfg.anchor.sigma_tilt_deg))
+        s.add(self.space.prior(F.X(0), a.pose, a.sigmas, tilt), "anchor")
         if self.nav:
             self.motion.start(s)
-        return gtsam.Pose2(*a.pose), None
+        return gtsam.Pose2(*a.pose), None if rp is None else self.space.tilted(a.pose, *rp)
 
     def _motion_step(self, s: Step, k: int, prev: gtsam.Pose2, state: NavPrev | None
                      ) -> tuple[gtsam.Pose2, gtsam.Pose3 | None, gtsam.Pose2, NDArray[np.float64]]:

@@ -180,6 +180,20 @@ class ImuChain:
             return pim
         return F.preintegrate(self.params, bias, self.samples(ta, tb), self.cfg.substeps, planar=not self.six)
 
+    def tilt(self, t: float, window: float = 1.0) -> tuple[float, float] | None:
+        """Roll and pitch [rad] of a 6-axis IMU from the gravity direction: the mean specific force of its
+        records over ``window`` s up to ``t`` (at rest ``f = g (-sin p, sin r cos p, cos r cos p)``); ``None``
+        for planar records or none yet. A moving hull's accelerations bias it by about ``|a| / g``."""
+        if not self.six or not self.t:
+            return None
+        hi = bisect.bisect_right(self.t, t)
+        lo = bisect.bisect_left(self.t, self.t[max(hi - 1, 0)] - window)
+        rows = np.asarray(self.rows[lo:max(hi, lo + 1)], dtype=float)
+        fx, fy, fz = rows[:, :3].mean(axis=0)
+        if not np.isfinite([fx, fy, fz]).all() or fz <= 0.0:
+            return None
+        return float(math.atan2(fy, fz)), float(math.atan2(-fx, math.hypot(fy, fz)))
+
     def prune(self, t: float) -> None:
         """Drop samples no later interval can need (all before the last one at or before ``t``)."""
         i = bisect.bisect_right(self.t, t) - 1

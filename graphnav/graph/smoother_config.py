@@ -94,6 +94,10 @@ class AnchorConfig:
     wait: float = option(2.0, "records are held this long (log time) to choose the anchor", unit="s")
     sigma_xy: float | None = option(None, "prior on the first pose when there is no pose_prior record")
     sigma_yaw_deg: float = option(30.0, "... its yaw sigma at the first compass reading")
+    sigma_tilt_deg: float = option(5.0,
+        "the Pose3 graph with a 6-axis IMU: the first pose's roll and pitch from the gravity direction (the mean "
+        "specific force of its first second), within this (a hull's accelerations while it was measured); planar or "
+        "no IMU records: level (their frame is the levelled one)")
     sigma_yaw_unknown_deg: float = option(60.0,
         "... at yaw 0 without one: 1 rad, not pi, or iSAM2's Gauss-Newton step diverges where nothing else observes "
         "the yaw (a GNSS-only log); odometry and GNSS recover a start 180 deg off (square loop: online 0.80 m against "

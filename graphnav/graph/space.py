@@ -12,8 +12,8 @@ covariances of matches and odometry -- and hands the factors to one of two space
   whose (x, y, yaw) block is the measured covariance and whose roll, pitch and z carry no
   information (:data:`LOOSE`); GNSS a ``GPSFactor`` at the sea surface (z = 0); compass a yaw-only
   ``PoseRotationPrior3D`` or a ``BetweenFactorPose3`` from a ``Pose3`` bias frame; beacons
-  ``BearingRangeFactor3D`` to ``Point3`` marks at the surface (horizontal bearing, the elevation
-  residual held at the bearing's sigma); GNSS velocity a ``PriorFactorVector`` on ``V(k)``.
+  ``BearingRangeFactor3D`` to ``Point3`` marks at the surface (the bearing's azimuth in the body
+  plane, its elevation free: :data:`BEACON_ELEVATION_SIGMA`); GNSS velocity a ``PriorFactorVector`` on ``V(k)``.
 
 Both answer in the plane: :meth:`pose2` of a key, :meth:`world_cov` the (x, y, yaw) covariance in
 the world frame (docs/conventions.md). Pose3's tangent is (roll, pitch, yaw, x, y, z) in the body
@@ -89,7 +89,9 @@ class PlanarSpace:
     def world_cov(self, value: Any, cov: NDArray[np.float64]) -> NDArray[np.float64]:
         return cov_to_world(self.pose2(value).theta(), cov)
 
-    def prior(self, key: int, pose: NDArray[np.float64], sigmas: NDArray[np.float64]) -> gtsam.NonlinearFactor:
+    def prior(self, key: int, pose: NDArray[np.float64], sigmas: NDArray[np.float64],
+              tilt: tuple[float, float, float] | None = None) -> gtsam.NonlinearFactor:
+        """``(x, y, yaw)`` within ``sigmas`` (``tilt``: the Pose3 graph's, not in the plane)."""
         return gtsam.PriorFactorPose2(key, gtsam.Pose2(*pose), gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigmas)))
 
     def prior_cov(self, key: int, value: Any, cov: NDArray[np.float64]) -> gtsam.NonlinearFactor:
@@ -171,10 +173,20 @@ class NavSpace(PlanarSpace):
             c = c[np.ix_(PLANAR, PLANAR)]
         return cov_to_world(self.pose2(value).theta(), c)
 
-    def prior(self, key: int, pose: NDArray[np.float64], sigmas: NDArray[np.float64]) -> gtsam.NonlinearFactor:
+    def prior(self, key: int, pose: NDArray[np.float64], sigmas: NDArray[np.float64],
+              tilt: tuple[float, float, float] | None = None) -> gtsam.NonlinearFactor:
+        """``(x, y, yaw)`` within ``sigmas``; level (roll = pitch = 0 within 1e-4 rad) unless ``tilt``
+        ``(roll, pitch, sigma)`` [rad] is given (a 6-axis IMU's gravity direction: a boat may heel)."""
         s = np.asarray(sigmas, dtype=float)
-        model = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-4, 1e-4, s[2], s[0], s[1], 1e-3]))
-        return gtsam.PriorFactorPose3(key, F.planar_pose(*pose), model)
+        roll, pitch, st = tilt if tilt is not None else (0.0, 0.0, 1e-4)
+        model = gtsam.noiseModel.Diagonal.Sigmas(np.array([st, st, s[2], s[0], s[1], 1e-3]))
+        return gtsam.PriorFactorPose3(key, self.tilted(pose, roll, pitch), model)
+
+    @staticmethod
+    def tilted(pose: NDArray[np.float64], roll: float, pitch: float) -> gtsam.Pose3:
+        """``(x, y, yaw)`` at z = 0 with ``roll`` and ``pitch`` (ZYX: yaw, then pitch, then roll)."""
+        return gtsam.Pose3(gtsam.Rot3.Ypr(float(pose[2]), float(pitch), float(roll)),
+                           np.array([float(pose[0]), float(pose[1]), 0.0]))
 
     def prior_cov(self, key: int, value: Any, cov: NDArray[np.float64]) -> gtsam.NonlinearFactor:
         return gtsam.PriorFactorPose3(key, value, gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov)))
@@ -228,8 +240,12 @@ class NavSpace(PlanarSpace):
 
     def beacon(self, key: int, lkey: int, rng: float, brg: float, sr: float, sb: float, robust: str | None,
                k: float | None):
-        noise = robustify(gtsam.noiseModel.Diagonal.Sigmas(np.array([sb, sb, sr], dtype=float)), robust, k)
         bearing = gtsam.Unit3(np.array([math.cos(brg), math.sin(brg), 0.0]))
+        # the bearing's 2-D error lives in the tangent basis of the measured direction: the component along
+        # the vertical is the elevation, which a scanning sensor (radar, 2D LiDAR) does not measure
+        vertical = np.abs(np.asarray(bearing.basis())[2, :]) > 0.5
+        sig = np.where(vertical, BEACON_ELEVATION_SIGMA, sb)
+        noise = robustify(gtsam.noiseModel.Diagonal.Sigmas(np.array([sig[0], sig[1], sr], dtype=float)), robust, k)
         return gtsam.BearingRangeFactor3D(key, lkey, bearing, float(rng), noise)
 
     def attitude(self, key: int, roll: float, pitch: float, sigma: float):
@@ -246,6 +262,9 @@ class NavSpace(PlanarSpace):
         return gtsam.PriorFactorVector(V(k), np.array([vx, vy, 0.0]), noise)
 
 
+#: [rad] the elevation of a beacon bearing: not measured (a bearing is the azimuth in the sensor's plane, which
+#: heels with the hull); held at 0 with the bearing's sigma, it pulled the roll of a boat heeled 10 deg by 1.5 deg
+BEACON_ELEVATION_SIGMA = 1.0
 #: [m] a mark's height above the surface (charted or unknown: a prior at 0)
 SURFACE_SIGMA = 1.0
 #: [m/s] the vertical velocity of a GNSS velocity record (a surface vessel's heave rate)

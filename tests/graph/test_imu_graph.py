@@ -380,3 +380,40 @@ def test_variance_components_on_the_pose3_graph_count_only_measured_rows(solent_
     (5 / 0.5)^2 = 100 within sampling error."""
     r = estimators.run("isam2", solent_s2, noise_estimation="all", **FAST)
     assert 50.0 < r.info["noise_scale"]["compass"]["scale"] < 200.0
+
+
+def test_six_axis_tilt_is_the_gravity_direction():
+    """A 6-axis IMU at rest on a heeled hull: the anchor's roll and pitch from its mean specific force."""
+    roll, pitch = math.radians(8.0), math.radians(-3.0)
+    f = gtsam.Rot3.Ypr(0.4, pitch, roll).unrotate(gtsam.Point3(0.0, 0.0, 9.80665))  # R^T (0, 0, g)
+    chain = ImuChain(ImuConfig())
+    assert chain.tilt(1.0) is None  # no records yet
+    for i in range(1, 201):
+        chain.add(Imu(i / 100, float(f[0]), float(f[1]), 0.0, float(f[2]), 0.0, 0.0))
+    r, p = chain.tilt(2.0)
+    assert r == pytest.approx(roll, abs=1e-9) and p == pytest.approx(pitch, abs=1e-9)
+    planar = ImuChain(ImuConfig())
+    planar.add(Imu(0.01, 0.1, 0.0, 0.0))
+    assert planar.tilt(1.0) is None  # levelled records: no gravity to read
+
+
+def test_beacon_bearing_leaves_the_elevation_free():
+    """A bearing is the azimuth in the sensor's (the hull's) plane: on a hull heeled 10 deg the factor holds
+    the azimuth and says nothing of the roll (held at the bearing's sigma, the elevation pulled it level)."""
+    sp = NavSpace()
+    lm = np.array([30.0, 25.0, 0.0])
+    vals = gtsam.Values()
+    vals.insert(F.V(7), lm)  # any key for the mark
+
+    def err(roll_deg: float, brg: float) -> float:
+        v = gtsam.Values(vals)
+        v.insert(F.X(0), gtsam.Pose3(gtsam.Rot3.Ypr(0.3, 0.0, math.radians(roll_deg)), np.zeros(3)))
+        return sp.beacon(F.X(0), F.V(7), float(np.linalg.norm(lm)), brg, 0.1, math.radians(1.0), None, None).error(v)
+
+    def azimuth(roll_deg: float) -> float:  # the mark's azimuth in the heeled body's plane
+        b = gtsam.Rot3.Ypr(0.3, 0.0, math.radians(roll_deg)).unrotate(gtsam.Point3(*lm))
+        return math.atan2(b[1], b[0])
+
+    for roll in (-15.0, 0.0, 10.0, 20.0):  # satisfied at any heel (4-8 deg of elevation, 1 deg sigma: 8-32 before)
+        assert err(roll, azimuth(roll)) < 0.02
+    assert err(10.0, azimuth(10.0) + math.radians(2.0)) > 1.5  # ... the azimuth holds (2 sigma: 0.5 x 2^2 = 2)

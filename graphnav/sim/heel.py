@@ -1,0 +1,97 @@
+"""A planar log on a heeled, rolling hull: its IMU records made 6-axis (gravity included) and its
+beacon bearings measured in the hull's plane.
+
+The simulators' IMU records are planar (levelled ``ax``, ``ay``, ``wz``: docs/log-format.md); a real
+strapdown IMU reads the specific force and the angular rate in a body frame that heels and rolls.
+:func:`heeled` rotates each record into the body of a hull at a constant ``heel`` [rad] plus the wave
+roll and pitch of :mod:`graphnav.sim.harbour3d` (scaled to ``roll_amp``): with ``R = R_y(pitch) R_x(roll)``
+(levelled -> body, REP-103 ZYX), the specific force ``f_b = R^T (ax, ay, g)`` and the body rates
+``(p, q, r) = (roll' - yaw' sin pitch, pitch' cos roll + yaw' cos pitch sin roll, -pitch' sin roll +
+yaw' cos pitch cos roll)``, evaluated at each record's interval middle (each record is the mean over
+its interval; second order at 100 Hz). The added axes get the log's stated white noise. A beacon
+bearing becomes the azimuth of the mark's direction in the hull's plane (a radar or 2D LiDAR heels
+with the hull); the 2D scans are left as they are (level: a heeled 2D LiDAR would see another slice
+of the scene). ``attitude_hz`` adds AHRS roll and pitch records (``ahrs_sigma``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..log import Attitude, BeaconObs, Imu, NavLog, Record
+from .harbour3d import Lidar3dConfig, attitude
+
+GRAVITY = 9.80665  # [m/s^2] standard gravity (the graph's: graphnav.graph.imu_chain.GRAVITY)
+_H = 1e-4  # [s] the central difference of the roll and pitch rates
+
+
+def _roll_pitch(cfg: Lidar3dConfig, phase_rng_seed: int, heel: float, t: NDArray[np.float64]
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    a = attitude(cfg, np.random.default_rng(phase_rng_seed), np.atleast_1d(t))  # the same phases every call
+    return heel + a[:, 0], a[:, 1]
+
+
+def heeled(log: NavLog, heel: float = math.radians(10.0), roll_amp: float = math.radians(5.0), *,
+           seed: int = 0, attitude_hz: float = 0.0, ahrs_sigma: float = math.radians(0.2)) -> NavLog:
+    """``log`` on a hull heeled ``heel`` [rad] and rolling with waves of ``roll_amp`` [rad] (the harbour3d
+    model's roll, its pitch at half that; see the module docstring). ``meta["heel"]`` states what was done."""
+    scale = roll_amp / math.radians(sum(Lidar3dConfig().roll_amp_deg)) if roll_amp else 0.0
+    base = Lidar3dConfig()
+    cfg = replace(base, roll_amp_deg=tuple(a * scale for a in base.roll_amp_deg),
+                  pitch_amp_deg=tuple(a * scale for a in base.pitch_amp_deg), heave_amp=0.0)
+    imu_meta = log.meta.get("imu") if isinstance(log.meta.get("imu"), dict) else {}
+    hz = float(imu_meta.get("hz", 100.0))
+    acc_sd, gyro_sd = float(imu_meta.get("acc_std", 0.02)), float(imu_meta.get("gyro_std", 1e-3))
+    rng = np.random.default_rng(seed + 1)
+    att_every = 1.0 / attitude_hz if attitude_hz > 0 else math.inf
+    next_att = -math.inf
+    out: list[Record] = []
+    for r in log.records:
+        if isinstance(r, Imu) and not r.six_axis:
+            tm = r.t - 0.5 / hz
+            (phi,), (th,) = _roll_pitch(cfg, seed, heel, np.array([tm]))
+            (p1,), (t1,) = _roll_pitch(cfg, seed, heel, np.array([tm + _H]))
+            (p0,), (t0,) = _roll_pitch(cfg, seed, heel, np.array([tm - _H]))
+            dphi, dth = (p1 - p0) / (2 * _H), (t1 - t0) / (2 * _H)
+            f = body_rotation(phi, th).T @ np.array([r.ax, r.ay, GRAVITY])
+            cp, sp, ct, st = math.cos(phi), math.sin(phi), math.cos(th), math.sin(th)
+            w = np.array([dphi - r.wz * st, dth * cp + r.wz * ct * sp, -dth * sp + r.wz * ct * cp])
+            f[2] += rng.normal(0.0, acc_sd)
+            w[:2] += rng.normal(0.0, gyro_sd, 2)
+            out.append(Imu(r.t, float(f[0]), float(f[1]), float(w[2]), float(f[2]), float(w[0]), float(w[1])))
+            if attitude_hz > 0 and r.t >= next_att:
+                (phi,), (th,) = _roll_pitch(cfg, seed, heel, np.array([r.t]))
+                out.append(Attitude(r.t, float(phi + rng.normal(0.0, ahrs_sigma)),
+                                    float(th + rng.normal(0.0, ahrs_sigma)), ahrs_sigma))
+                next_att = r.t + att_every - 1e-9
+            continue
+        if isinstance(r, BeaconObs):
+            (phi,), (th,) = _roll_pitch(cfg, seed, heel, np.array([r.t]))
+            d = body_rotation(phi, th).T @ np.array([math.cos(r.bearing), math.sin(r.bearing), 0.0])
+            r = replace(r, bearing=float(math.atan2(d[1], d[0])))
+        out.append(r)
+    meta = dict(log.meta)
+    meta["heel"] = {"heel_deg": math.degrees(heel), "roll_amp_deg": math.degrees(roll_amp), "seed": seed,
+                    "attitude_hz": attitude_hz, "model": "graphnav.sim.heel"}
+    return NavLog(out, list(log.beacons_known), meta)
+
+
+def body_rotation(roll: float, pitch: float) -> NDArray[np.float64]:
+    """``R_y(pitch) R_x(roll)``: the heeled body -> the levelled frame."""
+    cp, sp, ct, st = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
+    return np.array([[ct, 0.0, st], [0.0, 1.0, 0.0], [-st, 0.0, ct]]) @ np.array(
+        [[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
+
+
+def roll_pitch_at(log: NavLog, t: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The true roll and pitch [rad] of a :func:`heeled` log at times ``t``."""
+    h = log.meta["heel"]
+    scale = math.radians(h["roll_amp_deg"]) / math.radians(sum(Lidar3dConfig().roll_amp_deg))
+    base = Lidar3dConfig()
+    cfg = replace(base, roll_amp_deg=tuple(a * scale for a in base.roll_amp_deg),
+                  pitch_amp_deg=tuple(a * scale for a in base.pitch_amp_deg), heave_amp=0.0)
+    return _roll_pitch(cfg, int(h["seed"]), math.radians(h["heel_deg"]), np.asarray(t, dtype=float))
