@@ -80,20 +80,23 @@ class GraphBuilder:
     ``chart``: charted beacons; ``lidar``: the log's LiDAR error model (``sigma_r_rel``,
     ``sigma_alpha``); ``scans``: whether the log has scans (``None``: decided by the first scan --
     a grid until then); ``matcher``: replaces the weighted ICP (tests); ``imu``: whether the log has
-    an IMU; ``imu_model``: its noise and initial velocity (``meta``).
+    an IMU; ``imu_model``: its noise and initial velocity (``meta``); ``odometry``: whether the log has
+    odometry (the robot at rest before its first sample; ``None``: decided by the first sample).
     """
 
     def __init__(self, cfg: SmootherConfig, *, matcher: Matcher | None = None,
                  chart: Iterable[KnownBeacon] = (), lidar: dict[str, Any] | None = None,
                  scans: bool | None = None, lidar3d: dict[str, Any] | None = None,
-                 imu: bool | None = None, imu_model: dict[str, Any] | None = None) -> None:
+                 imu: bool | None = None, imu_model: dict[str, Any] | None = None,
+                 odometry: bool | None = None) -> None:
         self.cfg = cfg
         # the state space: Pose3 + velocity + IMU bias when the log has an IMU (motion "auto") or
         # when asked ("imu"; "vessel": the same without an IMU, a white-noise acceleration model)
         nav = cfg.motion in ("imu", "vessel") or (cfg.motion == "auto" and bool(imu))
         self.space: PlanarSpace = NavSpace() if nav else PlanarSpace()
         mounts = parse_mounts(cfg.mounts)
-        self.motion = Motion(cfg, self.space, nav, imu_model, mounts["imu"].pose3() if "imu" in mounts else None)
+        self.motion = Motion(cfg, self.space, nav, imu_model, mounts["imu"].pose3() if "imu" in mounts else None,
+                             odometry=bool(odometry))
         self.scans = ScanFactors(cfg.scan, self.space, matcher=matcher, lidar=lidar, lidar3d=lidar3d,
                                  mount=mounts.get("lidar"))
         self.charted = {b.id: b for b in chart}

@@ -44,14 +44,16 @@ class Motion:
     noise and initial velocity (``meta``)."""
 
     def __init__(self, cfg: SmootherConfig, space: PlanarSpace, nav: bool, imu_model: dict[str, Any] | None,
-                 imu_mount: gtsam.Pose3 | None = None) -> None:
+                 imu_mount: gtsam.Pose3 | None = None, odometry: bool = False) -> None:
         self.cfg = cfg
         self.space = space
         self.imu: ImuChain | None = ImuChain(ImuConfig(**cfg.imu), imu_model) if nav else None
         if self.imu is not None and imu_mount is not None:  # GTSAM's body_P_sensor (docs/mounts.md)
             self.imu.body_P_sensor = imu_mount
         self.imu_model = imu_model
-        self.odometry = OdometryBuffer(cfg.odometry)  # the odometry samples (graphnav.graph.odometry_buffer)
+        # the odometry samples (graphnav.graph.odometry_buffer); ``odometry``: the log has them (at rest before
+        # the first)
+        self.odometry = OdometryBuffer(cfg.odometry, expected=odometry and self.uses_odometry)
         self.last_rel = gtsam.Pose2()  # relative motion of the newest interval
         self.last_gap = 0.0
         self.twist: NDArray[np.float64] | None = None  # [m/s, m/s, rad/s] of the last measured motion

@@ -87,8 +87,8 @@ def graph_params(cfg: SolverConfig, space: PlanarSpace | None = None) -> gtsam.I
 
 
 def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -> dict[str, Any]:
-    """The :class:`Navigator`'s arguments from ``log``: its chart, LiDAR models, whether it has scans and
-    an IMU, the IMU model and initial velocity, the mounts (the log's, the option's ``kw["mounts"]``
+    """The :class:`Navigator`'s arguments from ``log``: its chart, LiDAR models, whether it has scans,
+    an IMU and odometry, the IMU model and initial velocity, the mounts (the log's, the option's ``kw["mounts"]``
     winning per sensor), with the other arguments ``kw``."""
     lidar = log.meta.get("lidar") if isinstance(log.meta.get("lidar"), dict) else None
     lidar3d = log.meta.get("lidar3d") if isinstance(log.meta.get("lidar3d"), dict) else None
@@ -107,7 +107,8 @@ def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -
     if imu_model is not None or v0 is not None:
         imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}
     return {"chart": log.beacons_known, "lidar": lidar, "scans": scans, "lidar3d": lidar3d,
-            "imu": any(r.kind == "imu" for r in log.records), "imu_model": imu_model, **kw}
+            "imu": any(r.kind == "imu" for r in log.records), "imu_model": imu_model,
+            "odometry": bool(log.of("odometry")), **kw}
 
 
 class Navigator:
@@ -116,7 +117,10 @@ class Navigator:
     ``config``: a :class:`SmootherConfig` (``None``: defaults; ``**options`` override its fields).
     ``chart``: charted beacons (``KnownBeacon``; they may also be passed to :meth:`add`);
     ``lidar``: the log's LiDAR error model (``meta["lidar"]``); ``scans``: whether scans will
-    come (``None``: a keyframe grid until the first scan); ``matcher``: replaces the weighted ICP;
+    come (``None``: a keyframe grid until the first scan); ``odometry``: whether odometry will come
+    (the robot at rest before its first sample, :meth:`OdometryBuffer.rest_row
+    <graphnav.graph.odometry_buffer.OdometryBuffer.rest_row>`; ``None``: from the first sample on);
+    ``matcher``: replaces the weighted ICP;
     ``on_estimate(t, pose_vec, cov)``: called with every online estimate. ``history=False`` (live
     mode, unbounded runs) keeps neither the online trajectory nor, with fixed-lag, the poses that
     left the window: memory stays bounded (the smoothed trajectory is then the window only).
@@ -126,7 +130,7 @@ class Navigator:
     def __init__(self, config: SmootherConfig | None = None, *, chart: Iterable[KnownBeacon] = (),
                  lidar: dict[str, Any] | None = None, scans: bool | None = None, matcher: Matcher | None = None,
                  lidar3d: dict[str, Any] | None = None, imu: bool | None = None,
-                 imu_model: dict[str, Any] | None = None,
+                 imu_model: dict[str, Any] | None = None, odometry: bool | None = None,
                  on_estimate: OnEstimate | None = None, history: bool = True, **options: Any) -> None:
         if config is None:
             cfg = SmootherConfig.from_options(options)
@@ -135,7 +139,7 @@ class Navigator:
             cfg = replace(config, **options)
         self.cfg = cfg
         self.builder = GraphBuilder(cfg, matcher=matcher, chart=chart, lidar=lidar, scans=scans, lidar3d=lidar3d,
-                                    imu=imu, imu_model=imu_model)
+                                    imu=imu, imu_model=imu_model, odometry=odometry)
         self.space = self.builder.space
         self.nav = self.builder.nav
         self.last_state: NavPrev | None = None  # the Pose3 graph: the newest keyframe's full state
