@@ -191,10 +191,13 @@ class Motion:
     def _level(self, s: Step, k: int) -> None:
         """Roll = pitch = 0 on keyframe ``k`` (``AttitudeFactorPose3``, ``level_sigma_deg``) when the IMU is
         planar or absent: its records are the levelled frame's and observe neither, so without it they
-        wander with the gyro's noise (and a rolled body turns the planar acceleration out of the plane)."""
+        wander with the gyro's noise (and a rolled body turns the planar acceleration out of the plane).
+        With a 6-axis IMU (roll and pitch from gravity): the height at the sea surface (``surface_sigma``)."""
         assert self.imu is not None
         if not self.imu.six and self.cfg.dynamics.level_sigma_deg > 0:
             s.add(self.space.attitude(F.X(k), 0.0, 0.0, math.radians(self.cfg.dynamics.level_sigma_deg)), "level")
+        elif self.imu.six and self.cfg.dynamics.surface_sigma > 0:  # a 6-axis IMU's height: at the surface
+            s.add(self.space.surface(F.X(k), self.cfg.dynamics.surface_sigma), "level")
 
     @staticmethod
     def lift(p3: gtsam.Pose3, p2: gtsam.Pose2) -> gtsam.Pose3:

@@ -153,6 +153,11 @@ class MotionConfig:
         "(3-axis: levelled horizontal specific force and yaw rate) or absent: such records define a level body "
         "frame and observe no roll or pitch, which would otherwise wander freely and rotate the planar motion; "
         "0 turns it off", unit="deg")
+    surface_sigma: float = option(
+        0.5, "the Pose3 graph with a 6-axis IMU: 1-sigma of every keyframe's height at the sea surface (z = 0: a hull "
+        "floats; the waves' heave). Without it the height drifts with the vertical accelerometer, held only by the "
+        "fixes' 3-D sigma, and on a heeled hull a height error turns every beacon bearing (harbour heeled 20 deg: "
+        "marks at -2.8 to +4.8 m, roll 0.4 deg off); 0 turns it off", unit="m")
 
     def __post_init__(self) -> None:
         _choice("motion_model", self.model, MOTION_MODELS)

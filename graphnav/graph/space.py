@@ -241,8 +241,10 @@ class NavSpace(PlanarSpace):
     def beacon(self, key: int, lkey: int, rng: float, brg: float, sr: float, sb: float, robust: str | None,
                k: float | None):
         bearing = gtsam.Unit3(np.array([math.cos(brg), math.sin(brg), 0.0]))
-        # the bearing's 2-D error lives in the tangent basis of the measured direction: the component along
-        # the vertical is the elevation, which a scanning sensor (radar, 2D LiDAR) does not measure
+        # the component of the bearing's 2-D error along the vertical is the elevation, which a scanning sensor
+        # (radar, 2D LiDAR) does not measure. GTSAM takes the error in the basis of the *predicted* direction,
+        # which matches the measured one's (horizontal, vertical) unless the mark lies within about the
+        # elevation of the body's x or y axis: there the elevation stays held (docs/smoother.md, heeled hull)
         vertical = np.abs(np.asarray(bearing.basis())[2, :]) > 0.5
         sig = np.where(vertical, BEACON_ELEVATION_SIGMA, sb)
         noise = robustify(gtsam.noiseModel.Diagonal.Sigmas(np.array([sig[0], sig[1], sr], dtype=float)), robust, k)
@@ -255,6 +257,11 @@ class NavSpace(PlanarSpace):
         up_body = gtsam.Rot3.Ypr(0.0, pitch, roll).unrotate(gtsam.Point3(0.0, 0.0, 1.0))
         return gtsam.AttitudeFactorPose3(key, gtsam.Unit3(np.array([0.0, 0.0, 1.0])),
                                          gtsam.noiseModel.Isotropic.Sigma(2, sigma), gtsam.Unit3(up_body))
+
+    def surface(self, key: int, sigma: float):
+        """The keyframe's height at the sea surface (z = 0 within ``sigma`` [m]): a ``GPSFactor`` that says
+        nothing of x and y (sigma 1e4 m there)."""
+        return gtsam.GPSFactor(key, np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(np.array([1e4, 1e4, float(sigma)])))
 
     def velocity(self, k: int, vx: float, vy: float, sigma: float, robust: str | None):
         """GNSS velocity over ground (nav frame) on ``V(k)``; the vertical held at the surface."""

@@ -71,3 +71,23 @@ def test_bearings_are_azimuths_in_the_hull_plane(logs):
     ahead = np.array([abs(math.sin(a.bearing)) < 0.05 or abs(math.cos(a.bearing)) < 0.05 for a in b0])
     assert np.max(np.abs(d[ahead])) < math.radians(0.3)  # ahead, astern and abeam the heel does not move them
     assert np.max(np.abs(d)) > math.radians(0.2)  # elsewhere it does (tan-like, ~0.4 deg at 10 deg heel)
+
+
+def test_a_heeled_six_axis_log_is_held_at_the_surface_and_its_heel(logs):
+    """isam2 on 120 s of the heeled harbour: the keyframes' height stays at the sea surface (surface_sigma) and
+    the first roll comes from gravity (anchor.sigma_tilt_deg), not level."""
+    import factors as F
+    from graphnav.graph.navigator import Navigator
+
+    _, heel = logs
+    nav = Navigator.for_log(heel)
+    for r in heel:
+        nav.add(r)
+    nav.flush()
+    nav.result()
+    t = np.array(nav.builder.kf_t)
+    poses = [nav._final.atPose3(F.X(k)) for k in range(len(t))]
+    roll, _ = roll_pitch_at(heel, t)
+    assert max(abs(p.translation()[2]) for p in poses) < 1.0
+    d_roll = np.degrees([p.rotation().roll() for p in poses]) - np.degrees(roll)
+    assert abs(np.mean(d_roll)) < 0.5 and np.degrees(poses[0].rotation().roll()) > 5.0  # heeled ~10 deg from the start
