@@ -289,6 +289,8 @@ class GraphBuilder:
             # (Solent s2, 20 m fixes: 15.9 m ATE with the gate on k-1's covariance, 3.2 m without a gate)
             assert prev is not None
             gate_cov = prev_cov + cov_to_world(prev.theta(), step_cov)
+        if self.nav:  # the beacon factors' elevation (space.beacon): the keyframe's roll and pitch as estimated
+            self.meas.tilt_of = lambda key: keyframe_tilt(s, state, key)
         self.meas.step(s, k, due, pose_k, gate_cov, prev if k > 0 else None, self._offset)
         kf.done(k)
         self.motion.prune(t)
@@ -358,3 +360,14 @@ class GraphBuilder:
             **(self.scans.loops.info() if self.scans.loops is not None else {}),
             **self.counts,
         }
+
+
+def keyframe_tilt(s: Step, state: NavPrev | None, key: int) -> tuple[float, float] | None:
+    """Roll and pitch of keyframe ``key`` as now estimated: this step's value, or the previous state's."""
+    if s.values.exists(key):
+        r = s.values.atPose3(key).rotation()
+    elif state is not None:
+        r = state[0].rotation()
+    else:
+        return None
+    return float(r.roll()), float(r.pitch())

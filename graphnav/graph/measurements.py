@@ -85,6 +85,8 @@ class Measurements:
         self.rejected: list[gtsam.NonlinearFactor] = []
         self.current: tuple[int, int] | None = None  # the water current W(j): (first, newest) keyframe
         self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
+        #: the Pose3 graph: a keyframe key's (roll, pitch) estimate when its factors are made (the builder's)
+        self.tilt_of: Callable[[int], tuple[float, float] | None] | None = None
         self.arms: dict[str, tuple[float, float, float]] = {}  # GNSS lever arms (body frame, m) by source ("": all)
         self.log_yaw = 0.0  # [rad] the speed log's mounting yaw (its axis from the bow)
         for name, g in (mounts or {}).items():  # the GNSS antennas: the sensor's, and each source's
@@ -278,8 +280,9 @@ class Measurements:
         sr = r.sigma_range if math.isfinite(r.sigma_range) else math.hypot(cfg.beacon.sigma_range,
                                                                            cfg.beacon.sigma_range_rel * r.range)
         sb = r.sigma_bearing if math.isfinite(r.sigma_bearing) else math.radians(cfg.beacon.sigma_bearing_deg)
-        s.add(self.space.beacon(xa, F.L(self.beacon_ids[r.id]), rng_, brg, sr, sb, cfg.beacon.robust, cfg.beacon.k),
-              "beacon")
+        tilt = self.tilt_of(xa) if self.tilt_of is not None else None
+        s.add(self.space.beacon(xa, F.L(self.beacon_ids[r.id]), rng_, brg, sr, sb, cfg.beacon.robust, cfg.beacon.k,
+                                tilt), "beacon")
 
     def water_speed(self, s: Step, a: int, pa: gtsam.Pose2, r: WaterSpeed) -> None:
         """Speed through water ``v`` along the bow at keyframe ``a``: ``V(a) - W(a) = v (cos yaw, sin yaw)``

@@ -141,7 +141,7 @@ class PlanarSpace:
         return gtsam.PriorFactorPoint2(key, p, gtsam.noiseModel.Gaussian.Covariance(cov))
 
     def beacon(self, key: int, lkey: int, rng: float, brg: float, sr: float, sb: float, robust: str | None,
-               k: float | None):
+               k: float | None, tilt: tuple[float, float] | None = None):
         return F.beacon_factor(key, lkey, rng, brg, sr, sb, robust=robust, k=k)
 
 
@@ -239,14 +239,16 @@ class NavSpace(PlanarSpace):
         return gtsam.PriorFactorPoint3(key, p, gtsam.noiseModel.Gaussian.Covariance(cov))
 
     def beacon(self, key: int, lkey: int, rng: float, brg: float, sr: float, sb: float, robust: str | None,
-               k: float | None):
+               k: float | None, tilt: tuple[float, float] | None = None):
+        """Range and bearing ``brg`` (the azimuth in the hull's plane) to a mark: ``BearingRangeFactor3D``
+        whose elevation component has :data:`BEACON_ELEVATION_SIGMA` (a scanning sensor does not measure it).
+        GTSAM takes the bearing's error in the basis of the *predicted* direction: which of its two components
+        is the vertical one is read from the direction expected at the keyframe's ``tilt`` (roll, pitch; the
+        estimate when the factor is made), a mark at the sensor's height."""
         bearing = gtsam.Unit3(np.array([math.cos(brg), math.sin(brg), 0.0]))
-        # the component of the bearing's 2-D error along the vertical is the elevation, which a scanning sensor
-        # (radar, 2D LiDAR) does not measure. GTSAM takes the error in the basis of the *predicted* direction,
-        # which matches the measured one's (horizontal, vertical) unless the mark lies within about the
-        # elevation of the body's x or y axis: there the elevation stays held (docs/smoother.md, heeled hull)
-        vertical = np.abs(np.asarray(bearing.basis())[2, :]) > 0.5
-        sig = np.where(vertical, BEACON_ELEVATION_SIGMA, sb)
+        vert = _vertical_component(brg, tilt)
+        sig = [sb, sb]
+        sig[vert] = BEACON_ELEVATION_SIGMA
         noise = robustify(gtsam.noiseModel.Diagonal.Sigmas(np.array([sig[0], sig[1], sr], dtype=float)), robust, k)
         return gtsam.BearingRangeFactor3D(key, lkey, bearing, float(rng), noise)
 
@@ -272,6 +274,22 @@ class NavSpace(PlanarSpace):
 #: [rad] the elevation of a beacon bearing: not measured (a bearing is the azimuth in the sensor's plane, which
 #: heels with the hull); held at 0 with the bearing's sigma, it pulled the roll of a boat heeled 10 deg by 1.5 deg
 BEACON_ELEVATION_SIGMA = 1.0
+def _vertical_component(brg: float, tilt: tuple[float, float] | None) -> int:
+    """Which tangent component (0 or 1) of GTSAM's ``Unit3`` basis is the vertical one for a mark at azimuth
+    ``brg`` in the body plane seen from a body at ``tilt`` = (roll, pitch) (None: level). ``Unit3::basis``:
+    ``b1 = n x a / |n x a|``, ``a`` the axis of ``n``'s smallest absolute component (x, y, z in that order on
+    ties), ``b2 = n x b1``. ``n`` is the body direction of a horizontal world direction of that azimuth: its
+    body z is ``w . R e_z`` with ``R e_z = (cos r sin p, -sin r, cos r cos p)``."""
+    roll, pitch = tilt if tilt is not None else (0.0, 0.0)
+    c, s = math.cos(brg), math.sin(brg)
+    n = np.array([c, s, c * math.cos(roll) * math.sin(pitch) - s * math.sin(roll)])
+    n /= np.linalg.norm(n)
+    b1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+    b1 /= np.linalg.norm(b1)
+    b2 = np.cross(n, b1)
+    return 0 if abs(b1[2]) > abs(b2[2]) else 1
+
+
 #: [m] a mark's height above the surface (charted or unknown: a prior at 0)
 SURFACE_SIGMA = 1.0
 #: [m/s] the vertical velocity of a GNSS velocity record (a surface vessel's heave rate)

@@ -398,22 +398,27 @@ def test_six_axis_tilt_is_the_gravity_direction():
 
 
 def test_beacon_bearing_leaves_the_elevation_free():
-    """A bearing is the azimuth in the sensor's (the hull's) plane: on a hull heeled 10 deg the factor holds
-    the azimuth and says nothing of the roll (held at the bearing's sigma, the elevation pulled it level)."""
+    """A bearing is the azimuth in the sensor's (the hull's) plane: on a heeled hull the factor holds the azimuth
+    and not the elevation (held at the bearing's sigma, it pulled the roll level). GTSAM takes the error in the
+    predicted direction's basis: abeam of a heeled hull its first component is the vertical one, which the
+    keyframe's tilt tells ``space.beacon``."""
     sp = NavSpace()
-    lm = np.array([30.0, 25.0, 0.0])
-    vals = gtsam.Values()
-    vals.insert(F.V(7), lm)  # any key for the mark
 
-    def err(roll_deg: float, brg: float) -> float:
-        v = gtsam.Values(vals)
+    def err(lm: np.ndarray, roll_deg: float, brg: float, tilt: bool = True) -> float:
+        v = gtsam.Values()
+        v.insert(F.V(7), lm)  # any key for the mark
         v.insert(F.X(0), gtsam.Pose3(gtsam.Rot3.Ypr(0.3, 0.0, math.radians(roll_deg)), np.zeros(3)))
-        return sp.beacon(F.X(0), F.V(7), float(np.linalg.norm(lm)), brg, 0.1, math.radians(1.0), None, None).error(v)
+        f = sp.beacon(F.X(0), F.V(7), float(np.linalg.norm(lm)), brg, 0.1, math.radians(1.0), None, None,
+                      (math.radians(roll_deg), 0.0) if tilt else None)
+        return f.error(v)
 
-    def azimuth(roll_deg: float) -> float:  # the mark's azimuth in the heeled body's plane
+    def azimuth(lm: np.ndarray, roll_deg: float) -> float:  # the mark's azimuth in the heeled body's plane
         b = gtsam.Rot3.Ypr(0.3, 0.0, math.radians(roll_deg)).unrotate(gtsam.Point3(*lm))
         return math.atan2(b[1], b[0])
 
-    for roll in (-15.0, 0.0, 10.0, 20.0):  # satisfied at any heel (4-8 deg of elevation, 1 deg sigma: 8-32 before)
-        assert err(roll, azimuth(roll)) < 0.02
-    assert err(10.0, azimuth(10.0) + math.radians(2.0)) > 1.5  # ... the azimuth holds (2 sigma: 0.5 x 2^2 = 2)
+    ahead, abeam = np.array([30.0, 25.0, 0.0]), np.array([-12.0, 38.0, 0.0])  # ~40 deg and ~87 deg off the bow
+    for lm in (ahead, abeam):
+        for roll in (-15.0, 0.0, 10.0, 20.0):  # satisfied at any heel (4-20 deg of elevation, 1 deg sigma)
+            assert err(lm, roll, azimuth(lm, roll)) < 0.1  # (the elevation at BEACON_ELEVATION_SIGMA 1 rad)
+        assert err(lm, 10.0, azimuth(lm, 10.0) + math.radians(2.0)) > 1.5  # the azimuth holds (0.5 x 2^2)
+    assert err(abeam, 20.0, azimuth(abeam, 20.0), tilt=False) > 10.0  # taken as level: the elevation is held
