@@ -119,8 +119,11 @@ def test_ctrl_c_during_beacons_search_exits_130_keeps_results_and_resumes(tmp_pa
     argv = [sys.executable, "-m", "graphnav", "beacons", "search", "--beacons", "1", "--chunk", "1",
             "--results", str(results), "--no-progress"]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
+    # the child starts with SIGINT at its default, as from a shell (an ignored SIGINT is inherited, and Python
+    # then installs no KeyboardInterrupt handler: whatever left it ignored in this process must not decide)
     p = subprocess.Popen([*argv, "--scheduler", "local", "--workers", "2"], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+                         stderr=subprocess.PIPE, text=True, env=env, start_new_session=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and p.poll() is None and not (results.exists() and load_done(results)):
