@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..log import Attitude, BeaconObs, Imu, NavLog, Record
-from .harbour3d import Lidar3dConfig, attitude
+from .harbour3d import Lidar3dConfig, attitude, rot_zyx
 
 GRAVITY = 9.80665  # [m/s^2] standard gravity (the graph's: graphnav.graph.imu_chain.GRAVITY)
 _H = 1e-4  # [s] the central difference of the roll and pitch rates
@@ -35,14 +35,20 @@ def _roll_pitch(cfg: Lidar3dConfig, phase_rng_seed: int, heel: float, t: NDArray
     return heel + a[:, 0], a[:, 1]
 
 
+def _waves(roll_amp: float) -> Lidar3dConfig:
+    """The harbour3d wave model with its roll scaled to ``roll_amp`` [rad] (the sum of its two sinusoids), its
+    pitch alike, no heave."""
+    base = Lidar3dConfig()
+    scale = roll_amp / math.radians(sum(base.roll_amp_deg)) if roll_amp else 0.0
+    return replace(base, roll_amp_deg=tuple(a * scale for a in base.roll_amp_deg),
+                   pitch_amp_deg=tuple(a * scale for a in base.pitch_amp_deg), heave_amp=0.0)
+
+
 def heeled(log: NavLog, heel: float = math.radians(10.0), roll_amp: float = math.radians(5.0), *,
            seed: int = 0, attitude_hz: float = 0.0, ahrs_sigma: float = math.radians(0.2)) -> NavLog:
     """``log`` on a hull heeled ``heel`` [rad] and rolling with waves of ``roll_amp`` [rad] (the harbour3d
     model's roll, its pitch at half that; see the module docstring). ``meta["heel"]`` states what was done."""
-    scale = roll_amp / math.radians(sum(Lidar3dConfig().roll_amp_deg)) if roll_amp else 0.0
-    base = Lidar3dConfig()
-    cfg = replace(base, roll_amp_deg=tuple(a * scale for a in base.roll_amp_deg),
-                  pitch_amp_deg=tuple(a * scale for a in base.pitch_amp_deg), heave_amp=0.0)
+    cfg = _waves(roll_amp)
     imu_meta = log.meta.get("imu") if isinstance(log.meta.get("imu"), dict) else {}
     hz = float(imu_meta.get("hz", 100.0))
     acc_sd, gyro_sd = float(imu_meta.get("acc_std", 0.02)), float(imu_meta.get("gyro_std", 1e-3))
@@ -57,7 +63,7 @@ def heeled(log: NavLog, heel: float = math.radians(10.0), roll_amp: float = math
             (p1,), (t1,) = _roll_pitch(cfg, seed, heel, np.array([tm + _H]))
             (p0,), (t0,) = _roll_pitch(cfg, seed, heel, np.array([tm - _H]))
             dphi, dth = (p1 - p0) / (2 * _H), (t1 - t0) / (2 * _H)
-            f = body_rotation(phi, th).T @ np.array([r.ax, r.ay, GRAVITY])
+            f = rot_zyx(0.0, th, phi).T @ np.array([r.ax, r.ay, GRAVITY])
             cp, sp, ct, st = math.cos(phi), math.sin(phi), math.cos(th), math.sin(th)
             w = np.array([dphi - r.wz * st, dth * cp + r.wz * ct * sp, -dth * sp + r.wz * ct * cp])
             f[2] += rng.normal(0.0, acc_sd)
@@ -71,7 +77,7 @@ def heeled(log: NavLog, heel: float = math.radians(10.0), roll_amp: float = math
             continue
         if isinstance(r, BeaconObs):
             (phi,), (th,) = _roll_pitch(cfg, seed, heel, np.array([r.t]))
-            d = body_rotation(phi, th).T @ np.array([math.cos(r.bearing), math.sin(r.bearing), 0.0])
+            d = rot_zyx(0.0, th, phi).T @ np.array([math.cos(r.bearing), math.sin(r.bearing), 0.0])
             r = replace(r, bearing=float(math.atan2(d[1], d[0])))
         out.append(r)
     meta = dict(log.meta)
@@ -80,18 +86,8 @@ def heeled(log: NavLog, heel: float = math.radians(10.0), roll_amp: float = math
     return NavLog(out, list(log.beacons_known), meta)
 
 
-def body_rotation(roll: float, pitch: float) -> NDArray[np.float64]:
-    """``R_y(pitch) R_x(roll)``: the heeled body -> the levelled frame."""
-    cp, sp, ct, st = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
-    return np.array([[ct, 0.0, st], [0.0, 1.0, 0.0], [-st, 0.0, ct]]) @ np.array(
-        [[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
-
-
 def roll_pitch_at(log: NavLog, t: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The true roll and pitch [rad] of a :func:`heeled` log at times ``t``."""
     h = log.meta["heel"]
-    scale = math.radians(h["roll_amp_deg"]) / math.radians(sum(Lidar3dConfig().roll_amp_deg))
-    base = Lidar3dConfig()
-    cfg = replace(base, roll_amp_deg=tuple(a * scale for a in base.roll_amp_deg),
-                  pitch_amp_deg=tuple(a * scale for a in base.pitch_amp_deg), heave_amp=0.0)
-    return _roll_pitch(cfg, int(h["seed"]), math.radians(h["heel_deg"]), np.asarray(t, dtype=float))
+    return _roll_pitch(_waves(math.radians(h["roll_amp_deg"])), int(h["seed"]), math.radians(h["heel_deg"]),
+                       np.asarray(t, dtype=float))
