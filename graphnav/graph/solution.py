@@ -107,7 +107,7 @@ class Closing:
         if cfg.robust.backend == "gnc":
             graph, self.groups, values, info["switched_off"] = gnc.switch_off(
                 graph, values, self.groups, lm, cfg.robust.prob, cfg.robust.groups)
-        dropped = 0
+        dropped, scale = 0, None  # scale: the fixes' local scales of (graph, values) as they now are
         for _ in range(3 if cfg.gnss.gate is not None else 0):
             # the gate in the fixes' own scatter nearby (a receiver's stated sigma may be optimistic: Solent s2
             # states 7 m for 20 m fixes, and a gate on the stated sigma dropped 210 of 555 correct fixes)
@@ -116,13 +116,14 @@ class Closing:
                 graph.at(i), values, robust=False) > cfg.gnss.gate * np.sqrt(scale.get(i, 1.0)))]
             if len(keep) == graph.size():
                 break
+            scale = None  # (the graph changes)
             dropped += graph.size() - len(keep)
             graph = noise.subgraph(graph, keep)
             self.groups = [self.groups[i] for i in keep]
             values, it = levenberg_marquardt(graph, values, lm)
             iters += it
         info["gnss_dropped_after_lm"] = dropped
-        graph, values = self._inflate_gnss(graph, values, info)
+        graph, values = self._inflate_gnss(graph, values, info, scale)
         if cfg.robust.noise_estimation != "off":
             scalable = noise.SCALABLE if cfg.robust.noise_estimation == "all" else tuple(
                 g for g in noise.SCALABLE if g in self.defaulted)
@@ -135,13 +136,14 @@ class Closing:
         info["converge_ms"] = (time.perf_counter() - c0) * 1e3
         return values
 
-    def _inflate_gnss(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, info: dict[str, Any]
-                      ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+    def _inflate_gnss(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, info: dict[str, Any],
+                      scale: dict[int, float] | None = None) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
         """The fixes whose scatter nearby (:func:`gnc.factor_scales`) shows their stated sigma too small
         beyond chance (:func:`~graphnav.graph.chi2.significant_scale`, ``robust.prob``) get their covariance times that
         scale, and LM re-solves: a receiver's stated sigma is a claim the log can refute (Solent s2 states
         7 m for 20 m fixes: NEES 7.6 and 2.7 m before, see docs/smoother.md). Never deflated."""
-        scale = gnc.factor_scales(graph, values, self.groups, ["gnss"])
+        if scale is None:  # (the gate's, when it dropped nothing, is of this very graph and values)
+            scale = gnc.factor_scales(graph, values, self.groups, ["gnss"])
         if not scale:
             return graph, values
         bound = significant_scale(2, self.cfg.robust.prob)  # a fix measures 2 axes (its height is the surface)
