@@ -2,6 +2,7 @@
 (issue #25; docs/defaults.md, "What was fitted").
 
     python benchmarks/icp_yaw_slope.py LOG... [--pairs N] [--init truth|odometry] [--matcher hdl|p2l|both]
+                                              [--sweep SECONDS]
 
 Every consecutive scan pair is matched from the truth's increment (``--init odometry``: from the
 odometry's, as the graph does); the match's own estimate is kept (``quality["icp_pose"]``, before a
@@ -28,6 +29,11 @@ absolute error) of the truth's. Per log:
 * ``pair_rms``: the RMS per-pair error of the matches and of the odometry against the truth
   (translation [m], yaw [deg]).
 
+``--sweep S`` de-skews every scan first as a LiDAR sweeping its beams in index order over ``S``
+seconds would need (:mod:`graphnav.scan.deskew`, beam ``i`` of ``N`` at ``i S / N``), with the truth's
+twist over the scan's next pair: a sweep left in the scans turns every match clockwise by
+``~ dyaw w S / pi`` when the beams are taken counter-clockwise (a SICK LMS: 180 deg in 6.7 ms).
+
 ``--matcher p2l`` runs :func:`p2l_match` instead, a textbook point-to-line ICP independent of
 graphnav's kernels (cKDTree nearest neighbours, unweighted Gauss-Newton); ``both`` runs the two on
 the same pairs and adds the RMS of their yaw difference and the correlation of their errors: when
@@ -52,6 +58,7 @@ sys.path.insert(0, str(ROOT))
 from graphnav.geometry import increment, wrap_angle  # noqa: E402
 from graphnav.io import load_log  # noqa: E402
 from graphnav.log import odometry_samples  # noqa: E402
+from graphnav.scan.deskew import twist_of  # noqa: E402
 from graphnav.scan.icp_pairs import reference_increments  # noqa: E402
 from graphnav.scan.weighted_icp import IcpConfig, match_points, scan_points  # noqa: E402
 
@@ -181,9 +188,21 @@ def summary(est: NDArray, ref: NDArray, ok: NDArray) -> dict:
 # ----------------------------------------------------------------------------- the study
 
 
-def match_all(path: Path, pairs: int, init: str, matchers: list[str]) -> tuple[dict, NDArray, NDArray]:
+def _twists(ref: NDArray, t0: NDArray, t1: NDArray) -> list[NDArray | None]:
+    """Per scan, the truth's constant twist over its next pair (the last scan: its previous one)."""
+    out: list[NDArray | None] = []
+    for k in range(len(ref) + 1):
+        j = k if k < len(ref) else k - 1
+        ok = j >= 0 and np.all(np.isfinite(ref[j])) and t1[j] > t0[j]
+        out.append(twist_of(ref[j], float(t1[j] - t0[j])) if ok else None)
+    return out
+
+
+def match_all(path: Path, pairs: int, init: str, matchers: list[str], sweep: float = 0.0
+              ) -> tuple[dict, NDArray, NDArray]:
     """Every consecutive pair of the first ``pairs`` + 1 scans matched by each of ``matchers``:
-    ``{matcher: (est (N, 3), ok (N,))}``, the truth's increments (N, 3) and the odometry's."""
+    ``{matcher: (est (N, 3), ok (N,))}``, the truth's increments (N, 3) and the odometry's; with a
+    ``sweep`` [s] the scans de-skewed first with the truth's twist."""
     log = load_log(path)
     scans = log.of("scan")[:pairs + 1]
     t0 = np.array([s.t for s in scans[:-1]])
@@ -192,7 +211,10 @@ def match_all(path: Path, pairs: int, init: str, matchers: list[str]) -> tuple[d
     odo_samples = odometry_samples(log)
     odo = np.full_like(ref, np.nan)
     cfg = IcpConfig()
-    pts = [scan_points(s, cfg) for s in scans]
+    if sweep:
+        pts = [scan_points(s, cfg, sweep_s=sweep, twist=tw) for s, tw in zip(scans, _twists(ref, t0, t1), strict=True)]
+    else:
+        pts = [scan_points(s, cfg) for s in scans]
     out = {m: (np.full_like(ref, np.nan), np.zeros(len(t0), dtype=bool)) for m in matchers}
     for k in range(len(t0)):
         inc = increment(odo_samples, t0[k], t1[k]) if len(odo_samples) else None
@@ -211,11 +233,11 @@ def match_all(path: Path, pairs: int, init: str, matchers: list[str]) -> tuple[d
     return out, ref, odo
 
 
-def study(path: Path, pairs: int, init: str, matcher: str) -> dict:
+def study(path: Path, pairs: int, init: str, matcher: str, sweep: float = 0.0) -> dict:
     matchers = ["hdl", "p2l"] if matcher == "both" else [matcher]
-    res, ref, odo = match_all(path, pairs, init, matchers)
+    res, ref, odo = match_all(path, pairs, init, matchers, sweep)
     dt = np.isfinite(ref[:, 2])
-    out: dict = {"log": path.name, "pairs": len(ref), "init": init,
+    out: dict = {"log": path.name, "pairs": len(ref), "init": init, "sweep_s": sweep,
                  "truth_turn_deg": {"net": float(np.degrees(ref[dt, 2].sum())),
                                     "abs": float(np.degrees(np.abs(ref[dt, 2]).sum()))}}
     for m, (est, ok) in res.items():
@@ -243,9 +265,10 @@ def main() -> int:
     ap.add_argument("--pairs", type=int, default=100_000)
     ap.add_argument("--init", choices=("truth", "odometry"), default="truth")
     ap.add_argument("--matcher", choices=("hdl", "p2l", "both"), default="both")
+    ap.add_argument("--sweep", type=float, default=0.0, help="de-skew the scans for this sweep [s] first")
     args = ap.parse_args()
     for p in args.logs:
-        print(json.dumps(study(p, args.pairs, args.init, args.matcher)), flush=True)
+        print(json.dumps(study(p, args.pairs, args.init, args.matcher, args.sweep)), flush=True)
     return 0
 
 

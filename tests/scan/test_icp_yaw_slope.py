@@ -130,3 +130,32 @@ def test_scale_and_offset_are_recovered(scale, offset_deg):
     assert fit["scale_pct"] == pytest.approx(100 * (scale - 1.0), abs=3 * fit["scale_se_pct"])
     assert fit["offset_deg"] == pytest.approx(offset_deg, abs=3 * fit["offset_se_deg"])
     assert fit["scale_se_pct"] < 0.3 and fit["offset_se_deg"] < 0.004
+
+
+@pytest.mark.parametrize("wz_deg", [30.0, -30.0])
+def test_an_unmodelled_counter_clockwise_sweep_turns_matches_clockwise(wz_deg):
+    """Known answer for the clockwise drift of benchmarks/icp_yaw_slope.py's ``--sweep``: scans whose
+    beams are taken one after the other from -90 to +90 deg over ``S`` seconds while the robot turns
+    at ``w``, matched as if instantaneous, come out turned by ``-dyaw w S / pi`` (clockwise whichever
+    way the robot turns: the scan is stretched or squeezed in bearing by ``1 + w S / pi``)."""
+    from graphnav.scan.deskew import beam_times, se2_exp
+
+    segs, ang, sweep, dt = room(), flaser_angles(181), 0.1, 0.25
+    twist = np.array([0.4, 0.0, math.radians(wz_deg)])
+    rel = np.array([*se2_exp(twist, np.array([dt]))]).ravel()
+
+    def swept(pose: np.ndarray) -> np.ndarray:
+        x, y, th = se2_exp(twist, beam_times(ang.size, sweep * ang.size / (ang.size - 1)))  # -90..+90 in S
+        r = np.array([raycast(segs, se2_compose(pose, np.array([x[i], y[i], th[i]])), ang[i:i + 1])[0]
+                      for i in range(ang.size)])
+        ok = np.isfinite(r)
+        return np.column_stack([r[ok] * np.cos(ang[ok]), r[ok] * np.sin(ang[ok])])
+
+    errs = []
+    for p0 in ([-3.0, -1.0, 0.3], [2.0, 1.0, 2.5], [0.0, -2.0, -1.2]):
+        p0 = np.array(p0)
+        r = match_points(swept(se2_compose(p0, rel)), swept(p0), IcpConfig(), init=rel)
+        errs.append(r.quality["icp_pose"][2] - rel[2])
+    want = -rel[2] * twist[2] * sweep / math.pi
+    assert want < 0
+    assert np.mean(errs) == pytest.approx(want, rel=0.15)
