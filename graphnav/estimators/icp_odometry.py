@@ -18,6 +18,11 @@ guess with a wide covariance, and counted (``info["failed_matches"]``, ``info["b
 flagged for degeneracy only, from an odometry guess, is chained as returned (the match across its weak
 directions, the guess along them) with its covariance (the match's across, the odometry's along;
 ``info["constrained"]``).
+
+LiDAR-inertial (an IMU, no odometry): each keyframe match enters by its own information
+(:meth:`~graphnav.scan.weighted_icp.MatchResult.own`) where it agrees with the IMU's prediction, in one
+filter over the keyframe's pose, the IMU's state (velocity and, with ``gyro_bias``, the gyro's bias) and
+the increment (:meth:`_KeyframeChain._match_joint`; docs/weighted-icp.md "icp-dr: LiDAR-inertial").
 """
 
 from __future__ import annotations
