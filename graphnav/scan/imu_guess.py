@@ -127,6 +127,7 @@ class ImuGuess:
             sv = V0_SIGMA
         # the state's covariance: (vx, vy, b_g); the bias block is 0 and unused without gyro_bias
         self.P3 = np.diag([sv * sv, sv * sv, self.b_gyro**2 if gyro_bias else 0.0])
+        self._rows: list[list[float]] | None = None  # the samples as Python floats (the bias's scalar loop)
         self._pred: tuple[float, float, NDArray[np.float64], NDArray[np.float64], float,
                           NDArray[np.float64], NDArray[np.float64]] | None = None
         self.last: tuple[float, float, NDArray[np.float64], NDArray[np.float64]] | None = None  # newest guess
@@ -144,25 +145,50 @@ class ImuGuess:
         """Position and velocity change (frame of ``t0``, start velocity zero) and yaw over ``[t0, t1]``
         with the rate ``wz - bg``, and the derivatives of the position and velocity change by ``bg``."""
         t = self.s[:, 0]
-        p, dv, th = np.zeros(2), np.zeros(2), 0.0
-        dp_db, dv_db = np.zeros(2), np.zeros(2)
         i = int(np.searchsorted(t, t0, side="right"))
+        if self.gyro_bias:
+            return self._integrate_bias(t0, t1, i)
+        p, dv, th = np.zeros(2), np.zeros(2), 0.0
         lo = t0
         while lo < t1 - 1e-12:
             row = self.s[min(i, len(t) - 1)]
             hi = min(t[i], t1) if i < len(t) else t1
             dt = hi - lo
             if dt > 0:
-                p, dv_new, th_new = strapdown_step(p, dv, th, row[1], row[2], row[3] - self.bg, dt)
-                if self.gyro_bias:  # d/dbg: the mid-step yaw moves by -(mid time); the force turns with it
-                    acc = (dv_new - dv) / dt
-                    dacc = np.array([-acc[1], acc[0]]) * -(lo - t0 + 0.5 * dt)
-                    dp_db = dp_db + dt * dv_db + 0.5 * dt * dt * dacc
-                    dv_db = dv_db + dt * dacc
-                dv, th = dv_new, th_new
+                p, dv, th = strapdown_step(p, dv, th, row[1], row[2], row[3], dt)
             lo = hi
             i += 1
-        return p, dv, th, dp_db, dv_db
+        return p, dv, th, np.zeros(2), np.zeros(2)
+
+    def _integrate_bias(self, t0: float, t1: float, i: int) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                                      float, NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`_integrate` with the bias: :func:`strapdown_step` in scalars, with the derivatives by ``bg``
+        (the mid-step yaw moves by minus the mid-step time, and the specific force turns with it)."""
+        if self._rows is None:
+            self._rows = self.s.tolist()
+        rows, n, bg = self._rows, len(self._rows), self.bg
+        px = py = vx = vy = th = dpx = dpy = dvx = dvy = 0.0
+        lo = t0
+        while lo < t1 - 1e-12:
+            row = rows[min(i, n - 1)]
+            hi = min(rows[i][0], t1) if i < n else t1
+            dt = hi - lo
+            if dt > 0:
+                wz = row[3] - bg
+                mid = th + 0.5 * dt * wz
+                c, s = math.cos(mid), math.sin(mid)
+                ax, ay = c * row[1] - s * row[2], s * row[1] + c * row[2]
+                k = -(lo - t0 + 0.5 * dt)  # d mid / d bg
+                dax, day = -ay * k, ax * k
+                h = 0.5 * dt * dt
+                px, py = px + dt * vx + h * ax, py + dt * vy + h * ay
+                vx, vy = vx + dt * ax, vy + dt * ay
+                dpx, dpy = dpx + dt * dvx + h * dax, dpy + dt * dvy + h * day
+                dvx, dvy = dvx + dt * dax, dvy + dt * day
+                th += dt * wz
+            lo = hi
+            i += 1
+        return np.array([px, py]), np.array([vx, vy]), th, np.array([dpx, dpy]), np.array([dvx, dvy])
 
     def _jacobian(self, dt: float, dp_db: NDArray[np.float64]) -> NDArray[np.float64]:
         """``d inc / d (vx, vy, b_g)`` (3, 3)."""
