@@ -1,17 +1,25 @@
 """Scan-to-map LiDAR odometry: the continuous-frame experiment of Wang et al. (2023), in 2D.
 
-Each scan is registered against a local map made of the last ``keyframes`` registered keyframe
-scans (a scan becomes a keyframe when the vessel has moved ``keyframe_dist`` metres or turned
-``keyframe_angle_deg`` since the last one), voxel-downsampled to ``map_voxel`` metres. The initial
-guess is the odometry increment when the log has odometry (``predict="odometry"``), else the
-constant-velocity prediction; the result is the pose in SE(2) (see :mod:`graphnav.scan.registration`
-for how each backend is kept planar). A registration whose point-to-line information against the
-map's local lines is degenerate (:mod:`graphnav.scan.degeneracy`: condition number above
-``max_condition``, or the registration's 1-sigma along the weakest direction — the sandwich of
-:mod:`graphnav.scan.covariance` over the point-to-line pairs, with the map's voxel as the sampling
-resolution — above ``max_sigma`` voxels) takes the
-prediction along its weak directions and is counted (``info["degenerate_registrations"]``). The
-trajectory is the chain of registered poses — odometry, so it drifts, as in the paper's Table 2.
+Each scan is registered against a local map made of the last ``keyframes`` registered keyframe scans (a
+scan becomes a keyframe when the vessel has moved ``keyframe_dist`` metres or turned
+``keyframe_angle_deg`` since the last one), voxel-downsampled to ``map_voxel`` metres. The initial guess
+is the odometry increment when the log has odometry (``predict="odometry"``), else the IMU's prediction
+when it has an IMU, else the constant-velocity prediction; the result is the pose in SE(2) (see
+:mod:`graphnav.scan.registration` for how each backend is kept planar). A registration whose
+point-to-line information against the map's local lines is degenerate (:mod:`graphnav.scan.degeneracy`:
+condition number above ``max_condition``, or the registration's 1-sigma along the weakest direction —
+the sandwich of :mod:`graphnav.scan.covariance` over the point-to-line pairs, with the map's voxel as
+the sampling resolution — above ``max_sigma`` voxels) takes the prediction along its weak directions and
+is counted (``info["degenerate_registrations"]``). The trajectory is the chain of registered poses —
+odometry, so it drifts, as in the paper's Table 2.
+
+With the IMU's prediction (a log with an IMU and no odometry) it is LiDAR-inertial odometry: the pose and
+the IMU's state (velocity, gyro bias) are one filter (:func:`graphnav.scan.lio.lio_step`, shared with
+``icp-dr``), each registration measures the predicted pose where its geometry sees and only where it
+agrees with the prediction (``consistent``; else it is not heard and does not join the map,
+``info["inconsistent_with_imu"]``), and the map is built from the filter's poses (docs/weighted-icp.md,
+"scan-to-map: LiDAR-inertial"). ``gyro_bias=false``: the previous fusion (the registration and the
+prediction combined by information, the velocity corrected apart, the bias white noise per scan).
 
 Options (``graphnav run LOG -e scan-to-map -O key=value``): ``backend`` (``small_gicp:VGICP``
 default, ``small_gicp:GICP``, ``open3d:point_to_point``, ``open3d:point_to_plane``,
