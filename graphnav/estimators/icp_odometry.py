@@ -18,25 +18,30 @@ guess with a wide covariance, and counted (``info["failed_matches"]``, ``info["b
 flagged for degeneracy only, from an odometry guess, is chained as returned (the match across its weak
 directions, the guess along them) with its covariance (the match's across, the odometry's along;
 ``info["constrained"]``).
+
+LiDAR-inertial (an IMU, no odometry): each keyframe match enters by its own information
+(:meth:`~graphnav.scan.weighted_icp.MatchResult.own`) where it agrees with the IMU's prediction, in one
+filter over the keyframe's pose, the IMU's state (velocity and, with ``gyro_bias``, the gyro's bias) and
+the increment (:meth:`_KeyframeChain._match_joint`; docs/weighted-icp.md "icp-dr: LiDAR-inertial").
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any, ClassVar
 
 import numpy as np
 
 from ..config import option
-from ..geometry import cov_to_world, se2_adjoint_inv, se2_compose
+from ..geometry import cov_to_world, se2_adjoint_inv, se2_between, se2_compose
 from ..log import NavLog, Scan, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan import icp_cache
 from ..scan.deskew import sweep_of
-from ..scan.imu_guess import ImuGuess, fuse_se2, log_imu_guess
+from ..scan.imu_guess import ImuGuess, consistent, fuse_se2, log_imu_guess
 from ..scan.motion_guess import MotionGuess
-from ..scan.weighted_icp import IcpConfig, scan_points
+from ..scan.weighted_icp import IcpConfig, MatchResult, scan_points
 from ..trajectory import Trajectory
 from .base import BatchEstimator
 from .start import log_start
@@ -66,9 +71,14 @@ class _KeyframeChain:
         self.lio = guesser.imu is not None and guesser.odometry is None and guesser.mode in ("odometry", "imu")
         self.keyframe_dist, self.keyframe_angle = keyframe_dist, np.radians(keyframe_angle_deg)
         self.kf_t, self.kf_pose, self.kf_cov, self.kf_pts = scan0.t, pose, cov, scan_points(scan0, cfg)
+        # with the gyro's bias a state: one filter over the keyframe's pose and the IMU's state (vx, vy, b_g),
+        # kf_cross their covariance (the pose's right perturbation x the state)
+        self.joint = self.lio and bool(getattr(guesser.imu, "gyro_bias", False))
+        self.kf_cross = np.zeros((3, 3))
         self.icp_ms: list[float] = []
         self.bridged = {"odometry": 0, "imu": 0, "cv": 0}
         self.constrained = 0
+        self.inconsistent = 0  # LiDAR-inertial: matches whose own estimate disagrees with the IMU's prediction
         self.matches = 0
 
     def step(self, scan: Scan, last: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -79,15 +89,76 @@ class _KeyframeChain:
         if self.lio and not last and guess is not None and not (
                 np.hypot(guess[0], guess[1]) >= self.keyframe_dist or abs(guess[2]) >= self.keyframe_angle):
             inc, q = guess, self.guesser.cov
+            a = se2_adjoint_inv(inc)
+            cov = a @ self.kf_cov @ a.T + q
+            if self.joint:  # the increment shares the IMU's state with the keyframe's pose
+                jac, _ = self._imu_jacobian(ta, tb, inc)
+                x = a @ self.kf_cross @ jac.T
+                cov = cov + x + x.T
+            return se2_compose(self.kf_pose, inc), cov
+        pts = self._points(scan, guess, tb - ta)
+        if self.joint and guess is not None and self.guesser.cov is not None:
+            pose, cov = self._match_joint(pts, ta, tb, guess)
         else:
-            pts = self._points(scan, guess, tb - ta)
             inc, q = self._match(pts, ta, tb, guess)
-        a = se2_adjoint_inv(inc)
-        cov = a @ self.kf_cov @ a.T + q
-        pose = se2_compose(self.kf_pose, inc)
-        if pts is not None:
-            self.kf_t, self.kf_pose, self.kf_cov, self.kf_pts = tb, pose, cov, pts
+            a = se2_adjoint_inv(inc)
+            cov = a @ self.kf_cov @ a.T + q
+            pose = se2_compose(self.kf_pose, inc)
+        self.kf_t, self.kf_pose, self.kf_cov, self.kf_pts = tb, pose, cov, pts
         return pose, cov
+
+    def _imu_jacobian(self, ta: float, tb: float, inc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The guess's Jacobian by the IMU's state and its own noise, in the increment's tangent space
+        (right perturbation: ``xi_xy = R(-dyaw) d(dx, dy)``)."""
+        imu = self.guesser.imu
+        assert imu is not None
+        jac, q = imu.predicted(ta, tb)
+        c, s = np.cos(inc[2]), np.sin(inc[2])
+        rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        return rot @ jac, rot @ q @ rot.T
+
+    def _match_joint(self, pts: np.ndarray, ta: float, tb: float, guess: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """LiDAR-inertial keyframe with the gyro's bias a state (stochastic cloning, Roumeliotis & Burdick
+        2002): the state ``(keyframe pose, IMU state, increment)``, the increment predicted by the IMU
+        (``J x + w``), the match measures the increment; the update corrects all three (the keyframe's
+        heading too: a better bias says how far the heading has drifted), then the new keyframe's pose
+        is the corrected pose composed with the corrected increment and the IMU's state is carried to it."""
+        guesser, imu = self.guesser, self.guesser.imu
+        assert imu is not None and guesser.cov is not None
+        res, own = self._matched(pts, ta, tb, guess)
+        guesser.update(res, ta, tb, imu=False)
+        jac, q = self._imu_jacobian(ta, tb, guess)
+        pxx, c = imu.P3, self.kf_cross
+        big = np.zeros((9, 9))  # (keyframe pose, IMU state, increment)
+        big[:3, :3], big[:3, 3:6], big[3:6, 3:6] = self.kf_cov, c, pxx
+        big[3:6, :3] = c.T
+        big[:6, 6:] = np.vstack([c, pxx]) @ jac.T
+        big[6:, :6] = big[:6, 6:].T
+        big[6:, 6:] = jac @ pxx @ jac.T + q
+        kf_pose, inc, dx = self.kf_pose, guess, None
+        if own is None:
+            _, _, how = guesser.bridge(ta, tb)  # the IMU's prediction: the prior stands
+            self.bridged[how] += 1
+        else:
+            z, r, weak = own
+            if weak is not None:
+                r = r + 1e8 * (weak @ weak.T)
+            if not res.ok:
+                self.constrained += 1
+            gain = big[:, 6:] @ np.linalg.inv(big[6:, 6:] + r)
+            gain[:2] = 0.0  # the keyframe's position a consider state (Schmidt): the track does not jump back
+            d = gain @ se2_between(guess, z)
+            ikh = np.eye(9)
+            ikh[:, 6:] -= gain  # Joseph form, right for any gain
+            big = ikh @ big @ ikh.T + gain @ r @ gain.T
+            kf_pose, inc, dx = se2_compose(kf_pose, d[:3]), se2_compose(guess, d[6:]), d[3:6]
+        f, qx = imu.advance(ta, tb, dx, big[3:6, 3:6])
+        m = np.zeros((6, 9))
+        m[:3, :3], m[:3, 6:], m[3:, 3:6] = se2_adjoint_inv(inc), np.eye(3), f
+        new = m @ big @ m.T
+        new[3:, 3:] += qx
+        self.kf_cross = new[:3, 3:]
+        return se2_compose(kf_pose, inc), 0.5 * (new[:3, :3] + new[:3, :3].T)
 
     def _points(self, scan: Scan, guess: np.ndarray | None, dt: float) -> np.ndarray:
         """The scan's points; with a sweep, de-skewed to its stamp with the guess's constant twist since the
@@ -98,14 +169,32 @@ class _KeyframeChain:
 
         return scan_points(scan, self.cfg, sweep_s=self.sweep_s, twist=twist_of(guess, dt))
 
-    def _match(self, pts: np.ndarray, ta: float, tb: float, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """The increment from the keyframe at ``ta`` to the scan at ``tb`` and its covariance."""
+    def _matched(self, pts: np.ndarray, ta: float, tb: float, guess: np.ndarray | None
+                 ) -> tuple[MatchResult, tuple[np.ndarray, np.ndarray, np.ndarray | None] | None]:
+        """The match of the scan at ``tb`` to the keyframe at ``ta`` and, LiDAR-inertial, what a fusion by
+        information takes from it (:meth:`~graphnav.scan.weighted_icp.MatchResult.own`; None: nothing)."""
         guesser = self.guesser
         t0 = time.perf_counter()
         res = icp_cache.match_points(pts, self.kf_pts, self.cfg, init=guess,  # shared in compare
                                      init_cov=guesser.cov if self.guess_cov else None)
         self.icp_ms.append((time.perf_counter() - t0) * 1e3)
         self.matches += 1
+        own = None
+        if self.lio and guess is not None and guesser.cov is not None and (res.ok or res.quality.get("inflated")):
+            # LiDAR-inertial: fused by information, the match's own estimate and covariance, deaf only where
+            # its geometry is (not where the IMU knows better: then its yaw, and the gyro's bias, would never
+            # be heard); it must agree with the IMU's prediction where it is heard
+            own = res.own()
+            if not consistent(guess, guesser.cov, *own):
+                own = None
+                self.inconsistent += 1
+                res = replace(res, ok=False, quality={**res.quality, "inflated": False})
+        return res, own
+
+    def _match(self, pts: np.ndarray, ta: float, tb: float, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The increment from the keyframe at ``ta`` to the scan at ``tb`` and its covariance."""
+        guesser = self.guesser
+        res, own = self._matched(pts, ta, tb, guess)
         guesser.update(res, ta, tb)
         if res.ok:
             inc, q = res.pose, res.cov
@@ -117,17 +206,22 @@ class _KeyframeChain:
         else:
             inc, q, how = guesser.bridge(ta, tb)
             self.bridged[how] += 1
-        if self.lio and guess is not None and guesser.cov is not None and (res.ok or res.quality.get("inflated")):
-            weak = res.quality.get("weak_projector")
-            inc, q = fuse_se2(guess, guesser.cov, np.asarray(res.pose, dtype=float), res.cov,
-                              None if weak is None else np.asarray(weak, dtype=float))
+        if own is not None:
+            assert guess is not None and guesser.cov is not None
+            inc, q = fuse_se2(guess, guesser.cov, *own)
         return inc, q
 
     def info(self) -> dict[str, Any]:
         b = self.bridged
-        return {"failed_matches": sum(b.values()), "bridged_odometry": b["odometry"], "bridged_imu": b["imu"],
-                "bridged_cv": b["cv"], "constrained": self.constrained, "matches": self.matches,
-                "guess": _guess_source(self.guesser)}
+        out = {"failed_matches": sum(b.values()), "bridged_odometry": b["odometry"], "bridged_imu": b["imu"],
+               "bridged_cv": b["cv"], "constrained": self.constrained, "matches": self.matches,
+               "inconsistent_with_imu": self.inconsistent,
+               "guess": _guess_source(self.guesser)}
+        imu = self.guesser.imu
+        if self.joint and imu is not None:  # the gyro's bias at the end and its 1-sigma [deg/s]
+            out["gyro_bias_dps"] = float(np.degrees(imu.bg))
+            out["gyro_bias_sigma_dps"] = float(np.degrees(np.sqrt(imu.P3[2, 2])))
+        return out
 
 
 def _first_scans(log: NavLog, sigma_xy0: float, sigma_yaw0: float) -> tuple[np.ndarray, str, np.ndarray, list[Scan]]:
@@ -147,7 +241,7 @@ def _first_scans(log: NavLog, sigma_xy0: float, sigma_yaw0: float) -> tuple[np.n
 def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: str = "HDL",
                init: str = "odometry", sigma_xy0: float = 0.0, sigma_yaw0: float = 0.0, guess_cov: bool = True,
                keyframe_dist: float = 1.0, keyframe_angle_deg: float = 10.0, deskew: bool = True,
-               **options: Any) -> RunResult:
+               gyro_bias: bool = True, **options: Any) -> RunResult:
     """Options: ``variant`` (K, H, HM, HD, HDL), ``init`` ("odometry": the odometry increment when the log
     has odometry, else the IMU's prediction when it has an IMU, else constant velocity; "imu", "cv" or
     "zero"; :class:`~graphnav.scan.motion_guess.MotionGuess`),
@@ -156,13 +250,15 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
     the anchor's own sigmas win: a pose prior's, the first GNSS fix's, ...), and with the IMU's guess the
     keyframe rule (``keyframe_dist`` [m], ``keyframe_angle_deg``: the scan-to-map baseline's); ``deskew``: each
     matched scan de-skewed with its guess's twist when the log states the LiDAR's sweep
-    (``meta["lidar"]["sweep_s"]``)."""
+    (``meta["lidar"]["sweep_s"]``); ``gyro_bias``: with the IMU's guess, the gyro's bias a state of its filter,
+    estimated from the matches (false: white noise of the stated residual bias per interval)."""
     unknown = set(options) - _CONFIG_FIELDS
     if unknown:
         raise ValueError(f"unknown icp-dr options: {', '.join(sorted(unknown))}")
     cfg = IcpConfig(variant=variant, **options)
     pose, anchor, cov, scans = _first_scans(log, sigma_xy0, sigma_yaw0)
-    guesser = MotionGuess(init, odometry_samples(log), _imu_guess(log, pose) if init in ("odometry", "imu") else None)
+    guesser = MotionGuess(init, odometry_samples(log),
+                          _imu_guess(log, pose, gyro_bias) if init in ("odometry", "imu") else None)
     chain = _KeyframeChain(cfg, guesser, scans[0], pose, cov, guess_cov=guess_cov, keyframe_dist=keyframe_dist,
                            keyframe_angle_deg=keyframe_angle_deg, sweep_s=sweep_of(log) if deskew else 0.0)
     t, poses, covs = [scans[0].t], [pose], [_to_world(pose, cov)]
@@ -180,9 +276,9 @@ def run_icp_dr(log: NavLog, *, on_estimate: OnEstimate | None = None, variant: s
     return RunResult(traj, traj, np.zeros(0), np.array(chain.icp_ms), info=info)
 
 
-def _imu_guess(log: NavLog, pose: np.ndarray) -> ImuGuess | None:
+def _imu_guess(log: NavLog, pose: np.ndarray, gyro_bias: bool) -> ImuGuess | None:
     """The IMU's prediction for a log without odometry (the log's IMU model and start velocity)."""
-    return None if len(log.of("odometry")) >= 2 else log_imu_guess(log, float(pose[2]))
+    return None if len(log.of("odometry")) >= 2 else log_imu_guess(log, float(pose[2]), gyro_bias=gyro_bias)
 
 
 def _guess_source(g: MotionGuess) -> str:
@@ -219,6 +315,8 @@ class IcpDrConfig(IcpConfig):
     keyframe_angle_deg: float = option(10.0, "with the IMU's guess: ... or turned this much", unit="deg")
     deskew: bool = option(True, "de-skew each matched scan with its guess's twist when the log states the LiDAR's "
                           "sweep (meta lidar sweep_s > 0)")
+    gyro_bias: bool = option(True, "with the IMU's guess: the gyro's bias a state of its filter, estimated from the "
+                             "matches (false: white noise of the stated residual bias per interval)")
 
 
 class IcpDr(BatchEstimator):

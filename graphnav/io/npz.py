@@ -15,6 +15,7 @@ import json
 import math
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.lib import format as npformat
@@ -32,6 +33,7 @@ from ..log import (
     Record,
     Scan,
     check_record,
+    suspect_rows,
 )
 
 KINDS = list(RECORD_TYPES)
@@ -223,9 +225,13 @@ def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> N
         if f"{kind}/t" not in data:
             continue
         n = _get(data, f"{kind}/t", path, length=int(np.count_nonzero(order == KINDS.index(kind)))).shape[0]
-        cols = {name: _get(data, f"{kind}/{name}", path, numeric=name != "id", length=n).tolist()
-                if f"{kind}/{name}" in data or name not in OPTIONAL_COLUMNS + OPTIONAL_SCALARS[kind] else [math.nan] * n
-                for name in SCALAR_FIELDS[kind]}
+        optional = OPTIONAL_COLUMNS + OPTIONAL_SCALARS[kind]
+        cols: dict[str, Any] = {
+            name: _get(data, f"{kind}/{name}", path, numeric=name != "id", length=n)
+            if f"{kind}/{name}" in data or name not in optional else np.full(n, math.nan)
+            for name in SCALAR_FIELDS[kind]}
+        cols = {k: [str(x) for x in v.tolist()] if k == "id" else v.astype(float) for k, v in cols.items()}
+        suspects: np.ndarray | None = None  # rows check_record could reject (None: check every row)
         recs: list[Record | None] = []
         if kind == "scan":
             off = _get(data, "scan/offsets", path, integer=True, length=n + 1)
@@ -241,10 +247,13 @@ def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> N
         else:
             cls = RECORD_TYPES[kind]
             if f"{kind}/source" in data and kind in SOURCED_KINDS:
-                cols["source"] = _get(data, f"{kind}/source", path, numeric=False, length=n).tolist()
-            for i in range(n):
-                recs.append(cls(**{k: (str(v[i]) if k in ("id", "source") else float(v[i])) for k, v in cols.items()}))
-        for i, r in enumerate(recs):
+                cols["source"] = [str(x) for x in _get(data, f"{kind}/source", path, numeric=False, length=n).tolist()]
+            suspects = suspect_rows(cls, cols, limits)
+            names = list(cols)
+            rows = zip(*(c if isinstance(c, list) else c.tolist() for c in cols.values()), strict=True)
+            recs = [cls(**dict(zip(names, row, strict=True))) for row in rows]
+        for i in range(len(recs)) if suspects is None else np.flatnonzero(suspects).tolist():
+            r = recs[i]
             try:
                 check_record(r, limits)
             except LogError as err:

@@ -92,16 +92,18 @@ class MotionGuess:
         inc, self.cov = self.imu.guess(t0, t1)
         return inc
 
-    def update(self, result: MatchResult, t0: float, t1: float) -> None:
+    def update(self, result: MatchResult, t0: float, t1: float, *, imu: bool = True) -> None:
         """Feed the match of the pair ``(t0, t1)``; only a good one (``ok``) is remembered. The IMU's
         velocity is corrected by a good match, and by a degenerate one across its weak directions
-        (its covariance inflated along them), and carried to ``t1`` in any case."""
-        if self.imu is not None:
-            inflated = bool(result.quality.get("inflated"))
-            usable = result.ok or inflated
-            weak = result.quality.get("weak_projector") if inflated else None
-            self.imu.update(t0, t1, result.pose if usable else None, result.cov if usable else None,
-                            None if weak is None else np.asarray(weak, dtype=float))
+        (its covariance inflated along them), and carried to ``t1`` in any case: by the match's own
+        estimate and covariance (:meth:`~graphnav.scan.weighted_icp.MatchResult.own`), not where the guess
+        replaced it; ``imu`` False: the caller updates the IMU's state itself)."""
+        if self.imu is not None and imu:
+            usable = result.ok or bool(result.quality.get("inflated"))
+            if usable:  # the match's own information, where its geometry sees
+                self.imu.update(t0, t1, *result.own())
+            else:
+                self.imu.update(t0, t1, None, None)
         if result.ok:
             self._last = (np.asarray(result.pose, dtype=float).copy(), t1 - t0, t1)
 

@@ -125,6 +125,19 @@ class MatchResult:
     ok: bool
     quality: dict[str, Any] = field(default_factory=dict)
 
+    def own(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
+        """The match's own estimate, its covariance and the projector onto the directions its geometry
+        cannot see (``None``: none), before the guess replaced any direction the guess knew better
+        (``quality["icp_pose"]``, ``["icp_cov"]``, ``["geometry_weak_projector"]``; the returned ones
+        when the quality has none): what a fusion of the match with its guess by information takes."""
+        q = self.quality
+        if "icp_cov" not in q:
+            weak = q.get("weak_projector")
+            return self.pose, self.cov, None if weak is None else np.asarray(weak, dtype=float)
+        weak = q.get("geometry_weak_projector")
+        return (np.asarray(q["icp_pose"], dtype=float), np.asarray(q["icp_cov"], dtype=float),
+                None if weak is None else np.asarray(weak, dtype=float))
+
     @property
     def cov_target(self) -> NDArray[np.float64]:
         """Covariance of additive errors of ``(dx, dy, dyaw)`` in the target frame (first order)."""
@@ -322,6 +335,10 @@ def _report(cfg: IcpConfig, out: tuple, t0: float, ns: int, nt: int, init: Array
     bt = covariance.from_sums(k, n_inl, h, b_lidar, b_samp, rms, info, radius, max_condition=cfg.max_condition,
                               max_sigma=cfg.max_sigma * big_d, prior_cov=None if init is None else init_cov)
     deg = bt.degeneracy
+    # the geometry's own weak directions (without the guess's "known better" rule): what a fusion of the
+    # match with its guess by information may not hear from the match
+    geo = deg if init is None or init_cov is None else degeneracy.analyse(
+        info, radius, bt.cov, max_condition=cfg.max_condition, max_sigma=cfg.max_sigma * big_d)
     failed, maha = _failures(cfg, pose, bt, iters, converged, moved, src_range, inlier_fraction, radius, init,
                              init_cov)
     cov, icp_pose, reasons = bt.cov, pose.copy(), []
@@ -349,6 +366,8 @@ def _report(cfg: IcpConfig, out: tuple, t0: float, ns: int, nt: int, init: Array
         "weak_projector": deg.projector().tolist() if deg.degenerate else None,  # P: the weak directions' part of xi
         "inflated": bool(deg.degenerate and not failed),  # flagged for degeneracy only: covariance inflated there
         "icp_pose": [float(x) for x in icp_pose],
+        "icp_cov": bt.cov.tolist(),  # the covariance of icp_pose (before any weak direction took the guess's)
+        "geometry_weak_projector": geo.projector().tolist() if geo.degenerate else None,  # weak by geometry alone
         "guess_mahalanobis": maha,  # the estimate before a flag replaced any of it by the guess
         "reason": "; ".join(reasons),
         "ms": (time.perf_counter() - t0) * 1e3,

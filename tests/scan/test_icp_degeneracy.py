@@ -227,3 +227,28 @@ def test_keep_constrained_uses_pose_composition():
     pose = np.array([0.0, 0.0, np.pi / 2])
     guess = se2_compose(pose, [0.7, 0.0, 0.0])  # 0.7 m ahead along the body x axis
     assert np.allclose(degeneracy.keep_constrained(pose, guess, d), guess, atol=1e-12)
+
+
+def test_own_estimate_survives_a_guess_that_knows_better():
+    """A room constrains every direction; a guess 3 cm / 0.3 deg off with a covariance far tighter than the match's
+    (an IMU over a short interval) makes the matcher return the guess along all of them (weak "where the guess knows
+    better"), but the match's own estimate, its covariance and its geometry (no weak direction) stay available for a
+    fusion by information (MatchResult.own)."""
+    rng = np.random.default_rng(6)
+    segs = room()
+    true = np.array([0.4, 0.1, 0.03])
+    r0, a0 = noisy_scan(segs, (0.0, 0.0, 0.0), rng)
+    r1, a1 = noisy_scan(segs, true, rng)
+    p0 = np.column_stack([r0 * np.cos(a0), r0 * np.sin(a0)])[np.isfinite(r0)]
+    p1 = np.column_stack([r1 * np.cos(a1), r1 * np.sin(a1)])[np.isfinite(r1)]
+    guess = true + np.array([0.03, -0.03, np.radians(0.3)])
+    tight = np.diag([1e-4, 1e-4, np.radians(0.01)]) ** 2
+    res = match_points(p1, p0, IcpConfig(), init=guess, init_cov=tight)
+    assert res.quality["inflated"] and res.quality["weak_dims"] == 3
+    assert np.allclose(res.pose, guess, atol=1e-9)  # the guess, all of it
+    pose, cov, weak = res.own()
+    assert weak is None and np.all(np.isfinite(cov))
+    assert np.allclose(pose, true, atol=0.02)  # the match's own answer
+    alone = match_points(p1, p0, IcpConfig(), init=guess)
+    np.testing.assert_allclose(pose, alone.pose, atol=1e-12)
+    np.testing.assert_allclose(cov, alone.cov, atol=1e-15)
