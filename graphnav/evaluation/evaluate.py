@@ -109,7 +109,8 @@ def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
             out["online_nees_mean"] = ns["mean"] if ns else None
         out["errors_by_event"] = errors_by_event(result, log, max_dt=max_dt)
     out.update(gnss_scores(traj, log))
-    for k in ("anchor", "loop_closures", "loop_candidates", "switched_off", "odometry_consistency"):
+    for k in ("anchor", "loop_closures", "loop_candidates", "switched_off", "odometry_consistency", "odometry_scale",
+              "noise_scale"):
         if k in result.info:
             out[k] = result.info[k]
     return out

@@ -356,6 +356,8 @@ class GraphBuilder:
             "compass_bias_estimated": self.meas.bias_key is not None,
             "state": self.space.name,
             **({"imu_noise": imu.source if imu else "none (vessel model)"} if imu is not None else {}),
+            **({"vessel_position_walk": {"walk": imu.vessel_walk, "estimate": imu.walk_estimate}}
+               if imu is not None and not imu else {}),
             "defaulted_sigmas": sorted(self.defaulted),
             **(self.scans.loops.info() if self.scans.loops is not None else {}),
             **self.counts,

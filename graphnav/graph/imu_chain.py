@@ -52,6 +52,10 @@ class ImuConfig:
     vessel_steerage_speed: float = 1.0  # [m/s] below this the yaw-rate density is x (this / speed), at most x10:
     #  a hull's yaw is damped in proportion to its speed through the water; stopped or drifting, wind and
     #  waves turn it freely (and a boat going astern or drifting sideways is neither of the two)
+    vessel_position_walk: float | None = None  # [m/sqrt(s)] the position's random walk apart from the velocity
+    #  (the fixes wandering from the integrated SOG/COG); None: the log's (graphnav.graph.position_walk: fixes
+    #  against GNSS velocity records), else integration_sigma. psaros33-20140805-0020's fixes: 0.44
+    #  (docs/smoother.md, "Where the NEES came from")
 
 
 class ImuChain:
@@ -71,10 +75,18 @@ class ImuChain:
         self.six: bool | None = None
         self.params: gtsam.PreintegrationParams | None = None
         self.body_P_sensor: gtsam.Pose3 | None = None  # the IMU's mount (graphnav.graph.mounts), when not at the origin
+        walk = cfg.vessel_position_walk
+        #: the log's estimate of it (graphnav.graph.position_walk), when made and used
+        self.walk_estimate: dict[str, Any] | None = None
+        if walk is None and isinstance(stated, dict) and stated.get("vessel_position_walk") is not None:
+            walk = stated["vessel_position_walk"]
+            self.walk_estimate = stated.get("position_walk")
+        #: [m/sqrt(s)] the vessel model's position random walk (its integration noise)
+        self.vessel_walk = max(float(walk), cfg.integration_sigma) if walk is not None else cfg.integration_sigma
         p = gtsam.PreintegrationParams.MakeSharedU(0.0)  # no IMU: zero measurements, the vessel model's noise
         p.setAccelerometerCovariance(np.eye(3) * cfg.vessel_accel**2)
         p.setGyroscopeCovariance(np.eye(3) * math.radians(cfg.vessel_yaw_rate_deg) ** 2)
-        p.setIntegrationCovariance(np.eye(3) * cfg.integration_sigma**2)
+        p.setIntegrationCovariance(np.eye(3) * self.vessel_walk**2)
         self.vessel_params = p
         self._vessel_by_scale: dict[float, gtsam.PreintegrationParams] = {1.0: p}
 
@@ -89,7 +101,7 @@ class ImuChain:
             p = gtsam.PreintegrationParams.MakeSharedU(0.0)
             p.setAccelerometerCovariance(np.eye(3) * c.vessel_accel**2)
             p.setGyroscopeCovariance(np.eye(3) * (scale * math.radians(c.vessel_yaw_rate_deg)) ** 2)
-            p.setIntegrationCovariance(np.eye(3) * c.integration_sigma**2)
+            p.setIntegrationCovariance(np.eye(3) * self.vessel_walk**2)
             self._vessel_by_scale[scale] = p
         return self._vessel_by_scale[scale]
 

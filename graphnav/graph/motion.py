@@ -60,6 +60,9 @@ class Motion:
         self.twist_t: float | None = None  # ... and its time
         self.fixes: deque[tuple[float, float, float, float]] = deque(maxlen=256)  # recent GNSS (t, x, y, sigma)
         self.gnss_twist: tuple[float, NDArray[np.float64], float] | None = None  # (t, twist, speed sigma)
+        # each odometry factor's samples (t, v, w) and interval by its keys: the closing step's scale estimate
+        # (graphnav.graph.odometry_scale) re-integrates them
+        self.intervals: dict[tuple[int, int], tuple[NDArray[np.float64], float, float]] = {}
 
     # -- records in ------------------------------------------------------------------------------
     @property
@@ -132,6 +135,8 @@ class Motion:
             if odo_cov is not None:
                 s.add(self.space.between(F.X(k - 1), F.X(k), _vec(odo[0]), odo_cov), "odometry")
                 rel = odo[0]
+                if self.cfg.robust.odometry_scale and self.odometry.last is not None:
+                    self.intervals[(F.X(k - 1), F.X(k))] = (self.odometry.last[:, :3].copy(), ta, tb)
         guess = self._imu(s, k, ta, tb, state) if self.imu is not None else None
         return rel, odo_cov, guess
 

@@ -45,6 +45,7 @@ from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
 from .online_track import OnlineTrack, kinematics
+from .position_walk import position_walk
 from .smoother_config import SmootherConfig, SolverConfig, auto_motion
 from .solution import Closing, marginal_priors, refresh_places
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt
@@ -106,6 +107,12 @@ def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -
     v0 = log.meta.get("initial_velocity")
     if imu_model is not None or v0 is not None:
         imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}
+    if (kw.get("motion", motion) == "vessel" and not any(r.kind == "imu" for r in log.records)
+            and (given_option(SmootherConfig, kw, "imu", config.imu if config is not None else None) or {}
+                 ).get("vessel_position_walk") is None):
+        walk = position_walk(log)  # how far the fixes wander from the integrated velocity
+        if walk is not None:
+            imu_model = {**(imu_model or {}), "vessel_position_walk": walk["walk"], "position_walk": walk}
     return {"chart": log.beacons_known, "lidar": lidar, "scans": scans, "lidar3d": lidar3d,
             "imu": any(r.kind == "imu" for r in log.records), "imu_model": imu_model,
             "odometry": bool(log.of("odometry")), **kw}
@@ -375,7 +382,8 @@ class Navigator:
             empty = Trajectory(np.zeros(0), np.zeros((0, 3)), name=cfg.solver)
             return RunResult(empty, self.online(), np.zeros(0), np.array(self.track.icp_ms), info)
         c0, p0 = time.perf_counter(), time.process_time()
-        closing = Closing(cfg, self.solver, self.space, self.groups, b.rejected_fixes, b.defaulted)
+        closing = Closing(cfg, self.solver, self.space, self.groups, b.rejected_fixes, b.defaulted,
+                          b.motion.intervals)
         try:
             values, poses, covs = closing.solve(n, self.front, info)
         except SolverError as exc:

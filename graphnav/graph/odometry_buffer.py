@@ -24,6 +24,7 @@ class OdometryBuffer:
         self.expected = expected  # the log has odometry: before its first sample the robot is at rest
         self.t: list[float] = []
         self.rows: list[tuple[float, float, float, float, float, float]] = []
+        self.last: NDArray[np.float64] | None = None  # the samples of the last :meth:`between` (t, v, w, ...)
 
     def __bool__(self) -> bool:
         return bool(self.t)
@@ -87,6 +88,7 @@ class OdometryBuffer:
         if not rows:
             return None
         samples = np.array(rows, dtype=float)
+        self.last = samples
         inc = increment(samples, t0, t1, lateral=self.cfg.lateral)
         if inc is None:
             return None

@@ -324,6 +324,9 @@ class RobustConfig:
         "variance scale per sensor group after the batch solution: \"defaulted\" (the groups whose sigmas came "
         "from the defaults above), \"all\", \"off\"", flat="noise_estimation")
     noise_iterations: int = option(3, "re-solves of the variance-component estimation", flat="noise_iterations")
+    odometry_scale: bool = option(
+        False, "estimate the odometry's scale factors on v and w in the closing step, before the noise "
+        "estimation, where the other sensors observe them (graphnav.graph.odometry_scale)", flat="odometry_scale")
 
     def __post_init__(self) -> None:
         _choice("noise_estimation", self.noise_estimation, NOISE_ESTIMATION)

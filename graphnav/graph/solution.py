@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 import factors as F
 
-from . import gnc, noise
+from . import gnc, noise, odometry_scale
 from .chi2 import significant_scale
 from .smoother_config import SmootherConfig
 from .solver import Solver, levenberg_marquardt, marginals
@@ -36,8 +36,10 @@ class Closing:
     from the configuration (``noise_estimation="defaulted"`` scales only those)."""
 
     def __init__(self, cfg: SmootherConfig, solver: Solver, space: PlanarSpace, groups: list[str],
-                 rejected: list[gtsam.NonlinearFactor], defaulted: set[str]) -> None:
+                 rejected: list[gtsam.NonlinearFactor], defaulted: set[str],
+                 intervals: dict[tuple[int, int], odometry_scale.Interval] | None = None) -> None:
         self.cfg, self.solver, self.space = cfg, solver, space
+        self.intervals = intervals or {}  # the odometry factors' samples (graphnav.graph.odometry_scale)
         self.groups = groups
         self.rejected, self.defaulted = rejected, defaulted
         self.kept: list[int] | None = None  # fixed-lag: the keyframes the solution holds (the window only in live mode)
@@ -124,6 +126,10 @@ class Closing:
             iters += it
         info["gnss_dropped_after_lm"] = dropped
         graph, values = self._inflate_gnss(graph, values, info, scale)
+        if cfg.robust.odometry_scale and self.intervals:
+            graph, values, rep = odometry_scale.estimate(graph, values, self.groups, self.intervals, self.space, lm)
+            if rep is not None:
+                info["odometry_scale"] = rep
         if cfg.robust.noise_estimation != "off":
             scalable = noise.SCALABLE if cfg.robust.noise_estimation == "all" else tuple(
                 g for g in noise.SCALABLE if g in self.defaulted)

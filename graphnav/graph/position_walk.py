@@ -1,0 +1,110 @@
+"""How far a log's fixes wander from its own velocity: the position random walk of the vessel model,
+estimated from the log.
+
+A receiver's fixes and its speed and course over ground (or a speed log) are two views of one track,
+and the vessel graph (``motion="vessel"``) joins them through the integrated velocity. Over a lag
+``tau`` the difference between a pair of fixes and the velocity integrated between them,
+
+    r = (p_j - p_i) - integral_{t_i}^{t_j} v dt,
+
+has, per axis, ``E[r^2] = a + q tau``: ``a`` the fixes' white noise (both ends; whatever their stated
+sigma) and ``q`` [m^2/s] whatever random walk separates the positions from the integrated velocity -- the
+velocity's own errors and a receiver's position wandering (multipath, satellites coming and going).
+The vessel model's integration noise was 1 mm/sqrt(s): a real boat's fixes
+(psaros33-20140805-0020) wander from its SOG/COG by 0.44 m/sqrt(s), and the graph, trusting the
+velocity, was over-confident (NEES 11-13 against the fixes; 1.5-2.0 with the estimate: docs/smoother.md,
+"Where the NEES came from").
+
+:func:`position_walk` fits ``a`` and ``q`` (non-negative least squares, each lag's variance a robust
+median estimate: a jump of the fixes is a few pairs' outlier) to pairs of fixes at lags
+:data:`LAGS`; ``q`` less the velocity records' own stated white noise (``sigma_v^2 dt`` per axis) is
+the vessel model's position random walk (:class:`~graphnav.graph.imu_chain.ImuConfig`
+``vessel_position_walk``). Only where the log has GNSS fixes and GNSS velocity records.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import nnls
+
+from ..log import NavLog
+from .chi2 import chi2_median
+
+#: [s] the lags of the pairs of fixes: up to a minute (beyond it a velocity bias, not a walk, dominates)
+LAGS = (1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 18.0, 25.0, 35.0, 45.0, 60.0)
+MIN_PAIRS = 30  # pairs of a lag needed to use it
+MAX_VELOCITY_GAP = 3.0  # [s] a pair is used only where the velocity records are at most this far apart
+_MEDIAN_CHI2_1 = float(chi2_median(np.array([1.0]))[0])
+
+
+def _integrated(tv: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The velocity integrated (trapezoid) from ``tv[0]`` to each ``tv``."""
+    steps = 0.5 * (v[1:] + v[:-1]) * np.diff(tv)[:, None]
+    return np.vstack([np.zeros((1, v.shape[1])), np.cumsum(steps, axis=0)])
+
+
+def lag_variances(tf: NDArray[np.float64], pf: NDArray[np.float64], tv: NDArray[np.float64],
+                  v: NDArray[np.float64]) -> list[tuple[float, float, int]]:
+    """Per lag of :data:`LAGS`: ``(lag, variance per axis, pairs)`` of ``r`` (module docstring), the
+    variance a median estimate; fixes ``(tf, pf)``, velocities ``(tv, v)`` (times sorted)."""
+    inside = (tf >= tv[0]) & (tf <= tv[-1])
+    tf, pf = tf[inside], pf[inside]
+    if len(tf) < 2:
+        return []
+    cum = _integrated(tv, v)
+    D = np.c_[np.interp(tf, tv, cum[:, 0]), np.interp(tf, tv, cum[:, 1])]
+    gaps = np.diff(tv) > MAX_VELOCITY_GAP  # a pair across a velocity gap is not used
+    n_gaps = np.concatenate([[0], np.cumsum(gaps)])
+    seg = n_gaps[np.clip(np.searchsorted(tv, tf, side="right") - 1, 0, len(tv) - 1)]
+    out = []
+    for lag in LAGS:
+        j = np.searchsorted(tf, tf + lag)
+        ok = j < len(tf)
+        i = np.flatnonzero(ok)
+        j = j[ok]
+        keep = (np.abs(tf[j] - tf[i] - lag) <= 0.25 * lag + 1e-9) & (seg[i] == seg[j])
+        i, j = i[keep], j[keep]
+        if len(i) < MIN_PAIRS:
+            continue
+        r = (pf[j] - pf[i]) - (D[j] - D[i])
+        out.append((lag, float(np.median(r.ravel() ** 2)) / _MEDIAN_CHI2_1, len(i)))
+    return out
+
+
+def fit_walk(rows: list[tuple[float, float, int]]) -> tuple[float, float] | None:
+    """``(a, q)`` of ``variance = a + q lag`` (non-negative least squares, each lag weighted by the
+    inverse standard deviation of its variance estimate, ``~ variance sqrt(2 / pairs)``)."""
+    if len(rows) < 3:
+        return None
+    lag, var, n = (np.array(c, dtype=float) for c in zip(*rows, strict=True))
+    w = np.sqrt(n / 2.0) / np.maximum(var, 1e-12)
+    sol, _ = nnls(np.c_[np.ones_like(lag), lag] * w[:, None], var * w)
+    return float(sol[0]), float(sol[1])
+
+
+def position_walk(log: NavLog) -> dict[str, Any] | None:
+    """The vessel model's position random walk from ``log``'s fixes and GNSS velocity records
+    (module docstring): ``{"walk": sqrt(q - sigma_v^2 dt) [m/sqrt(s)], "q", "a", "lags"}``, or
+    ``None`` without enough of both."""
+    fixes, vel = log.of("gnss"), log.of("gnss_velocity")
+    if len(fixes) < 2 * MIN_PAIRS or len(vel) < 2 * MIN_PAIRS:
+        return None
+    tf = np.array([r.t for r in fixes])
+    pf = np.array([[r.x, r.y] for r in fixes])
+    tv = np.array([r.t for r in vel])
+    v = np.array([[r.vx, r.vy] for r in vel])
+    fo, vo = np.argsort(tf, kind="stable"), np.argsort(tv, kind="stable")
+    rows = lag_variances(tf[fo], pf[fo], tv[vo], v[vo])
+    fit = fit_walk(rows)
+    if fit is None:
+        return None
+    a, q = fit
+    sig = np.array([r.sigma for r in vel])
+    dt = float(np.median(np.diff(tv[vo]))) if len(tv) > 1 else 1.0
+    stated = float(np.median(sig[np.isfinite(sig)]) ** 2 * dt) if np.isfinite(sig).any() else 0.0
+    return {"walk": math.sqrt(max(q - stated, 0.0)), "q": q, "a": a, "velocity_q": stated,
+            "lags": [[lag, var, n] for lag, var, n in rows]}
