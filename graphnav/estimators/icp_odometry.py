@@ -34,12 +34,13 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..config import option
-from ..geometry import cov_to_world, se2_adjoint_inv, se2_between, se2_compose
+from ..geometry import cov_to_world, se2_adjoint_inv, se2_compose
 from ..log import NavLog, Scan, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan import icp_cache
 from ..scan.deskew import sweep_of
 from ..scan.imu_guess import ImuGuess, consistent, fuse_se2, log_imu_guess
+from ..scan.lio import imu_tangent, lio_step
 from ..scan.motion_guess import MotionGuess
 from ..scan.weighted_icp import IcpConfig, MatchResult, scan_points
 from ..trajectory import Trajectory
@@ -92,7 +93,8 @@ class _KeyframeChain:
             a = se2_adjoint_inv(inc)
             cov = a @ self.kf_cov @ a.T + q
             if self.joint:  # the increment shares the IMU's state with the keyframe's pose
-                jac, _ = self._imu_jacobian(ta, tb, inc)
+                assert self.guesser.imu is not None
+                jac, _ = imu_tangent(self.guesser.imu, ta, tb, inc)
                 x = a @ self.kf_cross @ jac.T
                 cov = cov + x + x.T
             return se2_compose(self.kf_pose, inc), cov
@@ -107,16 +109,6 @@ class _KeyframeChain:
         self.kf_t, self.kf_pose, self.kf_cov, self.kf_pts = tb, pose, cov, pts
         return pose, cov
 
-    def _imu_jacobian(self, ta: float, tb: float, inc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The guess's Jacobian by the IMU's state and its own noise, in the increment's tangent space
-        (right perturbation: ``xi_xy = R(-dyaw) d(dx, dy)``)."""
-        imu = self.guesser.imu
-        assert imu is not None
-        jac, q = imu.predicted(ta, tb)
-        c, s = np.cos(inc[2]), np.sin(inc[2])
-        rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        return rot @ jac, rot @ q @ rot.T
-
     def _match_joint(self, pts: np.ndarray, ta: float, tb: float, guess: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """LiDAR-inertial keyframe with the gyro's bias a state (stochastic cloning, Roumeliotis & Burdick
         2002): the state ``(keyframe pose, IMU state, increment)``, the increment predicted by the IMU
@@ -127,38 +119,14 @@ class _KeyframeChain:
         assert imu is not None and guesser.cov is not None
         res, own = self._matched(pts, ta, tb, guess)
         guesser.update(res, ta, tb, imu=False)
-        jac, q = self._imu_jacobian(ta, tb, guess)
-        pxx, c = imu.P3, self.kf_cross
-        big = np.zeros((9, 9))  # (keyframe pose, IMU state, increment)
-        big[:3, :3], big[:3, 3:6], big[3:6, 3:6] = self.kf_cov, c, pxx
-        big[3:6, :3] = c.T
-        big[:6, 6:] = np.vstack([c, pxx]) @ jac.T
-        big[6:, :6] = big[:6, 6:].T
-        big[6:, 6:] = jac @ pxx @ jac.T + q
-        kf_pose, inc, dx = self.kf_pose, guess, None
         if own is None:
             _, _, how = guesser.bridge(ta, tb)  # the IMU's prediction: the prior stands
             self.bridged[how] += 1
-        else:
-            z, r, weak = own
-            if weak is not None:
-                r = r + 1e8 * (weak @ weak.T)
-            if not res.ok:
-                self.constrained += 1
-            gain = big[:, 6:] @ np.linalg.inv(big[6:, 6:] + r)
-            gain[:2] = 0.0  # the keyframe's position a consider state (Schmidt): the track does not jump back
-            d = gain @ se2_between(guess, z)
-            ikh = np.eye(9)
-            ikh[:, 6:] -= gain  # Joseph form, right for any gain
-            big = ikh @ big @ ikh.T + gain @ r @ gain.T
-            kf_pose, inc, dx = se2_compose(kf_pose, d[:3]), se2_compose(guess, d[6:]), d[3:6]
-        f, qx = imu.advance(ta, tb, dx, big[3:6, 3:6])
-        m = np.zeros((6, 9))
-        m[:3, :3], m[:3, 6:], m[3:, 3:6] = se2_adjoint_inv(inc), np.eye(3), f
-        new = m @ big @ m.T
-        new[3:, 3:] += qx
-        self.kf_cross = new[:3, 3:]
-        return se2_compose(kf_pose, inc), 0.5 * (new[:3, :3] + new[:3, :3].T)
+        elif not res.ok:
+            self.constrained += 1
+        pose, cov, self.kf_cross = lio_step(imu, ta, tb, self.kf_pose, self.kf_cov, self.kf_cross, guess, own,
+                                            consider_xy=True)  # the track does not jump back
+        return pose, cov
 
     def _points(self, scan: Scan, guess: np.ndarray | None, dt: float) -> np.ndarray:
         """The scan's points; with a sweep, de-skewed to its stamp with the guess's constant twist since the

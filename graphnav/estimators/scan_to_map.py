@@ -1,17 +1,25 @@
 """Scan-to-map LiDAR odometry: the continuous-frame experiment of Wang et al. (2023), in 2D.
 
-Each scan is registered against a local map made of the last ``keyframes`` registered keyframe
-scans (a scan becomes a keyframe when the vessel has moved ``keyframe_dist`` metres or turned
-``keyframe_angle_deg`` since the last one), voxel-downsampled to ``map_voxel`` metres. The initial
-guess is the odometry increment when the log has odometry (``predict="odometry"``), else the
-constant-velocity prediction; the result is the pose in SE(2) (see :mod:`graphnav.scan.registration`
-for how each backend is kept planar). A registration whose point-to-line information against the
-map's local lines is degenerate (:mod:`graphnav.scan.degeneracy`: condition number above
-``max_condition``, or the registration's 1-sigma along the weakest direction — the sandwich of
-:mod:`graphnav.scan.covariance` over the point-to-line pairs, with the map's voxel as the sampling
-resolution — above ``max_sigma`` voxels) takes the
-prediction along its weak directions and is counted (``info["degenerate_registrations"]``). The
-trajectory is the chain of registered poses — odometry, so it drifts, as in the paper's Table 2.
+Each scan is registered against a local map made of the last ``keyframes`` registered keyframe scans (a
+scan becomes a keyframe when the vessel has moved ``keyframe_dist`` metres or turned
+``keyframe_angle_deg`` since the last one), voxel-downsampled to ``map_voxel`` metres. The initial guess
+is the odometry increment when the log has odometry (``predict="odometry"``), else the IMU's prediction
+when it has an IMU, else the constant-velocity prediction; the result is the pose in SE(2) (see
+:mod:`graphnav.scan.registration` for how each backend is kept planar). A registration whose
+point-to-line information against the map's local lines is degenerate (:mod:`graphnav.scan.degeneracy`:
+condition number above ``max_condition``, or the registration's 1-sigma along the weakest direction —
+the sandwich of :mod:`graphnav.scan.covariance` over the point-to-line pairs, with the map's voxel as
+the sampling resolution — above ``max_sigma`` voxels) takes the prediction along its weak directions and
+is counted (``info["degenerate_registrations"]``). The trajectory is the chain of registered poses —
+odometry, so it drifts, as in the paper's Table 2.
+
+With the IMU's prediction (a log with an IMU and no odometry) it is LiDAR-inertial odometry: the pose and
+the IMU's state (velocity, gyro bias) are one filter (:func:`graphnav.scan.lio.lio_step`, shared with
+``icp-dr``), each registration measures the predicted pose where its geometry sees and only where it
+agrees with the prediction (``consistent``; else it is not heard and does not join the map,
+``info["inconsistent_with_imu"]``), and the map is built from the filter's poses (docs/weighted-icp.md,
+"scan-to-map: LiDAR-inertial"). ``gyro_bias=false``: the previous fusion (the registration and the
+prediction combined by information, the velocity corrected apart, the bias white noise per scan).
 
 Options (``graphnav run LOG -e scan-to-map -O key=value``): ``backend`` (``small_gicp:VGICP``
 default, ``small_gicp:GICP``, ``open3d:point_to_point``, ``open3d:point_to_plane``,
@@ -35,7 +43,8 @@ from ..result import OnEstimate, RunResult
 from ..scan.covariance import SAMPLING_VARIANCE, sandwich
 from ..scan.degeneracy import analyse, flatness, keep_constrained, line_information
 from ..scan.deskew import sweep_of
-from ..scan.imu_guess import ImuGuess, fuse_se2, log_imu_guess
+from ..scan.imu_guess import ImuGuess, consistent, fuse_se2, log_imu_guess
+from ..scan.lio import composed_cov, lio_step
 from ..scan.registration import (
     Params,
     Target,
@@ -87,6 +96,8 @@ class ScanToMapConfig:
         "them; \"predict\" takes the prediction (either way the scan may join the map)")
     predict: str = option("odometry", "initial guess: \"odometry\" (when the log has odometry, else the IMU's when "
                           "it has an IMU, else cv), \"imu\" or \"cv\"")
+    gyro_bias: bool = option(True, "with the IMU's prediction: the gyro's bias a state of one filter with the pose, "
+                             "estimated from the registrations (graphnav.scan.lio; false: white noise per scan)")
     # 3D clouds (a log with cloud records and no scans: graphnav.estimators.scan_to_map3d)
     cloud: dict[str, Any] = option(help="3D: the clouds' filter, graphnav.scan.cloud_match.CloudMatchConfig "
                                    "(min_range, max_range, water_margin, sensor_height, ...)", factory=dict)
@@ -158,6 +169,12 @@ class _ScanMap2d:
         self.last_kf: np.ndarray | None = None
         self.target: Target | None = None
         self.p_pose = np.zeros((3, 3))  # with the IMU: the pose's covariance relative to the map (body frame)
+        # with the gyro's bias a state: one filter over the pose and the IMU's state (vx, vy, b_g), cross their
+        # covariance; _inc the IMU's predicted increment to the scan and _pred_cov the predicted pose's covariance
+        self.joint = imu is not None and imu.gyro_bias
+        self.cross = np.zeros((3, 3))
+        self._inc, self._pred_cov = np.zeros(3), np.zeros((3, 3))
+        self.inconsistent = 0  # registrations that disagree with the IMU's prediction (not heard, not mapped)
         self.sweep_s = 0.0  # [s] the LiDAR's sweep (meta lidar sweep_s, when cfg.deskew): scans are de-skewed
 
     def predict(self, t: float) -> tuple[np.ndarray, np.ndarray | None]:
@@ -165,6 +182,11 @@ class _ScanMap2d:
         ts, poses = self.ts, self.poses
         inc = increment(self.odo, ts[-1], t) if len(self.odo) else None
         imu_inc = self.imu.guess(ts[-1], t) if self.imu is not None else None
+        if imu_inc is not None and self.joint:  # the pose and the IMU's state in one filter (graphnav.scan.lio)
+            assert self.imu is not None
+            self._inc = imu_inc[0]
+            self._pred_cov = composed_cov(self.imu, ts[-1], t, self.p_pose, self.cross, imu_inc[0])
+            return se2_compose(poses[-1], imu_inc[0]), None
         if imu_inc is not None:  # the IMU's prediction of the filter (see the module docstring)
             a = se2_adjoint_inv(imu_inc[0])
             self.p_pose = a @ self.p_pose @ a.T + imu_inc[1]
@@ -247,11 +269,16 @@ class _ScanMap2d:
                 pose, registered, source, reg_cov, deg = self.register(xy, pred, pred_cov)
             else:
                 self.failed += 1
+        fused = None
+        if self.joint and self.poses:
+            fused, registered = self._lio(scan.t, pred, pose, registered, source, reg_cov, deg)
         # keyframe and local-map update (timed as the step; registration time is icp_ms); a scan
         # whose registration was rejected does not enter the map
-        if enough and registered:
-            self.update_map(xy, pose, source)
-        if self.imu is not None and self.poses:
+        if enough and registered:  # LiDAR-inertial: the filter's pose (else the registration's)
+            self.update_map(xy, pose if fused is None else fused, source)
+        if fused is not None:
+            pose = fused
+        elif self.imu is not None and self.poses:
             ok_reg = registered and source is not None and reg_cov is not None and np.all(np.isfinite(reg_cov))
             weak = deg.projector() if ok_reg and deg.weak.any() else None
             reg_inc = se2_between(self.poses[-1], pose)
@@ -263,9 +290,29 @@ class _ScanMap2d:
         self.poses.append(np.array(pose, dtype=float))
         return self.icp_ms[-1] if len(self.icp_ms) > n_icp else 0.0
 
+    def _lio(self, t: float, pred: np.ndarray, pose: np.ndarray, registered: bool, source: Any,
+             reg_cov: np.ndarray | None, deg: Any) -> tuple[np.ndarray, bool]:
+        """The pose and the IMU's state after the registration ``pose`` (:func:`graphnav.scan.lio.lio_step`: the
+        registration measures the composed pose, where its geometry sees and only if it agrees with the IMU's
+        prediction ``pred``); returns the fused pose and whether the registration may join the map."""
+        assert self.imu is not None
+        meas = None
+        if registered and source is not None and reg_cov is not None and np.all(np.isfinite(reg_cov)):
+            meas = (pose, reg_cov, deg.projector() if deg.weak.any() else None)
+            if not consistent(pred, self._pred_cov, *meas):
+                meas, registered = None, False
+                self.inconsistent += 1
+        fused, self.p_pose, self.cross = lio_step(self.imu, self.ts[-1], t, self.poses[-1], self.p_pose, self.cross,
+                                                  self._inc, meas, of_pose=True)
+        return fused, registered
+
     def info(self) -> dict[str, Any]:
         st = self.stats
-        return {
+        imu = self.imu
+        bias = {} if not self.joint or imu is None else {  # the gyro's bias at the end and its 1-sigma [deg/s]
+            "inconsistent_with_imu": self.inconsistent, "gyro_bias_dps": float(np.degrees(imu.bg)),
+            "gyro_bias_sigma_dps": float(np.degrees(np.sqrt(imu.P3[2, 2])))}
+        return {**bias,
             "registrations": len(self.icp_ms),
             "failed_registrations": self.failed,
             "degenerate_registrations": self.degenerate,
@@ -280,7 +327,7 @@ def _imu_guess(log: NavLog, cfg: ScanToMapConfig, pose0: np.ndarray, odo: np.nda
     """The IMU's prediction when ``predict`` asks for it (or for odometry the log does not have)."""
     if not (cfg.predict == "imu" or (cfg.predict == "odometry" and not len(odo))):
         return None
-    return log_imu_guess(log, float(pose0[2]))
+    return log_imu_guess(log, float(pose0[2]), gyro_bias=cfg.gyro_bias)
 
 
 def run_scan_to_map(log: NavLog, *, on_estimate: OnEstimate | None = None, **options: Any) -> RunResult:
