@@ -23,11 +23,12 @@ from .smoother_config import ScanConfig
 from .step import Step
 
 #: ``matcher(cur, prev, init, init_cov, guess_in_graph) -> (usable, pose, cov)``: ``init`` the motion
-#: guess prev -> cur and ``init_cov`` its covariance (the odometry integrated, else the motion
-#: model's); ``guess_in_graph``: that guess is a factor of its own (odometry), so the match's factor
-#: must not repeat it along the directions it does not observe
+#: guess prev -> cur and ``init_cov`` its covariance (the odometry integrated, the IMU's prediction, else
+#: the motion model's); ``guess_in_graph``: which factor of the graph that guess is already (``"odometry"``,
+#: ``"imu"``; ``""``: none, the motion model's), so the match's factor must not repeat it along the
+#: directions it does not observe (a non-empty string is true: a matcher may test it as a flag)
 Matcher = Callable[
-    [Scan, Scan, NDArray[np.float64] | None, NDArray[np.float64] | None, bool],
+    [Scan, Scan, NDArray[np.float64] | None, NDArray[np.float64] | None, str],
     tuple[bool, NDArray[np.float64], NDArray[np.float64]],
 ]
 #: [m^2, m^2, rad^2] the factor's covariance added along a degenerate match's weak directions when the
@@ -43,8 +44,16 @@ def default_matcher(options: dict[str, Any], sweep_s: float = 0.0) -> Matcher | 
     The guess's covariance goes to the matcher as ``init_cov``: a match beyond the 99.9 % bound of
     both covariances from the guess fails (another minimum), and a direction the guess knows better
     is weak. Along weak directions the matcher returns the guess with the guess's covariance; when
-    the guess is a factor of the graph already (``guess_in_graph``: the odometry) the match's
-    factor gets :data:`UNOBSERVED_COV` there instead, so the odometry is not counted twice.
+    the guess is a factor of the graph already (``guess_in_graph``) the match's factor gets
+    :data:`UNOBSERVED_COV` there instead, so the guess is not counted twice.
+
+    With the IMU's prediction as the guess (``"imu"``) the factor is the match's own estimate and
+    covariance (:meth:`~graphnav.scan.weighted_icp.MatchResult.own`), weak only where the scans'
+    geometry is: "a direction the guess knows better" compares one step's covariances, and the IMU's
+    error between keyframes is mostly its bias, the same from step to step, which the matches'
+    independent errors average out and its one-step covariance does not show (docs/smoother.md, "The
+    LiDAR in the IMU graph"). The odometry's factor is white noise step by step: there the rule stays
+    (measured on CARMEN: mixed, docs/smoother.md).
 
     With a LiDAR ``sweep_s`` (``meta["lidar"]``, 0: instantaneous scans) both scans' points are de-skewed to
     their stamps with the guess's constant twist ``Log(init) / (cur.t - prev.t)`` (:mod:`graphnav.scan.deskew`)."""
@@ -57,7 +66,7 @@ def default_matcher(options: dict[str, Any], sweep_s: float = 0.0) -> Matcher | 
     last: list[Any] = [None, None]  # the previous call's current scan and its points
 
     def match(cur: Scan, prev: Scan, init: NDArray[np.float64] | None,
-              init_cov: NDArray[np.float64] | None = None, guess_in_graph: bool = False):
+              init_cov: NDArray[np.float64] | None = None, guess_in_graph: str = ""):
         twist = _sweep_twist(sweep_s, cur, prev, init)
         if twist is not None:  # de-skewed with this pair's twist: nothing to share with the next pair
             prev_xy = scan_points(prev, cfg, sweep_s=sweep_s, twist=twist)
@@ -69,6 +78,12 @@ def default_matcher(options: dict[str, Any], sweep_s: float = 0.0) -> Matcher | 
             last[:] = [cur, cur_xy]
         r = match_points(cur_xy, prev_xy, cfg, init=init, init_cov=init_cov)
         inflated = bool(r.quality.get("inflated", False))
+        if guess_in_graph == "imu" and (r.ok or inflated):  # the match's own, weak where the geometry is
+            pose, cov, weak = r.own()
+            cov = np.asarray(cov, dtype=float)
+            if weak is not None:
+                cov = cov + weak @ UNOBSERVED_COV @ weak.T
+            return True, np.asarray(pose, dtype=float), cov
         cov = np.asarray(r.cov, dtype=float)
         if inflated and guess_in_graph and r.quality.get("weak_projector") is not None:
             p = np.asarray(r.quality["weak_projector"], dtype=float)
@@ -111,7 +126,7 @@ def mounted(matcher: Matcher | None, extrinsic: gtsam.Pose2 | None) -> Matcher |
     inv = extrinsic.inverse()
 
     def match(cur: Scan, prev: Scan, init: NDArray[np.float64] | None,
-              init_cov: NDArray[np.float64] | None = None, guess_in_graph: bool = False):
+              init_cov: NDArray[np.float64] | None = None, guess_in_graph: str = ""):
         if init is not None:
             init, init_cov = conjugate(np.asarray(init, dtype=float), init_cov, inv)
         ok, pose, cov = matcher(cur, prev, init, init_cov, guess_in_graph)
@@ -286,18 +301,19 @@ class ScanFactors:
         relative pose, covariance), which is in the graph already (the ``ImuFactor``): along the
         directions the match cannot see, its factor says nothing and the IMU and GNSS decide; else
         the motion model's ``prior()`` (constant velocity from the last measured motion, random walk)."""
+        in_graph = "odometry"
         if odo_rel is None and guess is not None:
-            odo_rel, odo_cov = gtsam.Pose2(*guess[1]), guess[2]
+            odo_rel, odo_cov, in_graph = gtsam.Pose2(*guess[1]), guess[2], "imu"
         if isinstance(cur, Cloud):
             return self.cloud3d.factor(s, k, cur, prev, odo_rel, odo_cov, last_rel)
         cfg = self.cfg
         if self.matcher is None or cur is None or prev is None:
             return None
         if odo_rel is not None and odo_cov is not None:  # the guess and its covariance: the odometry or IMU ...
-            init, init_cov, in_graph = _vec(odo_rel), odo_cov, True
+            init, init_cov = _vec(odo_rel), odo_cov
         else:  # ... else the motion model's (constant velocity from the last measured motion, random walk)
             mean, init_cov, _ = prior()
-            init, in_graph = _vec(mean), False
+            init, in_graph = _vec(mean), ""
         c0 = time.perf_counter()
         ok, mp, mc = self.matcher(cur, prev, init, init_cov, in_graph)
         s.icp_ms = (time.perf_counter() - c0) * 1e3

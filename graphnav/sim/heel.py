@@ -10,8 +10,10 @@ roll and pitch of :mod:`graphnav.sim.harbour3d` (scaled to ``roll_amp``): with `
 yaw' cos pitch cos roll)``, evaluated at each record's interval middle (each record is the mean over
 its interval; second order at 100 Hz). The added axes get the log's stated white noise. A beacon
 bearing becomes the azimuth of the mark's direction in the hull's plane (a radar or 2D LiDAR heels
-with the hull); the 2D scans are left as they are (level: a heeled 2D LiDAR would see another slice
-of the scene). ``attitude_hz`` adds AHRS roll and pitch records (``ahrs_sigma``).
+with the hull). A 2D scan becomes the slice of the scene the hull's plane cuts (:func:`tilted_scan`:
+the scene of the simulators is vertical walls, so each level return keeps its place on its wall and is
+seen in the hull's plane, at a height, at another bearing and a longer range). ``attitude_hz`` adds
+AHRS roll and pitch records (``ahrs_sigma``).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..log import Attitude, BeaconObs, Imu, NavLog, Record
+from ..log import Attitude, BeaconObs, Imu, NavLog, Record, Scan
 from .harbour3d import Lidar3dConfig, attitude, rot_zyx
 
 GRAVITY = 9.80665  # [m/s^2] standard gravity (the graph's: graphnav.graph.imu_chain.GRAVITY)
@@ -75,6 +77,9 @@ def heeled(log: NavLog, heel: float = math.radians(10.0), roll_amp: float = math
                                     float(th + rng.normal(0.0, ahrs_sigma)), ahrs_sigma))
                 next_att = r.t + att_every - 1e-9
             continue
+        if isinstance(r, Scan):
+            (phi,), (th,) = _roll_pitch(cfg, seed, heel, np.array([r.t]))
+            r = tilted_scan(r, phi, th)
         if isinstance(r, BeaconObs):
             (phi,), (th,) = _roll_pitch(cfg, seed, heel, np.array([r.t]))
             d = rot_zyx(0.0, th, phi).T @ np.array([math.cos(r.bearing), math.sin(r.bearing), 0.0])
@@ -84,6 +89,31 @@ def heeled(log: NavLog, heel: float = math.radians(10.0), roll_amp: float = math
     meta["heel"] = {"heel_deg": math.degrees(heel), "roll_amp_deg": math.degrees(roll_amp), "seed": seed,
                     "attitude_hz": attitude_hz, "model": "graphnav.sim.heel"}
     return NavLog(out, list(log.beacons_known), meta)
+
+
+def tilted_scan(scan: Scan, roll: float, pitch: float) -> Scan:
+    """The level ``scan`` of a scene of vertical walls as a 2D LiDAR in the hull's plane sees it at
+    ``roll``, ``pitch`` [rad]: each return's horizontal point ``(x, y)`` (levelled sensor frame) lifted
+    onto the hull's plane (``z = -(n_x x + n_y y) / n_z``, ``n = R e_z`` its normal, ``R = R_y(pitch)
+    R_x(roll)`` body -> levelled) and expressed in the body, ``b = R^T (x, y, z)`` (``b_z = 0``): range
+    ``|b|``, bearing ``atan2(b_y, b_x)``; a missing return keeps its range at its new bearing, a return
+    beyond ``range_max`` becomes missing. Known answer: level (0, 0) returns the scan unchanged."""
+    R = rot_zyx(0.0, pitch, roll)
+    n = R[:, 2]
+    ok = scan.valid()
+    r = np.where(ok, scan.ranges, 1.0)
+    x, y = r * np.cos(scan.angles), r * np.sin(scan.angles)
+    z = -(n[0] * x + n[1] * y) / n[2]
+    b = np.stack([x, y, z], axis=1) @ R  # rows R^T p
+    rng = np.hypot(b[:, 0], b[:, 1])
+    ang = np.arctan2(b[:, 1], b[:, 0])
+    ranges = np.where(ok, rng, scan.ranges)
+    if math.isfinite(scan.range_max):
+        ranges = np.where(ok & (ranges > scan.range_max), math.inf, ranges)
+    order = np.argsort(ang, kind="stable") if np.any(np.diff(ang) < 0) and np.all(np.diff(scan.angles) >= 0) else None
+    if order is not None:  # keep the beams in bearing order when the level scan was (the bearings wrap at pi)
+        ranges, ang = ranges[order], ang[order]
+    return replace(scan, ranges=ranges, angles=ang)
 
 
 def roll_pitch_at(log: NavLog, t: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -12,7 +12,9 @@ import pytest
 
 from graphnav.graph.imu_chain import ImuChain, ImuConfig
 from graphnav.io.dispatch import load_log
-from graphnav.sim.heel import heeled, roll_pitch_at
+from graphnav.log import Scan
+from graphnav.sim.harbour3d import rot_zyx
+from graphnav.sim.heel import heeled, roll_pitch_at, tilted_scan
 
 HARBOUR = Path(__file__).resolve().parents[2] / "data" / "harbour.npz"
 
@@ -91,3 +93,41 @@ def test_a_heeled_six_axis_log_is_held_at_the_surface_and_its_heel(logs):
     assert max(abs(p.translation()[2]) for p in poses) < 1.0
     d_roll = np.degrees([p.rotation().roll() for p in poses]) - np.degrees(roll)
     assert abs(np.mean(d_roll)) < 0.5 and np.degrees(poses[0].rotation().roll()) > 5.0  # heeled ~10 deg from the start
+
+
+def test_tilted_scan_known_answers():
+    """Level: unchanged. Rolled by phi: straight ahead the beam stays level (a wall 10 m ahead at 10 m);
+    abeam it climbs (a wall 10 m abeam at 10 / cos phi, still abeam); a return pushed beyond the
+    stated maximum becomes missing; a missing return stays missing."""
+    ang = np.array([-math.pi / 2, 0.0, 0.3, math.pi / 2])
+    scan = Scan(1.0, np.array([10.0, 10.0, math.inf, 10.0]), ang, 10.5)
+    same = tilted_scan(scan, 0.0, 0.0)
+    np.testing.assert_allclose(same.ranges[[0, 1, 3]], [10.0, 10.0, 10.0], atol=1e-12)
+    np.testing.assert_allclose(same.angles, ang, atol=1e-12)
+    phi = math.radians(15.0)
+    t = tilted_scan(Scan(1.0, np.array([10.0, 10.0, math.inf, 10.0]), ang, 20.0), phi, 0.0)
+    np.testing.assert_allclose(t.ranges[[0, 1, 3]], [10.0 / math.cos(phi), 10.0, 10.0 / math.cos(phi)], rtol=1e-12)
+    np.testing.assert_allclose(t.angles[[0, 1, 3]], [-math.pi / 2, 0.0, math.pi / 2], atol=1e-12)
+    assert not np.isfinite(t.ranges[2])
+    cut = tilted_scan(scan, math.radians(30.0), 0.0)  # 10 / cos 30 = 11.5 > 10.5: missing now
+    assert cut.valid().tolist() == [False, True, False, False]
+    th = math.radians(10.0)  # pitched: ahead the beam climbs, abeam it stays level
+    p = tilted_scan(Scan(1.0, np.array([10.0, 10.0, math.inf, 10.0]), ang, 20.0), 0.0, th)
+    np.testing.assert_allclose(p.ranges[[0, 1, 3]], [10.0, 10.0 / math.cos(th), 10.0], rtol=1e-12)
+
+
+def test_heeled_scans_are_the_hull_plane_slices(logs):
+    """Every scan of a heeled log is its level scan lifted into the hull's plane at its time's roll and
+    pitch: the returns' horizontal points are the level ones (the walls did not move)."""
+    level, tilt = logs[0], logs[1]
+    ls, ts = level.of("scan"), tilt.of("scan")
+    assert len(ls) == len(ts) > 10
+    roll, pitch = roll_pitch_at(tilt, np.array([s.t for s in ts]))
+    assert np.ptp(roll) > math.radians(1.0)
+    for s0, s1, ph, th in list(zip(ls, ts, roll, pitch, strict=True))[:: max(1, len(ls) // 20)]:
+        v0, v1 = s0.valid(), s1.valid()
+        p1 = np.stack([s1.ranges[v1] * np.cos(s1.angles[v1]), s1.ranges[v1] * np.sin(s1.angles[v1]),
+                       np.zeros(v1.sum())], axis=1) @ rot_zyx(0.0, th, ph).T  # body -> levelled
+        p0 = np.stack([s0.ranges[v0] * np.cos(s0.angles[v0]), s0.ranges[v0] * np.sin(s0.angles[v0])], axis=1)
+        d = np.min(np.hypot(p1[:, None, 0] - p0[None, :, 0], p1[:, None, 1] - p0[None, :, 1]), axis=1)
+        assert np.max(d) < 1e-9
