@@ -110,7 +110,9 @@ def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gr
     lin = graph.linearize(values)
     sj = np.asarray(lin.sparseJacobian_())
     rows, cols, vals = sj[0].astype(np.int64) - 1, sj[1].astype(np.int64) - 1, sj[2]
-    n_cols = int(cols.max()) if cols.size else 0  # the last column is b
+    # the last column is b (GTSAM's ordering of the graph's keys, then b); its index from the variables'
+    # dimensions, not from the largest column present: at an exact solution b is all zero and absent
+    n_cols = int(values.dim()) if lin.keys().size() == values.size() else (int(cols.max()) if cols.size else 0)
     is_b = cols == n_cols
     m_rows = int(rows.max()) + 1 if rows.size else 0
     b = np.zeros(m_rows)
