@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from graphnav.errors import LogError
 from graphnav.io import load_log
 from graphnav.log import ARRAY_FIELDS, RECORD_TYPES, KnownBeacon, Limits, check_record, suspect_rows
+from graphnav.sim.heel import heeled
 from tests._logfactory import every_record_log
 
 TYPES = [c for c in (*RECORD_TYPES.values(), KnownBeacon) if not set(f.name for f in fields(c)) & set(ARRAY_FIELDS)]
@@ -87,11 +88,12 @@ def test_non_float_values_are_flagged():
 
 
 _HARBOUR = load_log(Path(__file__).resolve().parents[2] / "data" / "harbour.npz")
+_ATTITUDE = heeled(_HARBOUR.sliced(0.0, 20.0), attitude_hz=5.0).of("attitude")  # AHRS roll and pitch records
 
 
 @pytest.mark.parametrize("kind", sorted(k for k, c in RECORD_TYPES.items() if c in TYPES))
 def test_valid_records_flag_nothing(kind):
-    recs = [r for r in [*every_record_log().records, *_HARBOUR.records] if type(r) is RECORD_TYPES[kind]]
+    recs = [r for r in [*every_record_log().records, *_HARBOUR.records, *_ATTITUDE] if type(r) is RECORD_TYPES[kind]]
     if not recs:
         pytest.skip(f"the factory log has no {kind} record")
     cls = RECORD_TYPES[kind]
