@@ -72,8 +72,8 @@ def test_corridor_flagged_and_weak_along_it():
     assert res.pose[0] == pytest.approx(1.0, abs=0.02)  # the guess, not a slide along the walls
 
 
-@pytest.mark.parametrize("variant", ["HD", "HDL"])
-def test_room_not_flagged_and_not_inflated(variant):
+def _room_pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The room scanned from the origin and from ``true`` (0.4 m, 0.1 m, 0.03 rad): ``true``, the points."""
     rng = np.random.default_rng(6)
     segs = room()
     true = np.array([0.4, 0.1, 0.03])
@@ -81,6 +81,12 @@ def test_room_not_flagged_and_not_inflated(variant):
     r1, a1 = noisy_scan(segs, true, rng)
     p0 = np.column_stack([r0 * np.cos(a0), r0 * np.sin(a0)])[np.isfinite(r0)]
     p1 = np.column_stack([r1 * np.cos(a1), r1 * np.sin(a1)])[np.isfinite(r1)]
+    return true, p0, p1
+
+
+@pytest.mark.parametrize("variant", ["HD", "HDL"])
+def test_room_not_flagged_and_not_inflated(variant):
+    true, p0, p1 = _room_pair()
     res = match_points(p1, p0, IcpConfig(variant=variant), init=np.zeros(3))
     assert res.ok and not res.quality["degenerate"] and not res.quality["inflated"]
     assert res.quality["sigma_weak"] < 0.5
@@ -234,13 +240,7 @@ def test_own_estimate_survives_a_guess_that_knows_better():
     (an IMU over a short interval) makes the matcher return the guess along all of them (weak "where the guess knows
     better"), but the match's own estimate, its covariance and its geometry (no weak direction) stay available for a
     fusion by information (MatchResult.own)."""
-    rng = np.random.default_rng(6)
-    segs = room()
-    true = np.array([0.4, 0.1, 0.03])
-    r0, a0 = noisy_scan(segs, (0.0, 0.0, 0.0), rng)
-    r1, a1 = noisy_scan(segs, true, rng)
-    p0 = np.column_stack([r0 * np.cos(a0), r0 * np.sin(a0)])[np.isfinite(r0)]
-    p1 = np.column_stack([r1 * np.cos(a1), r1 * np.sin(a1)])[np.isfinite(r1)]
+    true, p0, p1 = _room_pair()
     guess = true + np.array([0.03, -0.03, np.radians(0.3)])
     tight = np.diag([1e-4, 1e-4, np.radians(0.01)]) ** 2
     res = match_points(p1, p0, IcpConfig(), init=guess, init_cov=tight)

@@ -4,9 +4,7 @@ per-pose noise (docs/defaults.md, "What was fitted")."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,19 +13,9 @@ from _scan_sim import raycast, room
 from graphnav.geometry import se2_compose
 from graphnav.io.carmen import flaser_angles
 from graphnav.scan.weighted_icp import IcpConfig, match_points
+from tests._bench import load_benchmark
 
-REPO = Path(__file__).resolve().parents[2]
-
-
-def _bench():
-    path = REPO / "benchmarks" / "icp_yaw_slope.py"
-    spec = importlib.util.spec_from_file_location("icp_yaw_slope", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-BENCH = _bench()
+BENCH = load_benchmark("icp_yaw_slope")
 
 
 def carmen_pairs(n_beams: int, n_pairs: int, seed: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:

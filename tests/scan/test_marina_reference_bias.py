@@ -3,26 +3,14 @@ constant-twist sweep de-skewed back to the points of a scan taken at one instant
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import gtsam
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-REPO = Path(__file__).resolve().parents[2]
+from tests._bench import load_benchmark
 
-
-def _bench():
-    path = REPO / "benchmarks" / "marina_reference_bias.py"
-    spec = importlib.util.spec_from_file_location("marina_reference_bias", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-BENCH = _bench()
+BENCH = load_benchmark("marina_reference_bias")
 finite = st.floats(-3.0, 3.0, allow_nan=False)
 
 
