@@ -10,7 +10,7 @@ sigma (a hold-out error near it is as good as the fixes can tell). Pure: no file
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -66,7 +66,10 @@ class Holdout:
     """A hold-out plan applied to a log: ``log`` is what the estimators see (GNSS withheld in
     ``windows``); ``fixes`` the withheld position fixes (``t``, ``x``, ``y``, ``sigma``) and ``ends``
     the index of each window's last withheld fix (windows without a fix, e.g. in a logger gap, are
-    not scored)."""
+    not scored). ``silent``: per scored window, whether the log holds no other record inside it (only
+    GNSS was logged then): no estimator has an estimate there, the score takes the last one before
+    (:func:`~graphnav.evaluation.metrics.gnss_residuals`), and every estimator's end error is the
+    distance sailed in the window, alike; ``rmse_informative_m`` leaves those windows out."""
 
     spec: HoldoutSpec
     windows: list[tuple[float, float]]
@@ -74,6 +77,7 @@ class Holdout:
     fixes: dict[str, NDArray]
     ends: list[int]
     withheld: dict[str, int]
+    silent: list[bool] = field(default_factory=list)
 
     @property
     def scored_windows(self) -> int:
@@ -90,11 +94,13 @@ class Holdout:
         r = gnss_residuals(traj, f["t"], np.column_stack([f["x"], f["y"]]), f["sigma"])
         err = np.full(len(f["t"]), np.nan)
         err[r["i_fix"]] = r["residual_m"]
-        ends = err[self.ends]
-        ends = ends[np.isfinite(ends)]
+        all_ends = err[self.ends]
+        ends = all_ends[np.isfinite(all_ends)]
+        loud = all_ends[np.isfinite(all_ends) & ~np.asarray(self.silent or [False] * len(self.ends), bool)]
         nis = r["nis"]
         return {"end_errors_m": [float(v) for v in err[self.ends]],
                 "rmse_m": float(np.sqrt(np.mean(ends ** 2))) if ends.size else nan,
+                "rmse_informative_m": float(np.sqrt(np.mean(loud ** 2))) if loud.size else nan,
                 "max_m": float(np.max(ends)) if ends.size else nan,
                 "mean_m": float(np.nanmean(err)) if np.isfinite(err).any() else nan,
                 "nis_mean": float(np.mean(nis)) if nis is not None and nis.size else None,
@@ -106,6 +112,7 @@ class Holdout:
         return {"every_s": self.spec.every_s, "length_s": self.spec.length_s,
                 "windows": [[a, b] for a, b in self.windows], "scored_windows": self.scored_windows,
                 "withheld": dict(self.withheld),
+                "silent_windows": int(sum(self.silent)),
                 "fix_sigma_m": float(np.median(s)) if s.size else None}
 
 
@@ -124,11 +131,13 @@ def withhold(log: NavLog, spec: HoldoutSpec) -> Holdout:
     sel = _inside(t, wins)
     fixes = {"t": t[sel], "x": np.asarray(c["x"], float)[sel], "y": np.asarray(c["y"], float)[sel],
              "sigma": np.asarray(c["sigma"], float)[sel]}
-    ends = []
+    others = np.sort(np.array([r.t for r in log.records if r.kind not in (*WITHHELD_KINDS, "truth")], dtype=float))
+    ends, silent = [], []
     for a, b in wins:
         idx = np.flatnonzero((fixes["t"] >= a) & (fixes["t"] < b))
         if idx.size:
             ends.append(int(idx[-1]))
+            silent.append(bool(np.searchsorted(others, b) == np.searchsorted(others, a)))
     withheld = {k: 0 for k in WITHHELD_KINDS}
 
     def held(r: Any) -> bool:
@@ -137,7 +146,7 @@ def withhold(log: NavLog, spec: HoldoutSpec) -> Holdout:
             return True
         return False
 
-    return Holdout(spec, wins, log.without(held), fixes, ends, withheld)
+    return Holdout(spec, wins, log.without(held), fixes, ends, withheld, silent)
 
 
 def ranking(scores: dict[str, dict[str, Any]]) -> list[str]:

@@ -61,6 +61,22 @@ def test_withheld_fixes_are_those_in_the_windows_and_an_offset_is_scored_exactly
     assert plan.describe()["fix_sigma_m"] == 1.0
 
 
+def test_a_window_with_no_other_record_is_marked_silent_and_left_out_of_the_informative_rmse():
+    """The compass and speed log silent over the second window (GNSS only was logged then): no estimate
+    inside it, so an estimator's end error there is the distance sailed (the last estimate before holds);
+    the plan marks that window, and ``rmse_informative_m`` is the other windows' RMSE."""
+    log = NavLog([r for r in _straight().records if isinstance(r, Gnss | GnssVelocity) or not 170 <= r.t < 210])
+    plan = withhold(log, HoldoutSpec(100, 20))
+    assert plan.silent == [False, True, False] and plan.describe()["silent_windows"] == 1
+    t = np.array([k for k in range(400) if not 180 <= k < 200], dtype=float)  # an estimate on every record
+    est = Trajectory(t, np.column_stack([2.0 * t + 1.0, np.zeros(t.size), np.zeros(t.size)]))
+    s = plan.score(est)
+    assert s["end_errors_m"] == pytest.approx([1.0, 2.0 * 20 - 1.0, 1.0])  # 199 s scored by the estimate at 179 s
+    assert s["rmse_informative_m"] == pytest.approx(1.0)
+    assert s["rmse_m"] == pytest.approx(np.sqrt((1 + 39**2 + 1) / 3))
+    assert withhold(_straight(), HoldoutSpec(100, 20)).silent == [False, False, False]
+
+
 def test_residuals_never_interpolate_across_a_gap_in_the_estimate():
     """An estimate made after a gap is not used for a time inside it: the last one before holds."""
     est = Trajectory(np.array([0.0, 1.0, 60.0]), np.array([[0.0, 0, 0], [1.0, 0, 0], [100.0, 0, 0]]))
