@@ -257,7 +257,7 @@ class Solver:
 def marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> Callable[[int], NDArray[np.float64]]:
     """``key -> marginal covariance`` of a batch solution: ``gtsam.Marginals`` (Cholesky), or where
     that finds the system indeterminate -- when it is built, or later for one key (the 2.7 h psaros33
-    log with GNSS withheld: a velocity's marginal, after 8 000 others) -- the marginals of a
+    log with GNSS withheld: a pose's marginal, GTSAM's elimination stopping near a velocity) -- the marginals of a
     QR-factorised iSAM2 Bayes tree of the same graph linearised at ``values``, for that key and every
     later one (the Pose3 graph's loose roll/pitch/height directions and IMU biases, a vessel's
     velocity through a long GNSS gap, leave it ill-conditioned, not singular)."""
