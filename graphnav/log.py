@@ -382,13 +382,10 @@ def check_record(rec: Record | KnownBeacon, limits: Limits | None = None) -> Non
     for name, code, arg in plan:
         v = getattr(rec, name)
         if code == _ID:
-            if not isinstance(v, str) or not v:
-                raise LogError("beacon id must be a non-empty string", field="id")
+            _check_id(v)
             continue
         if code == _SOURCE:
-            if not isinstance(v, str) or len(v) > MAX_SOURCE_CHARS or not v.isprintable():
-                raise LogError(f"source must be a printable string of at most {MAX_SOURCE_CHARS} characters",
-                               field=SOURCE_FIELD)
+            _check_source(v)
             continue
         if not isinstance(v, float):
             raise LogError(f"expected a number, got {type(v).__name__}", field=name)
@@ -467,7 +464,7 @@ def suspect_rows(cls: type, columns: dict[str, Any], limits: Limits | None = Non
             if code in (_ID, _SOURCE):
                 for v in set(col):
                     try:
-                        check_record(_StrProbe(v), lim) if code == _SOURCE else _check_id(v)
+                        (_check_source if code == _SOURCE else _check_id)(v)
                     except LogError:
                         bad |= np.fromiter((c == v for c in col), dtype=bool, count=n)
                 continue
@@ -502,19 +499,15 @@ def suspect_rows(cls: type, columns: dict[str, Any], limits: Limits | None = Non
     return bad
 
 
-@dataclass
-class _StrProbe:
-    """A one-field stand-in that lets :func:`suspect_rows` put a ``source`` value through the scalar check."""
-
-    source: Any
-
-
-_PLANS[_StrProbe] = ((SOURCE_FIELD, _SOURCE, None),)
-
-
 def _check_id(v: Any) -> None:
     if not isinstance(v, str) or not v:
         raise LogError("beacon id must be a non-empty string", field="id")
+
+
+def _check_source(v: Any) -> None:
+    if not isinstance(v, str) or len(v) > MAX_SOURCE_CHARS or not v.isprintable():
+        raise LogError(f"source must be a printable string of at most {MAX_SOURCE_CHARS} characters",
+                       field=SOURCE_FIELD)
 
 
 API_LIMITS = Limits(max_speed=math.inf, max_yaw_rate=math.inf, max_accel=math.inf, max_beacon_range=math.inf)
