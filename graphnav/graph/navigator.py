@@ -102,7 +102,7 @@ def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -
         given = kw.get("mounts", config.mounts if config is not None else {})
         kw["mounts"] = {k: asdict(m) for k, m in merged(log.meta["mounts"], given).items()}
     motion = kw.get("motion", config.motion if config is not None else "auto")
-    if motion == "auto" and auto_motion(log.counts()) == "vessel":  # a vessel's instruments, no IMU
+    if motion == "auto" and auto_motion(log.counts(), log.meta) == "vessel":  # a vessel's instruments, no IMU
         kw["motion"] = "vessel"
     v0 = log.meta.get("initial_velocity")
     if imu_model is not None or v0 is not None:

@@ -17,7 +17,7 @@ from graphnav.graph.imu_chain import ImuChain, ImuConfig
 from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
 from graphnav.graph.smoother_config import auto_motion
 from graphnav.graph.space import NavSpace
-from graphnav.log import Gnss, GnssVelocity, Heading, Imu, NavLog, PosePrior, Truth
+from graphnav.log import ODOMETRY_FROM_ROT, Gnss, GnssVelocity, Heading, Imu, NavLog, PosePrior, Truth
 from graphnav.sim.solent import simulate_solent
 
 FAST = {"covariances": False}
@@ -213,6 +213,10 @@ def test_vessel_model_without_imu_lets_course_and_heading_differ():
     # a compass with GNSS velocity and nothing else: "auto" is the vessel graph; without the compass, Pose2
     assert auto_motion(log.counts()) == "vessel"
     assert auto_motion(log.without(lambda r: r.kind == "heading").counts()) == "odometry"
+    # a rate of turn paired with the SOG (NMEA ROT, N2K 127251) is no odometer: still the vessel graph
+    kinds = {**log.counts(), "odometry": 10}
+    assert auto_motion(kinds) == "odometry"
+    assert auto_motion(kinds, {"odometry": ODOMETRY_FROM_ROT}) == "vessel"
 
 
 def test_water_current_is_estimated_from_water_speed_and_gnss():
