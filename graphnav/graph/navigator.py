@@ -383,7 +383,7 @@ class Navigator:
             return RunResult(empty, self.online(), np.zeros(0), np.array(self.track.icp_ms), info)
         c0, p0 = time.perf_counter(), time.process_time()
         closing = Closing(cfg, self.solver, self.space, self.groups, b.rejected_fixes, b.defaulted,
-                          b.motion.intervals)
+                          b.motion.intervals, b.meas.water)
         try:
             values, poses, covs = closing.solve(n, self.front, info)
         except SolverError as exc:
