@@ -101,6 +101,7 @@ class GraphBuilder:
                                  mount=mounts.get("lidar"))
         self.charted = {b.id: b for b in chart}
         self.keyframes = Keyframes(cfg.keyframe, scans)
+        self.keyframes.imu = self.motion.imu
         if self.keyframes.mode == "scan":
             self.scans.want_matcher()
         self.anchor = Anchor(cfg.anchor, cfg.mounts)

@@ -9,6 +9,10 @@ records are the levelled horizontal specific force with gravity removed (gravity
 gravity off); a log whose records carry all six axes is preintegrated
 in 3D with gravity (``n_gravity``, z up).
 
+Where an interval takes a share of a record (or holds one beyond its time) the rate's change within it
+adds to the noise (:meth:`ImuChain.hold_variance`); the keyframes wait for a slow IMU's records so that
+this stays rare (:meth:`graphnav.graph.keyframes.Keyframes.at_imu_record`).
+
 The noise is the log's stated IMU model (``meta["imu"]``: ``acc_std`` [m/s^2] and ``gyro_std``
 [rad/s] per sample at ``hz``) when it has one, else :class:`ImuConfig`'s; as continuous densities
 ``sigma^2 / hz`` the integrated error does not depend on the sample rate.
@@ -108,14 +112,18 @@ class ImuChain:
     def __bool__(self) -> bool:
         return bool(self.t)
 
-    def _make_params(self) -> gtsam.PreintegrationParams:
-        """Preintegration parameters with the noise densities ``std / sqrt(rate)`` [per sqrt(s)]."""
+    def _make_params(self, acc_density: NDArray[np.float64] | None = None,
+                     gyro_density: NDArray[np.float64] | None = None,
+                     integration_density: float | None = None) -> gtsam.PreintegrationParams:
+        """Preintegration parameters with the noise densities ``std^2 / rate`` [per s] (or the per-axis
+        densities given)."""
         acc, gyro, hz = self.std
         rate = hz if hz else 1.0 / max(self._period(), 1e-6)
         p = gtsam.PreintegrationParams.MakeSharedU(GRAVITY if self.six else 0.0)
-        p.setAccelerometerCovariance(np.eye(3) * acc**2 / rate)
-        p.setGyroscopeCovariance(np.eye(3) * gyro**2 / rate)
-        p.setIntegrationCovariance(np.eye(3) * self.cfg.integration_sigma**2)
+        p.setAccelerometerCovariance(np.diag(acc_density) if acc_density is not None else np.eye(3) * acc**2 / rate)
+        p.setGyroscopeCovariance(np.diag(gyro_density) if gyro_density is not None else np.eye(3) * gyro**2 / rate)
+        p.setIntegrationCovariance(np.eye(3) * (integration_density if integration_density is not None
+                                                else self.cfg.integration_sigma**2))
         if self.body_P_sensor is not None:  # GTSAM rotates the samples and removes the centripetal term
             p.setBodyPSensor(self.body_P_sensor)
         return p
@@ -148,21 +156,70 @@ class ImuChain:
     def samples(self, ta: float, tb: float) -> list[tuple[NDArray[np.float64], NDArray[np.float64], float]]:
         """``(acc, omega, dt)`` over ``[ta, tb]``: each record held over the interval since the
         previous one, the last one held on to ``tb`` (zero-order hold over a gap or a late sample)."""
-        out: list[tuple[NDArray[np.float64], NDArray[np.float64], float]] = []
+        return [(np.array(self.rows[i][:3]), np.array(self.rows[i][3:]), hi - lo) for i, lo, hi in self._pieces(ta, tb)]
+
+    def _pieces(self, ta: float, tb: float) -> list[tuple[int, float, float]]:
+        """``(record index, lo, hi)`` covering ``[ta, tb]``: record ``i`` over its share of
+        ``(t[i-1], t[i]]``, the newest one held beyond its time."""
+        out: list[tuple[int, float, float]] = []
         if not self.t or tb <= ta:
             return out
         i = bisect.bisect_right(self.t, ta)
         lo = ta
+        n = len(self.t)
         while lo < tb - 1e-12:
-            if i < len(self.t):
-                hi, r = min(self.t[i], tb), self.rows[i]
-            else:
-                hi, r = tb, self.rows[-1]
+            j, hi = (i, min(self.t[i], tb)) if i < n else (n - 1, tb)
             if hi > lo:
-                out.append((np.array(r[:3]), np.array(r[3:]), hi - lo))
+                out.append((j, lo, hi))
             lo = hi
             i += 1
         return out
+
+    def hold_variance(self, ta: float, tb: float) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+        """The variance [per axis: (m/s)^2 and rad^2] that holding the records' means over ``[ta, tb]``
+        adds to the integrated specific force and rate: zero where the interval covers records whole.
+
+        A record is the mean over ``(t[i-1], t[i]]`` (length ``T``); where the interval takes a share
+        ``f`` of it, the true integral over that share differs from ``f T`` x the mean by the rate's
+        variation within the record. With the quantity changing linearly by ``v`` over ``T`` (``v``: the
+        larger step to a neighbouring record, the data's own measure of it) that error is
+        ``v T f (1 - f) / 2`` (the integral of ``v (tau - 1/2)`` over ``[0, f]``), taken as one sigma.
+        Beyond the newest record (a late sample or a gap, held over ``d``) the quantity drifts by about
+        ``v d / T``: the error ``v d^2 / (2 T)``. Negligible for a fast IMU (``v`` small), it is what a
+        slow one (1 Hz) gets wrong through a turn's reversal (docs/smoother.md).
+
+        The third value [m^2] is the position's: even over whole records the double integral depends on
+        how the specific force is spread within each, ``v_a T^2 f^3 / 12`` for a share ``f`` (the integral
+        of ``(d - tau) v_a (tau / d - 1/2) f`` over the share's length ``d = f T``), summed over the axes."""
+        va, vg = np.zeros(3), np.zeros(3)
+        vp = 0.0
+        n = len(self.t)
+        for i, lo, hi in self._pieces(ta, tb):
+            if i == 0:
+                continue  # the first record's interval is unknown: no share to take
+            T = self.t[i] - self.t[i - 1]
+            if T <= 0.0:
+                continue
+            r = np.asarray(self.rows[i], dtype=float)
+            v = np.abs(r - np.asarray(self.rows[i - 1], dtype=float))
+            if i + 1 < n:
+                v = np.maximum(v, np.abs(np.asarray(self.rows[i + 1], dtype=float) - r))
+            f_all = min((hi - lo) / T, 1.0)
+            vp += float(np.sum((v[:3] * T * T * f_all**3 / 12.0) ** 2))
+            if hi > self.t[i] + 1e-12:  # held beyond the newest record: extrapolated
+                d = hi - max(lo, self.t[i])
+                e = v * d * d / (2.0 * T)
+                if lo < self.t[i] - 1e-12:  # ... and a share of its own interval before that
+                    f = (self.t[i] - lo) / T
+                    e = np.sqrt(e**2 + (v * T * f * (1.0 - f) / 2.0) ** 2)
+            else:
+                f = (hi - lo) / T
+                if f >= 1.0 - 1e-9:
+                    continue
+                e = v * T * f * (1.0 - f) / 2.0
+            va += e[:3] ** 2
+            vg += e[3:] ** 2
+        return va, vg, vp
 
     def rotation(self, ta: float, tb: float) -> float:
         """An upper bound of the rotation over ``[ta, tb]`` [rad]: the integrated gyro rate's norm (each
@@ -190,7 +247,23 @@ class ImuChain:
             if tb > ta:
                 pim.integrateMeasurement(np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope()), tb - ta)
             return pim
-        return F.preintegrate(self.params, bias, self.samples(ta, tb), self.cfg.substeps, planar=not self.six)
+        return F.preintegrate(self._held_params(ta, tb), bias, self.samples(ta, tb), self.cfg.substeps,
+                              planar=not self.six)
+
+    def _held_params(self, ta: float, tb: float) -> gtsam.PreintegrationParams:
+        """The parameters for ``[ta, tb]``: the shared ones, or with the densities raised by
+        :meth:`hold_variance` over the interval where that is not negligible (1 % of the interval's
+        white-noise variance on some axis)."""
+        assert self.params is not None
+        T = tb - ta
+        if T <= 0.0:
+            return self.params
+        va, vg, vp = self.hold_variance(ta, tb)
+        acc, gyro = np.diag(self.params.getAccelerometerCovariance()), np.diag(self.params.getGyroscopeCovariance())
+        ip = float(self.params.getIntegrationCovariance()[0, 0])
+        if not (np.any(va > 0.01 * acc * T) or np.any(vg > 0.01 * gyro * T) or vp > 0.01 * ip * T):
+            return self.params
+        return self._make_params(acc + va / T, gyro + vg / T, ip + vp / T)
 
     def tilt(self, t: float, window: float = 1.0) -> tuple[float, float] | None:
         """Roll and pitch [rad] of a 6-axis IMU from the gravity direction: the mean specific force of its

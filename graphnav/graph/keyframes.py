@@ -3,6 +3,8 @@
 * Keyframes are the scan times when the log has scans (one pose per scan, ICP between
   consecutive scans; ``scan_stride`` N keeps every N-th scan, to bound the matching cost),
   otherwise a fixed ``period`` [s] (default 0.5 s) from the first record.
+* In the IMU graph a scan becomes a keyframe by the motion since the newest one; an IMU slower than
+  the scans (or the grid) makes it wait for the scan nearest one of its records (:meth:`Keyframes.at_imu_record`).
 * Every other measurement (GNSS, heading, beacon) is attached to the keyframe **nearest in time**.
   The error this introduces is bounded by the motion over half the largest keyframe gap
   ``dt_max``: position ``<= v_max * dt_max / 2`` and yaw ``<= |ROT|_max * dt_max / 2``
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -110,6 +113,9 @@ class Keyframes:
         self.grid_i = 0  # the next grid slot
         self.scans: dict[int, Record] = {}  # keyframe -> its scan or cloud (until the next has its batch)
         self.n_scans = 0
+        self.imu: Any = None  # the IMU chain (graphnav.graph.imu_chain.ImuChain) of the IMU graph: set by the builder
+        self._last_scan_t: float | None = None
+        self._scan_gaps: deque[float] = deque(maxlen=16)
         self.lidar_kind: str | None = None  # "scan" or "cloud": the first LiDAR record's kind drives the keyframes
         self.pending: list[Record] = []  # measurements after the newest keyframe
         self.due: dict[int, list[tuple[int, Record]]] = {}  # step -> (attach, record)
@@ -153,6 +159,8 @@ class Keyframes:
                 self.grid_i = max(self.grid_i + 1, math.ceil((t - self.period - EPS - self.grid_t0) / self.period))
                 continue
             self.grid_i += 1
+            if self.imu is not None and self.t and not self.at_imu_record(self.imu, ts, self.period):
+                continue  # a slow IMU: the slots between its records are skipped
             self.add(ts, None)
 
     def is_lidar(self, kind: str) -> bool:
@@ -175,17 +183,45 @@ class Keyframes:
         moved ``keyframe_distance`` (at the newest interval's ``speed``) or turned ``keyframe_angle_deg``
         (the gyro) since the newest keyframe, or ``keyframe_max_dt`` has passed."""
         cfg = self.cfg
+        scan_dt = self._scan_period(t)
         if self.n_scans % cfg.scan_stride:
             return False
         use = cfg.motion if cfg.motion is not None else bool(imu)
         if not use or not self.t or not imu:
             return True
         dt = t - self.t[-1]
-        if dt >= cfg.max_dt - EPS:
+        due = (dt >= cfg.max_dt - EPS or speed() * dt >= cfg.distance
+               or imu.rotation(self.t[-1], t) >= math.radians(cfg.angle_deg))
+        if not due:
+            return False
+        # an IMU slower than the LiDAR: the keyframe waits (at most one IMU period) for the scan nearest a
+        # record's time
+        if scan_dt is None or dt >= cfg.max_dt + self._imu_period(imu) - EPS:
             return True
-        if speed() * dt >= cfg.distance:
+        return self.at_imu_record(imu, t, scan_dt * cfg.scan_stride)
+
+    @staticmethod
+    def _imu_period(imu: Any) -> float:
+        return imu._period() if imu and len(imu.t) >= 2 else 0.0
+
+    def at_imu_record(self, imu: Any, t: float, spacing: float) -> bool:
+        """Whether a keyframe at ``t`` (candidates ``spacing`` seconds apart) keeps the IMU's records whole:
+        always, unless the IMU is slower than the candidates (1.5x), when ``t`` must be the candidate nearest
+        a record's time (the newest record's, or a period on from it). Each record is the mean over its
+        interval: its preintegration is exact over whole records, and over a share of one only to the
+        rate's variation within it (:meth:`~graphnav.graph.imu_chain.ImuChain.hold_variance`)."""
+        period = self._imu_period(imu)
+        if period <= 1.5 * spacing:
             return True
-        return imu.rotation(self.t[-1], t) >= math.radians(cfg.angle_deg)
+        tn = imu.t[-1]
+        return abs(t - (tn + round((t - tn) / period) * period)) <= 0.5 * spacing + EPS
+
+    def _scan_period(self, t: float) -> float | None:
+        """The median interval of the last scans (the newest at ``t``), ``None`` before two."""
+        if self._last_scan_t is not None and t > self._last_scan_t:
+            self._scan_gaps.append(t - self._last_scan_t)
+        self._last_scan_t = t
+        return float(np.median(self._scan_gaps)) if self._scan_gaps else None
 
     def add(self, t: float, scan: Record | None) -> None:
         """A new keyframe at ``t`` (with its scan); the pending measurements join it or the previous one."""

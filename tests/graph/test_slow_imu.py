@@ -1,0 +1,126 @@
+"""A slow IMU (records further apart than the keyframes): each record is the mean over its interval, so
+the preintegration is exact over whole records; the keyframes wait for a record's time
+(graphnav.graph.keyframes.Keyframes.at_imu_record) and a share of a record adds the variance of the
+rate's variation within it (graphnav.graph.imu_chain.ImuChain.hold_variance). Known answers."""
+
+from __future__ import annotations
+
+import math
+
+import gtsam
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from graphnav.graph.imu_chain import ImuChain, ImuConfig
+from graphnav.graph.keyframes import Keyframes
+from graphnav.graph.smoother_config import KeyframeConfig
+from graphnav.log import Gnss, Imu
+
+
+def _ramp_chain(slope: float, n: int = 6) -> ImuChain:
+    """1 Hz records of a yaw rate rising linearly, ``w(t) = slope t``: record ``i`` (at ``t = i``) is its
+    mean over ``(i - 1, i]``, ``slope (i - 1/2)``."""
+    chain = ImuChain(ImuConfig())
+    for i in range(1, n + 1):
+        chain.add(Imu(float(i), 0.0, 0.0, slope * (i - 0.5)))
+    return chain
+
+
+@settings(max_examples=40, deadline=None)
+@given(lo=st.floats(1.01, 1.99), hi=st.floats(3.01, 3.99), slope=st.floats(-0.05, 0.05))
+def test_a_share_of_a_record_is_off_by_the_rate_change_within_it(lo: float, hi: float, slope: float):
+    """A linear rate: the held mean over a share ``f`` at either end of a record misses ``v T f (1 - f) / 2``
+    of the integral (``v`` = the step between records = ``slope T``), the sigma ``hold_variance`` states."""
+    chain = _ramp_chain(slope)
+    yaw = chain.preintegrate(gtsam.imuBias.ConstantBias(), lo, hi).deltaRij().yaw()
+    exact = slope * (hi**2 - lo**2) / 2.0
+    f_start, f_end = 2.0 - lo, hi - 3.0  # the shares of records 2 and 4; record 3 whole
+    # the end of record 2 (the rate above its mean there) and the start of record 4 (below it)
+    e_start, e_end = slope * f_start * (1 - f_start) / 2.0, -slope * f_end * (1 - f_end) / 2.0
+    assert exact - yaw == pytest.approx(e_start + e_end, abs=1e-9)
+    _, vg, _ = chain.hold_variance(lo, hi)
+    assert vg[2] == pytest.approx(e_start**2 + e_end**2, rel=1e-9, abs=1e-18)
+    assert vg[0] == vg[1] == 0.0
+
+
+def test_whole_records_add_nothing_and_a_held_tail_grows_with_its_square():
+    chain = _ramp_chain(0.02, n=4)
+    va, vg, vp = chain.hold_variance(1.0, 4.0)  # records 2, 3, 4 whole
+    assert not va.any() and not vg.any() and vp == 0.0  # (no specific force)
+    _, vg, _ = chain.hold_variance(3.5, 5.0)  # half of the newest record, then held 1 s beyond it
+    v = 0.02
+    assert vg[2] == pytest.approx((v * 0.25 / 2) ** 2 + (v * 1.0**2 / 2) ** 2)
+    const = ImuChain(ImuConfig())
+    for i in range(1, 5):
+        const.add(Imu(float(i), 0.1, 0.2, 0.01))
+    va, vg, vp = const.hold_variance(1.3, 6.0)
+    assert not va.any() and not vg.any() and vp == 0.0
+
+
+def test_whole_records_of_a_changing_force_leave_the_position_off_by_its_spread():
+    """A specific force rising linearly (``a = s t``, 1 Hz records of its means): over whole records the
+    velocity is exact and the position misses ``s T^3 / 12`` per record, the sigma ``hold_variance`` states."""
+    s_ = 0.04
+    chain = ImuChain(ImuConfig())
+    for i in range(1, 6):
+        chain.add(Imu(float(i), s_ * (i - 0.5), 0.0, 0.0))
+    bias = gtsam.imuBias.ConstantBias()
+    pim = chain.preintegrate(bias, 1.0, 3.0)
+    exact_v = s_ * (3.0**2 - 1.0**2) / 2.0
+    exact_p = s_ * (3.0**3 - 1.0**3) / 6.0 - s_ * 1.0**2 / 2.0 * 2.0  # from rest at t = 1
+    assert pim.deltaVij()[0] == pytest.approx(exact_v, abs=1e-12)
+    assert exact_p - pim.deltaPij()[0] == pytest.approx(-2 * s_ / 12.0, abs=1e-12)
+    _, _, vp = chain.hold_variance(1.0, 3.0)
+    assert vp == pytest.approx(2 * (s_ / 12.0) ** 2, rel=1e-9)
+
+
+def test_the_preintegration_of_a_share_carries_that_variance():
+    """The factor's rotation variance: the white noise's density x dt plus ``hold_variance``."""
+    chain = _ramp_chain(0.05)
+    bias = gtsam.imuBias.ConstantBias()
+    whole = chain.preintegrate(bias, 1.0, 3.0).preintMeasCov()[2, 2]
+    share = chain.preintegrate(bias, 1.5, 3.5).preintMeasCov()[2, 2]
+    gyro_density = math.radians(ImuConfig().gyro_sigma_deg) ** 2 / ImuConfig().hz
+    assert whole == pytest.approx(gyro_density * 2.0, rel=1e-6)
+    assert share == pytest.approx(gyro_density * 2.0 + 2 * (0.05 * 0.25 / 2) ** 2, rel=1e-6)
+
+
+def _keyframe_times(imu_hz: float, scan_hz: float = 5.0, speed: float = 1.43, T: float = 12.0) -> list[float]:
+    """The keyframes the motion rule (1 m) picks among ``scan_hz`` scans with an IMU at ``imu_hz``."""
+    kf = Keyframes(KeyframeConfig(), scans=True)
+    chain = ImuChain(ImuConfig())
+    n_imu = 0
+    for j in range(int(T * scan_hz) + 1):
+        t = j / scan_hz
+        while (n_imu + 1) / imu_hz <= t + 1e-9:  # the records up to the scan have arrived
+            n_imu += 1
+            chain.add(Imu(n_imu / imu_hz, 0.0, 0.0, 0.0))
+        if kf.scan_is_keyframe(t, lambda: speed, chain):
+            kf.add(t, None)
+        kf.n_scans += 1
+    return kf.t
+
+
+def test_keyframes_wait_for_a_slow_imus_record():
+    slow = np.array(_keyframe_times(1.0))
+    slow = slow[slow >= 2.0]  # from the second record on (the first two give the period)
+    assert len(slow) >= 10
+    np.testing.assert_allclose(slow, np.round(slow), atol=1e-9)  # at the 1 Hz records' times
+    fast = np.array(_keyframe_times(100.0))  # a fast IMU: the motion rule alone (1 m at 1.43 m/s: every 0.8 s)
+    np.testing.assert_allclose(np.diff(fast), 0.8, atol=1e-9)
+
+
+def test_the_grid_skips_the_slots_between_a_slow_imus_records():
+    kf = Keyframes(KeyframeConfig(period=0.5), scans=False)
+    chain = ImuChain(ImuConfig())
+    kf.imu = chain
+    for i in range(0, 21):  # 1 Hz IMU and 2 Hz GNSS, 0.5 s grid
+        t = i * 0.5
+        if i % 2 == 0:
+            chain.add(Imu(t, 0.0, 0.0, 0.0))
+        kf.clock(Gnss(t, 0.0, 0.0, 3.0))
+    later = np.array(kf.t)[np.array(kf.t) >= 2.0]
+    assert len(later) >= 8
+    np.testing.assert_allclose(later, np.round(later), atol=1e-9)
