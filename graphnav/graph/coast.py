@@ -45,7 +45,8 @@ Prediction = tuple[NDArray[np.float64], NDArray[np.float64], float | None, float
 class Coaster:
     """The output grid through gaps. ``hz``: the output rate (``None``: the median rate of the
     estimates so far, from the :data:`MIN_INTERVALS`-th on; 0: off). :meth:`estimated` records each
-    real estimate (the newest is the seed of the predictions); :meth:`grid` gives the times due."""
+    real estimate (the newest is the seed of the predictions); :meth:`gap` says whether the next one
+    leaves a gap; :meth:`grid` gives the times due."""
 
     def __init__(self, hz: float | None) -> None:
         self.hz = hz
@@ -65,6 +66,17 @@ class Coaster:
         if len(self.dts) < MIN_INTERVALS:
             return None
         return float(np.median(self.dts))
+
+    def gap(self, t: float) -> bool:
+        """Whether an estimate at ``t`` after the newest one leaves a gap in the output: longer than 1.5
+        periods of an asked ``hz``; else (the log's own rate) longer than twice the 90th percentile of
+        the recent intervals -- the keyframe policy's own spread (one keyframe per 1 m, at least every
+        second: 0.1-1 s apart under way) is the normal output, not a gap."""
+        period = self.period()
+        if period is None or self.seed is None:
+            return False
+        limit = 1.5 * period if self.hz is not None else 2.0 * float(np.quantile(self.dts, 0.9))
+        return t - self.seed[1] > limit
 
     def estimated(self, k: int, t: float) -> None:
         """A real estimate of keyframe ``k`` at ``t``."""
@@ -226,8 +238,9 @@ class Coasting:
 
 
     def _coast_before(self, k: int) -> None:
-        """Offline (and live) at keyframe ``k``: the output grid through the gap before it, up to half a
-        period before it (online solvers only)."""
+        """Offline (and live) at keyframe ``k``: the output grid through the gap before it (:meth:`Coaster.gap`),
+        up to half a period before it (online solvers only)."""
+        t = self.builder.kf_t[k]
         period = self.coaster.period()
-        if self.solver.online and period is not None:
-            self._coast_to(self.builder.kf_t[k] - 0.5 * period)
+        if self.solver.online and period is not None and self.coaster.gap(t):
+            self._coast_to(t - 0.5 * period)

@@ -296,8 +296,10 @@ class SolverConfig:
     covariances: bool = option(True, "per-pose marginal covariances on the final trajectory")
     coast_hz: float | None = option(
         None, "the online output's rate through a gap without records: predicted estimates (the motion model's, "
-        "covariance grown by its process noise; flagged coasted) on this grid from the newest estimate. None: the "
-        "median rate of the estimates so far; 0: off (the output then has a hole wherever the records do)", unit="Hz")
+        "covariance grown by its process noise; flagged coasted) on this grid from the newest estimate, where the "
+        "next estimate is more than 1.5 periods away. None: the median rate of the estimates so far, and a gap is "
+        "twice their 90th-percentile interval (the keyframe policy's spread is no gap); 0: off (the output then has "
+        "a hole wherever the records do)", unit="Hz")
     batch_init: str = option("incremental",
         "batch's initial guess: \"incremental\" (LM on the graph so far each time it has grown by batch_init_growth, "
         "later poses chained from that solution) or \"chained\" (dead reckoning)")

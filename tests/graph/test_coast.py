@@ -119,3 +119,21 @@ def test_the_live_runner_publishes_the_predictions_while_the_stream_is_silent():
     runner.tick(now=110.0)
     assert runner.sink.coasted == runner.sink.estimates - real > 10 and runner.sink.last.coasted
     assert runner.sink.last.t <= GAP[0] + 9.0 + 1e-9
+
+
+def test_the_keyframe_policys_spread_is_no_gap():
+    """Estimates 0.4-1.0 s apart (one keyframe per metre, at least every second): a 1.0 s interval is the
+    normal output, not a gap (twice the 90th percentile: 2.0 s); with an asked rate a gap is 1.5 periods."""
+    from graphnav.graph.coast import Coaster
+
+    c = Coaster(None)
+    t = 0.0
+    for k, dt in enumerate([0.4, 0.5, 0.8, 1.0, 0.4, 0.8, 0.8, 1.0, 0.8, 0.8]):
+        t += dt
+        c.estimated(k, t)
+    assert c.period() == pytest.approx(0.8)
+    assert not c.gap(t + 1.0) and not c.gap(t + 1.99) and c.gap(t + 2.01)
+    assert c.grid(t + 2.0) == pytest.approx([t + 0.8, t + 1.6])  # what a gap's grid would be
+    asked = Coaster(2.0)
+    asked.estimated(0, 0.0)
+    assert not asked.gap(0.75) and asked.gap(0.76) and Coaster(0.0).period() is None
