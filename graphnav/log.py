@@ -127,6 +127,12 @@ class Heading:
     kind: ClassVar[str] = "heading"
 
 
+#: ``meta["odometry"]`` of a log whose odometry records are a rate of turn paired with the newest speed
+#: over ground (NMEA 0183 ROT, NMEA 2000 127251, Signal K rateOfTurn): not an odometer, whose speed is along
+#: the bow (graphnav.graph.smoother_config.auto_motion).
+ODOMETRY_FROM_ROT = "rate of turn + SOG"
+
+
 @dataclass(frozen=True, slots=True)
 class Odometry:
     """Speed over ground ``v`` [m/s] and yaw rate ``w`` [rad/s] (ship's log + rate-of-turn sensor).

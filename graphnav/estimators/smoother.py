@@ -26,7 +26,7 @@ def _inputs(log: NavLog, options: dict[str, Any]) -> set[str]:
     checks the output changes exactly when it is listed)."""
     motion = given_option(SmootherConfig, options, "motion", "auto")
     has_imu = bool(log.of("imu"))
-    nav = motion in ("imu", "vessel") or (motion == "auto" and auto_motion(log.counts()) != "odometry")
+    nav = motion in ("imu", "vessel") or (motion == "auto" and auto_motion(log.counts(), log.meta) != "odometry")
     kinds = {"scan", "gnss", "heading", "beacon", "pose_prior"}
     if log.of("beacon"):
         kinds.add("beacon_known")  # the chart, for the beacons the log observes

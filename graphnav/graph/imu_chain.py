@@ -191,34 +191,30 @@ class ImuChain:
         The third value [m^2] is the position's: even over whole records the double integral depends on
         how the specific force is spread within each, ``v_a T^2 f^3 / 12`` for a share ``f`` (the integral
         of ``(d - tau) v_a (tau / d - 1/2) f`` over the share's length ``d = f T``), summed over the axes."""
-        va, vg = np.zeros(3), np.zeros(3)
-        vp = 0.0
+        pieces = [p for p in self._pieces(ta, tb) if p[0] > 0]  # the first record's interval is unknown
+        if not pieces:
+            return np.zeros(3), np.zeros(3), 0.0
         n = len(self.t)
-        for i, lo, hi in self._pieces(ta, tb):
-            if i == 0:
-                continue  # the first record's interval is unknown: no share to take
-            T = self.t[i] - self.t[i - 1]
-            if T <= 0.0:
-                continue
-            r = np.asarray(self.rows[i], dtype=float)
-            v = np.abs(r - np.asarray(self.rows[i - 1], dtype=float))
-            if i + 1 < n:
-                v = np.maximum(v, np.abs(np.asarray(self.rows[i + 1], dtype=float) - r))
-            f_all = min((hi - lo) / T, 1.0)
-            vp += float(np.sum((v[:3] * T * T * f_all**3 / 12.0) ** 2))
-            if hi > self.t[i] + 1e-12:  # held beyond the newest record: extrapolated
-                d = hi - max(lo, self.t[i])
-                e = v * d * d / (2.0 * T)
-                if lo < self.t[i] - 1e-12:  # ... and a share of its own interval before that
-                    f = (self.t[i] - lo) / T
-                    e = np.sqrt(e**2 + (v * T * f * (1.0 - f) / 2.0) ** 2)
-            else:
-                f = (hi - lo) / T
-                if f >= 1.0 - 1e-9:
-                    continue
-                e = v * T * f * (1.0 - f) / 2.0
-            va += e[:3] ** 2
-            vg += e[3:] ** 2
+        idx = np.array([p[0] for p in pieces])
+        lo, hi = np.array([p[1] for p in pieces]), np.array([p[2] for p in pieces])
+        k0, k1 = int(idx[0]) - 1, min(int(idx[-1]) + 2, n)  # the records the pieces and their neighbours use
+        t = np.asarray(self.t[k0:k1], dtype=float)
+        rows = np.asarray(self.rows[k0:k1], dtype=float)
+        j = idx - k0
+        T = t[j] - t[j - 1]
+        ok = T > 0.0
+        j, lo, hi, T, ti = j[ok], lo[ok], hi[ok], T[ok], t[j[ok]]
+        v = np.abs(rows[j] - rows[j - 1])
+        has_next = j + 1 < len(t)
+        v[has_next] = np.maximum(v[has_next], np.abs(rows[j[has_next] + 1] - rows[j[has_next]]))
+        f_all = np.minimum((hi - lo) / T, 1.0)
+        vp = float(np.sum((v[:, :3] * (T * T * f_all**3 / 12.0)[:, None]) ** 2))
+        beyond = hi > ti + 1e-12  # held beyond the newest record: extrapolated ...
+        d = np.where(beyond, hi - np.maximum(lo, ti), 0.0)
+        f = np.where(beyond, np.clip((ti - lo) / T, 0.0, 1.0), (hi - lo) / T)  # ... and its share before that
+        share = np.where(f >= 1.0 - 1e-9, 0.0, T * f * (1.0 - f) / 2.0)
+        e2 = v**2 * ((d * d / (2.0 * T)) ** 2 + share**2)[:, None]
+        va, vg = e2[:, :3].sum(axis=0), e2[:, 3:].sum(axis=0)
         return va, vg, vp
 
     def rotation(self, ta: float, tb: float) -> float:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import gtsam
@@ -27,6 +28,30 @@ from .step import Step
 
 SURFACE_V = 0.1  # [m/s] the vertical of a water-speed factor (no vertical water velocity)
 MEDIAN_CHI2_2 = float(chi2_median(np.array([2.0]))[0])  # |d|^2 / sigma^2 of a 2-D fix: its median
+
+
+@dataclass(frozen=True)
+class WaterRow:
+    """A speed-through-water reading on keyframe ``a``: speed ``v`` along the bow [m/s], its sigma ``sv``
+    and the sigma across the bow ``lee`` (leeway). Its factor (:meth:`factor`) is linear in the
+    velocities, so the bow's direction is taken from an estimate of the keyframe's yaw: the builder's
+    estimate when the record arrives (``yaw``), the solution's in the closing step
+    (:meth:`graphnav.graph.solution.Closing.batch`)."""
+
+    a: int
+    v: float
+    sv: float
+    lee: float
+    yaw: float  # [rad] the bow's direction the builder's factor was made with
+
+    def factor(self, yaw: float) -> gtsam.BetweenFactorVector:
+        """``V(a) - W(a) = v (cos yaw, sin yaw, 0)``, covariance ``diag(sv, lee, SURFACE_V)^2`` along
+        and across the bow ``yaw``."""
+        c, sn = math.cos(yaw), math.sin(yaw)
+        R = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+        cov = R @ np.diag([self.sv**2, self.lee**2, SURFACE_V**2]) @ R.T
+        return gtsam.BetweenFactorVector(W(self.a), V(self.a), np.array([self.v * c, self.v * sn, 0.0]),
+                                         gtsam.noiseModel.Gaussian.Covariance(cov))
 
 
 class GnssScale:
@@ -83,6 +108,8 @@ class Measurements:
         #: the factors of the fixes the online gate rejected: the closing batch step reconsiders them
         #: (a cold start's first fixes can be the wrong ones, and the gate then rejects every good fix)
         self.rejected: list[gtsam.NonlinearFactor] = []
+        #: the water-speed readings, in the order of their factors (the closing step re-aims them: WaterRow)
+        self.water: list[WaterRow] = []
         self.current: tuple[int, int] | None = None  # the water current W(j): (first, newest) keyframe
         self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
         #: the Pose3 graph: a keyframe key's (roll, pitch) estimate when its factors are made (the builder's)
@@ -309,11 +336,9 @@ class Measurements:
         if self.log_yaw:
             v, sv = v / math.cos(self.log_yaw), sv / abs(math.cos(self.log_yaw))
         lee = math.hypot(cfg.water.leeway, cfg.water.leeway_rel * abs(v))
-        c, sn = math.cos(pa.theta()), math.sin(pa.theta())
-        R = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
-        cov = R @ np.diag([sv**2, lee**2, SURFACE_V**2]) @ R.T
-        s.add(gtsam.BetweenFactorVector(W(a), V(a), np.array([v * c, v * sn, 0.0]),
-                                        gtsam.noiseModel.Gaussian.Covariance(cov)), "water_speed")
+        row = WaterRow(a, v, sv, lee, pa.theta())
+        self.water.append(row)
+        s.add(row.factor(row.yaw), "water_speed")
 
     def current_step(self, s: Step, k: int) -> None:
         """The water current's variables up to keyframe ``k``: a random walk ``current_rw`` between

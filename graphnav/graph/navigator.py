@@ -106,7 +106,7 @@ def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -
         given = kw.get("mounts", config.mounts if config is not None else {})
         kw["mounts"] = {k: asdict(m) for k, m in merged(log.meta["mounts"], given).items()}
     motion = kw.get("motion", config.motion if config is not None else "auto")
-    if motion == "auto" and auto_motion(log.counts()) == "vessel":  # a vessel's instruments, no IMU
+    if motion == "auto" and auto_motion(log.counts(), log.meta) == "vessel":  # a vessel's instruments, no IMU
         kw["motion"] = "vessel"
     v0 = log.meta.get("initial_velocity")
     if imu_model is not None or v0 is not None:
@@ -390,7 +390,7 @@ class Navigator(Coasting):
             return RunResult(empty, self.online(), np.zeros(0), np.array(self.track.icp_ms), info)
         c0, p0 = time.perf_counter(), time.process_time()
         closing = Closing(cfg, self.solver, self.space, self.groups, b.rejected_fixes, b.defaulted,
-                          b.motion.intervals)
+                          b.motion.intervals, b.meas.water)
         try:
             values, poses, covs = closing.solve(n, self.front, info)
         except SolverError as exc:

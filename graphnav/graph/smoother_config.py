@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..config import Sectioned, config_from_options, option, section
+from ..log import ODOMETRY_FROM_ROT
 
 MOTION_MODELS = ("constant-velocity", "random-walk")
 MOTIONS = ("auto", "odometry", "imu", "vessel")
@@ -22,7 +23,7 @@ MOTIONS = ("auto", "odometry", "imu", "vessel")
 VESSEL_KINDS = ("gnss_velocity", "water_speed")
 
 
-def auto_motion(kinds: Collection[str]) -> str:
+def auto_motion(kinds: Collection[str], meta: dict[str, Any] | None = None) -> str:
     """The state space ``motion="auto"`` picks from the record kinds of a log: ``"imu"`` with IMU records;
     ``"vessel"`` (Pose3 + velocity, white-noise acceleration: course and heading differ, the current
     is a state) for a vessel's instruments -- a compass and GNSS velocity or water speed -- without an
@@ -33,10 +34,18 @@ def auto_motion(kinds: Collection[str]) -> str:
     at their HDOP-weighted mean, 1.97 m from them, docs/smoother.md). Measured on
     real boats' logs with their fixes degraded to 2.5 m at 1 Hz, a 60 s outage and a 20 m jump
     (docs/smoother.md, "A real boat's instruments"): the vessel graph 0.22-0.46x the degraded fixes
-    interpolated, the Pose2 graph 0.36-0.86x, online 1.9-2.5 m against 3.9-7.8 m."""
+    interpolated, the Pose2 graph 0.36-0.86x, online 1.9-2.5 m against 3.9-7.8 m.
+
+    Odometry that is a rate of turn paired with the speed over ground (``meta["odometry"] ==``
+    :data:`~graphnav.log.ODOMETRY_FROM_ROT`: NMEA ROT, NMEA 2000 127251) is no odometer: the Pose2
+    graph would move the boat along its bow at its speed over ground, which a heading that is not the
+    course contradicts (the Furuno SCX-20 logs: each receiver alone 0.50-0.84 m from its fixes in the
+    Pose2 graph, 0.44-0.54 m in the vessel graph; docs/smoother.md)."""
     k = set(kinds)
     if "imu" in k:
         return "imu"
+    if "odometry" in k and (meta or {}).get("odometry") == ODOMETRY_FROM_ROT:
+        k.discard("odometry")
     if not k & {"odometry", "scan", "cloud"} and "heading" in k and k & set(VESSEL_KINDS):
         return "vessel"
     return "odometry"

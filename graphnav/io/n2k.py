@@ -33,7 +33,9 @@ yaw CCW from east, docs/conventions.md). Every record keeps its N2K source addre
 * 127251 Rate of Turn (positive to starboard) -> ``odometry`` (``w = -rate``, ``v`` = the newest SOG
   of any source no older than ``SOG_MAX_AGE_S``).
 * 127257 Attitude (roll positive starboard down, pitch positive bow up) -> ``attitude`` (REP-103:
-  pitch negated).
+  pitch negated); its yaw (clockwise from true north: a satellite compass's heading, e.g. the Furuno
+  SCX-20 of ``canboat/furuno-*``, which sends no 127250) -> ``heading`` as a true 127250, unless the same
+  source sends 127250 (then the yaw is counted, not used).
 * 128259 Speed (water referenced) -> ``water_speed``.
 
 Errors: a line that is none of the formats, a bad hex byte, a length that does not match, a value
@@ -56,6 +58,7 @@ from ..errors import LogError, require
 from ..geodesy import LocalFrame
 from ..geometry import heading_deg_to_yaw
 from ..log import (
+    ODOMETRY_FROM_ROT,
     Attitude,
     Gnss,
     GnssVelocity,
@@ -274,6 +277,7 @@ class N2kDecoder:
     fix_info: dict[int, tuple[float, float, int]] = field(default_factory=dict)  # src -> (t, hdop, method)
     sog: tuple[float, float] | None = None  # (t, m/s): the newest SOG of any source
     variation: float | None = None  # rad, east positive: the last 127250 variation seen
+    heading_sources: set[str] = field(default_factory=set)  # sources that send 127250 (their 127257 yaw is not used)
 
     def __post_init__(self) -> None:
         self._cb, self._backend = _canboat()
@@ -364,6 +368,7 @@ class N2kDecoder:
             sig = velocity_sigma(sog, SOG_STEP, COG_STEP)
             return [GnssVelocity(t, sog * math.sin(cog), sog * math.cos(cog), sig, source=src)]
         if pgn == 127250:
+            self.heading_sources.add(src)
             hdg = self._num(v, "heading")
             var = self._num(v, "variation")
             if var is not None:
@@ -397,11 +402,18 @@ class N2kDecoder:
                 return []
             return [Odometry(t, self.sog[1], -rate, source=src)]
         if pgn == 127257:
-            roll, pitch = self._num(v, "roll"), self._num(v, "pitch")
+            roll, pitch, yaw = self._num(v, "roll"), self._num(v, "pitch"), self._num(v, "yaw")
+            out: list[Record] = []
+            if yaw is not None:  # a satellite compass's (or AHRS's) heading, true: as a 127250 true heading
+                if src in self.heading_sources:
+                    self.counts["skip:127257 yaw of a source that sends 127250"] += 1
+                else:
+                    out.append(Heading(t, float(heading_deg_to_yaw(math.degrees(yaw))),
+                                       math.radians(HEADING_SIGMA_DEG["HDT"]), source=src))
             if roll is None or pitch is None:
                 self.counts["skip:127257 without roll and pitch"] += 1
-                return []
-            return [Attitude(t, roll, -pitch, source=src)]
+                return out
+            return [*out, Attitude(t, roll, -pitch, source=src)]
         stw = self._num(v, "speedWaterReferenced")  # 128259
         if stw is None:
             self.counts["skip:128259 without speed through water"] += 1
@@ -475,6 +487,8 @@ def read_n2k(path: str | Path, *, lenient: bool = False, limits: Limits | None =
         note_truncation(meta, lines, skipped)
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
+    if any(r.kind == "odometry" for r in records):
+        meta["odometry"] = ODOMETRY_FROM_ROT
     return NavLog.from_unsorted(records, (), meta)
 
 

@@ -46,6 +46,7 @@ from ..errors import LogError
 from ..geodesy import LocalFrame
 from ..geometry import heading_deg_to_yaw
 from ..log import (
+    ODOMETRY_FROM_ROT,
     Attitude,
     Gnss,
     GnssVelocity,
@@ -345,6 +346,8 @@ def read_signalk(path: str | Path, *, lenient: bool = False, limits: Limits | No
         note_truncation(meta, lines, skipped)
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
+    if any(r.kind == "odometry" for r in records):
+        meta["odometry"] = ODOMETRY_FROM_ROT
     return NavLog.from_unsorted(records, (), meta)
 
 

@@ -66,6 +66,7 @@ def test_each_pgn_gives_its_record_with_known_values(tmp_path):
     assert g[0].t == pytest.approx(POSIX0) and (g[0].x, g[0].y) == pytest.approx((0.0, 0.0), abs=1e-6)
     assert g[0].sigma == pytest.approx(0.8 * 1.0)  # DGNSS: HDOP x 1 m
     assert g[0].source == "7"
+    assert log.meta["odometry"] == "rate of turn + SOG"  # not an odometer (auto_motion)
     # 0.0001 deg of latitude north is 11.1 m; the rapid update inherits HDOP and method of 129029
     assert g[1].y == pytest.approx(11.13, abs=0.02) and abs(g[1].x) < 1e-3 and g[1].sigma == pytest.approx(0.8)
     assert (vel[0].vx, vel[0].vy) == pytest.approx((2.0 * math.sin(0.5), 2.0 * math.cos(0.5)), abs=1e-3)
@@ -235,7 +236,29 @@ def test_real_furuno_two_gnss_sources(tmp_path):
     b = np.array([[r.t, r.x, r.y] for r in log.of("gnss") if r.source == "52"])
     d = np.hypot(np.interp(b[:, 0], a[:, 0], a[:, 1]) - b[:, 1], np.interp(b[:, 0], a[:, 0], a[:, 2]) - b[:, 2])
     assert np.median(d) < 10.0  # one boat: its two receivers within metres of each other
-    assert {"odometry", "gnss_velocity", "attitude", "water_speed"} <= set(log.counts())
+    assert {"odometry", "gnss_velocity", "attitude", "water_speed", "heading"} <= set(log.counts())
+    # the SCX-20's heading comes in 127257's yaw (it sends no 127250): within the turns' sideslip of the course
+    hd = np.array([[r.t, r.yaw] for r in log.of("heading")])
+    assert {r.source for r in log.of("heading")} == {"52"}
+    v = np.array([[r.t, r.vx, r.vy] for r in log.of("gnss_velocity") if math.hypot(r.vx, r.vy) > 1.0])
+    course = np.arctan2(v[:, 2], v[:, 1])
+    slip = np.degrees(np.angle(np.exp(1j * (course - np.interp(v[:, 0], hd[:, 0], np.unwrap(hd[:, 1]))))))
+    assert abs(np.median(slip)) < 5.0
+
+
+def test_attitude_yaw_is_a_true_heading_unless_the_source_sends_127250(tmp_path):
+    lines = [
+        _canboat(T0, 127257, 12, _payload("attitude", yaw=1.0, roll=0.1, pitch=0.05)),
+        _canboat("2024-06-01T12:00:00.100Z", 127250, 9, _payload("vesselHeading", heading=2.0, reference=0)),
+        _canboat("2024-06-01T12:00:00.200Z", 127257, 9, _payload("attitude", yaw=2.1, roll=0.1, pitch=0.05)),
+        _canboat("2024-06-01T12:00:00.300Z", 127257, 12, _payload("attitude", yaw=-1.0)),
+    ]
+    log = read_n2k(_write(tmp_path, lines), lenient=True)
+    hd = log.of("heading")
+    assert [(r.source, round(r.yaw, 4)) for r in hd] == [
+        ("12", round(math.pi / 2 - 1.0, 4)), ("9", round(math.pi / 2 - 2.0, 4)), ("12", round(math.pi / 2 + 1.0, 4))]
+    assert hd[0].sigma == pytest.approx(hd[1].sigma)  # as a true 127250
+    assert len(log.of("attitude")) == 2  # the last 127257 has no roll or pitch
 
 
 def test_real_aava_head_isam2_follows_its_fixes(tmp_path):
