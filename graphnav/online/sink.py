@@ -77,6 +77,7 @@ class Sink:
         self.latency_kind = np.zeros(LATENCY_WINDOW, dtype=np.int8)  # index into _KINDS of each
         self.n_latency = self.estimates = self.published = 0
         self.coasted = 0  # estimates that were predictions through a silent stream (GGA quality 6)
+        self.late = 0  # estimates older than one already emitted (a keyframe solved after coasting past it): dropped
         self.last: Estimate | None = None
         self.hdop = 1.0  # published HDOP: from the last estimate that carried a covariance
 
@@ -99,7 +100,13 @@ class Sink:
 
     def emit(self, est: Estimate, arrival: float | None, frame: LocalFrame | None, kind: str = "") -> None:
         """Publish one estimate (NMEA), time its latency (``kind``: the record kind that produced it),
-        append it to the output file."""
+        append it to the output file. An estimate older than one already emitted (a keyframe solved once
+        the stream came back, after predictions had coasted past its time) is counted in ``late`` and
+        dropped: the published times and the file's only go forward, and the online output stays what
+        was said at the time."""
+        if self.last is not None and est.t < self.last.t:
+            self.late += 1
+            return
         self.estimates += 1
         self.coasted += est.coasted
         self.last = est
@@ -133,7 +140,8 @@ class Sink:
     def summary(self) -> dict[str, Any]:
         lat = self.latency_ms[: min(self.n_latency, LATENCY_WINDOW)]
         out: dict[str, Any] = {
-            "estimates": self.estimates, "coasted_estimates": self.coasted, "published": self.published,
+            "estimates": self.estimates, "coasted_estimates": self.coasted, "late_estimates": self.late,
+            "published": self.published,
             "latency_ms_median": float(np.median(lat)) if lat.size else None,
             "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None,
             "latency_ms_max": float(lat.max()) if lat.size else None,
