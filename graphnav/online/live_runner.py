@@ -185,9 +185,11 @@ class LiveRunner:
             self._stop.set()
 
     def _step_back(self) -> None:
-        """The clock stepped back: waiting scans are dropped, and a fresh estimator (when ``restart`` is
-        given) takes over, which would drop every record as late otherwise."""
+        """The clock stepped back: waiting scans are dropped, the sink's times start again (its estimates
+        are not late, :meth:`Sink.resync`), and a fresh estimator (when ``restart`` is given) takes over,
+        which would drop every record as late otherwise."""
         self.scans.waiting.clear()
+        self.sink.resync()
         if self.restart is not None:
             log_.warning("clock step back: the estimator starts afresh")
             self.estimator = self.restart()

@@ -79,6 +79,7 @@ class Sink:
         self.coasted = 0  # estimates that were predictions through a silent stream (GGA quality 6)
         self.late = 0  # estimates older than one already emitted (a keyframe solved after coasting past it): dropped
         self.last: Estimate | None = None
+        self.newest: float | None = None  # the newest time emitted since the clock's last re-sync
         self.hdop = 1.0  # published HDOP: from the last estimate that carried a covariance
 
     def open(self) -> None:
@@ -98,15 +99,20 @@ class Sink:
             if s is not None:
                 s.close()
 
+    def resync(self) -> None:
+        """The stream's clock stepped back (a re-sync): what comes next is not late against what went before."""
+        self.newest = None
+
     def emit(self, est: Estimate, arrival: float | None, frame: LocalFrame | None, kind: str = "") -> None:
         """Publish one estimate (NMEA), time its latency (``kind``: the record kind that produced it),
         append it to the output file. An estimate older than one already emitted (a keyframe solved once
         the stream came back, after predictions had coasted past its time) is counted in ``late`` and
         dropped: the published times and the file's only go forward, and the online output stays what
         was said at the time."""
-        if self.last is not None and est.t < self.last.t:
+        if self.newest is not None and est.t < self.newest:
             self.late += 1
             return
+        self.newest = est.t
         self.estimates += 1
         self.coasted += est.coasted
         self.last = est

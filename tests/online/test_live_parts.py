@@ -94,3 +94,15 @@ def test_sink_drops_an_estimate_older_than_one_emitted(tmp_path):
     assert (s["estimates"], s["coasted_estimates"], s["late_estimates"]) == (6, 2, 1)
     times = [float(line.split()[0]) for line in open(s["tum"]).read().splitlines()[1:]]
     assert times == [1.0, 2.0, 3.0, 4.0, 4.0, 5.0]
+
+
+def test_sink_times_start_again_after_a_clock_resync(tmp_path):
+    sink = Sink(out_dir=tmp_path)
+    sink.open()
+    sink.emit(Estimate(3600.0, np.zeros(3)), None, None)
+    sink.resync()  # the stream's clock stepped back an hour: a fresh estimator's estimates are not late
+    sink.emit(Estimate(1.0, np.zeros(3)), None, None)
+    sink.emit(Estimate(0.5, np.zeros(3)), None, None)  # ... but one older than those is
+    sink.close()
+    s = sink.summary()
+    assert (s["estimates"], s["late_estimates"]) == (2, 1)
