@@ -28,6 +28,7 @@ from .imu import (
     planar_pose,
     pose_xy_yaw,
     preintegrate,
+    preintegrate_arrays,
 )
 from .prior import pose_prior
 from .robust import robustify
@@ -77,5 +78,6 @@ __all__ = [
     "pose_prior",
     "pose_xy_yaw",
     "preintegrate",
+    "preintegrate_arrays",
     "robustify",
 ]

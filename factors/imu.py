@@ -62,20 +62,42 @@ def preintegrate(
     with the mid-step attitude (second order, as the exact constant-turn arc). The rotation acts on
     the bias-corrected sample at the preintegration's bias ``bias`` (which GTSAM subtracts again), so
     it is exact at that linearisation point. 6-axis samples are passed as they are."""
+    rows = [(a, w, d) for a, w, d in samples]
+    if not rows:
+        return gtsam.PreintegratedImuMeasurements(params, bias)
+    acc = np.array([np.asarray(a, dtype=float) for a, _, _ in rows])
+    omega = np.array([np.asarray(w, dtype=float) for _, w, _ in rows])
+    return preintegrate_arrays(params, bias, acc, omega, np.array([d for _, _, d in rows], dtype=float), substeps,
+                               planar=planar)
+
+
+def preintegrate_arrays(
+    params: gtsam.PreintegrationParams,
+    bias: gtsam.imuBias.ConstantBias,
+    acc: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    dt: NDArray[np.float64],
+    substeps: int = 1,
+    *,
+    planar: bool = True,
+) -> gtsam.PreintegratedImuMeasurements:
+    """:func:`preintegrate` of samples given as arrays (``acc``, ``omega``: (n, 3); ``dt``: (n,)), the
+    planar mid-step rotation computed for all of them at once."""
     pim = gtsam.PreintegratedImuMeasurements(params, bias)
-    ba, bg = bias.accelerometer(), bias.gyroscope()
     n = max(1, int(substeps))
-    for acc, omega, dt in samples:
-        if dt <= 0.0:
-            continue
-        h = dt / n
-        if planar:
-            half = 0.5 * (omega[2] - bg[2]) * h
-            c, s = math.cos(half), math.sin(half)
-            ux, uy = acc[0] - ba[0], acc[1] - ba[1]
-            acc = np.array([c * ux - s * uy + ba[0], s * ux + c * uy + ba[1], 0.0])
+    keep = dt > 0.0
+    acc, omega, h = np.asarray(acc, dtype=float)[keep], np.asarray(omega, dtype=float)[keep], dt[keep] / n
+    if planar and len(h):
+        ba, bg = np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope())
+        half = 0.5 * (omega[:, 2] - bg[2]) * h
+        c, s = np.cos(half), np.sin(half)
+        ux, uy = acc[:, 0] - ba[0], acc[:, 1] - ba[1]
+        acc = np.column_stack([c * ux - s * uy + ba[0], s * ux + c * uy + ba[1], np.zeros(len(h))])
+    acc, omega = np.ascontiguousarray(acc), np.ascontiguousarray(omega)
+    for k in range(len(h)):
+        a, w, hk = acc[k], omega[k], float(h[k])
         for _ in range(n):
-            pim.integrateMeasurement(acc, omega, h)
+            pim.integrateMeasurement(a, w, hk)
     return pim
 
 

@@ -67,6 +67,8 @@ class Estimate:
     """The navigation solution at time ``t``: ``vec`` = (x, y, yaw) (``pose`` gives it as a
     ``gtsam.Pose2``), its 3x3 covariance in the world frame, order x, y, yaw (or None) and, when
     known, speed over ground [m/s], course over ground [rad, CCW from east], yaw rate [rad/s].
+    ``coasted``: a prediction through a gap without records (the motion model's, no measurement
+    since the previous estimate; :meth:`graphnav.graph.navigator.Navigator.coast`).
     ``vec`` may be given as a ``gtsam.Pose2``."""
 
     t: float
@@ -75,6 +77,7 @@ class Estimate:
     sog: float | None = None
     cog: float | None = None
     w: float | None = None
+    coasted: bool = False
 
     def __post_init__(self) -> None:
         v = self.vec

@@ -183,8 +183,11 @@ def _single(args: argparse.Namespace, options: dict, dropped: list[str], out: Ou
     summary["inputs"] = estimators.inputs(args.estimator, log, options, result.info)
     summary["origin"] = record_origin(log.meta)  # the log's geodetic origin (None: none), for graphnav export
     if plan is not None:
-        summary["holdout"] = {**plan.describe(), **plan.score(result.trajectory)}
+        smoothed = estimators.get(args.estimator).kind == "smoother"  # read across a hole (Holdout.score)
+        summary["holdout"] = {**plan.describe(), **plan.score(result.trajectory, smoothed=smoothed)}
         summary["holdout_rmse_m"] = summary["holdout"]["rmse_m"]
+        if result.online is not None and result.online is not result.trajectory:
+            summary["holdout"]["online_rmse_m"] = plan.score(result.online)["rmse_m"]
     if out is not None:  # each file atomically (temporary file + rename)
         write_tum(result.trajectory, out.file("trajectory.tum"))
         write_trajectory_csv(result.trajectory, out.file("trajectory.csv"))

@@ -204,7 +204,7 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
     if plan is not None:
         for e in out:
             if e.ok and e.summary is not None and e.result is not None:
-                e.summary["holdout"] = plan.score(e.result.trajectory)
+                e.summary["holdout"] = plan.score(e.result.trajectory, smoothed=e.kind == "smoother")
                 e.summary["holdout_rmse_m"] = e.summary["holdout"]["rmse_m"]
                 if e.result.online is not None and e.result.online is not e.result.trajectory:
                     e.summary["holdout"]["online_rmse_m"] = plan.score(e.result.online)["rmse_m"]

@@ -67,9 +67,10 @@ class Holdout:
     ``windows``); ``fixes`` the withheld position fixes (``t``, ``x``, ``y``, ``sigma``) and ``ends``
     the index of each window's last withheld fix (windows without a fix, e.g. in a logger gap, are
     not scored). ``silent``: per scored window, whether the log holds no other record inside it (only
-    GNSS was logged then): no estimator has an estimate there, the score takes the last one before
-    (:func:`~graphnav.evaluation.metrics.gnss_residuals`), and every estimator's end error is the
-    distance sailed in the window, alike; ``rmse_informative_m`` leaves those windows out."""
+    GNSS was logged then): an estimator has only its motion model there -- a coasting navigator's
+    predictions, a smoother's track between the poses around the window (:meth:`score`
+    ``smoothed``), else its last estimate before (a causal estimator silent there: the distance
+    sailed) --, so the window tells little of the sensors; ``rmse_informative_m`` leaves them out."""
 
     spec: HoldoutSpec
     windows: list[tuple[float, float]]
@@ -83,15 +84,20 @@ class Holdout:
     def scored_windows(self) -> int:
         return len(self.ends)
 
-    def score(self, traj: Trajectory | None) -> dict[str, Any]:
+    def score(self, traj: Trajectory | None, smoothed: bool = False) -> dict[str, Any]:
         """``end_errors_m`` (one per scored window: the estimate against the window's last fix),
         ``rmse_m`` and ``max_m`` over them, ``mean_m`` over every withheld fix, ``nis_mean`` (the
-        withheld fixes' normalised residual against the estimate's covariance plus the fix's, 2 dof)."""
+        withheld fixes' normalised residual against the estimate's covariance plus the fix's, 2 dof).
+        ``smoothed``: ``traj`` is a smoother's final track: across a hole in it (a silent window) it
+        is read between its poses on either side, which its motion factor ties (its own answer
+        there; :func:`~graphnav.evaluation.metrics.gnss_residuals` ``bridge``); an online or causal
+        track is read as it was then: its last estimate before the hole (a coasting navigator has
+        its own predictions inside)."""
         nan = float("nan")
         if traj is None or not len(traj) or not self.ends:
             return {"end_errors_m": [], "rmse_m": nan, "max_m": nan, "mean_m": nan, "nis_mean": None, "scored": 0}
         f = self.fixes
-        r = gnss_residuals(traj, f["t"], np.column_stack([f["x"], f["y"]]), f["sigma"])
+        r = gnss_residuals(traj, f["t"], np.column_stack([f["x"], f["y"]]), f["sigma"], bridge=smoothed)
         err = np.full(len(f["t"]), np.nan)
         err[r["i_fix"]] = r["residual_m"]
         all_ends = err[self.ends]

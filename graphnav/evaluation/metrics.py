@@ -265,15 +265,18 @@ def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0
 
 
 def gnss_residuals(est: Trajectory, t: NDArray, xy: NDArray, sigma: NDArray, *,
-                   max_gap: float = 10.0) -> dict[str, Any]:
+                   max_gap: float = 10.0, bridge: bool = False) -> dict[str, Any]:
     """The estimate against GNSS position fixes, for a log without truth: per fix, ``residual_m`` =
     |fix - estimate| with the estimate at the fix's time: linear between the two estimates around
     it when they are at most ``max_gap`` seconds apart, else the last estimate before it (what the
-    estimator had to say then: an estimate made after a gap is never used for a time inside it), and
+    estimator had to say then: an estimate made after a gap is never used for a time inside it) --
+    unless ``bridge`` (a smoothed track, whose poses on either side of a hole are tied by the motion
+    model's factor across it: linear between them is its own answer inside) --, and
     ``nis`` = ``e^T (P + sigma^2 I)^-1 e`` (the normalised innovation, chi-square with 2 degrees of
-    freedom when the estimate's covariance ``P`` (the last estimate's) and the fix's ``sigma`` are
-    honest and the fix is independent of the estimate; ``None`` without covariance). Fixes before the
-    first estimate or more than ``max_gap`` after the last are not scored; ``i_fix``: those scored."""
+    freedom when the estimate's covariance ``P`` (the last estimate's; across a bridged hole the
+    nearer one's) and the fix's ``sigma`` are honest and the fix is independent of the estimate;
+    ``None`` without covariance). Fixes before the first estimate or more than ``max_gap`` after the
+    last are not scored; ``i_fix``: those scored."""
     t = np.asarray(t, float)
     xy = np.asarray(xy, float).reshape(-1, 2)
     sigma = np.asarray(sigma, float)
@@ -289,13 +292,15 @@ def gnss_residuals(est: Trajectory, t: NDArray, xy: NDArray, sigma: NDArray, *,
         return empty
     t, xy, sigma, prev = t[ok], xy[ok], sigma[ok], j[ok] - 1
     nxt = np.minimum(prev + 1, n - 1)
-    interp = (nxt > prev) & (est.t[nxt] - est.t[prev] <= max_gap)
+    close = est.t[nxt] - est.t[prev] <= max_gap
+    interp = (nxt > prev) & (close | bridge)
     p = np.column_stack([np.where(interp, np.interp(t, est.t, est.x), est.x[prev]),
                          np.where(interp, np.interp(t, est.t, est.y), est.y[prev])])
     e = xy - p
     out: dict[str, Any] = {"t": t, "residual_m": np.hypot(e[:, 0], e[:, 1]), "nis": None, "i_fix": i_fix}
     if est.cov is not None:
-        c = est.cov[prev][:, :2, :2] + (sigma ** 2)[:, None, None] * np.eye(2)
+        near = np.where(interp & ~close & (est.t[nxt] - t < t - est.t[prev]), nxt, prev)  # bridged: the nearer
+        c = est.cov[near][:, :2, :2] + (sigma ** 2)[:, None, None] * np.eye(2)
         a, b, d = c[:, 0, 0], 0.5 * (c[:, 0, 1] + c[:, 1, 0]), c[:, 1, 1]
         det = a * d - b * b
         with np.errstate(divide="ignore", invalid="ignore"):

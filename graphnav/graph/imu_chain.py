@@ -156,24 +156,42 @@ class ImuChain:
     def samples(self, ta: float, tb: float) -> list[tuple[NDArray[np.float64], NDArray[np.float64], float]]:
         """``(acc, omega, dt)`` over ``[ta, tb]``: each record held over the interval since the
         previous one, the last one held on to ``tb`` (zero-order hold over a gap or a late sample)."""
-        return [(np.array(self.rows[i][:3]), np.array(self.rows[i][3:]), hi - lo) for i, lo, hi in self._pieces(ta, tb)]
+        acc, omega, dt = self._arrays(ta, tb)
+        return [(acc[k], omega[k], float(dt[k])) for k in range(len(dt))]
 
-    def _pieces(self, ta: float, tb: float) -> list[tuple[int, float, float]]:
-        """``(record index, lo, hi)`` covering ``[ta, tb]``: record ``i`` over its share of
-        ``(t[i-1], t[i]]``, the newest one held beyond its time."""
-        out: list[tuple[int, float, float]] = []
-        if not self.t or tb <= ta:
-            return out
-        i = bisect.bisect_right(self.t, ta)
-        lo = ta
+    def _arrays(self, ta: float, tb: float) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`samples` as arrays: ``acc`` (n, 3), ``omega`` (n, 3), ``dt`` (n,)."""
+        idx, lo, hi = self._pieces(ta, tb)
+        if not len(idx):
+            return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+        rows = np.asarray(self.rows[int(idx[0]):int(idx[-1]) + 1], dtype=float)[idx - idx[0]]
+        return rows[:, :3], rows[:, 3:], hi - lo
+
+    def _pieces(self, ta: float, tb: float) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """Record indices with the ``lo``, ``hi`` of their pieces covering ``[ta, tb]``: record ``i`` over
+        its share of ``(t[i-1], t[i]]``, the newest one held beyond its time (one more piece)."""
         n = len(self.t)
-        while lo < tb - 1e-12:
-            j, hi = (i, min(self.t[i], tb)) if i < n else (n - 1, tb)
-            if hi > lo:
-                out.append((j, lo, hi))
-            lo = hi
-            i += 1
-        return out
+        if not n or tb <= ta + 1e-12:
+            return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)
+        i0 = bisect.bisect_right(self.t, ta)
+        ie = bisect.bisect_left(self.t, tb, lo=i0)  # the first record at or after tb (n: none)
+        idx = np.arange(i0, min(ie, n - 1) + 1, dtype=np.int64)
+        t = np.asarray(self.t[max(i0 - 1, 0):int(idx[-1]) + 1 if len(idx) else i0], dtype=float)
+        off = max(i0 - 1, 0)
+        ti = t[idx - off] if len(idx) else np.zeros(0)
+        lo = np.empty(len(idx))
+        if len(idx):
+            lo[0] = ta
+            lo[1:] = np.maximum(t[idx[1:] - 1 - off], ta)
+        hi = np.minimum(ti, tb)
+        if ie >= n:  # beyond the newest record: it is held on to tb
+            last = self.t[-1]
+            if i0 >= n:  # the whole interval beyond it
+                idx, lo, hi = np.array([n - 1], dtype=np.int64), np.array([ta]), np.array([tb])
+            else:
+                idx, lo, hi = np.append(idx, n - 1), np.append(lo, max(last, ta)), np.append(hi, tb)
+        keep = hi > lo
+        return idx[keep], lo[keep], hi[keep]
 
     def hold_variance(self, ta: float, tb: float) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
         """The variance [per axis: (m/s)^2 and rad^2] that holding the records' means over ``[ta, tb]``
@@ -191,12 +209,12 @@ class ImuChain:
         The third value [m^2] is the position's: even over whole records the double integral depends on
         how the specific force is spread within each, ``v_a T^2 f^3 / 12`` for a share ``f`` (the integral
         of ``(d - tau) v_a (tau / d - 1/2) f`` over the share's length ``d = f T``), summed over the axes."""
-        pieces = [p for p in self._pieces(ta, tb) if p[0] > 0]  # the first record's interval is unknown
-        if not pieces:
+        idx, lo, hi = self._pieces(ta, tb)
+        first = idx > 0  # the first record's interval is unknown
+        idx, lo, hi = idx[first], lo[first], hi[first]
+        if not len(idx):
             return np.zeros(3), np.zeros(3), 0.0
         n = len(self.t)
-        idx = np.array([p[0] for p in pieces])
-        lo, hi = np.array([p[1] for p in pieces]), np.array([p[2] for p in pieces])
         k0, k1 = int(idx[0]) - 1, min(int(idx[-1]) + 2, n)  # the records the pieces and their neighbours use
         t = np.asarray(self.t[k0:k1], dtype=float)
         rows = np.asarray(self.rows[k0:k1], dtype=float)
@@ -243,8 +261,8 @@ class ImuChain:
             if tb > ta:
                 pim.integrateMeasurement(np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope()), tb - ta)
             return pim
-        return F.preintegrate(self._held_params(ta, tb), bias, self.samples(ta, tb), self.cfg.substeps,
-                              planar=not self.six)
+        return F.preintegrate_arrays(self._held_params(ta, tb), bias, *self._arrays(ta, tb), self.cfg.substeps,
+                                     planar=not self.six)
 
     def _held_params(self, ta: float, tb: float) -> gtsam.PreintegrationParams:
         """The parameters for ``[ta, tb]``: the shared ones, or with the densities raised by

@@ -248,7 +248,6 @@ class Motion:
         covariance and the model's name."""
         cfg = self.cfg.dynamics
         dt = max(dt, 0.0)
-        floor = self.floor()
         twist, extra, age = None, 0.0, 0.0
         if cfg.model == "constant-velocity":
             if self.twist is not None and (t is None or self.twist_t is None or t - self.twist_t <= cfg.cv_max_age):
@@ -258,6 +257,13 @@ class Motion:
                 g = self.gnss_velocity(t)
                 if g is not None:
                     twist, extra, age = g
+        return self._model(dt, twist, extra, age)
+
+    def _model(self, dt: float, twist: NDArray[np.float64] | None, extra: float, age: float
+               ) -> tuple[gtsam.Pose2, NDArray[np.float64], str]:
+        """The motion over ``dt`` at ``twist`` (constant velocity; ``None``: random walk) and its covariance
+        (:meth:`prior`)."""
+        cfg = self.cfg.dynamics
         if twist is not None:
             mean = gtsam.Pose2.Expmap(twist * dt)
             sv = math.sqrt(cfg.cv_sigma_v**2 + extra**2 + (cfg.cv_accel * age) ** 2)
@@ -267,7 +273,28 @@ class Motion:
             mean = gtsam.Pose2()
             rate = np.array([cfg.rw_sigma_v, cfg.rw_sigma_v, math.radians(cfg.rw_sigma_w_deg)])
             name = "random-walk"
-        return mean, np.diag(np.square(floor) + np.square(rate * dt)), name
+        return mean, np.diag(np.square(self.floor()) + np.square(rate * dt)), name
+
+    def coast(self, t0: float, dt: float) -> tuple[gtsam.Pose2, NDArray[np.float64], NDArray[np.float64] | None]:
+        """The motion model's prediction ``dt`` seconds on from the keyframe at ``t0`` (the online
+        output through a gap without records, :mod:`graphnav.graph.coast`): as :meth:`prior`, with the
+        velocity it would take at ``t0`` kept through the gap (the prior's choice at the gap's end
+        would drop it after ``cv_max_age``: the prediction would snap back to the last pose). The
+        graph's state is untouched. Returns the relative motion, its covariance and the twist
+        (``None``: random walk)."""
+        cfg = self.cfg.dynamics
+        twist, extra, age = None, 0.0, 0.0
+        if cfg.model == "constant-velocity":
+            if self.twist is not None and self.twist_t is not None and t0 - self.twist_t <= cfg.cv_max_age:
+                twist, age = self.twist, max(t0 - self.twist_t, 0.0)
+            else:
+                kept = self.gnss_twist
+                g = self.gnss_velocity(t0)
+                self.gnss_twist = kept  # an output only: the graph's next factor sees what it would have
+                if g is not None:
+                    twist, extra, age = g
+        mean, cov, _ = self._model(max(dt, 0.0), twist, extra, age)
+        return mean, cov, twist
 
     def gnss_velocity(self, t: float) -> tuple[NDArray[np.float64], float, float] | None:
         """Forward motion at the GNSS speed over ground: the least-squares velocity of the fixes of

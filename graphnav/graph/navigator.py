@@ -11,7 +11,10 @@
 :class:`Navigator` couples the record-by-record :class:`~graphnav.graph.builder.GraphBuilder` with a
 :class:`~graphnav.graph.solver.Solver`. After every keyframe's batch the online estimate of the
 newest pose and its marginal covariance (rotated to the world frame) are returned (iSAM2,
-fixed-lag; batch returns nothing online). :meth:`Navigator.smoothed` ends the run: iSAM2's
+fixed-lag; batch returns nothing online). Through a gap without records the online output goes on
+at its rate (the estimates' median interval, or ``coast_hz``): the newest state moved by the graph's
+motion model, its covariance grown, flagged ``coasted`` (:mod:`graphnav.graph.coast`; outputs only,
+the graph is untouched; ``info["coasted_estimates"]``). :meth:`Navigator.smoothed` ends the run: iSAM2's
 estimate after ``final_updates`` relinearisations and, with ``converge="lm"`` (default), a closing
 Levenberg-Marquardt step from it over the whole graph -- the same problem batch solves, so the two
 agree --; batch LM from the chained initial guess; fixed-lag each pose as it left the window. The
@@ -44,6 +47,7 @@ from ..log import KnownBeacon, NavLog, Record, validate_record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
+from .coast import Coaster, Coasting
 from .online_track import OnlineTrack, kinematics
 from .position_walk import position_walk
 from .smoother_config import SmootherConfig, SolverConfig, auto_motion
@@ -118,7 +122,7 @@ def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -
             "odometry": bool(log.of("odometry")), **kw}
 
 
-class Navigator:
+class Navigator(Coasting):
     """Record-by-record navigation on one factor graph (see the module docstring).
 
     ``config``: a :class:`SmootherConfig` (``None``: defaults; ``**options`` override its fields).
@@ -157,6 +161,7 @@ class Navigator:
         self.on_estimate = on_estimate
         self.history = history
         self.track = OnlineTrack(history)  # the online estimates and step times
+        self.coaster = Coaster(cfg.optimizer.coast_hz)  # the output through gaps without records (Coasting)
         self.last_pose: gtsam.Pose2 | None = None
         self.last_cov: NDArray[np.float64] | None = None
         self._base = 0  # the keyframe the fixed-lag smoother was last re-anchored at
@@ -190,7 +195,7 @@ class Navigator:
         if not checked:
             rec = validate_record(rec, index=self.n_records + 1)  # a LogError naming the record, before the graph
         self.n_records += 1
-        self._rec = rec if not isinstance(rec, KnownBeacon) else self._rec
+        self._rec = self.coaster.record(rec) or self._rec
         self.builder.push(rec)
         return self._advance()
 
@@ -236,6 +241,7 @@ class Navigator:
         return self.space.pose2(p), cov
 
     def _step(self, k: int) -> Estimate | None:
+        self._coast_before(k)  # the output grid through a gap before this keyframe (Coasting)
         s = self.builder.step(k, self.last_pose, self.last_cov if self.solver.online or self.front else None,
                               self.last_state)
         if s.icp_ms is not None:
@@ -259,6 +265,7 @@ class Navigator:
         if not self.history and (self.cfg.solver == "fixed-lag" and self.cfg.optimizer.rebase_every
                                  and k - self._base >= self.cfg.optimizer.rebase_every):
             self._rebase(k, s.t)  # bounded: the fixed-lag smoother re-anchored
+        self.coaster.estimated(k, s.t)
         if self.on_estimate is not None:
             self.on_estimate(s.t, vec, cov)
         velocity = self.last_state[1] if self.nav and self.last_state is not None else None
@@ -351,7 +358,7 @@ class Navigator:
                 "keyframes_solved": self.builder.stepped,
                 "icp_ms_median": float(np.median(icp)) if icp.size else None,
                 "step_ms_median": float(np.median(s)) if s.size else None,
-                "step_ms_p99": float(np.percentile(s, 99)) if s.size else None}
+                "step_ms_p99": float(np.percentile(s, 99)) if s.size else None, **self._coast_info()}
 
     def online(self) -> Trajectory | None:
         """The online estimates so far (``None`` for batch)."""
@@ -402,7 +409,7 @@ class Navigator:
         if info.get("loop_edges"):  # the accepted loops as (older, newer) keyframe times, for plots
             info["loop_edge_times"] = [[float(t[i]), float(t[k])] for i, k in info["loop_edges"]]
         info.update(b.report(values))  # compass bias, beacons, IMU bias, water current
-        info.update(self.extra)
+        info.update({**self.extra, **self._coast_info()})
         if self.solver.online:
             info["step_cpu_ms_median"] = float(np.median(self.track.step_cpu)) if self.track.step_cpu else None
             step_ms = np.array(self.track.step_ms)

@@ -3,6 +3,7 @@ keyframe, the step times, and the speed over ground, course and yaw rate reporte
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -23,6 +24,7 @@ class OnlineTrack:
         self.t: list[float] = []
         self.p: list[NDArray[np.float64]] = []
         self.c: list[NDArray[np.float64] | None] = []
+        self.coasted: list[bool] = []  # per estimate: a prediction through a gap without records
         self.step_ms: list[float] = []
         self.step_cpu: list[float] = []
         self.icp_ms: list[float] = []
@@ -33,22 +35,27 @@ class OnlineTrack:
         self.step_ms.append(ms)
         self.step_cpu.append(cpu_ms)
 
-    def add(self, t: float, vec: NDArray[np.float64], cov: NDArray[np.float64] | None
+    def add(self, t: float, vec: NDArray[np.float64], cov: NDArray[np.float64] | None, coasted: bool = False
             ) -> tuple[float | None, NDArray[np.float64] | None]:
-        """The online estimate at ``t``; returns the previous one's time and pose."""
+        """The online estimate at ``t`` (``coasted``: a prediction through a gap); returns the previous
+        one's time and pose. One older than the newest (live mode: a keyframe solved after the clock
+        tick coasted past it) is put in its place in time."""
         prev = self.prev
         self.prev = (t, vec)
         if self.history:
-            self.t.append(t)
-            self.p.append(vec)
-            self.c.append(cov)
+            i = bisect.bisect_right(self.t, t)
+            self.t.insert(i, t)
+            self.p.insert(i, vec)
+            self.c.insert(i, cov)
+            self.coasted.insert(i, coasted)
         else:
             del self.step_ms[:-KEEP_TIMES], self.step_cpu[:-KEEP_TIMES], self.icp_ms[:-KEEP_TIMES]
         return prev
 
     def trajectory(self, name: str) -> Trajectory:
         cov = np.array(self.c) if self.c else None
-        return Trajectory(np.array(self.t), np.array(self.p).reshape(-1, 3), cov, name=name)
+        return Trajectory(np.array(self.t), np.array(self.p).reshape(-1, 3), cov, name=name,
+                          meta={"coasted": np.array(self.coasted, dtype=bool)})
 
 
 def differenced(t: float, p: NDArray[np.float64], prev_t: float | None, prev_p: NDArray[np.float64] | None

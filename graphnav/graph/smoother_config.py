@@ -9,6 +9,7 @@ docs/smoother.md explains each group."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any
@@ -302,6 +303,12 @@ class SolverConfig:
         "otherwise crawls along its weakly observed common yaw: psaros33, 1200 s, 117 iterations in 21 s, the cost "
         "0.005 lower than after 10 (positions within 1 mm)")
     covariances: bool = option(True, "per-pose marginal covariances on the final trajectory")
+    coast_hz: float | None = option(
+        None, "the online output's rate through a gap without records: predicted estimates (the motion model's, "
+        "covariance grown by its process noise; flagged coasted) on this grid from the newest estimate, where the "
+        "next estimate is more than 1.5 periods away. None: the median rate of the estimates so far, and a gap is "
+        "twice their 90th-percentile interval (the keyframe policy's spread is no gap); 0: off (the output then has "
+        "a hole wherever the records do)", unit="Hz")
     batch_init: str = option("incremental",
         "batch's initial guess: \"incremental\" (LM on the graph so far each time it has grown by batch_init_growth, "
         "later poses chained from that solution) or \"chained\" (dead reckoning)")
@@ -312,6 +319,8 @@ class SolverConfig:
         _choice("batch_init", self.batch_init, BATCH_INIT)
         if not self.batch_init_growth > 1.0:
             raise ValueError(f"batch_init_growth must be > 1, got {self.batch_init_growth}")
+        if self.coast_hz is not None and not (self.coast_hz >= 0 and math.isfinite(self.coast_hz)):
+            raise ValueError(f"coast_hz must be >= 0 (0: off) or None (the estimates' rate), got {self.coast_hz}")
 
 
 @dataclass

@@ -34,6 +34,10 @@ transport (:mod:`.transport`), the clock and decoder (:mod:`.stream_clock`), the
   (:class:`graphnav.io.tum.TrajectoryWriter`), and published as GGA, HDT, VTG, ROT
   (valid checksums, one datagram per estimate) to ``publish`` (``udp://HOST:PORT``), and as one
   Signal K delta per estimate (:func:`graphnav.io.signalk.solution_delta`) to ``publish_signalk``.
+  While the stream is silent (two output or record periods without a record), the estimator's
+  predictions on its output grid are published too (``coast``, :meth:`LiveRunner.tick`: the
+  navigator's motion model, covariance grown; GGA fix quality 6, *estimated*; counted in
+  ``coasted_estimates``), instead of a hole in the output.
 * **Stopping** -- SIGINT/SIGTERM (or :meth:`LiveRunner.stop`, ``duration``, ``idle_exit``, the
   end of the scan replay) ends the loop; files are flushed and closed and ``summary()`` returns
   ``sentences_in``, ``bad_sentences``, ``estimates``, ``published``, ``latency_ms_median``,
@@ -181,9 +185,11 @@ class LiveRunner:
             self._stop.set()
 
     def _step_back(self) -> None:
-        """The clock stepped back: waiting scans are dropped, and a fresh estimator (when ``restart`` is
-        given) takes over, which would drop every record as late otherwise."""
+        """The clock stepped back: waiting scans are dropped, the sink's times start again (its estimates
+        are not late, :meth:`Sink.resync`), and a fresh estimator (when ``restart`` is given) takes over,
+        which would drop every record as late otherwise."""
         self.scans.waiting.clear()
+        self.sink.resync()
         if self.restart is not None:
             log_.warning("clock step back: the estimator starts afresh")
             self.estimator = self.restart()
@@ -193,8 +199,22 @@ class LiveRunner:
             return
         self.records += 1
         est = self.estimator.add(rec)
+        for c in getattr(self.estimator, "coasted_out", ()):  # predictions through the gap before it
+            self.sink.emit(c, None, self.nmea.decoder.frame)
         if est is not None:
             self.sink.emit(est, arrival, self.nmea.decoder.frame, rec.kind)
+
+    def tick(self, now: float | None = None) -> None:
+        """The output clock: while the stream is silent, the estimator's predictions due by now
+        (``coast(t)``, when it has it; the stream's time extrapolated at the wall clock's rate
+        since its last stamp arrived, ``now`` a ``time.perf_counter``) are published, flagged."""
+        coast = getattr(self.estimator, "coast", None)
+        clock = self.nmea.clock
+        if not callable(coast) or clock.t0 is None:
+            return
+        t = clock.t0 + max(0.0, (time.perf_counter() if now is None else now) - clock.a0)
+        for c in coast(t):
+            self.sink.emit(c, None, self.nmea.decoder.frame)
 
     # -- the loop
     def run(self) -> dict[str, Any]:
@@ -243,6 +263,7 @@ class LiveRunner:
                     self.feed_marine(kind, raw, arrival)
                 if self._stop.is_set():
                     break
+            self.tick()
         self.stop_reason = self.stop_reason or "signal"
         self.wall_s = time.monotonic() - t_start
 

@@ -76,7 +76,10 @@ class Sink:
         self.latency_ms = np.full(LATENCY_WINDOW, np.nan)  # ring buffer: constant memory
         self.latency_kind = np.zeros(LATENCY_WINDOW, dtype=np.int8)  # index into _KINDS of each
         self.n_latency = self.estimates = self.published = 0
+        self.coasted = 0  # estimates that were predictions through a silent stream (GGA quality 6)
+        self.late = 0  # estimates older than one already emitted (a keyframe solved after coasting past it): dropped
         self.last: Estimate | None = None
+        self.newest: float | None = None  # the newest time emitted since the clock's last re-sync
         self.hdop = 1.0  # published HDOP: from the last estimate that carried a covariance
 
     def open(self) -> None:
@@ -96,15 +99,28 @@ class Sink:
             if s is not None:
                 s.close()
 
+    def resync(self) -> None:
+        """The stream's clock stepped back (a re-sync): what comes next is not late against what went before."""
+        self.newest = None
+
     def emit(self, est: Estimate, arrival: float | None, frame: LocalFrame | None, kind: str = "") -> None:
         """Publish one estimate (NMEA), time its latency (``kind``: the record kind that produced it),
-        append it to the output file."""
+        append it to the output file. An estimate older than one already emitted (a keyframe solved once
+        the stream came back, after predictions had coasted past its time) is counted in ``late`` and
+        dropped: the published times and the file's only go forward, and the online output stays what
+        was said at the time."""
+        if self.newest is not None and est.t < self.newest:
+            self.late += 1
+            return
+        self.newest = est.t
         self.estimates += 1
+        self.coasted += est.coasted
         self.last = est
         if self.sock is not None and frame is not None:
             if est.cov is not None and np.all(np.isfinite(est.cov[:2, :2])):  # HDOP = sigma / UERE(GPS)
                 self.hdop = max(0.01, math.sqrt(max(0.0, 0.5 * (est.cov[0, 0] + est.cov[1, 1]))) / UERE_M[1])
-            lines = solution_sentences(est.t, est.vec, frame, sog=est.sog, cog_yaw=est.cog, w=est.w, hdop=self.hdop)
+            lines = solution_sentences(est.t, est.vec, frame, sog=est.sog, cog_yaw=est.cog, w=est.w, hdop=self.hdop,
+                                       quality=6 if est.coasted else 1)  # GGA quality 6: estimated (dead reckoning)
             try:
                 self.sock.sendto(("\r\n".join(lines) + "\r\n").encode("ascii"), self.addr)
                 self.published += len(lines)
@@ -130,7 +146,8 @@ class Sink:
     def summary(self) -> dict[str, Any]:
         lat = self.latency_ms[: min(self.n_latency, LATENCY_WINDOW)]
         out: dict[str, Any] = {
-            "estimates": self.estimates, "published": self.published,
+            "estimates": self.estimates, "coasted_estimates": self.coasted, "late_estimates": self.late,
+            "published": self.published,
             "latency_ms_median": float(np.median(lat)) if lat.size else None,
             "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None,
             "latency_ms_max": float(lat.max()) if lat.size else None,

@@ -77,6 +77,28 @@ def test_a_window_with_no_other_record_is_marked_silent_and_left_out_of_the_info
     assert withhold(_straight(), HoldoutSpec(100, 20)).silent == [False, False, False]
 
 
+def test_a_smoothed_track_is_read_across_its_hole_in_a_silent_window():
+    """A smoother's track has no pose inside a silent window either, but its poses on either side are
+    tied by the motion factor across it: ``smoothed`` reads it between them (known answers), never a
+    still boat; the online (causal) reading keeps the last estimate before."""
+    log = NavLog([r for r in _straight().records if isinstance(r, Gnss | GnssVelocity) or not 170 <= r.t < 210])
+    plan = withhold(log, HoldoutSpec(100, 20))
+    t = np.array([k for k in range(400) if not 180 <= k < 200], dtype=float)
+    x = 2.0 * t + np.where(t < 180, 1.0, 3.0)  # 1 m ahead before the hole, 3 m after
+    cov = np.tile(np.diag([1.0, 1.0, 0.01]), (t.size, 1, 1))
+    cov[t >= 200] = np.diag([4.0, 4.0, 0.01])
+    est = Trajectory(t, np.column_stack([x, np.zeros(t.size), np.zeros(t.size)]), cov)
+    s = plan.score(est, smoothed=True)
+    # 199 s between 179 s (359 m) and 200 s (403 m): 359 + 44 x 20/21 = 400.90 m against the fix's 398 m
+    assert s["end_errors_m"] == pytest.approx([1.0, 359.0 + 44.0 * 20 / 21 - 398.0, 3.0])
+    assert plan.score(est)["end_errors_m"][1] == pytest.approx(398.0 - 359.0)  # causal: the estimate at 179 s
+    r = gnss_residuals(est, np.array([181.0, 199.0]), np.array([[363.0, 0.0], [401.0, 0.0]]), np.ones(2),
+                       bridge=True)
+    e = np.array([363.0 - (359.0 + 44.0 * 2 / 21), 401.0 - (359.0 + 44.0 * 20 / 21)])
+    assert r["residual_m"] == pytest.approx(np.abs(e))
+    assert r["nis"] == pytest.approx([e[0] ** 2 / 2.0, e[1] ** 2 / 5.0])  # the nearer pose's covariance + sigma^2
+
+
 def test_residuals_never_interpolate_across_a_gap_in_the_estimate():
     """An estimate made after a gap is not used for a time inside it: the last one before holds."""
     est = Trajectory(np.array([0.0, 1.0, 60.0]), np.array([[0.0, 0, 0], [1.0, 0, 0], [100.0, 0, 0]]))

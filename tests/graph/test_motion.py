@@ -13,7 +13,7 @@ import pytest
 from _scan_sim import raycast
 
 from graphnav.errors import GraphnavError
-from graphnav.evaluation.metrics import ate
+from graphnav.evaluation.metrics import ate, nees_stats
 from graphnav.geometry import se2_between
 from graphnav.graph.builder import GraphBuilder
 from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
@@ -162,7 +162,9 @@ def test_scans_without_returns_and_equal_times_in_the_grid():
 def test_gnss_only_log_follows_its_fixes(legacy_harbour):
     """The (legacy) harbour log with everything but GNSS and truth removed (a 30 s outage, multipath near
     the quays): the fixes alone are 4.2 m off; the graph (GNSS velocity as the constant-velocity
-    motion, the outage spanned by one motion factor) follows them closer, online and smoothed."""
+    motion, the outage spanned by one motion factor) follows them closer, online and smoothed. Through
+    the outage the online output coasts: constant-velocity predictions while the boat turns 148 deg
+    (about 20 m off), within their grown covariance."""
     log = legacy_harbour
     gnss = log.without(lambda r: r.kind not in ("gnss", "truth"))
     gnss.beacons_known.clear()
@@ -171,9 +173,13 @@ def test_gnss_only_log_follows_its_fixes(legacy_harbour):
     raw_ate = ate(raw, log.truth(), max_dt=0.02)["rmse"]
     assert 4.0 < raw_ate < 4.4
     r = run_isam2(gnss, covariances=False)
-    online = ate(r.online, log.truth(), max_dt=0.02)["rmse"]
+    o, c = r.online, np.asarray(r.online.meta["coasted"], bool)
+    online = ate(Trajectory(o.t[~c], o.poses[~c]), log.truth(), max_dt=0.02)["rmse"]
     smoothed = ate(r.trajectory, log.truth(), max_dt=0.02)["rmse"]
     assert online <= 4.5 and smoothed <= 3.5, (online, smoothed)  # 3.20 / 1.56 m measured
+    coasted = nees_stats(Trajectory(o.t[c], o.poses[c], o.cov[c]), log.truth(), max_dt=0.02)
+    assert coasted is not None and 40 <= coasted["n"] == c.sum() <= 60  # 0.5 s apart in the 30 s outage
+    assert coasted["mean"] < 4.0  # 2.1 measured (chi-square, 2 dof: 2 when honest)
     assert r.info["anchor"] == "first GNSS"
 
 

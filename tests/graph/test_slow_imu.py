@@ -5,6 +5,7 @@ rate's variation within it (graphnav.graph.imu_chain.ImuChain.hold_variance). Kn
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import gtsam
@@ -124,3 +125,39 @@ def test_the_grid_skips_the_slots_between_a_slow_imus_records():
     later = np.array(kf.t)[np.array(kf.t) >= 2.0]
     assert len(later) >= 8
     np.testing.assert_allclose(later, np.round(later), atol=1e-9)
+
+
+def _pieces_loop(t: list[float], ta: float, tb: float) -> list[tuple[int, float, float]]:
+    """The record pieces of ``[ta, tb]`` walked one record at a time (the reference)."""
+    out: list[tuple[int, float, float]] = []
+    if not t or tb <= ta:
+        return out
+    i, lo, n = bisect.bisect_right(t, ta), ta, len(t)
+    while lo < tb - 1e-12:
+        j, hi = (i, min(t[i], tb)) if i < n else (n - 1, tb)
+        if hi > lo:
+            out.append((j, lo, hi))
+        lo, i = hi, i + 1
+    return out
+
+
+@settings(max_examples=150, deadline=None)
+@given(gaps=st.lists(st.floats(0.001, 2.0), min_size=1, max_size=30), ta=st.floats(-1.0, 40.0),
+       width=st.floats(0.01, 20.0), at_record=st.booleans())
+def test_the_pieces_are_the_records_walked_one_at_a_time(gaps: list[float], ta: float, width: float,
+                                                         at_record: bool):
+    t = list(np.cumsum(gaps))
+    if at_record:  # interval ends exactly on record times
+        ta = t[len(t) // 3]
+    chain = ImuChain(ImuConfig())
+    for i, ti in enumerate(t):
+        chain.add(Imu(float(ti), 0.01 * i, -0.02 * i, 0.001 * i))
+    tb = ta + width
+    idx, lo, hi = chain._pieces(ta, tb)
+    ref = _pieces_loop(chain.t, ta, tb)
+    assert [int(i) for i in idx] == [r[0] for r in ref]
+    np.testing.assert_allclose(lo, [r[1] for r in ref], atol=1e-12)
+    np.testing.assert_allclose(hi, [r[2] for r in ref], atol=1e-12)
+    acc, omega, dt = chain._arrays(ta, tb)
+    np.testing.assert_allclose(dt, [r[2] - r[1] for r in ref], atol=1e-12)
+    np.testing.assert_allclose(omega[:, 2], [chain.rows[r[0]][5] for r in ref])

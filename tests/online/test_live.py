@@ -144,6 +144,11 @@ def test_udp_loopback_tracks_truth(tmp_path):
     frame = LocalFrame(log.meta["origin"]["lat"], log.meta["origin"]["lon"])  # the truth's frame
     gga = [m for m in msgs if m.sentence_type == "GGA"]
     hdt = [m for m in msgs if m.sentence_type == "HDT"]
+    # after the stream ends the runner coasts (GGA quality 6, estimated: past the truth's end here)
+    coasted = [int(m.gps_qual) == 6 for m in gga]
+    assert sum(coasted) == summary["coasted_estimates"] and not any(coasted[:-5])
+    gga = [m for m, c in zip(gga, coasted, strict=True) if not c]
+    hdt = [m for m, c in zip(hdt, coasted, strict=True) if not c]
     tod = np.array([m.timestamp.hour * 3600 + m.timestamp.minute * 60 + m.timestamp.second
                     + m.timestamp.microsecond * 1e-6 for m in gga])
     t = 1.7e9 - (1.7e9 % 86400) + tod
@@ -257,7 +262,9 @@ def test_cli_sigterm_exits_cleanly_with_one_json_object(tmp_path):
     keys = ("sentences_in", "bad_sentences", "estimates", "published", "latency_ms_median", "latency_ms_p99")
     for key in keys:
         assert key in obj
-    assert obj["stop_reason"] == "signal" and obj["estimates"] == _offline_estimates(log)
+    # once the stream fell silent the runner coasted (predictions, counted apart)
+    assert obj["stop_reason"] == "signal"
+    assert obj["estimates"] - obj["coasted_estimates"] + obj["late_estimates"] == _offline_estimates(log)
     tum = Path(obj["tum"]).read_text().splitlines()
     assert len(tum) - 1 == obj["estimates"]  # nothing lost
     saved = json.loads(Path(obj["tum"]).with_suffix(".summary.json").read_text())

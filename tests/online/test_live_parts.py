@@ -80,3 +80,29 @@ def test_sink_counts_times_and_writes(tmp_path):
     s = sink.summary()
     assert (s["estimates"], s["published"]) == (2, 0) and s["latency_ms_median"] >= 0.0
     assert s["tum"].endswith(".tum") and len(open(s["tum"]).read().splitlines()) == 3  # header + 2
+
+
+def test_sink_drops_an_estimate_older_than_one_emitted(tmp_path):
+    """A keyframe solved once the stream came back, after predictions coasted past its time: dropped and
+    counted, so the file's (and the bus's) times only go forward."""
+    sink = Sink(out_dir=tmp_path)
+    sink.open()
+    for t, coasted in ((1.0, False), (2.0, False), (3.0, True), (4.0, True), (2.5, False), (4.0, False), (5.0, False)):
+        sink.emit(Estimate(t, np.array([t, 0.0, 0.0]), np.eye(3) * 0.01, coasted=coasted), None, None)
+    sink.close()
+    s = sink.summary()
+    assert (s["estimates"], s["coasted_estimates"], s["late_estimates"]) == (6, 2, 1)
+    times = [float(line.split()[0]) for line in open(s["tum"]).read().splitlines()[1:]]
+    assert times == [1.0, 2.0, 3.0, 4.0, 4.0, 5.0]
+
+
+def test_sink_times_start_again_after_a_clock_resync(tmp_path):
+    sink = Sink(out_dir=tmp_path)
+    sink.open()
+    sink.emit(Estimate(3600.0, np.zeros(3)), None, None)
+    sink.resync()  # the stream's clock stepped back an hour: a fresh estimator's estimates are not late
+    sink.emit(Estimate(1.0, np.zeros(3)), None, None)
+    sink.emit(Estimate(0.5, np.zeros(3)), None, None)  # ... but one older than those is
+    sink.close()
+    s = sink.summary()
+    assert (s["estimates"], s["late_estimates"]) == (2, 1)

@@ -146,9 +146,10 @@ def holdout_table(comp: Comparison) -> tuple[str, list[str], list[list[str]]] | 
             f"{d['withheld']['gnss_velocity']} velocities) were withheld from every estimator; "
             f"{d['scored_windows']} of {len(h.windows)} windows held a fix to score against"
             + (" (the others fell in gaps of the log)" if d["scored_windows"] < len(h.windows) else "")
-            + (f"; {d['silent_windows']} of them held no other record (only GNSS was logged then): no estimator has "
-               f"an estimate inside them and each is scored by its last one before, so there every end error is "
-               f"the distance sailed, alike (`rmse_informative_m` in the JSON leaves them out)"
+            + (f"; {d['silent_windows']} of them held no other record (only GNSS was logged then): there an "
+               f"estimator has only its motion model (a smoother's track read between its poses around the window, "
+               f"a coasting navigator's online predictions, else the last estimate before: the distance sailed), "
+               f"which says little of the sensors (`rmse_informative_m` in the JSON leaves them out)"
                if d.get("silent_windows") else "")
             + f". *end error*: the estimate against the window's last withheld fix (the farthest "
             f"from GNSS); *all*: the mean over every withheld fix; *NIS*: the withheld fixes' normalised "
