@@ -34,6 +34,8 @@ import factors as F
 from ..log import Imu
 
 GRAVITY = 9.80665  # [m/s^2] standard gravity (6-axis records)
+#: the record pieces covering an interval (:meth:`ImuChain._pieces`): record indices, each piece's start and end [s]
+Pieces = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
 
 
 @dataclass
@@ -118,7 +120,7 @@ class ImuChain:
         """Preintegration parameters with the noise densities ``std^2 / rate`` [per s] (or the per-axis
         densities given)."""
         acc, gyro, hz = self.std
-        rate = hz if hz else 1.0 / max(self._period(), 1e-6)
+        rate = hz if hz else 1.0 / max(self.period(), 1e-6)
         p = gtsam.PreintegrationParams.MakeSharedU(GRAVITY if self.six else 0.0)
         p.setAccelerometerCovariance(np.diag(acc_density) if acc_density is not None else np.eye(3) * acc**2 / rate)
         p.setGyroscopeCovariance(np.diag(gyro_density) if gyro_density is not None else np.eye(3) * gyro**2 / rate)
@@ -128,7 +130,7 @@ class ImuChain:
             p.setBodyPSensor(self.body_P_sensor)
         return p
 
-    def _period(self) -> float:
+    def period(self) -> float:
         """The median interval of the records so far [s] (1 / ``hz`` of the config before two)."""
         if len(self.t) < 2:
             return 1.0 / self.cfg.hz
@@ -156,18 +158,18 @@ class ImuChain:
     def samples(self, ta: float, tb: float) -> list[tuple[NDArray[np.float64], NDArray[np.float64], float]]:
         """``(acc, omega, dt)`` over ``[ta, tb]``: each record held over the interval since the
         previous one, the last one held on to ``tb`` (zero-order hold over a gap or a late sample)."""
-        acc, omega, dt = self._arrays(ta, tb)
+        acc, omega, dt = self._arrays(self._pieces(ta, tb))
         return [(acc[k], omega[k], float(dt[k])) for k in range(len(dt))]
 
-    def _arrays(self, ta: float, tb: float) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """:meth:`samples` as arrays: ``acc`` (n, 3), ``omega`` (n, 3), ``dt`` (n,)."""
-        idx, lo, hi = self._pieces(ta, tb)
+    def _arrays(self, pieces: Pieces) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`samples` of the ``pieces`` (:meth:`_pieces`) as arrays: ``acc``, ``omega`` (n, 3), ``dt`` (n,)."""
+        idx, lo, hi = pieces
         if not len(idx):
             return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
         rows = np.asarray(self.rows[int(idx[0]):int(idx[-1]) + 1], dtype=float)[idx - idx[0]]
         return rows[:, :3], rows[:, 3:], hi - lo
 
-    def _pieces(self, ta: float, tb: float) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    def _pieces(self, ta: float, tb: float) -> Pieces:
         """Record indices with the ``lo``, ``hi`` of their pieces covering ``[ta, tb]``: record ``i`` over
         its share of ``(t[i-1], t[i]]``, the newest one held beyond its time (one more piece)."""
         n = len(self.t)
@@ -209,7 +211,11 @@ class ImuChain:
         The third value [m^2] is the position's: even over whole records the double integral depends on
         how the specific force is spread within each, ``v_a T^2 f^3 / 12`` for a share ``f`` (the integral
         of ``(d - tau) v_a (tau / d - 1/2) f`` over the share's length ``d = f T``), summed over the axes."""
-        idx, lo, hi = self._pieces(ta, tb)
+        return self._hold(self._pieces(ta, tb))
+
+    def _hold(self, pieces: Pieces) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+        """:meth:`hold_variance` of the ``pieces`` (:meth:`_pieces`)."""
+        idx, lo, hi = pieces
         first = idx > 0  # the first record's interval is unknown
         idx, lo, hi = idx[first], lo[first], hi[first]
         if not len(idx):
@@ -261,18 +267,18 @@ class ImuChain:
             if tb > ta:
                 pim.integrateMeasurement(np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope()), tb - ta)
             return pim
-        return F.preintegrate_arrays(self._held_params(ta, tb), bias, *self._arrays(ta, tb), self.cfg.substeps,
+        pieces = self._pieces(ta, tb)
+        return F.preintegrate_arrays(self._held_params(pieces, tb - ta), bias, *self._arrays(pieces), self.cfg.substeps,
                                      planar=not self.six)
 
-    def _held_params(self, ta: float, tb: float) -> gtsam.PreintegrationParams:
-        """The parameters for ``[ta, tb]``: the shared ones, or with the densities raised by
-        :meth:`hold_variance` over the interval where that is not negligible (1 % of the interval's
+    def _held_params(self, pieces: Pieces, T: float) -> gtsam.PreintegrationParams:
+        """The parameters for an interval of ``T`` seconds made of ``pieces``: the shared ones, or with
+        the densities raised by :meth:`hold_variance` where that is not negligible (1 % of the interval's
         white-noise variance on some axis)."""
         assert self.params is not None
-        T = tb - ta
         if T <= 0.0:
             return self.params
-        va, vg, vp = self.hold_variance(ta, tb)
+        va, vg, vp = self._hold(pieces)
         acc, gyro = np.diag(self.params.getAccelerometerCovariance()), np.diag(self.params.getGyroscopeCovariance())
         ip = float(self.params.getIntegrationCovariance()[0, 0])
         if not (np.any(va > 0.01 * acc * T) or np.any(vg > 0.01 * gyro * T) or vp > 0.01 * ip * T):

@@ -202,7 +202,7 @@ class Keyframes:
 
     @staticmethod
     def _imu_period(imu: Any) -> float:
-        return imu._period() if imu and len(imu.t) >= 2 else 0.0
+        return imu.period() if imu and len(imu.t) >= 2 else 0.0
 
     def at_imu_record(self, imu: Any, t: float, spacing: float) -> bool:
         """Whether a keyframe at ``t`` (candidates ``spacing`` seconds apart) keeps the IMU's records whole:

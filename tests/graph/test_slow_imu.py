@@ -158,6 +158,6 @@ def test_the_pieces_are_the_records_walked_one_at_a_time(gaps: list[float], ta: 
     assert [int(i) for i in idx] == [r[0] for r in ref]
     np.testing.assert_allclose(lo, [r[1] for r in ref], atol=1e-12)
     np.testing.assert_allclose(hi, [r[2] for r in ref], atol=1e-12)
-    acc, omega, dt = chain._arrays(ta, tb)
+    acc, omega, dt = chain._arrays((idx, lo, hi))
     np.testing.assert_allclose(dt, [r[2] - r[1] for r in ref], atol=1e-12)
     np.testing.assert_allclose(omega[:, 2], [chain.rows[r[0]][5] for r in ref])
