@@ -133,6 +133,13 @@ class Heading:
 ODOMETRY_FROM_ROT = "rate of turn + SOG"
 
 
+def note_rot_odometry(meta: dict[str, Any], records: Iterable[Record]) -> None:
+    """A reader whose odometry records are a rate of turn with the SOG: ``meta["odometry"]`` says so
+    (:data:`ODOMETRY_FROM_ROT`) when it produced any."""
+    if any(r.kind == "odometry" for r in records):
+        meta["odometry"] = ODOMETRY_FROM_ROT
+
+
 @dataclass(frozen=True, slots=True)
 class Odometry:
     """Speed over ground ``v`` [m/s] and yaw rate ``w`` [rad/s] (ship's log + rate-of-turn sensor).

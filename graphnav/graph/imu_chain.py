@@ -176,22 +176,17 @@ class ImuChain:
         if not n or tb <= ta + 1e-12:
             return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)
         i0 = bisect.bisect_right(self.t, ta)
+        if i0 >= n:  # the whole interval beyond the newest record: it is held
+            return np.array([n - 1], dtype=np.int64), np.array([ta]), np.array([tb])
         ie = bisect.bisect_left(self.t, tb, lo=i0)  # the first record at or after tb (n: none)
         idx = np.arange(i0, min(ie, n - 1) + 1, dtype=np.int64)
-        t = np.asarray(self.t[max(i0 - 1, 0):int(idx[-1]) + 1 if len(idx) else i0], dtype=float)
         off = max(i0 - 1, 0)
-        ti = t[idx - off] if len(idx) else np.zeros(0)
-        lo = np.empty(len(idx))
-        if len(idx):
-            lo[0] = ta
-            lo[1:] = np.maximum(t[idx[1:] - 1 - off], ta)
-        hi = np.minimum(ti, tb)
+        t = np.asarray(self.t[off:int(idx[-1]) + 1], dtype=float)
+        lo = np.maximum(t[np.maximum(idx - 1 - off, 0)], ta)  # each record from its predecessor's time ...
+        lo[0] = ta  # ... the first from ta
+        hi = np.minimum(t[idx - off], tb)
         if ie >= n:  # beyond the newest record: it is held on to tb
-            last = self.t[-1]
-            if i0 >= n:  # the whole interval beyond it
-                idx, lo, hi = np.array([n - 1], dtype=np.int64), np.array([ta]), np.array([tb])
-            else:
-                idx, lo, hi = np.append(idx, n - 1), np.append(lo, max(last, ta)), np.append(hi, tb)
+            idx, lo, hi = np.append(idx, n - 1), np.append(lo, self.t[-1]), np.append(hi, tb)
         keep = hi > lo
         return idx[keep], lo[keep], hi[keep]
 

@@ -152,7 +152,7 @@ class Closing:
                                                        cfg.robust.noise_iterations, lm)
             info["noise_scale"] = vce
         info["odometry_consistency"] = oc = gnc.odometry_consistency(graph, values, self.groups, cfg.robust.prob)
-        self._covariance_graph(pre, graph, vce, oc, info)
+        self.cov_graph = self._covariance_graph(pre, graph, vce, oc, info)
         self.solver.graph = graph
         info["lm_iterations"] = iters
         info["converge_ms"] = (time.perf_counter() - c0) * 1e3
@@ -190,23 +190,24 @@ class Closing:
         return graph, values, iters
 
     def _covariance_graph(self, pre: gtsam.NonlinearFactorGraph, post: gtsam.NonlinearFactorGraph,
-                          vce: dict[str, Any], oc: dict[str, Any] | None, info: dict[str, Any]) -> None:
+                          vce: dict[str, Any], oc: dict[str, Any] | None, info: dict[str, Any]
+                          ) -> gtsam.NonlinearFactorGraph | None:
         """The noise estimation's scales assume white errors. Where it shrank a group and the smoothed
         motion then disagrees with the odometry beyond chance over windows of keyframes
         (:func:`gnc.odometry_consistency` fails: errors correlated over time, as MRCLAM's commanded
         velocities), the shrunk sigmas understate the uncertainty over the windows that make up a
-        position error: the covariances come from the graph with those groups as they were before
-        (``cov_graph``), the estimate keeps the estimated weights. MRCLAM DS6 r1-r5 smoothed NEES
+        position error: the covariances come from the graph returned, with those groups as they were
+        before (``None``: the solved graph's), the estimate keeps the estimated weights. MRCLAM DS6 r1-r5 smoothed NEES
         42.4/22.5/6.6/24.9/17.7 -> 3.5/7.1/1.8/4.4/5.7 at the same ATE (docs/smoother.md)."""
         shrunk = sorted(g for g, r in vce.items() if r.get("scale", 1.0) < 1.0)
         if not shrunk or oc is None or oc.get("consistent", True):
-            return
+            return None
         cov = gtsam.NonlinearFactorGraph()
         for i in range(post.size()):
             cov.add(pre.at(i) if self.groups[i] in shrunk else post.at(i))
-        self.cov_graph = cov
         info["covariance_noise"] = {"unshrunk": shrunk,
                                     "why": "odometry windows inconsistent after the noise estimation"}
+        return cov
 
     def _inflate_gnss(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, info: dict[str, Any],
                       scale: dict[int, float] | None = None) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:

@@ -58,7 +58,6 @@ from ..errors import LogError, require
 from ..geodesy import LocalFrame
 from ..geometry import heading_deg_to_yaw
 from ..log import (
-    ODOMETRY_FROM_ROT,
     Attitude,
     Gnss,
     GnssVelocity,
@@ -69,6 +68,7 @@ from ..log import (
     Record,
     WaterSpeed,
     check_record,
+    note_rot_odometry,
 )
 from .nmea_fields import (
     DEFAULT_HDOP,
@@ -378,8 +378,7 @@ class N2kDecoder:
                 return []
             ref = raw.get("reference")
             if ref == 0:
-                return [Heading(t, float(heading_deg_to_yaw(math.degrees(hdg))), math.radians(HEADING_SIGMA_DEG["HDT"]),
-                                source=src)]
+                return [_true_heading(t, hdg, src)]
             if ref != 1:
                 self.counts["skip:127250 reference not true/magnetic"] += 1
                 return []
@@ -408,8 +407,7 @@ class N2kDecoder:
                 if src in self.heading_sources:
                     self.counts["skip:127257 yaw of a source that sends 127250"] += 1
                 else:
-                    out.append(Heading(t, float(heading_deg_to_yaw(math.degrees(yaw))),
-                                       math.radians(HEADING_SIGMA_DEG["HDT"]), source=src))
+                    out.append(_true_heading(t, yaw, src))
             if roll is None or pitch is None:
                 self.counts["skip:127257 without roll and pitch"] += 1
                 return out
@@ -419,6 +417,12 @@ class N2kDecoder:
             self.counts["skip:128259 without speed through water"] += 1
             return []
         return [WaterSpeed(t, stw, water_speed_sigma(stw, STW_STEP), source=src)]
+
+
+def _true_heading(t: float, heading: float, src: str) -> Heading:
+    """A true heading [rad, clockwise from north] as a record (sigma of an HDT)."""
+    return Heading(t, float(heading_deg_to_yaw(math.degrees(heading))), math.radians(HEADING_SIGMA_DEG["HDT"]),
+                   source=src)
 
 
 def _as_day0(d: date | str | None) -> float | None:
@@ -487,8 +491,7 @@ def read_n2k(path: str | Path, *, lenient: bool = False, limits: Limits | None =
         note_truncation(meta, lines, skipped)
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
-    if any(r.kind == "odometry" for r in records):
-        meta["odometry"] = ODOMETRY_FROM_ROT
+    note_rot_odometry(meta, records)
     return NavLog.from_unsorted(records, (), meta)
 
 

@@ -60,7 +60,7 @@ import pynmea2
 
 from ..errors import LogError
 from ..geodesy import LocalFrame
-from ..log import ODOMETRY_FROM_ROT, Limits, NavLog, Record, check_record
+from ..log import Limits, NavLog, Record, check_record, note_rot_odometry
 from .nmea_clock import SentenceClock
 from .nmea_fields import (  # noqa: F401  (the constants and field parsers are part of this module's API)
     DAY,
@@ -495,6 +495,5 @@ def read_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, f
     """
     options.setdefault("keep_sog_cog", False)  # the samples are not log records: not held
     out, meta = parse_nmea(path, lenient=lenient, origin=origin, date=date, **options)
-    if any(r.kind == "odometry" for r in out.records):
-        meta["odometry"] = ODOMETRY_FROM_ROT
+    note_rot_odometry(meta, out.records)
     return NavLog.from_unsorted(out.records, (), meta)

@@ -46,7 +46,6 @@ from ..errors import LogError
 from ..geodesy import LocalFrame
 from ..geometry import heading_deg_to_yaw
 from ..log import (
-    ODOMETRY_FROM_ROT,
     Attitude,
     Gnss,
     GnssVelocity,
@@ -57,6 +56,7 @@ from ..log import (
     Record,
     WaterSpeed,
     check_record,
+    note_rot_odometry,
 )
 from .nmea_fields import (
     DEFAULT_HDOP,
@@ -346,8 +346,7 @@ def read_signalk(path: str | Path, *, lenient: bool = False, limits: Limits | No
         note_truncation(meta, lines, skipped)
         meta["skipped"] = len(skipped)
         meta["skipped_errors"] = skipped[:20]
-    if any(r.kind == "odometry" for r in records):
-        meta["odometry"] = ODOMETRY_FROM_ROT
+    note_rot_odometry(meta, records)
     return NavLog.from_unsorted(records, (), meta)
 
 
