@@ -282,12 +282,17 @@ def _vertical_component(brg: float, tilt: tuple[float, float] | None) -> int:
     body z is ``w . R e_z`` with ``R e_z = (cos r sin p, -sin r, cos r cos p)``."""
     roll, pitch = tilt if tilt is not None else (0.0, 0.0)
     c, s = math.cos(brg), math.sin(brg)
-    n = np.array([c, s, c * math.cos(roll) * math.sin(pitch) - s * math.sin(roll)])
-    n /= np.linalg.norm(n)
-    b1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
-    b1 /= np.linalg.norm(b1)
-    b2 = np.cross(n, b1)
-    return 0 if abs(b1[2]) > abs(b2[2]) else 1
+    z = c * math.cos(roll) * math.sin(pitch) - s * math.sin(roll)
+    r = math.sqrt(c * c + s * s + z * z)
+    n = (c / r, s / r, z / r)
+    a = min(range(3), key=lambda i: abs(n[i]))  # (the first on ties, as np.argmin)
+    # b1 = n x e_a / |n x e_a|; only the z components of b1 and b2 = n x b1 are compared (plain floats:
+    # one keyframe's beacon factors, ~1 ms with numpy's small-array overhead)
+    b1 = (n[1] * (a == 2) - n[2] * (a == 1), n[2] * (a == 0) - n[0] * (a == 2), n[0] * (a == 1) - n[1] * (a == 0))
+    nb = math.sqrt(b1[0] * b1[0] + b1[1] * b1[1] + b1[2] * b1[2])
+    b1 = (b1[0] / nb, b1[1] / nb, b1[2] / nb)
+    b2z = n[0] * b1[1] - n[1] * b1[0]
+    return 0 if abs(b1[2]) > abs(b2z) else 1
 
 
 #: [m] a mark's height above the surface (charted or unknown: a prior at 0)
