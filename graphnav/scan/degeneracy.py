@@ -95,38 +95,31 @@ def analyse(info: NDArray[np.float64], radius: float, cov: NDArray[np.float64], 
     is weak): the 1-sigma along each eigenvector is ``sqrt(v^T T cov T v)``, ``T = diag(1, 1, L)``.
     With ``prior_cov`` (the initial guess's covariance, same convention) a direction is also weak
     where the match knows it less well than the guess does."""
-    return _weak(*np.linalg.eigh(0.5 * (info + info.T)), radius, cov, max_condition, max_sigma, prior_cov)
+    return analyse_both(info, radius, cov, max_condition=max_condition, max_sigma=max_sigma,
+                        prior_cov=prior_cov)[0]
 
 
 def analyse_both(info: NDArray[np.float64], radius: float, cov: NDArray[np.float64], *,
                  max_condition: float = 200.0, max_sigma: float = np.inf,
                  prior_cov: NDArray[np.float64] | None = None) -> tuple[Degeneracy, Degeneracy]:
     """:func:`analyse` with ``prior_cov`` and without it (the geometry's own weak directions), from one
-    eigen-decomposition of ``info``."""
+    eigen-decomposition of ``info``: the second is the first without the "known better" rule."""
     ev, vec = np.linalg.eigh(0.5 * (info + info.T))
-    geo = _weak(ev, vec, radius, cov, max_condition, max_sigma, None)
-    if prior_cov is None:
-        return geo, geo
-    return _weak(ev, vec, radius, cov, max_condition, max_sigma, prior_cov), geo
-
-
-def _weak(ev: NDArray[np.float64], vec: NDArray[np.float64], radius: float, cov: NDArray[np.float64],
-          max_condition: float, max_sigma: float, prior_cov: NDArray[np.float64] | None) -> Degeneracy:
-    """:func:`analyse` of the eigenvalues ``ev`` (ascending) and eigenvectors ``vec`` of the information."""
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
-    pos = ev > 0
     var = np.full(3, np.inf)
-    finite = bool(np.all(np.isfinite(cov)))
+    finite = bool(np.isfinite(cov).all())
     tm = np.diag([1.0, 1.0, float(radius)])
     if finite:
         var = np.einsum("ji,jk,ki->i", vec, tm @ cov @ tm, vec)
     sig = np.sqrt(np.maximum(var, 0.0))
-    weak = ~pos | (ev * max_condition < ev[-1]) | (sig > max_sigma)
-    if prior_cov is not None and np.all(np.isfinite(prior_cov)):
-        weak |= var > np.einsum("ji,jk,ki->i", vec, tm @ np.asarray(prior_cov, dtype=float) @ tm, vec)
+    weak = ~(ev > 0) | (ev * max_condition < ev[-1]) | (sig > max_sigma)
     if not finite:
         weak[:] = True
-    return Degeneracy(cond, sig, vec, weak, float(radius))
+    geo = Degeneracy(cond, sig, vec, weak, float(radius))
+    if prior_cov is None or not finite or not np.isfinite(prior_cov).all():
+        return geo, geo
+    known = var > np.einsum("ji,jk,ki->i", vec, tm @ np.asarray(prior_cov, dtype=float) @ tm, vec)
+    return Degeneracy(cond, sig, vec, weak | known, float(radius)), geo
 
 
 def keep_constrained(pose: NDArray[np.float64], guess: NDArray[np.float64],
