@@ -46,6 +46,7 @@ def W(k: int) -> int:
 LOOSE = (0.5, 0.5, 10.0)
 #: Pose3 tangent indices of the planar (x, y, yaw)
 PLANAR = [3, 4, 2]
+_PLANAR_IX = np.ix_(PLANAR, PLANAR)  # (built once: np.ix_ per call was a tenth of the conversions)
 
 
 def _vec2(p: gtsam.Pose2) -> NDArray[np.float64]:
@@ -61,7 +62,7 @@ def as_pose2(p: gtsam.Pose3) -> gtsam.Pose2:
 def embed_cov(cov3: NDArray[np.float64], loose: tuple[float, float, float] = LOOSE) -> NDArray[np.float64]:
     """A (x, y, yaw) covariance as a Pose3 tangent covariance with ``loose`` roll, pitch, z."""
     c = np.zeros((6, 6))
-    c[np.ix_(PLANAR, PLANAR)] = 0.5 * (cov3 + cov3.T)
+    c[_PLANAR_IX] = 0.5 * (cov3 + cov3.T)
     c[0, 0], c[1, 1], c[5, 5] = loose[0] ** 2, loose[1] ** 2, loose[2] ** 2
     return c
 
@@ -170,7 +171,7 @@ class NavSpace(PlanarSpace):
     def world_cov(self, value: Any, cov: NDArray[np.float64]) -> NDArray[np.float64]:
         c = np.asarray(cov)
         if c.shape == (6, 6):
-            c = c[np.ix_(PLANAR, PLANAR)]
+            c = c[_PLANAR_IX]
         return cov_to_world(self.pose2(value).theta(), c)
 
     def prior(self, key: int, pose: NDArray[np.float64], sigmas: NDArray[np.float64],
