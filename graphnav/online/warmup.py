@@ -33,11 +33,13 @@ in :meth:`WarmUp.motion_choice` (``motion_changed_by``); the graph is not rebuil
 from __future__ import annotations
 
 import logging
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 from ..config import given_option
 from ..graph.navigator import Navigator, log_inputs
+from ..graph.position_walk import LAGS, position_walk
 from ..graph.smoother_config import VESSEL_KINDS, SmootherConfig, auto_motion
 from ..log import ODOMETRY_FROM_ROT, NavLog, Record
 from ..result import Estimate, OnlineEstimator
@@ -50,6 +52,41 @@ WARMUP_PERIODS = 2.0
 MAX_WARMUP_S = 30.0
 #: records held at most (a memory bound: 30 s of a 10 Hz bus with ~30 kinds)
 MAX_WARMUP_RECORDS = 10_000
+#: [s] the vessel graph's position walk is estimated again this often (the longest lag of its fit)
+WALK_EVERY_S = max(LAGS)
+#: [s] ... from the fixes and GNSS velocities of this last stretch of stream (30 of its longest lags; memory bound)
+WALK_WINDOW_S = 30 * max(LAGS)
+
+
+class WalkTracker:
+    """The vessel graph's position random walk, estimated live (:func:`position_walk` on the fixes and
+    GNSS velocity records of the last :data:`WALK_WINDOW_S`, every :data:`WALK_EVERY_S` of stream time):
+    ``add(rec)`` returns a new estimate when one was made."""
+
+    def __init__(self) -> None:
+        self.recs: deque[Record] = deque()
+        self.next_t: float | None = None
+        self.updates = 0
+        self.last: dict[str, Any] | None = None
+
+    def add(self, rec: Record) -> dict[str, Any] | None:
+        if rec.kind not in ("gnss", "gnss_velocity"):
+            return None
+        self.recs.append(rec)
+        t = float(rec.t)
+        while self.recs and self.recs[0].t < t - WALK_WINDOW_S:
+            self.recs.popleft()
+        if self.next_t is None:
+            self.next_t = t + WALK_EVERY_S
+        if t < self.next_t:
+            return None
+        self.next_t = t + WALK_EVERY_S
+        walk = position_walk(NavLog.from_unsorted(self.recs))
+        if walk is None:
+            return None
+        self.updates += 1
+        self.last = {"walk": walk["walk"], "t": t, "window_s": t - float(self.recs[0].t), "updates": self.updates}
+        return walk
 
 
 def motion_reason(motion: str, kinds: set[str], rot_odometry: bool) -> str:
@@ -142,12 +179,14 @@ class WarmUp:
         self.replayed_out: list[Estimate] = []  # the same when the end of input ended the warm-up (flush)
         self._kinds: set[str] = set()
         self._changed: list[str] = []
+        self.walker: WalkTracker | None = None  # the vessel graph's position walk, re-estimated as the stream goes
 
     # -- OnlineEstimator
     def add(self, rec: Record) -> Estimate | None:
         if self.nav is not None:
             self._out = []
             self._watch(rec)
+            self._walk(rec)
             return self.nav.add(rec)
         self.held.append(rec)
         why = self.rule.add(rec)
@@ -190,6 +229,8 @@ class WarmUp:
                                           "ended_by": self.ended_by}}
         if self.walk is not None:
             out["warmup"]["position_walk"] = self.walk
+        if self.walker is not None:
+            out["position_walk_live"] = self.walker.last
         if self._changed:
             out["motion_changed_by"] = self._changed
         return out
@@ -198,7 +239,7 @@ class WarmUp:
     def _start(self, why: str) -> Estimate | None:
         """Decide, build the navigator, replay the held records; the last one's estimate is returned,
         the others' in :attr:`_out`."""
-        log = NavLog(self.held, meta=dict(self.meta))
+        log = NavLog.from_unsorted(self.held, meta=self.meta)  # (a live stream may step back a little)
         kinds = set(log.counts())
         rot = log.meta.get("odometry") == ODOMETRY_FROM_ROT
         self.motion = auto_motion(kinds, log.meta)
@@ -217,6 +258,12 @@ class WarmUp:
         t0, t1 = self.rule.t_first, self.rule.t_now
         self.warmup_s = (t1 - t0) if t0 is not None and t1 is not None else None
         self._kinds = kinds
+        if self.motion == "vessel" and (given_option(SmootherConfig, self.options, "imu", None) or {}).get(
+                "vessel_position_walk") is None:
+            self.walker = WalkTracker()
+            for r in self.held:
+                self.walker.add(r)
+            self.reason += f" (estimated again every {WALK_EVERY_S:g} s)"
         log_.info("motion %s after a %.3g s warm-up of %d records (%s): %s", self.motion, self.warmup_s or 0.0,
                   len(self.held), why, self.reason)
         out: list[Estimate] = []
@@ -232,6 +279,17 @@ class WarmUp:
                     out.append(e)
         self._out = out
         return last
+
+    def _walk(self, rec: Record) -> None:
+        """The vessel graph's position walk from the stream so far: the factors to come take it."""
+        if self.walker is None or self.nav is None or self.nav.builder.motion.imu is None:
+            return
+        walk = self.walker.add(rec)
+        if walk is not None:
+            self.nav.builder.motion.imu.set_vessel_walk(walk["walk"], walk)
+            if self.walker.updates == 1:
+                log_.info("vessel position walk %.3g m/sqrt(s) from %.0f s of the stream's fixes and velocities "
+                          "(then every %g s)", walk["walk"], self.walker.last["window_s"], WALK_EVERY_S)
 
     def _watch(self, rec: Record) -> None:
         """A kind first seen after the warm-up that would have changed the choice: warned about once."""
