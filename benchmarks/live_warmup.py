@@ -40,6 +40,7 @@ sys.path.insert(0, str(ROOT))
 from graphnav.estimators import make_online  # noqa: E402
 from graphnav.graph.imu_chain import ImuConfig  # noqa: E402
 from graphnav.graph.navigator import Navigator  # noqa: E402
+from graphnav.graph.smoother_config import SmootherConfig  # noqa: E402
 from graphnav.io import load_log  # noqa: E402
 from graphnav.log import ODOMETRY_FROM_ROT, NavLog, Record  # noqa: E402
 from graphnav.online.live_runner import LiveRunner  # noqa: E402
@@ -112,7 +113,7 @@ def offline(records: list[Record], solver: str, live_order: bool = False,
             **kw: Any) -> tuple[list[Estimate], dict[str, Any]]:
     meta = {"odometry": ODOMETRY_FROM_ROT} if any(r.kind == "odometry" for r in records) else {}
     log = NavLog.from_unsorted(records, meta=meta)  # a log is in time order; the live stream may step back
-    nav = Navigator.for_log(log, solver=solver, **kw)
+    nav = Navigator.for_log(log, SmootherConfig.from_options({"solver": solver, **kw}))
     out: list[Estimate] = []
     for r in records if live_order else log.records:
         e = nav.add(r)

@@ -16,11 +16,18 @@ The warm-up ends at the first record for which (stream time ``t``, the records' 
   whatever else the stream carries); or
 * ``--warmup S`` given: ``t >= t_fix + S`` (``t_fix`` the first GNSS fix; ``S = 0``: at the first fix); or
 * by default: a fix has come, every kind seen so far has been seen at least twice (so that its rate is
-  known), and ``t >= t_fix + WARMUP_PERIODS x`` the longest mean interval of those kinds: the slowest
-  instrument has had two of its periods to show itself after the first fix (a 1 Hz NMEA 0183 stream:
-  ~2 s; a kind slower than every kind seen and absent for that long is not waited for); or
+  known), and ``t >= t_fix + WARMUP_PERIODS x`` the longest mean interval of those kinds, at least
+  :data:`MIN_PERIOD_S` (1 s, the standards' slowest navigation rate): the slowest instrument has had two
+  of its periods to show itself after the first fix (a 1 Hz NMEA 0183 stream or a 10 Hz NMEA 2000 bus:
+  2 s; a kind slower than every kind seen and absent for that long is not waited for); or
 * a bound: ``MAX_WARMUP_S`` of stream time since the first record (``S`` if longer), or
   ``MAX_WARMUP_RECORDS`` records held (memory).
+
+The vessel graph's position random walk (``imu.vessel_position_walk``: how far the fixes wander from
+the integrated velocity) is, offline, estimated from the whole log; live it starts from the warm-up's
+records or the documented default (``integration_sigma``) and is estimated again from the stream's fixes
+and GNSS velocities as they come (:class:`WalkTracker`; the vessel factors made from then on take it),
+unless ``-O imu.vessel_position_walk=W`` gives it. So the live graph converges to the offline run's.
 
 Nothing is lost: every held record goes to the navigator, and the estimates it makes from them are
 published at once (in time order, before the one of the record that ended the warm-up; their latency
@@ -33,6 +40,7 @@ in :meth:`WarmUp.motion_choice` (``motion_changed_by``); the graph is not rebuil
 from __future__ import annotations
 
 import logging
+import math
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -48,6 +56,10 @@ log_ = logging.getLogger("graphnav.live")
 
 #: the default warm-up: this many of the slowest kind's record intervals after the first fix
 WARMUP_PERIODS = 2.0
+#: [s] ... the slowest kind's interval taken as at least this: the standards' slowest navigation rate (NMEA 0183
+#: instruments send once a second; NMEA 2000 GNSS position data 129029 and speed through water 128259 are 1 Hz),
+#: so a bus of fast PGNs still waits for a 1 Hz kind
+MIN_PERIOD_S = 1.0
 #: [s] of stream time since the first record: the warm-up ends by then whatever has come (a stream without a fix)
 MAX_WARMUP_S = 30.0
 #: records held at most (a memory bound: 30 s of a 10 Hz bus with ~30 kinds)
@@ -60,12 +72,14 @@ WALK_WINDOW_S = 30 * max(LAGS)
 
 class WalkTracker:
     """The vessel graph's position random walk, estimated live (:func:`position_walk` on the fixes and
-    GNSS velocity records of the last :data:`WALK_WINDOW_S`, every :data:`WALK_EVERY_S` of stream time):
-    ``add(rec)`` returns a new estimate when one was made."""
+    GNSS velocity records of the last :data:`WALK_WINDOW_S`; tried each time the stream's stretch has
+    doubled, then every :data:`WALK_EVERY_S` of stream time; :func:`position_walk` gives nothing before
+    it has enough pairs of fixes at three lags): ``add(rec)`` returns a new estimate when one was made."""
 
     def __init__(self) -> None:
         self.recs: deque[Record] = deque()
-        self.next_t: float | None = None
+        self.t_first: float | None = None
+        self.next_t = -math.inf
         self.updates = 0
         self.last: dict[str, Any] | None = None
 
@@ -76,11 +90,11 @@ class WalkTracker:
         t = float(rec.t)
         while self.recs and self.recs[0].t < t - WALK_WINDOW_S:
             self.recs.popleft()
-        if self.next_t is None:
-            self.next_t = t + WALK_EVERY_S
+        if self.t_first is None:
+            self.t_first = t
         if t < self.next_t:
             return None
-        self.next_t = t + WALK_EVERY_S
+        self.next_t = t + min(WALK_EVERY_S, max(t - self.t_first, 1.0))  # as the stretch doubles, then every 60 s
         walk = position_walk(NavLog.from_unsorted(self.recs))
         if walk is None:
             return None
@@ -144,7 +158,7 @@ class WarmUpRule:
             else:
                 iv = [self.interval(kk) for kk in self.count]
                 if all(i is not None for i in iv):
-                    slowest = max([i for i in iv if i is not None], default=0.0)
+                    slowest = max([MIN_PERIOD_S, *(i for i in iv if i is not None)])
                     if since_fix >= WARMUP_PERIODS * slowest:
                         return (f"every kind seen twice and {WARMUP_PERIODS:g} x the slowest kind's interval "
                                 f"({slowest:.3g} s) after the first fix")
@@ -243,11 +257,12 @@ class WarmUp:
         kinds = set(log.counts())
         rot = log.meta.get("odometry") == ODOMETRY_FROM_ROT
         self.motion = auto_motion(kinds, log.meta)
-        args = log_inputs(log, None, {**self.options, "solver": self.solver})
+        cfg = SmootherConfig.from_options({**self.options, "solver": self.solver})  # as the offline estimator's
+        args = log_inputs(log, cfg, {})
         for k in ("scans", "imu", "odometry"):  # not seen yet: unknown (may come later), as without a warm-up
             if not args[k]:
                 args[k] = None
-        self.nav = Navigator(history=False, **args)
+        self.nav = Navigator(cfg, history=False, **args)
         imu_model = args.get("imu_model") or {}
         self.walk = imu_model.get("position_walk")
         self.reason = motion_reason(self.motion, kinds, rot)
@@ -258,8 +273,7 @@ class WarmUp:
         t0, t1 = self.rule.t_first, self.rule.t_now
         self.warmup_s = (t1 - t0) if t0 is not None and t1 is not None else None
         self._kinds = kinds
-        if self.motion == "vessel" and (given_option(SmootherConfig, self.options, "imu", None) or {}).get(
-                "vessel_position_walk") is None:
+        if self.motion == "vessel" and cfg.imu.get("vessel_position_walk") is None:
             self.walker = WalkTracker()
             for r in self.held:
                 self.walker.add(r)

@@ -12,10 +12,11 @@ import pytest
 
 from graphnav.geodesy import LocalFrame
 from graphnav.graph.navigator import Navigator
+from graphnav.graph.smoother_config import SmootherConfig
 from graphnav.io.nmea_out import gga, hdt, rmc, rot, vtg, zda
 from graphnav.log import NavLog, Record
 from graphnav.online.live_runner import LiveRunner
-from graphnav.online.warmup import WARMUP_PERIODS, WarmUp, WarmUpRule, live_estimator
+from graphnav.online.warmup import MIN_PERIOD_S, WARMUP_PERIODS, WarmUp, WarmUpRule, live_estimator
 from graphnav.result import Estimate
 
 T0 = 1.7e9  # POSIX seconds: dated sentences
@@ -75,7 +76,7 @@ class Taped(LiveRunner):
 
 def offline(records: list[Record], solver: str = "isam2", **kw) -> tuple[Navigator, list[Estimate]]:
     """The offline navigator (``Navigator.for_log``, motion auto) on the same records, record by record."""
-    nav = Navigator.for_log(NavLog(records), solver=solver, **kw)
+    nav = Navigator.for_log(NavLog(records), SmootherConfig.from_options({"solver": solver, **kw}))
     out = []
     for r in records:
         e = nav.add(r)
@@ -116,9 +117,10 @@ def test_an_explicit_motion_skips_the_warm_up():
     r = Taped(make())
     summary = r.play(vessel_sentences())
     assert "warmup" not in summary and not r.estimator.builder.nav
-    vessel = Taped(live_estimator("isam2", {"motion": "vessel"})())
+    vessel = Taped(live_estimator("isam2", {"motion": "vessel", "imu": {"vessel_position_walk": 0.2}})())
     vessel.play(vessel_sentences())
     assert isinstance(vessel.estimator, Navigator) and vessel.estimator.builder.nav
+    assert vessel.estimator.builder.motion.imu.vessel_walk == pytest.approx(0.2)  # the config's imu section
 
 
 def test_the_ekf_has_no_warm_up():
@@ -181,6 +183,9 @@ def test_warm_up_rule_lengths():
                 ended = rec.t
     # the slowest kind: the fixes, every 1 s from t = 0.3: the warm-up ends 2 s after the first fix
     assert ended == pytest.approx(0.3 + WARMUP_PERIODS * 1.0)
+    fast = WarmUpRule()  # a 10 Hz bus: its slowest kind's interval taken as 1 s (MIN_PERIOD_S)
+    ended = next(k * 0.1 for k in range(100) if fast.add(Gnss(k * 0.1, 0.0, 0.0, 1.0)) is not None)
+    assert ended == pytest.approx(WARMUP_PERIODS * MIN_PERIOD_S)
     given = WarmUpRule(0.0)
     assert given.add(Heading(0.0, 0.0, 0.02)) is None and given.add(Gnss(0.5, 0.0, 0.0, 1.0)) is not None
 
@@ -194,3 +199,37 @@ def test_a_stream_that_ends_inside_the_warm_up_loses_nothing():
     _, off = offline(r.taped)
     assert summary["records"] == len(r.taped) == r.estimator.nav.n_records
     assert summary["estimates"] == len(off) > 0
+
+
+def test_the_vessel_position_walk_is_estimated_from_the_stream():
+    """A receiver whose fixes wander 0.4 m/sqrt(s) from its exact SOG/COG (as tests/graph/test_position_walk.py):
+    live, the walk starts at the default and is estimated from the stream; by the end it is the one the
+    offline run estimates from the whole log (within 15 %: the last estimate misses the final minute)."""
+    from graphnav.graph.imu_chain import ImuConfig
+    from graphnav.graph.position_walk import position_walk
+    from graphnav.log import Gnss, GnssVelocity, Heading
+
+    rng = np.random.default_rng(1)
+    n = 400
+    t = np.arange(n, dtype=float)
+    yaw = 0.6 * np.sin(2 * math.pi * t / 300.0)
+    vx, vy = 2.0 * np.cos(yaw), 2.0 * np.sin(yaw)
+    x, y = np.cumsum(vx), np.cumsum(vy)
+    wander = np.cumsum(rng.normal(0.0, 0.4, size=(n, 2)), axis=0)
+    recs: list[Record] = []
+    for k in range(n):
+        recs += [Gnss(t[k], x[k] + wander[k, 0] + rng.normal(0, 1.0), y[k] + wander[k, 1] + rng.normal(0, 1.0), 1.0),
+                 GnssVelocity(t[k], vx[k], vy[k], 0.05), Heading(t[k], float(yaw[k]), 0.02)]
+    w = WarmUp("isam2", {})
+    for rec in recs:
+        w.add(rec)
+    w.flush()
+    imu = w.nav.builder.motion.imu
+    assert w.motion == "vessel" and w.walker is not None and w.walker.updates >= 3
+    whole = position_walk(NavLog(recs))["walk"]
+    assert imu.vessel_walk == pytest.approx(whole, rel=0.15) and imu.vessel_walk > 10 * ImuConfig().integration_sigma
+    assert w.motion_choice()["position_walk_live"]["walk"] == imu.vessel_walk
+    given = WarmUp("isam2", {"imu": {"vessel_position_walk": 0.1}})  # given: kept
+    for rec in recs[:300]:
+        given.add(rec)
+    assert given.walker is None and given.nav.builder.motion.imu.vessel_walk == pytest.approx(0.1)
