@@ -75,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
     options = options_for(args, args.estimator)
     make = live_estimator(args.estimator, options, args.warmup)
     estimator = make()
+    if args.warmup is not None and not hasattr(estimator, "rule"):
+        log_.warning("--warmup is ignored: the warm-up chooses the motion of fixed-lag/isam2 with motion auto")
     scans = load_log(args.scans_from) if args.scans_from else None
     runner = LiveRunner(args.nmea or [], estimator, n2k_sources=args.n2k, signalk_sources=args.signalk,
                         publish_signalk=args.publish_signalk, drop=drop, publish=args.publish, out_dir=args.out,
