@@ -360,16 +360,6 @@ class Navigator(Coasting):
                 "step_ms_median": float(np.median(s)) if s.size else None,
                 "step_ms_p99": float(np.percentile(s, 99)) if s.size else None, **self._coast_info()}
 
-    def motion_choice(self) -> dict[str, Any]:
-        """The motion model in use and why (live mode's summary; with a warm-up,
-        :meth:`graphnav.online.warmup.WarmUp.motion_choice` says it instead)."""
-        m = self.cfg.motion
-        if m != "auto":
-            return {"motion": m, "motion_reason": f"given (motion={m})"}
-        return {"motion": "imu" if self.builder.nav else "odometry",
-                "motion_reason": "motion auto, decided when the navigator was made (no warm-up): "
-                + ("told of an IMU" if self.builder.nav else "no IMU known, the Pose2 graph")}
-
     def online(self) -> Trajectory | None:
         """The online estimates so far (``None`` for batch)."""
         if not self.solver.online:

@@ -291,9 +291,9 @@ class LiveRunner:
         if nm.decoder.frame is not None:
             out["origin"] = {"lat": nm.decoder.frame.lat0, "lon": nm.decoder.frame.lon0}
         out.update(sink)  # out, tum
-        choice = getattr(self.estimator, "motion_choice", None)  # live mode's warm-up (graphnav.online.warmup)
-        if callable(choice):
-            out.update(choice())
+        from .warmup import motion_of
+
+        out.update(motion_of(self.estimator))  # the motion model and why (graphnav.online.warmup)
         info = getattr(self.estimator, "info", None)
         if callable(info):
             out["estimator"] = info()

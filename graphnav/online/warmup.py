@@ -317,6 +317,20 @@ class WarmUp:
                          rec.kind, auto_motion(self._kinds, self.meta), self.motion)
 
 
+def motion_of(estimator: Any) -> dict[str, Any]:
+    """Live mode's summary: the motion model in use and why (``{}`` for an estimator without one)."""
+    if isinstance(estimator, WarmUp):
+        return estimator.motion_choice()
+    if not isinstance(estimator, Navigator):
+        return {}
+    m = estimator.cfg.motion
+    if m != "auto":
+        return {"motion": m, "motion_reason": f"given (motion={m})"}
+    return {"motion": "imu" if estimator.builder.nav else "odometry",
+            "motion_reason": "motion auto, decided when the navigator was made (no warm-up): "
+            + ("told of an IMU" if estimator.builder.nav else "no IMU known, the Pose2 graph")}
+
+
 def live_estimator(name: str, options: dict[str, Any], warmup: float | None = None) -> Callable[[], OnlineEstimator]:
     """The factory of live mode's estimator ``name``: the navigation graph (``fixed-lag``, ``isam2``) with
     ``motion`` auto (not given) goes through a :class:`WarmUp`; otherwise :func:`graphnav.estimators.make_online`."""
