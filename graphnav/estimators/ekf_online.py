@@ -31,9 +31,9 @@ class EkfOnline:
     """EKF behind ``add(record) -> Estimate | None``. ``emit``: ``"fix"`` (default) yields an
     estimate per GNSS fix, and per used record while no fix came for ``outage_s`` [s];
     ``"all"`` one per used record. The other options are :func:`run_ekf`'s (``motion`` is
-    ``"odometry"``, ``"imu"`` or ``"icp"``; there is no ``"auto"`` without the whole log; with
-    ``"imu"`` the IMU motion's options, :data:`graphnav.estimators.ekf.IMU_DEFAULTS`, the initial
-    velocity the first held GNSS velocity when ``v0`` is not given)."""
+    ``"odometry"``, ``"imu"``, ``"icp"`` or ``"vessel"``; there is no ``"auto"`` without the whole log; with
+    ``"imu"`` or ``"vessel"`` the IMU (vessel) motion's options, :data:`graphnav.estimators.ekf.IMU_DEFAULTS`,
+    the initial velocity the first held GNSS velocity when ``v0`` is not given)."""
 
     def __init__(self, *, motion: str = "odometry", speed: bool = False, emit: str = "fix", outage_s: float = 1.5,
                  init_wait: float = 2.0, **ekf_options: Any) -> None:
@@ -44,8 +44,8 @@ class EkfOnline:
         imu = {k: ekf_options.pop(k) for k in list(ekf_options) if k in IMU_DEFAULTS}
         self.options: dict[str, Any] = {"keep": 10_000, **ekf_options}
         if imu:
-            if motion != "imu":
-                raise ValueError(f"ekf option(s) {sorted(imu)} need motion='imu'")
+            if motion not in ("imu", "vessel"):
+                raise ValueError(f"ekf option(s) {sorted(imu)} need motion='imu' or 'vessel'")
             self.options["imu"] = imu
         EkfStepper(np.zeros(3), np.eye(3), motion=motion, **self.options)  # validate the options now
         self.stepper: EkfStepper | None = None
@@ -84,7 +84,7 @@ class EkfOnline:
     def _start(self) -> None:
         x0, P0, self.anchor = initial_state(self.pending, self.speed)
         options = self.options
-        if self.motion == "imu" and "v0" not in options.get("imu", {}):
+        if self.motion in ("imu", "vessel") and "v0" not in options.get("imu", {}):
             gv = next((r for r in self.pending if isinstance(r, GnssVelocity)), None)
             if gv is not None and gv.t - self.pending[0].t <= 1.0:  # as run_ekf's rule
                 sv = gv.sigma if math.isfinite(gv.sigma) else IMU_DEFAULTS["sigma_gnss_velocity"]
@@ -126,7 +126,7 @@ class EkfOnline:
         assert st is not None and st.t is not None
         f = st.f
         self.last_emit_t = st.t
-        if self.motion == "imu":  # velocity over ground from the state, rate of turn from the IMU less its bias
+        if self.motion in ("imu", "vessel"):  # velocity over ground from the state, rate of turn from the IMU
             vx, vy = float(f.x[3]), float(f.x[4])
             m = st.imu_u
             ib = getattr(f, "ib", None)
@@ -153,7 +153,7 @@ class EkfOnline:
 class Ekf(BatchEstimator):
     """The EKF (:func:`run_ekf`); live: :class:`graphnav.estimators.ekf_online.EkfOnline`."""
 
-    description = ("EKF: odometry, IMU (INS/GNSS, bias + current states) or ICP motion; "
+    description = ("EKF: odometry, IMU (INS/GNSS, bias + current states), ICP or vessel (constant velocity) motion; "
                    "gated GNSS (+velocity), compass, water speed")
     Config = EkfConfig
     live = True
