@@ -14,6 +14,7 @@ from ..errors import GraphnavError
 from ..estimators import online_names
 from ..io import load_log
 from ..io.outputs import ensure_dir, write_text_atomic
+from ..log import ODOMETRY_FROM_ROT
 from ..online.live_runner import LiveRunner
 from ..online.warmup import MAX_WARMUP_S, live_estimator
 from ._common import add_drop_flag, add_json_flag, dropped_kinds, emit, jsonable, options_for
@@ -73,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         ensure_dir(args.out)
     options = options_for(args, args.estimator)
+    if args.estimator == "ekf":  # a marine stream's odometry is a rate of turn with the SOG (io.nmea_motion, n2k)
+        options.setdefault("meta", {"odometry": ODOMETRY_FROM_ROT})
     make = live_estimator(args.estimator, options, args.warmup)
     estimator = make()
     if args.warmup is not None and not hasattr(estimator, "rule"):

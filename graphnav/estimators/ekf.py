@@ -287,23 +287,24 @@ class EkfStepper:
         return self.last_inc, np.diag(np.square(CV_BRIDGE_SIGMA))
 
 
-def auto_motion(log: NavLog) -> str:
+def auto_motion(log: NavLog, least: int = 2) -> str:
     """``motion="auto"``: the graph's choice for a vessel's instruments (``"vessel"``,
     :func:`graphnav.graph.smoother_config.auto_motion`: a compass with GNSS velocity or water speed, no
     IMU, odometer or LiDAR; a rate of turn with the SOG is no odometer); else odometry if the log has
     it, else the IMU, else ICP on the scans, else (GNSS alone) the vessel model. A rate of turn with the
     SOG gives way to an IMU: as a unicycle it moves a boat along its bow at its speed over ground (Solent
-    s1-s3: 9.07 / 13.93 / 14.23 m, NEES 308-814; with the IMU 1.56 / 4.04 / 2.25 m)."""
+    s1-s3: 9.07 / 13.93 / 14.23 m, NEES 308-814; with the IMU 1.56 / 4.04 / 2.25 m). ``least``: records of a
+    kind that make it count."""
     from ..graph.smoother_config import auto_motion as graph_motion
 
     if graph_motion(log.counts(), log.meta) == "vessel":
         return "vessel"
     rot = isinstance(log.meta, dict) and log.meta.get("odometry") == ODOMETRY_FROM_ROT
-    if len(log.of("odometry")) >= 2 and not (rot and len(log.of("imu")) >= 2):
+    if len(log.of("odometry")) >= least and not (rot and len(log.of("imu")) >= least):
         return "odometry"
-    if len(log.of("imu")) >= 2:
+    if len(log.of("imu")) >= least:
         return "imu"
-    return "icp" if len(log.of("scan")) >= 2 or not log.of("gnss") else "vessel"
+    return "icp" if len(log.of("scan")) >= least or not log.of("gnss") else "vessel"
 
 
 def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:

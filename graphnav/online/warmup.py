@@ -40,14 +40,12 @@ in :meth:`WarmUp.motion_choice` (``motion_changed_by``); the graph is not rebuil
 from __future__ import annotations
 
 import logging
-import math
-from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 from ..config import given_option
 from ..graph.navigator import Navigator, log_inputs
-from ..graph.position_walk import LAGS, position_walk
+from ..graph.position_walk import WALK_EVERY_S, WalkTracker
 from ..graph.smoother_config import VESSEL_KINDS, SmootherConfig, auto_motion
 from ..log import ODOMETRY_FROM_ROT, NavLog, Record
 from ..result import Estimate, OnlineEstimator
@@ -64,45 +62,6 @@ MIN_PERIOD_S = 1.0
 MAX_WARMUP_S = 30.0
 #: records held at most (a memory bound: 30 s of a 10 Hz bus with ~30 kinds)
 MAX_WARMUP_RECORDS = 10_000
-#: [s] the vessel graph's position walk is estimated again this often (the longest lag of its fit)
-WALK_EVERY_S = max(LAGS)
-#: [s] ... from the fixes and GNSS velocities of this last stretch of stream (30 of its longest lags; memory bound)
-WALK_WINDOW_S = 30 * max(LAGS)
-
-
-class WalkTracker:
-    """The vessel graph's position random walk, estimated live (:func:`position_walk` on the fixes and
-    GNSS velocity records of the last :data:`WALK_WINDOW_S`; tried each time the stream's stretch has
-    doubled, then every :data:`WALK_EVERY_S` of stream time; :func:`position_walk` gives nothing before
-    it has enough pairs of fixes at three lags): ``add(rec)`` returns a new estimate when one was made."""
-
-    def __init__(self) -> None:
-        self.recs: deque[Record] = deque()
-        self.t_first: float | None = None
-        self.next_t = -math.inf
-        self.updates = 0
-        self.last: dict[str, Any] | None = None
-
-    def add(self, rec: Record) -> dict[str, Any] | None:
-        if rec.kind not in ("gnss", "gnss_velocity"):
-            return None
-        self.recs.append(rec)
-        t = float(rec.t)
-        while self.recs and self.recs[0].t < t - WALK_WINDOW_S:
-            self.recs.popleft()
-        if self.t_first is None:
-            self.t_first = t
-        if t < self.next_t:
-            return None
-        self.next_t = t + min(WALK_EVERY_S, max(t - self.t_first, 1.0))  # as the stretch doubles, then every 60 s
-        walk = position_walk(NavLog.from_unsorted(self.recs))
-        if walk is None:
-            return None
-        self.updates += 1
-        self.last = {"walk": walk["walk"], "t": t, "window_s": t - float(self.recs[0].t), "updates": self.updates}
-        return walk
-
-
 def motion_reason(motion: str, kinds: set[str], rot_odometry: bool) -> str:
     """Why :func:`auto_motion` picked ``motion`` from the record ``kinds`` (words for the log and summary)."""
     if motion == "imu":
