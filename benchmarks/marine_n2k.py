@@ -5,8 +5,8 @@ GNSS receivers of the Furuno logs alone and fused.
 
 For every NMEA 2000 log of ``../shared/data/marine`` (``canboat/*.raw.gz``, ``signalk/aava-n2k.data.gz``):
 the record kinds read, and ``graphnav run LOG -e isam2`` (``graphnav.estimators.run``) scored by
-the median distance of the smoothed track to the log's own GNSS fixes (interpolated at each fix
-time; every source's fixes). For a log with two GNSS sources, also:
+the median distance of the smoothed track (``-e E``: another estimator's) to the log's own GNSS fixes
+(interpolated at each fix time; every source's fixes). For a log with two GNSS sources, also:
 
 * the receivers' disagreement: median distance of one's fixes to the other's (interpolated);
 * each receiver alone (``--drop gnss@OTHER``): the track's median distance to its own fixes;
@@ -62,8 +62,11 @@ def rpe_1s(track: np.ndarray, fixes: np.ndarray, delta: float = 1.0) -> float:
     return float(np.median(np.hypot(*(dp_trk - dp_fix).T)))
 
 
+ESTIMATOR = "isam2"  # -e
+
+
 def _track(log) -> np.ndarray:
-    tr = estimators.run("isam2", log).trajectory
+    tr = estimators.run(ESTIMATOR, log).trajectory
     return np.c_[tr.t, tr.poses[:, :2]]
 
 
@@ -74,7 +77,7 @@ def study(path: Path) -> dict:
         out["note"] = "no position PGN in this log: nothing to score against"
         return out
     fused = _track(log)
-    out["isam2_median_to_fixes_m"] = median_distance(fused, _fixes(log))
+    out[f"{ESTIMATOR}_median_to_fixes_m"] = median_distance(fused, _fixes(log))
     srcs = sorted({r.source for r in log.of("gnss")})
     if len(srcs) == 2:
         a, b = srcs
@@ -96,7 +99,10 @@ def main() -> None:
                                 / "marine") if p.is_dir()), ROOT.parent / "shared" / "data" / "marine")
     ap.add_argument("--data", default=str(default))
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("-e", dest="estimator", default="isam2", help="the estimator (default isam2)")
     args = ap.parse_args()
+    global ESTIMATOR
+    ESTIMATOR = args.estimator
     data = Path(args.data)
     logs = sorted(data.glob("canboat/*.raw.gz")) + sorted(data.glob("signalk/*.data.gz"))
     if not logs:

@@ -1,10 +1,11 @@
 """A real boat's log scored against its own fixes: the fixes become the reference, a degraded copy of
 them (2.5 m at 1 Hz, a 60 s outage, a 10 s 20 m jump: ``graphnav.sim.degrade``) replaces them, and the
 boat's own heading, SOG/COG and water speed stay. Prints, per seed, the degraded fixes linearly
-interpolated against the reference (what a user has without an estimator) and isam2 with each set of
-options: smoothed ATE (and its ratio to the fixes'), online ATE, NEES, the fixes rejected online and
-switched off at the end. The reference is a receiver's fixes: the figures are upper bounds, and a second NEES
-adds the reference's own rounding (:func:`rounding_sigma`) to the covariance (a lower bound on its noise).
+interpolated against the reference (what a user has without an estimator) and each estimator (``-e``,
+default isam2; the graph's with each set of options): smoothed ATE (and its ratio to the fixes'), online
+ATE, NEES, the fixes rejected online and switched off at the end. The reference is a receiver's fixes:
+the figures are upper bounds, and a second NEES adds the reference's own rounding (:func:`rounding_sigma`)
+to the covariance (a lower bound on its noise).
 
     python benchmarks/real_boat_degraded.py ../shared/data/marine/anemomind/psaros33-20140627-0006.nmea.gz \\
         --start 0.3 --duration 900 -O '{}' -O '{"motion": "odometry"}'
@@ -65,7 +66,10 @@ def main() -> None:
     ap.add_argument("--start", type=float, default=0.3, help="where the slice starts (fraction of the fixes)")
     ap.add_argument("--duration", type=float, default=900.0, help="[s]")
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("-O", dest="options", action="append", default=None, help="isam2 options as JSON (repeatable)")
+    ap.add_argument("-O", dest="options", action="append", default=None,
+                    help="options of the graph estimators as JSON (repeatable)")
+    ap.add_argument("-e", dest="estimators", default="isam2",
+                    help="estimators, comma-separated (the -O sets apply to isam2, batch and fixed-lag)")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--lenient", action="store_true", help="skip bad sentences of the log")
     a = ap.parse_args()
@@ -83,13 +87,17 @@ def main() -> None:
         interp = np.c_[np.interp(ref.t[m], ft, fxy[:, 0]), np.interp(ref.t[m], ft, fxy[:, 1])]
         row = {"seed": seed, "fixes_interpolated_m": float(np.sqrt(np.mean(np.sum((interp - ref.poses[m, :2]) ** 2,
                                                                                  axis=1)))), "runs": []}
-        for opts in [json.loads(o) for o in (a.options or ["{}"])]:
-            r = estimators.run("isam2", dl, **opts)
+        sets = [json.loads(o) for o in (a.options or ["{}"])]
+        for name, opts in [(e, o) for e in a.estimators.split(",")
+                           for o in (sets if e in ("isam2", "batch", "fixed-lag") else [{}])]:
+            r = estimators.run(name, dl, **opts)
             err = r.trajectory.poses[:, :2] - ref.interpolate(r.trajectory.t)[:, :2]
             cov = r.trajectory.cov[:, :2, :2]
             nees = float(np.einsum("ni,nij,nj->n", err, np.linalg.inv(cov), err).mean())
             nees_ref = float(np.einsum("ni,nij,nj->n", err, np.linalg.inv(cov + ref_cov), err).mean())
-            row["runs"].append({"options": opts, "state": r.info.get("state"), "ate_m": ate(r.trajectory, ref)["rmse"],
+            state = r.info.get("state", r.info.get("motion"))
+            row["runs"].append({"estimator": name, "options": opts, "state": state,
+                                "ate_m": ate(r.trajectory, ref)["rmse"],
                                 "online_ate_m": ate(r.online, ref)["rmse"], "nees_mean": nees,
                                 "nees_with_reference_rounding": nees_ref,
                                 "gnss_rejected": r.info.get("gnss_rejected"),
@@ -102,7 +110,7 @@ def main() -> None:
     for row in rows:
         parts = [f"seed {row['seed']}: fixes interpolated {row['fixes_interpolated_m']:.2f} m"]
         for run in row["runs"]:
-            parts.append(f"{run['options'] or 'defaults'} ({run['state']}): {run['ate_m']:.2f} m "
+            parts.append(f"{run['estimator']} {run['options'] or ''} ({run['state']}): {run['ate_m']:.2f} m "
                          f"({run['ate_m'] / row['fixes_interpolated_m']:.2f}x), online {run['online_ate_m']:.2f}, "
                          f"NEES {run['nees_mean']:.2f} ({run['nees_with_reference_rounding']:.2f} with the "
                          f"reference's rounding), rejected {run['gnss_rejected']}")

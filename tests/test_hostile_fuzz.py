@@ -224,6 +224,7 @@ def _extra(files: dict[str, Path]) -> dict[tuple[str, str], tuple[list[str], boo
         ("compare", "--max-speed"): (["compare", log, "--estimators", "ekf", "--max-speed", "VALUE"], True),
         ("replay", "--max-speed"): (["replay", log, "--nmea-out", "udp://127.0.0.1:9", "--speed", "0",
                                      "--max-speed", "VALUE"], True),
+        ("live", "--warmup"): (["live", "--nmea", "udp://127.0.0.1:0", "--duration", "0.2", "--warmup", "VALUE"], True),
     }
 
 

@@ -11,10 +11,12 @@ import json
 import logging
 
 from ..errors import GraphnavError
-from ..estimators import make_online, online_names
+from ..estimators import online_names
 from ..io import load_log
 from ..io.outputs import ensure_dir, write_text_atomic
+from ..log import ODOMETRY_FROM_ROT
 from ..online.live_runner import LiveRunner
+from ..online.warmup import MAX_WARMUP_S, live_estimator
 from ._common import add_drop_flag, add_json_flag, dropped_kinds, emit, jsonable, options_for
 from .replay import parse_origin
 
@@ -50,6 +52,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="accept sentences without a checksum (a wrong checksum is always rejected)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument("--idle-exit", type=float, metavar="S", help="stop when no input came for S seconds")
+    p.add_argument("--warmup", type=float, metavar="S",
+                   help="fixed-lag/isam2 with motion auto: hold the first records until S seconds (stream time) after "
+                        "the first fix, then choose the motion model from them as an offline run would (default: "
+                        "every kind seen twice and two of the slowest kind's intervals after the first fix; "
+                        "docs/live.md); -O motion=... skips the warm-up")
     add_drop_flag(p)
     add_json_flag(p)
     p.set_defaults(func=run)
@@ -60,20 +67,26 @@ def run(args: argparse.Namespace) -> int:
 
     for flag, value in (("--duration", args.duration), ("--idle-exit", args.idle_exit)):
         number(flag, value, Range(lo=0.0, hi=1e9, lo_open=True, optional=True))
+    number("--warmup", args.warmup, Range(lo=0.0, hi=MAX_WARMUP_S, optional=True))
     if not (args.nmea or args.n2k or args.signalk):
         raise GraphnavError("give at least one source: --nmea, --n2k or --signalk", where="--nmea")
     drop = dropped_kinds(args)
     if args.out:
         ensure_dir(args.out)
     options = options_for(args, args.estimator)
-    estimator = make_online(args.estimator, **options)
+    if args.estimator == "ekf":  # a marine stream's odometry is a rate of turn with the SOG (io.nmea_motion, n2k)
+        options.setdefault("meta", {"odometry": ODOMETRY_FROM_ROT})
+    make = live_estimator(args.estimator, options, args.warmup)
+    estimator = make()
+    if args.warmup is not None and not hasattr(estimator, "rule"):
+        log_.warning("--warmup is ignored: the warm-up chooses the motion of fixed-lag/isam2 with motion auto")
     scans = load_log(args.scans_from) if args.scans_from else None
     runner = LiveRunner(args.nmea or [], estimator, n2k_sources=args.n2k, signalk_sources=args.signalk,
                         publish_signalk=args.publish_signalk, drop=drop, publish=args.publish, out_dir=args.out,
                         scans_from=scans,
                         origin=parse_origin(args.origin), require_checksum=not args.no_checksum_required,
                         duration=args.duration, idle_exit=args.idle_exit, scan_sources=args.scans,
-                        restart=lambda: make_online(args.estimator, **options))
+                        restart=make)
     summary = runner.run()
     if args.out and runner.sink.writer is not None:  # beside this run's own TUM file, written atomically
         write_text_atomic(runner.sink.writer.path.with_suffix(".summary.json"), json.dumps(jsonable(summary), indent=2))

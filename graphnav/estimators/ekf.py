@@ -96,7 +96,34 @@ IMU_DEFAULTS: dict[str, Any] = {
     "gyro_bias_rw": math.radians(1e-4), "bias": True, "current": False, "sigma_bias_acc": 0.01,
     "sigma_bias_gyro_deg": 0.1, "sigma_current0": 0.5, "q_current": 0.005, "v0": (0.0, 0.0, 2.0),
     "sigma_gnss_velocity": 0.1, "sigma_water_speed": 0.1, "use_velocity": True, "use_odometry": True,
+    # motion="vessel" (no IMU): None takes the graph's vessel model (graphnav.graph.imu_chain.ImuConfig)
+    "vessel_accel": None, "vessel_yaw_rate_deg": None, "vessel_steerage_speed": None, "vessel_position_walk": None,
+    # the water-speed record's sideways sigma hypot(leeway, leeway_rel |v|); None: the graph's (WaterConfig)
+    "water_leeway": None, "water_leeway_rel": None,
 }
+VESSEL_KEYS = ("vessel_accel", "vessel_yaw_rate_deg", "vessel_steerage_speed", "vessel_position_walk")
+
+
+def _leeway(given: dict[str, Any]) -> tuple[float, float]:
+    """``(leeway [m/s], leeway_rel)`` of the water-speed update: ``given`` where not None, else the
+    graph's (:class:`graphnav.graph.smoother_config.WaterConfig`)."""
+    from ..graph.smoother_config import WaterConfig
+
+    c = WaterConfig()
+    lee, rel = given.get("water_leeway"), given.get("water_leeway_rel")
+    return (float(c.leeway if lee is None else lee), float(c.leeway_rel if rel is None else rel))
+
+
+def vessel_model(given: dict[str, Any]) -> dict[str, float]:
+    """The vessel motion's densities: ``given`` where not None, else the graph's vessel model
+    (:class:`graphnav.graph.imu_chain.ImuConfig`; the position walk its ``integration_sigma`` floor), so
+    the filter and the graph move a boat with the same noise."""
+    from ..graph.imu_chain import ImuConfig
+
+    c = ImuConfig()
+    out = {k: given.get(k) if given.get(k) is not None else getattr(c, k) for k in VESSEL_KEYS}
+    out["vessel_position_walk"] = max(float(out["vessel_position_walk"] or 0.0), c.integration_sigma)
+    return out
 
 MatchFn = Callable[..., Any]  # graphnav.scan.weighted_icp.match_scans(scan, prev, init=...) -> MatchResult
 
@@ -117,8 +144,8 @@ class EkfStepper:
                  sigma_w: float = math.radians(0.5), sigma_acc: float = 0.5, use_gnss: bool = True,
                  use_heading: bool = True, match: MatchFn | None = None,
                  keep: int | None = None, imu: dict[str, Any] | None = None, **gating: Any) -> None:
-        if motion not in ("odometry", "icp", "imu"):
-            raise ValueError(f"motion must be 'odometry', 'icp' or 'imu', not {motion!r}")
+        if motion not in ("odometry", "icp", "imu", "vessel"):
+            raise ValueError(f"motion must be 'odometry', 'icp', 'imu' or 'vessel', not {motion!r}")
         if motion == "icp" and match is None:
             if not icp_available():
                 raise ValueError("ICP motion needs graphnav.scan.weighted_icp (not installed in this build)")
@@ -130,8 +157,10 @@ class EkfStepper:
         if unknown:
             raise ValueError(f"unknown ekf option(s): {sorted(unknown)}")
         self.imu_opts = io = {**IMU_DEFAULTS, **(imu or {})}
-        if motion == "imu":
-            bias, cur = bool(io["bias"]), bool(io["current"])
+        self.vessel = vessel_model(io) if motion == "vessel" else None
+        self.leeway = _leeway(io)
+        if motion in ("imu", "vessel"):
+            bias, cur = bool(io["bias"]) and motion == "imu", bool(io["current"])
             vx, vy, sv = io["v0"]
             x = [*np.asarray(x0, float)[:3], vx, vy] + [0.0] * (3 * bias) + [0.0] * (2 * cur)
             d = [sv ** 2] * 2 + [io["sigma_bias_acc"] ** 2] * (2 * bias) \
@@ -147,7 +176,8 @@ class EkfStepper:
             self.f = PoseEkf(x0, P0, gate=gate, **gating)
         self.motion = motion
         self.kinds: tuple[type, ...] = {"odometry": (Gnss, Heading, Odometry), "icp": (Gnss, Heading, Scan),
-                                        "imu": (Gnss, Heading, Imu, GnssVelocity, WaterSpeed, Odometry)}[motion]
+                                        "imu": (Gnss, Heading, Imu, GnssVelocity, WaterSpeed, Odometry),
+                                        "vessel": (Gnss, Heading, GnssVelocity, WaterSpeed, Odometry)}[motion]
         self.sigma_v, self.sigma_w, self.sigma_acc = sigma_v, sigma_w, sigma_acc
         self.use_gnss, self.use_heading = use_gnss, use_heading
         self.match = match
@@ -190,11 +220,13 @@ class EkfStepper:
                 m = r if isinstance(r, Imu) else self.imu_u  # a record is the mean over its own interval
                 if m is not None:
                     f.predict_imu(m.ax, m.ay, m.wz, r.t - self.t)  # type: ignore[attr-defined]
+            elif self.vessel is not None:
+                self._predict_vessel(r.t - self.t)
             self.t = r.t
         io = self.imu_opts
         if isinstance(r, Imu):
             self.imu_u = r
-        elif isinstance(r, Odometry) and self.motion == "imu":
+        elif isinstance(r, Odometry) and self.motion in ("imu", "vessel"):
             if io["use_odometry"]:
                 f.update_sog(r.v, _sig(r.sigma_v, self.sigma_v), r.t)  # type: ignore[attr-defined]
         elif isinstance(r, Odometry):
@@ -208,9 +240,22 @@ class EkfStepper:
         elif isinstance(r, GnssVelocity) and io["use_velocity"]:
             f.update_velocity((r.vx, r.vy), _sig(r.sigma, io["sigma_gnss_velocity"]), r.t)  # type: ignore
         elif isinstance(r, WaterSpeed) and io["current"]:
-            f.update_water_speed(r.v, _sig(r.sigma_v, io["sigma_water_speed"]), r.t)  # type: ignore
+            lee = math.hypot(self.leeway[0], self.leeway[1] * abs(r.v))
+            f.update_water_speed(r.v, _sig(r.sigma_v, io["sigma_water_speed"]), r.t, leeway=lee)  # type: ignore
         self.step_ms.append((time.perf_counter() - t0) * 1e3)
         return True
+
+    def _predict_vessel(self, T: float) -> None:
+        """The vessel model over ``T`` (:meth:`InsEkf.predict_vessel`), its yaw-rate density the graph's:
+        x ``steerage / speed`` through the water below steerage speed, at most x10."""
+        vm, f = self.vessel, self.f
+        assert vm is not None and isinstance(f, InsEkf)
+        speed = f.speed_through_water()
+        steer = vm["vessel_steerage_speed"]
+        scale = min(steer / max(speed, 1e-3), 10.0) if speed < steer else 1.0
+        f.predict_vessel(T, accel_density=vm["vessel_accel"],
+                         yaw_density=scale * math.radians(vm["vessel_yaw_rate_deg"]),
+                         position_walk=vm["vessel_position_walk"])
 
     def _icp_increment(self, scan: Scan, prev: Scan) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Body-frame increment prev -> scan and its covariance (a failed match re-uses the last
@@ -229,11 +274,25 @@ class EkfStepper:
         return self.last_inc, np.diag(np.square(CV_BRIDGE_SIGMA))
 
 
-def auto_motion(log: NavLog) -> str:
-    """``motion="auto"``: odometry if the log has it, else the IMU, else ICP on the scans."""
-    if len(log.of("odometry")) >= 2:
+def auto_motion(log: NavLog, least: int = 2) -> str:
+    """``motion="auto"``: the graph's choice for a vessel's instruments (``"vessel"``,
+    :func:`graphnav.graph.smoother_config.auto_motion`: a compass with GNSS velocity or water speed, no
+    IMU, odometer or LiDAR; a rate of turn with the SOG is no odometer); else odometry if the log has
+    it, else the IMU, else ICP on the scans, else (GNSS alone) the vessel model. A rate of turn with the
+    SOG gives way to an IMU: as a unicycle it moves a boat along its bow at its speed over ground (Solent
+    s1-s3: 9.07 / 13.93 / 14.23 m, NEES 308-814; with the IMU 1.56 / 4.04 / 2.25 m). ``least``: records of a
+    kind that make it count."""
+    from ..graph.smoother_config import auto_motion as graph_motion
+    from ..log import ODOMETRY_FROM_ROT
+
+    if graph_motion(log.counts(), log.meta) == "vessel":
+        return "vessel"
+    rot = isinstance(log.meta, dict) and log.meta.get("odometry") == ODOMETRY_FROM_ROT
+    if len(log.of("odometry")) >= least and not (rot and len(log.of("imu")) >= least):
         return "odometry"
-    return "imu" if len(log.of("imu")) >= 2 else "icp"
+    if len(log.of("imu")) >= least:
+        return "imu"
+    return "icp" if len(log.of("scan")) >= least or not log.of("gnss") else "vessel"
 
 
 def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
@@ -249,7 +308,7 @@ def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {**IMU_DEFAULTS, "acc_density": m["acc_std"] / math.sqrt(m["hz"]),
                            "gyro_density": m["gyro_std"] / math.sqrt(m["hz"]),
                            "acc_bias_rw": m["acc_bias_rw"], "gyro_bias_rw": m["gyro_bias_rw"]}
-    out["bias"] = resolve_flag(given.pop("bias", "auto"), wants_bias(log)[0], "bias")
+    out["bias"] = resolve_flag(given.pop("bias", "auto"), wants_bias(log)[0], "bias") if log.of("imu") else False
     out["current"] = resolve_flag(given.pop("current", "auto"), bool(log.of("water_speed")), "current")
     v0 = log.meta.get("initial_velocity") if isinstance(log.meta, dict) else None
     gv = log.of("gnss_velocity")
@@ -258,7 +317,13 @@ def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
         out["v0"] = (float(v0[0]), float(v0[1]), 0.2)
     elif gv and t0 is not None and gv[0].t - t0 <= 1.0:
         out["v0"] = (gv[0].vx, gv[0].vy, 3.0 * _sig(gv[0].sigma, out["sigma_gnss_velocity"]))
-    out.update(given)
+    if not log.of("imu") and given.get("vessel_position_walk") is None:  # the vessel model: the log's walk
+        from ..graph.position_walk import position_walk
+
+        walk = position_walk(log)
+        if walk is not None:
+            out["vessel_position_walk"] = walk["walk"]
+    out.update({k: v for k, v in given.items() if v is not None or k not in IMU_DEFAULTS})
     return out
 
 
@@ -276,9 +341,9 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
     if motion == "auto":
         motion = auto_motion(log)
     imu_given = {k: gating.pop(k) for k in list(gating) if k in IMU_DEFAULTS or k == "bias" or k == "current"}
-    imu = imu_options(log, imu_given) if motion == "imu" else None
-    if imu_given and motion != "imu":
-        raise ValueError(f"ekf option(s) {sorted(imu_given)} need motion='imu'")
+    imu = imu_options(log, imu_given) if motion in ("imu", "vessel") else None
+    if imu_given and motion not in ("imu", "vessel"):
+        raise ValueError(f"ekf option(s) {sorted(imu_given)} need motion='imu' or 'vessel'")
     x0, P0, anchor = initial_state(log.records, speed)
     st = EkfStepper(x0, P0, motion=motion, gate=gate, sigma_v=sigma_v,
                     sigma_w=sigma_w, sigma_acc=sigma_acc, use_gnss=use_gnss, use_heading=use_heading,
@@ -303,8 +368,8 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
     if imu is not None:
         f = st.f
         info.update(bias_states=imu["bias"], current_states=imu["current"],
-                    process_noise={k: imu[k] for k in ("acc_density", "gyro_density", "acc_bias_rw",
-                                                        "gyro_bias_rw", "q_current")})
+                    process_noise=dict(st.vessel, q_current=imu["q_current"]) if st.vessel is not None else
+                    {k: imu[k] for k in ("acc_density", "gyro_density", "acc_bias_rw", "gyro_bias_rw", "q_current")})
         if imu["bias"]:
             info["bias_final"] = f.x[5:8].tolist()
         if imu["current"]:
@@ -317,9 +382,9 @@ def _unmet(log: NavLog) -> str | None:
     has_odo = len(log.of("odometry")) >= 2
     has_imu = len(log.of("imu")) >= 2
     has_scans = len(log.of("scan")) >= 2
-    if not has_odo and not has_imu and not (has_scans and icp_available()):
+    if not has_odo and not has_imu and not (has_scans and icp_available()) and not log.of("gnss"):
         extra = " (scans need graphnav.scan.weighted_icp, not installed)" if has_scans else ""
-        return "needs odometry or imu records" + extra
+        return "needs odometry, imu, LiDAR or GNSS records" + extra
     return None
 
 
@@ -329,12 +394,12 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
     motion = options.get("motion", "auto")
     if motion == "auto":
         motion = auto_motion(log)
-    kinds = {"pose_prior", {"odometry": "odometry", "imu": "imu", "icp": "scan"}[motion]}
+    kinds = {"pose_prior", {"odometry": "odometry", "imu": "imu", "icp": "scan", "vessel": "gnss"}[motion]}
     if options.get("use_gnss", True):
         kinds.add("gnss")
     if options.get("use_heading", True):
         kinds.add("heading")
-    if motion == "imu":
+    if motion in ("imu", "vessel"):
         if options.get("use_velocity", True):
             kinds.add("gnss_velocity")
         if options.get("current", "auto") not in (False, "false"):
@@ -352,7 +417,7 @@ def _inputs(log: NavLog, options: dict) -> set[str]:
 class ImuMotionOptions:
     """The IMU motion's options (``motion=imu``); null: from the log (:func:`imu_options`)."""
 
-    group: ClassVar[str] = "IMU motion (motion=imu)"
+    group: ClassVar[str] = "IMU and vessel motion (motion=imu, motion=vessel)"
     acc_density: float | None = option(None, "accelerometer noise density (null: the log's meta['imu'])",
                                        unit="m/s^2/sqrt(Hz)")
     gyro_density: float | None = option(None, "gyro noise density (null: the log's meta['imu'])",
@@ -373,6 +438,18 @@ class ImuMotionOptions:
     sigma_water_speed: float = option(0.1, "water-speed sigma when the record gives none", unit="m/s")
     use_velocity: bool = option(True, "false: GNSS velocities are not used")
     use_odometry: bool = option(True, "false: odometry speeds are not used as SOG updates")
+    water_leeway: float | None = option(None, "water speed across the bow: sigma hypot(this, water_leeway_rel |v|) "
+                                        "(null: the graph's, [water] leeway)", unit="m/s")
+    water_leeway_rel: float | None = option(None, "... x |v| (null: the graph's, [water] leeway_rel)")
+    vessel_accel: float | None = option(None, "motion=vessel: manoeuvring acceleration density (null: the graph's "
+                                        "vessel model, [imu] vessel_accel)", unit="m/s^2/sqrt(s)")
+    vessel_yaw_rate_deg: float | None = option(None, "motion=vessel: yaw-rate density under way (null: the graph's)",
+                                               unit="deg/s/sqrt(s)")
+    vessel_steerage_speed: float | None = option(None, "motion=vessel: below this speed through the water the "
+                                                 "yaw-rate density grows as 1/speed, at most x10 (null: the graph's)",
+                                                 unit="m/s")
+    vessel_position_walk: float | None = option(None, "motion=vessel: the position's own random walk (null: the "
+                                                "log's, fixes against GNSS velocity, as the graph)", unit="m/sqrt(s)")
 
 
 @dataclass
@@ -380,8 +457,9 @@ class EkfConfig(ImuMotionOptions, GateOptions):
     """The ``ekf`` estimator's options (:func:`run_ekf`)."""
 
     group: ClassVar[str] = "ekf"
-    motion: str = option("auto", "odometry, imu, icp or auto (odometry if the log has it, else the IMU, else ICP "
-                         "on the scans)")
+    motion: str = option("auto", "odometry, imu, icp, vessel or auto (vessel for a compass with GNSS velocity or "
+                         "water speed and no IMU, odometer or LiDAR, as the graph; else odometry if the log has it, "
+                         "else the IMU, else ICP on the scans, else vessel)")
     speed: bool = option(False, "true: the state is [x, y, yaw, v] (v a random walk, the odometry speed a "
                          "measurement of it)")
     sigma_v: float = option(0.5, "odometry speed sigma when the record gives none", unit="m/s")

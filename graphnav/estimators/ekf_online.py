@@ -10,6 +10,13 @@ GNSS fix and a heading -- and an odometry speed with ``speed=True``), or for ``i
 after the first fix, then replayed; the first estimate is that of the record that completed the
 epoch. So on a log whose first epoch has those inputs, every later estimate is bit-identical to
 the batch filter's (``tests/online/test_ekf_online.py``).
+
+``motion="auto"`` (the default) chooses the motion as the batch filter does
+(:func:`~graphnav.estimators.ekf.auto_motion`) and ``meta`` (a marine stream's odometry is a rate of turn
+with the SOG: ``{"odometry": ODOMETRY_FROM_ROT}``, which ``graphnav live`` passes): provisionally from the
+first epoch's records, finally from every record up to ``init_wait`` seconds after the first fix (the kinds
+the stream carries by then); if the two differ, the filter is rebuilt from those records as if the final
+choice had been made at the start, and goes on.
 """
 
 from __future__ import annotations
@@ -21,33 +28,52 @@ from typing import Any
 import numpy as np
 
 from ..geometry import wrap_angle
-from ..log import Gnss, GnssVelocity, Heading, Odometry, PosePrior, Record
+from ..graph.position_walk import WalkTracker
+from ..log import Gnss, GnssVelocity, Heading, NavLog, Odometry, PosePrior, Record
 from ..result import Estimate
 from .base import BatchEstimator
-from .ekf import IMU_DEFAULTS, EkfConfig, EkfStepper, _inputs, _unmet, initial_state, run_ekf
+from .ekf import (
+    IMU_DEFAULTS,
+    EkfConfig,
+    EkfStepper,
+    _inputs,
+    _unmet,
+    auto_motion,
+    initial_state,
+    run_ekf,
+    vessel_model,
+)
 
 
 class EkfOnline:
     """EKF behind ``add(record) -> Estimate | None``. ``emit``: ``"fix"`` (default) yields an
     estimate per GNSS fix, and per used record while no fix came for ``outage_s`` [s];
     ``"all"`` one per used record. The other options are :func:`run_ekf`'s (``motion`` is
-    ``"odometry"``, ``"imu"`` or ``"icp"``; there is no ``"auto"`` without the whole log; with
-    ``"imu"`` the IMU motion's options, :data:`graphnav.estimators.ekf.IMU_DEFAULTS`, the initial
-    velocity the first held GNSS velocity when ``v0`` is not given)."""
+    ``"auto"``, ``"odometry"``, ``"imu"``, ``"icp"`` or ``"vessel"``; ``"auto"`` decides at the start, from the
+    records held by then and ``meta``: module docstring); with
+    ``"imu"`` or ``"vessel"`` the IMU (vessel) motion's options, :data:`graphnav.estimators.ekf.IMU_DEFAULTS`,
+    the initial velocity the first held GNSS velocity when ``v0`` is not given)."""
 
-    def __init__(self, *, motion: str = "odometry", speed: bool = False, emit: str = "fix", outage_s: float = 1.5,
-                 init_wait: float = 2.0, **ekf_options: Any) -> None:
+    def __init__(self, *, motion: str = "auto", speed: bool = False, emit: str = "fix", outage_s: float = 1.5,
+                 init_wait: float = 2.0, meta: dict[str, Any] | None = None, **ekf_options: Any) -> None:
         if emit not in ("fix", "all"):
             raise ValueError(f"emit must be 'fix' or 'all', not {emit!r}")
         self.motion, self.speed, self.emit = motion, speed, emit
         self.outage_s, self.init_wait = outage_s, init_wait
+        self.meta = dict(meta or {})
+        self.heard: list[Record] | None = None  # motion "auto": the records since the start, until the choice
+        self.t_decide: float | None = None
         imu = {k: ekf_options.pop(k) for k in list(ekf_options) if k in IMU_DEFAULTS}
         self.options: dict[str, Any] = {"keep": 10_000, **ekf_options}
         if imu:
-            if motion != "imu":
-                raise ValueError(f"ekf option(s) {sorted(imu)} need motion='imu'")
+            if motion not in ("imu", "vessel", "auto"):
+                raise ValueError(f"ekf option(s) {sorted(imu)} need motion='imu' or 'vessel'")
             self.options["imu"] = imu
-        EkfStepper(np.zeros(3), np.eye(3), motion=motion, **self.options)  # validate the options now
+        #: the vessel motion's position walk estimated from the stream (unless given), as live mode's graph
+        self.walker = None if self.options.get("imu", {}).get("vessel_position_walk") is not None else WalkTracker()
+        for m in (("vessel", "odometry") if motion == "auto" else (motion,)):  # validate the options now
+            EkfStepper(np.zeros(3), np.eye(3), motion=m, **(self.options if m in ("imu", "vessel") else
+                                                             {k: v for k, v in self.options.items() if k != "imu"}))
         self.stepper: EkfStepper | None = None
         self.pending: deque[Record] = deque(maxlen=10_000)
         self.held: Counter[type] = Counter()  # kinds of the held records
@@ -81,21 +107,35 @@ class EkfOnline:
             return True
         return (self.held[PosePrior] > 0 or self.held[Heading] > 0) and (not self.speed or self.held[Odometry] > 0)
 
+    def _choose(self, records: list[Record], least: int) -> str:
+        return auto_motion(NavLog.from_unsorted(records, meta=self.meta), least=least)
+
     def _start(self) -> None:
-        x0, P0, self.anchor = initial_state(self.pending, self.speed)
-        options = self.options
-        if self.motion == "imu" and "v0" not in options.get("imu", {}):
-            gv = next((r for r in self.pending if isinstance(r, GnssVelocity)), None)
-            if gv is not None and gv.t - self.pending[0].t <= 1.0:  # as run_ekf's rule
-                sv = gv.sigma if math.isfinite(gv.sigma) else IMU_DEFAULTS["sigma_gnss_velocity"]
-                options = {**options, "imu": {**options.get("imu", {}), "v0": (gv.vx, gv.vy, 3.0 * sv)}}
-        self.stepper = st = EkfStepper(x0, P0, motion=self.motion, **options)
-        for r in self.pending:
-            if st.step(r) and isinstance(r, Gnss) and st.use_gnss:  # as in add: an unused fix is none
-                self.last_fix_t = r.t
+        recs = list(self.pending)
+        if self.motion == "auto":  # provisional, from the first epoch; final init_wait after the first fix
+            self.motion = self._choose(recs, least=1)
+            self.heard = recs
+            self.t_decide = (self.t_first_fix if self.t_first_fix is not None else recs[0].t) + self.init_wait
+        self._build(recs)
         self.pending.clear()
         self.held.clear()
         self.t_first_fix = None
+
+    def _build(self, recs: list[Record]) -> None:
+        """The stepper from ``recs``' initial state (:func:`initial_state`), ``recs`` replayed into it."""
+        x0, P0, self.anchor = initial_state(recs, self.speed)
+        options = self.options
+        if self.motion not in ("imu", "vessel"):
+            options = {k: v for k, v in options.items() if k != "imu"}
+        if self.motion in ("imu", "vessel") and "v0" not in options.get("imu", {}):
+            gv = next((r for r in recs if isinstance(r, GnssVelocity)), None)
+            if gv is not None and gv.t - recs[0].t <= 1.0:  # as run_ekf's rule
+                sv = gv.sigma if math.isfinite(gv.sigma) else IMU_DEFAULTS["sigma_gnss_velocity"]
+                options = {**options, "imu": {**options.get("imu", {}), "v0": (gv.vx, gv.vy, 3.0 * sv)}}
+        self.stepper = st = EkfStepper(x0, P0, motion=self.motion, **options)
+        for r in recs:
+            if st.step(r) and isinstance(r, Gnss) and st.use_gnss:  # as in add: an unused fix is none
+                self.last_fix_t = r.t
 
     # -- the interface
     def add(self, record: Record) -> Estimate | None:
@@ -112,7 +152,16 @@ class EkfOnline:
             self.counts["late"] += 1
             return None
         self.counts[kind] += 1
-        if not st.step(record):
+        if self.walker is not None and st.vessel is not None:
+            walk = self.walker.add(record)
+            if walk is not None:
+                st.vessel["vessel_position_walk"] = max(walk["walk"], vessel_model({})["vessel_position_walk"])
+        if self.heard is not None and self._decided(record):  # the motion changed: rebuilt, this record replayed
+            st = self.stepper
+            assert st is not None
+            if not st.uses(record):
+                return None
+        elif not st.step(record):
             return None
         if isinstance(record, Gnss) and st.use_gnss:
             self.last_fix_t = record.t
@@ -121,12 +170,28 @@ class EkfOnline:
             return self._estimate()
         return None
 
+    def _decided(self, record: Record) -> bool:
+        """``motion="auto"``: hear ``record``; at ``t_decide`` (or a full buffer) the final choice from every
+        record heard. True when it differs from the provisional one: the stepper is rebuilt from the heard
+        records (``record`` among them) as if it had been chosen at the start."""
+        assert self.heard is not None and self.t_decide is not None
+        self.heard.append(record)
+        if record.t < self.t_decide and len(self.heard) < (self.pending.maxlen or 10_000):
+            return False
+        heard, self.heard = self.heard, None
+        final = self._choose(heard, least=2)
+        if final == self.motion:
+            return False
+        self.motion = final
+        self._build(heard)
+        return True
+
     def _estimate(self) -> Estimate:
         st = self.stepper
         assert st is not None and st.t is not None
         f = st.f
         self.last_emit_t = st.t
-        if self.motion == "imu":  # velocity over ground from the state, rate of turn from the IMU less its bias
+        if self.motion in ("imu", "vessel"):  # velocity over ground from the state, rate of turn from the IMU
             vx, vy = float(f.x[3]), float(f.x[4])
             m = st.imu_u
             ib = getattr(f, "ib", None)
@@ -147,13 +212,15 @@ class EkfOnline:
                                "step_ms_p99": float(np.percentile(s, 99)) if s.size else None}
         if st is not None:
             out.update(st.f.counts, icp_failed=st.icp_failed)
+            if st.vessel is not None:
+                out["position_walk_live"] = self.walker.last if self.walker is not None else None
         return out
 
 
 class Ekf(BatchEstimator):
     """The EKF (:func:`run_ekf`); live: :class:`graphnav.estimators.ekf_online.EkfOnline`."""
 
-    description = ("EKF: odometry, IMU (INS/GNSS, bias + current states) or ICP motion; "
+    description = ("EKF: odometry, IMU (INS/GNSS, bias + current states), ICP or vessel (constant velocity) motion; "
                    "gated GNSS (+velocity), compass, water speed")
     Config = EkfConfig
     live = True

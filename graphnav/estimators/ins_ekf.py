@@ -10,6 +10,16 @@ Process noise from the IMU's white noise as a density (per-sample sigma ``s`` at
 ``s^2 / hz`` per second), bias and current random walks. Measurements: GNSS position (H picks x, y),
 compass (yaw), GNSS velocity (v_x, v_y) and speed through water
 ``h = (v_x - c_x) cos(yaw) + (v_y - c_y) sin(yaw)``, each through :class:`PoseEkf`'s gated Joseph update.
+
+Without an IMU (``motion="vessel"``, :meth:`InsEkf.predict_vessel`) the same state moves as the graph's
+vessel model (:class:`graphnav.graph.imu_chain.ImuConfig`, ``vessel_*``): the velocity a random walk
+driven by white-noise acceleration of density ``q_a``, the position its integral plus a random walk
+``q_p`` of its own, the heading a random walk apart from the course (density ``q_y``, larger below
+steerage speed)::
+
+    p += T v;   Q_pp = q_a T^3/3 + q_p T,  Q_pv = q_a T^2/2,  Q_vv = q_a T,  Q_yaw = q_y T
+
+(the exact discretisation of the continuous white-noise-acceleration model, Bar-Shalom et al. 2001, 6.2.2).
 """
 
 from __future__ import annotations
@@ -80,6 +90,36 @@ class InsEkf(PoseEkf):
         x[2] = wrap_angle(th + T * wz)
         self.P = F @ self.P @ F.T + Q
 
+    def predict_vessel(self, T: float, *, accel_density: float, yaw_density: float,
+                       position_walk: float = 0.0) -> None:
+        """Propagate over ``T`` [s] without an IMU (module docstring): constant velocity, the heading held;
+        densities in [m/s^2/sqrt(s)], [rad/s/sqrt(s)] and [m/sqrt(s)]."""
+        if T <= 0.0:
+            return
+        x, n = self.x, len(self.x)
+        F = np.eye(n)
+        F[0, 3] = F[1, 4] = T
+        qa = accel_density ** 2
+        Q = np.zeros((n, n))
+        for i in (0, 1):
+            Q[i, i] = qa * T ** 3 / 3 + position_walk ** 2 * T
+            Q[i, i + 3] = Q[i + 3, i] = qa * T * T / 2
+            Q[i + 3, i + 3] = qa * T
+        Q[2, 2] = yaw_density ** 2 * T
+        if self.ib is not None:
+            Q[self.ib, self.ib] = Q[self.ib + 1, self.ib + 1] = self.qba * T
+            Q[self.ib + 2, self.ib + 2] = self.qbg * T
+        if self.ic is not None:
+            Q[self.ic, self.ic] = Q[self.ic + 1, self.ic + 1] = self.qc * T
+        x[0] += T * x[3]
+        x[1] += T * x[4]
+        self.P = F @ self.P @ F.T + Q
+
+    def speed_through_water(self) -> float:
+        """``|v - c|`` [m/s] (``|v|`` without the current states)."""
+        x, ic = self.x, self.ic
+        return math.hypot(x[3] - x[ic], x[4] - x[ic + 1]) if ic is not None else math.hypot(x[3], x[4])
+
     def update_velocity(self, v: tuple[float, float], sigma: float, t: float | None = None) -> bool:
         """GNSS velocity over ground (east, north) [m/s]."""
         H = np.zeros((2, len(self.x)))
@@ -97,13 +137,22 @@ class InsEkf(PoseEkf):
         H[0, 3], H[0, 4] = vx / h, vy / h
         return self._update("speed", np.array([abs(v) - h]), H, np.array([[sigma ** 2]]), t, reinit=False)
 
-    def update_water_speed(self, v: float, sigma: float, t: float | None = None) -> bool:
-        """Speed through water along the bow (needs the current states)."""
+    def update_water_speed(self, v: float, sigma: float, t: float | None = None, leeway: float | None = None) -> bool:
+        """Speed through water along the bow (needs the current states). With ``leeway`` [m/s] the graph's
+        water model (:meth:`graphnav.graph.measurements.Measurements.water_speed`): the velocity through
+        the water ``v - c`` is ``v (cos yaw, sin yaw)``, ``sigma`` along the bow and ``leeway`` across it."""
         if self.ic is None:
             raise ValueError("a water-speed update needs the current states")
         ic, x = self.ic, self.x
         c, s = math.cos(x[2]), math.sin(x[2])
         ux, uy = x[3] - x[ic], x[4] - x[ic + 1]
+        if leeway is not None:  # (along, across) the bow: rows of R(yaw)^T (u - v e_yaw)
+            H = np.zeros((2, len(x)))
+            H[0, 3], H[0, 4], H[1, 3], H[1, 4] = c, s, -s, c
+            H[:, ic:ic + 2] = -H[:, 3:5]
+            H[0, 2], H[1, 2] = -ux * s + uy * c, -ux * c - uy * s
+            nu = np.array([v - (ux * c + uy * s), -(-ux * s + uy * c)])
+            return self._update("water_speed", nu, H, np.diag([sigma ** 2, leeway ** 2]), t, reinit=False)
         H = np.zeros((1, len(x)))
         H[0, 2] = -ux * s + uy * c
         H[0, 3], H[0, 4] = c, s

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-from ..config import given_option
+from ..config import config_from_options, given_option
 from ..graph.log_runs import unmet
 from ..graph.navigator import Navigator
 from ..graph.smoother_config import SmootherConfig, auto_motion
@@ -70,8 +70,10 @@ class Smoother(Estimator):
 
     @classmethod
     def online(cls, **options: Any) -> Navigator:
-        """The navigation graph with this solver, bounded memory (no history kept)."""
-        return Navigator(history=False, **_solver_options(cls.solver, options))
+        """The navigation graph with this solver, bounded memory (no history kept). The options make its
+        config (``imu={...}`` is the config's section, not the navigator's ``imu`` flag)."""
+        return Navigator(config_from_options(SmootherConfig, _solver_options(cls.solver, options), "smoother"),
+                         history=False)
 
     def add(self, record: Record) -> Estimate | None:
         checked = False

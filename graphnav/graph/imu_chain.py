@@ -90,12 +90,25 @@ class ImuChain:
             self.walk_estimate = stated.get("position_walk")
         #: [m/sqrt(s)] the vessel model's position random walk (its integration noise)
         self.vessel_walk = max(float(walk), cfg.integration_sigma) if walk is not None else cfg.integration_sigma
-        p = gtsam.PreintegrationParams.MakeSharedU(0.0)  # no IMU: zero measurements, the vessel model's noise
-        p.setAccelerometerCovariance(np.eye(3) * cfg.vessel_accel**2)
-        p.setGyroscopeCovariance(np.eye(3) * math.radians(cfg.vessel_yaw_rate_deg) ** 2)
+        self.vessel_params = self._vessel_set(1.0)  # no IMU: zero measurements, the vessel model's noise
+        self._vessel_by_scale: dict[float, gtsam.PreintegrationParams] = {1.0: self.vessel_params}
+
+    def _vessel_set(self, scale: float) -> gtsam.PreintegrationParams:
+        """The vessel model's parameters with the yaw-rate density x ``scale``."""
+        c = self.cfg
+        p = gtsam.PreintegrationParams.MakeSharedU(0.0)
+        p.setAccelerometerCovariance(np.eye(3) * c.vessel_accel**2)
+        p.setGyroscopeCovariance(np.eye(3) * (scale * math.radians(c.vessel_yaw_rate_deg)) ** 2)
         p.setIntegrationCovariance(np.eye(3) * self.vessel_walk**2)
-        self.vessel_params = p
-        self._vessel_by_scale: dict[float, gtsam.PreintegrationParams] = {1.0: p}
+        return p
+
+    def set_vessel_walk(self, walk: float, estimate: dict[str, Any] | None = None) -> None:
+        """A new position random walk for the vessel factors made from now on (live mode's running
+        estimate, graphnav.online.warmup): fresh parameter sets, those of the factors already made untouched."""
+        self.vessel_walk = max(float(walk), self.cfg.integration_sigma)
+        self.walk_estimate = estimate
+        self.vessel_params = self._vessel_set(1.0)
+        self._vessel_by_scale = {1.0: self.vessel_params}
 
     def _vessel(self, speed: float | None) -> gtsam.PreintegrationParams:
         """The vessel model's parameters at ``speed``: the yaw-rate density x ``steerage / speed`` (1 to 10,
@@ -105,11 +118,7 @@ class ImuChain:
             return self.vessel_params
         scale = round(min(c.vessel_steerage_speed / max(speed, 1e-3), 10.0) * 2) / 2
         if scale not in self._vessel_by_scale:
-            p = gtsam.PreintegrationParams.MakeSharedU(0.0)
-            p.setAccelerometerCovariance(np.eye(3) * c.vessel_accel**2)
-            p.setGyroscopeCovariance(np.eye(3) * (scale * math.radians(c.vessel_yaw_rate_deg)) ** 2)
-            p.setIntegrationCovariance(np.eye(3) * self.vessel_walk**2)
-            self._vessel_by_scale[scale] = p
+            self._vessel_by_scale[scale] = self._vessel_set(scale)
         return self._vessel_by_scale[scale]
 
     def __bool__(self) -> bool:

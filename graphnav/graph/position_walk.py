@@ -25,12 +25,13 @@ the vessel model's position random walk (:class:`~graphnav.graph.imu_chain.ImuCo
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..log import NavLog
+from ..log import NavLog, Record
 from .chi2 import chi2_median
 
 #: [s] the lags of the pairs of fixes: up to a minute (beyond it a velocity bias, not a walk, dominates)
@@ -109,3 +110,43 @@ def position_walk(log: NavLog) -> dict[str, Any] | None:
     stated = float(np.median(sig[np.isfinite(sig)]) ** 2 * dt) if np.isfinite(sig).any() else 0.0
     return {"walk": math.sqrt(max(q - stated, 0.0)), "q": q, "a": a, "velocity_q": stated,
             "lags": [[lag, var, n] for lag, var, n in rows]}
+
+
+#: [s] the vessel graph's position walk is estimated again this often (the longest lag of its fit)
+WALK_EVERY_S = max(LAGS)
+#: [s] ... from the fixes and GNSS velocities of this last stretch of stream (30 of its longest lags; memory bound)
+WALK_WINDOW_S = 30 * max(LAGS)
+
+
+class WalkTracker:
+    """The vessel model's position random walk, estimated live (the graph's in live mode, the vessel EKF's
+    online): :func:`position_walk` on the fixes and GNSS velocity records of the last :data:`WALK_WINDOW_S`,
+    tried each time the stream's stretch has doubled, then every :data:`WALK_EVERY_S` of stream time
+    (:func:`position_walk` gives nothing before it has enough pairs of fixes at three lags).
+    ``add(rec)`` returns a new estimate when one was made."""
+
+    def __init__(self) -> None:
+        self.recs: deque[Record] = deque()
+        self.t_first: float | None = None
+        self.next_t = -math.inf
+        self.updates = 0
+        self.last: dict[str, Any] | None = None
+
+    def add(self, rec: Record) -> dict[str, Any] | None:
+        if rec.kind not in ("gnss", "gnss_velocity"):
+            return None
+        self.recs.append(rec)
+        t = float(rec.t)
+        while self.recs and self.recs[0].t < t - WALK_WINDOW_S:
+            self.recs.popleft()
+        if self.t_first is None:
+            self.t_first = t
+        if t < self.next_t:
+            return None
+        self.next_t = t + min(WALK_EVERY_S, max(t - self.t_first, 1.0))  # as the stretch doubles, then every 60 s
+        walk = position_walk(NavLog.from_unsorted(self.recs))
+        if walk is None:
+            return None
+        self.updates += 1
+        self.last = {"walk": walk["walk"], "t": t, "window_s": t - float(self.recs[0].t), "updates": self.updates}
+        return walk

@@ -230,6 +230,8 @@ class LiveRunner:
             flush = getattr(self.estimator, "flush", None)  # keyframes waiting for a later record
             if callable(flush):
                 est = flush()
+                for e in getattr(self.estimator, "replayed_out", ()):  # a warm-up ended by the end of input
+                    self.sink.emit(e, None, self.nmea.decoder.frame)
                 if est is not None:
                     self.sink.emit(est, None, self.nmea.decoder.frame)
         finally:
@@ -289,6 +291,9 @@ class LiveRunner:
         if nm.decoder.frame is not None:
             out["origin"] = {"lat": nm.decoder.frame.lat0, "lon": nm.decoder.frame.lon0}
         out.update(sink)  # out, tum
+        from .warmup import motion_of
+
+        out.update(motion_of(self.estimator))  # the motion model and why (graphnav.online.warmup)
         info = getattr(self.estimator, "info", None)
         if callable(info):
             out["estimator"] = info()

@@ -20,7 +20,8 @@ Sensors are sampled every T = 1 s:
   the rate of turn ``w`` of a ROT gyro, white noise ``sigma_v`` = 0.05 m/s, ``sigma_w`` = 0.1 deg/s,
   so odometry-driven estimators (EKF, smoothers) can run on the log. The *direction* of the ground
   velocity (course, which differs from the heading by the crab angle the current causes) is not
-  in it. ``odometry="fore_aft"`` writes the fore-aft component of the ground velocity instead.
+  in it (``meta["odometry"]`` says so: :data:`graphnav.log.ODOMETRY_FROM_ROT`, no odometer).
+  ``odometry="fore_aft"`` writes the fore-aft component of the ground velocity instead.
 * ``truth`` at every step, a ``pose_prior`` at t = 0 (the known start berth, 1 m / 1 deg).
 
 The numeric core :func:`simulate_solent` returns a :class:`NavLog`; the CLI is in :mod:`graphnav.commands.simulate`.
@@ -34,7 +35,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..geometry import heading_deg_to_yaw, wrap_angle
-from ..log import Gnss, Heading, Imu, NavLog, Odometry, PosePrior, Truth
+from ..log import ODOMETRY_FROM_ROT, Gnss, Heading, Imu, NavLog, Odometry, PosePrior, Truth
 
 START = (765.0, 728.0)
 WAYPOINTS = ((650.0, 385.0), (320.0, 190.0), (30.0, 250.0))
@@ -233,6 +234,7 @@ def simulate_solent(cfg: SolentConfig | None = None, **kw) -> NavLog:
         "noise": {"gnss_x": sig[:, 0].tolist(), "gnss_y": sig[:, 1].tolist(), "compass": sig[:, 2].tolist()},
         "initial_velocity": tr["v"][0].tolist(),
         "waypoints_reached": int(tr["wp"][-1]),
+        **({"odometry": ODOMETRY_FROM_ROT} if cfg.odometry == "sog" else {}),  # a SOG sensor and a ROT gyro
         "events": ([{"kind": "noise_increase", "t0": float(t[min(cfg.switch_step, n - 1)]),
                      "t1": float(t[-1])}] if cfg.scenario == 3 else []),
     }
