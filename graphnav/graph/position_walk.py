@@ -80,7 +80,7 @@ def fit_walk(rows: list[tuple[float, float, int]]) -> tuple[float, float] | None
     inverse standard deviation of its variance estimate, ``~ variance sqrt(2 / pairs)``)."""
     if len(rows) < 3:
         return None
-    from scipy.optimize import nnls  # (scipy.optimize: 0.1 s at start-up, for logs without GNSS velocity unused)
+    from scipy.optimize import nnls  # (0.1 s to import: only the vessel model without an IMU fits a walk)
 
     lag, var, n = (np.array(c, dtype=float) for c in zip(*rows, strict=True))
     w = np.sqrt(n / 2.0) / np.maximum(var, 1e-12)
