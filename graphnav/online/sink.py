@@ -1,7 +1,10 @@
 """Live mode's sink: each estimate published as NMEA (GGA, HDT, VTG, ROT; one UDP datagram) and as a
 Signal K delta (:func:`graphnav.io.signalk.solution_delta`, uncertainties under meta), timed
 (GNSS sentence arrival -> solution sent, over the last :data:`LATENCY_WINDOW` fixes) and appended to
-a new TUM file per run (``DIR/live-YYYYmmddTHHMMSSZ.tum``, + ``.cov``, flushed line by line)."""
+a new TUM file per run (``DIR/live-YYYYmmddTHHMMSSZ.tum``, + ``.cov``, flushed line by line). A coasted
+estimate (a prediction through a silent stream) is flagged in each output that can carry it: GGA quality 6,
+Signal K ``navigation.gnss.methodQuality`` "Estimated (DR) mode"; the TUM file cannot, so the summary lists
+the spans of coasted estimates (``coasted_spans``)."""
 
 from __future__ import annotations
 
