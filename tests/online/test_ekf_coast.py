@@ -200,3 +200,20 @@ def test_the_sink_counts_coasted_spans():
         sink.emit(Estimate(t, np.array([t, 0.0, 0.0]), np.eye(3), coasted=c), None, None)
     s = sink.summary()
     assert s["coasted_spans"] == [[2.0, 3.0, 2], [5.0, 5.0, 1]] and s["coasted_spans_total"] == 2
+
+
+def test_run_out_writes_the_online_track_with_its_coasted_column(tmp_path):
+    """``graphnav run -e isam2 --out``: ``online_final.csv`` flags the navigator's coasted estimates."""
+    import subprocess
+    import sys
+
+    from graphnav.io import save_log
+
+    save_log(_line("vessel"), tmp_path / "line.jsonl")
+    p = subprocess.run([sys.executable, "-m", "graphnav", "run", str(tmp_path / "line.jsonl"), "-e", "isam2",
+                        "--out", str(tmp_path / "o"), "--json"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    tr = read_trajectory_csv(tmp_path / "o" / "online_final.csv")
+    c = tr.meta["coasted"]
+    assert c.sum() == json.loads(p.stdout)["coasted_estimates"] > 100  # the 0.5 s grid through the 60 s gap
+    assert np.all((tr.t[c] > GAP[0]) & (tr.t[c] < GAP[1])) and tr.cov is not None
