@@ -22,3 +22,21 @@ def start_live(out_dir: Path, *args: str, ready_s: float = 30.0) -> subprocess.P
         time.sleep(0.05)
     time.sleep(0.2)
     return p
+
+
+def send_and_wait(p: subprocess.Popen, port: int, datagrams: list[str], *, pause_s: float,
+                  timeout_s: float) -> tuple[str, str]:
+    """Send each text datagram (CRLF-terminated) to ``127.0.0.1:port`` with ``pause_s`` between them, then
+    wait for ``p`` to exit by itself (its ``--idle-exit``); killed if it has not by ``timeout_s``. Its
+    stdout and stderr."""
+    import socket
+
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for d in datagrams:
+                tx.sendto((d + "\r\n").encode(), ("127.0.0.1", port))
+                time.sleep(pause_s)
+        return p.communicate(timeout=timeout_s)
+    finally:
+        if p.poll() is None:
+            p.kill()

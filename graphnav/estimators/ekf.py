@@ -31,20 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import option
-from ..log import (
-    ODOMETRY_FROM_ROT,
-    Gnss,
-    GnssVelocity,
-    Heading,
-    Imu,
-    NavLog,
-    Odometry,
-    PosePrior,
-    Record,
-    Scan,
-    Truth,
-    WaterSpeed,
-)
+from ..log import Gnss, GnssVelocity, Heading, Imu, NavLog, Odometry, PosePrior, Record, Scan, Truth, WaterSpeed
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .gating import GATING_DEFAULTS, GateOptions
@@ -333,6 +320,7 @@ def auto_motion(log: NavLog, least: int = 2) -> str:
     s1-s3: 9.07 / 13.93 / 14.23 m, NEES 308-814; with the IMU 1.56 / 4.04 / 2.25 m). ``least``: records of a
     kind that make it count."""
     from ..graph.smoother_config import auto_motion as graph_motion
+    from ..log import ODOMETRY_FROM_ROT
 
     if graph_motion(log.counts(), log.meta) == "vessel":
         return "vessel"

@@ -236,22 +236,12 @@ def test_the_vessel_filter_estimates_its_position_walk_from_the_stream():
     """Fixes wandering 0.4 m/sqrt(s) from the exact SOG/COG: the online vessel filter takes the walk the
     stream shows (as live mode's graph, :class:`graphnav.graph.position_walk.WalkTracker`), close to what
     the batch filter reads from the whole log; a given walk is kept."""
-    import math
+    from _logfactory import wandering_fixes
 
     from graphnav.graph.position_walk import position_walk
-    from graphnav.log import Gnss, GnssVelocity, Heading, NavLog
+    from graphnav.log import NavLog
 
-    rng = np.random.default_rng(1)
-    n = 200
-    t = np.arange(n, dtype=float)
-    yaw = 0.6 * np.sin(2 * math.pi * t / 300.0)
-    vx, vy = 2.0 * np.cos(yaw), 2.0 * np.sin(yaw)
-    x, y = np.cumsum(vx), np.cumsum(vy)
-    wander = np.cumsum(rng.normal(0.0, 0.4, size=(n, 2)), axis=0)
-    recs = []
-    for k in range(n):
-        recs += [Gnss(t[k], x[k] + wander[k, 0] + rng.normal(0, 1.0), y[k] + wander[k, 1] + rng.normal(0, 1.0), 1.0),
-                 GnssVelocity(t[k], vx[k], vy[k], 0.05), Heading(t[k], float(yaw[k]), 0.02)]
+    recs = wandering_fixes()
     on = EkfOnline()
     for r in recs:
         on.add(r)

@@ -10,7 +10,7 @@ import time
 
 import pytest
 from _harbour import harbour_trial
-from _live import start_live
+from _live import send_and_wait, start_live
 
 from graphnav.io.nmea_out import _hhmmss, sentence
 from graphnav.log import NavLog
@@ -181,15 +181,8 @@ def test_graphnav_live_cli_with_an_eleven_hour_sentence(tmp_path):
         port = probe.getsockname()[1]
     p = start_live(tmp_path / "o", "--nmea", f"udp://127.0.0.1:{port}", "--estimator", "ekf", "--idle-exit", "2",
                    "--duration", "60", "--json")
-    try:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
-            for k in range(0, len(sents), 6):  # one epoch (ZDA, GGA, HDT, VTG, ROT) per datagram, 100 Hz
-                tx.sendto(("\r\n".join(x for _, x in sents[k:k + 6]) + "\r\n").encode(), ("127.0.0.1", port))
-                time.sleep(0.01)
-        out, err = p.communicate(timeout=60)
-    finally:
-        if p.poll() is None:
-            p.kill()
+    epochs = ["\r\n".join(x for _, x in sents[k:k + 6]) for k in range(0, len(sents), 6)]  # one per datagram
+    out, err = send_and_wait(p, port, epochs, pause_s=0.01, timeout_s=60)  # (ZDA, GGA, HDT, VTG, ROT) at 100 Hz
     assert p.returncode == 0, err
     obj = json.loads(out)
     assert obj["time_outliers"] == 1 and obj["estimates"] >= 119 and obj["estimator"]["late"] == 0

@@ -206,21 +206,12 @@ def test_the_vessel_position_walk_is_estimated_from_the_stream():
     """A receiver whose fixes wander 0.4 m/sqrt(s) from its exact SOG/COG (as tests/graph/test_position_walk.py):
     live, the walk starts at the default and is estimated from the stream; by the end it is the one the
     offline run estimates from the whole log (within 15 %: the last estimate, at 184 s, misses the last 16 s)."""
+    from _logfactory import wandering_fixes
+
     from graphnav.graph.imu_chain import ImuConfig
     from graphnav.graph.position_walk import position_walk
-    from graphnav.log import Gnss, GnssVelocity, Heading
 
-    rng = np.random.default_rng(1)
-    n = 200
-    t = np.arange(n, dtype=float)
-    yaw = 0.6 * np.sin(2 * math.pi * t / 300.0)
-    vx, vy = 2.0 * np.cos(yaw), 2.0 * np.sin(yaw)
-    x, y = np.cumsum(vx), np.cumsum(vy)
-    wander = np.cumsum(rng.normal(0.0, 0.4, size=(n, 2)), axis=0)
-    recs: list[Record] = []
-    for k in range(n):
-        recs += [Gnss(t[k], x[k] + wander[k, 0] + rng.normal(0, 1.0), y[k] + wander[k, 1] + rng.normal(0, 1.0), 1.0),
-                 GnssVelocity(t[k], vx[k], vy[k], 0.05), Heading(t[k], float(yaw[k]), 0.02)]
+    recs = wandering_fixes()
     w = WarmUp("fixed-lag", {"keyframe_period": 1.0})
     for rec in recs:
         w.add(rec)
@@ -242,22 +233,14 @@ def test_graphnav_live_cli_says_which_motion_and_why(tmp_path):
     import json
     import socket
 
-    from _live import start_live
+    from _live import send_and_wait, start_live
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     p = start_live(tmp_path / "o", "--nmea", f"udp://127.0.0.1:{port}", "--idle-exit", "1.5", "--duration", "60",
                    "--json", "--origin", f"{FRAME.lat0},{FRAME.lon0}")
-    try:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
-            for _, line in vessel_sentences(20):
-                tx.sendto((line + "\r\n").encode(), ("127.0.0.1", port))
-                time.sleep(0.002)
-        out, err = p.communicate(timeout=30)
-    finally:
-        if p.poll() is None:
-            p.kill()
+    out, err = send_and_wait(p, port, [line for _, line in vessel_sentences(20)], pause_s=0.002, timeout_s=30)
     assert p.returncode == 0, err
     obj = json.loads(out)
     assert obj["motion"] == "vessel" and obj["warmup"]["records"] > 0 and "motion vessel" in err
