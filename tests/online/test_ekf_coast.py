@@ -14,12 +14,14 @@ import socket
 
 import numpy as np
 import pytest
+from _live import fed_up_to_the_gap
+from _logfactory import straight_line
 
 from graphnav.estimators.ekf_online import EkfOnline
 from graphnav.geodesy import LocalFrame
 from graphnav.io.signalk import DR_MODE, solution_delta
 from graphnav.io.trajectory_csv import read_trajectory_csv, write_trajectory_csv
-from graphnav.log import Gnss, GnssVelocity, Heading, NavLog, Odometry
+from graphnav.log import NavLog
 from graphnav.online.live_runner import LiveRunner
 from graphnav.online.runner import run_online
 from graphnav.online.sink import Sink
@@ -36,20 +38,8 @@ VESSEL = {"motion": "vessel", "vessel_accel": 0.05, "vessel_yaw_rate_deg": 1.0, 
 def _line(kind: str, seed: int = 1) -> NavLog:
     """Fixes and a compass at 1 Hz on ``x = V t`` (+ noise), none in ``GAP``; ``kind`` "vessel": GNSS
     velocity with each fix, "odometry": the speed and a zero rate of turn."""
-    rng = np.random.default_rng(seed)
-    recs = []
-    for k in range(181):
-        t = float(k)
-        if GAP[0] < t < GAP[1]:
-            continue
-        p = V * t + rng.normal(0.0, SIGMA, 2)
-        recs += [Gnss(t, p[0], p[1], SIGMA), Heading(t, YAW, math.radians(2.0))]
-        if kind == "vessel":
-            v = V + rng.normal(0.0, SIGMA_V, 2)
-            recs.append(GnssVelocity(t, v[0], v[1], SIGMA_V))
-        else:
-            recs.append(Odometry(t, float(np.hypot(*V)), 0.0, 0.05, math.radians(0.5)))
-    return NavLog(recs)
+    return straight_line(V, SIGMA, GAP, heading=True, velocity_sigma=SIGMA_V if kind == "vessel" else None,
+                         odometry=kind == "odometry", seed=seed)
 
 
 def _options(kind: str) -> dict:
@@ -146,12 +136,7 @@ def test_live_ticks_coast_the_ekf_and_every_output_carries_the_flag(tmp_path):
                             publish_signalk=f"udp://127.0.0.1:{sk.getsockname()[1]}")
         runner.sink.open()
         runner.nmea.decoder.frame = LocalFrame(43.5, 16.4, 0.0)
-        for rec in log.records:
-            if rec.t > GAP[0]:
-                break
-            runner._record(rec, None)
-        real = runner.sink.estimates
-        runner.nmea.clock.t0, runner.nmea.clock.a0 = GAP[0], 100.0  # the last stamp came at wall time 100 s
+        real = fed_up_to_the_gap(runner, log, GAP[0])  # the last stamp came at wall time 100 s
         runner.tick(now=101.5)
         assert runner.sink.estimates == real  # 1.5 s of silence at 1 Hz: nothing due yet
         runner.tick(now=110.0)
