@@ -40,3 +40,15 @@ def send_and_wait(p: subprocess.Popen, port: int, datagrams: list[str], *, pause
     finally:
         if p.poll() is None:
             p.kill()
+
+
+def fed_up_to_the_gap(runner, log, t_gap: float, wall: float = 100.0) -> int:  # noqa: ANN001
+    """A ``LiveRunner`` fed ``log``'s records up to ``t_gap`` (no sockets), the stream's last stamp ``t_gap``
+    arriving at wall time ``wall`` (so ``runner.tick(now=wall + s)`` is ``s`` seconds of silence); returns
+    the estimates emitted so far."""
+    for rec in log.records:
+        if rec.t > t_gap:
+            break
+        runner._record(rec, None)
+    runner.nmea.clock.t0, runner.nmea.clock.a0 = t_gap, wall
+    return runner.sink.estimates

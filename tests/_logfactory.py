@@ -63,3 +63,28 @@ def wandering_fixes(n: int = 200, walk: float = 0.4, seed: int = 1) -> list[L.Re
         recs += [Gnss(t[k], x[k] + wander[k, 0] + rng.normal(0, 1.0), y[k] + wander[k, 1] + rng.normal(0, 1.0), 1.0),
                  L.GnssVelocity(t[k], vx[k], vy[k], 0.05), Heading(t[k], float(yaw[k]), 0.02)]
     return recs
+
+
+def straight_line(v: np.ndarray, sigma: float, gap: tuple[float, float], *, heading: bool = False,
+                  velocity_sigma: float | None = None, odometry: bool = False, n: int = 181,
+                  seed: int = 1) -> NavLog:
+    """A boat on ``x = v t``: fixes at 1 Hz (+ N(0, ``sigma``) per axis), no record strictly inside ``gap``; with
+    each fix a compass along ``v`` (``heading``, 2 deg), a GNSS velocity (``velocity_sigma``) and an odometry
+    record (``odometry``: the speed, a zero rate of turn). The coasting tests' silent gap."""
+    rng = np.random.default_rng(seed)
+    yaw = math.atan2(v[1], v[0])
+    recs: list[L.Record] = []
+    for k in range(n):
+        t = float(k)
+        if gap[0] < t < gap[1]:
+            continue
+        p = v * t + rng.normal(0.0, sigma, 2)
+        recs.append(Gnss(t, p[0], p[1], sigma))
+        if heading:
+            recs.append(Heading(t, yaw, math.radians(2.0)))
+        if velocity_sigma is not None:
+            u = v + rng.normal(0.0, velocity_sigma, 2)
+            recs.append(L.GnssVelocity(t, u[0], u[1], velocity_sigma))
+        if odometry:
+            recs.append(Odometry(t, float(np.hypot(*v)), 0.0, 0.05, math.radians(0.5)))
+    return NavLog(recs)

@@ -193,6 +193,8 @@ def _single(args: argparse.Namespace, options: dict, dropped: list[str], out: Ou
         write_trajectory_csv(result.trajectory, out.file("trajectory.csv"))
         if result.online is not None and result.online is not result.trajectory:
             write_tum(result.online, out.file("online_final.tum"))
+            if "coasted" in (result.online.meta or {}):  # the online track with its coasted flag (and covariance)
+                write_trajectory_csv(result.online, out.file("online_final.csv"))
         if getattr(args, "report", False):
             summary.update(_report(args, whole, log, plan, result, summary, runtime, out))
         else:

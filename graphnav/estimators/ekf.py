@@ -19,6 +19,7 @@ shared by the batch :func:`run_ekf` and the live adapter :class:`graphnav.estima
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections import deque
@@ -186,6 +187,7 @@ class EkfStepper:
         self.imu_u: Imu | None = None  # the held IMU record
         self.prev_scan: Scan | None = None
         self.last_inc, self.last_cov = np.zeros(3), np.eye(3)
+        self.inc_dt: float | None = None  # [s] the interval of the last scan increment
         self.icp_failed = 0
         self.step_ms: deque[float] = deque(maxlen=keep)
         self.icp_ms: deque[float] = deque(maxlen=keep)
@@ -204,6 +206,8 @@ class EkfStepper:
         if isinstance(r, Scan):
             if self.prev_scan is not None:
                 inc, cov = self._icp_increment(r, self.prev_scan)
+                if r.t > self.prev_scan.t:
+                    self.inc_dt = r.t - self.prev_scan.t  # the interval of the last increment (coasting)
                 t0 = time.perf_counter()
                 f.predict_increment(inc, cov)
                 self.step_ms.append((time.perf_counter() - t0) * 1e3)
@@ -212,16 +216,8 @@ class EkfStepper:
             return True
         t0 = time.perf_counter()
         if r.t > self.t:  # (with ICP motion the state only moves at scans, but it is reported at r.t)
-            u = self.u
-            if u is not None and self.motion == "odometry":
-                f.predict_odometry(u.v, u.w, r.t - self.t, _sig(u.sigma_v, self.sigma_v),
-                                   _sig(u.sigma_w, self.sigma_w), self.sigma_acc)
-            elif self.motion == "imu":
-                m = r if isinstance(r, Imu) else self.imu_u  # a record is the mean over its own interval
-                if m is not None:
-                    f.predict_imu(m.ax, m.ay, m.wz, r.t - self.t)  # type: ignore[attr-defined]
-            elif self.vessel is not None:
-                self._predict_vessel(r.t - self.t)
+            # an IMU record is the mean over its own interval
+            self._predict(f, r.t - self.t, r if isinstance(r, Imu) else self.imu_u)
             self.t = r.t
         io = self.imu_opts
         if isinstance(r, Imu):
@@ -245,10 +241,51 @@ class EkfStepper:
         self.step_ms.append((time.perf_counter() - t0) * 1e3)
         return True
 
-    def _predict_vessel(self, T: float) -> None:
-        """The vessel model over ``T`` (:meth:`InsEkf.predict_vessel`), its yaw-rate density the graph's:
-        x ``steerage / speed`` through the water below steerage speed, at most x10."""
-        vm, f = self.vessel, self.f
+    def _predict(self, f: PoseEkf, T: float, m: Imu | None) -> None:
+        """Filter ``f`` moved ``T`` seconds by the motion model: the unicycle with the held control, the IMU
+        record ``m`` held, or the vessel model (with ICP motion the state moves at scans only)."""
+        u = self.u
+        if u is not None and self.motion == "odometry":
+            f.predict_odometry(u.v, u.w, T, _sig(u.sigma_v, self.sigma_v), _sig(u.sigma_w, self.sigma_w),
+                               self.sigma_acc)
+        elif self.motion == "imu":
+            if m is not None:
+                f.predict_imu(m.ax, m.ay, m.wz, T)  # type: ignore[attr-defined]
+        elif self.vessel is not None:
+            self._predict_vessel(T, f)
+
+    def coast(self, t: float) -> PoseEkf | None:
+        """A copy of the filter predicted to ``t`` (coasting through a gap without records): the motion model
+        with the held inputs (odometry: the unicycle with the held control; the IMU record held; the vessel
+        model; ICP: the last increment's constant twist, with the constant-velocity bridge's covariance,
+        :data:`~graphnav.scan.motion_guess.CV_BRIDGE_SIGMA`, per scan interval, as a failed match), the
+        covariance grown by that model's process noise. ``None``: the model has nothing to move with yet (no
+        control, IMU record or scan increment). The filter itself is untouched."""
+        if self.t is None or t < self.t:
+            return None
+        if (self.motion == "odometry" and self.u is None) or (self.motion == "imu" and self.imu_u is None) \
+                or (self.motion == "icp" and (self.inc_dt is None or self.prev_scan is None)):
+            return None
+        g = copy.copy(self.f)  # the predictions replace x and P (they never touch the gate)
+        g.x, g.P = self.f.x.copy(), self.f.P.copy()
+        if self.motion == "icp":
+            assert self.prev_scan is not None and self.inc_dt is not None
+            import gtsam
+
+            from ..scan.motion_guess import CV_BRIDGE_SIGMA
+
+            frac = (t - self.prev_scan.t) / self.inc_dt
+            twist = np.asarray(gtsam.Pose2.Logmap(gtsam.Pose2(*self.last_inc)))
+            inc = gtsam.Pose2.Expmap(twist * frac)
+            g.predict_increment(np.array([inc.x(), inc.y(), inc.theta()]), np.diag(np.square(CV_BRIDGE_SIGMA)) * frac)
+        else:
+            self._predict(g, t - self.t, self.imu_u)
+        return g
+
+    def _predict_vessel(self, T: float, f: PoseEkf | None = None) -> None:
+        """The vessel model over ``T`` (:meth:`InsEkf.predict_vessel`) on ``f`` (default: the filter), its
+        yaw-rate density the graph's: x ``steerage / speed`` through the water below steerage speed, at most x10."""
+        vm, f = self.vessel, self.f if f is None else f
         assert vm is not None and isinstance(f, InsEkf)
         speed = f.speed_through_water()
         steer = vm["vessel_steerage_speed"]

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry import wrap_angle
+from ..graph.coast import Coaster
 from ..graph.position_walk import WalkTracker
 from ..log import Gnss, GnssVelocity, Heading, NavLog, Odometry, PosePrior, Record
 from ..result import Estimate
@@ -43,6 +44,7 @@ from .ekf import (
     run_ekf,
     vessel_model,
 )
+from .pose_ekf import PoseEkf
 
 
 class EkfOnline:
@@ -55,9 +57,13 @@ class EkfOnline:
     the initial velocity the first held GNSS velocity when ``v0`` is not given)."""
 
     def __init__(self, *, motion: str = "auto", speed: bool = False, emit: str = "fix", outage_s: float = 1.5,
-                 init_wait: float = 2.0, meta: dict[str, Any] | None = None, **ekf_options: Any) -> None:
+                 init_wait: float = 2.0, meta: dict[str, Any] | None = None, coast_hz: float | None = None,
+                 coast_max_s: float | None = None, **ekf_options: Any) -> None:
         if emit not in ("fix", "all"):
             raise ValueError(f"emit must be 'fix' or 'all', not {emit!r}")
+        #: the output grid through gaps without records (the navigator's rule, :class:`~graphnav.graph.coast.Coaster`)
+        self.coaster = Coaster(None if coast_hz is None else float(coast_hz),
+                               None if coast_max_s is None else float(coast_max_s))
         self.motion, self.speed, self.emit = motion, speed, emit
         self.outage_s, self.init_wait = outage_s, init_wait
         self.meta = dict(meta or {})
@@ -139,6 +145,7 @@ class EkfOnline:
 
     # -- the interface
     def add(self, record: Record) -> Estimate | None:
+        self.coaster.out = []
         kind = record.kind if record.kind in self.counts else "other"
         if self.stepper is None:
             if not (self.pending and record.t > self.pending[-1].t + 1e-9 and self._ready(record.t)):
@@ -152,6 +159,11 @@ class EkfOnline:
             self.counts["late"] += 1
             return None
         self.counts[kind] += 1
+        if st.uses(record):  # (a record the filter does not take is silence to it)
+            silent = self.coaster.live_horizon(record.t) is not None  # (before this record counts)
+            self.coaster.record(record)
+            if silent:
+                self._coast_before(record.t)
         if self.walker is not None and st.vessel is not None:
             walk = self.walker.add(record)
             if walk is not None:
@@ -189,27 +201,75 @@ class EkfOnline:
     def _estimate(self) -> Estimate:
         st = self.stepper
         assert st is not None and st.t is not None
-        f = st.f
         self.last_emit_t = st.t
+        self.coaster.estimated(0, st.t)
+        return self._of(st.f, st.t)
+
+    def _of(self, f: PoseEkf, t: float, coasted: bool = False) -> Estimate:
+        """The estimate of filter ``f`` (the stepper's, or a predicted copy) at ``t``."""
+        st = self.stepper
+        assert st is not None
         if self.motion in ("imu", "vessel"):  # velocity over ground from the state, rate of turn from the IMU
             vx, vy = float(f.x[3]), float(f.x[4])
             m = st.imu_u
             ib = getattr(f, "ib", None)
             w = None if m is None else m.wz - (float(f.x[ib + 2]) if ib is not None else 0.0)
-            return Estimate(st.t, f.x[:3].copy(), f.P[:3, :3].copy(), math.hypot(vx, vy),
-                            float(wrap_angle(math.atan2(vy, vx))), w)
+            return Estimate(t, f.x[:3].copy(), f.P[:3, :3].copy(), math.hypot(vx, vy),
+                            float(wrap_angle(math.atan2(vy, vx))), w, coasted=coasted)
         u = st.u
         v = float(f.x[3]) if f.has_speed else (u.v if u is not None else None)
         w = u.w if u is not None else None
         cog = None if v is None else float(f.x[2] if v >= 0 else math.remainder(f.x[2] + math.pi, 2 * math.pi))
-        return Estimate(st.t, f.x[:3].copy(), f.P[:3, :3].copy(), None if v is None else abs(v), cog, w)
+        return Estimate(t, f.x[:3].copy(), f.P[:3, :3].copy(), None if v is None else abs(v), cog, w,
+                        coasted=coasted)
+
+    # -- coasting (graphnav.graph.coast: the same output grid and silence rule as the navigator's)
+    @property
+    def coasted_out(self) -> list[Estimate]:
+        """The coasted estimates the last ``add()`` put out, before its own (live mode's sink publishes them)."""
+        return self.coaster.out
+
+    def coast(self, t: float) -> list[Estimate]:
+        """Live mode's clock tick at stream time ``t``: once no record the filter takes came for two output (or
+        record) periods, the predictions due on the output grid up to a period before ``t``
+        (:meth:`~graphnav.graph.coast.Coaster.live_horizon`); offline the gaps are filled as the next record comes."""
+        until = self.coaster.live_horizon(t) if self.stepper is not None else None
+        return [] if until is None else self._coast_to(until)
+
+    def _coast_before(self, t: float) -> None:
+        """A record at ``t`` after a silence live mode would have coasted through (the live rule at ``t``, checked
+        by the caller) and a gap in the output (:meth:`~graphnav.graph.coast.Coaster.gap`): the grid up to half a
+        period before it."""
+        period = self.coaster.period()
+        if period is not None and self.coaster.gap(t):
+            self._coast_to(t - 0.5 * period)
+
+    def _coast_to(self, until: float) -> list[Estimate]:
+        """Predictions on the output grid up to ``until``, each from a copy of the filter
+        (:meth:`~graphnav.estimators.ekf.EkfStepper.coast`: the filter's own motion model, its process noise),
+        flagged ``coasted``; kept in :attr:`coasted_out`. The filter is untouched."""
+        st = self.stepper
+        if st is None or st.t is None:
+            return []
+        out = []
+        for tau in self.coaster.grid(until):
+            if tau <= st.t + 1e-9:  # records came up to st.t: no silence there
+                continue
+            g = st.coast(tau)
+            if g is None:  # nothing to move with (no control, IMU record or scan increment yet)
+                break
+            out.append(self._of(g, tau, coasted=True))
+            self.coaster.coasted(tau)
+        self.coaster.out.extend(out)
+        return out
 
     def info(self) -> dict[str, Any]:
         st = self.stepper
         s = np.asarray(st.step_ms if st is not None else [])
         out: dict[str, Any] = {"estimator": "ekf-online", "motion": self.motion, "anchor": self.anchor,
                                **self.counts, "step_ms_median": float(np.median(s)) if s.size else None,
-                               "step_ms_p99": float(np.percentile(s, 99)) if s.size else None}
+                               "step_ms_p99": float(np.percentile(s, 99)) if s.size else None,
+                               **self.coaster.info()}
         if st is not None:
             out.update(st.f.counts, icp_failed=st.icp_failed)
             if st.vessel is not None:

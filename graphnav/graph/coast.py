@@ -16,6 +16,7 @@ a period before it); live, the runner's clock tick asks for them while the strea
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import deque
 from typing import Any
@@ -38,6 +39,7 @@ OUTPUT_INTERVALS = 64  # the output period: the median of the newest this many i
 MIN_INTERVALS = 3  # ... once there are this many
 MAX_POINTS = 100_000  # coasted estimates per call at most (a clock jump of days is not walked at the output rate)
 EPS = 1e-9  # [s]
+log_ = logging.getLogger("graphnav.coast")
 
 #: a prediction: pose (x, y, yaw), world covariance, speed over ground, course, yaw rate
 Prediction = tuple[NDArray[np.float64], NDArray[np.float64], float | None, float | None, float | None]
@@ -49,8 +51,15 @@ class Coaster:
     real estimate (the newest is the seed of the predictions); :meth:`gap` says whether the next one
     leaves a gap; :meth:`grid` gives the times due."""
 
-    def __init__(self, hz: float | None) -> None:
+    def __init__(self, hz: float | None, max_s: float | None = None) -> None:
+        if hz is not None and not (hz >= 0 and math.isfinite(hz)):
+            raise ValueError(f"coast_hz must be >= 0 (0: off) or None (the estimates' rate), got {hz}")
+        if max_s is not None and not max_s > 0:
+            raise ValueError(f"coast_max_s must be > 0 or None (no limit), got {max_s}")
         self.hz = hz
+        self.max_s = max_s  # [s] no prediction further than this from the newest real estimate (None: no limit)
+        self.stopped = 0  # gaps in which coasting stopped at max_s
+        self._stopped_seed: tuple[int, float] | None = None
         self.dts: deque[float] = deque(maxlen=OUTPUT_INTERVALS)
         self.seed: tuple[int, float] | None = None  # the newest real estimate: keyframe, time
         self.t_out: float | None = None  # the newest output (real or coasted)
@@ -115,14 +124,30 @@ class Coaster:
 
     def grid(self, until: float) -> list[float]:
         """The output times due up to ``until`` (inclusive): the seed's time + n periods, after the
-        newest output."""
+        newest output, and at most ``max_s`` after the seed (coasting stops there: counted in
+        :attr:`stopped` once per gap, logged)."""
         period = self.period()
         if period is None or self.seed is None or self.t_out is None or not period > 0:
             return []
         t0 = self.seed[1]
+        if self.max_s is not None and until > t0 + self.max_s:
+            until = t0 + self.max_s
+            if self._stopped_seed != self.seed:
+                self._stopped_seed = self.seed
+                self.stopped += 1
+                log_.warning("coasting stopped %.1f s after the last estimate (coast_max_s): no output until a "
+                             "record comes", self.max_s)
         n = max(1, math.floor((self.t_out - t0) / period + 1e-9) + 1)
         last = math.floor((until - t0) / period + 1e-9)
         return [t0 + i * period for i in range(n, min(last, n + MAX_POINTS - 1) + 1)]
+
+    def info(self) -> dict[str, Any]:
+        """The summary's coasting entries: how many estimates were coasted, at which period, and (with
+        ``max_s``) the limit and how many gaps it cut short."""
+        out: dict[str, Any] = {"coasted_estimates": self.count, "coast_period_s": self.period()}
+        if self.max_s is not None:
+            out.update(coast_max_s=self.max_s, coast_stopped=self.stopped)
+        return out
 
     def coasted(self, t: float) -> None:
         """A coasted estimate at ``t`` was put out."""
@@ -235,7 +260,7 @@ class Coasting:
         """How many online estimates were coasted (predictions through gaps) and at which period."""
         if not self.solver.online:
             return {}
-        return {"coasted_estimates": self.coaster.count, "coast_period_s": self.coaster.period()}
+        return self.coaster.info()
 
 
     def _coast_before(self, k: int) -> None:

@@ -161,7 +161,7 @@ class Navigator(Coasting):
         self.on_estimate = on_estimate
         self.history = history
         self.track = OnlineTrack(history)  # the online estimates and step times
-        self.coaster = Coaster(cfg.optimizer.coast_hz)  # the output through gaps without records (Coasting)
+        self.coaster = Coaster(cfg.optimizer.coast_hz, cfg.optimizer.coast_max_s)  # output through gaps (Coasting)
         self.last_pose: gtsam.Pose2 | None = None
         self.last_cov: NDArray[np.float64] | None = None
         self._base = 0  # the keyframe the fixed-lag smoother was last re-anchored at

@@ -309,6 +309,10 @@ class SolverConfig:
         "next estimate is more than 1.5 periods away. None: the median rate of the estimates so far, and a gap is "
         "twice their 90th-percentile interval (the keyframe policy's spread is no gap); 0: off (the output then has "
         "a hole wherever the records do)", unit="Hz")
+    coast_max_s: float | None = option(
+        None, "coasting stops this long after the newest real estimate (no output until a record comes; counted in "
+        "coast_stopped). None: no limit -- the predictions' covariance grows with the motion model's process noise "
+        "and is published with them (GGA HDOP, Signal K uncertainty), flagged as dead reckoning", unit="s")
     batch_init: str = option("incremental",
         "batch's initial guess: \"incremental\" (LM on the graph so far each time it has grown by batch_init_growth, "
         "later poses chained from that solution) or \"chained\" (dead reckoning)")
@@ -321,6 +325,8 @@ class SolverConfig:
             raise ValueError(f"batch_init_growth must be > 1, got {self.batch_init_growth}")
         if self.coast_hz is not None and not (self.coast_hz >= 0 and math.isfinite(self.coast_hz)):
             raise ValueError(f"coast_hz must be >= 0 (0: off) or None (the estimates' rate), got {self.coast_hz}")
+        if self.coast_max_s is not None and not self.coast_max_s > 0:
+            raise ValueError(f"coast_max_s must be > 0 or None (no limit), got {self.coast_max_s}")
 
 
 @dataclass

@@ -76,6 +76,8 @@ MAX_LINE = 1 << 20
 #: Signal K's ``navigation.gnss.methodQuality`` -> the NMEA 0183 GGA quality of :data:`UERE_M`.
 METHOD_QUALITY = {"gnss fix": 1, "dgnss fix": 2, "precise gnss": 3, "rtk fixed integer": 4, "rtk float": 5,
                   "estimated (dr) mode": 6, "manual input": 7, "simulator mode": 8}
+#: ``navigation.gnss.methodQuality`` of a dead-reckoned (coasted) solution
+DR_MODE = "Estimated (DR) mode"
 #: Resolution assumed for values without one (Signal K carries doubles): SOG 0.01 m/s, COG 1e-4 rad.
 SOG_STEP, COG_STEP, STW_STEP = 0.01, 1e-4, 0.01
 #: The paths read (the rest are counted).
@@ -359,11 +361,14 @@ def _course(yaw: float) -> float:
 
 def solution_delta(t: float, vec, frame: LocalFrame, *, cov=None, sog: float | None = None,
                    cog_yaw: float | None = None, w: float | None = None, source: str = "graphnav",
-                   context: str = "vessels.self") -> dict[str, Any]:
+                   context: str = "vessels.self", coasted: bool | None = None) -> dict[str, Any]:
     """One Signal K delta of a navigation solution at ``t``: ``vec`` (x, y, yaw) in ``frame``, its
     3x3 covariance ``cov`` (x, y, yaw; None: no uncertainty), speed/course over ground, yaw rate.
     Uncertainties (1-sigma, SI) go in the update's ``meta`` as ``{"path", "value": {"uncertainty"}}``:
-    the position's is the root mean square of the east and north sigmas [m]."""
+    the position's is the root mean square of the east and north sigmas [m]. ``coasted`` (not None):
+    ``navigation.gnss.methodQuality`` is ``"Estimated (DR) mode"`` (a prediction through a gap without
+    records, as GGA quality 6) or ``"GNSS Fix"`` (as GGA quality 1): the values of the Signal K
+    specification's enum (:data:`METHOD_QUALITY`)."""
     x, y, yaw = (float(a) for a in np.asarray(vec, dtype=float).reshape(3))
     lat, lon = frame.to_geodetic(x, y)
     values: list[dict[str, Any]] = [
@@ -376,6 +381,8 @@ def solution_delta(t: float, vec, frame: LocalFrame, *, cov=None, sog: float | N
         values.append({"path": "navigation.courseOverGroundTrue", "value": _course(cog_yaw)})
     if w is not None and math.isfinite(w):
         values.append({"path": "navigation.rateOfTurn", "value": -float(w)})
+    if coasted is not None:
+        values.append({"path": "navigation.gnss.methodQuality", "value": DR_MODE if coasted else "GNSS Fix"})
     upd: dict[str, Any] = {"$source": source, "source": {"label": source, "type": "graphnav"},
                            "timestamp": iso_time(t), "values": values}
     if cov is not None:

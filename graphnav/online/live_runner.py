@@ -36,8 +36,9 @@ transport (:mod:`.transport`), the clock and decoder (:mod:`.stream_clock`), the
   Signal K delta per estimate (:func:`graphnav.io.signalk.solution_delta`) to ``publish_signalk``.
   While the stream is silent (two output or record periods without a record), the estimator's
   predictions on its output grid are published too (``coast``, :meth:`LiveRunner.tick`: the
-  navigator's motion model, covariance grown; GGA fix quality 6, *estimated*; counted in
-  ``coasted_estimates``), instead of a hole in the output.
+  navigator's or the EKF's motion model, covariance grown; GGA fix quality 6, *estimated*, Signal K
+  ``navigation.gnss.methodQuality`` "Estimated (DR) mode"; counted in ``coasted_estimates``, their times
+  in ``coasted_spans``), instead of a hole in the output.
 * **Stopping** -- SIGINT/SIGTERM (or :meth:`LiveRunner.stop`, ``duration``, ``idle_exit``, the
   end of the scan replay) ends the loop; files are flushed and closed and ``summary()`` returns
   ``sentences_in``, ``bad_sentences``, ``estimates``, ``published``, ``latency_ms_median``,

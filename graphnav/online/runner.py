@@ -16,7 +16,7 @@ import numpy as np
 
 from ..estimators import make_online, online_names
 from ..log import NavLog
-from ..result import OnlineEstimator
+from ..result import Estimate, OnlineEstimator
 from ..trajectory import Trajectory
 
 __all__ = ["make_online", "online_names", "run_online"]
@@ -24,17 +24,25 @@ __all__ = ["make_online", "online_names", "run_online"]
 
 def run_online(log: NavLog, estimator: OnlineEstimator) -> Trajectory:
     """Feed a log's records in order (then ``flush()``, when the estimator has it); the trajectory
-    of the estimates as they were produced."""
-    t, poses = [], []
+    of the estimates as they were produced, with the predictions an estimator coasted through a gap
+    without records before each (its ``coasted_out``; ``meta["coasted"]`` flags them)."""
+    t, poses, coasted = [], [], []
+
+    def put(e: Estimate) -> None:
+        t.append(e.t)
+        poses.append(e.vec)
+        coasted.append(e.coasted)
+
     for r in log.records:
         e = estimator.add(r)
+        for c in getattr(estimator, "coasted_out", ()):  # predictions through the gap before it
+            put(c)
         if e is not None:
-            t.append(e.t)
-            poses.append(e.vec)
+            put(e)
     flush = getattr(estimator, "flush", None)
     if callable(flush):
         e = flush()
         if e is not None:
-            t.append(e.t)
-            poses.append(e.vec)
-    return Trajectory(np.array(t), np.array(poses).reshape(-1, 3), name="online")
+            put(e)
+    return Trajectory(np.array(t), np.array(poses).reshape(-1, 3), name="online",
+                      meta={"coasted": np.array(coasted, dtype=bool)})

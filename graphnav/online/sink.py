@@ -1,7 +1,10 @@
 """Live mode's sink: each estimate published as NMEA (GGA, HDT, VTG, ROT; one UDP datagram) and as a
 Signal K delta (:func:`graphnav.io.signalk.solution_delta`, uncertainties under meta), timed
 (GNSS sentence arrival -> solution sent, over the last :data:`LATENCY_WINDOW` fixes) and appended to
-a new TUM file per run (``DIR/live-YYYYmmddTHHMMSSZ.tum``, + ``.cov``, flushed line by line)."""
+a new TUM file per run (``DIR/live-YYYYmmddTHHMMSSZ.tum``, + ``.cov``, flushed line by line). A coasted
+estimate (a prediction through a silent stream) is flagged in each output that can carry it: GGA quality 6,
+Signal K ``navigation.gnss.methodQuality`` "Estimated (DR) mode"; the TUM file cannot, so the summary lists
+the spans of coasted estimates (``coasted_spans``)."""
 
 from __future__ import annotations
 
@@ -10,6 +13,7 @@ import logging
 import math
 import socket
 import time
+from collections import deque
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +31,7 @@ from .transport import parse_endpoint, resolve
 
 log_ = logging.getLogger("graphnav.live")
 LATENCY_WINDOW = 100_000
+MAX_SPANS = 1000  # coasted spans kept for the summary (the newest)
 _KINDS = ("", *RECORD_TYPES)  # latency ring buffer: the record kind of each estimate ("": unknown)
 
 
@@ -79,6 +84,10 @@ class Sink:
         self.coasted = 0  # estimates that were predictions through a silent stream (GGA quality 6)
         self.late = 0  # estimates older than one already emitted (a keyframe solved after coasting past it): dropped
         self.last: Estimate | None = None
+        #: [first t, last t, count] of each run of consecutive coasted estimates (the newest MAX_SPANS)
+        self.spans: deque[list[float]] = deque(maxlen=MAX_SPANS)
+        self.n_spans = 0
+        self._in_span = False
         self.newest: float | None = None  # the newest time emitted since the clock's last re-sync
         self.hdop = 1.0  # published HDOP: from the last estimate that carried a covariance
 
@@ -115,6 +124,13 @@ class Sink:
         self.newest = est.t
         self.estimates += 1
         self.coasted += est.coasted
+        if est.coasted:  # the spans of coasted estimates (the TUM file cannot flag them)
+            if self._in_span and self.spans:
+                self.spans[-1][1:] = [est.t, self.spans[-1][2] + 1]
+            else:
+                self.spans.append([est.t, est.t, 1])
+                self.n_spans += 1
+        self._in_span = est.coasted
         self.last = est
         if self.sock is not None and frame is not None:
             if est.cov is not None and np.all(np.isfinite(est.cov[:2, :2])):  # HDOP = sigma / UERE(GPS)
@@ -129,7 +145,8 @@ class Sink:
         if self.sk_sock is not None and frame is not None:
             from ..io.signalk import solution_delta
 
-            delta = solution_delta(est.t, est.vec, frame, cov=est.cov, sog=est.sog, cog_yaw=est.cog, w=est.w)
+            delta = solution_delta(est.t, est.vec, frame, cov=est.cov, sog=est.sog, cog_yaw=est.cog, w=est.w,
+                                   coasted=est.coasted)  # navigation.gnss.methodQuality "Estimated (DR) mode"
             try:
                 self.sk_sock.sendto(json.dumps(delta).encode("utf-8"), self.sk_addr)
                 self.published_signalk += 1
@@ -146,7 +163,9 @@ class Sink:
     def summary(self) -> dict[str, Any]:
         lat = self.latency_ms[: min(self.n_latency, LATENCY_WINDOW)]
         out: dict[str, Any] = {
-            "estimates": self.estimates, "coasted_estimates": self.coasted, "late_estimates": self.late,
+            "estimates": self.estimates, "coasted_estimates": self.coasted,
+            "coasted_spans": [[a, b, int(n)] for a, b, n in self.spans], "coasted_spans_total": self.n_spans,
+            "late_estimates": self.late,
             "published": self.published,
             "latency_ms_median": float(np.median(lat)) if lat.size else None,
             "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None,

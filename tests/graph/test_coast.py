@@ -10,10 +10,12 @@ import math
 
 import numpy as np
 import pytest
+from _live import fed_up_to_the_gap
+from _logfactory import straight_line
 
 from graphnav.graph.log_runs import run_isam2
 from graphnav.graph.navigator import Navigator
-from graphnav.log import Gnss, GnssVelocity, Heading, NavLog
+from graphnav.log import NavLog
 
 V = np.array([1.5, 0.8])  # [m/s] the true velocity
 SIGMA = 0.5  # [m] the fixes' sigma
@@ -24,18 +26,7 @@ GAP = (60.0, 121.0)  # the last fix before the gap, the first after
 def _line(vessel: bool, seed: int = 1) -> NavLog:
     """Fixes at 1 Hz on ``x = V t`` (+ noise) with no record in ``GAP``; ``vessel``: a compass and GNSS
     velocity with each fix (the Pose3 vessel graph), else the fixes alone (the Pose2 graph)."""
-    rng = np.random.default_rng(seed)
-    recs = []
-    for k in range(181):
-        t = float(k)
-        if GAP[0] < t < GAP[1]:
-            continue
-        p = V * t + rng.normal(0.0, SIGMA, 2)
-        recs.append(Gnss(t, p[0], p[1], SIGMA))
-        if vessel:
-            v = V + rng.normal(0.0, SIGMA_V, 2)
-            recs += [Heading(t, math.atan2(V[1], V[0]), math.radians(2.0)), GnssVelocity(t, v[0], v[1], SIGMA_V)]
-    return NavLog(recs)
+    return straight_line(V, SIGMA, GAP, heading=vessel, velocity_sigma=SIGMA_V if vessel else None, seed=seed)
 
 
 def _coasted(r):
@@ -108,12 +99,7 @@ def test_the_live_runner_publishes_the_predictions_while_the_stream_is_silent():
 
     log = _line(True)
     runner = LiveRunner(["udp://127.0.0.1:9"], Navigator.for_log(log))
-    for rec in log.records:
-        if rec.t > GAP[0]:
-            break
-        runner._record(rec, None)
-    real = runner.sink.estimates
-    runner.nmea.clock.t0, runner.nmea.clock.a0 = GAP[0], 100.0  # the last stamp came at wall time 100 s
+    real = fed_up_to_the_gap(runner, log, GAP[0])  # the last stamp came at wall time 100 s
     runner.tick(now=101.0)
     assert runner.sink.estimates == real  # one second of silence: nothing due yet
     runner.tick(now=110.0)

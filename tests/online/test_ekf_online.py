@@ -150,13 +150,19 @@ def test_live_cli_with_the_ekf_publishes_parseable_nmea(tmp_path):
     assert p.returncode == 0, err
     summary = json.loads(out)
     assert summary["estimator"]["estimator"] == "ekf-online" and summary["bad_sentences"] == 0
-    assert summary["estimates"] == len(log.of("gnss")) - 1  # the first fix's epoch starts the filter
+    # the first fix's epoch starts the filter; once the stream ended (1 s before --idle-exit) it coasted
+    assert summary["estimates"] - summary["coasted_estimates"] == len(log.of("gnss")) - 1
+    assert summary["coasted_estimates"] >= 1 and summary["estimator"]["coasted_estimates"] >= 1
     lines = [ln for d in data for ln in d.decode("ascii").split("\r\n") if ln]
     msgs = [pynmea2.parse(s, check=True) for s in lines]
     assert {m.sentence_type for m in msgs} == {"GGA", "HDT", "VTG", "ROT"}
     assert summary["published"] == len(lines) == 4 * summary["estimates"]
     frame = LocalFrame(*[log.meta["origin"][k] for k in ("lat", "lon")])
     gga = [m for m in msgs if m.sentence_type == "GGA"]
+    coasted = [int(m.gps_qual) == 6 for m in gga]  # GGA quality 6: estimated (dead reckoning), at the end only
+    assert sum(coasted) == summary["coasted_estimates"]
+    assert all(coasted[len(coasted) - sum(coasted):]) and not any(coasted[:len(coasted) - sum(coasted)])
+    gga = [m for m, c in zip(gga, coasted, strict=True) if not c]
     x, y = frame.to_local(np.array([m.latitude for m in gga]), np.array([m.longitude for m in gga]))
     fixes = log.of("gnss")[1:]
     ref = log.truth().interpolate(np.array([r.t for r in fixes]))
