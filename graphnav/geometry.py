@@ -56,6 +56,11 @@ def se2_compose(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
     """a ⊕ b for poses (x, y, yaw); broadcasts over leading dimensions."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
+    if a.shape == b.shape == (3,):  # one pose each: the same arithmetic on floats (~10x less overhead)
+        ax, ay, at = a.tolist()
+        bx, by, bt = b.tolist()
+        c, s = math.cos(at), math.sin(at)
+        return np.array([ax + c * bx - s * by, ay + s * bx + c * by, wrap_angle(at + bt)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
@@ -65,6 +70,10 @@ def se2_compose(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
 def se2_inverse(a: ArrayLike) -> NDArray[np.float64]:
     """⊖a for poses (x, y, yaw)."""
     a = np.asarray(a, dtype=float)
+    if a.shape == (3,):
+        ax, ay, at = a.tolist()
+        c, s = math.cos(at), math.sin(at)
+        return np.array([-c * ax - s * ay, s * ax - c * ay, wrap_angle(-at)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]

@@ -7,7 +7,9 @@ bearings from the bow). See docs/log-format.md for the text form of every record
 
 from __future__ import annotations
 
+import itertools
 import math
+import operator
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import MISSING, dataclass, field, fields
@@ -17,6 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import LogError
+
+_KIND = operator.attrgetter("kind")  # a record's kind (its class's), for counting
 
 #: Maximum range [m] of a scan whose log states none: a return beyond it is a missing return.
 #: Above the rated range of the 2D LiDARs used on vessels and indoors (Scanse Sweep 40 m, Hokuyo
@@ -612,6 +616,9 @@ class NavLog:
                                                               compare=False)
 
     def __post_init__(self) -> None:
+        t = [r.t for r in self.records]
+        if all(map(operator.le, t, itertools.islice(t, 1, None))):  # (in order: no walk by index)
+            return
         for i in range(1, len(self.records)):
             if self.records[i].t < self.records[i - 1].t:
                 raise LogError(
@@ -640,7 +647,7 @@ class NavLog:
 
     def counts(self) -> dict[str, int]:
         """Number of records per type (``beacon_known`` included when present)."""
-        c = Counter(r.kind for r in self.records)
+        c = Counter(map(_KIND, self.records))
         out = {k: c.get(k, 0) for k in RECORD_TYPES if c.get(k, 0)}
         if self.beacons_known:
             out["beacon_known"] = len(self.beacons_known)

@@ -207,7 +207,10 @@ class GraphBuilder:
 
     def ready(self) -> list[int]:
         """Keyframes whose batch can be built now (in order)."""
-        return self.keyframes.ready(self.motion.imu_until())
+        kf = self.keyframes
+        if kf.stepped >= len(kf.t):  # (asked after every record: mostly none waits)
+            return []
+        return kf.ready(self.motion.imu_until())
 
     def _start(self) -> None:
         t0, replay = self.anchor.choose(self.charted)

@@ -31,6 +31,7 @@ from ..result import Estimate, OnEstimate
 from .imu_chain import relative_prediction
 from .motion import Motion, NavPrev
 from .online_track import OnlineTrack
+from .order_stats import median, quantile
 from .solver import Solver, SolverError
 from .space import V, as_pose2
 
@@ -74,7 +75,7 @@ class Coaster:
             return 1.0 / self.hz if self.hz > 0 else None
         if len(self.dts) < MIN_INTERVALS:
             return None
-        return float(np.median(self.dts))
+        return median(self.dts)
 
     def gap(self, t: float) -> bool:
         """Whether an estimate at ``t`` after the newest one leaves a gap in the output: longer than 1.5
@@ -84,7 +85,7 @@ class Coaster:
         period = self.period()
         if period is None or self.seed is None:
             return False
-        limit = 1.5 * period if self.hz is not None else 2.0 * float(np.quantile(self.dts, 0.9))
+        limit = 1.5 * period if self.hz is not None else 2.0 * quantile(self.dts, 0.9)
         return t - self.seed[1] > limit
 
     def estimated(self, k: int, t: float) -> None:
@@ -118,7 +119,7 @@ class Coaster:
         period = self.period()
         if period is None or self.t_rec is None:
             return None
-        lag = max(period, float(np.median(self.rec_dts)) if self.rec_dts else 0.0)
+        lag = max(period, median(self.rec_dts) if self.rec_dts else 0.0)
         return now - lag if now - self.t_rec > 2 * lag else None
 
     def grid(self, until: float) -> list[float]:

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..log import NavLog, Record
+from .order_stats import median
 from .smoother_config import KeyframeConfig
 
 DEFAULT_PERIOD = 0.5
@@ -221,7 +222,7 @@ class Keyframes:
         if self._last_scan_t is not None and t > self._last_scan_t:
             self._scan_gaps.append(t - self._last_scan_t)
         self._last_scan_t = t
-        return float(np.median(self._scan_gaps)) if self._scan_gaps else None
+        return median(self._scan_gaps) if self._scan_gaps else None
 
     def add(self, t: float, scan: Record | None) -> None:
         """A new keyframe at ``t`` (with its scan); the pending measurements join it or the previous one."""

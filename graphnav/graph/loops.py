@@ -206,13 +206,13 @@ class LoopCloser:
             return []
         out: list[tuple[float, str, int, Vec, float, float]] = []
         seen: set[int] = set()
-        for _, j in self.places.near(q.pose[:2], cfg.gate_neighbours, valid):
-            p = self.places[j]
-            if p.k < oldest:
-                continue
-            dp = q.pose[:2] - p.pose[:2]
-            S = q.cov[:2, :2] + p.cov[:2, :2]
-            d2 = float(dp @ np.linalg.solve(S, dp))
+        near = [(j, self.places[j]) for _, j in self.places.near(q.pose[:2], cfg.gate_neighbours, valid)]
+        near = [(j, p) for j, p in near if p.k >= oldest]
+        # the Mahalanobis distances: one batched solve (LAPACK on each 2x2 system, as one by one)
+        dps = q.pose[:2] - np.array([p.pose[:2] for _, p in near]).reshape(-1, 2)
+        S = q.cov[:2, :2] + np.array([p.cov[:2, :2] for _, p in near]).reshape(-1, 2, 2)
+        for (j, p), dp, x in zip(near, dps, np.linalg.solve(S, dps[..., None])[..., 0], strict=True):
+            d2 = float(dp @ x)
             if d2 <= self.chi_gate:
                 guess = _vec(_pose(p.pose).between(_pose(q.pose)))
                 out.append((d2 / self.chi_gate, "gate", j, guess, 0.0, 0.0))

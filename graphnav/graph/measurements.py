@@ -22,6 +22,7 @@ from ..config import OptionError
 from ..log import Attitude, BeaconObs, Gnss, GnssVelocity, Heading, KnownBeacon, PosePrior, Record, WaterSpeed
 from .chi2 import SCALE_WINDOW, chi2_median, significant_scale
 from .mounts import Mount
+from .order_stats import median
 from .smoother_config import SmootherConfig
 from .space import PlanarSpace, V, W
 from .step import Step
@@ -80,7 +81,8 @@ class GnssScale:
             return
         if n not in self._bound:
             self._bound[n] = significant_scale(2, self.prob, n)
-        est = float(np.median(self.x)) / MEDIAN_CHI2_2
+        med = median(self.x) if all(map(math.isfinite, self.x)) else float(np.median(self.x))  # (NaN: numpy's)
+        est = med / MEDIAN_CHI2_2
         self.scale = est if est > self._bound[n] else 1.0
         self.max_scale = max(self.max_scale, self.scale)
 

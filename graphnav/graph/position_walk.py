@@ -30,7 +30,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import nnls
 
 from ..log import NavLog, Record
 from .chi2 import chi2_median
@@ -81,6 +80,8 @@ def fit_walk(rows: list[tuple[float, float, int]]) -> tuple[float, float] | None
     inverse standard deviation of its variance estimate, ``~ variance sqrt(2 / pairs)``)."""
     if len(rows) < 3:
         return None
+    from scipy.optimize import nnls  # (0.1 s to import: only the vessel model without an IMU fits a walk)
+
     lag, var, n = (np.array(c, dtype=float) for c in zip(*rows, strict=True))
     w = np.sqrt(n / 2.0) / np.maximum(var, 1e-12)
     sol, _ = nnls(np.c_[np.ones_like(lag), lag] * w[:, None], var * w)

@@ -122,7 +122,8 @@ class Solver:
         self.initial = gtsam.Values()
         self.frozen: dict[int, tuple[Any, NDArray[np.float64] | None]] = {}  # fixed-lag: left the window
         self._fresh: set[int] = set()  # iSAM2: the variables the last update inserted (see `estimate`)
-        self._marginals: dict[int, NDArray[np.float64]] = {}  # ... their marginal covariances, once computed
+        self._info: dict[int, NDArray[np.float64]] = {}  # ... their marginal information, once read
+        self._marginals: dict[int, NDArray[np.float64]] = {}  # ... its inverse, once asked for (`marginal`)
         self._stamps: dict[int, float] = {}  # fixed-lag: tracked key -> time
         self.updates = 0
         if kind == "isam2":
@@ -152,7 +153,7 @@ class Solver:
             if self.kind == "isam2":
                 self.s.update(graph, values)
                 self._fresh = set(values.keys())
-                self._marginals = {}
+                self._info, self._marginals = {}, {}
             elif self.kind == "fixed-lag":
                 if t is not None and track is not None:
                     for key, ts in list(self._stamps.items()):
@@ -195,7 +196,7 @@ class Solver:
                 self.s.update()
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
-        self._marginals = {}
+        self._info, self._marginals = {}, {}
 
     def estimate(self, key: int, type_name: str = "Pose2") -> Any:
         """The current estimate of ``key`` (batch: the initial guess).
@@ -225,7 +226,7 @@ class Solver:
         cond = self.s.marginalFactor(key)
         info = np.asarray(cond.information())
         delta = np.asarray(cond.solve(gtsam.VectorValues()).at(key))
-        self._marginals[key] = np.linalg.inv(info)
+        self._info[key] = info  # (inverted when asked for: the IMU bias's and the current's never are)
         theta = getattr(self.s.getLinearizationPoint(), f"at{type_name}")(key)
         if type_name in ("Vector", "Point2", "Point3", "Double"):
             return np.asarray(theta) + delta
@@ -236,6 +237,8 @@ class Solver:
         if self.kind == "batch":
             return None
         cached = self._marginals.get(key)
+        if cached is None and key in self._info:
+            cached = self._marginals[key] = np.linalg.inv(self._info[key])
         if cached is not None:
             return cached.copy()
         try:

@@ -46,6 +46,7 @@ def W(k: int) -> int:
 LOOSE = (0.5, 0.5, 10.0)
 #: Pose3 tangent indices of the planar (x, y, yaw)
 PLANAR = [3, 4, 2]
+_PLANAR_IX = np.ix_(PLANAR, PLANAR)  # (built once: np.ix_ per call was a tenth of the conversions)
 
 
 def _vec2(p: gtsam.Pose2) -> NDArray[np.float64]:
@@ -61,7 +62,7 @@ def as_pose2(p: gtsam.Pose3) -> gtsam.Pose2:
 def embed_cov(cov3: NDArray[np.float64], loose: tuple[float, float, float] = LOOSE) -> NDArray[np.float64]:
     """A (x, y, yaw) covariance as a Pose3 tangent covariance with ``loose`` roll, pitch, z."""
     c = np.zeros((6, 6))
-    c[np.ix_(PLANAR, PLANAR)] = 0.5 * (cov3 + cov3.T)
+    c[_PLANAR_IX] = 0.5 * (cov3 + cov3.T)
     c[0, 0], c[1, 1], c[5, 5] = loose[0] ** 2, loose[1] ** 2, loose[2] ** 2
     return c
 
@@ -170,7 +171,7 @@ class NavSpace(PlanarSpace):
     def world_cov(self, value: Any, cov: NDArray[np.float64]) -> NDArray[np.float64]:
         c = np.asarray(cov)
         if c.shape == (6, 6):
-            c = c[np.ix_(PLANAR, PLANAR)]
+            c = c[_PLANAR_IX]
         return cov_to_world(self.pose2(value).theta(), c)
 
     def prior(self, key: int, pose: NDArray[np.float64], sigmas: NDArray[np.float64],
@@ -282,12 +283,17 @@ def _vertical_component(brg: float, tilt: tuple[float, float] | None) -> int:
     body z is ``w . R e_z`` with ``R e_z = (cos r sin p, -sin r, cos r cos p)``."""
     roll, pitch = tilt if tilt is not None else (0.0, 0.0)
     c, s = math.cos(brg), math.sin(brg)
-    n = np.array([c, s, c * math.cos(roll) * math.sin(pitch) - s * math.sin(roll)])
-    n /= np.linalg.norm(n)
-    b1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
-    b1 /= np.linalg.norm(b1)
-    b2 = np.cross(n, b1)
-    return 0 if abs(b1[2]) > abs(b2[2]) else 1
+    z = c * math.cos(roll) * math.sin(pitch) - s * math.sin(roll)
+    r = math.sqrt(c * c + s * s + z * z)
+    n = (c / r, s / r, z / r)
+    a = min(range(3), key=lambda i: abs(n[i]))  # (the first on ties, as np.argmin)
+    # b1 = n x e_a / |n x e_a|; only the z components of b1 and b2 = n x b1 are compared (plain floats:
+    # one keyframe's beacon factors, ~1 ms with numpy's small-array overhead)
+    b1 = (n[1] * (a == 2) - n[2] * (a == 1), n[2] * (a == 0) - n[0] * (a == 2), n[0] * (a == 1) - n[1] * (a == 0))
+    nb = math.sqrt(b1[0] * b1[0] + b1[1] * b1[1] + b1[2] * b1[2])
+    b1 = (b1[0] / nb, b1[1] / nb, b1[2] / nb)
+    b2z = n[0] * b1[1] - n[1] * b1[0]
+    return 0 if abs(b1[2]) > abs(b2z) else 1
 
 
 #: [m] a mark's height above the surface (charted or unknown: a prior at 0)

@@ -11,6 +11,7 @@ round-trip exactly, ``beacon_known/<field>``, and ``meta`` (a JSON string).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import zipfile
@@ -209,6 +210,11 @@ def read_npz(path: str | Path, *, max_bytes: int = MAX_DECODED_BYTES, lenient: b
         data.close()
 
 
+def _init_fields(cls: type) -> list[str]:
+    """The names of a record type's ``__init__`` parameters, in order."""
+    return [f.name for f in dataclasses.fields(cls) if f.init]
+
+
 def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> NavLog:
     order = _get(data, "order", path, integer=True)
     meta_arr = data.read("meta") if "meta" in data else np.array("{}")
@@ -251,7 +257,10 @@ def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> N
             suspects = suspect_rows(cls, cols, limits)
             names = list(cols)
             rows = zip(*(c if isinstance(c, list) else c.tolist() for c in cols.values()), strict=True)
-            recs = [cls(**dict(zip(names, row, strict=True))) for row in rows]
+            if names == _init_fields(cls)[:len(names)]:  # the columns in the record's field order: positional
+                recs = [cls(*row) for row in rows]  # (no keyword dict per record: 80 000 records of a log)
+            else:
+                recs = [cls(**dict(zip(names, row, strict=True))) for row in rows]
         for i in range(len(recs)) if suspects is None else np.flatnonzero(suspects).tolist():
             r = recs[i]
             try:

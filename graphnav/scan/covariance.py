@@ -97,6 +97,9 @@ class Between:
     residual_rms: float  # weighted RMS of the residuals [m]
     inliers: int
     degeneracy: degeneracy.Degeneracy
+    #: the geometry's own weak directions (without ``prior_cov``'s "known better" rule; ``degeneracy``
+    #: itself when no ``prior_cov`` was given)
+    geometry: degeneracy.Degeneracy
 
 
 def from_sums(k: float, n_inl: int, h: NDArray, b_lidar: NDArray, b_sampling: NDArray, rms: float, info: NDArray,
@@ -116,5 +119,6 @@ def from_sums(k: float, n_inl: int, h: NDArray, b_lidar: NDArray, b_sampling: ND
         if hi is not None:
             cov = hi @ (k * b_lidar + b_sampling) @ hi.T
             cov = 0.5 * (cov + cov.T)
-    deg = degeneracy.analyse(info, radius, cov, max_condition=max_condition, max_sigma=max_sigma, prior_cov=prior_cov)
-    return Between(cov, k, rms, n_inl, deg)
+    deg, geo = degeneracy.analyse_both(info, radius, cov, max_condition=max_condition, max_sigma=max_sigma,
+                                       prior_cov=prior_cov)
+    return Between(cov, k, rms, n_inl, deg, geo)

@@ -15,7 +15,7 @@ Pure numerics; used by :mod:`graphnav.scan.covariance` (every ICP match) and the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +36,7 @@ class Degeneracy:
     vectors: NDArray[np.float64]  # (3, 3) unit eigenvectors as columns, scaled coordinates
     weak: NDArray[np.bool_]
     radius: float  # L [m]
+    _proj: NDArray[np.float64] | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def degenerate(self) -> bool:
@@ -55,9 +56,11 @@ class Degeneracy:
     def projector(self) -> NDArray[np.float64]:
         """``P`` (3, 3) in unscaled tangent coordinates: ``P xi`` is the part of ``xi`` along the
         weak directions."""
-        v = self.vectors[:, self.weak]
-        s = np.diag([1.0, 1.0, 1.0 / self.radius])
-        return s @ v @ v.T @ np.linalg.inv(s)
+        if self._proj is None:  # (asked up to five times per match: computed once, handed out as copies)
+            v = self.vectors[:, self.weak]
+            s = np.diag([1.0, 1.0, 1.0 / self.radius])
+            self._proj = s @ v @ v.T @ np.linalg.inv(s)
+        return self._proj.copy()
 
     def inflation(self, sigma: float) -> NDArray[np.float64]:
         """Covariance (3, 3, unscaled tangent coordinates) of 1-sigma ``sigma`` [m] along every weak
@@ -92,21 +95,31 @@ def analyse(info: NDArray[np.float64], radius: float, cov: NDArray[np.float64], 
     is weak): the 1-sigma along each eigenvector is ``sqrt(v^T T cov T v)``, ``T = diag(1, 1, L)``.
     With ``prior_cov`` (the initial guess's covariance, same convention) a direction is also weak
     where the match knows it less well than the guess does."""
+    return analyse_both(info, radius, cov, max_condition=max_condition, max_sigma=max_sigma,
+                        prior_cov=prior_cov)[0]
+
+
+def analyse_both(info: NDArray[np.float64], radius: float, cov: NDArray[np.float64], *,
+                 max_condition: float = 200.0, max_sigma: float = np.inf,
+                 prior_cov: NDArray[np.float64] | None = None) -> tuple[Degeneracy, Degeneracy]:
+    """:func:`analyse` with ``prior_cov`` and without it (the geometry's own weak directions), from one
+    eigen-decomposition of ``info``: the second is the first without the "known better" rule."""
     ev, vec = np.linalg.eigh(0.5 * (info + info.T))
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
-    pos = ev > 0
     var = np.full(3, np.inf)
-    finite = bool(np.all(np.isfinite(cov)))
+    finite = bool(np.isfinite(cov).all())
     tm = np.diag([1.0, 1.0, float(radius)])
     if finite:
         var = np.einsum("ji,jk,ki->i", vec, tm @ cov @ tm, vec)
     sig = np.sqrt(np.maximum(var, 0.0))
-    weak = ~pos | (ev * max_condition < ev[-1]) | (sig > max_sigma)
-    if prior_cov is not None and np.all(np.isfinite(prior_cov)):
-        weak |= var > np.einsum("ji,jk,ki->i", vec, tm @ np.asarray(prior_cov, dtype=float) @ tm, vec)
+    weak = ~(ev > 0) | (ev * max_condition < ev[-1]) | (sig > max_sigma)
     if not finite:
         weak[:] = True
-    return Degeneracy(cond, sig, vec, weak, float(radius))
+    geo = Degeneracy(cond, sig, vec, weak, float(radius))
+    if prior_cov is None or not finite or not np.isfinite(prior_cov).all():
+        return geo, geo
+    known = var > np.einsum("ji,jk,ki->i", vec, tm @ np.asarray(prior_cov, dtype=float) @ tm, vec)
+    return Degeneracy(cond, sig, vec, weak | known, float(radius)), geo
 
 
 def keep_constrained(pose: NDArray[np.float64], guess: NDArray[np.float64],

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +44,13 @@ class Descriptor:
     grid: NDArray[np.float64]
     key: NDArray[np.float64]
     filled: NDArray[np.bool_]
+
+    @cached_property
+    def columns(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The columns' norms and the grid with each column normalised (zero where empty): computed once
+        per descriptor, which a loop search compares with many."""
+        norm = np.linalg.norm(self.grid, axis=0)
+        return norm, np.divide(self.grid, norm, out=np.zeros_like(self.grid), where=norm > 0)
 
 
 def describe(xy: NDArray[np.float64], cfg: DescriptorConfig | None = None) -> Descriptor | None:
@@ -90,10 +98,7 @@ def distance(q: Descriptor, c: Descriptor, min_overlap: float = 0.25) -> tuple[f
     [0, 1] (0: identical after the shift; 1 when fewer than ``min_overlap`` of the sectors hold
     returns in both)."""
     n = q.grid.shape[1]
-    qn = np.linalg.norm(q.grid, axis=0)
-    cn = np.linalg.norm(c.grid, axis=0)
-    qh = np.divide(q.grid, qn, out=np.zeros_like(q.grid), where=qn > 0)
-    ch = np.divide(c.grid, cn, out=np.zeros_like(c.grid), where=cn > 0)
+    (qn, qh), (cn, ch) = q.columns, c.columns
     cos = qh.T @ ch  # cos[j, l]: query column j against candidate column l
     both = np.outer(qn > 0, cn > 0)
     flat = _diagonals(n)  # row s: (j, j + s) for every j -- the query rotated by +s sectors

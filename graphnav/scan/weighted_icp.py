@@ -337,8 +337,7 @@ def _report(cfg: IcpConfig, out: tuple, t0: float, ns: int, nt: int, init: Array
     deg = bt.degeneracy
     # the geometry's own weak directions (without the guess's "known better" rule): what a fusion of the
     # match with its guess by information may not hear from the match
-    geo = deg if init is None or init_cov is None else degeneracy.analyse(
-        info, radius, bt.cov, max_condition=cfg.max_condition, max_sigma=cfg.max_sigma * big_d)
+    geo = deg if init is None or init_cov is None else bt.geometry
     failed, maha = _failures(cfg, pose, bt, iters, converged, moved, src_range, inlier_fraction, radius, init,
                              init_cov)
     cov, icp_pose, reasons = bt.cov, pose.copy(), []
