@@ -20,6 +20,7 @@ shared by the batch :func:`run_ekf` and the live adapter :class:`graphnav.estima
 from __future__ import annotations
 
 import copy
+import logging
 import math
 import time
 from collections import deque
@@ -375,6 +376,9 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
     ``reinit_after_s``, ``scale_window``) and the IMU motion's (:data:`IMU_DEFAULTS`, filled from the
     log by :func:`imu_options`). Sigmas in the records win over ``sigma_v``/``sigma_w``. One estimate
     per record time."""
+    live = sorted(k for k in LIVE_ONLY if gating.pop(k, None) is not None)
+    if live:
+        logging.getLogger("graphnav.ekf").warning("ekf option(s) %s apply to graphnav live only: ignored", live)
     if motion == "auto":
         motion = auto_motion(log)
     imu_given = {k: gating.pop(k) for k in list(gating) if k in IMU_DEFAULTS or k == "bias" or k == "current"}
@@ -490,7 +494,29 @@ class ImuMotionOptions:
 
 
 @dataclass
-class EkfConfig(ImuMotionOptions, GateOptions):
+class EkfLiveOptions:
+    """The live filter's options (:class:`graphnav.estimators.ekf_online.EkfOnline`, ``graphnav live -e ekf``);
+    a batch run has no output stream and ignores them (with a warning)."""
+
+    group: ClassVar[str] = "live only (graphnav live -e ekf)"
+    emit: str = option("fix", "fix: an estimate per GNSS fix, and per used record after outage_s without one; "
+                       "all: one per used record")
+    outage_s: float = option(1.5, "emit=fix: no fix for this long and every used record yields an estimate", unit="s")
+    init_wait: float = option(2.0, "the filter starts at the first complete epoch with a fix and a heading, or this "
+                              "long after the first fix; motion=auto is final this long after it", unit="s")
+    coast_hz: float | None = option(None, "the output's rate through a silent stream: the filter's predictions "
+                                    "(flagged coasted) on this grid; None: the estimates' own rate; 0: off "
+                                    "(as the graph's coast_hz)", unit="Hz")
+    coast_max_s: float | None = option(None, "coasting stops this long after the newest real estimate (None: no "
+                                       "limit, the covariance grows with the motion model's noise)", unit="s")
+
+
+#: the options only the live filter reads
+LIVE_ONLY = ("emit", "outage_s", "init_wait", "coast_hz", "coast_max_s")
+
+
+@dataclass
+class EkfConfig(EkfLiveOptions, ImuMotionOptions, GateOptions):
     """The ``ekf`` estimator's options (:func:`run_ekf`)."""
 
     group: ClassVar[str] = "ekf"
