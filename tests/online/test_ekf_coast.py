@@ -4,7 +4,8 @@ Known answers: the predictions lie on the output grid inside the gap, each the f
 in closed form (the vessel model's constant velocity and white-noise acceleration; the unicycle with the
 held control) applied to a copy of the filter; the filter's later estimates are bit-identical to a run
 without coasting; the flag reaches GGA, Signal K (``navigation.gnss.methodQuality``), the trajectory CSV
-and the live summary; ``coast_hz=0`` turns it off and ``coast_max_s`` stops it."""
+and the live summary; ``coast_hz=0`` turns it off and ``coast_max_s`` stops it. ICP motion coasts on the last
+scan increment's twist."""
 
 from __future__ import annotations
 
@@ -202,3 +203,40 @@ def test_run_out_writes_the_online_track_with_its_coasted_column(tmp_path):
     c = tr.meta["coasted"]
     assert c.sum() == json.loads(p.stdout)["coasted_estimates"] > 100  # the 0.5 s grid through the 60 s gap
     assert np.all((tr.t[c] > GAP[0]) & (tr.t[c] < GAP[1])) and tr.cov is not None
+
+
+def test_icp_motion_coasts_on_the_last_increments_twist():
+    """``motion="icp"``: a prediction is the last scan increment's constant twist for the time since that
+    scan (``Pose2.Expmap(Logmap(inc) * dt / scan interval)`` composed on the state), its covariance grown by the
+    failed-match bridge's per scan interval; nothing before the first increment; the filter untouched."""
+    import gtsam
+    from _harbour import harbour_trial
+
+    from graphnav.scan.motion_guess import CV_BRIDGE_SIGMA
+
+    log = harbour_trial(duration=6.0, rate=5.0, scans=True, scan_hz=1.0)
+    est = EkfOnline(motion="icp", emit="all")
+    scans = [r for r in log.records if r.kind == "scan"]
+    for r in log.records:
+        if r is scans[1]:
+            break
+        est.add(r)
+    st = est.stepper
+    assert st is not None and st.coast(st.t + 0.5) is None  # one scan so far: no increment to coast on
+    for r in log.records:
+        if r.t >= scans[1].t:
+            est.add(r)
+    x0, P0 = st.f.x.copy(), st.f.P.copy()
+    last = st.prev_scan
+    assert last is not None and st.inc_dt is not None
+    t = last.t + 1.7 * st.inc_dt
+    g = st.coast(t)
+    assert g is not None
+    inc = gtsam.Pose2.Expmap(np.asarray(gtsam.Pose2.Logmap(gtsam.Pose2(*st.last_inc))) * 1.7)
+    want = gtsam.Pose2(*x0[:3]).compose(inc)
+    assert np.allclose(g.x[:2], [want.x(), want.y()], atol=1e-9)
+    assert math.isclose(math.remainder(g.x[2] - want.theta(), 2 * math.pi), 0.0, abs_tol=1e-9)
+    grown = np.linalg.eigvalsh(g.P[:3, :3] - P0[:3, :3])
+    assert grown.min() > -1e-12 and np.trace(g.P[:3, :3]) - np.trace(P0[:3, :3]) >= 1.7 * min(
+        np.square(CV_BRIDGE_SIGMA)) * 0.99
+    assert np.array_equal(st.f.x, x0) and np.array_equal(st.f.P, P0)  # the filter itself untouched
