@@ -102,7 +102,9 @@ class Measurements:
         self.charted, self.kf_t, self.defaulted, self.counts = charted, kf_t, defaulted, counts
         self.beacon_ids: dict[str, int] = {}
         self.beacon_init: dict[str, NDArray[np.float64]] = {}
-        self.bias_key: int | None = None
+        self.bias_key: int | None = None  # the newest compass-bias variable
+        self.bias_t0: float | None = None  # when it took its first reading
+        self.bias_segments = 1  # compass-bias variables so far (B(0), B(1), ...)
         self.n_rejected = 0
         self.gnss_scale = GnssScale(cfg.robust.prob)  # the fixes' online variance scale
         self.consecutive_rejects = 0
@@ -215,6 +217,7 @@ class Measurements:
                     s.stamps[self.bias_key] = s.t
                     s.add(self.space.bias_prior(self.bias_key, math.radians(cfg.compass.bias_sigma_deg)), "bias")
                 if self.bias_key is not None:
+                    self._bias_segment(s)
                     s.add(self.space.biased_compass(self.bias_key, xa, yaw, sig, cfg.compass.robust), "compass")
                 else:
                     s.add(self.space.compass(xa, yaw, sig, cfg.compass.robust), "compass")
@@ -341,6 +344,25 @@ class Measurements:
         row = WaterRow(a, v, sv, lee, pa.theta())
         self.water.append(row)
         s.add(row.factor(row.yaw), "water_speed")
+
+    def _bias_segment(self, s: Step) -> None:
+        """A new compass-bias variable once the newest one has taken ``compass.bias_segment_s`` of readings,
+        tied to it by the random walk ``compass.bias_drift_deg`` (:class:`CompassConfig`)."""
+        seg = self.cfg.compass.bias_segment_s
+        if self.bias_key is None or seg is None:
+            return
+        if self.bias_t0 is None:
+            self.bias_t0 = s.t
+            return
+        if s.t - self.bias_t0 < seg:
+            return
+        new = F.B(self.bias_segments)
+        s.values.insert(new, self.space.bias_frame())
+        s.stamps[new] = s.t
+        sigma = math.radians(self.cfg.compass.bias_drift_deg) * math.sqrt(s.t - self.bias_t0)
+        s.add(self.space.bias_between(self.bias_key, new, sigma), "bias")
+        self.bias_key, self.bias_t0 = new, s.t
+        self.bias_segments += 1
 
     def current_step(self, s: Step, k: int) -> None:
         """The water current's variables up to keyframe ``k``: a random walk ``current_rw`` between

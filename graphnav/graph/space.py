@@ -120,6 +120,11 @@ class PlanarSpace:
     def bias_prior(self, key: int, sigma: float):
         return F.compass_bias_prior(key, sigma)
 
+    def bias_between(self, a: int, b: int, sigma: float):
+        """Consecutive compass-bias frames: the same, the angle within ``sigma`` [rad] (x/y pinned as the prior)."""
+        return gtsam.BetweenFactorPose2(a, b, gtsam.Pose2(), gtsam.noiseModel.Diagonal.Sigmas(
+            np.array([1e-3, 1e-3, sigma])))
+
     def biased_compass(self, bias_key: int, key: int, yaw: float, sigma: float, robust: str | None):
         return F.biased_compass_factor(bias_key, key, yaw, sigma, robust=robust)
 
@@ -214,6 +219,10 @@ class NavSpace(PlanarSpace):
     def bias_prior(self, key: int, sigma: float):
         model = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-4, 1e-4, sigma, 1e-3, 1e-3, 1e-3]))
         return gtsam.PriorFactorPose3(key, gtsam.Pose3(), model)
+
+    def bias_between(self, a: int, b: int, sigma: float):
+        model = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-4, 1e-4, sigma, 1e-3, 1e-3, 1e-3]))
+        return gtsam.BetweenFactorPose3(a, b, gtsam.Pose3(), model)
 
     def biased_compass(self, bias_key: int, key: int, yaw: float, sigma: float, robust: str | None):
         # roll, pitch, x, y, z: a precision of 1e-8 (sigma 1e4), not 0, so marginals (Cholesky) stay defined
