@@ -78,8 +78,7 @@ class EkfOnline:
         #: the vessel motion's position walk estimated from the stream (unless given), as live mode's graph
         self.walker = None if self.options.get("imu", {}).get("vessel_position_walk") is not None else WalkTracker()
         for m in (("vessel", "odometry") if motion == "auto" else (motion,)):  # validate the options now
-            EkfStepper(np.zeros(3), np.eye(3), motion=m, **(self.options if m in ("imu", "vessel") else
-                                                             {k: v for k, v in self.options.items() if k != "imu"}))
+            EkfStepper(np.zeros(3), np.eye(3), motion=m, **self._options_for(m))
         self.stepper: EkfStepper | None = None
         self.pending: deque[Record] = deque(maxlen=10_000)
         self.held: Counter[type] = Counter()  # kinds of the held records
@@ -113,6 +112,10 @@ class EkfOnline:
             return True
         return (self.held[PosePrior] > 0 or self.held[Heading] > 0) and (not self.speed or self.held[Odometry] > 0)
 
+    def _options_for(self, motion: str) -> dict[str, Any]:
+        """The stepper's options for ``motion``: the IMU (vessel) motion's only where it has them."""
+        return self.options if motion in ("imu", "vessel") else {k: v for k, v in self.options.items() if k != "imu"}
+
     def _choose(self, records: list[Record], least: int) -> str:
         return auto_motion(NavLog.from_unsorted(records, meta=self.meta), least=least)
 
@@ -130,9 +133,7 @@ class EkfOnline:
     def _build(self, recs: list[Record]) -> None:
         """The stepper from ``recs``' initial state (:func:`initial_state`), ``recs`` replayed into it."""
         x0, P0, self.anchor = initial_state(recs, self.speed)
-        options = self.options
-        if self.motion not in ("imu", "vessel"):
-            options = {k: v for k, v in options.items() if k != "imu"}
+        options = self._options_for(self.motion)
         if self.motion in ("imu", "vessel") and "v0" not in options.get("imu", {}):
             gv = next((r for r in recs if isinstance(r, GnssVelocity)), None)
             if gv is not None and gv.t - recs[0].t <= 1.0:  # as run_ekf's rule
