@@ -8,8 +8,9 @@ model as the UKFs (:mod:`graphnav.estimators.ukf`), linearised: with ``a = R(yaw
 
 Process noise from the IMU's white noise as a density (per-sample sigma ``s`` at rate ``hz``:
 ``s^2 / hz`` per second), bias and current random walks. Measurements: GNSS position (H picks x, y),
-compass (yaw), GNSS velocity (v_x, v_y) and speed through water
-``h = (v_x - c_x) cos(yaw) + (v_y - c_y) sin(yaw)``, each through :class:`PoseEkf`'s gated Joseph update.
+compass (yaw), GNSS velocity (v_x, v_y) and speed through water ``s`` as the graph's water model,
+``R(yaw)^T (v - c) = (s, 0)`` (along the bow the record's sigma, across it the leeway), each through
+:class:`PoseEkf`'s gated Joseph update.
 
 Without an IMU (``motion="vessel"``, :meth:`InsEkf.predict_vessel`) the same state moves as the graph's
 vessel model (:class:`graphnav.graph.imu_chain.ImuConfig`, ``vessel_*``): the velocity a random walk
@@ -137,25 +138,18 @@ class InsEkf(PoseEkf):
         H[0, 3], H[0, 4] = vx / h, vy / h
         return self._update("speed", np.array([abs(v) - h]), H, np.array([[sigma ** 2]]), t, reinit=False)
 
-    def update_water_speed(self, v: float, sigma: float, t: float | None = None, leeway: float | None = None) -> bool:
-        """Speed through water along the bow (needs the current states). With ``leeway`` [m/s] the graph's
-        water model (:meth:`graphnav.graph.measurements.Measurements.water_speed`): the velocity through
-        the water ``v - c`` is ``v (cos yaw, sin yaw)``, ``sigma`` along the bow and ``leeway`` across it."""
+    def update_water_speed(self, v: float, sigma: float, t: float | None = None, *, leeway: float) -> bool:
+        """Speed through water ``v`` along the bow (needs the current states), the graph's water model
+        (:meth:`graphnav.graph.measurements.Measurements.water_speed`): the velocity through the water
+        ``v - c`` is ``v (cos yaw, sin yaw)``, ``sigma`` along the bow and ``leeway`` [m/s] across it."""
         if self.ic is None:
             raise ValueError("a water-speed update needs the current states")
         ic, x = self.ic, self.x
         c, s = math.cos(x[2]), math.sin(x[2])
         ux, uy = x[3] - x[ic], x[4] - x[ic + 1]
-        if leeway is not None:  # (along, across) the bow: rows of R(yaw)^T (u - v e_yaw)
-            H = np.zeros((2, len(x)))
-            H[0, 3], H[0, 4], H[1, 3], H[1, 4] = c, s, -s, c
-            H[:, ic:ic + 2] = -H[:, 3:5]
-            H[0, 2], H[1, 2] = -ux * s + uy * c, -ux * c - uy * s
-            nu = np.array([v - (ux * c + uy * s), -(-ux * s + uy * c)])
-            return self._update("water_speed", nu, H, np.diag([sigma ** 2, leeway ** 2]), t, reinit=False)
-        H = np.zeros((1, len(x)))
-        H[0, 2] = -ux * s + uy * c
-        H[0, 3], H[0, 4] = c, s
-        H[0, ic], H[0, ic + 1] = -c, -s
-        nu = np.array([v - (ux * c + uy * s)])
-        return self._update("water_speed", nu, H, np.array([[sigma ** 2]]), t, reinit=False)
+        H = np.zeros((2, len(x)))  # (along, across) the bow: rows of R(yaw)^T (u - v e_yaw)
+        H[0, 3], H[0, 4], H[1, 3], H[1, 4] = c, s, -s, c
+        H[:, ic:ic + 2] = -H[:, 3:5]
+        H[0, 2], H[1, 2] = -ux * s + uy * c, -ux * c - uy * s
+        nu = np.array([v - (ux * c + uy * s), -(-ux * s + uy * c)])
+        return self._update("water_speed", nu, H, np.diag([sigma ** 2, leeway ** 2]), t, reinit=False)
