@@ -25,7 +25,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
@@ -106,14 +106,13 @@ IMU_DEFAULTS: dict[str, Any] = {
 VESSEL_KEYS = ("vessel_accel", "vessel_yaw_rate_deg", "vessel_steerage_speed", "vessel_position_walk")
 
 
-def _leeway(given: dict[str, Any]) -> tuple[float, float]:
-    """``(leeway [m/s], leeway_rel)`` of the water-speed update: ``given`` where not None, else the
-    graph's (:class:`graphnav.graph.smoother_config.WaterConfig`)."""
+def _water(given: dict[str, Any]) -> Any:
+    """The water-speed update's sideways model: the graph's :class:`~graphnav.graph.smoother_config.WaterConfig`
+    with ``water_leeway`` / ``water_leeway_rel`` where given (not None)."""
     from ..graph.smoother_config import WaterConfig
 
-    c = WaterConfig()
-    lee, rel = given.get("water_leeway"), given.get("water_leeway_rel")
-    return (float(c.leeway if lee is None else lee), float(c.leeway_rel if rel is None else rel))
+    keys = {"water_leeway": "leeway", "water_leeway_rel": "leeway_rel"}
+    return WaterConfig(**{f: float(given[k]) for k, f in keys.items() if given.get(k) is not None})
 
 
 def vessel_model(given: dict[str, Any]) -> dict[str, float]:
@@ -160,7 +159,7 @@ class EkfStepper:
             raise ValueError(f"unknown ekf option(s): {sorted(unknown)}")
         self.imu_opts = io = {**IMU_DEFAULTS, **(imu or {})}
         self.vessel = vessel_model(io) if motion == "vessel" else None
-        self.leeway = _leeway(io)
+        self.water = _water(io)
         if motion in ("imu", "vessel"):
             bias, cur = bool(io["bias"]) and motion == "imu", bool(io["current"])
             vx, vy, sv = io["v0"]
@@ -237,8 +236,8 @@ class EkfStepper:
         elif isinstance(r, GnssVelocity) and io["use_velocity"]:
             f.update_velocity((r.vx, r.vy), _sig(r.sigma, io["sigma_gnss_velocity"]), r.t)  # type: ignore
         elif isinstance(r, WaterSpeed) and io["current"]:
-            lee = math.hypot(self.leeway[0], self.leeway[1] * abs(r.v))
-            f.update_water_speed(r.v, _sig(r.sigma_v, io["sigma_water_speed"]), r.t, leeway=lee)  # type: ignore
+            f.update_water_speed(r.v, _sig(r.sigma_v, io["sigma_water_speed"]), r.t,  # type: ignore
+                                 leeway=self.water.leeway_sigma(r.v))
         self.step_ms.append((time.perf_counter() - t0) * 1e3)
         return True
 
@@ -288,9 +287,9 @@ class EkfStepper:
         yaw-rate density the graph's: x ``steerage / speed`` through the water below steerage speed, at most x10."""
         vm, f = self.vessel, self.f if f is None else f
         assert vm is not None and isinstance(f, InsEkf)
-        speed = f.speed_through_water()
-        steer = vm["vessel_steerage_speed"]
-        scale = min(steer / max(speed, 1e-3), 10.0) if speed < steer else 1.0
+        from ..graph.imu_chain import yaw_rate_scale
+
+        scale = yaw_rate_scale(f.speed_through_water(), vm["vessel_steerage_speed"])
         f.predict_vessel(T, accel_density=vm["vessel_accel"],
                          yaw_density=scale * math.radians(vm["vessel_yaw_rate_deg"]),
                          position_walk=vm["vessel_position_walk"])
@@ -512,7 +511,7 @@ class EkfLiveOptions:
 
 
 #: the options only the live filter reads
-LIVE_ONLY = ("emit", "outage_s", "init_wait", "coast_hz", "coast_max_s")
+LIVE_ONLY = tuple(f.name for f in fields(EkfLiveOptions))
 
 
 @dataclass

@@ -65,6 +65,14 @@ class ImuConfig:
     #  (docs/smoother.md, "Where the NEES came from")
 
 
+def yaw_rate_scale(speed: float | None, steerage: float) -> float:
+    """The vessel model's yaw-rate density factor at ``speed`` through the water [m/s]: 1 at or above the
+    steerage speed, ``steerage / speed`` below it, at most 10 (:class:`ImuConfig`; the vessel EKF's too)."""
+    if speed is None or not math.isfinite(speed) or speed >= steerage:
+        return 1.0
+    return min(steerage / max(speed, 1e-3), 10.0)
+
+
 class ImuChain:
     """IMU samples in, per-interval preintegration out (see the module docstring)."""
 
@@ -113,10 +121,10 @@ class ImuChain:
     def _vessel(self, speed: float | None) -> gtsam.PreintegrationParams:
         """The vessel model's parameters at ``speed``: the yaw-rate density x ``steerage / speed`` (1 to 10,
         in steps of 0.5 so that a handful of parameter sets serve a whole log)."""
-        c = self.cfg
-        if speed is None or not math.isfinite(speed) or speed >= c.vessel_steerage_speed:
+        s = yaw_rate_scale(speed, self.cfg.vessel_steerage_speed)
+        if s == 1.0:
             return self.vessel_params
-        scale = round(min(c.vessel_steerage_speed / max(speed, 1e-3), 10.0) * 2) / 2
+        scale = round(s * 2) / 2
         if scale not in self._vessel_by_scale:
             self._vessel_by_scale[scale] = self._vessel_set(scale)
         return self._vessel_by_scale[scale]

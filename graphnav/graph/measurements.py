@@ -340,7 +340,7 @@ class Measurements:
         v = r.v
         if self.log_yaw:
             v, sv = v / math.cos(self.log_yaw), sv / abs(math.cos(self.log_yaw))
-        lee = math.hypot(cfg.water.leeway, cfg.water.leeway_rel * abs(v))
+        lee = cfg.water.leeway_sigma(v)
         row = WaterRow(a, v, sv, lee, pa.theta())
         self.water.append(row)
         s.add(row.factor(row.yaw), "water_speed")

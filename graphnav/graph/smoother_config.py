@@ -275,6 +275,10 @@ class WaterConfig:
     current_rw: float = option(0.002, "its random walk: 0.1 m/s in ~40 min (tides turn over hours)",
         unit="m/s/sqrt(s)", flat="current_rw")
 
+    def leeway_sigma(self, v: float) -> float:
+        """[m/s] a water-speed reading's sigma across the bow at speed ``v``: ``hypot(leeway, leeway_rel |v|)``."""
+        return math.hypot(self.leeway, self.leeway_rel * abs(v))
+
 
 @dataclass
 class SolverConfig:
