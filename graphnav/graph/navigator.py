@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import asdict, replace
 from typing import Any
@@ -154,6 +155,9 @@ class Navigator(Coasting):
         self.space = self.builder.space
         self.nav = self.builder.nav
         self.last_state: NavPrev | None = None  # the Pose3 graph: the newest keyframe's full state
+        #: iSAM2 factor indices of the newest fixes the GNSS gate accepted (_track_fixes)
+        self.gnss_fixes: deque[int] = deque(maxlen=max(1, cfg.gnss.gate_max_rejects))
+        self.anchor_index: int | None = None  # iSAM2's index of the anchor's prior (released on a re-acquisition)
         self.solver = Solver(cfg.solver, graph_params(cfg.optimizer, self.space), lag=cfg.optimizer.lag,
                              lm=LmSettings(cfg.optimizer.lm_tol, cfg.optimizer.lm_max_iterations,
                                            cfg.optimizer.lm_abs_tol))
@@ -230,10 +234,33 @@ class Navigator(Coasting):
             self.solver.update(s.graph, s.values, s.stamps, t=s.t, track=self._freeze if self.history else None,
                                tracked=(F.X(s.k),) if s.new_keyframe else (), kept=s.kept())
             self.solver.relinearize(self.cfg.optimizer.isam_extra_updates)
+            self._track_fixes(s)
         except SolverError as exc:
             raise self._fail(exc, s.t) from None
         if self.solver.keep:
             self.groups.extend(s.groups)
+
+    def _track_fixes(self, s: Step) -> None:
+        """iSAM2: the factor indices of the fixes the GNSS gate accepted since it last re-acquired
+        (graph.fix_gate; at most ``gate_max_rejects``, the most it can outnumber). When this step
+        re-acquired, those fixes are taken out of the online problem: the estimate rests on the fixes
+        that outnumbered them (the closing step still judges them all)."""
+        if self.solver.kind != "isam2" or not self.solver.new_indices:
+            return
+        if s.k == 0 and s.new_keyframe:  # the anchor's prior: when it is the first fix, the same evidence
+            self.anchor_index = next((i for i, g in zip(self.solver.new_indices, s.groups, strict=True)
+                                      if g == "anchor"), None)
+        if s.reacquired and self.gnss_fixes:
+            old, add = list(self.gnss_fixes), None
+            released = self.builder.released_anchor() if self.anchor_index is not None else None
+            if released is not None:
+                add = gtsam.NonlinearFactorGraph()
+                add.add(released)
+                old.append(self.anchor_index)
+                self.anchor_index = None
+            self.solver.remove(old, add=add)
+            self.gnss_fixes.clear()
+        self.gnss_fixes.extend(i for i, g in zip(self.solver.new_indices, s.groups, strict=True) if g == "gnss")
 
     def _freeze(self, key: int) -> tuple[gtsam.Pose2, NDArray[np.float64] | None]:
         p = self.solver.estimate(key, self.space.pose_type)
