@@ -418,12 +418,15 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
     recs = [r for r in log.records if st.uses(r)]
     if motion == "imu":  # at equal times the IMU record (the motion up to t) before the measurements at t
         recs.sort(key=lambda r: (r.t, not isinstance(r, Imu)))
-    elif st.rot is not None:  # ... and so the rate of turn
-        recs.sort(key=lambda r: (r.t, not isinstance(r, Odometry)))
     if not recs:
         raise ValueError("ekf: the log has no usable records")
     ts, poses, covs = [], [], []
+    ahead = 0  # the rate of turn up to t before the measurements at t (the SOG updates keep their place)
     for i, r in enumerate(recs):
+        while st.rot is not None and ahead < len(recs) and recs[ahead].t <= r.t:
+            if isinstance(recs[ahead], Odometry):
+                st.rot.add_rot(recs[ahead])
+            ahead += 1
         st.step(r)
         if i + 1 == len(recs) or recs[i + 1].t > r.t:  # the last record of this time
             ts.append(r.t)
