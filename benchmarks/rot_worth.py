@@ -4,9 +4,11 @@ the ROT (``imu.vessel_rot``, the EKF's ``vessel_rot``).
 
     python benchmarks/rot_worth.py [--json] [--data ../shared/data/marine] [-e isam2|ekf] [--every 1,5]
 
-Each run is scored against the full-heading track of the same estimator without the ROT (the 10 Hz heading
-is the yaw's measurement): the yaw difference [deg] (RMS, 95th percentile, max) at that track's times, and
-the track's median distance to the log's own fixes [m] (benchmarks/marine_n2k.py's ``median_distance``).
+Each run is scored by its yaw [deg] (RMS, 95th percentile, max) against the full-heading track of the same
+estimator without the ROT (at that track's times) and against the heading records it was not given (the
+satellite compass's 10 Hz heading, 0.5 deg; every record for the full-heading runs), and by the track's median
+distance to the log's own fixes [m] (benchmarks/marine_n2k.py's ``median_distance``). The graph's compass
+bias estimate [deg] is listed: the track's yaw is the heading less it.
 """
 
 from __future__ import annotations
@@ -42,37 +44,42 @@ def thin_headings(log: NavLog, every: float) -> NavLog:
     return NavLog(out, meta=log.meta, beacons_known=log.beacons_known)
 
 
-def track(log: NavLog, name: str, rot: bool) -> np.ndarray:
-    """``t, x, y, yaw`` of ``name``'s track (``rot``: with the ROT)."""
+def track(log: NavLog, name: str, rot: bool) -> tuple[np.ndarray, float | None]:
+    """``t, x, y, yaw`` of ``name``'s track (``rot``: with the ROT) and its compass bias estimate [deg]."""
     opts = {"imu": {"vessel_rot": rot}} if name == "isam2" else {"vessel_rot": rot}
-    tr = estimators.run(name, log, **opts).trajectory
-    return np.c_[tr.t, tr.poses[:, :3]]
+    res = estimators.run(name, log, **opts)
+    tr = res.trajectory
+    return np.c_[tr.t, tr.poses[:, :3]], res.info.get("compass_bias_deg")
 
 
 def yaw_diff(a: np.ndarray, ref: np.ndarray) -> dict[str, float]:
-    """[deg] ``a``'s yaw against ``ref``'s at ``ref``'s times inside ``a``."""
-    t = ref[:, 0]
-    t = t[(t >= a[0, 0]) & (t <= a[-1, 0])]
-    ya = np.interp(t, a[:, 0], np.unwrap(a[:, 3]))
-    yr = np.interp(t, ref[:, 0], np.unwrap(ref[:, 3]))
-    d = np.degrees(np.abs(np.remainder(ya - yr + math.pi, 2 * math.pi) - math.pi))
+    """[deg] ``a``'s yaw against ``ref``'s (``t`` first, ``yaw`` last column) at ``ref``'s times inside ``a``."""
+    ref = ref[(ref[:, 0] >= a[0, 0]) & (ref[:, 0] <= a[-1, 0])]
+    ya = np.interp(ref[:, 0], a[:, 0], np.unwrap(a[:, 3]))
+    d = np.degrees(np.abs(np.remainder(ya - ref[:, -1] + math.pi, 2 * math.pi) - math.pi))
     return {"rms": float(np.sqrt(np.mean(d**2))), "p95": float(np.percentile(d, 95)), "max": float(d.max())}
+
+
+def scores(tr: np.ndarray, bias: float | None, ref: np.ndarray, headings: np.ndarray, fixes: np.ndarray) -> dict:
+    return {"yaw_vs_full_deg": yaw_diff(tr, ref), "yaw_vs_headings_deg": yaw_diff(tr, headings),
+            "compass_bias_deg": bias, "to_fixes_m": median_distance(tr[:, :3], fixes)}
 
 
 def study(path: Path, name: str, everies: list[float]) -> dict:
     log = load_log(path)
     fixes = np.array([[r.t, r.x, r.y] for r in log.of("gnss")]).reshape(-1, 3)
-    ref = track(log, name, rot=False)
-    out: dict = {"headings": len(log.of("heading")), "rot_records": len(log.of("odometry")),
-                 "full_no_rot": {"to_fixes_m": median_distance(ref[:, :3], fixes)}}
-    full = track(log, name, rot=True)
-    out["full_rot"] = {"yaw_vs_full_deg": yaw_diff(full, ref), "to_fixes_m": median_distance(full[:, :3], fixes)}
+    heads = np.array([[r.t, r.yaw] for r in log.of("heading")])
+    ref, bias = track(log, name, rot=False)
+    out: dict = {"headings": len(log.of("heading")), "rot_records": len(log.of("odometry"))}
+    out["full_no_rot"] = scores(ref, bias, ref, heads, fixes)
+    out["full_rot"] = scores(*track(log, name, rot=True), ref, heads, fixes)
     for every in everies:
         thin = thin_headings(log, every)
+        kept = {r.t for r in thin.of("heading")}
+        held_out = heads[[t not in kept for t in heads[:, 0]]]
         for rot in (False, True):
-            tr = track(thin, name, rot)
-            out[f"heading_every_{every:g}s_{'rot' if rot else 'no_rot'}"] = {
-                "yaw_vs_full_deg": yaw_diff(tr, ref), "to_fixes_m": median_distance(tr[:, :3], fixes)}
+            out[f"heading_every_{every:g}s_{'rot' if rot else 'no_rot'}"] = scores(*track(thin, name, rot), ref,
+                                                                                 held_out, fixes)
     return out
 
 
@@ -96,9 +103,10 @@ def main() -> None:
             print(p.name)
             for k, v in res[p.name].items():
                 if isinstance(v, dict):
-                    y = v.get("yaw_vs_full_deg")
-                    ys = f"yaw rms {y['rms']:.3f} p95 {y['p95']:.3f} max {y['max']:.3f} deg, " if y else ""
-                    print(f"  {k:28s} {ys}to fixes {v['to_fixes_m']:.3f} m")
+                    y, h, b = v["yaw_vs_full_deg"], v["yaw_vs_headings_deg"], v["compass_bias_deg"]
+                    print(f"  {k:26s} yaw vs full rms {y['rms']:.3f} max {y['max']:.3f}, vs headings rms "
+                          f"{h['rms']:.3f} p95 {h['p95']:.3f} max {h['max']:.3f} deg, compass bias "
+                          f"{'-' if b is None else f'{b:.2f}'} deg, to fixes {v['to_fixes_m']:.3f} m")
     if a.json:
         print(json.dumps(res, indent=1))
 
