@@ -240,6 +240,12 @@ class EkfOnline:
         until = self.coaster.live_horizon(t) if self.stepper is not None else None
         return [] if until is None else self._coast_to(until)
 
+    def no_fix(self, t: float) -> list[float]:
+        """Live mode's clock tick at stream time ``t``, after :meth:`coast`: the output times past
+        ``coast_max_s`` that have no solution (:meth:`~graphnav.graph.coast.Coaster.silent`)."""
+        until = self.coaster.live_horizon(t) if self.stepper is not None else None
+        return [] if until is None else self.coaster.silent(until)
+
     def _coast_before(self, t: float) -> None:
         """A record at ``t`` after a silence live mode would have coasted through (the live rule at ``t``, checked
         by the caller) and a gap in the output (:meth:`~graphnav.graph.coast.Coaster.gap`): the grid up to half a

@@ -60,6 +60,8 @@ class Coaster:
         self.max_s = max_s  # [s] no prediction further than this from the newest real estimate (None: no limit)
         self.stopped = 0  # gaps in which coasting stopped at max_s
         self._stopped_seed: tuple[int, float] | None = None
+        self.t_silent: float | None = None  # the newest time said to have no solution (:meth:`silent`)
+        self.silent_count = 0  # such times so far
         self.dts: deque[float] = deque(maxlen=OUTPUT_INTERVALS)
         self.seed: tuple[int, float] | None = None  # the newest real estimate: keyframe, time
         self.t_out: float | None = None  # the newest output (real or coasted)
@@ -135,18 +137,36 @@ class Coaster:
             if self._stopped_seed != self.seed:
                 self._stopped_seed = self.seed
                 self.stopped += 1
-                log_.warning("coasting stopped %.1f s after the last estimate (coast_max_s): no output until a "
+                log_.warning("coasting stopped %.1f s after the last estimate (coast_max_s): 'no fix' until a "
                              "record comes", self.max_s)
         n = max(1, math.floor((self.t_out - t0) / period + 1e-9) + 1)
         last = math.floor((until - t0) / period + 1e-9)
         return [t0 + i * period for i in range(n, min(last, n + MAX_POINTS - 1) + 1)]
 
+    def silent(self, until: float) -> list[float]:
+        """Once coasting has stopped (``max_s`` after the newest real estimate), the output times up to
+        ``until`` on which live mode says it has no solution (GGA quality 0, RMC status V, Signal K
+        ``methodQuality`` "no GPS": :meth:`graphnav.online.sink.Sink.no_fix`) rather than falling silent,
+        which a chart plotter cannot tell from a broken cable; each time once, on the coasting grid."""
+        period = self.period()
+        if self.max_s is None or period is None or self.seed is None or not period > 0:
+            return []
+        t0 = self.seed[1]
+        start = t0 + self.max_s if self.t_silent is None else max(t0 + self.max_s, self.t_silent)
+        n = math.floor((start - t0) / period + 1e-9) + 1
+        last = math.floor((until - t0) / period + 1e-9)
+        out = [t0 + i * period for i in range(n, min(last, n + MAX_POINTS - 1) + 1)]
+        if out:
+            self.t_silent = out[-1]
+            self.silent_count += len(out)
+        return out
+
     def info(self) -> dict[str, Any]:
         """The summary's coasting entries: how many estimates were coasted, at which period, and (with
-        ``max_s``) the limit and how many gaps it cut short."""
+        ``max_s``) the limit, how many gaps it cut short and how many times were said to have no solution."""
         out: dict[str, Any] = {"coasted_estimates": self.count, "coast_period_s": self.period()}
         if self.max_s is not None:
-            out.update(coast_max_s=self.max_s, coast_stopped=self.stopped)
+            out.update(coast_max_s=self.max_s, coast_stopped=self.stopped, no_fix_outputs=self.silent_count)
         return out
 
     def coasted(self, t: float) -> None:
@@ -218,6 +238,12 @@ class Coasting:
         up to a period before ``t``; offline the gaps are filled as the next keyframe comes."""
         until = self.coaster.live_horizon(t) if self.solver.online and self._result is None else None
         return [] if until is None else self._coast_to(until)
+
+    def no_fix(self, t: float) -> list[float]:
+        """Live mode's clock tick at stream time ``t``, after :meth:`coast`: the output times past
+        ``coast_max_s`` that have no solution (:meth:`Coaster.silent`)."""
+        until = self.coaster.live_horizon(t) if self.solver.online and self._result is None else None
+        return [] if until is None else self.coaster.silent(until)
 
     def _coast_to(self, until: float) -> list[Estimate]:
         """Predicted estimates on the output grid after the newest output, up to ``until``: the newest

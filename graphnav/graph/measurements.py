@@ -262,7 +262,6 @@ class Measurements:
             moved = F.antenna_position(pa.compose(delta), arm) - F.antenna_position(pa, arm)
             rx -= float(moved[0])
             ry -= float(moved[1])
-        gate_on = cfg.gnss.gate_online if cfg.gnss.gate_online is not None else not self.nav
         scale = self.gnss_scale.scale
         sigma = r.sigma * math.sqrt(scale)  # the stated sigma, unless the fixes refute it
         stated = self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss.robust, cfg.gnss.k, arm3)
@@ -270,7 +269,7 @@ class Measurements:
             ant = F.antenna_position(pa, arm)
             d = np.array([rx - ant[0], ry - ant[1]])
             self.gnss_scale.add(d, prev_cov[:2, :2], r.sigma)
-            if gate_on and cfg.gnss.gate is not None:
+            if cfg.gnss.gate_online and cfg.gnss.gate is not None:
                 S = prev_cov[:2, :2] + (sigma**2) * np.eye(2)
                 if (float(d @ np.linalg.solve(S, d)) > cfg.gnss.gate**2
                         and self.consecutive_rejects < cfg.gnss.gate_max_rejects):

@@ -84,6 +84,13 @@ def rmc(t: float, lat: float, lon: float, sog: float | None = None, cog_yaw: flo
                                    f"{_utc(t):%d%m%y}", "", "", mode])
 
 
+def no_fix_sentences(t: float, talker: str = "GN") -> list[str]:
+    """The "no solution" pair at ``t``: GGA with quality 0 and no position, RMC with status V (void) and
+    mode N (data not valid), as a receiver says it has lost its fix."""
+    return [_render(talker, "GGA", [_hhmmss(t), "", "", "", "", "0", "00", "", "", "", "", "", "", ""]),
+            _render(talker, "RMC", [_hhmmss(t), "V", "", "", "", "", "", "", f"{_utc(t):%d%m%y}", "", "", "N"])]
+
+
 def zda(t: float, talker: str = "GN") -> str:
     """ZDA: UTC time and date (local zone 00:00)."""
     d = _utc(t)

@@ -78,6 +78,8 @@ METHOD_QUALITY = {"gnss fix": 1, "dgnss fix": 2, "precise gnss": 3, "rtk fixed i
                   "estimated (dr) mode": 6, "manual input": 7, "simulator mode": 8}
 #: ``navigation.gnss.methodQuality`` of a dead-reckoned (coasted) solution
 DR_MODE = "Estimated (DR) mode"
+#: ``navigation.gnss.methodQuality`` when there is no solution (coasting stopped at ``coast_max_s``)
+NO_FIX = "no GPS"
 #: Resolution assumed for values without one (Signal K carries doubles): SOG 0.01 m/s, COG 1e-4 rad.
 SOG_STEP, COG_STEP, STW_STEP = 0.01, 1e-4, 0.01
 #: The paths read (the rest are counted).
@@ -395,6 +397,14 @@ def solution_delta(t: float, vec, frame: LocalFrame, *, cov=None, sog: float | N
                                                              "units": "rad"}},
             ]
     return {"context": context, "updates": [upd]}
+
+
+def no_fix_delta(t: float, source: str = "graphnav", context: str = "vessels.self") -> dict[str, Any]:
+    """The Signal K delta of "no solution" at ``t``: ``navigation.gnss.methodQuality`` "no GPS"
+    (:data:`NO_FIX`, the specification's enum) and no position."""
+    return {"context": context, "updates": [{"$source": source, "source": {"label": source, "type": "graphnav"},
+                                             "timestamp": iso_time(t),
+                                             "values": [{"path": "navigation.gnss.methodQuality", "value": NO_FIX}]}]}
 
 
 def record_delta(rec: Record, frame: LocalFrame, *, source: str | None = None,

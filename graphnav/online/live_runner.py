@@ -208,7 +208,8 @@ class LiveRunner:
     def tick(self, now: float | None = None) -> None:
         """The output clock: while the stream is silent, the estimator's predictions due by now
         (``coast(t)``, when it has it; the stream's time extrapolated at the wall clock's rate
-        since its last stamp arrived, ``now`` a ``time.perf_counter``) are published, flagged."""
+        since its last stamp arrived, ``now`` a ``time.perf_counter``) are published, flagged; past
+        ``coast_max_s`` the output says it has no solution (``no_fix(t)``, :meth:`Sink.no_fix`)."""
         coast = getattr(self.estimator, "coast", None)
         clock = self.nmea.clock
         if not callable(coast) or clock.t0 is None:
@@ -216,6 +217,9 @@ class LiveRunner:
         t = clock.t0 + max(0.0, (time.perf_counter() if now is None else now) - clock.a0)
         for c in coast(t):
             self.sink.emit(c, None, self.nmea.decoder.frame)
+        no_fix = getattr(self.estimator, "no_fix", None)  # past coast_max_s: said, not silent
+        for tau in no_fix(t) if callable(no_fix) else ():
+            self.sink.no_fix(tau, self.nmea.decoder.frame)
 
     # -- the loop
     def run(self) -> dict[str, Any]:

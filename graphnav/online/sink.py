@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import GraphnavError
 from ..geodesy import LocalFrame
 from ..io.nmea_fields import UERE_M
-from ..io.nmea_out import solution_sentences
+from ..io.nmea_out import no_fix_sentences, solution_sentences
 from ..io.outputs import ensure_dir
 from ..io.tum import TrajectoryWriter
 from ..log import RECORD_TYPES
@@ -82,6 +82,7 @@ class Sink:
         self.latency_kind = np.zeros(LATENCY_WINDOW, dtype=np.int8)  # index into _KINDS of each
         self.n_latency = self.estimates = self.published = 0
         self.coasted = 0  # estimates that were predictions through a silent stream (GGA quality 6)
+        self.no_fix_outputs = 0  # times said to have no solution (coasting stopped at coast_max_s)
         self.late = 0  # estimates older than one already emitted (a keyframe solved after coasting past it): dropped
         self.last: Estimate | None = None
         #: [first t, last t, count] of each run of consecutive coasted estimates (the newest MAX_SPANS)
@@ -160,12 +161,37 @@ class Sink:
         if self.writer is not None:
             self.writer.write(est.t, est.vec, est.cov)
 
+    def no_fix(self, t: float, frame: LocalFrame | None = None) -> None:
+        """Say that there is no solution at ``t`` (coasting stopped at ``coast_max_s``): GGA quality 0 and
+        RMC status V (NMEA), ``methodQuality`` "no GPS" (Signal K); nothing is written to the file, which
+        holds estimates only. ``frame`` is not needed (no position); it is taken for symmetry with :meth:`emit`."""
+        if self.newest is not None and t < self.newest:
+            return
+        self.newest = t
+        self.no_fix_outputs += 1
+        self._in_span = False
+        if self.sock is not None:
+            lines = no_fix_sentences(t)
+            try:
+                self.sock.sendto(("\r\n".join(lines) + "\r\n").encode("ascii"), self.addr)
+                self.published += len(lines)
+            except OSError as exc:
+                log_.warning("publish to %s failed: %s", self.publish, exc)
+        if self.sk_sock is not None:
+            from ..io.signalk import no_fix_delta
+
+            try:
+                self.sk_sock.sendto(json.dumps(no_fix_delta(t)).encode("utf-8"), self.sk_addr)
+                self.published_signalk += 1
+            except OSError as exc:
+                log_.warning("publish to %s failed: %s", self.publish_signalk, exc)
+
     def summary(self) -> dict[str, Any]:
         lat = self.latency_ms[: min(self.n_latency, LATENCY_WINDOW)]
         out: dict[str, Any] = {
             "estimates": self.estimates, "coasted_estimates": self.coasted,
             "coasted_spans": [[a, b, int(n)] for a, b, n in self.spans], "coasted_spans_total": self.n_spans,
-            "late_estimates": self.late,
+            "late_estimates": self.late, "no_fix_outputs": self.no_fix_outputs,
             "published": self.published,
             "latency_ms_median": float(np.median(lat)) if lat.size else None,
             "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None,

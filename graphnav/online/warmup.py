@@ -178,6 +178,9 @@ class WarmUp:
     def coast(self, t: float) -> list[Estimate]:
         return self.nav.coast(t) if self.nav is not None else []
 
+    def no_fix(self, t: float) -> list[float]:
+        return self.nav.no_fix(t) if self.nav is not None else []
+
     def flush(self) -> Estimate | None:
         """End of input: a warm-up still going ends here (its estimates in :attr:`replayed_out`)."""
         if self.nav is None:

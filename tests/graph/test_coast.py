@@ -123,3 +123,52 @@ def test_the_keyframe_policys_spread_is_no_gap():
     asked = Coaster(2.0)
     asked.estimated(0, 0.0)
     assert not asked.gap(0.75) and asked.gap(0.76) and Coaster(0.0).period() is None
+
+
+def test_past_coast_max_s_the_live_output_says_no_fix_once_per_period_instead_of_falling_silent():
+    """``coast_max_s``: predictions stop that long after the newest estimate; the output grid then carries
+    "no solution" (GGA quality 0 with no position, RMC status V: what a receiver says when it loses its fix),
+    each time once, until a record comes back."""
+    import pynmea2
+
+    from graphnav.geodesy import LocalFrame
+    from graphnav.graph.smoother_config import SmootherConfig
+    from graphnav.online.live_runner import LiveRunner
+
+    class Sock:  # the NMEA socket: what was sent
+        def __init__(self) -> None:
+            self.sent: list[str] = []
+
+        def sendto(self, data: bytes, addr: object) -> None:
+            self.sent.extend(data.decode().split())
+
+    log = _line(True)
+    nav = Navigator.for_log(log, SmootherConfig.from_options({"coast_max_s": 5.0}))
+    runner = LiveRunner(["udp://127.0.0.1:9"], nav)
+    runner.sink.sock = sock = Sock()
+    runner.nmea.decoder.frame = LocalFrame(43.5, 16.4, 0.0)
+    fed_up_to_the_gap(runner, log, GAP[0])
+    seed_t = runner.sink.last.t  # the newest real estimate
+    sock.sent.clear()
+    runner.tick(now=120.0)  # 20 s of silence: 5 s of predictions, then "no fix" up to a period behind
+    period = nav.info()["coast_period_s"]
+    n = runner.sink.no_fix_outputs
+    assert runner.sink.last.coasted and runner.sink.last.t == pytest.approx(seed_t + 5.0)
+    assert runner.sink.coasted == round(5.0 / period)
+    lag = max(period, 1.0)  # the output runs a period (of the output or of the 1 Hz records) behind the stream
+    assert n == round((GAP[0] + 20.0 - lag - (seed_t + 5.0)) / period) > 10
+    gga = [pynmea2.parse(s) for s in sock.sent if s[3:6] == "GGA"]
+    rmc = [pynmea2.parse(s) for s in sock.sent if s[3:6] == "RMC"]
+    quality = [int(g.gps_qual) for g in gga]
+    assert quality.count(6) == runner.sink.coasted and quality.count(0) == n == sum(r.status == "V" for r in rmc)
+    assert all(g.lat == "" and g.lon == "" for g in gga if int(g.gps_qual) == 0)
+    assert quality == sorted(quality, reverse=True)  # predictions first, then "no fix": never mixed
+    runner.tick(now=120.0)
+    assert runner.sink.no_fix_outputs == n  # nothing twice
+    assert nav.info()["no_fix_outputs"] == n and nav.info()["coast_stopped"] == 1
+    estimates = runner.sink.estimates
+    for rec in log.records:
+        if rec.t >= GAP[1]:
+            runner._record(rec, None)
+    assert runner.sink.estimates > estimates and runner.sink.no_fix_outputs == n
+    assert runner.summary()["no_fix_outputs"] == n

@@ -240,3 +240,40 @@ def test_icp_motion_coasts_on_the_last_increments_twist():
     assert grown.min() > -1e-12 and np.trace(g.P[:3, :3]) - np.trace(P0[:3, :3]) >= 1.7 * min(
         np.square(CV_BRIDGE_SIGMA)) * 0.99
     assert np.array_equal(st.f.x, x0) and np.array_equal(st.f.P, P0)  # the filter itself untouched
+
+
+def test_past_coast_max_s_the_ekf_says_no_gps_on_signalk_and_the_nmea_reader_reads_no_fix(tmp_path):
+    """Coasting stops at ``coast_max_s``; then each output time carries Signal K ``methodQuality`` "no GPS"
+    with no position, and the NMEA pair (GGA quality 0, RMC status V) is what our own reader takes as no fix."""
+    from graphnav.io.nmea import read_nmea
+    from graphnav.io.nmea_out import no_fix_sentences
+    from graphnav.io.signalk import NO_FIX
+
+    log = _line("vessel")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sk:
+        sk.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+        sk.bind(("127.0.0.1", 0))
+        sk.settimeout(0.5)
+        runner = LiveRunner(["udp://127.0.0.1:9"], EkfOnline(**VESSEL, coast_max_s=10.0),
+                            publish_signalk=f"udp://127.0.0.1:{sk.getsockname()[1]}")
+        runner.sink.open()
+        runner.nmea.decoder.frame = LocalFrame(43.5, 16.4, 0.0)
+        fed_up_to_the_gap(runner, log, GAP[0])
+        runner.tick(now=130.0)  # 30 s of silence: 10 s coasted, then "no GPS" up to a period behind (89 s)
+        runner.tick(now=130.0)
+        runner.sink.close()
+        deltas = []
+        while True:
+            try:
+                deltas.append(json.loads(sk.recv(65536)))
+            except TimeoutError:
+                break
+    values = [{v["path"]: v["value"] for v in d["updates"][0]["values"]} for d in deltas]
+    no_fix = [v for v in values if v.get("navigation.gnss.methodQuality") == NO_FIX]
+    assert len(no_fix) == runner.sink.no_fix_outputs == 19  # 71 .. 89 s at 1 Hz, each once
+    assert all("navigation.position" not in v for v in no_fix)
+    assert sum(v.get("navigation.gnss.methodQuality") == DR_MODE for v in values) == runner.sink.coasted == 10
+    assert runner.estimator.info()["no_fix_outputs"] == 19
+    p = tmp_path / "nofix.nmea"
+    p.write_text("\r\n".join(s for k in range(3) for s in no_fix_sentences(1_700_000_000.0 + k)) + "\r\n")
+    assert not any(r.kind == "gnss" for r in read_nmea(p, date="2023-11-14").records)
