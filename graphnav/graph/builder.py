@@ -211,7 +211,7 @@ class GraphBuilder:
         kf = self.keyframes
         if kf.stepped >= len(kf.t):  # (asked after every record: mostly none waits)
             return []
-        return kf.ready(self.motion.imu_until())
+        return kf.ready(self.motion.imu_until(kf.t_last))
 
     def _start(self) -> None:
         t0, replay = self.anchor.choose(self.charted)
@@ -236,7 +236,7 @@ class GraphBuilder:
             if self.motion.uses_odometry:
                 if self.motion.add_odometry(rec):
                     self.defaulted.add("odometry")
-            else:
+            elif not self.motion.add_rot(rec):  # (a rate of turn: the vessel model's yaw rate; its SOG unused)
                 self.counts["odometry_unused"] = self.counts.get("odometry_unused", 0) + 1
         elif kind in MEASUREMENTS:
             if isinstance(rec, Gnss) and self.motion.add_fix(rec):
@@ -375,6 +375,9 @@ class GraphBuilder:
             **({"imu_noise": imu.source if imu else "none (vessel model)"} if imu is not None else {}),
             **({"vessel_position_walk": {"walk": imu.vessel_walk, "estimate": imu.walk_estimate}}
                if imu is not None and not imu else {}),
+            **({"vessel_rot": {"source": imu.rot.source, "rate_hz": 1.0 / imu.rot.period(),
+                               "other_sources_ignored": imu.rot.ignored}}
+               if imu is not None and not imu and imu.rot is not None else {}),
             "defaulted_sigmas": sorted(self.defaulted),
             **(self.scans.loops.info() if self.scans.loops is not None else {}),
             **self.counts,

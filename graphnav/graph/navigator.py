@@ -44,7 +44,7 @@ import factors as F
 from ..config import given_option
 from ..errors import GraphnavError
 from ..geometry import cov_to_world
-from ..log import KnownBeacon, NavLog, Record, validate_record
+from ..log import ODOMETRY_FROM_ROT, KnownBeacon, NavLog, Record, validate_record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
@@ -112,14 +112,17 @@ def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -
     v0 = log.meta.get("initial_velocity")
     if imu_model is not None or v0 is not None:
         imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}
-    if (kw.get("motion", motion) == "vessel" and not any(r.kind == "imu" for r in log.records)
+    has_imu = any(r.kind == "imu" for r in log.records)
+    if log.meta.get("odometry") == ODOMETRY_FROM_ROT and not has_imu:  # a rate of turn: the vessel model's yaw rate
+        imu_model = {**(imu_model or {}), "rot": True}
+    if (kw.get("motion", motion) == "vessel" and not has_imu
             and (given_option(SmootherConfig, kw, "imu", config.imu if config is not None else None) or {}
                  ).get("vessel_position_walk") is None):
         walk = position_walk(log)  # how far the fixes wander from the integrated velocity
         if walk is not None:
             imu_model = {**(imu_model or {}), "vessel_position_walk": walk["walk"], "position_walk": walk}
     return {"chart": log.beacons_known, "lidar": lidar, "scans": scans, "lidar3d": lidar3d,
-            "imu": any(r.kind == "imu" for r in log.records), "imu_model": imu_model,
+            "imu": has_imu, "imu_model": imu_model,
             "odometry": bool(log.of("odometry")), **kw}
 
 
