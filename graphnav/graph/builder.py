@@ -44,6 +44,7 @@ import factors as F
 from ..geometry import cov_to_world
 from ..log import Gnss, KnownBeacon, PosePrior, Record
 from .anchor import Anchor
+from .fix_gate import gate_info
 from .keyframes import Keyframes
 from .measurements import Measurements
 from .motion import Guess, Motion, NavPrev
@@ -66,7 +67,6 @@ GROUPS = ("anchor", "odometry", "motion", "icp", "loop", "gnss", "compass", "bia
           "level")
 SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon", "cloud")
 MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior", "gnss_velocity", "water_speed", "attitude")
-RELEASED_SIGMA = 1e4  # [m] the first pose's position sigma once its fix is disowned (released_anchor): no information
 ODOMETRY_FRESH_S = 2.0  # [s] the newest odometry sample gives the speed and yaw rate when at most this old
 
 
@@ -306,22 +306,11 @@ class GraphBuilder:
         a = self.anchor
         assert a.pose is not None and a.sigmas is not None
         rp = self.motion.imu.tilt(s.t) if self.nav and self.motion.imu is not None else None
-        tilt = None if rp is None else (*rp, math.radians(self.cfg.anchor.sigma_tilt_deg))
+        a.tilt = tilt = None if rp is None else (*rp, math.radians(self.cfg.anchor.sigma_tilt_deg))
         s.add(self.space.prior(F.X(0), a.pose, a.sigmas, tilt), "anchor")
-        self.anchor_tilt = tilt  # (released_anchor)
         if self.nav:
             self.motion.start(s)
         return gtsam.Pose2(*a.pose), None if rp is None else self.space.tilted(a.pose, *rp)
-
-    def released_anchor(self) -> gtsam.NonlinearFactor | None:
-        """When the anchor is the first GNSS fix and the GNSS gate re-acquired away from it (graph.fix_gate):
-        the first pose's prior with its position released (``RELEASED_SIGMA``), the rest as it was; ``None`` for
-        any other anchor."""
-        a = self.anchor
-        if a.pose is None or a.sigmas is None or not (a.name or "").startswith("first GNSS"):
-            return None
-        sig = np.array([RELEASED_SIGMA, RELEASED_SIGMA, a.sigmas[2]])
-        return self.space.prior(F.X(0), a.pose, sig, getattr(self, "anchor_tilt", None))
 
     def _motion_step(self, s: Step, k: int, prev: gtsam.Pose2, state: NavPrev | None
                      ) -> tuple[gtsam.Pose2, gtsam.Pose3 | None, gtsam.Pose2, NDArray[np.float64]]:
@@ -364,8 +353,7 @@ class GraphBuilder:
             "anchor": self.anchor.name,
             "keyframes": len(kf),
             "keyframe_policy": "scan" if kf.mode == "scan" else f"grid {kf.period:g} s",
-            "gnss_rejected": g.rejected if (g := self.meas.gate) else 0,
-            "gnss_reacquired": g.reacquired if g else 0,
+            **gate_info(self.meas.gate),
             "gnss_online_scale": {"final": self.meas.gnss_scale.scale, "max": self.meas.gnss_scale.max_scale},
             **self.scans.info(),
             "beacons": sorted(self.meas.beacon_ids),

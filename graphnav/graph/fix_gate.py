@@ -13,15 +13,17 @@ A fix whose innovation ``d`` (the fix minus the predicted antenna position, cova
 
 On a re-acquisition (2.) the run's rejected fixes are taken back (``taken_back``), the fixes are taken
 ungated until one passes the test again, and the navigator takes the fixes the old estimate rested on
-out of iSAM2's online problem (``Navigator._track_fixes``; the closing step still judges them all).
+out of iSAM2's online problem (:class:`OnlineFixes`; the closing step still judges them all).
 The rule is the filters' gate's (graphnav.estimators.gating, rules 2-4) in the graph's terms, with the
 number of fixes for the time a filter has tracked.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
 
+import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
@@ -91,3 +93,39 @@ class FixGate:
     def _agree(self, a: tuple[NDArray[np.float64], float], b: tuple[NDArray[np.float64], float]) -> bool:
         diff = a[0] - b[0]
         return float(diff @ diff) / (a[1] + b[1]) <= self.limit
+
+
+def gate_info(gate: FixGate | None) -> dict[str, int]:
+    """The run summary's counts of the online gate (``None``: it is off)."""
+    return {"gnss_rejected": gate.rejected if gate else 0, "gnss_reacquired": gate.reacquired if gate else 0}
+
+
+class OnlineFixes:
+    """The navigator's side of a re-acquisition (iSAM2 only): the factor indices of the fixes the gate
+    accepted since it last re-acquired (at most ``max_rejects``, the most a run can outnumber) and of the
+    anchor's prior. When a step re-acquired, those fixes leave iSAM2's online problem and an anchor taken
+    from the first fix is released (:meth:`~graphnav.graph.anchor.Anchor.released`): the estimate rests on
+    the fixes that outnumbered them (the closing step still judges them all)."""
+
+    def __init__(self, max_rejects: int) -> None:
+        self.indices: deque[int] = deque(maxlen=max(1, int(max_rejects)))
+        self.anchor: int | None = None
+
+    def step(self, solver: Any, builder: Any, s: Any) -> None:
+        """After ``solver`` (a :class:`~graphnav.graph.solver.Solver`) took step ``s``."""
+        if solver.kind != "isam2" or not solver.new_indices:
+            return
+        new = list(zip(solver.new_indices, s.groups, strict=True))
+        if s.k == 0 and s.new_keyframe:
+            self.anchor = next((i for i, g in new if g == "anchor"), None)
+        if s.reacquired and self.indices:
+            old, add = list(self.indices), None
+            released = builder.anchor.released(builder.space) if self.anchor is not None else None
+            if released is not None:
+                add = gtsam.NonlinearFactorGraph()
+                add.add(released)
+                old.append(self.anchor)
+                self.anchor = None
+            solver.remove(old, add=add)
+            self.indices.clear()
+        self.indices.extend(i for i, g in new if g == "gnss")

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import deque
 from collections.abc import Iterable
 from dataclasses import asdict, replace
 from typing import Any
@@ -49,6 +48,7 @@ from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
 from .coast import Coaster, Coasting
+from .fix_gate import OnlineFixes
 from .online_track import OnlineTrack, kinematics
 from .position_walk import position_walk
 from .smoother_config import SmootherConfig, SolverConfig, auto_motion
@@ -90,6 +90,13 @@ def graph_params(cfg: SolverConfig, space: PlanarSpace | None = None) -> gtsam.I
                        partial_check=cfg.partial_relinearization_check,
                        wildfire=cfg.wildfire_threshold, factorization=cfg.isam_factorization,
                        optimizer=cfg.isam_optimizer)
+
+
+def solve_failure(exc: SolverError, t: float, rec: Record | None, n_records: int) -> GraphnavError:
+    """The error of a keyframe at ``t`` the solver could not solve, naming the record that brought it."""
+    where = f"record {n_records}" + (f" ({rec.kind} at t = {rec.t:.6g} s)" if rec is not None else "")
+    return GraphnavError(f"the navigation graph could not be solved at the keyframe of t = {t:.6g} s: {exc}",
+                         where=where)
 
 
 def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -> dict[str, Any]:
@@ -158,9 +165,7 @@ class Navigator(Coasting):
         self.space = self.builder.space
         self.nav = self.builder.nav
         self.last_state: NavPrev | None = None  # the Pose3 graph: the newest keyframe's full state
-        #: iSAM2 factor indices of the newest fixes the GNSS gate accepted (_track_fixes)
-        self.gnss_fixes: deque[int] = deque(maxlen=max(1, cfg.gnss.gate_max_rejects))
-        self.anchor_index: int | None = None  # iSAM2's index of the anchor's prior (released on a re-acquisition)
+        self.fixes = OnlineFixes(cfg.gnss.gate_max_rejects)  # the gate's re-acquisitions online (graph.fix_gate)
         self.solver = Solver(cfg.solver, graph_params(cfg.optimizer, self.space), lag=cfg.optimizer.lag,
                              lm=LmSettings(cfg.optimizer.lm_tol, cfg.optimizer.lm_max_iterations,
                                            cfg.optimizer.lm_abs_tol))
@@ -226,44 +231,16 @@ class Navigator(Coasting):
     def _estimate_of(self, k: int) -> gtsam.Pose2:
         return self.space.pose2(self.solver.estimate(F.X(k), self.space.pose_type))
 
-    def _fail(self, exc: SolverError, t: float) -> GraphnavError:
-        r = self._rec
-        where = f"record {self.n_records}" + (f" ({r.kind} at t = {r.t:.6g} s)" if r is not None else "")
-        return GraphnavError(f"the navigation graph could not be solved at the keyframe of t = {t:.6g} s: {exc}",
-                             where=where)
-
     def _update(self, s: Step) -> None:
         try:
             self.solver.update(s.graph, s.values, s.stamps, t=s.t, track=self._freeze if self.history else None,
                                tracked=(F.X(s.k),) if s.new_keyframe else (), kept=s.kept())
             self.solver.relinearize(self.cfg.optimizer.isam_extra_updates)
-            self._track_fixes(s)
+            self.fixes.step(self.solver, self.builder, s)
         except SolverError as exc:
-            raise self._fail(exc, s.t) from None
+            raise solve_failure(exc, s.t, self._rec, self.n_records) from None
         if self.solver.keep:
             self.groups.extend(s.groups)
-
-    def _track_fixes(self, s: Step) -> None:
-        """iSAM2: the factor indices of the fixes the GNSS gate accepted since it last re-acquired
-        (graph.fix_gate; at most ``gate_max_rejects``, the most it can outnumber). When this step
-        re-acquired, those fixes are taken out of the online problem: the estimate rests on the fixes
-        that outnumbered them (the closing step still judges them all)."""
-        if self.solver.kind != "isam2" or not self.solver.new_indices:
-            return
-        if s.k == 0 and s.new_keyframe:  # the anchor's prior: when it is the first fix, the same evidence
-            self.anchor_index = next((i for i, g in zip(self.solver.new_indices, s.groups, strict=True)
-                                      if g == "anchor"), None)
-        if s.reacquired and self.gnss_fixes:
-            old, add = list(self.gnss_fixes), None
-            released = self.builder.released_anchor() if self.anchor_index is not None else None
-            if released is not None:
-                add = gtsam.NonlinearFactorGraph()
-                add.add(released)
-                old.append(self.anchor_index)
-                self.anchor_index = None
-            self.solver.remove(old, add=add)
-            self.gnss_fixes.clear()
-        self.gnss_fixes.extend(i for i, g in zip(self.solver.new_indices, s.groups, strict=True) if g == "gnss")
 
     def _freeze(self, key: int) -> tuple[gtsam.Pose2, NDArray[np.float64] | None]:
         p = self.solver.estimate(key, self.space.pose_type)
@@ -321,7 +298,7 @@ class Navigator(Coasting):
                 if w is not None:
                     self.builder.observe_current(np.asarray(solver.estimate(w, "Vector")))
         except SolverError as exc:
-            raise self._fail(exc, t) from None
+            raise solve_failure(exc, t, self._rec, self.n_records) from None
         if loops is not None:
             loops.observe(k, _vec(pose), cov)
         return pose, cov
@@ -337,7 +314,7 @@ class Navigator(Coasting):
                 self.front.update(s.graph, s.values)
             self.front.relinearize(self.cfg.optimizer.isam_extra_updates)
         except SolverError as exc:
-            raise self._fail(exc, s.t) from None
+            raise solve_failure(exc, s.t, self._rec, self.n_records) from None
         self.last_pose, self.last_cov = self._newest(self.front, k, s.t, loops)
         self.extra["loop_front_end"] = "isam2"
 
@@ -351,7 +328,7 @@ class Navigator(Coasting):
             values, it = levenberg_marquardt(self.solver.graph, self.solver.initial,
                                              replace(lm, tol=max(lm.tol, 1e-8)))
         except SolverError as exc:
-            raise self._fail(exc, t) from None
+            raise solve_failure(exc, t, self._rec, self.n_records) from None
         self.solver.initial = values
         self._take(values, k)
         self._next_init = max(k + 2, math.ceil((k + 1) * self.cfg.optimizer.batch_init_growth))
@@ -376,7 +353,7 @@ class Navigator(Coasting):
         try:
             self.solver.rebase(*marginal_priors(self.solver, self.space, keys, t))
         except SolverError as exc:
-            raise self._fail(exc, t) from None
+            raise solve_failure(exc, t, self._rec, self.n_records) from None
         self._base = k
         self.extra["rebases"] = self.extra.get("rebases", 0) + 1
 
