@@ -44,6 +44,7 @@ import factors as F
 from ..geometry import cov_to_world
 from ..log import Gnss, KnownBeacon, PosePrior, Record
 from .anchor import Anchor
+from .fix_gate import gate_info
 from .keyframes import Keyframes
 from .measurements import Measurements
 from .motion import Guess, Motion, NavPrev
@@ -305,7 +306,7 @@ class GraphBuilder:
         a = self.anchor
         assert a.pose is not None and a.sigmas is not None
         rp = self.motion.imu.tilt(s.t) if self.nav and self.motion.imu is not None else None
-        tilt = None if rp is None else (*rp, math.radians(self.cfg.anchor.sigma_tilt_deg))
+        a.tilt = tilt = None if rp is None else (*rp, math.radians(self.cfg.anchor.sigma_tilt_deg))
         s.add(self.space.prior(F.X(0), a.pose, a.sigmas, tilt), "anchor")
         if self.nav:
             self.motion.start(s)
@@ -352,7 +353,7 @@ class GraphBuilder:
             "anchor": self.anchor.name,
             "keyframes": len(kf),
             "keyframe_policy": "scan" if kf.mode == "scan" else f"grid {kf.period:g} s",
-            "gnss_rejected": self.meas.n_rejected,
+            **gate_info(self.meas.gate),
             "gnss_online_scale": {"final": self.meas.gnss_scale.scale, "max": self.meas.gnss_scale.max_scale},
             **self.scans.info(),
             "beacons": sorted(self.meas.beacon_ids),

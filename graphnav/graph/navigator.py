@@ -48,6 +48,7 @@ from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
 from .coast import Coaster, Coasting
+from .fix_gate import OnlineFixes
 from .online_track import OnlineTrack, kinematics
 from .position_walk import position_walk
 from .smoother_config import SmootherConfig, SolverConfig, auto_motion
@@ -89,6 +90,13 @@ def graph_params(cfg: SolverConfig, space: PlanarSpace | None = None) -> gtsam.I
                        partial_check=cfg.partial_relinearization_check,
                        wildfire=cfg.wildfire_threshold, factorization=cfg.isam_factorization,
                        optimizer=cfg.isam_optimizer)
+
+
+def solve_failure(exc: SolverError, t: float, rec: Record | None, n_records: int) -> GraphnavError:
+    """The error of a keyframe at ``t`` the solver could not solve, naming the record that brought it."""
+    where = f"record {n_records}" + (f" ({rec.kind} at t = {rec.t:.6g} s)" if rec is not None else "")
+    return GraphnavError(f"the navigation graph could not be solved at the keyframe of t = {t:.6g} s: {exc}",
+                         where=where)
 
 
 def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -> dict[str, Any]:
@@ -157,6 +165,7 @@ class Navigator(Coasting):
         self.space = self.builder.space
         self.nav = self.builder.nav
         self.last_state: NavPrev | None = None  # the Pose3 graph: the newest keyframe's full state
+        self.fixes = OnlineFixes(cfg.gnss.gate_max_rejects)  # the gate's re-acquisitions online (graph.fix_gate)
         self.solver = Solver(cfg.solver, graph_params(cfg.optimizer, self.space), lag=cfg.optimizer.lag,
                              lm=LmSettings(cfg.optimizer.lm_tol, cfg.optimizer.lm_max_iterations,
                                            cfg.optimizer.lm_abs_tol))
@@ -222,19 +231,14 @@ class Navigator(Coasting):
     def _estimate_of(self, k: int) -> gtsam.Pose2:
         return self.space.pose2(self.solver.estimate(F.X(k), self.space.pose_type))
 
-    def _fail(self, exc: SolverError, t: float) -> GraphnavError:
-        r = self._rec
-        where = f"record {self.n_records}" + (f" ({r.kind} at t = {r.t:.6g} s)" if r is not None else "")
-        return GraphnavError(f"the navigation graph could not be solved at the keyframe of t = {t:.6g} s: {exc}",
-                             where=where)
-
     def _update(self, s: Step) -> None:
         try:
             self.solver.update(s.graph, s.values, s.stamps, t=s.t, track=self._freeze if self.history else None,
                                tracked=(F.X(s.k),) if s.new_keyframe else (), kept=s.kept())
             self.solver.relinearize(self.cfg.optimizer.isam_extra_updates)
+            self.fixes.step(self.solver, self.builder, s)
         except SolverError as exc:
-            raise self._fail(exc, s.t) from None
+            raise solve_failure(exc, s.t, self._rec, self.n_records) from None
         if self.solver.keep:
             self.groups.extend(s.groups)
 
@@ -294,7 +298,7 @@ class Navigator(Coasting):
                 if w is not None:
                     self.builder.observe_current(np.asarray(solver.estimate(w, "Vector")))
         except SolverError as exc:
-            raise self._fail(exc, t) from None
+            raise solve_failure(exc, t, self._rec, self.n_records) from None
         if loops is not None:
             loops.observe(k, _vec(pose), cov)
         return pose, cov
@@ -310,7 +314,7 @@ class Navigator(Coasting):
                 self.front.update(s.graph, s.values)
             self.front.relinearize(self.cfg.optimizer.isam_extra_updates)
         except SolverError as exc:
-            raise self._fail(exc, s.t) from None
+            raise solve_failure(exc, s.t, self._rec, self.n_records) from None
         self.last_pose, self.last_cov = self._newest(self.front, k, s.t, loops)
         self.extra["loop_front_end"] = "isam2"
 
@@ -324,7 +328,7 @@ class Navigator(Coasting):
             values, it = levenberg_marquardt(self.solver.graph, self.solver.initial,
                                              replace(lm, tol=max(lm.tol, 1e-8)))
         except SolverError as exc:
-            raise self._fail(exc, t) from None
+            raise solve_failure(exc, t, self._rec, self.n_records) from None
         self.solver.initial = values
         self._take(values, k)
         self._next_init = max(k + 2, math.ceil((k + 1) * self.cfg.optimizer.batch_init_growth))
@@ -349,7 +353,7 @@ class Navigator(Coasting):
         try:
             self.solver.rebase(*marginal_priors(self.solver, self.space, keys, t))
         except SolverError as exc:
-            raise self._fail(exc, t) from None
+            raise solve_failure(exc, t, self._rec, self.n_records) from None
         self._base = k
         self.extra["rebases"] = self.extra.get("rebases", 0) + 1
 
