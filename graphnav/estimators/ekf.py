@@ -26,7 +26,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,6 +38,9 @@ from ..trajectory import Trajectory
 from .gating import GATING_DEFAULTS, GateOptions
 from .ins_ekf import InsEkf
 from .pose_ekf import PoseEkf
+
+if TYPE_CHECKING:
+    from ..graph.imu_chain import RotChain
 
 
 def icp_available() -> bool:
@@ -100,6 +103,7 @@ IMU_DEFAULTS: dict[str, Any] = {
     "sigma_gnss_velocity": 0.1, "sigma_water_speed": 0.1, "use_velocity": True, "use_odometry": True,
     # motion="vessel" (no IMU): None takes the graph's vessel model (graphnav.graph.imu_chain.ImuConfig)
     "vessel_accel": None, "vessel_yaw_rate_deg": None, "vessel_steerage_speed": None, "vessel_position_walk": None,
+    "vessel_rot": None,  # motion="vessel": odometry records are a rate of turn, the heading's rate (None: from meta)
     # the water-speed record's sideways sigma hypot(leeway, leeway_rel |v|); None: the graph's (WaterConfig)
     "water_leeway": None, "water_leeway_rel": None,
 }
@@ -160,18 +164,29 @@ class EkfStepper:
         self.imu_opts = io = {**IMU_DEFAULTS, **(imu or {})}
         self.vessel = vessel_model(io) if motion == "vessel" else None
         self.water = _water(io)
+        #: motion="vessel" with a rate of turn: its records (the graph's vessel model's gyro z), the heading's rate
+        self.rot: RotChain | None = None
         if motion in ("imu", "vessel"):
             bias, cur = bool(io["bias"]) and motion == "imu", bool(io["current"])
+            sb = (io["sigma_bias_acc"], math.radians(io["sigma_bias_gyro_deg"]))
+            rw = (io["acc_bias_rw"], io["gyro_bias_rw"])
+            if motion == "vessel" and io["vessel_rot"]:  # the ROT's bias: the graph's gyro-z bias state
+                from ..graph.imu_chain import ImuConfig, RotChain, rot_bias
+
+                self.rot = RotChain(ImuConfig())
+                bias = bool(io["bias"])
+                b0, brw = rot_bias(ImuConfig())
+                sb, rw = (0.0, b0), (0.0, brw)  # (no accelerometer: its bias states stay 0)
             vx, vy, sv = io["v0"]
             x = [*np.asarray(x0, float)[:3], vx, vy] + [0.0] * (3 * bias) + [0.0] * (2 * cur)
-            d = [sv ** 2] * 2 + [io["sigma_bias_acc"] ** 2] * (2 * bias) \
-                + [math.radians(io["sigma_bias_gyro_deg"]) ** 2] * bias + [io["sigma_current0"] ** 2] * (2 * cur)
+            d = [sv ** 2] * 2 + [sb[0] ** 2] * (2 * bias) + [sb[1] ** 2] * bias \
+                + [io["sigma_current0"] ** 2] * (2 * cur)
             P = np.zeros((len(x), len(x)))
             P[:3, :3] = np.asarray(P0, float)[:3, :3]
             P[3:, 3:] = np.diag(d)
             self.f: PoseEkf = InsEkf(np.array(x), P, bias=bias, current=cur, acc_density=io["acc_density"],
-                                     gyro_density=io["gyro_density"], acc_bias_rw=io["acc_bias_rw"],
-                                     gyro_bias_rw=io["gyro_bias_rw"], current_rw=io["q_current"],
+                                     gyro_density=io["gyro_density"], acc_bias_rw=rw[0],
+                                     gyro_bias_rw=rw[1], current_rw=io["q_current"],
                                      gate=gate, **gating)
         else:
             self.f = PoseEkf(x0, P0, gate=gate, **gating)
@@ -215,6 +230,8 @@ class EkfStepper:
             self.t = r.t
             return True
         t0 = time.perf_counter()
+        if self.rot is not None and isinstance(r, Odometry):  # the rate over the interval up to r.t
+            self.rot.add_rot(r)
         if r.t > self.t:  # (with ICP motion the state only moves at scans, but it is reported at r.t)
             # an IMU record is the mean over its own interval
             self._predict(f, r.t - self.t, r if isinstance(r, Imu) else self.imu_u)
@@ -290,9 +307,14 @@ class EkfStepper:
         from ..graph.imu_chain import yaw_rate_scale
 
         scale = yaw_rate_scale(f.speed_through_water(), vm["vessel_steerage_speed"])
+        rot = None
+        if self.rot is not None and self.t is not None:  # the rate of turn over the interval, as the graph's
+            yaw = self.rot.interval(self.t, self.t + T)
+            rot = (float(np.sum(yaw[0] * yaw[1])), yaw[2]) if yaw is not None else None
+            self.rot.prune(self.t)
         f.predict_vessel(T, accel_density=vm["vessel_accel"],
                          yaw_density=scale * math.radians(vm["vessel_yaw_rate_deg"]),
-                         position_walk=vm["vessel_position_walk"])
+                         position_walk=vm["vessel_position_walk"], rot=rot)
 
     def _icp_increment(self, scan: Scan, prev: Scan) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Body-frame increment prev -> scan and its covariance (a failed match re-uses the last
@@ -338,6 +360,7 @@ def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
     graph's), bias states when the IMU has a bias and current states when the log has water speed
     (``"auto"``), the initial velocity from ``meta["initial_velocity"]`` or the first GNSS velocity;
     ``given`` (options of the same names) wins."""
+    from ..log import ODOMETRY_FROM_ROT
     from .imu_model import imu_noise, resolve_flag, wants_bias
 
     m = imu_noise(log)
@@ -345,7 +368,11 @@ def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {**IMU_DEFAULTS, "acc_density": m["acc_std"] / math.sqrt(m["hz"]),
                            "gyro_density": m["gyro_std"] / math.sqrt(m["hz"]),
                            "acc_bias_rw": m["acc_bias_rw"], "gyro_bias_rw": m["gyro_bias_rw"]}
-    out["bias"] = resolve_flag(given.pop("bias", "auto"), wants_bias(log)[0], "bias") if log.of("imu") else False
+    rot = given.get("vessel_rot")
+    out["vessel_rot"] = rot = (log.meta.get("odometry") == ODOMETRY_FROM_ROT and bool(log.of("odometry"))
+                               and not log.of("imu")) if rot is None else bool(rot)
+    out["bias"] = (resolve_flag(given.pop("bias", "auto"), wants_bias(log)[0], "bias") if log.of("imu")
+                   else rot and resolve_flag(given.pop("bias", "auto"), True, "bias"))  # the ROT's bias
     out["current"] = resolve_flag(given.pop("current", "auto"), bool(log.of("water_speed")), "current")
     v0 = log.meta.get("initial_velocity") if isinstance(log.meta, dict) else None
     gv = log.of("gnss_velocity")
@@ -394,7 +421,12 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
     if not recs:
         raise ValueError("ekf: the log has no usable records")
     ts, poses, covs = [], [], []
+    ahead = 0  # the rate of turn up to t before the measurements at t (the SOG updates keep their place)
     for i, r in enumerate(recs):
+        while st.rot is not None and ahead < len(recs) and recs[ahead].t <= r.t:
+            if isinstance(recs[ahead], Odometry):
+                st.rot.add_rot(recs[ahead])
+            ahead += 1
         st.step(r)
         if i + 1 == len(recs) or recs[i + 1].t > r.t:  # the last record of this time
             ts.append(r.t)
@@ -490,6 +522,9 @@ class ImuMotionOptions:
                                                  unit="m/s")
     vessel_position_walk: float | None = option(None, "motion=vessel: the position's own random walk (null: the "
                                                 "log's, fixes against GNSS velocity, as the graph)", unit="m/sqrt(s)")
+    vessel_rot: bool | None = option(None, "motion=vessel: odometry records are a rate of turn that turns the heading "
+                                     "(the graph's vessel model's gyro z, its bias a state; null: when the log's "
+                                     "meta['odometry'] says so and it has no IMU)")
 
 
 @dataclass

@@ -23,7 +23,9 @@ The rule (docs/ekf.md, *Gating*), per sensor, with the defaults of :data:`GATING
    does not continue the recently accepted ones (it disagrees, by the unscaled test of 2., with the
    median of the last 5 accepted innovations, covariance ``pi/2 R / 5``) -- is the sensor's fault
    (the vessel cannot teleport: multipath, spoofing, a datum switch): rejected until the streak
-   has lasted ``reinit_after_s`` (300 s), then believed.
+   has lasted ``reinit_after_s`` (300 s), or until the run outnumbers the measurements the filter
+   accepted since it (re)started (a cold start whose first fixes were the wrong ones; the graph's
+   gate has the same rule, graphnav.graph.fix_gate), then believed.
 4. **Re-initialise on sustained evidence.** Any other run of ``reinit_n`` (5) measurements that
    agree with each other and not with the estimate re-initialises the measured components (the
    caller sets them to the last measurement, covariance ``s R``, cross-covariances zero): a wrong
@@ -187,7 +189,8 @@ class InnovationGate:
             st.jumped = st.tracking and not self._continues(entry, st.recent, angle)
         if len(st.run) == 1:
             st.isolated = d2 / self._chi2_median(dof)  # its scale sample, if no neighbour agrees with it
-        if len(st.run) >= self.reinit_n and (not st.jumped or t - st.streak_t0 >= self.reinit_after_s):
+        if len(st.run) >= self.reinit_n and (not st.jumped or t - st.streak_t0 >= self.reinit_after_s
+                                             or len(st.run) > st.accepted):
             return self._reinit(st, t)
         self.counts["rejected"] += 1
         return "reject"

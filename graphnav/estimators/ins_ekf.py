@@ -20,6 +20,9 @@ steerage speed)::
 
     p += T v;   Q_pp = q_a T^3/3 + q_p T,  Q_pv = q_a T^2/2,  Q_vv = q_a T,  Q_yaw = q_y T
 
+With a rate of turn (the graph's vessel model's gyro z, :class:`graphnav.graph.imu_chain.RotChain`) the heading
+turns by its integral less the gyro bias state, ``Q_yaw`` the ROT's own variance over ``T``.
+
 (the exact discretisation of the continuous white-noise-acceleration model, Bar-Shalom et al. 2001, 6.2.2).
 """
 
@@ -92,21 +95,25 @@ class InsEkf(PoseEkf):
         self.P = F @ self.P @ F.T + Q
 
     def predict_vessel(self, T: float, *, accel_density: float, yaw_density: float,
-                       position_walk: float = 0.0) -> None:
+                       position_walk: float = 0.0, rot: tuple[float, float] | None = None) -> None:
         """Propagate over ``T`` [s] without an IMU (module docstring): constant velocity, the heading held;
-        densities in [m/s^2/sqrt(s)], [rad/s/sqrt(s)] and [m/sqrt(s)]."""
+        densities in [m/s^2/sqrt(s)], [rad/s/sqrt(s)] and [m/sqrt(s)]. ``rot``: a rate of turn's integral
+        over ``T`` [rad] and its variance [rad^2] (:meth:`graphnav.graph.imu_chain.RotChain.interval`): the
+        heading turns by it, less ``T`` x the gyro bias state, with that variance instead of ``yaw_density``'s."""
         if T <= 0.0:
             return
         x, n = self.x, len(self.x)
         F = np.eye(n)
         F[0, 3] = F[1, 4] = T
+        if rot is not None and self.ib is not None:
+            F[2, self.ib + 2] = -T
         qa = accel_density ** 2
         Q = np.zeros((n, n))
         for i in (0, 1):
             Q[i, i] = qa * T ** 3 / 3 + position_walk ** 2 * T
             Q[i, i + 3] = Q[i + 3, i] = qa * T * T / 2
             Q[i + 3, i + 3] = qa * T
-        Q[2, 2] = yaw_density ** 2 * T
+        Q[2, 2] = yaw_density ** 2 * T if rot is None else rot[1]
         if self.ib is not None:
             Q[self.ib, self.ib] = Q[self.ib + 1, self.ib + 1] = self.qba * T
             Q[self.ib + 2, self.ib + 2] = self.qbg * T
@@ -114,6 +121,8 @@ class InsEkf(PoseEkf):
             Q[self.ic, self.ic] = Q[self.ic + 1, self.ic + 1] = self.qc * T
         x[0] += T * x[3]
         x[1] += T * x[4]
+        if rot is not None:
+            x[2] = wrap_angle(x[2] + rot[0] - (T * x[self.ib + 2] if self.ib is not None else 0.0))
         self.P = F @ self.P @ F.T + Q
 
     def speed_through_water(self) -> float:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
@@ -18,6 +19,8 @@ from ..log import BeaconObs, Gnss, Heading, KnownBeacon, PosePrior, Record, Trut
 from .keyframes import EPS
 from .mounts import mount_of, parse_mounts
 from .smoother_config import AnchorConfig
+
+RELEASED_SIGMA = 1e4  # [m] the first pose's position sigma once its fix is disowned (Anchor.released): no information
 
 
 def anchor_ready(held: list[Record], charted: dict[str, KnownBeacon], anchor_wait: float, t_next: float) -> bool:
@@ -93,6 +96,7 @@ class Anchor:
         self.pose: NDArray[np.float64] | None = None
         self.sigmas: NDArray[np.float64] | None = None
         self.name: str | None = None
+        self.tilt: tuple[float, float, float] | None = None  # the Pose3 graph's (roll, pitch, sigma) of its prior
 
     @property
     def chosen(self) -> bool:
@@ -116,6 +120,14 @@ class Anchor:
         self.pose, self.sigmas, self.name = choose_anchor(held, charted, self.cfg, self.mounts)
         first_prior = next((r for r in held if isinstance(r, PosePrior)), None)
         return (held[0].t if held else None), [r for r in held if r is not first_prior]
+
+    def released(self, space: Any) -> gtsam.NonlinearFactor | None:
+        """When the anchor is the first GNSS fix and the GNSS gate re-acquired away from it (graph.fix_gate):
+        the first pose's prior with its position released (``RELEASED_SIGMA``), the rest as it was (``space``:
+        the graph's :mod:`~graphnav.graph.space`); ``None`` for any other anchor."""
+        if self.pose is None or self.sigmas is None or not (self.name or "").startswith("first GNSS"):
+            return None
+        return space.prior(F.X(0), self.pose, np.array([RELEASED_SIGMA, RELEASED_SIGMA, self.sigmas[2]]), self.tilt)
 
     def cov(self) -> NDArray[np.float64]:
         """The anchor's (x, y, yaw) covariance."""

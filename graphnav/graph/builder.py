@@ -44,6 +44,7 @@ import factors as F
 from ..geometry import cov_to_world
 from ..log import Gnss, KnownBeacon, PosePrior, Record
 from .anchor import Anchor
+from .fix_gate import gate_info
 from .keyframes import Keyframes
 from .measurements import Measurements
 from .motion import Guess, Motion, NavPrev
@@ -210,7 +211,7 @@ class GraphBuilder:
         kf = self.keyframes
         if kf.stepped >= len(kf.t):  # (asked after every record: mostly none waits)
             return []
-        return kf.ready(self.motion.imu_until())
+        return kf.ready(self.motion.imu_until(kf.t_last))
 
     def _start(self) -> None:
         t0, replay = self.anchor.choose(self.charted)
@@ -235,7 +236,7 @@ class GraphBuilder:
             if self.motion.uses_odometry:
                 if self.motion.add_odometry(rec):
                     self.defaulted.add("odometry")
-            else:
+            elif not self.motion.add_rot(rec):  # (a rate of turn: the vessel model's yaw rate; its SOG unused)
                 self.counts["odometry_unused"] = self.counts.get("odometry_unused", 0) + 1
         elif kind in MEASUREMENTS:
             if isinstance(rec, Gnss) and self.motion.add_fix(rec):
@@ -305,7 +306,7 @@ class GraphBuilder:
         a = self.anchor
         assert a.pose is not None and a.sigmas is not None
         rp = self.motion.imu.tilt(s.t) if self.nav and self.motion.imu is not None else None
-        tilt = None if rp is None else (*rp, math.radians(self.cfg.anchor.sigma_tilt_deg))
+        a.tilt = tilt = None if rp is None else (*rp, math.radians(self.cfg.anchor.sigma_tilt_deg))
         s.add(self.space.prior(F.X(0), a.pose, a.sigmas, tilt), "anchor")
         if self.nav:
             self.motion.start(s)
@@ -352,7 +353,7 @@ class GraphBuilder:
             "anchor": self.anchor.name,
             "keyframes": len(kf),
             "keyframe_policy": "scan" if kf.mode == "scan" else f"grid {kf.period:g} s",
-            "gnss_rejected": self.meas.n_rejected,
+            **gate_info(self.meas.gate),
             "gnss_online_scale": {"final": self.meas.gnss_scale.scale, "max": self.meas.gnss_scale.max_scale},
             **self.scans.info(),
             "beacons": sorted(self.meas.beacon_ids),
@@ -362,6 +363,9 @@ class GraphBuilder:
             **({"imu_noise": imu.source if imu else "none (vessel model)"} if imu is not None else {}),
             **({"vessel_position_walk": {"walk": imu.vessel_walk, "estimate": imu.walk_estimate}}
                if imu is not None and not imu else {}),
+            **({"vessel_rot": {"source": imu.rot.source, "rate_hz": 1.0 / imu.rot.period(),
+                               "other_sources_ignored": imu.rot.ignored}}
+               if imu is not None and not imu and imu.rot is not None else {}),
             "defaulted_sigmas": sorted(self.defaulted),
             **(self.scans.loops.info() if self.scans.loops is not None else {}),
             **self.counts,

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 import factors as F
 
-from ..log import Imu
+from ..log import Imu, Odometry
 from .order_stats import median
 
 GRAVITY = 9.80665  # [m/s^2] standard gravity (6-axis records)
@@ -63,6 +63,31 @@ class ImuConfig:
     #  (the fixes wandering from the integrated SOG/COG); None: the log's (graphnav.graph.position_walk: fixes
     #  against GNSS velocity records), else integration_sigma. psaros33-20140805-0020's fixes: 0.44
     #  (docs/smoother.md, "Where the NEES came from")
+    vessel_rot: bool = True  # a rate of turn (meta["odometry"] == ODOMETRY_FROM_ROT) is the vessel model's gyro z
+    #  sample (:class:`RotChain`); its bias the gyro-z bias state (bias_sigma_gyro_deg, bias_rw_gyro_deg)
+
+
+#: a rate-of-turn indicator's stated accuracy (IMO A.526(13), 10: within 0.5 deg/min plus 5 % of the indicated
+#: rate), the 1-sigma of a ROT record that states none (NMEA 0183 ROT, NMEA 2000 127251, Signal K rateOfTurn)
+ROT_ACCURACY_DEG_MIN = 0.5
+ROT_ACCURACY_REL = 0.05
+#: [s] a ROT record is held at most this long beyond the one before it or the newest (as the graph's
+#: ODOMETRY_FRESH_S): an interval with a longer gap takes the vessel model's yaw-rate walk instead
+ROT_FRESH_S = 2.0
+
+
+def rot_sigma(rec: Odometry) -> float:
+    """[rad/s] a ROT record's 1-sigma: its stated ``sigma_w``, else the indicator's accuracy
+    (:data:`ROT_ACCURACY_DEG_MIN` + :data:`ROT_ACCURACY_REL` x the rate)."""
+    if math.isfinite(rec.sigma_w) and rec.sigma_w > 0.0:
+        return float(rec.sigma_w)
+    return math.radians(ROT_ACCURACY_DEG_MIN / 60.0) + ROT_ACCURACY_REL * abs(rec.w)
+
+
+def rot_bias(cfg: ImuConfig) -> tuple[float, float]:
+    """The ROT gyro's bias model, the graph's gyro-z bias state: its prior 1-sigma [rad/s] and random walk
+    [rad/s/sqrt(s)] (:class:`ImuConfig` ``bias_sigma_gyro_deg``, ``bias_rw_gyro_deg``; the vessel EKF's too)."""
+    return math.radians(cfg.bias_sigma_gyro_deg), math.radians(cfg.bias_rw_gyro_deg)
 
 
 def yaw_rate_scale(speed: float | None, steerage: float) -> float:
@@ -100,6 +125,14 @@ class ImuChain:
         self.vessel_walk = max(float(walk), cfg.integration_sigma) if walk is not None else cfg.integration_sigma
         self.vessel_params = self._vessel_set(1.0)  # no IMU: zero measurements, the vessel model's noise
         self._vessel_by_scale: dict[float, gtsam.PreintegrationParams] = {1.0: self.vessel_params}
+        #: the vessel model's ROT records (:meth:`add_rot`; ``None``: none)
+        self.rot: RotChain | None = None
+
+    def add_rot(self, rec: Odometry) -> None:
+        """A rate of turn (``rec.w``; its speed is a SOG, not used): the vessel model's gyro z sample."""
+        if self.rot is None:
+            self.rot = RotChain(self.cfg)
+        self.rot.add_rot(rec)
 
     def _vessel_set(self, scale: float) -> gtsam.PreintegrationParams:
         """The vessel model's parameters with the yaw-rate density x ``scale``."""
@@ -277,6 +310,9 @@ class ImuChain:
         if self.params is None and self.t and (len(self.t) >= 2 or self.std[2]):
             self.params = self._make_params()
         if self.params is None:  # no IMU: the white-noise acceleration model
+            yaw = self.rot.interval(ta, tb) if self.rot is not None else None
+            if yaw is not None:  # ... its yaw rate the ROT's
+                return self._rot_preintegrate(bias, yaw, self._vessel(speed))
             pim = gtsam.PreintegratedImuMeasurements(self._vessel(speed), bias)
             if tb > ta:
                 pim.integrateMeasurement(np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope()), tb - ta)
@@ -284,6 +320,24 @@ class ImuChain:
         pieces = self._pieces(ta, tb)
         return F.preintegrate_arrays(self._held_params(pieces, tb - ta), bias, *self._arrays(pieces), self.cfg.substeps,
                                      planar=not self.six)
+
+    def _rot_preintegrate(self, bias: gtsam.imuBias.ConstantBias, yaw: tuple[NDArray[np.float64], NDArray[np.float64],
+                          float], base: gtsam.PreintegrationParams) -> gtsam.PreintegratedImuMeasurements:
+        """The vessel model over an interval that ROT records cover (:meth:`RotChain.interval`: each piece's rate
+        and length, the yaw's variance): the ROT's rates as the gyro z samples (so the z bias state is the ROT's
+        bias), its variance as the gyro z density; acceleration and roll/pitch rate ``base``'s walks."""
+        w, dt, var = yaw
+        g = np.diag(base.getGyroscopeCovariance()).copy()
+        g[2] = var / float(dt.sum())
+        p = gtsam.PreintegrationParams.MakeSharedU(0.0)
+        p.setAccelerometerCovariance(base.getAccelerometerCovariance())
+        p.setGyroscopeCovariance(np.diag(g))
+        p.setIntegrationCovariance(base.getIntegrationCovariance())
+        pim = gtsam.PreintegratedImuMeasurements(p, bias)
+        acc, b = np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope())
+        for wk, dk in zip(w, dt, strict=True):
+            pim.integrateMeasurement(acc, np.array([b[0], b[1], wk]), float(dk))
+        return pim
 
     def _held_params(self, pieces: Pieces, T: float) -> gtsam.PreintegrationParams:
         """The parameters for an interval of ``T`` seconds made of ``pieces``: the shared ones, or with
@@ -315,6 +369,8 @@ class ImuChain:
 
     def prune(self, t: float) -> None:
         """Drop samples no later interval can need (all before the last one at or before ``t``)."""
+        if self.rot is not None:
+            self.rot.prune(t)
         i = bisect.bisect_right(self.t, t) - 1
         if i > 1024:
             del self.t[:i - 1]
@@ -334,6 +390,64 @@ class ImuChain:
     def bias_between(self, k0: int, k1: int, dt: float) -> gtsam.NonlinearFactor:
         c = self.cfg
         return F.bias_between(k0, k1, c.bias_rw_acc, math.radians(c.bias_rw_gyro_deg), dt)
+
+
+class RotChain(ImuChain):
+    """A rate-of-turn sensor's records (NMEA 0183 ROT, NMEA 2000 127251, Signal K rateOfTurn, a simulator's ROT
+    gyro), the vessel model's gyro z: each record the mean rate over the interval since the previous one,
+    held as :class:`ImuChain`'s records are (its hold variance too), and its own 1-sigma (:func:`rot_sigma`)
+    white at the records' rate: the yaw over an interval has the variance ``sum sigma_i^2 dt_i / rate``.
+    One sensor: the first source's records (a second one, often the same sensor's rate relayed by another
+    device, would count its noise twice); the others are counted in ``ignored``."""
+
+    def __init__(self, cfg: ImuConfig) -> None:
+        super().__init__(cfg)
+        self.sigma: list[float] = []
+        self.source: str | None = None
+        self.ignored = 0
+
+    def add_rot(self, rec: Odometry) -> None:
+        """One ROT record (out of order: dropped; at the newest time: replaces it)."""
+        n = len(self.t)
+        if self.source is None:
+            self.source = rec.source
+        if not math.isfinite(rec.w) or rec.source != self.source:
+            self.ignored += 1
+            return
+        self.add(Imu(rec.t, 0.0, 0.0, float(rec.w)))
+        if len(self.t) > n:
+            self.sigma.append(rot_sigma(rec))
+        elif self.t and rec.t == self.t[-1]:
+            self.sigma[-1] = rot_sigma(rec)
+
+    def prune(self, t: float) -> None:
+        n = len(self.t)
+        super().prune(t)
+        del self.sigma[:n - len(self.t)]
+
+    def covers(self, ta: float, tb: float) -> bool:
+        """Whether the records cover ``[ta, tb]``: one at or before ``ta``, none of the records over it
+        (nor the hold beyond the newest) longer than :data:`ROT_FRESH_S`."""
+        t, n = self.t, len(self.t)
+        if n < 2 or t[0] > ta or tb - t[-1] > ROT_FRESH_S:
+            return False
+        i0 = bisect.bisect_right(t, ta) - 1
+        i1 = min(bisect.bisect_left(t, tb, lo=i0), n - 1)
+        return i1 <= i0 or float(np.max(np.diff(t[i0:i1 + 1]))) <= ROT_FRESH_S
+
+    def interval(self, ta: float, tb: float) -> tuple[NDArray[np.float64], NDArray[np.float64], float] | None:
+        """The rates [rad/s] and lengths [s] of the pieces covering ``[ta, tb]`` and the integrated yaw's
+        variance [rad^2] (white noise at the records' rate plus :meth:`hold_variance`'s); ``None`` where the
+        records do not cover it (:meth:`covers`)."""
+        if tb <= ta or not self.covers(ta, tb):
+            return None
+        pieces = self._pieces(ta, tb)
+        idx, lo, hi = pieces
+        dt = hi - lo
+        sig = np.asarray(self.sigma[int(idx[0]):int(idx[-1]) + 1], dtype=float)[idx - idx[0]]
+        var = float(np.sum(sig**2 * dt)) * self.period() + float(self._hold(pieces)[1][2])
+        _, omega, _ = self._arrays(pieces)
+        return omega[:, 2].copy(), dt, var
 
 
 def relative_prediction(pim: gtsam.PreintegratedImuMeasurements, pose: gtsam.Pose3, vel: NDArray[np.float64],

@@ -160,7 +160,7 @@ class Keyframes:
                 self.grid_i = max(self.grid_i + 1, math.ceil((t - self.period - EPS - self.grid_t0) / self.period))
                 continue
             self.grid_i += 1
-            if self.imu is not None and self.t and not self.at_imu_record(self.imu, ts, self.period):
+            if self.imu is not None and self.t and not self.at_imu_record(_rates(self.imu), ts, self.period):
                 continue  # a slow IMU: the slots between its records are skipped
             self.add(ts, None)
 
@@ -294,3 +294,8 @@ class Keyframes:
     def take_late(self) -> list[tuple[int, Record]]:
         late, self.late = self.late, []
         return late
+
+
+def _rates(imu: Any) -> Any:
+    """The records whose intervals the grid keeps whole: the IMU's, else (the vessel model) its ROT's."""
+    return imu if imu or getattr(imu, "rot", None) is None else imu.rot

@@ -21,6 +21,7 @@ import factors as F
 from ..config import OptionError
 from ..log import Attitude, BeaconObs, Gnss, GnssVelocity, Heading, KnownBeacon, PosePrior, Record, WaterSpeed
 from .chi2 import SCALE_WINDOW, chi2_median, significant_scale
+from .fix_gate import FixGate
 from .mounts import Mount
 from .order_stats import median
 from .smoother_config import SmootherConfig
@@ -105,9 +106,10 @@ class Measurements:
         self.bias_key: int | None = None  # the newest compass-bias variable
         self.bias_t0: float | None = None  # when it took its first reading
         self.bias_segments = 1  # compass-bias variables so far (B(0), B(1), ...)
-        self.n_rejected = 0
         self.gnss_scale = GnssScale(cfg.robust.prob)  # the fixes' online variance scale
-        self.consecutive_rejects = 0
+        #: the online GNSS gate (graph.fix_gate; None: off)
+        self.gate = (FixGate(cfg.gnss.gate, cfg.gnss.gate_max_rejects)
+                     if cfg.gnss.gate_online and cfg.gnss.gate is not None else None)
         self.after_outage: set[int] = set()  # ids of the first fixes after a GNSS outage (not gated)
         #: the factors of the fixes the online gate rejected: the closing batch step reconsiders them
         #: (a cold start's first fixes can be the wrong ones, and the gate then rejects every good fix)
@@ -268,16 +270,26 @@ class Measurements:
         if prev_cov is not None and id(r) not in self.after_outage:
             ant = F.antenna_position(pa, arm)
             d = np.array([rx - ant[0], ry - ant[1]])
-            self.gnss_scale.add(d, prev_cov[:2, :2], r.sigma)
-            if cfg.gnss.gate_online and cfg.gnss.gate is not None:
-                S = prev_cov[:2, :2] + (sigma**2) * np.eye(2)
-                if (float(d @ np.linalg.solve(S, d)) > cfg.gnss.gate**2
-                        and self.consecutive_rejects < cfg.gnss.gate_max_rejects):
-                    self.n_rejected += 1
-                    self.consecutive_rejects += 1
+            sample = (d, prev_cov[:2, :2], r.sigma)
+            if self.gate is None:
+                self.gnss_scale.add(*sample)
+            else:  # the scale learns from accepted fixes and lone rejections, never from a jump (graph.fix_gate)
+                ok = self.gate.accept(d, prev_cov[:2, :2] + sigma**2 * np.eye(2), sigma**2, sample)
+                if self.gate.lone is not None:
+                    self.gnss_scale.add(*self.gate.lone)
+                if not ok:
                     self.rejected.append(stated)
                     return
-        self.consecutive_rejects = 0
+                self.gnss_scale.add(*sample)
+            if self.gate is not None and self.gate.taken_back:  # a re-acquisition: the run's fixes count again
+                n, self.gate.taken_back = self.gate.taken_back, 0
+                s.reacquired = True
+                if cfg.solver != "fixed-lag":  # (the fixed-lag window may have dropped their keyframes)
+                    for f in self.rejected[-n:]:
+                        s.add(f, "gnss")
+                    del self.rejected[-n:]
+        elif self.gate is not None:
+            self.gate.passed()
         self.after_outage.discard(id(r))
         if scale == 1.0:
             s.add(stated, "gnss")

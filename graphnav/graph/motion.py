@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..log import Gnss, Imu, Odometry
-from .imu_chain import ImuChain, ImuConfig, relative_prediction
+from .imu_chain import ROT_FRESH_S, ImuChain, ImuConfig, relative_prediction
 from .keyframes import EPS
 from .odometry_buffer import OdometryBuffer
 from .scan_factors import proper_cov
@@ -75,6 +75,14 @@ class Motion:
         """One odometry sample; whether its sigmas came from the configuration."""
         return self.odometry.add(rec)
 
+    def add_rot(self, rec: Odometry) -> bool:
+        """A rate of turn for the vessel model's gyro z, when it takes one (the log's ``meta["odometry"]`` says
+        the odometry is one: ``imu_model["rot"]``; ``imu.vessel_rot``; no IMU records): whether it did."""
+        if self.imu is None or self.imu or not (self.imu.cfg.vessel_rot and (self.imu_model or {}).get("rot")):
+            return False
+        self.imu.add_rot(rec)
+        return True
+
     def add_imu(self, rec: Imu) -> None:
         assert self.imu is not None
         self.imu.add(rec)
@@ -85,9 +93,13 @@ class Motion:
         self.fixes.append((rec.t, rec.x, rec.y, rec.sigma))
         return outage
 
-    def imu_until(self) -> float | None:
-        """The newest IMU sample's time (``None``: no IMU samples, nothing awaited)."""
-        return self.imu.t[-1] if self.imu else None
+    def imu_until(self, now: float | None = None) -> float | None:
+        """The newest IMU sample's time, else the newest ROT record's up to :data:`ROT_FRESH_S` before ``now``
+        (the one closing a keyframe's interval is awaited); ``None``: nothing awaited."""
+        rot = self.imu.rot if self.imu is not None else None
+        if self.imu or not rot or now is None:
+            return self.imu.t[-1] if self.imu else None
+        return max(rot.t[-1], now - ROT_FRESH_S)
 
     def speed(self) -> float:
         """[m/s] the newest interval's speed."""

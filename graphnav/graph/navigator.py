@@ -43,11 +43,12 @@ import factors as F
 from ..config import given_option
 from ..errors import GraphnavError
 from ..geometry import cov_to_world
-from ..log import KnownBeacon, NavLog, Record, validate_record
+from ..log import ODOMETRY_FROM_ROT, KnownBeacon, NavLog, Record, validate_record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
 from .coast import Coaster, Coasting
+from .fix_gate import OnlineFixes
 from .online_track import OnlineTrack, kinematics
 from .position_walk import position_walk
 from .smoother_config import SmootherConfig, SolverConfig, auto_motion
@@ -98,6 +99,13 @@ def wildfire_threshold(cfg: SolverConfig, space: PlanarSpace) -> float:
     return 0.01 if space.name == "nav" else 0.001
 
 
+def solve_failure(exc: SolverError, t: float, rec: Record | None, n_records: int) -> GraphnavError:
+    """The error of a keyframe at ``t`` the solver could not solve, naming the record that brought it."""
+    where = f"record {n_records}" + (f" ({rec.kind} at t = {rec.t:.6g} s)" if rec is not None else "")
+    return GraphnavError(f"the navigation graph could not be solved at the keyframe of t = {t:.6g} s: {exc}",
+                         where=where)
+
+
 def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -> dict[str, Any]:
     """The :class:`Navigator`'s arguments from ``log``: its chart, LiDAR models, whether it has scans,
     an IMU and odometry, the IMU model and initial velocity, the mounts (the log's, the option's ``kw["mounts"]``
@@ -118,14 +126,17 @@ def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -
     v0 = log.meta.get("initial_velocity")
     if imu_model is not None or v0 is not None:
         imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}
-    if (kw.get("motion", motion) == "vessel" and not any(r.kind == "imu" for r in log.records)
+    has_imu = any(r.kind == "imu" for r in log.records)
+    if log.meta.get("odometry") == ODOMETRY_FROM_ROT and not has_imu:  # a rate of turn: the vessel model's yaw rate
+        imu_model = {**(imu_model or {}), "rot": True}
+    if (kw.get("motion", motion) == "vessel" and not has_imu
             and (given_option(SmootherConfig, kw, "imu", config.imu if config is not None else None) or {}
                  ).get("vessel_position_walk") is None):
         walk = position_walk(log)  # how far the fixes wander from the integrated velocity
         if walk is not None:
             imu_model = {**(imu_model or {}), "vessel_position_walk": walk["walk"], "position_walk": walk}
     return {"chart": log.beacons_known, "lidar": lidar, "scans": scans, "lidar3d": lidar3d,
-            "imu": any(r.kind == "imu" for r in log.records), "imu_model": imu_model,
+            "imu": has_imu, "imu_model": imu_model,
             "odometry": bool(log.of("odometry")), **kw}
 
 
@@ -161,6 +172,7 @@ class Navigator(Coasting):
         self.space = self.builder.space
         self.nav = self.builder.nav
         self.last_state: NavPrev | None = None  # the Pose3 graph: the newest keyframe's full state
+        self.fixes = OnlineFixes(cfg.gnss.gate_max_rejects)  # the gate's re-acquisitions online (graph.fix_gate)
         self.solver = Solver(cfg.solver, graph_params(cfg.optimizer, self.space), lag=cfg.optimizer.lag,
                              lm=LmSettings(cfg.optimizer.lm_tol, cfg.optimizer.lm_max_iterations,
                                            cfg.optimizer.lm_abs_tol))
@@ -226,19 +238,14 @@ class Navigator(Coasting):
     def _estimate_of(self, k: int) -> gtsam.Pose2:
         return self.space.pose2(self.solver.estimate(F.X(k), self.space.pose_type))
 
-    def _fail(self, exc: SolverError, t: float) -> GraphnavError:
-        r = self._rec
-        where = f"record {self.n_records}" + (f" ({r.kind} at t = {r.t:.6g} s)" if r is not None else "")
-        return GraphnavError(f"the navigation graph could not be solved at the keyframe of t = {t:.6g} s: {exc}",
-                             where=where)
-
     def _update(self, s: Step) -> None:
         try:
             self.solver.update(s.graph, s.values, s.stamps, t=s.t, track=self._freeze if self.history else None,
                                tracked=(F.X(s.k),) if s.new_keyframe else (), kept=s.kept())
             self.solver.relinearize(self.cfg.optimizer.isam_extra_updates)
+            self.fixes.step(self.solver, self.builder, s)
         except SolverError as exc:
-            raise self._fail(exc, s.t) from None
+            raise solve_failure(exc, s.t, self._rec, self.n_records) from None
         if self.solver.keep:
             self.groups.extend(s.groups)
 
@@ -298,7 +305,7 @@ class Navigator(Coasting):
                 if w is not None:
                     self.builder.observe_current(np.asarray(solver.estimate(w, "Vector")))
         except SolverError as exc:
-            raise self._fail(exc, t) from None
+            raise solve_failure(exc, t, self._rec, self.n_records) from None
         if loops is not None:
             loops.observe(k, _vec(pose), cov)
         return pose, cov
@@ -314,7 +321,7 @@ class Navigator(Coasting):
                 self.front.update(s.graph, s.values)
             self.front.relinearize(self.cfg.optimizer.isam_extra_updates)
         except SolverError as exc:
-            raise self._fail(exc, s.t) from None
+            raise solve_failure(exc, s.t, self._rec, self.n_records) from None
         self.last_pose, self.last_cov = self._newest(self.front, k, s.t, loops)
         self.extra["loop_front_end"] = "isam2"
 
@@ -328,7 +335,7 @@ class Navigator(Coasting):
             values, it = levenberg_marquardt(self.solver.graph, self.solver.initial,
                                              replace(lm, tol=max(lm.tol, 1e-8)))
         except SolverError as exc:
-            raise self._fail(exc, t) from None
+            raise solve_failure(exc, t, self._rec, self.n_records) from None
         self.solver.initial = values
         self._take(values, k)
         self._next_init = max(k + 2, math.ceil((k + 1) * self.cfg.optimizer.batch_init_growth))
@@ -353,7 +360,7 @@ class Navigator(Coasting):
         try:
             self.solver.rebase(*marginal_priors(self.solver, self.space, keys, t))
         except SolverError as exc:
-            raise self._fail(exc, t) from None
+            raise solve_failure(exc, t, self._rec, self.n_records) from None
         self._base = k
         self.extra["rebases"] = self.extra.get("rebases", 0) + 1
 

@@ -126,6 +126,7 @@ class Solver:
         self._marginals: dict[int, NDArray[np.float64]] = {}  # ... its inverse, once asked for (`marginal`)
         self._stamps: dict[int, float] = {}  # fixed-lag: tracked key -> time
         self.updates = 0
+        self.new_indices: list[int] = []  # iSAM2: the indices of the last update's factors
         if kind == "isam2":
             self.s = gtsam.ISAM2(self.params)
         elif kind == "fixed-lag":
@@ -151,7 +152,7 @@ class Solver:
             self.initial.insert(values)
         try:
             if self.kind == "isam2":
-                self.s.update(graph, values)
+                self.new_indices = list(self.s.update(graph, values).getNewFactorsIndices())
                 self._fresh = set(values.keys())
                 self._info, self._marginals = {}, {}
             elif self.kind == "fixed-lag":
@@ -186,6 +187,23 @@ class Solver:
             self.s.update(graph, values, m)
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
+
+    def remove(self, indices: list[int], settle: int = 3, add: gtsam.NonlinearFactorGraph | None = None) -> bool:
+        """iSAM2 only: take the factors of ``indices`` (:attr:`new_indices` of earlier updates) out of the
+        online problem (``add``: put these in instead), then relinearise ``settle`` times regardless of the skip
+        (the robust kernels' weights of what remains re-evaluated); ``False`` (nothing done) for the other
+        solvers. The kept graph of the closing step is untouched."""
+        if self.kind != "isam2":
+            return False
+        try:
+            self.s.update(add if add is not None else gtsam.NonlinearFactorGraph(), gtsam.Values(), list(indices),
+                          force_relinearize=True)
+            for _ in range(settle):
+                self.s.update(gtsam.NonlinearFactorGraph(), gtsam.Values(), force_relinearize=True)
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
+        self._info, self._marginals = {}, {}
+        return True
 
     def relinearize(self, n: int) -> None:
         """``n`` extra ``update()`` calls without new factors (iSAM2 / fixed-lag relinearisation)."""

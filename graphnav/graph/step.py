@@ -26,6 +26,8 @@ class Step:
     #: factors the closing step solves instead of the online one at the same index (a GNSS fix at its stated
     #: sigma where the online estimate inflated it): batch and the closing of iSAM2 solve one problem
     closing: dict[int, gtsam.NonlinearFactor] = field(default_factory=dict)
+    #: the GNSS gate re-acquired on this step's fixes (graph.fix_gate): the solver relinearises until it settles
+    reacquired: bool = False
 
     def add(self, factor: gtsam.NonlinearFactor, group: str, closing: gtsam.NonlinearFactor | None = None) -> None:
         if closing is not None:
