@@ -316,7 +316,10 @@ def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: Any, worke
         with _workers_ignore_sigint():
             cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
                                    host="127.0.0.1", dashboard_address=dashboard, scheduler_kwargs=http,
-                                   silence_logs=logging.ERROR)
+                                   silence_logs=logging.CRITICAL)
+        # (workers' logs: a task's error reaches this process through its future and a dead worker as
+        # KilledWorker; what a worker logs at ERROR on its own is the shutdown race -- a heartbeat to the
+        # scheduler that a Ctrl-C just closed -- printed with its traceback under load)
         client = Client(cluster)
         if dashboard is not None:
             log.info("Dask dashboard: %s", cluster.dashboard_link)
