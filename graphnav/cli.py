@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import gc
 import importlib
 import logging
 import pkgutil
@@ -116,8 +117,23 @@ def _invoked(argv: list[str]) -> str:
     return next((a for a in argv if not a.startswith("-")), "")
 
 
+#: the cyclic garbage collector's first-generation threshold while a command runs (CPython: 700). A run
+#: allocates millions of short-lived objects and few cycles: collecting after every 700 took 0.23 s CPU of
+#: the harbour run (3 %, 0.12 s of it three full collections during the imports), 0.09 s at 10 000
+GC_THRESHOLD = 10_000
+
+
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
+    """Run the command ``argv`` (default ``sys.argv[1:]``); returns the exit status."""
+    thresholds = gc.get_threshold()
+    gc.set_threshold(GC_THRESHOLD, *thresholds[1:])
+    try:
+        return _main(sys.argv[1:] if argv is None else argv)
+    finally:
+        gc.set_threshold(*thresholds)
+
+
+def _main(argv: list[str]) -> int:
     parser = build_parser(_invoked(argv))
     if any(a == "--config" or a.startswith("--config=") for a in argv):
         relaxed = _relax_required(parser)  # what the file may give is not required on the command line yet

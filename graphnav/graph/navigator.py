@@ -88,8 +88,15 @@ def graph_params(cfg: SolverConfig, space: PlanarSpace | None = None) -> gtsam.I
                                         (cfg.relinearize_threshold_imu_acc, cfg.relinearize_threshold_imu_gyro)),
                        skip=cfg.relinearize_skip or (5 if space.name == "nav" else 1),
                        partial_check=cfg.partial_relinearization_check,
-                       wildfire=cfg.wildfire_threshold, factorization=cfg.isam_factorization,
+                       wildfire=wildfire_threshold(cfg, space), factorization=cfg.isam_factorization,
                        optimizer=cfg.isam_optimizer)
+
+
+def wildfire_threshold(cfg: SolverConfig, space: PlanarSpace) -> float:
+    """iSAM2's wildfire threshold: the option, else 0.01 on the Pose3 graph and GTSAM's 0.001 on the Pose2 graph."""
+    if cfg.wildfire_threshold is not None:
+        return cfg.wildfire_threshold
+    return 0.01 if space.name == "nav" else 0.001
 
 
 def solve_failure(exc: SolverError, t: float, rec: Record | None, n_records: int) -> GraphnavError:

@@ -75,7 +75,7 @@ class PlanarSpace:
     point_type = "Point2"
 
     def thresholds(self, pose: float, landmark: float, bias_yaw: float, velocity: float = 0.05,
-                   imu_bias: tuple[float, float] = (1e-3, 1e-4)) -> dict[str, list[float]]:
+                   imu_bias: tuple[float, float] = (1e-2, 1e-3)) -> dict[str, list[float]]:
         return {"x": [pose] * 3, "l": [landmark] * 2, "b": [1.0, 1.0, bias_yaw]}
 
     def value(self, p: gtsam.Pose2) -> gtsam.Pose2:
@@ -159,7 +159,7 @@ class NavSpace(PlanarSpace):
     point_type = "Point3"
 
     def thresholds(self, pose: float, landmark: float, bias_yaw: float, velocity: float = 0.05,
-                   imu_bias: tuple[float, float] = (1e-3, 1e-4)) -> dict[str, list[float]]:
+                   imu_bias: tuple[float, float] = (1e-2, 1e-3)) -> dict[str, list[float]]:
         return {"x": [pose] * 6, "v": [velocity] * 3, "w": [velocity] * 3,
                 "i": [imu_bias[0]] * 3 + [imu_bias[1]] * 3, "l": [landmark] * 3,
                 "b": [1.0, 1.0, bias_yaw, 1.0, 1.0, 1.0]}
