@@ -127,16 +127,31 @@ def test_coast_max_s_stops_coasting_and_says_so():
     assert info["coast_stopped"] == 1 and info["coast_max_s"] == 10.0 and info["coasted_estimates"] == 10
 
 
+def _signalk_runner(sk: socket.socket, est: EkfOnline, **kw) -> LiveRunner:
+    """A ``LiveRunner`` of ``est`` publishing Signal K deltas to ``sk`` (its sink open, its frame set)."""
+    runner = LiveRunner(["udp://127.0.0.1:9"], est, publish_signalk=f"udp://127.0.0.1:{sk.getsockname()[1]}", **kw)
+    runner.sink.open()
+    runner.nmea.decoder.frame = LocalFrame(43.5, 16.4, 0.0)
+    return runner
+
+
+def _received(sk: socket.socket) -> list[dict]:
+    """The deltas ``sk`` received (until it has been silent for its timeout)."""
+    deltas = []
+    while True:
+        try:
+            deltas.append(json.loads(sk.recv(65536)))
+        except TimeoutError:
+            return deltas
+
+
 def test_live_ticks_coast_the_ekf_and_every_output_carries_the_flag(tmp_path):
     log = _line("vessel")
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sk:
         sk.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)  # 180 datagrams read after they were sent
         sk.bind(("127.0.0.1", 0))
         sk.settimeout(0.5)
-        runner = LiveRunner(["udp://127.0.0.1:9"], EkfOnline(**VESSEL), out_dir=tmp_path,
-                            publish_signalk=f"udp://127.0.0.1:{sk.getsockname()[1]}")
-        runner.sink.open()
-        runner.nmea.decoder.frame = LocalFrame(43.5, 16.4, 0.0)
+        runner = _signalk_runner(sk, EkfOnline(**VESSEL), out_dir=tmp_path)
         real = fed_up_to_the_gap(runner, log, GAP[0])  # the last stamp came at wall time 100 s
         runner.tick(now=101.5)
         assert runner.sink.estimates == real  # 1.5 s of silence at 1 Hz: nothing due yet
@@ -149,12 +164,7 @@ def test_live_ticks_coast_the_ekf_and_every_output_carries_the_flag(tmp_path):
             if rec.t >= GAP[1]:
                 runner._record(rec, None)
         runner.sink.close()
-        deltas = []
-        while True:
-            try:
-                deltas.append(json.loads(sk.recv(65536)))
-            except TimeoutError:
-                break
+        deltas = _received(sk)
     q = [next(v["value"] for v in d["updates"][0]["values"] if v["path"] == "navigation.gnss.methodQuality")
          for d in deltas]
     assert len(q) == runner.sink.estimates and q.count(DR_MODE) == runner.sink.coasted > n  # the rest of the gap
@@ -254,20 +264,12 @@ def test_past_coast_max_s_the_ekf_says_no_gps_on_signalk_and_the_nmea_reader_rea
         sk.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
         sk.bind(("127.0.0.1", 0))
         sk.settimeout(0.5)
-        runner = LiveRunner(["udp://127.0.0.1:9"], EkfOnline(**VESSEL, coast_max_s=10.0),
-                            publish_signalk=f"udp://127.0.0.1:{sk.getsockname()[1]}")
-        runner.sink.open()
-        runner.nmea.decoder.frame = LocalFrame(43.5, 16.4, 0.0)
+        runner = _signalk_runner(sk, EkfOnline(**VESSEL, coast_max_s=10.0))
         fed_up_to_the_gap(runner, log, GAP[0])
         runner.tick(now=130.0)  # 30 s of silence: 10 s coasted, then "no GPS" up to a period behind (89 s)
         runner.tick(now=130.0)
         runner.sink.close()
-        deltas = []
-        while True:
-            try:
-                deltas.append(json.loads(sk.recv(65536)))
-            except TimeoutError:
-                break
+        deltas = _received(sk)
     values = [{v["path"]: v["value"] for v in d["updates"][0]["values"]} for d in deltas]
     no_fix = [v for v in values if v.get("navigation.gnss.methodQuality") == NO_FIX]
     assert len(no_fix) == runner.sink.no_fix_outputs == 19  # 71 .. 89 s at 1 Hz, each once
