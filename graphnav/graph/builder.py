@@ -364,7 +364,7 @@ class GraphBuilder:
             **({"vessel_position_walk": {"walk": imu.vessel_walk, "estimate": imu.walk_estimate}}
                if imu is not None and not imu else {}),
             **({"vessel_rot": {"source": imu.rot.source, "rate_hz": 1.0 / imu.rot.period(),
-                               "other_sources_ignored": imu.rot.ignored}}
+                               "other_sources_ignored": imu.rot.ignored, "implausible": imu.rot.implausible}}
                if imu is not None and not imu and imu.rot is not None else {}),
             "defaulted_sigmas": sorted(self.defaulted),
             **(self.scans.loops.info() if self.scans.loops is not None else {}),

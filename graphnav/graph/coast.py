@@ -153,6 +153,8 @@ class Coaster:
             return []
         t0 = self.seed[1]
         start = t0 + self.max_s if self.t_silent is None else max(t0 + self.max_s, self.t_silent)
+        if not start < until:  # (also a limit too large to count periods in: inf, 1e308)
+            return []
         n = math.floor((start - t0) / period + 1e-9) + 1
         last = math.floor((until - t0) / period + 1e-9)
         out = [t0 + i * period for i in range(n, min(last, n + MAX_POINTS - 1) + 1)]

@@ -13,7 +13,8 @@ A fix whose innovation ``d`` (the fix minus the predicted antenna position, cova
 
 On a re-acquisition (2.) the run's rejected fixes are taken back (``taken_back``), the fixes are taken
 ungated until one passes the test again, and the navigator takes the fixes the old estimate rested on
-out of iSAM2's online problem (:class:`OnlineFixes`; the closing step still judges them all).
+out of iSAM2's (or the fixed-lag window's) online problem (:class:`OnlineFixes`; the closing step still
+judges them all).
 The rule is the filters' gate's (graphnav.estimators.gating, rules 2-4) in the graph's terms, with the
 number of fixes for the time a filter has tracked.
 """
@@ -101,7 +102,7 @@ def gate_info(gate: FixGate | None) -> dict[str, int]:
 
 
 class OnlineFixes:
-    """The navigator's side of a re-acquisition (iSAM2 only): the factor indices of the fixes the gate
+    """The navigator's side of a re-acquisition (iSAM2 and fixed-lag): the factor indices of the fixes the gate
     accepted since it last re-acquired (at most ``max_rejects``, the most a run can outnumber) and of the
     anchor's prior. When a step re-acquired, those fixes leave iSAM2's online problem and an anchor taken
     from the first fix is released (:meth:`~graphnav.graph.anchor.Anchor.released`): the estimate rests on
@@ -111,9 +112,14 @@ class OnlineFixes:
         self.indices: deque[int] = deque(maxlen=max(1, int(max_rejects)))
         self.anchor: int | None = None
 
+    def forget(self) -> None:
+        """The solver started afresh (a fixed-lag rebase): the indices no longer name its factors."""
+        self.indices.clear()
+        self.anchor = None
+
     def step(self, solver: Any, builder: Any, s: Any) -> None:
         """After ``solver`` (a :class:`~graphnav.graph.solver.Solver`) took step ``s``."""
-        if solver.kind != "isam2" or not solver.new_indices:
+        if solver.kind == "batch" or not solver.new_indices:
             return
         new = list(zip(solver.new_indices, s.groups, strict=True))
         if s.k == 0 and s.new_keyframe:

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 import factors as F
 
-from ..log import Imu, Odometry
+from ..log import Imu, Limits, Odometry
 from .order_stats import median
 
 GRAVITY = 9.80665  # [m/s^2] standard gravity (6-axis records)
@@ -74,6 +74,9 @@ ROT_ACCURACY_REL = 0.05
 #: [s] a ROT record is held at most this long beyond the one before it or the newest (as the graph's
 #: ODOMETRY_FRESH_S): an interval with a longer gap takes the vessel model's yaw-rate walk instead
 ROT_FRESH_S = 2.0
+#: [rad/s] a larger rate of turn is no measurement (the file readers' bound, Limits.max_yaw_rate: 2000 deg/s,
+#: the largest MEMS gyro full scale); records handed to the API are only checked for finiteness
+ROT_MAX = Limits().max_yaw_rate
 
 
 def rot_sigma(rec: Odometry) -> float:
@@ -405,6 +408,7 @@ class RotChain(ImuChain):
         self.sigma: list[float] = []
         self.source: str | None = None
         self.ignored = 0
+        self.implausible = 0  # records beyond ROT_MAX: left out
 
     def add_rot(self, rec: Odometry) -> None:
         """One ROT record (out of order: dropped; at the newest time: replaces it)."""
@@ -413,6 +417,9 @@ class RotChain(ImuChain):
             self.source = rec.source
         if not math.isfinite(rec.w) or rec.source != self.source:
             self.ignored += 1
+            return
+        if abs(rec.w) > ROT_MAX:  # beyond any gyro's full scale (the API checks finiteness only): a corrupt record
+            self.implausible += 1
             return
         self.add(Imu(rec.t, 0.0, 0.0, float(rec.w)))
         if len(self.t) > n:

@@ -361,6 +361,7 @@ class Navigator(Coasting):
             self.solver.rebase(*marginal_priors(self.solver, self.space, keys, t))
         except SolverError as exc:
             raise solve_failure(exc, t, self._rec, self.n_records) from None
+        self.fixes.forget()
         self._base = k
         self.extra["rebases"] = self.extra.get("rebases", 0) + 1
 

@@ -126,7 +126,7 @@ class Solver:
         self._marginals: dict[int, NDArray[np.float64]] = {}  # ... its inverse, once asked for (`marginal`)
         self._stamps: dict[int, float] = {}  # fixed-lag: tracked key -> time
         self.updates = 0
-        self.new_indices: list[int] = []  # iSAM2: the indices of the last update's factors
+        self.new_indices: list[int] = []  # iSAM2 / fixed-lag: the indices of the last update's factors
         if kind == "isam2":
             self.s = gtsam.ISAM2(self.params)
         elif kind == "fixed-lag":
@@ -167,6 +167,7 @@ class Solver:
                 for key, ts in (stamps or {}).items():
                     m.insert((key, ts))
                 self.s.update(graph, values, m)
+                self.new_indices = list(self.s.getISAM2Result().getNewFactorsIndices())
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
         self.updates += 1
@@ -189,17 +190,28 @@ class Solver:
             raise SolverError(_gtsam_message(exc)) from None
 
     def remove(self, indices: list[int], settle: int = 3, add: gtsam.NonlinearFactorGraph | None = None) -> bool:
-        """iSAM2 only: take the factors of ``indices`` (:attr:`new_indices` of earlier updates) out of the
-        online problem (``add``: put these in instead), then relinearise ``settle`` times regardless of the skip
-        (the robust kernels' weights of what remains re-evaluated); ``False`` (nothing done) for the other
-        solvers. The kept graph of the closing step is untouched."""
-        if self.kind != "isam2":
+        """iSAM2 and fixed-lag: take the factors of ``indices`` (:attr:`new_indices` of earlier updates) out of
+        the online problem (``add``: put these in instead), then relinearise ``settle`` times (iSAM2: regardless
+        of the skip; the robust kernels' weights of what remains re-evaluated); ``False`` (nothing done) for
+        batch. Fixed-lag: the factors the window has marginalised out stay in their marginals (only those
+        still held are removed), and ``add`` only goes in while its variables are in the window. The kept
+        graph of the closing step is untouched."""
+        if self.kind == "batch":
             return False
+        add = add if add is not None else gtsam.NonlinearFactorGraph()
         try:
-            self.s.update(add if add is not None else gtsam.NonlinearFactorGraph(), gtsam.Values(), list(indices),
-                          force_relinearize=True)
-            for _ in range(settle):
-                self.s.update(gtsam.NonlinearFactorGraph(), gtsam.Values(), force_relinearize=True)
+            if self.kind == "fixed-lag":  # (a rebase starts afresh: its caller forgets the indices)
+                held, theta = self.s.getFactors(), self.s.getLinearizationPoint()
+                indices = [i for i in indices if held.exists(i)]
+                if not all(theta.exists(key) for key in add.keyVector()):
+                    add = gtsam.NonlinearFactorGraph()
+                self.s.update(add, gtsam.Values(), gtsam.FixedLagSmootherKeyTimestampMap(), indices)
+                for _ in range(settle):
+                    self.s.update()
+            else:
+                self.s.update(add, gtsam.Values(), list(indices), force_relinearize=True)
+                for _ in range(settle):
+                    self.s.update(gtsam.NonlinearFactorGraph(), gtsam.Values(), force_relinearize=True)
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
         self._info, self._marginals = {}, {}

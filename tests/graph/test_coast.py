@@ -172,3 +172,23 @@ def test_past_coast_max_s_the_live_output_says_no_fix_once_per_period_instead_of
             runner._record(rec, None)
     assert runner.sink.estimates > estimates and runner.sink.no_fix_outputs == n
     assert runner.summary()["no_fix_outputs"] == n
+
+
+@pytest.mark.parametrize("max_s", [math.inf, 1e308])
+def test_an_unbounded_coast_max_s_coasts_on_and_never_says_no_fix(max_s):
+    """``coast_max_s = inf`` (TOML ``inf``) or one too large to count periods in is no limit: the live tick
+    coasts through the silence and says "no fix" at no time (it raised OverflowError)."""
+    from graphnav.graph.coast import Coaster
+
+    c = Coaster(10.0, max_s)
+    for k in range(5):
+        c.estimated(k, float(k))
+    assert c.silent(1e6) == [] and c.grid(4.35) == pytest.approx([4.1, 4.2, 4.3])
+    log = _line(True)
+    nav = Navigator.for_log(log, coast_hz=10.0, coast_max_s=max_s)
+    for rec in log.records:
+        if rec.t > GAP[0]:
+            break
+        nav.add(rec)
+    coasted = nav.coast(GAP[0] + 20.0)
+    assert len(coasted) > 100 and nav.no_fix(GAP[0] + 20.0) == []

@@ -124,3 +124,17 @@ def test_rot_sigma_is_the_records_or_the_indicators_accuracy():
     assert c.interval(0.5, 1.5) is not None
     assert c.interval(1.5, 4.5) is None  # a 3 s gap: the vessel model's walk
     assert c.interval(5.0, 8.0) is None  # held 3 s beyond the newest
+
+
+@pytest.mark.parametrize("w", [1e200, -40.0])
+def test_an_implausible_rate_of_turn_is_ignored_not_integrated(w):
+    """A ROT record beyond any gyro's full scale (``Limits.max_yaw_rate``, 35 rad/s; records handed to the API are
+    checked for finiteness only) is counted and left out, by the graph and the EKF: 1e200 rad/s raised
+    OverflowError, 40 rad/s turned the yaw by up to 180 deg."""
+    recs = [r if not (isinstance(r, Odometry) and 10.0 < r.t < 11.0) else Odometry(r.t, r.v, w)
+            for r in weaving_boat(5.0, seconds=40.0).records]
+    log = NavLog(recs, meta={"odometry": ODOMETRY_FROM_ROT})
+    r = estimators.run("isam2", log, **FAST)
+    assert r.info["vessel_rot"]["implausible"] == sum(isinstance(q, Odometry) and q.w == w for q in recs) == 4
+    assert yaw_errors(log, "isam2", **FAST).max() < 2.0
+    assert yaw_errors(log, "ekf").max() < 5.0  # (1.8 deg with the good records alone)
