@@ -84,6 +84,15 @@ def test_cold_start_jump_follows_the_good_fixes(tmp_path, jumped):
         assert np.median(_distances(log, r0.online)[jumped:]) < 2.5
     ru = estimators.run("isam2", log, gnss_gate_online=False)
     assert np.median(_distances(log, ru.online)[jumped:]) > 20.0
+    if jumped == 3:  # the CLI's JSON counts the gate's decisions
+        import json
+        import subprocess
+        import sys
+
+        out = subprocess.run([sys.executable, "-m", "graphnav", "run", str(p), "-e", "isam2", "--json"],
+                             capture_output=True, text=True, check=True).stdout
+        got = json.loads(out)
+        assert got["gnss_reacquired"] == 1 and got["gnss_rejected"] == r.info["gnss_rejected"]
 
 
 
