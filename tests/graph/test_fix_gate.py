@@ -46,19 +46,26 @@ def test_scattered_rejections_and_a_jump_after_long_tracking_are_not_reacquired(
     assert _feed(g, [(20.0, 0.0)] * 6) == [False] * 5 + [True]  # the 16th in a row: gate_max_rejects (rule 1)
 
 
-@pytest.mark.parametrize("bad", [3, 6])
-def test_the_online_track_leaves_a_cold_starts_wrong_first_fixes(bad):
-    """A boat at 1.5 m/s with a compass and GNSS velocity (the vessel graph); its first ``bad`` fixes are
-    40 m off. Online, the estimate follows them, then re-acquires the good fixes after ``bad + 1`` of them
-    (the bad fixes are taken out of iSAM2's online problem) and stays on them."""
-    log = straight_line(np.array([1.5, 0.0]), 0.5, (1e6, 1e6 + 1), heading=True, velocity_sigma=0.05, n=41, seed=2)
+def _cold_start(bad: int, *, odometry: bool = False) -> NavLog:
+    """A boat at 1.5 m/s along x for 40 s, 1 Hz fixes (0.5 m) and a compass, with GNSS velocity (or, with
+    ``odometry``, an odometer instead); its first ``bad`` fixes 40 m off to the north."""
+    log = straight_line(np.array([1.5, 0.0]), 0.5, (1e6, 1e6 + 1), heading=True, odometry=odometry,
+                        velocity_sigma=None if odometry else 0.05, n=41, seed=2)
     recs, n = [], 0
     for r in log.records:
         if isinstance(r, Gnss) and n < bad:
             r = Gnss(r.t, r.x, r.y + 40.0, r.sigma)
             n += 1
         recs.append(r)
-    bent = NavLog(recs)
+    return NavLog(recs)
+
+
+@pytest.mark.parametrize("bad", [3, 6])
+def test_the_online_track_leaves_a_cold_starts_wrong_first_fixes(bad):
+    """A boat at 1.5 m/s with a compass and GNSS velocity (the vessel graph); its first ``bad`` fixes are
+    40 m off. Online, the estimate follows them, then re-acquires the good fixes after ``bad + 1`` of them
+    (the bad fixes are taken out of iSAM2's online problem) and stays on them."""
+    bent = _cold_start(bad)
     r = estimators.run("isam2", bent)
     assert r.info["gnss_reacquired"] == 1
     fixes = bent.columns("gnss")
@@ -110,15 +117,7 @@ def test_the_fixed_lag_smoother_leaves_a_cold_starts_wrong_first_fixes_too(odome
     """The cold start above (3 fixes 40 m off) on the fixed-lag smoother, vessel and Pose2 (odometry) graphs:
     the fixes the estimate rested on leave its window's problem as they leave iSAM2's (they stayed: the online
     track ended 22 m / 46 m off the good fixes)."""
-    log = straight_line(np.array([1.5, 0.0]), 0.5, (1e6, 1e6 + 1), heading=True, odometry=odometry,
-                        velocity_sigma=None if odometry else 0.05, n=41, seed=2)
-    recs, n = [], 0
-    for r in log.records:
-        if isinstance(r, Gnss) and n < 3:
-            r = Gnss(r.t, r.x, r.y + 40.0, r.sigma)
-            n += 1
-        recs.append(r)
-    bent = NavLog(recs)
+    bent = _cold_start(3, odometry=odometry)
     r = estimators.run("fixed-lag", bent)
     assert r.info["gnss_reacquired"] == 1
     on = r.online if r.online is not None else r.trajectory
