@@ -237,14 +237,19 @@ class EkfOnline:
         """Live mode's clock tick at stream time ``t``: once no record the filter takes came for two output (or
         record) periods, the predictions due on the output grid up to a period before ``t``
         (:meth:`~graphnav.graph.coast.Coaster.live_horizon`); offline the gaps are filled as the next record comes."""
-        until = self.coaster.live_horizon(t) if self.stepper is not None else None
+        until = self._horizon(t)
         return [] if until is None else self._coast_to(until)
 
     def no_fix(self, t: float) -> list[float]:
         """Live mode's clock tick at stream time ``t``, after :meth:`coast`: the output times past
         ``coast_max_s`` that have no solution (:meth:`~graphnav.graph.coast.Coaster.silent`)."""
-        until = self.coaster.live_horizon(t) if self.stepper is not None else None
+        until = self._horizon(t)
         return [] if until is None else self.coaster.silent(until)
+
+    def _horizon(self, t: float) -> float | None:
+        """Live mode at stream time ``t``: how far the output is due (:meth:`Coaster.live_horizon`) once the
+        filter has started; ``None``: nothing due."""
+        return self.coaster.live_horizon(t) if self.stepper is not None else None
 
     def _coast_before(self, t: float) -> None:
         """A record at ``t`` after a silence live mode would have coasted through (the live rule at ``t``, checked

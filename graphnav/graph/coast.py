@@ -242,14 +242,19 @@ class Coasting:
         """Live mode's clock tick at stream time ``t``: once no record came for two output (or record)
         periods, the predicted estimates due on the output grid (:class:`~graphnav.graph.coast.Coaster`)
         up to a period before ``t``; offline the gaps are filled as the next keyframe comes."""
-        until = self.coaster.live_horizon(t) if self.solver.online and self._result is None else None
+        until = self._horizon(t)
         return [] if until is None else self._coast_to(until)
 
     def no_fix(self, t: float) -> list[float]:
         """Live mode's clock tick at stream time ``t``, after :meth:`coast`: the output times past
         ``coast_max_s`` that have no solution (:meth:`Coaster.silent`)."""
-        until = self.coaster.live_horizon(t) if self.solver.online and self._result is None else None
+        until = self._horizon(t)
         return [] if until is None else self.coaster.silent(until)
+
+    def _horizon(self, t: float) -> float | None:
+        """Live mode at stream time ``t``: how far the output is due (:meth:`Coaster.live_horizon`), while an
+        online solver runs and the run has not ended; ``None``: nothing due."""
+        return self.coaster.live_horizon(t) if self.solver.online and self._result is None else None
 
     def _coast_to(self, until: float) -> list[Estimate]:
         """Predicted estimates on the output grid after the newest output, up to ``until``: the newest
