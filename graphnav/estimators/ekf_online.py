@@ -30,7 +30,7 @@ import numpy as np
 from ..geometry import wrap_angle
 from ..graph.coast import Coaster
 from ..graph.position_walk import WalkTracker
-from ..log import ODOMETRY_FROM_ROT, Gnss, GnssVelocity, Heading, NavLog, Odometry, PosePrior, Record
+from ..log import Gnss, GnssVelocity, Heading, NavLog, Odometry, PosePrior, Record, odometry_is_rot
 from ..result import Estimate
 from .base import BatchEstimator
 from .ekf import (
@@ -115,7 +115,7 @@ class EkfOnline:
     def _options_for(self, motion: str) -> dict[str, Any]:
         """The stepper's options for ``motion``: the IMU (vessel) motion's only where it has them."""
         if motion == "vessel" and self.options.get("imu", {}).get("vessel_rot") is None:  # the ROT: from meta
-            rot = self.meta.get("odometry") == ODOMETRY_FROM_ROT
+            rot = odometry_is_rot(self.meta)
             return {**self.options, "imu": {**self.options.get("imu", {}), "vessel_rot": rot}}
         return self.options if motion in ("imu", "vessel") else {k: v for k, v in self.options.items() if k != "imu"}
 
