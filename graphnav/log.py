@@ -137,6 +137,12 @@ class Heading:
 ODOMETRY_FROM_ROT = "rate of turn + SOG"
 
 
+def odometry_is_rot(meta: Any) -> bool:
+    """Whether a log's ``meta`` says its odometry records are a rate of turn with the SOG
+    (:data:`ODOMETRY_FROM_ROT`), not an odometer."""
+    return isinstance(meta, dict) and meta.get("odometry") == ODOMETRY_FROM_ROT
+
+
 def note_rot_odometry(meta: dict[str, Any], records: Iterable[Record]) -> None:
     """A reader whose odometry records are a rate of turn with the SOG: ``meta["odometry"]`` says so
     (:data:`ODOMETRY_FROM_ROT`) when it produced any."""

@@ -342,11 +342,11 @@ def auto_motion(log: NavLog, least: int = 2) -> str:
     s1-s3: 9.07 / 13.93 / 14.23 m, NEES 308-814; with the IMU 1.56 / 4.04 / 2.25 m). ``least``: records of a
     kind that make it count."""
     from ..graph.smoother_config import auto_motion as graph_motion
-    from ..log import ODOMETRY_FROM_ROT
+    from ..log import odometry_is_rot
 
     if graph_motion(log.counts(), log.meta) == "vessel":
         return "vessel"
-    rot = isinstance(log.meta, dict) and log.meta.get("odometry") == ODOMETRY_FROM_ROT
+    rot = odometry_is_rot(log.meta)
     if len(log.of("odometry")) >= least and not (rot and len(log.of("imu")) >= least):
         return "odometry"
     if len(log.of("imu")) >= least:
@@ -360,7 +360,7 @@ def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
     graph's), bias states when the IMU has a bias and current states when the log has water speed
     (``"auto"``), the initial velocity from ``meta["initial_velocity"]`` or the first GNSS velocity;
     ``given`` (options of the same names) wins."""
-    from ..log import ODOMETRY_FROM_ROT
+    from ..log import odometry_is_rot
     from .imu_model import imu_noise, resolve_flag, wants_bias
 
     m = imu_noise(log)
@@ -369,7 +369,7 @@ def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
                            "gyro_density": m["gyro_std"] / math.sqrt(m["hz"]),
                            "acc_bias_rw": m["acc_bias_rw"], "gyro_bias_rw": m["gyro_bias_rw"]}
     rot = given.get("vessel_rot")
-    out["vessel_rot"] = rot = (log.meta.get("odometry") == ODOMETRY_FROM_ROT and bool(log.of("odometry"))
+    out["vessel_rot"] = rot = (odometry_is_rot(log.meta) and bool(log.of("odometry"))
                                and not log.of("imu")) if rot is None else bool(rot)
     out["bias"] = (resolve_flag(given.pop("bias", "auto"), wants_bias(log)[0], "bias") if log.of("imu")
                    else rot and resolve_flag(given.pop("bias", "auto"), True, "bias"))  # the ROT's bias

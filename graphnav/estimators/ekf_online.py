@@ -30,7 +30,7 @@ import numpy as np
 from ..geometry import wrap_angle
 from ..graph.coast import Coaster
 from ..graph.position_walk import WalkTracker
-from ..log import ODOMETRY_FROM_ROT, Gnss, GnssVelocity, Heading, NavLog, Odometry, PosePrior, Record
+from ..log import Gnss, GnssVelocity, Heading, NavLog, Odometry, PosePrior, Record, odometry_is_rot
 from ..result import Estimate
 from .base import BatchEstimator
 from .ekf import (
@@ -115,7 +115,7 @@ class EkfOnline:
     def _options_for(self, motion: str) -> dict[str, Any]:
         """The stepper's options for ``motion``: the IMU (vessel) motion's only where it has them."""
         if motion == "vessel" and self.options.get("imu", {}).get("vessel_rot") is None:  # the ROT: from meta
-            rot = self.meta.get("odometry") == ODOMETRY_FROM_ROT
+            rot = odometry_is_rot(self.meta)
             return {**self.options, "imu": {**self.options.get("imu", {}), "vessel_rot": rot}}
         return self.options if motion in ("imu", "vessel") else {k: v for k, v in self.options.items() if k != "imu"}
 
@@ -237,14 +237,19 @@ class EkfOnline:
         """Live mode's clock tick at stream time ``t``: once no record the filter takes came for two output (or
         record) periods, the predictions due on the output grid up to a period before ``t``
         (:meth:`~graphnav.graph.coast.Coaster.live_horizon`); offline the gaps are filled as the next record comes."""
-        until = self.coaster.live_horizon(t) if self.stepper is not None else None
+        until = self._horizon(t)
         return [] if until is None else self._coast_to(until)
 
     def no_fix(self, t: float) -> list[float]:
         """Live mode's clock tick at stream time ``t``, after :meth:`coast`: the output times past
         ``coast_max_s`` that have no solution (:meth:`~graphnav.graph.coast.Coaster.silent`)."""
-        until = self.coaster.live_horizon(t) if self.stepper is not None else None
+        until = self._horizon(t)
         return [] if until is None else self.coaster.silent(until)
+
+    def _horizon(self, t: float) -> float | None:
+        """Live mode at stream time ``t``: how far the output is due (:meth:`Coaster.live_horizon`) once the
+        filter has started; ``None``: nothing due."""
+        return self.coaster.live_horizon(t) if self.stepper is not None else None
 
     def _coast_before(self, t: float) -> None:
         """A record at ``t`` after a silence live mode would have coasted through (the live rule at ``t``, checked

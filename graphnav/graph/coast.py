@@ -45,6 +45,14 @@ log_ = logging.getLogger("graphnav.coast")
 Prediction = tuple[NDArray[np.float64], NDArray[np.float64], float | None, float | None, float | None]
 
 
+def grid_times(t0: float, period: float, after: float, until: float) -> list[float]:
+    """The output grid ``t0 + i period`` (i >= 1) strictly after ``after`` and up to ``until`` (inclusive, to
+    1e-9 of a period), at most :data:`MAX_POINTS` of them."""
+    n = max(1, math.floor((after - t0) / period + 1e-9) + 1)
+    last = math.floor((until - t0) / period + 1e-9)
+    return [t0 + i * period for i in range(n, min(last, n + MAX_POINTS - 1) + 1)]
+
+
 class Coaster:
     """The output grid through gaps. ``hz``: the output rate (``None``: the median rate of the
     estimates so far, from the :data:`MIN_INTERVALS`-th on; 0: off). :meth:`estimated` records each
@@ -139,9 +147,7 @@ class Coaster:
                 self.stopped += 1
                 log_.warning("coasting stopped %.1f s after the last estimate (coast_max_s): 'no fix' until a "
                              "record comes", self.max_s)
-        n = max(1, math.floor((self.t_out - t0) / period + 1e-9) + 1)
-        last = math.floor((until - t0) / period + 1e-9)
-        return [t0 + i * period for i in range(n, min(last, n + MAX_POINTS - 1) + 1)]
+        return grid_times(t0, period, self.t_out, until)
 
     def silent(self, until: float) -> list[float]:
         """Once coasting has stopped (``max_s`` after the newest real estimate), the output times up to
@@ -155,9 +161,7 @@ class Coaster:
         start = t0 + self.max_s if self.t_silent is None else max(t0 + self.max_s, self.t_silent)
         if not start < until:  # (also a limit too large to count periods in: inf, 1e308)
             return []
-        n = math.floor((start - t0) / period + 1e-9) + 1
-        last = math.floor((until - t0) / period + 1e-9)
-        out = [t0 + i * period for i in range(n, min(last, n + MAX_POINTS - 1) + 1)]
+        out = grid_times(t0, period, start, until)
         if out:
             self.t_silent = out[-1]
             self.silent_count += len(out)
@@ -238,14 +242,19 @@ class Coasting:
         """Live mode's clock tick at stream time ``t``: once no record came for two output (or record)
         periods, the predicted estimates due on the output grid (:class:`~graphnav.graph.coast.Coaster`)
         up to a period before ``t``; offline the gaps are filled as the next keyframe comes."""
-        until = self.coaster.live_horizon(t) if self.solver.online and self._result is None else None
+        until = self._horizon(t)
         return [] if until is None else self._coast_to(until)
 
     def no_fix(self, t: float) -> list[float]:
         """Live mode's clock tick at stream time ``t``, after :meth:`coast`: the output times past
         ``coast_max_s`` that have no solution (:meth:`Coaster.silent`)."""
-        until = self.coaster.live_horizon(t) if self.solver.online and self._result is None else None
+        until = self._horizon(t)
         return [] if until is None else self.coaster.silent(until)
+
+    def _horizon(self, t: float) -> float | None:
+        """Live mode at stream time ``t``: how far the output is due (:meth:`Coaster.live_horizon`), while an
+        online solver runs and the run has not ended; ``None``: nothing due."""
+        return self.coaster.live_horizon(t) if self.solver.online and self._result is None else None
 
     def _coast_to(self, until: float) -> list[Estimate]:
         """Predicted estimates on the output grid after the newest output, up to ``until``: the newest

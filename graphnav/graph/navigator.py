@@ -43,7 +43,7 @@ import factors as F
 from ..config import given_option
 from ..errors import GraphnavError
 from ..geometry import cov_to_world
-from ..log import ODOMETRY_FROM_ROT, KnownBeacon, NavLog, Record, validate_record
+from ..log import KnownBeacon, NavLog, Record, odometry_is_rot, validate_record
 from ..result import Estimate, OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
@@ -127,7 +127,7 @@ def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -
     if imu_model is not None or v0 is not None:
         imu_model = {**(imu_model or {}), **({"initial_velocity": v0} if v0 is not None else {})}
     has_imu = any(r.kind == "imu" for r in log.records)
-    if log.meta.get("odometry") == ODOMETRY_FROM_ROT and not has_imu:  # a rate of turn: the vessel model's yaw rate
+    if odometry_is_rot(log.meta) and not has_imu:  # a rate of turn: the vessel model's yaw rate
         imu_model = {**(imu_model or {}), "rot": True}
     if (kw.get("motion", motion) == "vessel" and not has_imu
             and (given_option(SmootherConfig, kw, "imu", config.imu if config is not None else None) or {}

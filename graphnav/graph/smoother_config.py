@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..config import Sectioned, config_from_options, option, section
-from ..log import ODOMETRY_FROM_ROT
+from ..log import odometry_is_rot
 
 MOTION_MODELS = ("constant-velocity", "random-walk")
 MOTIONS = ("auto", "odometry", "imu", "vessel")
@@ -44,7 +44,7 @@ def auto_motion(kinds: Collection[str], meta: dict[str, Any] | None = None) -> s
     k = set(kinds)
     if "imu" in k:
         return "imu"
-    if "odometry" in k and (meta or {}).get("odometry") == ODOMETRY_FROM_ROT:
+    if "odometry" in k and odometry_is_rot(meta):
         k.discard("odometry")
     if not k & {"odometry", "scan", "cloud"} and "heading" in k and k & set(VESSEL_KINDS):
         return "vessel"

@@ -219,7 +219,7 @@ class LiveRunner:
             self.sink.emit(c, None, self.nmea.decoder.frame)
         no_fix = getattr(self.estimator, "no_fix", None)  # past coast_max_s: said, not silent
         for tau in no_fix(t) if callable(no_fix) else ():
-            self.sink.no_fix(tau, self.nmea.decoder.frame)
+            self.sink.no_fix(tau)
 
     # -- the loop
     def run(self) -> dict[str, Any]:

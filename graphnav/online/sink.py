@@ -138,21 +138,13 @@ class Sink:
                 self.hdop = max(0.01, math.sqrt(max(0.0, 0.5 * (est.cov[0, 0] + est.cov[1, 1]))) / UERE_M[1])
             lines = solution_sentences(est.t, est.vec, frame, sog=est.sog, cog_yaw=est.cog, w=est.w, hdop=self.hdop,
                                        quality=6 if est.coasted else 1)  # GGA quality 6: estimated (dead reckoning)
-            try:
-                self.sock.sendto(("\r\n".join(lines) + "\r\n").encode("ascii"), self.addr)
-                self.published += len(lines)
-            except OSError as exc:
-                log_.warning("publish to %s failed: %s", self.publish, exc)
+            self._send_nmea(lines)
         if self.sk_sock is not None and frame is not None:
             from ..io.signalk import solution_delta
 
             delta = solution_delta(est.t, est.vec, frame, cov=est.cov, sog=est.sog, cog_yaw=est.cog, w=est.w,
                                    coasted=est.coasted)  # navigation.gnss.methodQuality "Estimated (DR) mode"
-            try:
-                self.sk_sock.sendto(json.dumps(delta).encode("utf-8"), self.sk_addr)
-                self.published_signalk += 1
-            except OSError as exc:
-                log_.warning("publish to %s failed: %s", self.publish_signalk, exc)
+            self._send_signalk(delta)
         if arrival is not None:  # the published solution is the latency-critical path; the file comes next
             i = self.n_latency % LATENCY_WINDOW
             self.latency_ms[i] = (time.perf_counter() - arrival) * 1e3
@@ -161,30 +153,39 @@ class Sink:
         if self.writer is not None:
             self.writer.write(est.t, est.vec, est.cov)
 
-    def no_fix(self, t: float, frame: LocalFrame | None = None) -> None:
+    def no_fix(self, t: float) -> None:
         """Say that there is no solution at ``t`` (coasting stopped at ``coast_max_s``): GGA quality 0 and
         RMC status V (NMEA), ``methodQuality`` "no GPS" (Signal K); nothing is written to the file, which
-        holds estimates only. ``frame`` is not needed (no position); it is taken for symmetry with :meth:`emit`."""
+        holds estimates only."""
         if self.newest is not None and t < self.newest:
             return
         self.newest = t
         self.no_fix_outputs += 1
         self._in_span = False
         if self.sock is not None:
-            lines = no_fix_sentences(t)
-            try:
-                self.sock.sendto(("\r\n".join(lines) + "\r\n").encode("ascii"), self.addr)
-                self.published += len(lines)
-            except OSError as exc:
-                log_.warning("publish to %s failed: %s", self.publish, exc)
+            self._send_nmea(no_fix_sentences(t))
         if self.sk_sock is not None:
             from ..io.signalk import no_fix_delta
 
-            try:
-                self.sk_sock.sendto(json.dumps(no_fix_delta(t)).encode("utf-8"), self.sk_addr)
-                self.published_signalk += 1
-            except OSError as exc:
-                log_.warning("publish to %s failed: %s", self.publish_signalk, exc)
+            self._send_signalk(no_fix_delta(t))
+
+    def _send_nmea(self, lines: list[str]) -> None:
+        """One datagram of NMEA sentences to ``publish`` (a failed send is logged, not raised)."""
+        assert self.sock is not None
+        try:
+            self.sock.sendto(("\r\n".join(lines) + "\r\n").encode("ascii"), self.addr)
+            self.published += len(lines)
+        except OSError as exc:
+            log_.warning("publish to %s failed: %s", self.publish, exc)
+
+    def _send_signalk(self, delta: dict[str, Any]) -> None:
+        """One Signal K delta to ``publish_signalk`` (a failed send is logged, not raised)."""
+        assert self.sk_sock is not None
+        try:
+            self.sk_sock.sendto(json.dumps(delta).encode("utf-8"), self.sk_addr)
+            self.published_signalk += 1
+        except OSError as exc:
+            log_.warning("publish to %s failed: %s", self.publish_signalk, exc)
 
     def summary(self) -> dict[str, Any]:
         lat = self.latency_ms[: min(self.n_latency, LATENCY_WINDOW)]

@@ -47,7 +47,7 @@ from ..config import given_option
 from ..graph.navigator import Navigator, log_inputs
 from ..graph.position_walk import WALK_EVERY_S, WalkTracker
 from ..graph.smoother_config import VESSEL_KINDS, SmootherConfig, auto_motion
-from ..log import ODOMETRY_FROM_ROT, NavLog, Record
+from ..log import ODOMETRY_FROM_ROT, NavLog, Record, odometry_is_rot
 from ..result import Estimate, OnlineEstimator
 
 log_ = logging.getLogger("graphnav.live")
@@ -217,7 +217,7 @@ class WarmUp:
         the others' in :attr:`_out`."""
         log = NavLog.from_unsorted(self.held, meta=self.meta)  # (a live stream may step back a little)
         kinds = set(log.counts())
-        rot = log.meta.get("odometry") == ODOMETRY_FROM_ROT
+        rot = odometry_is_rot(log.meta)
         self.motion = auto_motion(kinds, log.meta)
         cfg = SmootherConfig.from_options({**self.options, "solver": self.solver})  # as the offline estimator's
         args = log_inputs(log, cfg, {})
