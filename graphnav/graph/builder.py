@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 import factors as F
 
 from ..geometry import cov_to_world
-from ..log import Gnss, Imu, KnownBeacon, PosePrior, Record
+from ..log import Gnss, KnownBeacon, PosePrior, Record
 from .anchor import Anchor
 from .fix_gate import gate_info
 from .keyframes import Keyframes
@@ -197,16 +197,21 @@ class GraphBuilder:
                 return
         self._ingest(rec)
 
-    def push_imu(self, recs: Sequence[Imu], ts: Sequence[float]) -> bool:
-        """IMU records (their times ``ts``) that can make no keyframe ready, taken as :meth:`push` of each
-        would (:meth:`Keyframes.quiet <graphnav.graph.keyframes.Keyframes.quiet>`); ``False`` (nothing done)
-        before the anchor, on the planar graph, or when they might."""
-        imu = self.motion.imu
-        if imu is None or not (self.anchor.chosen and self.keyframes.quiet(min(ts), max(ts))):
+    def push_quiet(self, recs: Sequence[Record]) -> bool:
+        """IMU and truth records that can make no keyframe ready, taken as :meth:`push` of each would
+        (:meth:`Keyframes.quiet <graphnav.graph.keyframes.Keyframes.quiet>`); ``False`` (nothing done) before
+        the anchor, on the planar graph, before the first of either kind, or when they might."""
+        imu, counts = self.motion.imu, self.counts
+        samples = [r for r in recs if r.kind == "imu"]
+        n_truth, ts = len(recs) - len(samples), [r.t for r in recs]
+        if (imu is None or not self.anchor.chosen or (samples and "imu" not in counts) or (n_truth and "truth" not in
+                counts) or not self.keyframes.quiet(min(ts), max(ts), max(r.t for r in samples) if samples else None)):
             return False
-        self.counts["records"] += len(recs)
-        self.counts["imu"] = self.counts.get("imu", 0) + len(recs)
-        imu.extend(recs)
+        counts["records"] += len(recs)
+        for kind, m in (("imu", len(samples)), ("truth", n_truth), ("ignored", n_truth)):  # (truth: a reference)
+            if m:
+                counts[kind] += m
+        imu.extend(samples)
         return True
 
     def finish(self) -> None:
