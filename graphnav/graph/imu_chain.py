@@ -117,6 +117,7 @@ class ImuChain:
         self.rows: list[tuple[float, ...]] = []  # ax, ay, az, wx, wy, wz
         self.cum: list[float] = []  # the integrated gyro rate's norm up to each t [rad] (the keyframe rule)
         self.six: bool | None = None
+        self._period: tuple[tuple[int, float] | None, float] = (None, 0.0)  # (len(t), t[-1]) -> period()
         self.params: gtsam.PreintegrationParams | None = None
         self.body_P_sensor: gtsam.Pose3 | None = None  # the IMU's mount (graphnav.graph.mounts), when not at the origin
         walk = cfg.vessel_position_walk
@@ -189,8 +190,11 @@ class ImuChain:
         """The median interval of the records so far [s] (1 / ``hz`` of the config before two)."""
         if len(self.t) < 2:
             return 1.0 / self.cfg.hz
-        t = self.t[-200:]
-        return median([b - a for a, b in zip(t[:-1], t[1:], strict=True)])  # (np.median of np.diff, to the bit)
+        key = (len(self.t), self.t[-1])  # (samples are appended in time order and pruned from the front only)
+        if self._period[0] != key:
+            t = self.t[-200:]
+            self._period = (key, median([b - a for a, b in zip(t[:-1], t[1:], strict=True)]))  # (np.median of np.diff)
+        return self._period[1]
 
     def add(self, r: Imu) -> None:
         self.extend((r,))
