@@ -466,7 +466,7 @@ def test_imu_chain_period_is_the_median_interval_of_its_newest_samples_as_they_c
         if step % 7 == 3:
             chain.add(Imu(t, 0.2, 0.0, 0.02))  # at the newest time: replaces it
             chain.add(Imu(t - 0.05, 0.2, 0.0, 0.02))  # older: dropped
-        if step % 11 == 5:
+        if step % 5 == 2:
             n = len(chain.t)
             chain.prune(t - 5.0)
             pruned += len(chain.t) < n
