@@ -458,7 +458,7 @@ def test_imu_chain_period_is_the_median_interval_of_its_newest_samples_as_they_c
     rng = np.random.default_rng(5)
     chain = ImuChain(ImuConfig())
     t, pruned = 0.0, 0
-    for step in range(150):
+    for step in range(300):
         dts = rng.choice([0.01, 0.0125, 0.02], size=int(rng.integers(1, 40)))
         times = t + np.cumsum(dts)
         t = float(times[-1])
@@ -473,4 +473,4 @@ def test_imu_chain_period_is_the_median_interval_of_its_newest_samples_as_they_c
         want = float(np.median(np.diff(np.asarray(chain.t[-200:])))) if len(chain.t) >= 2 else 1.0 / chain.cfg.hz
         assert chain.period() == want
         assert chain.period() == want  # (the kept value)
-    assert pruned >= 3
+    assert pruned >= 4
