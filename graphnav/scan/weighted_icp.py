@@ -190,7 +190,7 @@ def _pose_parts(init: ArrayLike | None) -> tuple[float, NDArray]:
     if init is None:
         return 0.0, np.zeros(2)
     x = np.asarray(init, dtype=float).ravel()
-    if x.shape != (3,) or not np.all(np.isfinite(x)):
+    if x.shape != (3,) or not (math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2])):
         raise ValueError(f"init must be a finite (dx, dy, dyaw), got {init!r}")
     return float(x[2]), x[:2].copy()
 
@@ -300,7 +300,24 @@ _KERNELS: list[Any] = []  # [the kernel module, numba importable], after the fir
 
 
 def _params(cfg: IcpConfig) -> Any:
-    """The kernels' :class:`graphnav.scan._icp_fast.Params` of a config."""
+    """The kernels' :class:`graphnav.scan._icp_fast.Params` of a config (made once per distinct settings)."""
+    key = tuple(vars(cfg).values())
+    try:
+        got = _PARAMS.get(key)
+    except TypeError:  # (an unhashable value set on the config)
+        return _make_params(cfg)
+    if got is None:
+        if len(_PARAMS) >= 64:
+            _PARAMS.clear()
+        got = _PARAMS[key] = _make_params(cfg)
+    return got
+
+
+_PARAMS: dict[tuple, Any] = {}  # the Params of the settings seen (keyed by the config's values)
+
+
+def _make_params(cfg: IcpConfig) -> Any:
+    """:func:`_params`, made."""
     from ._icp_fast import Params
 
     return Params(_VARIANT_CODE[cfg.variant], float(cfg.huber_c), float(cfg.weight_power),
@@ -308,7 +325,7 @@ def _params(cfg: IcpConfig) -> Any:
                   float(cfg.tol_step), int(cfg.max_iter), _GRID_CELL, int(cfg.normal_k), cfg.normals == "knn",
                   float(cfg.line_max_gap), float(cfg.line_flat_power), float(cfg.line_warmup), float(cfg.gate0),
                   _MIN_RES, float(cfg.sigma_alpha), float(cfg.sigma_r_rel), cfg.matching == "delaunay",
-                  float(covariance.SAMPLING_VARIANCE))
+                  float(covariance.SAMPLING_VARIANCE), float(cfg.max_condition), float(cfg.max_sigma))
 
 
 def _triangulation(tgt_xy: NDArray) -> tuple[NDArray, NDArray, NDArray]:
@@ -322,26 +339,27 @@ def _triangulation(tgt_xy: NDArray) -> tuple[NDArray, NDArray, NDArray]:
 
 def _report(cfg: IcpConfig, out: tuple, t0: float, ns: int, nt: int, init: ArrayLike | None,
             init_cov: ArrayLike | None) -> MatchResult:
-    """Covariance and degeneracy (:func:`graphnav.scan.covariance.from_sums` of the kernel's one-pass sums),
+    """Covariance and degeneracy (:func:`graphnav.scan.covariance.from_kernel`: the kernel's evaluation of
+    :func:`~graphnav.scan.covariance.from_sums` on its one-pass sums),
     the flags, the weak directions taken from ``init``, and the quality report.
 
     Residuals and their Jacobians with respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)``
     (GTSAM's Pose2 tangent space): ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1],
     [1, 0]]``; HDL: the point-to-line residual ``n . (p - q)``, its row ``n^T [R, J (p - t)]``.
     """
-    (th, tx, ty), iters, converged, gate, moved, src_range, radius, sums = out
-    k, n_inl, h, b_lidar, b_samp, rms, info, inlier_fraction, points_used, big_d = sums
+    (th, tx, ty), iters, converged, gate, moved, src_range, radius, sums, algebra = out
+    k, n_inl, _, _, _, rms, _, inlier_fraction, points_used, big_d = sums
     pose = np.array([tx, ty, th])
-    bt = covariance.from_sums(k, n_inl, h, b_lidar, b_samp, rms, info, radius, max_condition=cfg.max_condition,
-                              max_sigma=cfg.max_sigma * big_d, prior_cov=None if init is None else init_cov)
+    bt = covariance.from_kernel(k, n_inl, rms, radius, algebra, prior_cov=None if init is None else init_cov)
     deg = bt.degeneracy
     # the geometry's own weak directions (without the guess's "known better" rule): what a fusion of the
     # match with its guess by information may not hear from the match
     geo = deg if init is None or init_cov is None else bt.geometry
     failed, maha = _failures(cfg, pose, bt, iters, converged, moved, src_range, inlier_fraction, radius, init,
                              init_cov)
-    cov, icp_pose, reasons = bt.cov, pose.copy(), []
-    if deg.degenerate:
+    cov, reasons = bt.cov, []
+    degenerate = deg.degenerate
+    if degenerate:
         why = []
         if not np.isfinite(deg.condition) or deg.condition > cfg.max_condition:
             why.append(f"condition number {deg.condition:.3g} > {cfg.max_condition:g}")
@@ -359,14 +377,15 @@ def _report(cfg: IcpConfig, out: tuple, t0: float, ns: int, nt: int, init: Array
         "points_used": int(points_used), "points_source": ns, "points_target": nt,
         "inlier_fraction": float(inlier_fraction), "residual": bt.residual_rms, "residual_scale": bt.residual_scale,
         "resolution": float(big_d), "gate": float(gate), "condition_number": deg.condition,
-        "iterations": int(iters), "converged": bool(converged), "degenerate": bool(deg.degenerate),
-        "sigma_weak": deg.sigma_weak, "weak_direction": [float(x) for x in deg.weakest],
+        "iterations": int(iters), "converged": bool(converged), "degenerate": degenerate,
+        "sigma_weak": deg.sigma_weak, "weak_direction": deg.weakest.tolist(),
         "weak_dims": int(deg.weak.sum()),
-        "weak_projector": deg.projector().tolist() if deg.degenerate else None,  # P: the weak directions' part of xi
-        "inflated": bool(deg.degenerate and not failed),  # flagged for degeneracy only: covariance inflated there
-        "icp_pose": [float(x) for x in icp_pose],
+        "weak_projector": deg.projector().tolist() if degenerate else None,  # P: the weak directions' part of xi
+        "inflated": degenerate and not failed,  # flagged for degeneracy only: covariance inflated there
+        "icp_pose": [float(tx), float(ty), float(th)],
         "icp_cov": bt.cov.tolist(),  # the covariance of icp_pose (before any weak direction took the guess's)
-        "geometry_weak_projector": geo.projector().tolist() if geo.degenerate else None,  # weak by geometry alone
+        "geometry_weak_projector": (geo.projector().tolist() if (degenerate if geo is deg else geo.degenerate)
+                                    else None),  # weak by geometry alone
         "guess_mahalanobis": maha,  # the estimate before a flag replaced any of it by the guess
         "reason": "; ".join(reasons),
         "ms": (time.perf_counter() - t0) * 1e3,
