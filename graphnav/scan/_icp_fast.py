@@ -945,9 +945,11 @@ def report_algebra(k, h, b_lidar, b_sampling, info, radius, max_condition, max_s
     """:func:`graphnav.scan.covariance.from_sums` and :func:`graphnav.scan.degeneracy.analyse_both` (without a
     prior) on :func:`report_sums`' sums, in the kernel: the sandwich ``cov = H^-1 (k B_lidar + B_sampling)
     H^-1`` (NaN when ``k`` or ``H`` is not finite or ``H`` is singular) and the eigen-analysis of ``info``
-    (LAPACK's, as numpy's): ``(cov, var, sigmas, vectors, weak, condition)``, ``var`` the covariance's
-    variance along each eigenvector (scaled coordinates x, y, ``radius`` theta; inf when ``cov`` is not
-    finite). The same numbers as the numpy functions, to rounding (tests/scan/test_icp_report_algebra.py)."""
+    (LAPACK's, as numpy's): ``(cov, var, sigmas, vectors, weak, condition, finite, n_weak, weakest)``, ``var``
+    the covariance's variance along each eigenvector (scaled coordinates x, y, ``radius`` theta; inf when
+    ``cov`` is not finite), ``finite`` whether ``cov`` is, ``n_weak`` the number of weak directions and
+    ``weakest`` the weakest one in tangent coordinates (:attr:`graphnav.scan.degeneracy.Degeneracy.weakest`).
+    The same numbers as the numpy functions, to rounding (tests/scan/test_icp_report_algebra.py)."""
     cov = np.full((3, 3), np.nan)
     hi = np.zeros((3, 3))
     ok = False
@@ -996,10 +998,42 @@ def report_algebra(k, h, b_lidar, b_sampling, info, radius, max_condition, max_s
             var[i] = acc
             sig[i] = math.sqrt(max(acc, 0.0))
             weak[i] = not ev[i] > 0 or ev[i] * max_condition < ev[2] or sig[i] > max_sigma
-    return cov, var, sig, vec, weak, cond
+    n_weak = 0
+    for i in range(3):
+        n_weak += 1 if weak[i] else 0
+    weakest = (vec[0, 0], vec[1, 0], vec[2, 0] * (1.0 / radius))
+    return cov, var, sig, vec, weak, cond, finite, n_weak, weakest
 
 
 # ----------------------------------------------------------------------------- one whole match
+
+
+@njit(cache=True)
+def bounded(a, b, m):
+    """Whether every coordinate of ``a`` and ``b`` is finite and within ``[-m, m]`` (the matcher's input check,
+    without temporaries)."""
+    return _bounded(a, m) and _bounded(b, m)
+
+
+@njit(cache=True, inline="always")
+def _bounded(xy, m):
+    for i in range(xy.shape[0]):
+        for c in range(xy.shape[1]):
+            if not abs(xy[i, c]) <= m:  # (NaN: False)
+                return False
+    return True
+
+
+@njit(cache=True)
+def match_xy(src_xy, tgt_xy, ssig, tsig, prm, pose0, tri):
+    """:func:`match` of the (N, 2) and (M, 2) point arrays (their columns copied here), with the pose also as an
+    array ``(tx, ty, theta)``: ``(pose array, the output of match)``."""
+    out = match(src_xy[:, 0].copy(), src_xy[:, 1].copy(), ssig, tgt_xy[:, 0].copy(), tgt_xy[:, 1].copy(), tsig,
+                prm, pose0, tri)
+    th, t_x, t_y = out[0]
+    pose = np.empty(3)
+    pose[0], pose[1], pose[2] = t_x, t_y, th
+    return pose, out
 
 
 @njit(cache=True)

@@ -36,8 +36,11 @@ def _sums(seed: int, n: int, lever: float, rank: int) -> tuple:
 
 def _check(kernel, k: float, h, bl, bs, info, radius: float, max_condition: float, max_sigma: float) -> None:
     ref = covariance.from_sums(k, 10, h, bl, bs, 0.1, info, radius, max_condition=max_condition, max_sigma=max_sigma)
-    cov, var, sig, vec, weak, cond = kernel(k, h, bl, bs, info, radius, max_condition, max_sigma)
+    cov, var, sig, vec, weak, cond, finite_cov, n_weak, weakest = kernel(k, h, bl, bs, info, radius, max_condition,
+                                                                         max_sigma)
     d = ref.degeneracy
+    assert finite_cov == np.isfinite(ref.cov).all() and n_weak == d.weak.sum()
+    assert np.allclose(weakest, vec[:, 0] * [1.0, 1.0, 1.0 / radius], rtol=1e-15, atol=0)
     assert np.array_equal(np.isnan(cov), np.isnan(ref.cov))
     finite = np.isfinite(ref.cov).all()
     if finite:
@@ -69,8 +72,8 @@ def test_no_scale_or_a_singular_h_gives_no_covariance_and_every_direction_weak(k
     h, bl, bs, info = _sums(1, 50, 10.0, 3)
     for k, hh in ((np.nan, h), (1.0, np.zeros((3, 3))), (1.0, np.full((3, 3), np.nan))):
         _check(kernel, k, hh, bl, bs, info, 2.0, 200.0, 1.0)
-        cov, var, sig, _, weak, _ = kernel(k, hh, bl, bs, info, 2.0, 200.0, 1.0)
-        assert np.isnan(cov).all() and weak.all()
+        cov, var, sig, _, weak, _, finite_cov, n_weak, _ = kernel(k, hh, bl, bs, info, 2.0, 200.0, 1.0)
+        assert np.isnan(cov).all() and weak.all() and not finite_cov and n_weak == 3
 
 
 @pytest.mark.parametrize("kernel", KERNELS)
@@ -80,7 +83,7 @@ def test_a_corridor_is_weak_along_it(kernel):
     info = rows.T @ rows
     h = info + 1e-3 * np.eye(3)
     _check(kernel, 1.0, h, 1e-4 * np.eye(3), 1e-5 * np.eye(3), info, 1.0, 200.0, 1.0)
-    _, _, _, vec, weak, cond = kernel(1.0, h, 1e-4 * np.eye(3), 1e-5 * np.eye(3), info, 1.0, 200.0, 1.0)
+    _, _, _, vec, weak, cond, _, _, _ = kernel(1.0, h, 1e-4 * np.eye(3), 1e-5 * np.eye(3), info, 1.0, 200.0, 1.0)
     assert weak.tolist() == [True, False, False] and cond > 1e12
     assert np.allclose(np.abs(vec[:, 0]), [1.0, 0.0, 0.0])
 
