@@ -168,12 +168,11 @@ def nearest(px, py, tx, ty, grid):
                     best, bi = _scan_cell(px, py, ix, y0, tx, ty, grid, best, bi)
                 if y1 <= ny - 1:
                     best, bi = _scan_cell(px, py, ix, y1, tx, ty, grid, best, bi)
-            ya, yb = max(y0 + 1, 0), min(y1 - 1, ny - 1)  # the ring's sides: a run of cells each
-            if ya <= yb:
+            for iy in range(max(y0 + 1, 0), min(y1 - 1, ny - 1) + 1):
                 if x0 >= 0:
-                    best, bi = _scan_cells(px, py, x0, ya, yb, tx, ty, grid, best, bi)
+                    best, bi = _scan_cell(px, py, x0, iy, tx, ty, grid, best, bi)
                 if x1 <= nx - 1:
-                    best, bi = _scan_cells(px, py, x1, ya, yb, tx, ty, grid, best, bi)
+                    best, bi = _scan_cell(px, py, x1, iy, tx, ty, grid, best, bi)
         bound = r * h - off  # any point in a ring beyond r is at least this far
         if bi >= 0 and bound > 0 and best < bound * bound:
             break
@@ -285,10 +284,10 @@ def cloud_terms(x, y, sig, prm):
     b2 = np.empty(n)
     m2 = np.empty(n)
     for i in range(n):
-        r = math.hypot(x[i], y[i])
-        rs = r if r > 0 else 1.0
-        ux[i] = x[i] / rs
-        uy[i] = y[i] / rs
+        r = math.sqrt(x[i] * x[i] + y[i] * y[i])
+        inv = 1.0 / r if r > 0 else 1.0
+        ux[i] = x[i] * inv
+        uy[i] = y[i] * inv
         if use_sig:
             a2[i] = sig[i] ** 2
             b2[i] = a2[i]
@@ -343,7 +342,7 @@ def resolution(tx, ty, half, bearing):
             _insert(win, m - 1, gaps[_wrap(i - 1 + half, n)])
         med = win[m // 2] if m % 2 else 0.5 * (win[m // 2 - 1] + win[m // 2])  # as np.median
         j = order[i]
-        out[j] = math.hypot(tx[j], ty[j]) * med
+        out[j] = math.sqrt(tx[j] * tx[j] + ty[j] * ty[j]) * med
     return out
 
 
@@ -381,20 +380,19 @@ def target_resolution(tgt, half, min_res, bearing):
 
 @njit(cache=True, inline="always")
 def _pca_line(xs, ys, pick, m):
-    """Normal, flatness ((l1 - l2) / (l1 + l2), 0..1) of points ``pick[:m]`` by PCA."""
-    mx = my = 0.0
+    """Normal, flatness ((l1 - l2) / (l1 + l2), 0..1) of points ``pick[:m]`` by PCA: the scatter in one pass,
+    from the moments about the middle point (offsets of the window's size: no cancellation of the
+    coordinates' magnitude)."""
+    x0, y0 = xs[pick[m // 2]], ys[pick[m // 2]]
+    sx = sy = sxx = syy = sxy = 0.0
     for o in range(m):
-        mx += xs[pick[o]]
-        my += ys[pick[o]]
-    mx /= m
-    my /= m
-    cxx = cyy = cxy = 0.0
-    for o in range(m):
-        dx, dy = xs[pick[o]] - mx, ys[pick[o]] - my
-        cxx += dx * dx
-        cyy += dy * dy
-        cxy += dx * dy
-    return _line_of_moments(cxx, cyy, cxy)
+        dx, dy = xs[pick[o]] - x0, ys[pick[o]] - y0
+        sx += dx
+        sy += dy
+        sxx += dx * dx
+        syy += dy * dy
+        sxy += dx * dy
+    return _line_of_moments(sxx - sx * sx / m, syy - sy * sy / m, sxy - sx * sy / m)
 
 
 @njit(cache=True, inline="always")
@@ -568,7 +566,8 @@ def p2p_weights(pairs, c, s, src, tgt, prm, gate, dmax):
             wi = _inv_pow(sm2[i] + tm2[j], prm.wpow)
         elif variant == 3:
             if d[i] > 0:
-                wi = _dir_weight(i, j, c, s, (tx[j] - px[i]) / d[i], (ty[j] - py[i]) / d[i], src, tgt, prm.wpow)
+                inv = 1.0 / d[i]
+                wi = _dir_weight(i, j, c, s, (tx[j] - px[i]) * inv, (ty[j] - py[i]) * inv, src, tgt, prm.wpow)
             else:
                 wi = _dir_weight(i, j, c, s, 1.0, 0.0, src, tgt, prm.wpow)
         else:
@@ -897,7 +896,7 @@ def report_sums(pairs, cov, tgt, lines, res, scale, gate, pose, radius, prm):
     for i in range(n):
         j = idx[i]
         ex, ey = px[i] - tx[j], py[i] - ty[j]
-        inl = math.hypot(ex, ey) / scale[j] <= gate
+        inl = math.sqrt(ex * ex + ey * ey) / scale[j] <= gate
         wi = w[i]
         if inl:
             n_gate += 1
