@@ -190,13 +190,10 @@ def _pose_parts(init: ArrayLike | None) -> tuple[float, tuple[float, float]]:
     """``(dyaw, (dx, dy))`` of a guess ``(dx, dy, dyaw)`` (zeros without one)."""
     if init is None:
         return 0.0, (0.0, 0.0)
-    x = np.asarray(init, dtype=float).ravel()
-    if x.shape != (3,):
+    x = np.asarray(init, dtype=float).ravel().tolist()
+    if len(x) != 3 or not all(map(math.isfinite, x)):
         raise ValueError(f"init must be a finite (dx, dy, dyaw), got {init!r}")
-    dx, dy, th = x.tolist()
-    if not (math.isfinite(dx) and math.isfinite(dy) and math.isfinite(th)):
-        raise ValueError(f"init must be a finite (dx, dy, dyaw), got {init!r}")
-    return th, (dx, dy)
+    return x[2], (x[0], x[1])
 
 
 def _failed(reason: str, init: ArrayLike | None, n_src: int, n_tgt: int, t0: float) -> MatchResult:
