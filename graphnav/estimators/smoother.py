@@ -56,6 +56,9 @@ class Smoother(Estimator):
     live = True
     what = "smoother"
     solver: ClassVar[str] = "isam2"
+    #: its scans are matched from the iSAM2 estimate (batch's loop front end is one), so its weighted-ICP
+    #: matches are the other such smoothers' (:mod:`graphnav.scan.icp_cache`; compare runs them in one process)
+    shares_matches: ClassVar[bool] = True
 
     def __init__(self, log: NavLog | None = None, *, on_estimate: OnEstimate | None = None, **options: Any) -> None:
         super().__init__(log, on_estimate=on_estimate, **_solver_options(self.solver, options))
@@ -128,6 +131,7 @@ class FixedLag(Smoother):
 
     description = "incremental fixed-lag smoother (bounded memory)"
     solver = "fixed-lag"
+    shares_matches = False  # its window's estimates guess the matches: never those of isam2 / batch
 
 
 ESTIMATORS = {"isam2": Isam2, "batch": Batch, "fixed-lag": FixedLag}

@@ -37,6 +37,7 @@ from ..geometry import wrap_angle
 from ..log import NavLog
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
+from . import _ukf_fast
 from .base import BatchEstimator
 from .gating import GATING_DEFAULTS, GateOptions, InnovationGate, reinit_block
 from .imu_model import imu_noise, resolve_flag, wants_bias
@@ -102,6 +103,7 @@ class UnscentedNav:
         self.q_current = q_current
         self._Q_T = None
         self.P_pred = self.P.copy()
+        self.spans = _ukf_fast.COMPILED  # predict_span compiled (else the filter steps one sample at a time)
 
     def _Q(self, T: float) -> NDArray:
         if self._Q_T is None or self._Q_T[0] != T:
@@ -142,6 +144,19 @@ class UnscentedNav:
         self.x = m
         self.P = (D.T * self.wc) @ D + self._Q(T)
         self.P_pred = self.P
+
+    def predict_span(self, tab: dict[str, NDArray], k0: int, k1: int, poses: NDArray, cov: NDArray,
+                     states: NDArray) -> None:
+        """:meth:`predict` with the IMU samples ``k0 .. k1-1`` of :func:`measurement_table`'s ``tab`` in one
+        compiled call (:func:`graphnav.estimators._ukf_fast.predict_span`), each step's pose, its covariance
+        and the state written to row ``k`` of ``poses``, ``cov``, ``states``."""
+        x, P = self.x.copy(), self.P.copy()
+        _ukf_fast.predict_span(x, P, self.lam, self.wm, self.wc, self.q_acc, self.q_gyro, self.q_bias,
+                               self.q_current, self.ib if self.ib is not None else -1,
+                               self.ic if self.ic is not None else -1, tab["ax"], tab["ay"], tab["wz"], tab["t"],
+                               k0, k1, poses, cov, states)
+        self.x, self.P = x, P
+        self.P_pred = P
 
     def innovation(self, idx: NDArray, z: NDArray, ix: tuple | None = None) -> tuple[NDArray, NDArray]:
         """``eps = z - H x^-`` (eq. 14, heading wrapped) and ``H P^- H^T`` for the rows ``idx`` of eq. 13
@@ -360,46 +375,34 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
                      q_bias_acc=qn["q_bias_acc"], q_bias_gyro=qn["q_bias_gyro"],
                      current=current, q_current=float(opts["q_current"]),
                      alpha=opts["alpha"], beta=opts["beta"], kappa=opts["kappa"])
-    rk = channel_variances(tab, opts)
     gater = InnovationGate(**{k: opts[k] for k in GATING_DEFAULTS})
-    r_gate = getattr(adapter, "r_current", None)  # an adaptive R: gate with the one it holds now
-    inflation = getattr(adapter, "inflation", None)
-    t, z = tab["t"], tab["z"]
+    step = _Updates(f, gater, tab, channel_variances(tab, opts), adapter, current)
+    t = tab["t"]
     n = len(t)
     poses = np.empty((n, 3))
     cov = np.empty((n, 3, 3))
     states = np.empty((n, f.n))
-    r_used = np.full((n, 3), np.nan)
     step_ms = np.empty(n - 1)
     pidx = np.array([0, 1, 4])
     pix = np.ix_(pidx, pidx)
-    has = ~np.isnan(z)
-    all_idx = np.array([0, 1, 4])
-    sel = {}
-    for k in range(n):
+    has = step.has
+    quiet = ~has.any(axis=1)  # steps with nothing to update: predicted in spans (UnscentedNav.predict_span)
+    loud = np.append(np.flatnonzero(~quiet), n)
+    k = 0
+    while k < n:
         t0 = time.perf_counter()
+        if k and quiet[k] and f.spans:
+            k1 = int(loud[np.searchsorted(loud, k)])
+            f.predict_span(tab, k, k1, poses, cov, states)
+            step_ms[k - 1:k1 - 1] = (time.perf_counter() - t0) * 1e3 / (k1 - k)
+            if on_estimate is not None:
+                for j in range(k, k1):
+                    on_estimate(float(t[j]), poses[j].copy(), cov[j].copy())
+            k = k1
+            continue
         if k:
             f.predict(tab["ax"][k], tab["ay"][k], tab["wz"][k], t[k] - t[k - 1])
-        m = has[k, :3]
-        r0k = rk[k, :3]
-        if inflation is not None and m.any():
-            lam = np.ones(3)
-            lam[m] = inflation(np.flatnonzero(m), f.P[pidx, pidx][m])
-            if np.any(lam > 1.0):
-                f.P = inflate(f.P, lam)
-        if m.any() and gater.gate is not None:
-            m = _gated(f, gater, float(t[k]), z[k], m, r_gate(np.flatnonzero(m)) if r_gate else r0k[m])
-        if m.any():
-            key = (m[0], m[1], m[2])
-            if key not in sel:
-                ch_ = slice(0, 3) if m.all() else np.flatnonzero(m)  # basic slicing is cheaper
-                sel[key] = (all_idx[m], ch_, np.ix_(all_idx[m], all_idx[m]))
-            idx, ch, ix = sel[key]
-            eps, HPH = f.innovation(idx, z[k, ch], ix)
-            R = adapter(k, ch, eps, HPH, r0k[ch]) if adapter is not None else r0k[ch]
-            r_used[k, ch] = R
-            f.update(idx, eps, HPH, np.diag(R))
-        _velocity_updates(f, gater, float(t[k]), z[k], rk[k], has[k], current)
+        step.measure(k)
         if k:
             step_ms[k - 1] = (time.perf_counter() - t0) * 1e3
         poses[k] = f.x[pidx]
@@ -407,9 +410,10 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
         states[k] = f.x
         if on_estimate is not None:
             on_estimate(float(t[k]), poses[k].copy(), cov[k].copy())
+        k += 1
     traj = Trajectory(t, poses, cov, name=name)
     info: dict[str, Any] = {"options": {k: opts[k] for k in sorted(opts)}, "state_final": f.x.tolist(),
-                            "r_used": r_used, "velocity": states[:, 2:4], **gater.info(),
+                            "r_used": step.r_used, "velocity": states[:, 2:4], **gater.info(),
                             "bias_states": bias, "bias_reason": bias_why if bias == auto_bias else "option",
                             "current_states": current, "process_noise": dict(qn)}
     if bias:
@@ -418,6 +422,45 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
         info["current_final"] = f.x[f.ic:f.ic + 2].tolist()
         info["current"] = states[:, f.ic:f.ic + 2]
     return RunResult(traj, traj, step_ms, info=info)
+
+
+class _Updates:
+    """The measurement updates of one filter step (:func:`run_nav_filter`): the GNSS position and compass
+    (inflated by an adaptive filter's factor, gated, with an adapter's R), then the velocities."""
+
+    def __init__(self, f: UnscentedNav, gater: InnovationGate, tab: dict[str, NDArray], rk: NDArray,
+                 adapter: Adapter | None, current: bool) -> None:
+        self.f, self.gater, self.adapter, self.current = f, gater, adapter, current
+        self.t, self.z, self.rk = tab["t"], tab["z"], rk
+        self.has = ~np.isnan(self.z)
+        self.r_gate = getattr(adapter, "r_current", None)  # an adaptive R: gate with the one it holds now
+        self.inflation = getattr(adapter, "inflation", None)
+        self.r_used = np.full((len(self.t), 3), np.nan)
+        self.sel: dict[tuple, tuple] = {}
+
+    def measure(self, k: int) -> None:
+        """Every update of step ``k``."""
+        f, gater, z, t = self.f, self.gater, self.z, float(self.t[k])
+        m = self.has[k, :3]
+        r0k = self.rk[k, :3]
+        if self.inflation is not None and m.any():
+            lam = np.ones(3)
+            lam[m] = self.inflation(np.flatnonzero(m), f.P[_STATE, _STATE][m])
+            if np.any(lam > 1.0):
+                f.P = inflate(f.P, lam)
+        if m.any() and gater.gate is not None:
+            m = _gated(f, gater, t, z[k], m, self.r_gate(np.flatnonzero(m)) if self.r_gate else r0k[m])
+        if m.any():
+            key = (m[0], m[1], m[2])
+            if key not in self.sel:
+                ch_ = slice(0, 3) if m.all() else np.flatnonzero(m)  # basic slicing is cheaper
+                self.sel[key] = (_STATE[m], ch_, np.ix_(_STATE[m], _STATE[m]))
+            idx, ch, ix = self.sel[key]
+            eps, HPH = f.innovation(idx, z[k, ch], ix)
+            R = self.adapter(k, ch, eps, HPH, r0k[ch]) if self.adapter is not None else r0k[ch]
+            self.r_used[k, ch] = R
+            f.update(idx, eps, HPH, np.diag(R))
+        _velocity_updates(f, gater, t, z[k], self.rk[k], self.has[k], self.current)
 
 
 def _velocity_updates(f: UnscentedNav, gater: InnovationGate, t: float, zk: NDArray, rkk: NDArray, hk: NDArray,

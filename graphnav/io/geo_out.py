@@ -1,4 +1,4 @@
-"""Tracks in WGS84 for GIS and chart plotters: GeoJSON (RFC 7946), GPX 1.1 (gpxpy), KML (simplekml).
+"""Tracks in WGS84 for GIS and chart plotters: GeoJSON (RFC 7946), GPX 1.1, KML 2.2.
 
 A track is a :class:`~graphnav.trajectory.Trajectory` in the local frame converted with the log's
 geodetic origin (:func:`graphnav.geodesy.origin_frame`; without one nothing is written -- an origin
@@ -9,7 +9,8 @@ is never invented). Times are the log's seconds read as POSIX (UTC): a log whose
 * GeoJSON: a FeatureCollection with, per track, a ``LineString`` (``kind: "track"``) and one
   ``Point`` per pose (``kind: "pose"``, properties ``t``, ``time``, ``heading_deg``); coordinates
   ``[lon, lat]`` (RFC 7946 section 3.1.1) to 1e-8 deg (~1 mm), no ``crs`` member (WGS84 by definition).
-* GPX 1.1: one ``<trk>`` per track, ``<trkpt lat lon><time>`` per pose (GPX 1.1 has no heading).
+* GPX 1.1 (the document gpxpy writes, written directly): one ``<trk>`` per track, ``<trkpt lat lon><time>``
+  per pose (GPX 1.1 has no heading).
 * KML 2.2: one ``Placemark`` with a ``LineString`` and a ``TimeSpan`` per track.
 """
 
@@ -94,74 +95,112 @@ def check_track(traj: Trajectory, where: str) -> None:
                             "origin: not a place on Earth", where=where)
 
 
-def _iso(d: datetime) -> str:
-    return d.isoformat(timespec="milliseconds").replace("+00:00", "Z")
-
-
 def _c(v: float) -> float:
     return round(float(v), 8)
 
 
+def _iso_times(t: NDArray[np.float64], unit: str = "ms") -> list[str]:
+    """The ISO 8601 UTC times (to the millisecond, or ``unit="us"``; ``Z``) of POSIX seconds ``t``: ``isoformat``
+    of :meth:`GeoTrack.times`, vectorised (the microseconds as ``datetime.fromtimestamp`` of ``round(t, 6)``
+    makes them, then floored to the unit as ``isoformat`` does)."""
+    r = np.array([round(v, 6) for v in np.asarray(t, dtype=float).tolist()])
+    frac, whole = np.modf(r)
+    us = whole.astype(np.int64) * 1_000_000 + np.rint(frac * 1e6).astype(np.int64)
+    d = us.astype("datetime64[us]").astype(f"datetime64[{unit}]")
+    return [s + "Z" for s in np.datetime_as_string(d, unit=unit).tolist()]
+
+
+def _coord_pairs(tr: GeoTrack) -> list[str]:
+    """``[lon,lat]`` per pose as JSON text, to 1e-8 deg (:func:`_c`, the float's shortest repr)."""
+    lon = np.round(tr.lon.astype(float), 8).tolist()
+    lat = np.round(tr.lat.astype(float), 8).tolist()
+    return [f"[{lo!r},{la!r}]" for lo, la in zip(lon, lat, strict=True)]
+
+
 def geojson(tracks: list[GeoTrack]) -> dict[str, Any]:
     """An RFC 7946 FeatureCollection (see the module docstring)."""
-    features: list[dict[str, Any]] = []
+    return json.loads(geojson_text(tracks))
+
+
+def geojson_text(tracks: list[GeoTrack]) -> str:
+    """:func:`geojson` as compact JSON text, written directly (a few hundred thousand pose features of a
+    compare's 100 Hz filters took seconds through dicts and ``json.dumps``)."""
+    parts: list[str] = []
     for tr in tracks:
-        times = [_iso(d) for d in tr.times()]
-        coords = [[_c(lo), _c(la)] for la, lo in zip(tr.lat, tr.lon, strict=True)]
+        times = _iso_times(tr.t)
+        coords = _coord_pairs(tr)
+        name = json.dumps(tr.name)
         if len(coords) >= 2:
-            features.append({"type": "Feature", "geometry": {"type": "LineString", "coordinates": coords},
-                             "properties": {"name": tr.name, "kind": "track", "poses": len(coords),
-                                            "start": times[0], "end": times[-1]}})
-        for i, c in enumerate(coords):
-            h = tr.heading_deg[i]
-            props: dict[str, Any] = {"name": tr.name, "kind": "pose", "t": float(tr.t[i]), "time": times[i]}
-            if math.isfinite(h):
-                props["heading_deg"] = round(float(h), 3)
-            features.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": c}, "properties": props})
-    out: dict[str, Any] = {"type": "FeatureCollection", "features": features}
+            parts.append(f'{{"type":"Feature","geometry":{{"type":"LineString","coordinates":[{",".join(coords)}]}},'
+                         f'"properties":{{"name":{name},"kind":"track","poses":{len(coords)},'
+                         f'"start":"{times[0]}","end":"{times[-1]}"}}}}')
+        head = '{"type":"Feature","geometry":{"type":"Point","coordinates":'
+        props = f'}},"properties":{{"name":{name},"kind":"pose","t":'
+        hd = np.round(tr.heading_deg.astype(float), 3).tolist()
+        for c, t, tm, h in zip(coords, tr.t.astype(float).tolist(), times, hd, strict=True):
+            tail = f',"heading_deg":{h!r}}}}}' if math.isfinite(h) else "}}"
+            parts.append(f'{head}{c}{props}{t!r},"time":"{tm}"{tail}')
+    out = '{"type":"FeatureCollection","features":[' + ",".join(parts) + "]"
     lats = np.concatenate([tr.lat for tr in tracks]) if tracks else np.empty(0)
     lons = np.concatenate([tr.lon for tr in tracks]) if tracks else np.empty(0)
     if lats.size:
-        out["bbox"] = [_c(lons.min()), _c(lats.min()), _c(lons.max()), _c(lats.max())]
-    return out
+        box = [_c(lons.min()), _c(lats.min()), _c(lons.max()), _c(lats.max())]
+        out += f',"bbox":{json.dumps(box, separators=(",", ":"))}'
+    return out + "}"
 
 
 def gpx_text(tracks: list[GeoTrack]) -> str:
-    """GPX 1.1 (gpxpy): one track per :class:`GeoTrack`, with times."""
-    import gpxpy.gpx
+    """GPX 1.1: one track per :class:`GeoTrack`, with times; the document gpxpy writes, written directly
+    (gpxpy's ``to_xml`` took seconds for a compare's 100 Hz filters; tests read it back with gpxpy)."""
+    from xml.sax.saxutils import escape
 
-    g = gpxpy.gpx.GPX()
-    g.creator = "graphnav"
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             '<gpx xmlns="http://www.topografix.com/GPX/1/1" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" '
+             'xsi:schemaLocation="http://www.topografix.com/GPX/1/1 http://www.topografix.com/GPX/1/1/gpx.xsd" '
+             'version="1.1" creator="graphnav">']
     for tr in tracks:
-        trk = gpxpy.gpx.GPXTrack(name=tr.name)
-        seg = gpxpy.gpx.GPXTrackSegment()
-        seg.points = [gpxpy.gpx.GPXTrackPoint(float(la), float(lo), time=d)
-                      for la, lo, d in zip(tr.lat, tr.lon, tr.times(), strict=True)]
-        trk.segments.append(seg)
-        g.tracks.append(trk)
-    return g.to_xml(version="1.1")
+        lines += ["  <trk>", f"    <name>{escape(tr.name, {chr(13): '&#13;'})}</name>", "    <trkseg>"]
+        times = _iso_times(tr.t, "us")
+        lines += [f'      <trkpt lat="{la!r}" lon="{lo!r}">\n        <time>{tm}</time>\n      </trkpt>'
+                  for la, lo, tm in zip(tr.lat.astype(float).tolist(), tr.lon.astype(float).tolist(), times,
+                                        strict=True)]
+        lines += ["    </trkseg>", "  </trk>"]
+    return "\n".join([*lines, "</gpx>"])
 
 
 def kml_text(tracks: list[GeoTrack]) -> str:
-    """KML 2.2 (simplekml): one LineString placemark per track, with its time span."""
-    import simplekml
+    """KML 2.2: one LineString placemark per track, with its colour, width and time span; the document
+    simplekml writes, written directly (tests read both back the same)."""
+    from xml.sax.saxutils import escape
 
-    k = simplekml.Kml(name="graphnav")
+    styles, marks = [], []
     for i, tr in enumerate(tracks):
-        ls = k.newlinestring(name=tr.name, coords=[(float(lo), float(la)) for la, lo in zip(tr.lat, tr.lon,
-                                                                                               strict=True)])
-        ls.style.linestyle.color = "ff000000" if tr.name == "truth" else _KML_COLOURS[i % len(_KML_COLOURS)]
-        ls.style.linestyle.width = 2
+        colour = "ff000000" if tr.name == "truth" else _KML_COLOURS[i % len(_KML_COLOURS)]
+        styles.append(f'        <Style id="track{i}">\n            <LineStyle>\n'
+                      f"                <color>{colour}</color>\n"
+                      "                <colorMode>normal</colorMode>\n                <width>2</width>\n"
+                      "            </LineStyle>\n        </Style>")
+        span = ""
         if len(tr.t):
-            times = tr.times()
-            ls.timespan.begin, ls.timespan.end = _iso(times[0]), _iso(times[-1])
-    return k.kml()
+            times = _iso_times(tr.t[[0, -1]])
+            span = (f"            <TimeSpan>\n                <begin>{times[0]}</begin>\n"
+                    f"                <end>{times[1]}</end>\n            </TimeSpan>\n")
+        coords = " ".join(f"{lo!r},{la!r},0.0" for la, lo in zip(tr.lat.astype(float).tolist(),
+                                                                 tr.lon.astype(float).tolist(), strict=True))
+        marks.append(f"        <Placemark>\n            <name>{escape(tr.name, {chr(13): '&#13;'})}</name>\n{span}"
+                     f"            <styleUrl>#track{i}</styleUrl>\n            <LineString>\n"
+                     f"                <coordinates>{coords}</coordinates>\n            </LineString>\n"
+                     "        </Placemark>")
+    return "\n".join(['<?xml version="1.0" encoding="UTF-8"?>',
+                      '<kml xmlns="http://www.opengis.net/kml/2.2" xmlns:gx="http://www.google.com/kml/ext/2.2">',
+                      "    <Document>", *styles, "        <name>graphnav</name>", *marks, "    </Document>",
+                      "</kml>"]) + "\n"
 
 
 def render(tracks: list[GeoTrack], fmt: str) -> str:
     """The text of ``fmt`` (one of :data:`FORMATS`)."""
     if fmt == "geojson":
-        return json.dumps(geojson(tracks), allow_nan=False, separators=(",", ":")) + "\n"
+        return geojson_text(tracks) + "\n"
     if fmt == "gpx":
         return gpx_text(tracks)
     if fmt == "kml":

@@ -4,12 +4,13 @@ Compiled by numba when importable, else run as plain Python (:mod:`graphnav.scan
 :func:`match` runs the whole numeric part of one match in one call: the LiDAR error model of eq. 5-8,
 the target's resolution and lines, the loop (exact grid-based nearest neighbours, or the paper's
 Delaunay nearest apex), the final pairs' weights and the sums the covariance and degeneracy analysis
-need (:func:`report_sums`). The eigen-analysis (:mod:`graphnav.scan.degeneracy`) and the report stay in
-Python. The data travel in groups:
+need (:func:`report_sums`), and from them the covariance and the degeneracy's eigen-analysis
+(:func:`report_algebra`, the numbers of :mod:`graphnav.scan.covariance` and :mod:`graphnav.scan.degeneracy`).
+The flags and the report stay in Python. The data travel in groups:
 
 * a cloud, ``(x, y, ux, uy, a2, b2, m2)`` (:func:`cloud_terms`: points, unit radial vectors, squared
   semi-axes of eq. 6-7, squared mean error of eq. 5), one array each;
-* the target's grid, ``(xmin, ymin, h, nx, ny, start, items)`` (:func:`build_grid`);
+* the target's grid, ``(xmin, ymin, h, nx, ny, start, items, 1 / h)`` (:func:`build_grid`);
 * the target's lines, ``(nx, ny, flat)`` per target point;
 * an iteration's pairs, ``(px, py, d, idx, w)``: moved source points, distance and index of the match,
   weight;
@@ -56,6 +57,8 @@ class Params(NamedTuple):
     sigma_r_rel: float
     delaunay: bool
     samp_var: float  # variance of the sampling error per unit spacing^2 (covariance.SAMPLING_VARIANCE)
+    max_condition: float  # degeneracy: condition number of the point-to-line information above -> weak
+    max_sigma: float  # degeneracy: 1-sigma along a direction above max_sigma x D -> weak (in units of D)
 
 
 # ----------------------------------------------------------------------------- nearest neighbours
@@ -75,10 +78,12 @@ def grid_cell(h, ex, ey, n):
 
 
 @njit(cache=True, inline="always")
-def cell_index(v, vmin, h, nv):
+def cell_index(v, vmin, inv_h, nv):
     """``floor((v - vmin) / h)`` clamped to ``[0, nv - 1]`` (in floating point first, so a far or
-    non-finite coordinate cannot overflow the integer conversion)."""
-    f = np.floor((v - vmin) / h)
+    non-finite coordinate cannot overflow the integer conversion), as ``(v - vmin) * inv_h``, ``inv_h = 1 /
+    h``: exactly the quotient for a cell side that is a power of two (:func:`build_grid`), and in any case the
+    mapping the grid was bucketed with."""
+    f = np.floor((v - vmin) * inv_h)
     if not f >= 0.0:  # also NaN
         return 0
     if f > nv - 1:
@@ -89,16 +94,19 @@ def cell_index(v, vmin, h, nv):
 @njit(cache=True)
 def build_grid(tx, ty, h):
     """Bucket target points into square cells (counting sort). The cell side is ``h`` or larger
-    (:func:`grid_cell`: at most O(n) cells). Returns the grid ``(xmin, ymin, h, nx, ny, start, items)``."""
+    (:func:`grid_cell`: at most O(n) cells; a power of two when ``h`` is one, as the matcher's 1 m). Returns the
+    grid ``(xmin, ymin, h, nx, ny, start, items, 1 / h)``; points are bucketed by ``(v - vmin) * (1 / h)``, as
+    :func:`cell_index` finds them (a multiplication, not a division, per coordinate and query)."""
     n = tx.shape[0]
     xmin, ymin = tx.min(), ty.min()
     h = grid_cell(h, tx.max() - xmin, ty.max() - ymin, n)
-    nx = int((tx.max() - xmin) / h) + 1
-    ny = int((ty.max() - ymin) / h) + 1
+    inv = 1.0 / h
+    nx = int((tx.max() - xmin) * inv) + 1
+    ny = int((ty.max() - ymin) * inv) + 1
     cell = np.empty(n, np.int64)
     start = np.zeros(nx * ny + 1, np.int64)
     for i in range(n):
-        c = int((tx[i] - xmin) / h) * ny + int((ty[i] - ymin) / h)
+        c = int((tx[i] - xmin) * inv) * ny + int((ty[i] - ymin) * inv)
         cell[i] = c
         start[c + 1] += 1
     for c in range(nx * ny):
@@ -108,14 +116,21 @@ def build_grid(tx, ty, h):
     for i in range(n):
         items[fill[cell[i]]] = i
         fill[cell[i]] += 1
-    return xmin, ymin, h, nx, ny, start, items
+    return xmin, ymin, h, nx, ny, start, items, inv
 
 
 @njit(cache=True, inline="always")
 def _scan_cell(px, py, ix, iy, tx, ty, grid, best, bi):
+    return _scan_cells(px, py, ix, iy, iy, tx, ty, grid, best, bi)
+
+
+@njit(cache=True, inline="always")
+def _scan_cells(px, py, ix, iy0, iy1, tx, ty, grid, best, bi):
+    """The nearest of ``best``/``bi`` (squared distance, index) and the points of cells ``(ix, iy0..iy1)``: one
+    run of ``items`` (a column's cells are consecutive)."""
     ny, start, items = grid[4], grid[5], grid[6]
-    c = ix * ny + iy
-    for k in range(start[c], start[c + 1]):
+    c = ix * ny
+    for k in range(start[c + iy0], start[c + iy1 + 1]):
         j = items[k]
         dx = tx[j] - px
         dy = ty[j] - py
@@ -130,9 +145,9 @@ def _scan_cell(px, py, ix, iy, tx, ty, grid, best, bi):
 def nearest(px, py, tx, ty, grid):
     """Exact nearest target point of (px, py): rings of cells around the (clamped) home cell until
     no unvisited cell can hold a closer point. Returns (distance, index)."""
-    xmin, ymin, h, nx, ny = grid[0], grid[1], grid[2], grid[3], grid[4]
-    cx = cell_index(px, xmin, h, nx)
-    cy = cell_index(py, ymin, h, ny)
+    xmin, ymin, h, nx, ny, inv = grid[0], grid[1], grid[2], grid[3], grid[4], grid[7]
+    cx = cell_index(px, xmin, inv, nx)
+    cy = cell_index(py, ymin, inv, ny)
     # distance from p to the home cell's box (0 inside); inside, the margin to its nearest edge
     bx0, by0 = xmin + cx * h, ymin + cy * h
     ox = max(bx0 - px, 0.0, px - (bx0 + h))
@@ -168,19 +183,18 @@ def nearest(px, py, tx, ty, grid):
 def nearest_from(px, py, j0, tx, ty, grid):
     """As :func:`nearest`, given a candidate ``j0``: the nearest point is no farther than ``j0``, so
     only the cells meeting the square around that disc are searched (exact, same tie rule)."""
-    xmin, ymin, h, nx, ny = grid[0], grid[1], grid[2], grid[3], grid[4]
+    xmin, ymin, nx, ny, inv = grid[0], grid[1], grid[3], grid[4], grid[7]
     dx = tx[j0] - px
     dy = ty[j0] - py
     best = dx * dx + dy * dy
     bi = j0
     r = math.sqrt(best) * (1.0 + 1e-12) + 1e-12  # padded against rounding at the box's edge
-    x0 = cell_index(px - r, xmin, h, nx)
-    x1 = cell_index(px + r, xmin, h, nx)
-    y0 = cell_index(py - r, ymin, h, ny)
-    y1 = cell_index(py + r, ymin, h, ny)
+    x0 = cell_index(px - r, xmin, inv, nx)
+    x1 = cell_index(px + r, xmin, inv, nx)
+    y0 = cell_index(py - r, ymin, inv, ny)
+    y1 = cell_index(py + r, ymin, inv, ny)
     for ix in range(x0, x1 + 1):
-        for iy in range(y0, y1 + 1):
-            best, bi = _scan_cell(px, py, ix, iy, tx, ty, grid, best, bi)
+        best, bi = _scan_cells(px, py, ix, y0, y1, tx, ty, grid, best, bi)
     return math.sqrt(best), bi
 
 
@@ -270,10 +284,10 @@ def cloud_terms(x, y, sig, prm):
     b2 = np.empty(n)
     m2 = np.empty(n)
     for i in range(n):
-        r = math.hypot(x[i], y[i])
-        rs = r if r > 0 else 1.0
-        ux[i] = x[i] / rs
-        uy[i] = y[i] / rs
+        r = math.sqrt(x[i] * x[i] + y[i] * y[i])
+        inv = 1.0 / r if r > 0 else 1.0
+        ux[i] = x[i] * inv
+        uy[i] = y[i] * inv
         if use_sig:
             a2[i] = sig[i] ** 2
             b2[i] = a2[i]
@@ -328,7 +342,7 @@ def resolution(tx, ty, half, bearing):
             _insert(win, m - 1, gaps[_wrap(i - 1 + half, n)])
         med = win[m // 2] if m % 2 else 0.5 * (win[m // 2 - 1] + win[m // 2])  # as np.median
         j = order[i]
-        out[j] = math.hypot(tx[j], ty[j]) * med
+        out[j] = math.sqrt(tx[j] * tx[j] + ty[j] * ty[j]) * med
     return out
 
 
@@ -366,23 +380,42 @@ def target_resolution(tgt, half, min_res, bearing):
 
 @njit(cache=True, inline="always")
 def _pca_line(xs, ys, pick, m):
-    """Normal, flatness ((l1 - l2) / (l1 + l2), 0..1) of points ``pick[:m]`` by PCA."""
-    mx = my = 0.0
+    """Normal, flatness ((l1 - l2) / (l1 + l2), 0..1) of points ``pick[:m]`` by PCA: the scatter in one pass,
+    from the moments about the middle point (offsets of the window's size: no cancellation of the
+    coordinates' magnitude)."""
+    x0, y0 = xs[pick[m // 2]], ys[pick[m // 2]]
+    sx = sy = sxx = syy = sxy = 0.0
     for o in range(m):
-        mx += xs[pick[o]]
-        my += ys[pick[o]]
-    mx /= m
-    my /= m
-    cxx = cyy = cxy = 0.0
-    for o in range(m):
-        dx, dy = xs[pick[o]] - mx, ys[pick[o]] - my
-        cxx += dx * dx
-        cyy += dy * dy
-        cxy += dx * dy
-    phi = 0.5 * math.atan2(2 * cxy, cxx - cyy)  # direction of the line (major axis)
+        dx, dy = xs[pick[o]] - x0, ys[pick[o]] - y0
+        sx += dx
+        sy += dy
+        sxx += dx * dx
+        syy += dy * dy
+        sxy += dx * dy
+    return _line_of_moments(sxx - sx * sx / m, syy - sy * sy / m, sxy - sx * sy / m)
+
+
+@njit(cache=True, inline="always")
+def _line_of_moments(cxx, cyy, cxy):
+    """Normal ``(-sin phi, cos phi)`` and flatness ``(l1 - l2) / (l1 + l2)`` of the scatter ``[[cxx, cxy], [cxy,
+    cyy]]``, ``phi = atan2(b, a) / 2`` the major axis (``a = cxx - cyy``, ``b = 2 cxy``), by the half-angle
+    formulas (no trigonometric call): ``cos 2phi = a / rr``, ``sin 2phi = b / rr``, ``rr = hypot(a, b)``;
+    ``cos phi >= 0``, the larger of ``cos phi``, ``|sin phi|`` taken from its square root and the other as
+    ``sin 2phi / (2 x it)`` (no cancellation)."""
+    a = cxx - cyy
+    b = 2.0 * cxy
+    rr = math.sqrt(a * a + b * b)
     tr = cxx + cyy
-    disc = math.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy)
-    return -math.sin(phi), math.cos(phi), (2.0 * disc / tr if tr > 0 else 0.0)
+    flat = rr / tr if tr > 0 else 0.0
+    if not rr > 0:  # a circle, or one point: phi = 0
+        return -0.0, 1.0, flat
+    if a >= 0:
+        cph = math.sqrt(0.5 * (rr + a) / rr)
+        sph = b / (2.0 * rr * cph)
+    else:
+        sph = math.copysign(math.sqrt(0.5 * (rr - a) / rr), b)
+        cph = b / (2.0 * rr * sph)
+    return -sph, cph, flat
 
 
 @njit(cache=True)
@@ -449,10 +482,10 @@ def _scan_cell_k(px, py, ix, iy, tx, ty, grid, bd, bi, cnt):
 def k_nearest(px, py, tx, ty, grid, bd, bi):
     """The ``len(bd)`` nearest target points of (px, py), a target point, into ``bi`` (squared
     distances ``bd``; exact, by rings of grid cells; ties by index)."""
-    xmin, ymin, h, nx, ny = grid[0], grid[1], grid[2], grid[3], grid[4]
+    xmin, ymin, h, nx, ny, inv = grid[0], grid[1], grid[2], grid[3], grid[4], grid[7]
     k = bd.shape[0]
-    cx = cell_index(px, xmin, h, nx)
-    cy = cell_index(py, ymin, h, ny)
+    cx = cell_index(px, xmin, inv, nx)
+    cy = cell_index(py, ymin, inv, ny)
     bx0, by0 = xmin + cx * h, ymin + cy * h
     edge = max(min(px - bx0, bx0 + h - px, py - by0, by0 + h - py), 0.0)  # margin to the home cell's edge
     cnt = 0
@@ -506,7 +539,15 @@ def _dir_weight(i, j, c, s, bx, by, src, tgt, wpow):
     ury = s * sux[i] + c * suy[i]
     cs = urx * bx + ury * by
     ct = tux[j] * bx + tuy[j] * by
-    return (sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct)) ** (-wpow)
+    return _inv_pow(sa2[i] - (sa2[i] - sb2[i]) * cs * cs + (ta2[j] - (ta2[j] - tb2[j]) * ct * ct), wpow)
+
+
+@njit(cache=True, inline="always")
+def _inv_pow(g, wpow):
+    """``g^-wpow``: eq. 11's ``1 / sqrt(g)`` for ``wpow = 0.5`` (a square root, not a ``pow``), else ``pow``."""
+    if wpow == 0.5:
+        return 1.0 / math.sqrt(g)
+    return g ** (-wpow)
 
 
 @njit(cache=True)
@@ -522,10 +563,11 @@ def p2p_weights(pairs, c, s, src, tgt, prm, gate, dmax):
     for i in range(px.shape[0]):
         j = idx[i]
         if variant == 2:
-            wi = (sm2[i] + tm2[j]) ** (-prm.wpow)
+            wi = _inv_pow(sm2[i] + tm2[j], prm.wpow)
         elif variant == 3:
             if d[i] > 0:
-                wi = _dir_weight(i, j, c, s, (tx[j] - px[i]) / d[i], (ty[j] - py[i]) / d[i], src, tgt, prm.wpow)
+                inv = 1.0 / d[i]
+                wi = _dir_weight(i, j, c, s, (tx[j] - px[i]) * inv, (ty[j] - py[i]) * inv, src, tgt, prm.wpow)
             else:
                 wi = _dir_weight(i, j, c, s, 1.0, 0.0, src, tgt, prm.wpow)
         else:
@@ -803,26 +845,33 @@ def final_pairs(src, tgt, lines, prm, pose, idx, scale, dmax):
 def _add_sums(sums, ja, jb, wi, samp, cov, hdl):
     """One pair's terms of ``sums = (H, B_lidar, B_sampling)``: ``H = sum w J^T J``, ``B_lidar = sum w^2 J^T S
     J``, ``B_sampling = sum w^2 samp J^T J`` (HDL: the one row ``ja``, ``S = cov[0]``, the residual's
-    variance; else the rows ``ja``, ``jb`` and ``S = cov = (sxx, sxy, syy)``, 2x2)."""
+    variance; else the rows ``ja``, ``jb`` and ``S = cov = (sxx, sxy, syy)``, 2x2). The upper triangles only
+    (:func:`_mirror`)."""
     h, bl, bs = sums
     sxx, sxy, syy = cov
     sv = sxx
     w2 = wi * wi
     if hdl:
         for a in range(3):
-            for b in range(3):
+            for b in range(a, 3):
                 jj = ja[a] * ja[b]
                 h[a, b] += wi * jj
                 bl[a, b] += w2 * sv * jj
                 bs[a, b] += w2 * samp * jj
         return
     for a in range(3):
-        for b in range(3):
+        for b in range(a, 3):
             jtj = ja[a] * ja[b] + jb[a] * jb[b]
             jsj = sxx * ja[a] * ja[b] + sxy * (ja[a] * jb[b] + jb[a] * ja[b]) + syy * jb[a] * jb[b]
             h[a, b] += wi * jtj
             bl[a, b] += w2 * jsj
             bs[a, b] += w2 * samp * jtj
+
+
+@njit(cache=True, inline="always")
+def _mirror(m):
+    """The lower triangle of the 3x3 ``m`` from its upper one (each term is symmetric in its two indices)."""
+    m[1, 0], m[2, 0], m[2, 1] = m[0, 1], m[0, 2], m[1, 2]
 
 
 @njit(cache=True)
@@ -847,7 +896,7 @@ def report_sums(pairs, cov, tgt, lines, res, scale, gate, pose, radius, prm):
     for i in range(n):
         j = idx[i]
         ex, ey = px[i] - tx[j], py[i] - ty[j]
-        inl = math.hypot(ex, ey) / scale[j] <= gate
+        inl = math.sqrt(ex * ex + ey * ey) / scale[j] <= gate
         wi = w[i]
         if inl:
             n_gate += 1
@@ -859,7 +908,7 @@ def report_sums(pairs, cov, tgt, lines, res, scale, gate, pose, radius, prm):
         if both:
             sc[0], sc[1], sc[2] = row0, row1, row2 / radius
             for a in range(3):
-                for b in range(3):
+                for b in range(a, 3):
                     info[a, b] += fl[j] * sc[a] * sc[b]
         samp = prm.normal_k * prm.samp_var * res[j] ** 2
         if hdl:
@@ -881,6 +930,8 @@ def report_sums(pairs, cov, tgt, lines, res, scale, gate, pose, radius, prm):
             n_inl += 1
         _add_sums((h, bl, bs), ja, jb, wi, samp, (sv, 0.0, 0.0) if hdl else (sxx[i], sxy[i], syy[i]), hdl)
         sw += wi
+    for m in (h, bl, bs, info):
+        _mirror(m)
     k = ksum / max((1 if hdl else 2) * n_inl - 3, 1) if n_inl > 0 else np.nan
     rms = math.sqrt(rss / sw) if sw > 0 else np.nan
     big_d = np.median(scale[idx]) if n > 0 else np.nan
@@ -888,7 +939,100 @@ def report_sums(pairs, cov, tgt, lines, res, scale, gate, pose, radius, prm):
     return k, n_inl, h, bl, bs, rms, info, frac, used, big_d
 
 
+@njit(cache=True)
+def report_algebra(k, h, b_lidar, b_sampling, info, radius, max_condition, max_sigma):
+    """:func:`graphnav.scan.covariance.from_sums` and :func:`graphnav.scan.degeneracy.analyse_both` (without a
+    prior) on :func:`report_sums`' sums, in the kernel: the sandwich ``cov = H^-1 (k B_lidar + B_sampling)
+    H^-1`` (NaN when ``k`` or ``H`` is not finite or ``H`` is singular) and the eigen-analysis of ``info``
+    (LAPACK's, as numpy's): ``(cov, var, sigmas, vectors, weak, condition, finite, n_weak, weakest)``, ``var``
+    the covariance's variance along each eigenvector (scaled coordinates x, y, ``radius`` theta; inf when
+    ``cov`` is not finite), ``finite`` whether ``cov`` is, ``n_weak`` the number of weak directions and
+    ``weakest`` the weakest one in tangent coordinates (:attr:`graphnav.scan.degeneracy.Degeneracy.weakest`).
+    The same numbers as the numpy functions, to rounding (tests/scan/test_icp_report_algebra.py)."""
+    cov = np.full((3, 3), np.nan)
+    hi = np.zeros((3, 3))
+    ok = False
+    if math.isfinite(k) and np.all(np.isfinite(h)):
+        try:
+            hi = np.linalg.inv(h)
+            ok = True
+        except Exception:  # noqa: BLE001  (singular)
+            ok = False
+    if ok:
+        b = k * b_lidar + b_sampling
+        hb = np.zeros((3, 3))
+        for a in range(3):
+            for c in range(3):
+                acc = 0.0
+                for m in range(3):
+                    acc += hi[a, m] * b[m, c]
+                hb[a, c] = acc
+        full = np.empty((3, 3))
+        for a in range(3):
+            for c in range(3):
+                acc = 0.0
+                for m in range(3):
+                    acc += hb[a, m] * hi[c, m]
+                full[a, c] = acc
+        for a in range(3):
+            for c in range(3):
+                cov[a, c] = 0.5 * (full[a, c] + full[c, a])
+    sym = 0.5 * (info + info.T)
+    if np.all(np.isfinite(sym)):
+        ev, vec = np.linalg.eigh(sym)
+    else:  # (no direction known)
+        ev, vec = np.full(3, np.nan), np.eye(3)
+    cond = ev[2] / ev[0] if ev[0] > 0 else np.inf
+    finite = np.all(np.isfinite(cov))
+    var = np.full(3, np.inf)
+    sig = np.full(3, np.inf)
+    weak = np.ones(3, np.bool_)
+    tm = (1.0, 1.0, radius)
+    for i in range(3):
+        if finite:
+            acc = 0.0
+            for a in range(3):
+                for c in range(3):
+                    acc += vec[a, i] * tm[a] * cov[a, c] * tm[c] * vec[c, i]
+            var[i] = acc
+            sig[i] = math.sqrt(max(acc, 0.0))
+            weak[i] = not ev[i] > 0 or ev[i] * max_condition < ev[2] or sig[i] > max_sigma
+    n_weak = 0
+    for i in range(3):
+        n_weak += 1 if weak[i] else 0
+    weakest = (vec[0, 0], vec[1, 0], vec[2, 0] * (1.0 / radius))
+    return cov, var, sig, vec, weak, cond, finite, n_weak, weakest
+
+
 # ----------------------------------------------------------------------------- one whole match
+
+
+@njit(cache=True)
+def bounded(a, b, m):
+    """Whether every coordinate of ``a`` and ``b`` is finite and within ``[-m, m]`` (the matcher's input check,
+    without temporaries)."""
+    return _bounded(a, m) and _bounded(b, m)
+
+
+@njit(cache=True, inline="always")
+def _bounded(xy, m):
+    for i in range(xy.shape[0]):
+        for c in range(xy.shape[1]):
+            if not abs(xy[i, c]) <= m:  # (NaN: False)
+                return False
+    return True
+
+
+@njit(cache=True)
+def match_xy(src_xy, tgt_xy, ssig, tsig, prm, pose0, tri):
+    """:func:`match` of the (N, 2) and (M, 2) point arrays (their columns copied here), with the pose also as an
+    array ``(tx, ty, theta)``: ``(pose array, the output of match)``."""
+    out = match(src_xy[:, 0].copy(), src_xy[:, 1].copy(), ssig, tgt_xy[:, 0].copy(), tgt_xy[:, 1].copy(), tsig,
+                prm, pose0, tri)
+    th, t_x, t_y = out[0]
+    pose = np.empty(3)
+    pose[0], pose[1], pose[2] = t_x, t_y, th
+    return pose, out
 
 
 @njit(cache=True)
@@ -896,8 +1040,9 @@ def match(sx, sy, ssig, tx, ty, tsig, prm, pose0, tri):
     """One match of source ``(sx, sy)`` onto target ``(tx, ty)`` from ``pose0 = (theta, tx, ty)``
     (``ssig``/``tsig``: the caller's 1-sigma per point, or empty for the LiDAR model): the clouds'
     terms, the target's resolution, grid and lines (beam order, or HDL's k nearest), :func:`icp_loop`,
-    :func:`final_pairs` and :func:`report_sums` at the pose with its angle wrapped to [-pi, pi).
-    Returns ``(pose, iterations, converged, gate, moved, src_range, radius, sums)``."""
+    :func:`final_pairs`, :func:`report_sums` at the pose with its angle wrapped to [-pi, pi) and
+    :func:`report_algebra` of the sums. Returns ``(pose, iterations, converged, gate, moved, src_range,
+    radius, sums, algebra)``."""
     src = cloud_terms(sx, sy, ssig, prm)
     tgt = cloud_terms(tx, ty, tsig, prm)
     half = prm.normal_k // 2
@@ -913,4 +1058,6 @@ def match(sx, sy, ssig, tx, ty, tsig, prm, pose0, tri):
     radius = rms_radius(sx, sy, sx.shape[0])
     wrapped = ((pose[0] + math.pi) % (2.0 * math.pi) - math.pi, pose[1], pose[2])
     sums = report_sums(pairs, cov, tgt, lines, res, scale, dmax, wrapped, radius, prm)
-    return wrapped, it, converged, dmax, moved, src_r, radius, sums
+    k, _, h, bl, bs, _, info, _, _, big_d = sums
+    algebra = report_algebra(k, h, bl, bs, info, radius, prm.max_condition, prm.max_sigma * big_d)
+    return wrapped, it, converged, dmax, moved, src_r, radius, sums, algebra

@@ -122,3 +122,13 @@ def from_sums(k: float, n_inl: int, h: NDArray, b_lidar: NDArray, b_sampling: ND
     deg, geo = degeneracy.analyse_both(info, radius, cov, max_condition=max_condition, max_sigma=max_sigma,
                                        prior_cov=prior_cov)
     return Between(cov, k, rms, n_inl, deg, geo)
+
+
+def from_kernel(k: float, n_inl: int, rms: float, radius: float, algebra: tuple,
+                prior_cov: NDArray | None = None) -> Between:
+    """:func:`from_sums`, from the matcher's own evaluation of it (:func:`graphnav.scan._icp_fast.report_algebra`:
+    ``(cov, var, sigmas, vectors, weak, condition, ...)``, the geometry's weak directions) and the guess's
+    ``prior_cov`` (:func:`graphnav.scan.degeneracy.with_prior`)."""
+    cov, var, sig, vec, weak, cond = algebra[:6]
+    geo = degeneracy.Degeneracy(float(cond), sig, vec, weak, float(radius))
+    return Between(cov, k, rms, n_inl, degeneracy.with_prior(geo, var, prior_cov), geo)

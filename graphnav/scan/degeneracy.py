@@ -116,10 +116,19 @@ def analyse_both(info: NDArray[np.float64], radius: float, cov: NDArray[np.float
     if not finite:
         weak[:] = True
     geo = Degeneracy(cond, sig, vec, weak, float(radius))
-    if prior_cov is None or not finite or not np.isfinite(prior_cov).all():
-        return geo, geo
-    known = var > np.einsum("ji,jk,ki->i", vec, tm @ np.asarray(prior_cov, dtype=float) @ tm, vec)
-    return Degeneracy(cond, sig, vec, weak | known, float(radius)), geo
+    return with_prior(geo, var, prior_cov), geo
+
+
+def with_prior(geo: Degeneracy, var: NDArray[np.float64], prior_cov: NDArray[np.float64] | None) -> Degeneracy:
+    """``geo`` (the geometry's own weak directions) with the directions where the match knows less than its
+    guess also weak: the match's variance ``var`` along each eigenvector (scaled coordinates; inf when its
+    covariance is not finite) above the guess's ``prior_cov`` there. ``geo`` itself without a finite prior or
+    with a non-finite ``var``."""
+    if prior_cov is None or not np.isfinite(var).all() or not np.isfinite(prior_cov).all():
+        return geo
+    tm = np.diag([1.0, 1.0, geo.radius])
+    known = var > np.einsum("ji,jk,ki->i", geo.vectors, tm @ np.asarray(prior_cov, dtype=float) @ tm, geo.vectors)
+    return Degeneracy(geo.condition, geo.sigmas, geo.vectors, geo.weak | known, geo.radius)
 
 
 def keep_constrained(pose: NDArray[np.float64], guess: NDArray[np.float64],

@@ -26,6 +26,7 @@ A 6-axis record is used as planar (``ax``, ``ay``, ``wz``): a surface vessel's r
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -89,9 +90,15 @@ def consistent(prior: NDArray[np.float64], p_cov: NDArray[np.float64], meas: NDA
         d2 = float(xi @ np.linalg.solve(both, xi))
     except np.linalg.LinAlgError:
         return False
+    return d2 <= _chi2_ppf(float(p), dof)
+
+
+@lru_cache(maxsize=64)
+def _chi2_ppf(p: float, dof: int) -> float:
+    """``scipy.stats.chi2.ppf(p, dof)``, once per (p, dof) (it costs ~0.1 ms a call, once per scan here)."""
     from scipy.stats import chi2
 
-    return d2 <= float(chi2.ppf(p, dof))
+    return float(chi2.ppf(p, dof))
 
 
 def imu_samples(log: NavLog) -> NDArray[np.float64]:

@@ -25,6 +25,7 @@ nearest target point ``q`` lies within the correspondence distance; ``fitness`` 
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -127,13 +128,15 @@ def transform2(pose: ArrayLike, xy: NDArray[np.float64]) -> NDArray[np.float64]:
     return xy @ np.array([[c, s], [-s, c]]) + np.array([x, y])
 
 
+_SE2 = np.array([3, 4, 2])  # (v_x, v_y, ω_z) of small_gicp's (ω_xyz, v_xyz)
+_SE2_IX = np.ix_(_SE2, _SE2)
+_EPS_I3 = 1e-9 * np.eye(3)
+
+
 def pose_to_matrix4(pose: ArrayLike) -> NDArray[np.float64]:
-    x, y, th = np.asarray(pose, dtype=float)
-    c, s = np.cos(th), np.sin(th)
-    m = np.eye(4)
-    m[:2, :2] = [[c, -s], [s, c]]
-    m[:2, 3] = [x, y]
-    return m
+    x, y, th = (float(v) for v in pose)
+    c, s = math.cos(th), math.sin(th)
+    return np.array([[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
 
 def matrix4_to_pose(m: ArrayLike) -> NDArray[np.float64]:
@@ -144,18 +147,23 @@ def matrix4_to_pose(m: ArrayLike) -> NDArray[np.float64]:
 
 def se2_exp(d: ArrayLike) -> NDArray[np.float64]:
     """SE(2) exponential of the twist (v_x, v_y, ω) as a pose (x, y, yaw)."""
-    vx, vy, w = np.asarray(d, dtype=float)
+    return np.array(_se2_exp(*(float(v) for v in d)))
+
+
+def _se2_exp(vx: float, vy: float, w: float) -> tuple[float, float, float]:
     if abs(w) < 1e-4:  # series: (1 - cos w) / w cancels catastrophically for small w
         a, b = 1.0 - w * w / 6.0, 0.5 * w * (1.0 - w * w / 12.0)
     else:
-        s, c = np.sin(w), np.cos(w)
+        s, c = math.sin(w), math.cos(w)
         a, b = s / w, (1.0 - c) / w
-    return np.array([a * vx - b * vy, b * vx + a * vy, w])
+    return a * vx - b * vy, b * vx + a * vy, w
 
 
-def compose(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    c, s = np.cos(a[2]), np.sin(a[2])
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2])])
+def compose(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
+    ax, ay, ath = (float(v) for v in a)
+    bx, by, bth = (float(v) for v in b)
+    c, s = math.cos(ath), math.sin(ath)
+    return np.array([ax + c * bx - s * by, ay + s * bx + c * by, wrap_angle(ath + bth)])
 
 
 def local_frames_2d(xy: NDArray[np.float64], k: int, radius: float = np.inf
@@ -317,23 +325,20 @@ class Target:
             r = self._sg_call(src, pose_to_matrix4(init), p.max_iter)
             return matrix4_to_pose(r.T_target_source), int(r.iterations), bool(r.converged), None
         # Gauss-Newton in SE(2) on small_gicp's linearisation: delta = (ω_xyz, v_xyz), T <- T exp(delta)
-        sel = [3, 4, 2]  # (v_x, v_y, ω_z)
         pose = np.array(init, dtype=float)
         H3 = None
         converged = False
         it = 0
         for it in range(1, p.max_iter + 1):  # noqa: B007
             r = self._sg_call(src, pose_to_matrix4(pose), 1)
-            H = np.asarray(r.H)
-            b = np.asarray(r.b).reshape(-1)
-            H3 = H[np.ix_(sel, sel)]
-            if r.num_inliers < 3 or not np.all(np.isfinite(H3)):
+            H3 = np.asarray(r.H)[_SE2_IX]
+            if r.num_inliers < 3 or not np.isfinite(H3).all():
                 break
             try:
-                d = -np.linalg.solve(H3 + 1e-9 * np.eye(3), b[sel])
+                d = -np.linalg.solve(H3 + _EPS_I3, np.asarray(r.b).reshape(-1)[_SE2])
             except np.linalg.LinAlgError:
                 break
-            pose = compose(pose, se2_exp(d))
+            pose = compose(pose, _se2_exp(*d.tolist()))
             if np.hypot(d[0], d[1]) < p.eps_trans and abs(d[2]) < p.eps_rot:
                 converged = True
                 break

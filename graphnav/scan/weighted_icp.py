@@ -186,13 +186,14 @@ def line_normals(pts: ArrayLike, k: int = 12) -> tuple[NDArray, NDArray]:
 # ----------------------------------------------------------------------------- the matcher
 
 
-def _pose_parts(init: ArrayLike | None) -> tuple[float, NDArray]:
+def _pose_parts(init: ArrayLike | None) -> tuple[float, tuple[float, float]]:
+    """``(dyaw, (dx, dy))`` of a guess ``(dx, dy, dyaw)`` (zeros without one)."""
     if init is None:
-        return 0.0, np.zeros(2)
-    x = np.asarray(init, dtype=float).ravel()
-    if x.shape != (3,) or not np.all(np.isfinite(x)):
+        return 0.0, (0.0, 0.0)
+    x = np.asarray(init, dtype=float).ravel().tolist()
+    if len(x) != 3 or not all(map(math.isfinite, x)):
         raise ValueError(f"init must be a finite (dx, dy, dyaw), got {init!r}")
-    return float(x[2]), x[:2].copy()
+    return x[2], (x[0], x[1])
 
 
 def _failed(reason: str, init: ArrayLike | None, n_src: int, n_tgt: int, t0: float) -> MatchResult:
@@ -239,10 +240,14 @@ def match_points(
     """
     cfg = config or IcpConfig()
     t0 = time.perf_counter()
+    f = _kernels(cfg.backend)
     src_xy = np.asarray(src_xy, dtype=float).reshape(-1, 2)
     tgt_xy = np.asarray(tgt_xy, dtype=float).reshape(-1, 2)
-    src_xy, src_sigma = _finite(src_xy, _per_point(src_sigma, len(src_xy), "src_sigma"))
-    tgt_xy, tgt_sigma = _finite(tgt_xy, _per_point(tgt_sigma, len(tgt_xy), "tgt_sigma"))
+    src_sigma = _per_point(src_sigma, len(src_xy), "src_sigma")
+    tgt_sigma = _per_point(tgt_sigma, len(tgt_xy), "tgt_sigma")
+    if not f.bounded(src_xy, tgt_xy, MAX_STATED_RANGE):
+        src_xy, src_sigma = _finite(src_xy, src_sigma)
+        tgt_xy, tgt_sigma = _finite(tgt_xy, tgt_sigma)
     ns, nt = len(src_xy), len(tgt_xy)
     if ns < cfg.min_points or nt < cfg.min_points:
         return _failed(f"too few points (source {ns}, target {nt}, need {cfg.min_points})", init, ns, nt, t0)
@@ -257,11 +262,9 @@ def match_points(
             src_xy, src_sigma = src_xy[keep], None if src_sigma is None else src_sigma[keep]
         else:
             tgt_xy, tgt_sigma = tgt_xy[keep], None if tgt_sigma is None else tgt_sigma[keep]
-    f = _kernels(cfg.backend)
-    s, t = src_xy.T.copy(), tgt_xy.T.copy()  # contiguous x and y rows
-    out = f.match(s[0], s[1], _NO_SIGMA if src_sigma is None else src_sigma, t[0], t[1],
-                  _NO_SIGMA if tgt_sigma is None else tgt_sigma, _params(cfg), (th0, float(g0[0]), float(g0[1])),
-                  _triangulation(tgt_xy) if cfg.matching == "delaunay" else _NO_TRI)
+    out = f.match_xy(src_xy, tgt_xy, _NO_SIGMA if src_sigma is None else src_sigma,
+                     _NO_SIGMA if tgt_sigma is None else tgt_sigma, _params(cfg), (th0, g0[0], g0[1]),
+                     _triangulation(tgt_xy) if cfg.matching == "delaunay" else _NO_TRI)
     return _report(cfg, out, t0, ns, nt, init, init_cov)
 
 
@@ -300,7 +303,24 @@ _KERNELS: list[Any] = []  # [the kernel module, numba importable], after the fir
 
 
 def _params(cfg: IcpConfig) -> Any:
-    """The kernels' :class:`graphnav.scan._icp_fast.Params` of a config."""
+    """The kernels' :class:`graphnav.scan._icp_fast.Params` of a config (made once per distinct settings)."""
+    key = tuple(vars(cfg).values())
+    try:
+        got = _PARAMS.get(key)
+    except TypeError:  # (an unhashable value set on the config)
+        return _make_params(cfg)
+    if got is None:
+        if len(_PARAMS) >= 64:
+            _PARAMS.clear()
+        got = _PARAMS[key] = _make_params(cfg)
+    return got
+
+
+_PARAMS: dict[tuple, Any] = {}  # the Params of the settings seen (keyed by the config's values)
+
+
+def _make_params(cfg: IcpConfig) -> Any:
+    """:func:`_params`, made."""
     from ._icp_fast import Params
 
     return Params(_VARIANT_CODE[cfg.variant], float(cfg.huber_c), float(cfg.weight_power),
@@ -308,7 +328,7 @@ def _params(cfg: IcpConfig) -> Any:
                   float(cfg.tol_step), int(cfg.max_iter), _GRID_CELL, int(cfg.normal_k), cfg.normals == "knn",
                   float(cfg.line_max_gap), float(cfg.line_flat_power), float(cfg.line_warmup), float(cfg.gate0),
                   _MIN_RES, float(cfg.sigma_alpha), float(cfg.sigma_r_rel), cfg.matching == "delaunay",
-                  float(covariance.SAMPLING_VARIANCE))
+                  float(covariance.SAMPLING_VARIANCE), float(cfg.max_condition), float(cfg.max_sigma))
 
 
 def _triangulation(tgt_xy: NDArray) -> tuple[NDArray, NDArray, NDArray]:
@@ -322,26 +342,28 @@ def _triangulation(tgt_xy: NDArray) -> tuple[NDArray, NDArray, NDArray]:
 
 def _report(cfg: IcpConfig, out: tuple, t0: float, ns: int, nt: int, init: ArrayLike | None,
             init_cov: ArrayLike | None) -> MatchResult:
-    """Covariance and degeneracy (:func:`graphnav.scan.covariance.from_sums` of the kernel's one-pass sums),
+    """Covariance and degeneracy (:func:`graphnav.scan.covariance.from_kernel`: the kernel's evaluation of
+    :func:`~graphnav.scan.covariance.from_sums` on its one-pass sums),
     the flags, the weak directions taken from ``init``, and the quality report.
 
     Residuals and their Jacobians with respect to ``xi``, the right perturbation ``pose ∘ Exp(xi)``
     (GTSAM's Pose2 tangent space): ``d(R p_s + t)/d xi = R [I, J p_s] = [R, J (p - t)]``, ``J = [[0, -1],
     [1, 0]]``; HDL: the point-to-line residual ``n . (p - q)``, its row ``n^T [R, J (p - t)]``.
     """
-    (th, tx, ty), iters, converged, gate, moved, src_range, radius, sums = out
-    k, n_inl, h, b_lidar, b_samp, rms, info, inlier_fraction, points_used, big_d = sums
-    pose = np.array([tx, ty, th])
-    bt = covariance.from_sums(k, n_inl, h, b_lidar, b_samp, rms, info, radius, max_condition=cfg.max_condition,
-                              max_sigma=cfg.max_sigma * big_d, prior_cov=None if init is None else init_cov)
+    pose, ((th, tx, ty), iters, converged, gate, moved, src_range, radius, sums, algebra) = out
+    k, n_inl, _, _, _, rms, _, inlier_fraction, points_used, big_d = sums
+    finite, geo_weak, weakest = algebra[6:]  # the covariance is finite; the geometry's weak directions, weakest
+    bt = covariance.from_kernel(k, n_inl, rms, radius, algebra, prior_cov=None if init is None else init_cov)
     deg = bt.degeneracy
     # the geometry's own weak directions (without the guess's "known better" rule): what a fusion of the
     # match with its guess by information may not hear from the match
-    geo = deg if init is None or init_cov is None else bt.geometry
-    failed, maha = _failures(cfg, pose, bt, iters, converged, moved, src_range, inlier_fraction, radius, init,
-                             init_cov)
-    cov, icp_pose, reasons = bt.cov, pose.copy(), []
-    if deg.degenerate:
+    geo = bt.geometry
+    n_weak = geo_weak if deg is geo else int(deg.weak.sum())
+    degenerate = n_weak > 0
+    failed, maha = _failures(cfg, pose, bt, finite, iters, converged, moved, src_range, inlier_fraction, radius,
+                             init, init_cov)
+    cov, reasons = bt.cov, []
+    if degenerate:
         why = []
         if not np.isfinite(deg.condition) or deg.condition > cfg.max_condition:
             why.append(f"condition number {deg.condition:.3g} > {cfg.max_condition:g}")
@@ -359,14 +381,14 @@ def _report(cfg: IcpConfig, out: tuple, t0: float, ns: int, nt: int, init: Array
         "points_used": int(points_used), "points_source": ns, "points_target": nt,
         "inlier_fraction": float(inlier_fraction), "residual": bt.residual_rms, "residual_scale": bt.residual_scale,
         "resolution": float(big_d), "gate": float(gate), "condition_number": deg.condition,
-        "iterations": int(iters), "converged": bool(converged), "degenerate": bool(deg.degenerate),
-        "sigma_weak": deg.sigma_weak, "weak_direction": [float(x) for x in deg.weakest],
-        "weak_dims": int(deg.weak.sum()),
-        "weak_projector": deg.projector().tolist() if deg.degenerate else None,  # P: the weak directions' part of xi
-        "inflated": bool(deg.degenerate and not failed),  # flagged for degeneracy only: covariance inflated there
-        "icp_pose": [float(x) for x in icp_pose],
+        "iterations": int(iters), "converged": bool(converged), "degenerate": degenerate,
+        "sigma_weak": deg.sigma_weak, "weak_direction": list(weakest),
+        "weak_dims": n_weak,
+        "weak_projector": deg.projector().tolist() if degenerate else None,  # P: the weak directions' part of xi
+        "inflated": degenerate and not failed,  # flagged for degeneracy only: covariance inflated there
+        "icp_pose": [tx, ty, th],
         "icp_cov": bt.cov.tolist(),  # the covariance of icp_pose (before any weak direction took the guess's)
-        "geometry_weak_projector": geo.projector().tolist() if geo.degenerate else None,  # weak by geometry alone
+        "geometry_weak_projector": geo.projector().tolist() if geo_weak else None,  # weak by geometry alone
         "guess_mahalanobis": maha,  # the estimate before a flag replaced any of it by the guess
         "reason": "; ".join(reasons),
         "ms": (time.perf_counter() - t0) * 1e3,
@@ -374,11 +396,11 @@ def _report(cfg: IcpConfig, out: tuple, t0: float, ns: int, nt: int, init: Array
     return MatchResult(pose, cov, not reasons, quality)
 
 
-def _failures(cfg: IcpConfig, pose: NDArray, bt: Any, iters: int, converged: bool, moved: float, src_range: float,
-              inlier_fraction: float, radius: float, init: ArrayLike | None,
+def _failures(cfg: IcpConfig, pose: NDArray, bt: Any, finite: bool, iters: int, converged: bool, moved: float,
+              src_range: float, inlier_fraction: float, radius: float, init: ArrayLike | None,
               init_cov: ArrayLike | None) -> tuple[list[str], float]:
     """Why the match as a whole is not to be trusted (then the pose is the guess, when there is one), and
-    its Mahalanobis distance from the guess (with ``init_cov``)."""
+    its Mahalanobis distance from the guess (with ``init_cov``); ``finite``: whether ``bt.cov`` is."""
     cov, deg = bt.cov, bt.degeneracy
     failed = []
     if not converged:  # a limit cycle within the estimate's own 1-sigma is as good as converged
@@ -387,7 +409,7 @@ def _failures(cfg: IcpConfig, pose: NDArray, bt: Any, iters: int, converged: boo
             failed.append(f"not converged in {iters} iterations (last step {moved:.3g} m > its 1-sigma {sig:.3g} m)")
     if inlier_fraction < cfg.min_inlier_fraction:
         failed.append(f"inlier fraction {inlier_fraction:.2f} < {cfg.min_inlier_fraction}")
-    if not np.all(np.isfinite(cov)):
+    if not finite:
         failed.append("non-finite covariance")
     maha = float("nan")
     if init is not None and init_cov is not None and not failed:

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from graphnav import cli
 from graphnav.geodesy import LocalFrame, origin_frame
-from graphnav.io.geo_out import GeoTrack, geojson, gpx_text, kml_text, write_wgs84
+from graphnav.io.geo_out import GeoTrack, geojson, gpx_text, kml_text, render, write_wgs84
 from graphnav.io.outputs import MANIFEST
 from graphnav.io.tum import read_tum
 from graphnav.trajectory import Trajectory
@@ -178,3 +178,96 @@ def test_compare_writes_every_track_and_a_self_contained_map(tmp_path, capsys):
     rc, s = graphnav_json(capsys, "compare", str(tiny_log(tmp_path, None)), "-e", "dead-reckoning", "--out", str(out2))
     assert rc == 0 and s["wgs84"] is None and (out2 / "map.html").exists()
     assert not (out2 / "trajectory.geojson").exists()
+
+
+def _geojson_spec(tracks: list[GeoTrack]) -> dict:
+    """The FeatureCollection as the module docstring states it, built plainly from ``GeoTrack.times``
+    (``datetime``), ``round`` and dicts: the oracle of the directly written text."""
+    def iso(d: datetime) -> str:
+        return d.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+    features = []
+    for tr in tracks:
+        times = [iso(d) for d in tr.times()]
+        coords = [[round(float(lo), 8), round(float(la), 8)] for la, lo in zip(tr.lat, tr.lon, strict=True)]
+        if len(coords) >= 2:
+            features.append({"type": "Feature", "geometry": {"type": "LineString", "coordinates": coords},
+                             "properties": {"name": tr.name, "kind": "track", "poses": len(coords),
+                                            "start": times[0], "end": times[-1]}})
+        for i, c in enumerate(coords):
+            props = {"name": tr.name, "kind": "pose", "t": float(tr.t[i]), "time": times[i]}
+            if math.isfinite(tr.heading_deg[i]):
+                props["heading_deg"] = round(float(tr.heading_deg[i]), 3)
+            features.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": c}, "properties": props})
+    lat, lon = np.concatenate([t.lat for t in tracks]), np.concatenate([t.lon for t in tracks])
+    bbox = [round(float(v), 8) for v in (lon.min(), lat.min(), lon.max(), lat.max())]
+    return {"type": "FeatureCollection", "features": features, "bbox": bbox}
+
+
+_times = st.lists(st.floats(-1e9, 1e10, allow_nan=False), min_size=1, max_size=40)
+
+
+@settings(max_examples=60, deadline=None)
+@given(_times, st.integers(0, 2**32 - 1), st.text(max_size=8))
+def test_the_directly_written_geojson_and_gpx_equal_the_libraries_reading(ts, seed, name):
+    """GeoJSON and GPX are written as text directly (fast for 100 Hz tracks): the GeoJSON parses to the
+    plainly built document exactly, and gpxpy reads the GPX back to the very floats, ``datetime`` times
+    (``datetime.fromtimestamp`` of the time rounded to the microsecond) and name."""
+    rng = np.random.default_rng(seed)
+    n = len(ts)
+    poses = np.column_stack([rng.normal(0, 5e3, n), rng.normal(0, 5e3, n), rng.uniform(-4, 4, n)])
+    poses[rng.random(n) < 0.2, 2] = np.nan  # no heading there
+    tracks = [GeoTrack.from_trajectory(Trajectory(np.sort(ts), poses, name=name), FRAME),
+              GeoTrack.from_trajectory(square_track(5), FRAME, "second <&>")]
+    assert json.loads(render(tracks, "geojson")) == _geojson_spec(tracks)
+    g = gpxpy.parse(gpx_text(tracks))
+    for tr, trk in zip(tracks, g.tracks, strict=True):
+        pts = trk.segments[0].points
+        assert trk.name == (tr.name or None)
+        assert [p.latitude for p in pts] == tr.lat.tolist() and [p.longitude for p in pts] == tr.lon.tolist()
+        assert [p.time for p in pts] == tr.times()
+
+
+def _kml_read(text: str) -> list[tuple]:
+    """Per placemark: name, its style's colour and width, time span, coordinates (floats)."""
+    ns = {"k": "http://www.opengis.net/kml/2.2"}
+    root = ET.fromstring(text)
+    styles = {s.get("id"): (s.find(".//k:color", ns).text, s.find(".//k:width", ns).text)
+              for s in root.iter("{http://www.opengis.net/kml/2.2}Style")}
+    out = []
+    for pm in root.iter("{http://www.opengis.net/kml/2.2}Placemark"):
+        span = pm.find("k:TimeSpan", ns)
+        coords = [tuple(float(v) for v in c.split(",")) for c in pm.find(".//k:coordinates", ns).text.split()]
+        out.append((pm.find("k:name", ns).text, styles[pm.find("k:styleUrl", ns).text[1:]],
+                    None if span is None else (span.find("k:begin", ns).text, span.find("k:end", ns).text), coords))
+    return out
+
+
+def _simplekml_text(tracks: list[GeoTrack]) -> str:
+    """The KML as simplekml writes it (the oracle of the directly written text)."""
+    import simplekml
+
+    from graphnav.io.geo_out import _KML_COLOURS
+    k = simplekml.Kml(name="graphnav")
+    for i, tr in enumerate(tracks):
+        coords = [(float(lo), float(la)) for la, lo in zip(tr.lat, tr.lon, strict=True)]
+        ls = k.newlinestring(name=tr.name, coords=coords)
+        ls.style.linestyle.color = "ff000000" if tr.name == "truth" else _KML_COLOURS[i % len(_KML_COLOURS)]
+        ls.style.linestyle.width = 2
+        if len(tr.t):
+            times = [d.isoformat(timespec="milliseconds").replace("+00:00", "Z") for d in tr.times()]
+            ls.timespan.begin, ls.timespan.end = times[0], times[-1]
+    return k.kml()
+
+
+@settings(max_examples=40, deadline=None)
+@given(_times, st.integers(0, 2**32 - 1), st.sampled_from(["truth", "isam2", "a<&>b"]))
+def test_the_directly_written_kml_reads_as_simplekml_s(ts, seed, name):
+    """KML is written as text directly: read back, the same placemarks (names, colours, widths, time
+    spans, the very coordinates) as simplekml's document."""
+    rng = np.random.default_rng(seed)
+    n = len(ts)
+    poses = np.column_stack([rng.normal(0, 5e3, n), rng.normal(0, 5e3, n), rng.uniform(-4, 4, n)])
+    tracks = [GeoTrack.from_trajectory(square_track(5), FRAME, "truth"),
+              GeoTrack.from_trajectory(Trajectory(np.sort(ts), poses), FRAME, name)]
+    assert _kml_read(kml_text(tracks)) == _kml_read(_simplekml_text(tracks))
