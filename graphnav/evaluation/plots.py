@@ -7,6 +7,10 @@ module selects no backend and touches no global state, so it is safe in a notebo
 Each ``plot_*`` function takes an optional ``ax`` (one-axes figures) or ``fig`` (multi-panel figures)
 and returns the Figure it drew on; the ``*_panel`` functions draw one estimator into given axes.
 
+Series far denser than a panel's pixels are drawn thinned to them (:func:`thin_minmax`, :func:`thin_xy`,
+:func:`thin_track`: every extreme and gap kept at 300 dpi; zooming far into a drawn figure shows the
+thinning); every number in a title or caption comes from the full series.
+
 Errors are taken at the estimate/reference pairs of :func:`graphnav.evaluation.metrics.associate` — the same
 pairs that the report's numbers use. SOG/COG errors follow the weighted-ICP paper's Figs. 12-15
 (difference versus time and its histogram), with COG scored only while the reference moves.
@@ -213,6 +217,12 @@ class _InView(Locator):
 
     def tick_values(self, vmin: float, vmax: float) -> np.ndarray:
         return self.base.tick_values(vmin, vmax)
+
+    def nonsingular(self, v0: float, v1: float) -> tuple[float, float]:  # (autoscaling: the base's rule)
+        return self.base.nonsingular(v0, v1)
+
+    def view_limits(self, vmin: float, vmax: float) -> tuple[float, float]:
+        return self.base.view_limits(vmin, vmax)
 
 
 def _ticks_in_view(*axes: Axes) -> None:
