@@ -1,4 +1,4 @@
-"""Tracks in WGS84 for GIS and chart plotters: GeoJSON (RFC 7946), GPX 1.1, KML (simplekml).
+"""Tracks in WGS84 for GIS and chart plotters: GeoJSON (RFC 7946), GPX 1.1, KML 2.2.
 
 A track is a :class:`~graphnav.trajectory.Trajectory` in the local frame converted with the log's
 geodetic origin (:func:`graphnav.geodesy.origin_frame`; without one nothing is written -- an origin
@@ -95,16 +95,12 @@ def check_track(traj: Trajectory, where: str) -> None:
                             "origin: not a place on Earth", where=where)
 
 
-def _iso(d: datetime) -> str:
-    return d.isoformat(timespec="milliseconds").replace("+00:00", "Z")
-
-
 def _c(v: float) -> float:
     return round(float(v), 8)
 
 
 def _iso_times(t: NDArray[np.float64], unit: str = "ms") -> list[str]:
-    """The ISO 8601 UTC times (to the millisecond, or ``unit="us"``; ``Z``) of POSIX seconds ``t``: :func:`_iso`
+    """The ISO 8601 UTC times (to the millisecond, or ``unit="us"``; ``Z``) of POSIX seconds ``t``: ``isoformat``
     of :meth:`GeoTrack.times`, vectorised (the microseconds as ``datetime.fromtimestamp`` of ``round(t, 6)``
     makes them, then floored to the unit as ``isoformat`` does)."""
     r = np.array([round(v, 6) for v in np.asarray(t, dtype=float).tolist()])
@@ -173,19 +169,32 @@ def gpx_text(tracks: list[GeoTrack]) -> str:
 
 
 def kml_text(tracks: list[GeoTrack]) -> str:
-    """KML 2.2 (simplekml): one LineString placemark per track, with its time span."""
-    import simplekml
+    """KML 2.2: one LineString placemark per track, with its colour, width and time span; the document
+    simplekml writes, written directly (tests read both back the same)."""
+    from xml.sax.saxutils import escape
 
-    k = simplekml.Kml(name="graphnav")
+    styles, marks = [], []
     for i, tr in enumerate(tracks):
-        ls = k.newlinestring(name=tr.name, coords=[(float(lo), float(la)) for la, lo in zip(tr.lat, tr.lon,
-                                                                                               strict=True)])
-        ls.style.linestyle.color = "ff000000" if tr.name == "truth" else _KML_COLOURS[i % len(_KML_COLOURS)]
-        ls.style.linestyle.width = 2
+        colour = "ff000000" if tr.name == "truth" else _KML_COLOURS[i % len(_KML_COLOURS)]
+        styles.append(f'        <Style id="track{i}">\n            <LineStyle>\n'
+                      f"                <color>{colour}</color>\n"
+                      "                <colorMode>normal</colorMode>\n                <width>2</width>\n"
+                      "            </LineStyle>\n        </Style>")
+        span = ""
         if len(tr.t):
-            times = tr.times()
-            ls.timespan.begin, ls.timespan.end = _iso(times[0]), _iso(times[-1])
-    return k.kml()
+            times = _iso_times(tr.t[[0, -1]])
+            span = (f"            <TimeSpan>\n                <begin>{times[0]}</begin>\n"
+                    f"                <end>{times[1]}</end>\n            </TimeSpan>\n")
+        coords = " ".join(f"{lo!r},{la!r},0.0" for la, lo in zip(tr.lat.astype(float).tolist(),
+                                                                 tr.lon.astype(float).tolist(), strict=True))
+        marks.append(f"        <Placemark>\n            <name>{escape(tr.name, {chr(13): '&#13;'})}</name>\n{span}"
+                     f"            <styleUrl>#track{i}</styleUrl>\n            <LineString>\n"
+                     f"                <coordinates>{coords}</coordinates>\n            </LineString>\n"
+                     "        </Placemark>")
+    return "\n".join(['<?xml version="1.0" encoding="UTF-8"?>',
+                      '<kml xmlns="http://www.opengis.net/kml/2.2" xmlns:gx="http://www.google.com/kml/ext/2.2">',
+                      "    <Document>", *styles, "        <name>graphnav</name>", *marks, "    </Document>",
+                      "</kml>"]) + "\n"
 
 
 def render(tracks: list[GeoTrack], fmt: str) -> str:

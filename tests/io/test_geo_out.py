@@ -226,3 +226,48 @@ def test_the_directly_written_geojson_and_gpx_equal_the_libraries_reading(ts, se
         assert trk.name == (tr.name or None)
         assert [p.latitude for p in pts] == tr.lat.tolist() and [p.longitude for p in pts] == tr.lon.tolist()
         assert [p.time for p in pts] == tr.times()
+
+
+def _kml_read(text: str) -> list[tuple]:
+    """Per placemark: name, its style's colour and width, time span, coordinates (floats)."""
+    ns = {"k": "http://www.opengis.net/kml/2.2"}
+    root = ET.fromstring(text)
+    styles = {s.get("id"): (s.find(".//k:color", ns).text, s.find(".//k:width", ns).text)
+              for s in root.iter("{http://www.opengis.net/kml/2.2}Style")}
+    out = []
+    for pm in root.iter("{http://www.opengis.net/kml/2.2}Placemark"):
+        span = pm.find("k:TimeSpan", ns)
+        coords = [tuple(float(v) for v in c.split(",")) for c in pm.find(".//k:coordinates", ns).text.split()]
+        out.append((pm.find("k:name", ns).text, styles[pm.find("k:styleUrl", ns).text[1:]],
+                    None if span is None else (span.find("k:begin", ns).text, span.find("k:end", ns).text), coords))
+    return out
+
+
+def _simplekml_text(tracks: list[GeoTrack]) -> str:
+    """The KML as simplekml writes it (the oracle of the directly written text)."""
+    import simplekml
+
+    from graphnav.io.geo_out import _KML_COLOURS
+    k = simplekml.Kml(name="graphnav")
+    for i, tr in enumerate(tracks):
+        coords = [(float(lo), float(la)) for la, lo in zip(tr.lat, tr.lon, strict=True)]
+        ls = k.newlinestring(name=tr.name, coords=coords)
+        ls.style.linestyle.color = "ff000000" if tr.name == "truth" else _KML_COLOURS[i % len(_KML_COLOURS)]
+        ls.style.linestyle.width = 2
+        if len(tr.t):
+            times = [d.isoformat(timespec="milliseconds").replace("+00:00", "Z") for d in tr.times()]
+            ls.timespan.begin, ls.timespan.end = times[0], times[-1]
+    return k.kml()
+
+
+@settings(max_examples=40, deadline=None)
+@given(_times, st.integers(0, 2**32 - 1), st.sampled_from(["truth", "isam2", "a<&>b"]))
+def test_the_directly_written_kml_reads_as_simplekml_s(ts, seed, name):
+    """KML is written as text directly: read back, the same placemarks (names, colours, widths, time
+    spans, the very coordinates) as simplekml's document."""
+    rng = np.random.default_rng(seed)
+    n = len(ts)
+    poses = np.column_stack([rng.normal(0, 5e3, n), rng.normal(0, 5e3, n), rng.uniform(-4, 4, n)])
+    tracks = [GeoTrack.from_trajectory(square_track(5), FRAME, "truth"),
+              GeoTrack.from_trajectory(Trajectory(np.sort(ts), poses), FRAME, name)]
+    assert _kml_read(kml_text(tracks)) == _kml_read(_simplekml_text(tracks))
