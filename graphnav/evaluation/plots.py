@@ -7,6 +7,10 @@ module selects no backend and touches no global state, so it is safe in a notebo
 Each ``plot_*`` function takes an optional ``ax`` (one-axes figures) or ``fig`` (multi-panel figures)
 and returns the Figure it drew on; the ``*_panel`` functions draw one estimator into given axes.
 
+Series far denser than a panel's pixels are drawn thinned to them (:func:`thin_minmax`, :func:`thin_xy`,
+:func:`thin_track`: every extreme and gap kept at 300 dpi; zooming far into a drawn figure shows the
+thinning); every number in a title or caption comes from the full series.
+
 Errors are taken at the estimate/reference pairs of :func:`graphnav.evaluation.metrics.associate` — the same
 pairs that the report's numbers use. SOG/COG errors follow the weighted-ICP paper's Figs. 12-15
 (difference versus time and its histogram), with COG scored only while the reference moves.
@@ -25,7 +29,7 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Ellipse, Patch
-from matplotlib.ticker import FuncFormatter, MaxNLocator
+from matplotlib.ticker import FixedLocator, FuncFormatter, Locator, MaxNLocator, NullLocator
 from scipy.stats import chi2
 
 from ..geometry import wrap_angle
@@ -97,6 +101,168 @@ def _grid(fig: Figure | None, n: int, ncol: int, panel: tuple[float, float], **k
     for ax in axes.ravel()[n:]:
         ax.axis("off")
     return fig, axes
+
+
+def _cell_keep(pts: np.ndarray, cell: float) -> np.ndarray | None:
+    """Indices of the points (N, 2) where a track enters another ``cell``-sized square, and its last
+    point; ``None`` when nothing would be dropped (or ``cell <= 0``, or a point is not finite)."""
+    if not (cell > 0) or len(pts) <= 2 or not np.all(np.isfinite(pts)):
+        return None
+    c = np.floor((pts - pts.min(axis=0)) / cell).astype(np.int64)
+    keep = np.r_[0, np.flatnonzero((c[1:] != c[:-1]).any(axis=1)) + 1]
+    if keep[-1] != len(pts) - 1:
+        keep = np.r_[keep, len(pts) - 1]
+    return keep if len(keep) < len(pts) else None
+
+
+def thin_xy(x: np.ndarray, y: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """A track (an x-y line) thinned for drawing: its points where it enters another ``cell``-sized
+    square (a pixel's size in data units), and its last; as is when ``cell <= 0``."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    keep = _cell_keep(np.column_stack([x, y]), cell)
+    return (x, y) if keep is None else (x[keep], y[keep])
+
+
+def _pixel(ax: Axes, lims: tuple[tuple[float, float], ...] | None, dpi: float = 300.0) -> float:
+    """The data size of a pixel of ``ax`` at ``dpi`` (at least the figure's) once its limits are
+    ``lims``: the finer of the two axes (an equal aspect only makes pixels larger); 0 without limits."""
+    if lims is None:
+        return 0.0
+    w, h = ax.get_position().size * ax.figure.get_size_inches() * max(dpi, ax.figure.dpi)
+    return float(min((lims[0][1] - lims[0][0]) / max(w, 1.0), (lims[1][1] - lims[1][0]) / max(h, 1.0)))
+
+
+def _in_window(x: np.ndarray, y: np.ndarray, x0: float, x1: float, y0: float,
+               y1: float) -> tuple[np.ndarray, np.ndarray]:
+    """The parts of a line that can show in the window [x0, x1] x [y0, y1]: every segment whose
+    bounding box meets it, with a NaN (a break) between runs that are not consecutive."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    if len(x) < 2:
+        return x, y
+    meet = ((np.minimum(x[:-1], x[1:]) <= x1) & (np.maximum(x[:-1], x[1:]) >= x0)
+            & (np.minimum(y[:-1], y[1:]) <= y1) & (np.maximum(y[:-1], y[1:]) >= y0))
+    use = np.zeros(len(x), bool)
+    use[:-1] |= meet
+    use[1:] |= meet
+    use |= (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)  # (a lone point still shows as a marker)
+    idx = np.flatnonzero(use)
+    if len(idx) == len(x):
+        return x, y
+    brk = np.flatnonzero(np.diff(idx) > 1) + 1
+    return np.insert(x[idx], brk, np.nan), np.insert(y[idx], brk, np.nan)
+
+
+def thin_track(x: np.ndarray, y: np.ndarray, seg_values: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """A track's segments (M, 2, 2) and their values, thinned for a colour-coded drawing: the points
+    where the track enters another ``cell``-sized square are kept (and the last), each kept segment
+    spanning a run of original ones and taking the largest of their ``seg_values`` (N - 1), so no
+    peak is lost. ``cell <= 0``: every segment."""
+    pts = np.column_stack([x, y])
+    v = np.asarray(seg_values, dtype=float)
+    keep = _cell_keep(pts, cell)
+    if keep is not None:
+        return np.stack([pts[keep[:-1]], pts[keep[1:]]], axis=1), np.maximum.reduceat(v, keep[:-1])
+    return np.stack([pts[:-1], pts[1:]], axis=1), v
+
+
+def _shared_grid(fig: Figure, nrow: int, ncol: int) -> np.ndarray:
+    """``nrow`` x ``ncol`` axes meant to share their time axis: not matplotlib-shared (sharing is
+    quadratic in the number of axes at draw time); :func:`_finish_grid` gives them one x range."""
+    return np.asarray(fig.subplots(nrow, ncol, squeeze=False))
+
+
+def _finish_grid(axes: np.ndarray, *, margin: float = 0.05) -> None:
+    """One x range for every axes of ``axes`` (the union of their data, with matplotlib's default
+    margin), x tick labels on the bottom row only, and each axis's ticks computed once per distinct
+    (limits, length) and fixed: panels that look alike get the same ticks without recomputing them."""
+    on = [a for a in axes.ravel() if a.axison]
+    lims = [a.dataLim.intervalx for a in on if a.has_data() and np.all(np.isfinite(a.dataLim.intervalx))]
+    if lims:
+        lo, hi = min(v[0] for v in lims), max(v[1] for v in lims)
+        pad = margin * (hi - lo) if hi > lo else 0.5
+        for a in on:
+            a.set_xlim(lo - pad, hi + pad)
+    for a in axes[:-1].ravel():
+        a.tick_params(labelbottom=False)
+        a.set_xlabel("")
+    cache: dict[tuple, np.ndarray] = {}
+    for a in on:
+        size = a.get_position().size
+        for axis, lim, length in ((a.xaxis, a.get_xlim(), size[0]), (a.yaxis, a.get_ylim(), size[1])):
+            if axis.get_scale() != "linear":
+                continue
+            key = (axis.axis_name, tuple(lim), round(float(length), 6))
+            if key not in cache:  # (only the ticks inside the view: the others are never drawn)
+                locs, (v0, v1), tol = axis.get_majorticklocs(), sorted(lim), 1e-10 * abs(lim[1] - lim[0])
+                cache[key] = locs[(locs >= v0 - tol) & (locs <= v1 + tol)]
+            axis.set_major_locator(FixedLocator(cache[key]))
+
+
+class _InView(Locator):
+    """Another locator's ticks, without those outside the view: matplotlib builds a tick (lines, labels)
+    for every location a locator returns but draws only those inside, so the others cost for nothing."""
+
+    def __init__(self, base: Locator) -> None:
+        self.base = base
+
+    def set_axis(self, axis: Any) -> None:
+        super().set_axis(axis)
+        self.base.set_axis(axis)
+
+    def __call__(self) -> np.ndarray:
+        locs = np.asarray(self.base(), dtype=float)
+        v0, v1 = sorted(self.axis.get_view_interval())
+        tol = 1e-10 * max(abs(v0), abs(v1), v1 - v0)
+        return locs[(locs >= v0 - tol) & (locs <= v1 + tol)]
+
+    def tick_values(self, vmin: float, vmax: float) -> np.ndarray:
+        return self.base.tick_values(vmin, vmax)
+
+    def nonsingular(self, v0: float, v1: float) -> tuple[float, float]:  # (autoscaling: the base's rule)
+        return self.base.nonsingular(v0, v1)
+
+    def view_limits(self, vmin: float, vmax: float) -> tuple[float, float]:
+        return self.base.view_limits(vmin, vmax)
+
+
+def _ticks_in_view(*axes: Axes) -> None:
+    """Each axis of ``axes`` builds ticks only for the locations inside its view (:class:`_InView`)."""
+    for ax in axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            for get, put in ((axis.get_major_locator, axis.set_major_locator),
+                             (axis.get_minor_locator, axis.set_minor_locator)):
+                loc = get()
+                if not isinstance(loc, (_InView, NullLocator, FixedLocator)):
+                    put(_InView(loc))
+
+
+def _columns(ax: Axes, dpi: float = 300.0) -> int:
+    """Pixel columns of ``ax`` at ``dpi`` (at least the figure's): how finely a series needs drawing."""
+    return max(int(np.ceil(ax.get_position().width * ax.figure.get_figwidth() * max(dpi, ax.figure.dpi))), 1)
+
+
+def thin_minmax(x: np.ndarray, y: np.ndarray, columns: int) -> tuple[np.ndarray, np.ndarray]:
+    """A series sorted in ``x``, thinned to what ``columns`` pixel columns can show: in each column
+    its first and last sample, its minimum and maximum, and its first NaN (a gap stays a gap), in
+    their order. Every extreme stays visible; a series with at most four samples per column, or not
+    sorted, is returned as is. For drawing only: numbers are computed from the full series."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    n = len(x)
+    if n <= 4 * columns or not (np.isfinite(x[0]) and np.isfinite(x[-1]) and x[-1] > x[0]):
+        return x, y
+    dx = np.diff(x)
+    if not np.all(dx >= 0):
+        return x, y
+    b = np.minimum(((x - x[0]) * (columns / (x[-1] - x[0]))).astype(np.int64), columns - 1)
+    starts = np.flatnonzero(np.r_[True, b[1:] != b[:-1]])
+    ends = np.r_[starts[1:], n] - 1
+    fin = np.isfinite(y)
+    lo = np.lexsort((np.where(fin, y, np.inf), b))[starts]
+    hi = np.lexsort((np.where(fin, y, -np.inf), b))[ends]
+    nan = np.flatnonzero(~fin)
+    first_nan = nan[np.unique(b[nan], return_index=True)[1]] if len(nan) else nan
+    keep = np.unique(np.concatenate([starts, ends, lo, hi, first_nan]))
+    return x[keep], y[keep]
 
 
 def _as_dict(trajs: dict[str, Trajectory] | Trajectory) -> dict[str, Trajectory]:
@@ -238,20 +404,22 @@ def trajectory_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory | N
         if len(est):
             inside = (truth.t >= est.t[0] - MAX_DT) & (truth.t <= est.t[-1] + MAX_DT)
             tr_xy = np.column_stack([truth.x[inside], truth.y[inside]])
-        ax.plot(truth.x, truth.y, "-", color="k", lw=0.8, label="truth", zorder=2)
+    xy = np.vstack([np.column_stack([est.x, est.y]), tr_xy]) if len(est) else tr_xy
+    lims = _limits(xy) if len(xy) else None
+    cell = _pixel(ax, lims)  # the lines drawn thinned to this panel's pixels (numbers: full series)
+    if truth is not None and len(truth):
+        ax.plot(*thin_xy(truth.x, truth.y, cell), "-", color="k", lw=0.8, label="truth", zorder=2)
     if err is not None:
-        pts = np.column_stack([e.x, e.y])
-        segs = np.stack([pts[:-1], pts[1:]], axis=1)
+        segs, seg_err = thin_track(e.x, e.y, 0.5 * (err[:-1] + err[1:]), cell)
         norm = Normalize(0.0, max(float(np.percentile(err, 99)), 1e-6))
         lc = LineCollection(segs, cmap="viridis", norm=norm, lw=2.0, zorder=3)
-        lc.set_array(0.5 * (err[:-1] + err[1:]))
+        lc.set_array(seg_err)
         ax.add_collection(lc)
         fig.colorbar(lc, ax=ax, shrink=0.8, pad=0.01, label="position error [m]", extend="max")
     else:
-        ax.plot(est.x, est.y, "-", lw=1.5, color=color, label=name, zorder=3)
-    xy = np.vstack([np.column_stack([est.x, est.y]), tr_xy]) if len(est) else tr_xy
-    if len(xy):
-        (x0, x1), (y0, y1) = _limits(xy)
+        ax.plot(*thin_xy(est.x, est.y, cell), "-", lw=1.5, color=color, label=name, zorder=3)
+    if lims is not None:
+        (x0, x1), (y0, y1) = lims
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
     ax.set_aspect("equal", adjustable="box")
@@ -260,8 +428,9 @@ def trajectory_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory | N
     title = name
     if err is not None:
         title += f" — ATE RMSE {np.sqrt(np.mean(err**2)):.3g} m, max {err.max():.3g} m"
-    ax.set_title(title, fontsize=10)
+    ax.set_title(title, fontsize=10, y=1.0)
     ax.grid(alpha=0.3)
+    _ticks_in_view(ax)
     if zoom_ax is not None:
         if err is None or not len(err):
             zoom_ax.axis("off")
@@ -269,8 +438,9 @@ def trajectory_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory | N
         k = int(np.argmax(err))
         half = max(4.0 * float(err[k]), 1.0)  # a window a few errors wide (at least 2 m)
         cx, cy = 0.5 * (e.x[k] + r.x[k]), 0.5 * (e.y[k] + r.y[k])
-        zoom_ax.plot(truth.x, truth.y, "-", color="k", lw=1.2, label="truth")
-        zoom_ax.plot(e.x, e.y, ".-", color=color, lw=1.2, ms=3, label=name)
+        win = (cx - 1.05 * half, cx + 1.05 * half, cy - 1.05 * half, cy + 1.05 * half)  # (what can show)
+        zoom_ax.plot(*_in_window(truth.x, truth.y, *win), "-", color="k", lw=1.2, label="truth")
+        zoom_ax.plot(*_in_window(e.x, e.y, *win), ".-", color=color, lw=1.2, ms=3, label=name)
         zoom_ax.plot([e.x[k], r.x[k]], [e.y[k], r.y[k]], "-", color="0.4", lw=0.8)
         zoom_ax.set_xlim(cx - half, cx + half)
         zoom_ax.set_ylim(cy - half, cy + half)
@@ -278,9 +448,10 @@ def trajectory_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory | N
         zoom_ax.tick_params(labelsize=7)
         zoom_ax.xaxis.set_major_locator(MaxNLocator(4))
         zoom_ax.yaxis.set_major_locator(MaxNLocator(5))
-        zoom_ax.set_title(f"largest error {err[k]:.3g} m at t = {e.t[k]:.1f} s", fontsize=9)
+        zoom_ax.set_title(f"largest error {err[k]:.3g} m at t = {e.t[k]:.1f} s", fontsize=9, y=1.0)
         zoom_ax.grid(alpha=0.3)
         zoom_ax.legend(fontsize=7, loc="best")
+        _ticks_in_view(zoom_ax)
         ax.plot([e.x[k]], [e.y[k]], "s", ms=9, mfc="none", mec="r", zorder=6)
     return fig
 
@@ -411,33 +582,39 @@ def plot_sog_cog(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, e
                  fig: Figure | None = None) -> Figure:
     """The weighted-ICP paper's Figs. 12-15 as small multiples: one row per estimator (in its colour),
     SOG, COG and ΔCOG errors versus time in three columns with one y-scale per column (the 98th
-    percentile of every estimator's error), each panel titled with its RMS; the log's events shaded."""
+    percentile of every estimator's error), each panel titled with its RMS; the log's events shaded.
+    Each panel draws its series thinned to the extremes of each pixel column (:func:`thin_minmax`);
+    the RMS and the scales come from the full series."""
     trajs = _as_dict(trajs)
     n = max(len(trajs), 1)
     if fig is None:
-        fig = Figure(figsize=(13, 1.55 * n + 1.2), layout="constrained")
-    axes = fig.subplots(n, 3, sharex=True, squeeze=False)
-    col = colors(list(trajs))
+        fig = _panel_figure(13, 1.55 * n + 1.2, n, 3, left=0.75, right=0.2, top=0.65, bottom=0.75,
+                            hspace=0.32, wspace=0.6)
     series = {name: movement_error_series(tr, truth) for name, tr in trajs.items()}
+    axes = _shared_grid(fig, n, 3)
+    col = colors(list(trajs))
     cols = [("sog", "t", "m/s", "SOG", "{:.3f}"), ("cog", "t_cog", "deg", "COG", "{:.2f}"),
             ("dcog", "t_dcog", "deg", "ΔCOG", "{:.2f}")]
     shade: list[Patch] = []
+    span = _span(truth)
     for j, (key, tkey, unit, label, fmt) in enumerate(cols):
         vals = np.concatenate([np.abs(s[key][np.isfinite(s[key])]) for s in series.values()] or [np.zeros(0)])
         floor = 0.05 if key == "sog" else 0.2
         lim = max(float(np.percentile(vals, 98)) if len(vals) else floor, floor)
+        px = _columns(axes[0, j])
         for i, (name, s) in enumerate(series.items()):
             ax = axes[i, j]
             v = s[key]
             ok = np.isfinite(v)
-            ax.plot(s[tkey], v, "-", lw=0.8, color=col[name])
+            ax.plot(*thin_minmax(s[tkey], v, px), "-", lw=0.8, color=col[name])
             rms = float(np.sqrt(np.mean(v[ok] ** 2))) if ok.any() else float("nan")
-            shade = _shade_events(ax, events, _span(truth))
+            shade = _shade_events(ax, events, span)
             ax.set_ylim(-1.1 * lim, 1.1 * lim)
             ax.axhline(0, color="k", lw=0.5)
             ax.grid(alpha=0.3)
             ax.tick_params(labelsize=7)
-            ax.set_title(f"{name}: {label} RMS {fmt.format(rms)} {unit}", fontsize=8, color=col[name], loc="left")
+            ax.set_title(f"{name}: {label} RMS {fmt.format(rms)} {unit}", fontsize=8, color=col[name], loc="left",
+                         y=1.0)
             if j == 0:
                 ax.set_ylabel(f"[{unit}]", fontsize=8)
             if i == n - 1:
@@ -445,8 +622,9 @@ def plot_sog_cog(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, e
         moving = " (moving only)" if key != "sog" else ""
         axes[0, j].annotate(f"{label} estimate − truth{moving} [{unit}]", (0.5, 1.35), xycoords="axes fraction",
                             ha="center", fontsize=10, annotation_clip=False)
+    _finish_grid(axes)
     if shade:
-        fig.legend(handles=shade, loc="outside lower center", fontsize=8, frameon=False, ncols=len(shade))
+        fig.legend(handles=shade, loc="lower center", fontsize=8, frameon=False, ncols=len(shade))
     return fig
 
 
@@ -466,8 +644,9 @@ def plot_gnss_residuals(trajs: dict[str, Trajectory] | Trajectory, gnss: dict[st
         return None
     n = len(res)
     if fig is None:
-        fig = Figure(figsize=(11, 1.5 * n + 1.0), layout="constrained")
-    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+        fig = _panel_figure(11, 1.5 * n + 1.0, n, 1, left=0.6, right=0.2, top=0.3, bottom=0.75, hspace=0.3)
+    grid = _shared_grid(fig, n, 1)
+    axes = grid[:, 0]
     col = colors(list(trajs))
     top = max(float(np.percentile(np.concatenate([r["residual_m"] for r in res.values()]), 99)), 1.0)
     sig = float(np.nanmedian(gnss["sigma"])) if len(gnss["sigma"]) else None
@@ -479,17 +658,19 @@ def plot_gnss_residuals(trajs: dict[str, Trajectory] | Trajectory, gnss: dict[st
         if sig is not None and np.isfinite(sig):
             ax.axhline(sig, color="0.3", lw=0.8, ls="--")
         rms = float(np.sqrt(np.mean(r["residual_m"] ** 2)))
-        ax.set_title(f"{name}: RMS {rms:.2f} m over {len(r['t'])} fixes", fontsize=8, loc="left", color=col[name])
+        ax.set_title(f"{name}: RMS {rms:.2f} m over {len(r['t'])} fixes", fontsize=8, loc="left", color=col[name],
+                     y=1.0)
         ax.set_ylim(0, 1.1 * top)
         ax.set_ylabel("[m]", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
+    _finish_grid(grid)
     axes[-1].set_xlabel(f"time since the first fix (t = {t0:.1f} s) [s]")
     handles = [Line2D([], [], color="0.3", ls="--", label=f"fixes' 1σ (median {sig:.2g} m)")] if sig else []
     if windows:
         handles.append(Patch(facecolor="#f2d64b", alpha=0.35, label="hold-out windows (fixes withheld)"))
     if handles:
-        fig.legend(handles=handles, loc="outside lower center", fontsize=8, frameon=False, ncols=len(handles))
+        fig.legend(handles=handles, loc="lower center", fontsize=8, frameon=False, ncols=len(handles))
     return fig
 
 
@@ -509,12 +690,14 @@ def error_bound_panels(axes: Sequence[Axes], name: str, est: Trajectory, truth: 
     for ax, lab, unit, ei, si in zip(axes, ("x", "y", "yaw"), ("m", "m", "deg"), err, sig, strict=True):
         ok = np.isfinite(si)
         _shade_events(ax, events, _span(truth))
-        ax.fill_between(e.t, -nsigma * si, nsigma * si, where=ok, color=color, alpha=0.18, lw=0,
+        px = _columns(ax)
+        ts, ss = thin_minmax(e.t, si, px)
+        ax.fill_between(ts, -nsigma * ss, nsigma * ss, where=np.isfinite(ss), color=color, alpha=0.18, lw=0,
                         label=f"±{nsigma:g}σ")
-        ax.plot(e.t, ei, "-", color=color, lw=0.9, label="error")
+        ax.plot(*thin_minmax(e.t, ei, px), "-", color=color, lw=0.9, label="error")
         ax.axhline(0, color="k", lw=0.5)
         inside = float(np.mean(np.abs(ei[ok]) <= nsigma * si[ok])) if ok.any() else float("nan")
-        ax.set_title(f"{name}: {lab} error, {100 * inside:.1f} % inside ±{nsigma:g}σ", fontsize=9)
+        ax.set_title(f"{name}: {lab} error, {100 * inside:.1f} % inside ±{nsigma:g}σ", fontsize=9, y=1.0)
         ax.set_ylabel(f"{lab} error [{unit}]")
         # the axis follows the errors and the typical bound, not the largest bound (an odometry
         # estimator's bound grows without limit)
@@ -537,11 +720,10 @@ def plot_error_bounds(trajs: dict[str, Trajectory] | Trajectory, truth: Trajecto
         return None
     if fig is None:
         fig = _panel_figure(13, 2.3 * len(with_cov) + 0.6, len(with_cov), 3, hspace=0.45, wspace=0.75)
-    axes = np.asarray(fig.subplots(len(with_cov), 3, squeeze=False, sharex=True))
+    axes = _shared_grid(fig, len(with_cov), 3)
     for row, (name, tr) in zip(axes, with_cov.items(), strict=True):
         error_bound_panels(row, name, tr, truth, nsigma=nsigma, color=col[name], events=events)
-    for ax in axes[:-1].ravel():
-        ax.set_xlabel("")
+    _finish_grid(axes)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
     axes[0, -1].legend(fontsize=8, loc="upper right")
@@ -569,17 +751,19 @@ def nees_panel(ax: Axes, name: str, est: Trajectory, truth: Trajectory, *, color
                     label=f"running mean ({w} samples)")
         inside = float(np.mean((v >= NEES_BAND[0]) & (v <= NEES_BAND[1])))
         ax.set_title(f"{name}: NEES mean {np.mean(v):.3g}, {100 * inside:.1f} % of samples in the 95 % band"
-                     + (f" ({r['dropped']} without a usable covariance)" if r["dropped"] else ""), fontsize=9)
+                     + (f" ({r['dropped']} without a usable covariance)" if r["dropped"] else ""), fontsize=9,
+                     y=1.0)
         hi = max(float(np.percentile(v, 99.5)), NEES_BAND[1]) * 2
         lo = max(min(float(np.percentile(v, 1)), NEES_BAND[0]) / 2, floor)
         ax.set_ylim(lo, hi)
     else:
-        ax.set_title(f"{name}: no NEES samples", fontsize=9)
+        ax.set_title(f"{name}: no NEES samples", fontsize=9, y=1.0)
     ax.set_yscale("log")
     ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f"{y:g}"))
     ax.set_ylabel("NEES (log)")
     ax.set_xlabel("time [s]")
     ax.grid(alpha=0.3, which="both")
+    _ticks_in_view(ax)
     return ax.figure
 
 
@@ -597,11 +781,11 @@ def plot_nees(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, even
         return nees_panel(ax, name, tr, truth, color=col[name], events=events)
     if fig is None:
         fig = _panel_figure(11, 2.3 * len(with_cov) + 0.6, len(with_cov), 1, hspace=0.45)
-    axes = np.asarray(fig.subplots(len(with_cov), 1, squeeze=False, sharex=True)).ravel()
+    grid = _shared_grid(fig, len(with_cov), 1)
+    axes = grid.ravel()
     for a, (name, tr) in zip(axes, with_cov.items(), strict=True):
         nees_panel(a, name, tr, truth, color=col[name], events=events)
-        if a is not axes[-1]:
-            a.set_xlabel("")
+    _finish_grid(grid)
     axes[0].legend(fontsize=8, loc="upper right", ncol=3)
     return fig
 
@@ -637,11 +821,13 @@ def covariance_panel(ax: Axes, name: str, tr: Trajectory, truth: Trajectory | No
     ellipses larger than the track are clipped)."""
     xy = np.column_stack([tr.x, tr.y])
     if truth is not None and len(truth):
-        ax.plot(truth.x, truth.y, "-", color="k", lw=1.2, label="truth")
         inside = (truth.t >= tr.t[0] - MAX_DT) & (truth.t <= tr.t[-1] + MAX_DT)
         xy = np.vstack([xy, np.column_stack([truth.x[inside], truth.y[inside]])])
-    ax.plot(tr.x, tr.y, "-", color=color, lw=1.0, label=name)
     (x0, x1), (y0, y1) = _limits(xy)
+    cell = _pixel(ax, ((x0, x1), (y0, y1)))  # the lines drawn thinned to this panel's pixels
+    if truth is not None and len(truth):
+        ax.plot(*thin_xy(truth.x, truth.y, cell), "-", color="k", lw=1.2, label="truth")
+    ax.plot(*thin_xy(tr.x, tr.y, cell), "-", color=color, lw=1.0, label=name)
     extent = max(x1 - x0, y1 - y0)
     mag = ellipse_magnification(tr, extent, n_ellipses=n_ellipses, nsigma=nsigma)
     idx = np.unique(np.linspace(0, len(tr) - 1, n_ellipses).astype(int))
@@ -655,15 +841,17 @@ def covariance_panel(ax: Axes, name: str, tr: Trajectory, truth: Trajectory | No
         largest = max(largest, nsigma * float(np.sqrt(w[1])))
         ang = np.degrees(np.arctan2(v[1, 1], v[0, 1]))
         a, b = 2 * mag * nsigma * np.sqrt(w[1]), 2 * mag * nsigma * np.sqrt(w[0])
-        ax.add_patch(Ellipse((tr.x[i], tr.y[i]), a, b, angle=ang, fill=False, color=color, lw=1.0))
+        # (add_artist: the limits are set below, so no patch needs to stretch the data limits)
+        ax.add_artist(Ellipse((tr.x[i], tr.y[i]), a, b, angle=ang, fill=False, color=color, lw=1.0))
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x (east) [m]")
     ax.set_ylabel("y (north) [m]")
     scale = f"magnified ×{mag:g}" if mag != 1 else "true scale"
-    ax.set_title(f"{name}: {nsigma:g}σ ellipses ({scale}; largest {largest:.3g} m)", fontsize=9)
+    ax.set_title(f"{name}: {nsigma:g}σ ellipses ({scale}; largest {largest:.3g} m)", fontsize=9, y=1.0)
     ax.grid(alpha=0.3)
+    _ticks_in_view(ax)
     ax.legend(fontsize=8, loc="best")
     return ax.figure
 

@@ -154,3 +154,66 @@ def test_loop_closures_are_drawn_between_the_estimate_poses_at_their_times():
     assert "loop closures (2)" in labels
     fig = plots.plot_trajectory_panels({"isam2": est}, est)
     assert not any(str(c.get_label()).startswith("loop closures") for ax in fig.axes for c in ax.collections)
+
+
+def test_thin_minmax_keeps_every_column_extreme_and_the_gaps():
+    rng = np.random.default_rng(3)
+    x = np.linspace(0.0, 100.0, 20001)
+    y = rng.standard_normal(len(x))
+    y[5000] = 50.0  # one spike up, one down, and a gap
+    y[12000] = -40.0
+    y[8000:8100] = np.nan
+    tx, ty = plots.thin_minmax(x, y, 200)
+    assert len(tx) < 0.1 * len(x) and np.all(np.diff(tx) >= 0)
+    assert np.nanmax(ty) == 50.0 and np.nanmin(ty) == -40.0
+    assert tx[0] == x[0] and tx[-1] == x[-1] and np.isnan(ty).any()
+    # each column's min and max among the kept samples (a column is 0.5 wide)
+    col = np.minimum((x / 0.5).astype(int), 199)
+    tcol = np.minimum((tx / 0.5).astype(int), 199)
+    for c in (0, 37, 99, 160, 199):
+        np.testing.assert_equal(np.nanmax(ty[tcol == c]), np.nanmax(y[col == c]))
+        np.testing.assert_equal(np.nanmin(ty[tcol == c]), np.nanmin(y[col == c]))
+    # few samples per column, or not sorted: untouched
+    assert len(plots.thin_minmax(x[:500], y[:500], 200)[0]) == 500
+    assert len(plots.thin_minmax(x[::-1], y, 200)[0]) == len(x)
+
+
+def test_thin_track_keeps_the_peak_value_and_the_ends():
+    t = np.linspace(0.0, 2 * np.pi, 5001)
+    x, y = 100 * np.cos(t), 100 * np.sin(t)
+    v = np.zeros(len(t) - 1)
+    v[1234] = 7.0
+    segs, sv = plots.thin_track(x, y, v, cell=1.0)
+    assert len(segs) < 0.2 * len(v) and sv.max() == 7.0
+    np.testing.assert_allclose(segs[0, 0], [x[0], y[0]])
+    np.testing.assert_allclose(segs[-1, 1], [x[-1], y[-1]])
+    np.testing.assert_allclose(segs[1:, 0], segs[:-1, 1])  # still one connected track
+    segs0, sv0 = plots.thin_track(x, y, v, cell=0.0)
+    assert len(segs0) == len(v) and np.array_equal(sv0, v)
+    tx, ty = plots.thin_xy(x, y, 1.0)
+    assert len(tx) == len(segs) + 1 and np.max(np.hypot(np.diff(tx), np.diff(ty))) < 3.0
+
+
+def test_in_window_keeps_the_segments_crossing_it_and_breaks_between_runs():
+    x = np.array([-10.0, -5.0, 0.5, 5.0, 10.0, 20.0, 0.2, 30.0])
+    y = np.array([0.0, 0.0, 0.5, 0.0, -5.0, 20.0, 0.0, 0.0])
+    wx, wy = plots._in_window(x, y, -1.0, 1.0, -1.0, 1.0)
+    # (-5,0)-(0.5,0.5)-(5,0) meets it; (20,20)-(0.2,0)-(30,0) too; (5,0)-(10,-5) and (10,-5)-(20,20) do not
+    assert np.isnan(wx).sum() == 1
+    np.testing.assert_array_equal(wx[~np.isnan(wx)], [-5.0, 0.5, 5.0, 20.0, 0.2, 30.0])
+    # a segment crossing the window with both ends outside is kept
+    wx, _ = plots._in_window(np.array([-5.0, 5.0, 9.0]), np.zeros(3), -1.0, 1.0, -1.0, 1.0)
+    np.testing.assert_array_equal(wx, [-5.0, 5.0])
+
+
+def test_sog_cog_small_multiples_share_one_time_axis_and_keep_the_rms(trajs):
+    truth, tj = trajs
+    fig = plots.plot_sog_cog(tj, truth)
+    axes = np.array(fig.axes).reshape(len(tj), 3)
+    assert len({a.get_xlim() for a in fig.axes}) == 1
+    for j in range(3):
+        assert len({a.get_ylim() for a in axes[:, j]}) == 1
+    assert not any(lab.get_visible() for a in axes[:-1].ravel() for lab in a.get_xticklabels())
+    series = plots.movement_error_series(tj["smoother"], truth)
+    rms = float(np.sqrt(np.nanmean(series["sog"] ** 2)))
+    assert axes[0, 0].get_title(loc="left") == f"smoother: SOG RMS {rms:.3f} m/s"
