@@ -94,8 +94,7 @@ def run(name: str, log: NavLog, *, on_estimate: OnEstimate | None = None, **opti
     if why:
         raise ValueError(f"estimator {name!r} cannot run on this log: {why}")
     est = cls(log, on_estimate=on_estimate, **options)
-    for rec in log.records:
-        est.add(rec)
+    est.feed(log.records)
     return est.finish()
 
 

@@ -7,6 +7,9 @@ each field's help as metadata: :func:`graphnav.config.option`), ``add(record) ->
         est.add(rec)                   # an Estimate when the estimator publishes one, else None
     result = est.finish()              # the RunResult
 
+(:func:`graphnav.estimators.run` calls ``est.feed(log.records)``: the same loop, which an estimator may
+shorten, as the graph does for runs of IMU samples.)
+
 ``online(**options)`` gives the record-by-record form live mode runs (``None``: the estimator has none).
 :class:`BatchEstimator` is the form of an estimator that solves the whole log at once: ``add`` keeps the
 records, ``finish`` solves them (``solve(log)``).
@@ -14,7 +17,7 @@ records, ``finish`` solves them (``solve(log)``).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
@@ -71,6 +74,12 @@ class Estimator:
 
     def add(self, record: Record) -> Estimate | None:
         raise NotImplementedError
+
+    def feed(self, records: Sequence[Record]) -> None:
+        """:meth:`add` of every record, in order (the estimates go to ``on_estimate``; an estimator may take
+        runs of records at once, with the same result)."""
+        for rec in records:
+            self.add(rec)
 
     def finish(self) -> RunResult:
         raise NotImplementedError

@@ -9,11 +9,12 @@ otherwise (docs/smoother.md).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, ClassVar
 
 from ..config import config_from_options, given_option
 from ..graph.log_runs import unmet
-from ..graph.navigator import Navigator
+from ..graph.navigator import Navigator, feed
 from ..graph.smoother_config import SmootherConfig, auto_motion
 from ..log import NavLog, Record
 from ..result import Estimate, OnEstimate, RunResult
@@ -79,14 +80,29 @@ class Smoother(Estimator):
                          history=False)
 
     def add(self, record: Record) -> Estimate | None:
-        checked = False
+        return self.nav.add(record, checked=self._was_checked(record))
+
+    def feed(self, records: Sequence[Record]) -> None:
+        """:meth:`add` of each record; runs of IMU samples and truth poses at once
+        (:func:`graphnav.graph.navigator.feed`)."""
+        flags: list[bool] = []
+        if self._checked is not None:  # (as _was_checked of each record)
+            for rec, (r, ok) in zip(records, self._checked, strict=False):  # (records first: none taken beyond)
+                if r is not rec:
+                    break
+                flags.append(ok)
+            if len(flags) < len(records):
+                self._checked = None
+        feed(self.nav, records, flags + [False] * (len(records) - len(flags)))
+
+    def _was_checked(self, record: Record) -> bool:
+        """Whether ``record`` is the log's next one and its reader checked it."""
         if self._checked is not None:
             nxt = next(self._checked, None)
             if nxt is not None and nxt[0] is record:
-                checked = nxt[1]
-            else:  # not the log's next record: every record from here on is checked
-                self._checked = None
-        return self.nav.add(record, checked=checked)
+                return nxt[1]
+            self._checked = None  # not the log's next record: every record from here on is checked
+        return False
 
     def finish(self) -> RunResult:
         return self.nav.result()

@@ -32,7 +32,7 @@ factor carries its sensor group (:data:`GROUPS`), which the noise estimation use
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import gtsam
@@ -197,6 +197,23 @@ class GraphBuilder:
                 return
         self._ingest(rec)
 
+    def push_quiet(self, recs: Sequence[Record]) -> bool:
+        """IMU and truth records that can make no keyframe ready, taken as :meth:`push` of each would
+        (:meth:`Keyframes.quiet <graphnav.graph.keyframes.Keyframes.quiet>`); ``False`` (nothing done) before
+        the anchor, on the planar graph, before the first of either kind, or when they might."""
+        imu, counts = self.motion.imu, self.counts
+        samples = [r for r in recs if r.kind == "imu"]
+        n_truth, ts = len(recs) - len(samples), [r.t for r in recs]
+        if (imu is None or not self.anchor.chosen or (samples and "imu" not in counts) or (n_truth and "truth" not in
+                counts) or not self.keyframes.quiet(min(ts), max(ts), max(r.t for r in samples) if samples else None)):
+            return False
+        counts["records"] += len(recs)
+        for kind, m in (("imu", len(samples)), ("truth", n_truth), ("ignored", n_truth)):  # (truth: a reference)
+            if m:
+                counts[kind] += m
+        imu.extend(samples)
+        return True
+
     def finish(self) -> None:
         """End of the records: every keyframe becomes ready; measurements after the last keyframe
         join it (in a batch of their own when its batch is already out)."""
@@ -348,28 +365,8 @@ class GraphBuilder:
         return s
 
     def info(self) -> dict[str, Any]:
-        kf, imu = self.keyframes, self.motion.imu
-        return {
-            "anchor": self.anchor.name,
-            "keyframes": len(kf),
-            "keyframe_policy": "scan" if kf.mode == "scan" else f"grid {kf.period:g} s",
-            **gate_info(self.meas.gate),
-            "gnss_online_scale": {"final": self.meas.gnss_scale.scale, "max": self.meas.gnss_scale.max_scale},
-            **self.scans.info(),
-            "beacons": sorted(self.meas.beacon_ids),
-            **self.scans.cloud3d.info(),
-            "compass_bias_estimated": self.meas.bias_key is not None,
-            "state": self.space.name,
-            **({"imu_noise": imu.source if imu else "none (vessel model)"} if imu is not None else {}),
-            **({"vessel_position_walk": {"walk": imu.vessel_walk, "estimate": imu.walk_estimate}}
-               if imu is not None and not imu else {}),
-            **({"vessel_rot": {"source": imu.rot.source, "rate_hz": 1.0 / imu.rot.period(),
-                               "other_sources_ignored": imu.rot.ignored, "implausible": imu.rot.implausible}}
-               if imu is not None and not imu and imu.rot is not None else {}),
-            "defaulted_sigmas": sorted(self.defaulted),
-            **(self.scans.loops.info() if self.scans.loops is not None else {}),
-            **self.counts,
-        }
+        """Counts and settings of the graph so far (:func:`builder_info`)."""
+        return builder_info(self)
 
 
 def keyframe_tilt(s: Step, state: NavPrev | None, key: int) -> tuple[float, float] | None:
@@ -381,3 +378,29 @@ def keyframe_tilt(s: Step, state: NavPrev | None, key: int) -> tuple[float, floa
     else:
         return None
     return float(r.roll()), float(r.pitch())
+
+
+def builder_info(b: GraphBuilder) -> dict[str, Any]:
+    """A builder's counts and settings so far: anchor, keyframes, gate, scans, beacons, state, IMU, loops."""
+    kf, imu = b.keyframes, b.motion.imu
+    return {
+        "anchor": b.anchor.name,
+        "keyframes": len(kf),
+        "keyframe_policy": "scan" if kf.mode == "scan" else f"grid {kf.period:g} s",
+        **gate_info(b.meas.gate),
+        "gnss_online_scale": {"final": b.meas.gnss_scale.scale, "max": b.meas.gnss_scale.max_scale},
+        **b.scans.info(),
+        "beacons": sorted(b.meas.beacon_ids),
+        **b.scans.cloud3d.info(),
+        "compass_bias_estimated": b.meas.bias_key is not None,
+        "state": b.space.name,
+        **({"imu_noise": imu.source if imu else "none (vessel model)"} if imu is not None else {}),
+        **({"vessel_position_walk": {"walk": imu.vessel_walk, "estimate": imu.walk_estimate}}
+           if imu is not None and not imu else {}),
+        **({"vessel_rot": {"source": imu.rot.source, "rate_hz": 1.0 / imu.rot.period(),
+                           "other_sources_ignored": imu.rot.ignored, "implausible": imu.rot.implausible}}
+           if imu is not None and not imu and imu.rot is not None else {}),
+        "defaulted_sigmas": sorted(b.defaulted),
+        **(b.scans.loops.info() if b.scans.loops is not None else {}),
+        **b.counts,
+    }

@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
+from collections.abc import Iterable
 from typing import Any
 
 import gtsam
@@ -115,11 +116,19 @@ class Coaster:
             return None
         if rec.kind == "truth":  # a reference, not an input
             return rec
-        t = float(rec.t)
-        if self.t_rec is not None and t > self.t_rec + EPS:
-            self.rec_dts.append(t - self.t_rec)
-        self.t_rec = t if self.t_rec is None else max(self.t_rec, t)
+        self.record_times((rec.t,))
         return rec
+
+    def record_times(self, times: Iterable[float]) -> None:
+        """Records at ``times`` came in, in this order (:meth:`record` of each, a run of IMU samples at once)."""
+        self.out = []
+        t_rec, dts = self.t_rec, self.rec_dts
+        for t in times:
+            t = float(t)
+            if t_rec is not None and t > t_rec + EPS:
+                dts.append(t - t_rec)
+            t_rec = t if t_rec is None else max(t_rec, t)
+        self.t_rec = t_rec
 
     def live_horizon(self, now: float) -> float | None:
         """Live mode at stream time ``now``: coast up to the returned time once the input has been

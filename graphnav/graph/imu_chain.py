@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -116,6 +117,7 @@ class ImuChain:
         self.rows: list[tuple[float, ...]] = []  # ax, ay, az, wx, wy, wz
         self.cum: list[float] = []  # the integrated gyro rate's norm up to each t [rad] (the keyframe rule)
         self.six: bool | None = None
+        self._period: tuple[tuple[int, float] | None, float] = (None, 0.0)  # (len(t), t[-1]) -> period()
         self.params: gtsam.PreintegrationParams | None = None
         self.body_P_sensor: gtsam.Pose3 | None = None  # the IMU's mount (graphnav.graph.mounts), when not at the origin
         walk = cfg.vessel_position_walk
@@ -188,27 +190,34 @@ class ImuChain:
         """The median interval of the records so far [s] (1 / ``hz`` of the config before two)."""
         if len(self.t) < 2:
             return 1.0 / self.cfg.hz
-        t = self.t[-200:]
-        return median([b - a for a, b in zip(t[:-1], t[1:], strict=True)])  # (np.median of np.diff, to the bit)
+        key = (len(self.t), self.t[-1])  # (samples are appended in time order and pruned from the front only)
+        if self._period[0] != key:
+            t = self.t[-200:]
+            self._period = (key, median([b - a for a, b in zip(t[:-1], t[1:], strict=True)]))  # (np.median of np.diff)
+        return self._period[1]
 
     def add(self, r: Imu) -> None:
-        six = r.six_axis
-        if self.six is None:
-            self.six = six
-        if six:
-            row = (r.ax, r.ay, r.az, r.wx, r.wy, r.wz)
-        else:
-            row = (r.ax, r.ay, 0.0, 0.0, 0.0, r.wz)
-        rate = math.sqrt(row[3] ** 2 + row[4] ** 2 + row[5] ** 2)
-        if self.t and r.t <= self.t[-1]:
-            if r.t == self.t[-1]:
-                self.rows[-1] = row
-                if len(self.t) > 1:
-                    self.cum[-1] = self.cum[-2] + rate * (self.t[-1] - self.t[-2])
-            return  # out of order: dropped (the interval it covers is held by its neighbour)
-        self.cum.append(self.cum[-1] + rate * (r.t - self.t[-1]) if self.t else 0.0)
-        self.t.append(r.t)
-        self.rows.append(row)
+        self.extend((r,))
+
+    def extend(self, recs: Iterable[Imu]) -> None:
+        """IMU records in arrival order (one at the newest time replaces it; an older one is dropped: the
+        interval it covers is held by its neighbour)."""
+        ts, rows, cum = self.t, self.rows, self.cum
+        for r in recs:
+            six = r.six_axis
+            if self.six is None:
+                self.six = six
+            row = (r.ax, r.ay, r.az, r.wx, r.wy, r.wz) if six else (r.ax, r.ay, 0.0, 0.0, 0.0, r.wz)
+            rate = math.sqrt(row[3] ** 2 + row[4] ** 2 + row[5] ** 2)
+            if ts and r.t <= ts[-1]:
+                if r.t == ts[-1]:
+                    rows[-1] = row
+                    if len(ts) > 1:
+                        cum[-1] = cum[-2] + rate * (ts[-1] - ts[-2])
+                continue
+            cum.append(cum[-1] + rate * (r.t - ts[-1]) if ts else 0.0)
+            ts.append(r.t)
+            rows.append(row)
 
     def samples(self, ta: float, tb: float) -> list[tuple[NDArray[np.float64], NDArray[np.float64], float]]:
         """``(acc, omega, dt)`` over ``[ta, tb]``: each record held over the interval since the

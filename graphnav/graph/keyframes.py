@@ -140,6 +140,19 @@ class Keyframes:
         behind_scan = rec.kind == "scan" and self.mode == "scan" and bool(self.t) and t < self.t[-1] - EPS
         return behind_batch or behind_scan
 
+    def quiet(self, t_lo: float, t_hi: float, t_data: float | None) -> bool:
+        """Whether IMU and truth records from ``t_lo`` to ``t_hi`` (the newest with data at ``t_data``; truth is a
+        reference) can neither make, complete nor miss a keyframe: the keyframes at the scans, none waiting for
+        its batch, none of them late. If so their times are clocked (as :meth:`clock` of each); ``False``:
+        nothing done."""
+        if self.mode != "scan" or self.finished or self.stepped < len(self.t) or (
+                self.stepped > 0 and t_lo < self.t[self.stepped - 1] - EPS):
+            return False
+        if t_data is not None:
+            self.t_data = t_data if self.t_data is None else max(self.t_data, t_data)
+        self.t_last = t_hi if self.t_last is None else max(self.t_last, t_hi)
+        return True
+
     def clock(self, rec: Record) -> None:
         """The newest record's time; on the grid, the keyframes it completes."""
         t, kind = rec.t, rec.kind

@@ -91,9 +91,9 @@ class _Index:
         if self.tree is not None and self.n_tree:
             kk = min(n + max(0, self.n_tree - valid), self.n_tree)
             d, idx = self.tree.query(q, k=kk)
-            for dd, ii in zip(np.atleast_1d(d), np.atleast_1d(idx), strict=True):
-                if np.isfinite(dd) and ii < valid:
-                    out.append((float(dd), int(ii)))
+            d, idx = np.atleast_1d(d), np.atleast_1d(idx)
+            ok = np.isfinite(d) & (idx < valid)
+            out.extend(zip(d[ok].tolist(), idx[ok].tolist(), strict=True))
         lo, hi = self.n_tree, min(len(self.rows), valid)
         if hi > lo:
             rest = np.array(self.rows[lo:hi])

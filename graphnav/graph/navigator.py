@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, replace
 from typing import Any
 
@@ -218,6 +218,17 @@ class Navigator(Coasting):
         self.builder.push(rec)
         return self._advance()
 
+    def add_quiet(self, recs: Sequence[Record]) -> bool:
+        """Checked IMU and truth records that make no keyframe ready, taken as :meth:`add` of each would (a
+        log's runs between scans: :func:`feed`); ``False`` (nothing done) when they might
+        (:meth:`GraphBuilder.push_quiet`)."""
+        if self._result is not None or not self.builder.push_quiet(recs):
+            return False
+        self.n_records += len(recs)
+        self._rec = recs[-1]
+        self.coaster.record_times([r.t for r in recs if r.kind != "truth"])  # (truth: a reference, not an input)
+        return True
+
     def flush(self) -> Estimate | None:
         """End of input: solve the keyframes still waiting for a later record."""
         if self.builder.finished:
@@ -269,7 +280,7 @@ class Navigator(Coasting):
                 return None
             self._take(s.values, k)
             if self.cfg.optimizer.batch_init == "incremental" and k + 1 >= self._next_init:
-                self._initialise(k, s.t)
+                batch_initialise(self, k, s.t)
             return None
         pose, cov = self._newest(self.solver, k, s.t, loops)
         self.track.timing((time.perf_counter() - c0) * 1e3, (time.process_time() - p0) * 1e3)
@@ -324,25 +335,6 @@ class Navigator(Coasting):
             raise solve_failure(exc, s.t, self._rec, self.n_records) from None
         self.last_pose, self.last_cov = self._newest(self.front, k, s.t, loops)
         self.extra["loop_front_end"] = "isam2"
-
-    def _initialise(self, k: int, t: float) -> None:
-        """Batch's incremental initial guess: LM over the graph so far from the current guess; the
-        solution becomes the guess, and the poses and beacons to come are chained from it (not from
-        dead reckoning of the whole log). Causal: only the records up to keyframe ``k`` are used."""
-        c0 = time.perf_counter()
-        lm = self.solver.lm
-        try:
-            values, it = levenberg_marquardt(self.solver.graph, self.solver.initial,
-                                             replace(lm, tol=max(lm.tol, 1e-8)))
-        except SolverError as exc:
-            raise solve_failure(exc, t, self._rec, self.n_records) from None
-        self.solver.initial = values
-        self._take(values, k)
-        self._next_init = max(k + 2, math.ceil((k + 1) * self.cfg.optimizer.batch_init_growth))
-        e = self.extra
-        e["batch_init_solves"] = e.get("batch_init_solves", 0) + 1
-        e["batch_init_iterations"] = e.get("batch_init_iterations", 0) + it
-        e["batch_init_ms"] = e.get("batch_init_ms", 0.0) + (time.perf_counter() - c0) * 1e3
 
     def _take(self, values: gtsam.Values, k: int) -> None:
         """Keyframe ``k``'s state in ``values`` is the next step's starting point (batch)."""
@@ -437,3 +429,54 @@ class Navigator(Coasting):
                 for k in range(n):
                     self.on_estimate(float(t[k]), traj.poses[k], None if traj.cov is None else traj.cov[k])
         return RunResult(traj, self.online(), step_ms, np.array(self.track.icp_ms), info)
+
+
+def batch_initialise(nav: Navigator, k: int, t: float) -> None:
+    """Batch's incremental initial guess: LM over the graph so far from the current guess; the
+    solution becomes the guess, and the poses and beacons to come are chained from it (not from
+    dead reckoning of the whole log). Causal: only the records up to keyframe ``k`` are used."""
+    c0 = time.perf_counter()
+    lm = nav.solver.lm
+    try:
+        values, it = levenberg_marquardt(nav.solver.graph, nav.solver.initial,
+                                         replace(lm, tol=max(lm.tol, 1e-8)))
+    except SolverError as exc:
+        raise solve_failure(exc, t, nav._rec, nav.n_records) from None
+    nav.solver.initial = values
+    nav._take(values, k)
+    nav._next_init = max(k + 2, math.ceil((k + 1) * nav.cfg.optimizer.batch_init_growth))
+    e = nav.extra
+    e["batch_init_solves"] = e.get("batch_init_solves", 0) + 1
+    e["batch_init_iterations"] = e.get("batch_init_iterations", 0) + it
+    e["batch_init_ms"] = e.get("batch_init_ms", 0.0) + (time.perf_counter() - c0) * 1e3
+
+
+
+QUIET = ("imu", "truth")  # the kinds :meth:`Navigator.add_quiet` takes in runs
+
+
+def feed(nav: Navigator, records: Sequence[Record], checked: Sequence[bool]) -> None:
+    """Every record of ``records`` into ``nav`` as ``nav.add(rec, checked=c)`` of each would (``c``: ``checked``
+    at its place): the same keyframe steps, estimates and callbacks, in the same order. A run of checked IMU
+    samples and truth poses (100 Hz and 10 Hz: 87 % of a vessel's log) goes in at once where it can make no
+    keyframe ready (:meth:`Navigator.add_quiet`), the rest one by one."""
+    n, i = len(records), 0
+    while i < n:
+        j = i
+        while j < n and checked[j] and records[j].kind in QUIET:
+            j += 1
+        if j == i:
+            nav.add(records[i], checked=checked[i])
+            i += 1
+            continue
+        for _ in range(3):  # a keyframe waiting is readied by the run's first record (the second at its very time)
+            if nav.add_quiet(records[i:j]):
+                i = j
+                break
+            nav.add(records[i], checked=True)
+            i += 1
+            if i == j:
+                break
+        for rec in records[i:j]:  # (before the anchor, on a keyframe grid, a late record: one by one)
+            nav.add(rec, checked=True)
+        i = j

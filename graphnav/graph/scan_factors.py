@@ -73,8 +73,8 @@ def default_matcher(options: dict[str, Any], sweep_s: float = 0.0) -> Matcher | 
             cur_xy = scan_points(cur, cfg, sweep_s=sweep_s, twist=twist)
             last[:] = [None, None]
         else:
-            prev_xy = last[1] if prev is last[0] else scan_points(prev, cfg)  # consecutive pairs: each scan once
-            cur_xy = scan_points(cur, cfg)
+            prev_xy = last[1] if prev is last[0] else scan_points_of(prev, cfg)  # consecutive pairs: each scan once
+            cur_xy = scan_points_of(cur, cfg)
             last[:] = [cur, cur_xy]
         r = match_points(cur_xy, prev_xy, cfg, init=init, init_cov=init_cov)
         inflated = bool(r.quality.get("inflated", False))
@@ -174,10 +174,22 @@ def make_loop_closer(cfg: ScanConfig, icp_opts: dict[str, Any], extrinsic: gtsam
                       points)
 
 
-def scan_points_of(scan: Scan, icfg: Any) -> NDArray[np.float64]:
-    from ..scan.weighted_icp import scan_points
+#: the newest scan's points and the config they were made with (:func:`scan_points_of`)
+_newest_points: tuple[Any, Any, NDArray[np.float64] | None] = (None, None, None)
 
-    return scan_points(scan, icfg)
+
+def scan_points_of(scan: Scan, icfg: Any) -> NDArray[np.float64]:
+    """A scan's points (:func:`graphnav.scan.weighted_icp.scan_points`, not de-skewed), a copy: the newest
+    scan's are kept for the next one asking with an equal config (the matcher and the loop closer take each
+    keyframe's scan in turn)."""
+    global _newest_points
+    last, cfg, pts = _newest_points
+    if last is not scan or pts is None or not (cfg is icfg or cfg == icfg):
+        from ..scan.weighted_icp import scan_points
+
+        pts = scan_points(scan, icfg)
+        _newest_points = (scan, icfg, pts)
+    return pts.copy()
 
 
 def screen_match(cfg: ScanConfig, ok: bool, mp: Any, cov: NDArray[np.float64] | None, init: NDArray[np.float64],

@@ -215,6 +215,20 @@ def _init_fields(cls: type) -> list[str]:
     return [f.name for f in dataclasses.fields(cls) if f.init]
 
 
+def _in_order(order: np.ndarray, per_kind: dict[str, list[Record | None]], path: Path, skipped: bool) -> list[Record]:
+    """The records of ``per_kind`` interleaved as ``order`` (kind indices) says, those skipped (``None``) left
+    out; a LogError unless ``order`` takes each kind's records exactly."""
+    bad = LogError("record order does not match the record arrays", file=str(path), field="order")
+    if order.size and (order.min() < 0 or order.max() >= len(KINDS)):
+        raise bad
+    counts = np.bincount(order.astype(np.int64), minlength=len(KINDS))
+    if any(int(counts[i]) != len(per_kind.get(k, ())) for i, k in enumerate(KINDS)):
+        raise bad
+    nexts = [iter(per_kind.get(k, ())).__next__ for k in KINDS]
+    records = [nexts[c]() for c in order.tolist()]
+    return [r for r in records if r is not None] if skipped else records
+
+
 def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> NavLog:
     order = _get(data, "order", path, integer=True)
     meta_arr = data.read("meta") if "meta" in data else np.array("{}")
@@ -248,6 +262,11 @@ def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> N
             for i in range(n):
                 recs.append(Scan(float(cols["t"][i]), rng[off[i]:off[i + 1]], ang[off[i]:off[i + 1]],
                                  float(cols["range_max"][i])))
+            # the scans check_record could reject: a scalar field, or a beam without a finite angle (1-D
+            # ranges and angles of one length by construction)
+            suspects = suspect_rows(Scan, {"t": cols["t"], "range_max": cols["range_max"]}, limits)
+            no_angle = np.flatnonzero(~np.isfinite(ang))
+            suspects[np.searchsorted(off, no_angle, side="right") - 1] = True
         elif kind == "cloud":
             recs = _read_clouds(data, path, cols["t"], cols["roll"], cols["pitch"])
         else:
@@ -272,18 +291,7 @@ def _read(data: _Archive, path: Path, lenient: bool, limits: Limits | None) -> N
                 skipped.append(str(err))
                 recs[i] = None
         per_kind[kind] = recs
-    cursor = dict.fromkeys(per_kind, 0)
-    records: list[Record] = []
-    for c in order.tolist():
-        k = KINDS[c] if 0 <= c < len(KINDS) else None
-        if k is None or k not in per_kind or cursor[k] >= len(per_kind[k]):
-            raise LogError("record order does not match the record arrays", file=str(path), field="order")
-        rec = per_kind[k][cursor[k]]
-        if rec is not None:
-            records.append(rec)
-        cursor[k] += 1
-    if any(cursor[k] != len(v) for k, v in per_kind.items()):
-        raise LogError("record order does not match the record arrays", file=str(path), field="order")
+    records = _in_order(order, per_kind, path, bool(skipped))
     known = []
     if "beacon_known/id" in data:
         ids = _get(data, "beacon_known/id", path, numeric=False).tolist()

@@ -450,3 +450,27 @@ def test_beacon_bearing_leaves_the_elevation_free():
             assert err(lm, roll, azimuth(lm, roll)) < 0.1  # (the elevation at BEACON_ELEVATION_SIGMA 1 rad)
         assert err(lm, 10.0, azimuth(lm, 10.0) + math.radians(2.0)) > 1.5  # the azimuth holds (0.5 x 2^2)
     assert err(abeam, 20.0, azimuth(abeam, 20.0), tilt=False) > 10.0  # taken as level: the elevation is held
+
+
+def test_imu_chain_period_is_the_median_interval_of_its_newest_samples_as_they_come_and_go():
+    """The IMU's period (kept between calls): numpy's median of the last 200 intervals, after every run of
+    samples, a replaced newest sample, an out-of-order one and the pruning of old ones."""
+    rng = np.random.default_rng(5)
+    chain = ImuChain(ImuConfig())
+    t, pruned = 0.0, 0
+    for step in range(300):
+        dts = rng.choice([0.01, 0.0125, 0.02], size=int(rng.integers(1, 40)))
+        times = t + np.cumsum(dts)
+        t = float(times[-1])
+        chain.extend([Imu(float(ti), 0.1, 0.0, 0.01) for ti in times])
+        if step % 7 == 3:
+            chain.add(Imu(t, 0.2, 0.0, 0.02))  # at the newest time: replaces it
+            chain.add(Imu(t - 0.05, 0.2, 0.0, 0.02))  # older: dropped
+        if step % 5 == 2:
+            n = len(chain.t)
+            chain.prune(t - 5.0)
+            pruned += len(chain.t) < n
+        want = float(np.median(np.diff(np.asarray(chain.t[-200:])))) if len(chain.t) >= 2 else 1.0 / chain.cfg.hz
+        assert chain.period() == want
+        assert chain.period() == want  # (the kept value)
+    assert pruned >= 4

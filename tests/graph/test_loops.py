@@ -286,3 +286,23 @@ def test_motion_chain_covariance_from_prefixes_equals_the_direct_compounding():
         got = ch.covariance(a, b)
         assert np.max(np.abs(got - C)) < 1e-8 * np.max(np.abs(C))
         assert np.linalg.eigvalsh(got).min() > 0
+
+
+def test_place_index_finds_the_nearest_valid_rows_as_a_linear_scan_does():
+    """The places' index (a k-d tree over most rows, a linear scan over the newest): the ``n`` nearest among
+    the first ``valid`` rows, as distances and indices, nearest first."""
+    from graphnav.graph.loop_places import _Index
+
+    rng = np.random.default_rng(3)
+    rows = rng.uniform(-50.0, 50.0, size=(300, 2))
+    idx = _Index()
+    for i, r in enumerate(rows):
+        idx.add(r)
+        if i % 37 == 36:
+            q = rng.uniform(-50.0, 50.0, size=2)
+            for n, valid in ((5, i + 1), (8, max(1, i // 2)), (400, i - 3)):
+                d = np.hypot(*(rows[:valid] - q).T)
+                want = sorted(zip(d.tolist(), range(valid), strict=True))[:n]
+                got = idx.nearest(q, n, valid)
+                assert [j for _, j in got] == [j for _, j in want]
+                np.testing.assert_allclose([x for x, _ in got], [x for x, _ in want], rtol=1e-12)
