@@ -4,7 +4,9 @@ A track is a :class:`~graphnav.trajectory.Trajectory` in the local frame convert
 geodetic origin (:func:`graphnav.geodesy.origin_frame`; without one nothing is written -- an origin
 is never invented). Times are the log's seconds read as POSIX (UTC): a log whose times are not POSIX
 (a simulation from ``t = 0``) starts on 1970-01-01, as :mod:`graphnav.io.nmea_out` does; the raw
-``t`` is kept in GeoJSON's properties. Headings are degrees clockwise from true north.
+``t`` is kept in GeoJSON's properties. Headings are degrees clockwise from true north. The files of
+``run``/``compare --out`` hold at most :data:`MAX_RATE_HZ` poses a second per track (:func:`thinned`;
+the TUM files every pose); ``graphnav export --to gpx|kml|geojson`` writes every pose.
 
 * GeoJSON: a FeatureCollection with, per track, a ``LineString`` (``kind: "track"``) and one
   ``Point`` per pose (``kind: "pose"``, properties ``t``, ``time``, ``heading_deg``); coordinates
@@ -208,23 +210,51 @@ def render(tracks: list[GeoTrack], fmt: str) -> str:
     raise ValueError(f"unknown track format {fmt!r}: one of {', '.join(FORMATS)}")
 
 
+MAX_RATE_HZ = 10.0
+"""[Hz] The most poses per second a track keeps in the WGS84 files by default: a 100 Hz filter's track
+is drawn at 10 Hz (0.1-0.3 m apart at a boat's speeds, finer than any GNSS fix); the TUM files keep
+every pose. Without it a 10-minute harbour compare wrote 160 MB of GeoJSON/GPX/KML."""
+
+
+def thinned(traj: Trajectory, max_rate_hz: float | None) -> Trajectory:
+    """``traj`` with at most ``max_rate_hz`` poses per second: the first pose, then each pose at least
+    ``1 / max_rate_hz`` after the last one kept, and the last pose (``None`` or a track already that
+    sparse: ``traj`` itself)."""
+    t = np.asarray(traj.t, dtype=float)
+    if max_rate_hz is None or len(t) < 3 or not max_rate_hz > 0:
+        return traj
+    dt = 1.0 / float(max_rate_hz)
+    if np.all(np.diff(t) >= dt):
+        return traj
+    keep, last, tol = [0], t[0], 1e-3 * dt  # (times of a fixed rate differ from it by their rounding)
+    for i in range(1, len(t) - 1):
+        if t[i] - last >= dt - tol:
+            keep.append(i)
+            last = t[i]
+    keep.append(len(t) - 1)
+    return traj.subset(np.array(keep))
+
+
 def write_wgs84(out: OutDir | str | Path, trajectories: Mapping[str, Trajectory], meta: dict, *,
-                stem: str = "trajectory") -> dict[str, Any]:
+                stem: str = "trajectory", max_rate_hz: float | None = MAX_RATE_HZ) -> dict[str, Any]:
     """Write ``stem.geojson``, ``stem.gpx`` and ``stem.kml`` (atomically; an :class:`OutDir` records
-    them in its manifest) when ``meta`` has a geodetic origin. Returns the summary entry:
-    ``{"wgs84": {"origin": {...}, "files": [...], "tracks": [...]}}``, or ``{"wgs84": None,
-    "wgs84_reason": why}`` when nothing was written."""
+    them in its manifest) when ``meta`` has a geodetic origin, each track :func:`thinned` to
+    ``max_rate_hz`` (``None``: every pose). Returns the summary entry: ``{"wgs84": {"origin": {...},
+    "files": [...], "tracks": [...], "max_rate_hz": ...}}``, or ``{"wgs84": None, "wgs84_reason": why}``
+    when nothing was written."""
     frame, reason = origin_frame(meta)
     if frame is None:
         return {"wgs84": None, "wgs84_reason": f"{reason}: no GeoJSON/GPX/KML written"}
-    tracks = [GeoTrack.from_trajectory(tr, frame, name) for name, tr in trajectories.items() if len(tr)]
+    tracks = [GeoTrack.from_trajectory(thinned(tr, max_rate_hz), frame, name)
+              for name, tr in trajectories.items() if len(tr)]
     files = []
     for fmt in FORMATS:
         name = f"{stem}.{fmt}"
         path = out.file(name) if isinstance(out, OutDir) else Path(out) / name
         write_text_atomic(path, render(tracks, fmt))
         files.append(name)
-    return {"wgs84": {"origin": origin_dict(frame), "files": files, "tracks": [t.name for t in tracks]}}
+    return {"wgs84": {"origin": origin_dict(frame), "files": files, "tracks": [t.name for t in tracks],
+                      "max_rate_hz": max_rate_hz}}
 
 
 def origin_dict(frame: LocalFrame) -> dict[str, float]:

@@ -271,3 +271,23 @@ def test_the_directly_written_kml_reads_as_simplekml_s(ts, seed, name):
     tracks = [GeoTrack.from_trajectory(square_track(5), FRAME, "truth"),
               GeoTrack.from_trajectory(Trajectory(np.sort(ts), poses), FRAME, name)]
     assert _kml_read(kml_text(tracks)) == _kml_read(_simplekml_text(tracks))
+
+
+def test_wgs84_tracks_are_thinned_to_the_rate_and_keep_their_ends(tmp_path):
+    """A 100 Hz track goes into the WGS84 files at 10 Hz (first and last pose kept, consecutive poses at
+    least 0.1 s apart); a 1 Hz track whole; ``max_rate_hz=None``: every pose."""
+    from graphnav.io.geo_out import MAX_RATE_HZ, thinned
+
+    t = 1.7e9 + np.arange(0.0, 60.005, 0.01)
+    fast = Trajectory(t, np.column_stack([t - t[0], np.zeros_like(t), np.zeros_like(t)]), name="ukf")
+    th = thinned(fast, MAX_RATE_HZ)
+    assert th.t[0] == t[0] and th.t[-1] == t[-1]
+    assert np.all(np.diff(th.t[:-1]) >= 0.1 - 1e-4) and len(th) == 601
+    slow = square_track()
+    assert thinned(slow, MAX_RATE_HZ) is slow and thinned(fast, None) is fast
+    entry = write_wgs84(tmp_path, {"ukf": fast, "truth": slow}, {"origin": ORIGIN})
+    assert entry["wgs84"]["max_rate_hz"] == MAX_RATE_HZ
+    g = gpxpy.parse((tmp_path / "trajectory.gpx").read_text())
+    assert [len(trk.segments[0].points) for trk in g.tracks] == [601, len(slow)]
+    write_wgs84(tmp_path, {"ukf": fast}, {"origin": ORIGIN}, max_rate_hz=None)
+    assert len(gpxpy.parse((tmp_path / "trajectory.gpx").read_text()).tracks[0].segments[0].points) == len(t)
