@@ -121,7 +121,7 @@ class Solver:
         self.graph = gtsam.NonlinearFactorGraph()  # everything (batch, and iSAM2 with keep_graph)
         self.initial = gtsam.Values()
         self.frozen: dict[int, tuple[Any, NDArray[np.float64] | None]] = {}  # fixed-lag: left the window
-        self._fresh: set[int] = set()  # iSAM2: the variables the last update inserted (see `estimate`)
+        self._fresh: set[int] = set()  # iSAM2, fixed-lag: the variables the last update inserted (`estimate`)
         self._info: dict[int, NDArray[np.float64]] = {}  # ... their marginal information, once read
         self._marginals: dict[int, NDArray[np.float64]] = {}  # ... its inverse, once asked for (`marginal`)
         self._stamps: dict[int, float] = {}  # fixed-lag: tracked key -> time
@@ -168,6 +168,8 @@ class Solver:
                     m.insert((key, ts))
                 self.s.update(graph, values, m)
                 self.new_indices = list(self.s.getISAM2Result().getNewFactorsIndices())
+                self._fresh = set(values.keys())
+                self._info, self._marginals = {}, {}
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
         self.updates += 1
@@ -180,6 +182,7 @@ class Solver:
         if self.kind != "fixed-lag":
             raise ValueError("only the fixed-lag smoother is rebased")
         self.s = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
+        self._fresh, self._info, self._marginals = set(), {}, {}
         self._stamps = {k: v for k, v in self._stamps.items() if values.exists(k)}
         m = gtsam.FixedLagSmootherKeyTimestampMap()
         for key, ts in stamps.items():
@@ -231,8 +234,8 @@ class Solver:
     def estimate(self, key: int, type_name: str = "Pose2") -> Any:
         """The current estimate of ``key`` (batch: the initial guess).
 
-        iSAM2: a variable the last update inserted (the newest keyframe's state) is read from its
-        marginal factor -- the linearisation point moved by the Gauss-Newton step of its clique (the
+        iSAM2 and fixed-lag (its iSAM2): a variable the last update inserted (the newest keyframe's state) is
+        read from its marginal factor -- the linearisation point moved by the Gauss-Newton step of its clique (the
         root's, or one near it), exact, with its marginal covariance on the way -- without the
         back-substitution of the whole Bayes tree that ``calculateEstimate`` runs first. That
         back-substitution re-solves every clique whose separator moved by more than the wildfire
@@ -241,7 +244,7 @@ class Solver:
         if self.kind == "batch":
             return getattr(self.initial, f"at{type_name}")(key)
         try:
-            if self.kind == "isam2" and key in self._fresh:
+            if key in self._fresh:
                 try:
                     return self._newest(key, type_name)
                 except RuntimeError:  # a marginal not defined yet (e.g. an IMU bias at the start)
@@ -253,7 +256,8 @@ class Solver:
     def _newest(self, key: int, type_name: str) -> Any:
         """A freshly inserted variable's estimate from its marginal (``estimate``); the marginal
         covariance is kept for :meth:`marginal`."""
-        cond = self.s.marginalFactor(key)
+        isam = self.s if self.kind == "isam2" else self.s.getISAM2()  # (fixed-lag: a reference, not a copy)
+        cond = isam.marginalFactor(key)
         info = np.asarray(cond.information())
         delta = np.asarray(cond.solve(gtsam.VectorValues()).at(key))
         self._info[key] = info  # (inverted when asked for: the IMU bias's and the current's never are)

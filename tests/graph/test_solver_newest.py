@@ -22,10 +22,13 @@ def B(i):
     return gtsam.symbol("i", i)
 
 
+@pytest.mark.parametrize("kind", ["isam2", "fixed-lag"])
 @pytest.mark.parametrize("pose3", [False, True])
-def test_the_newest_state_equals_the_full_solve(pose3):
+def test_the_newest_state_equals_the_full_solve(pose3, kind):
+    """The newest state from the marginal factor (iSAM2's, or the fixed-lag smoother's iSAM2 with a window
+    of 10 keyframes, so that it marginalises) against the full solve and GTSAM's marginalCovariance."""
     rng = np.random.default_rng(1)
-    sol = Solver("isam2", isam_params(0.01, skip=3), keep_graph=False)
+    sol = Solver(kind, isam_params(0.01, skip=3), keep_graph=False, lag=10.0)
     ptype = "Pose3" if pose3 else "Pose2"
     for k in range(60):
         g, v = gtsam.NonlinearFactorGraph(), gtsam.Values()
@@ -55,8 +58,12 @@ def test_the_newest_state_equals_the_full_solve(pose3):
                                       gtsam.noiseModel.Isotropic.Sigma(2, 0.1)))
         v.insert(X(k), guess)
         v.insert(V(k), np.zeros(2))
-        sol.update(g, v)
-        full = sol.s.calculateBestEstimate()  # every variable, full back-substitution
+        if kind == "fixed-lag":
+            sol.update(g, v, {key: float(k) for key in v.keys()}, t=float(k))
+            full = sol.s.calculateEstimate()  # every variable of the window, full back-substitution
+        else:
+            sol.update(g, v)
+            full = sol.s.calculateBestEstimate()  # every variable, full back-substitution
         got = sol.estimate(X(k), ptype)
         want = getattr(full, f"at{ptype}")(X(k))
         assert np.allclose(np.asarray(want.localCoordinates(got)), 0.0, atol=1e-9)
