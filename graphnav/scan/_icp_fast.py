@@ -939,6 +939,19 @@ def report_sums(pairs, cov, tgt, lines, res, scale, gate, pose, radius, prm):
     return k, n_inl, h, bl, bs, rms, info, frac, used, big_d
 
 
+@njit(cache=True, inline="always")
+def _mul3(a: np.ndarray, b: np.ndarray, b_transposed: bool) -> np.ndarray:
+    """``a @ b`` (``a @ b.T`` with ``b_transposed``) of 3x3 matrices, each entry summed in index order."""
+    out = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for m in range(3):
+                acc += a[i, m] * (b[j, m] if b_transposed else b[m, j])
+            out[i, j] = acc
+    return out
+
+
 @njit(cache=True)
 def report_algebra(k, h, b_lidar, b_sampling, info, radius, max_condition, max_sigma):
     """:func:`graphnav.scan.covariance.from_sums` and :func:`graphnav.scan.degeneracy.analyse_both` (without a
@@ -960,20 +973,7 @@ def report_algebra(k, h, b_lidar, b_sampling, info, radius, max_condition, max_s
             ok = False
     if ok:
         b = k * b_lidar + b_sampling
-        hb = np.zeros((3, 3))
-        for a in range(3):
-            for c in range(3):
-                acc = 0.0
-                for m in range(3):
-                    acc += hi[a, m] * b[m, c]
-                hb[a, c] = acc
-        full = np.empty((3, 3))
-        for a in range(3):
-            for c in range(3):
-                acc = 0.0
-                for m in range(3):
-                    acc += hb[a, m] * hi[c, m]
-                full[a, c] = acc
+        full = _mul3(_mul3(hi, b, False), hi, True)  # H^-1 B H^-T
         for a in range(3):
             for c in range(3):
                 cov[a, c] = 0.5 * (full[a, c] + full[c, a])
