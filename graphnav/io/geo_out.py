@@ -81,6 +81,14 @@ def xml_safe(text: str) -> str:
     return _XML_BAD.sub("", str(text))
 
 
+def _xml_text(text: str) -> str:
+    """``text`` as XML character data: ``&``, ``<``, ``>`` escaped and a carriage return as ``&#13;`` (a
+    parser would read a raw one as a newline)."""
+    from xml.sax.saxutils import escape
+
+    return escape(text, {"\r": "&#13;"})
+
+
 def check_track(traj: Trajectory, where: str) -> None:
     """A :class:`GraphnavError` naming ``where`` when a pose's time or position cannot be a date or a
     place: a non-finite time, |t| beyond :data:`MAX_TIME`, a finite position beyond :data:`MAX_COORD`."""
@@ -154,14 +162,12 @@ def geojson_text(tracks: list[GeoTrack]) -> str:
 def gpx_text(tracks: list[GeoTrack]) -> str:
     """GPX 1.1: one track per :class:`GeoTrack`, with times; the document gpxpy writes, written directly
     (gpxpy's ``to_xml`` took seconds for a compare's 100 Hz filters; tests read it back with gpxpy)."""
-    from xml.sax.saxutils import escape
-
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              '<gpx xmlns="http://www.topografix.com/GPX/1/1" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" '
              'xsi:schemaLocation="http://www.topografix.com/GPX/1/1 http://www.topografix.com/GPX/1/1/gpx.xsd" '
              'version="1.1" creator="graphnav">']
     for tr in tracks:
-        lines += ["  <trk>", f"    <name>{escape(tr.name, {chr(13): '&#13;'})}</name>", "    <trkseg>"]
+        lines += ["  <trk>", f"    <name>{_xml_text(tr.name)}</name>", "    <trkseg>"]
         times = _iso_times(tr.t, "us")
         lines += [f'      <trkpt lat="{la!r}" lon="{lo!r}">\n        <time>{tm}</time>\n      </trkpt>'
                   for la, lo, tm in zip(tr.lat.astype(float).tolist(), tr.lon.astype(float).tolist(), times,
@@ -173,8 +179,6 @@ def gpx_text(tracks: list[GeoTrack]) -> str:
 def kml_text(tracks: list[GeoTrack]) -> str:
     """KML 2.2: one LineString placemark per track, with its colour, width and time span; the document
     simplekml writes, written directly (tests read both back the same)."""
-    from xml.sax.saxutils import escape
-
     styles, marks = [], []
     for i, tr in enumerate(tracks):
         colour = "ff000000" if tr.name == "truth" else _KML_COLOURS[i % len(_KML_COLOURS)]
@@ -189,7 +193,7 @@ def kml_text(tracks: list[GeoTrack]) -> str:
                     f"                <end>{times[1]}</end>\n            </TimeSpan>\n")
         coords = " ".join(f"{lo!r},{la!r},0.0" for la, lo in zip(tr.lat.astype(float).tolist(),
                                                                  tr.lon.astype(float).tolist(), strict=True))
-        marks.append(f"        <Placemark>\n            <name>{escape(tr.name, {chr(13): '&#13;'})}</name>\n{span}"
+        marks.append(f"        <Placemark>\n            <name>{_xml_text(tr.name)}</name>\n{span}"
                      f"            <styleUrl>#track{i}</styleUrl>\n            <LineString>\n"
                      f"                <coordinates>{coords}</coordinates>\n            </LineString>\n"
                      "        </Placemark>")
