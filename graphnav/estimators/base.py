@@ -43,6 +43,9 @@ class Estimator:
     kind: ClassVar[str] = "filter"
     Config: ClassVar[type | None] = NoOptions
     live: ClassVar[bool] = False  # online() gives a live form
+    #: how heavy a run is beside the others' (0 a filter's light step per record, 1 a match per keyframe, 2 a
+    #: factor graph, 3 a registration of every scan): compare starts its heaviest work units first
+    cost: ClassVar[int] = 0
     what: ClassVar[str] = ""  # the options' name in messages ("unknown WHAT option(s)"; default: the name)
 
     def __init__(self, log: NavLog | None = None, *, on_estimate: OnEstimate | None = None,

@@ -292,6 +292,7 @@ class IcpDr(BatchEstimator):
 
     description = "weighted-ICP scan-matching dead reckoning"
     kind = "odometry"
+    cost = 1  # a match per keyframe
     Config = IcpDrConfig
     unmet = staticmethod(_unmet)
     inputs = staticmethod(_inputs)

@@ -382,6 +382,7 @@ class ScanToMap(BatchEstimator):
 
     description = "LiDAR scan-to-local-map registration (2D: small_gicp VGICP; 3D: GICP to a KISS-ICP style voxel map)"
     kind = "odometry"
+    cost = 3  # every scan registered against the map
     Config = ScanToMapConfig
     what = "scan-to-map"
     unmet = staticmethod(_unmet)

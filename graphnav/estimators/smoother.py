@@ -59,6 +59,7 @@ class Smoother(Estimator):
     #: its scans are matched from the iSAM2 estimate (batch's loop front end is one), so its weighted-ICP
     #: matches are the other such smoothers' (:mod:`graphnav.scan.icp_cache`; compare runs them in one process)
     shares_matches: ClassVar[bool] = True
+    cost: ClassVar[int] = 2
 
     def __init__(self, log: NavLog | None = None, *, on_estimate: OnEstimate | None = None, **options: Any) -> None:
         super().__init__(log, on_estimate=on_estimate, **_solver_options(self.solver, options))

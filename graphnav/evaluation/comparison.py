@@ -229,29 +229,20 @@ def _run_forked(entries: list[Entry], ests: list[str]) -> list[Entry]:
     return _run_group(entries, ests, _FORKED["log"])
 
 
-def groups(todo: Sequence[tuple[int, str]], log: NavLog | None = None) -> list[list[tuple[int, str]]]:
-    """The parallel work units, longest first (so that a long one does not start last): the smoothers that
-    match their scans from the same iSAM2 estimate (``shares_matches``: isam2, batch) in one unit (they share
-    their weighted-ICP matches through the cache, so they run in one process, in order), every other
-    estimator alone; then the other smoothers, the estimators that match scans (with ``log``: their
-    ``inputs`` hold scans or clouds), the rest."""
-    scans = log is not None and bool(log.of("scan") or log.of("cloud"))
-
-    def weight(est: str) -> int:
-        spec = estimators.get(est)
-        if spec.kind == "smoother":
-            return 2
-        return int(scans and bool(set(spec.inputs(log, {}) or ()) & {"scan", "cloud"}))
-
+def groups(todo: Sequence[tuple[int, str]]) -> list[list[tuple[int, str]]]:
+    """The parallel work units, heaviest first (by the sum of their estimators' ``cost``, so that a long one
+    does not start last): the smoothers that match their scans from the same iSAM2 estimate
+    (``shares_matches``: isam2, batch) in one unit (they share their weighted-ICP matches through the cache,
+    so they run in one process, in order), every other estimator alone."""
     shared = [(i, est) for i, est in todo
               if estimators.get(est).kind == "smoother" and getattr(estimators.get(est), "shares_matches", False)]
-    alone = sorted(([(i, est)] for i, est in todo if (i, est) not in shared), key=lambda u: -weight(u[0][1]))
-    return ([shared] if shared else []) + alone
+    units = ([shared] if shared else []) + [[(i, est)] for i, est in todo if (i, est) not in shared]
+    return sorted(units, key=lambda u: -sum(estimators.get(est).cost for _, est in u))
 
 
 def _run_all(out: list[Entry], todo: list[tuple[int, str]], log: NavLog,
              progress: Callable[[str], None] | None, workers: int) -> None:
-    units = groups(todo, log)
+    units = groups(todo)
     if workers > 1 and len(units) > 1:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor

@@ -271,9 +271,10 @@ def test_parallel_smoothers_share_their_matches_in_one_process():
     log = synthetic_log(12)
     assert groups([(0, "batch"), (1, "ekf"), (2, "isam2"), (3, "ukf")]) == [
         [(0, "batch"), (2, "isam2")], [(1, "ekf")], [(3, "ukf")]]
-    # longest first: fixed-lag (its own matches: never isam2's) and the scan matchers before the filters
-    assert groups([(0, "ekf"), (1, "icp-dr"), (2, "fixed-lag"), (3, "isam2"), (4, "ukf")], log) == [
-        [(3, "isam2")], [(2, "fixed-lag")], [(1, "icp-dr")], [(0, "ekf")], [(4, "ukf")]]
+    # heaviest first: the shared unit, scan-to-map, fixed-lag (its own matches: never isam2's), icp-dr, the filters
+    assert groups([(0, "ekf"), (1, "icp-dr"), (2, "fixed-lag"), (3, "isam2"), (4, "ukf"), (5, "scan-to-map"),
+                   (6, "batch")]) == [[(3, "isam2"), (6, "batch")], [(5, "scan-to-map")], [(2, "fixed-lag")],
+                                      [(1, "icp-dr")], [(0, "ekf")], [(4, "ukf")]]
     names = ["batch", "dead-reckoning", "isam2"]
     seq = compare(log, names, cache=icp_cache.MatchCache())
     par = compare(log, names, cache=icp_cache.MatchCache(), workers=2)
