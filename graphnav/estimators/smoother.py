@@ -86,15 +86,7 @@ class Smoother(Estimator):
     def feed(self, records: Sequence[Record]) -> None:
         """:meth:`add` of each record; runs of IMU samples and truth poses at once
         (:func:`graphnav.graph.navigator.feed`)."""
-        flags: list[bool] = []
-        if self._checked is not None:  # (as _was_checked of each record)
-            for rec, (r, ok) in zip(records, self._checked, strict=False):  # (records first: none taken beyond)
-                if r is not rec:
-                    break
-                flags.append(ok)
-            if len(flags) < len(records):
-                self._checked = None
-        feed(self.nav, records, flags + [False] * (len(records) - len(flags)))
+        feed(self.nav, records, [self._was_checked(rec) for rec in records])
 
     def _was_checked(self, record: Record) -> bool:
         """Whether ``record`` is the log's next one and its reader checked it."""
