@@ -496,4 +496,6 @@ def read_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, f
     options.setdefault("keep_sog_cog", False)  # the samples are not log records: not held
     out, meta = parse_nmea(path, lenient=lenient, origin=origin, date=date, **options)
     note_rot_odometry(meta, out.records)
-    return NavLog.from_unsorted(out.records, (), meta)
+    # every record passed check_record with ``limits`` as the decoder made it (NmeaDecoder.feed; a GST's
+    # re-sigma'd fix too): the navigator need not check them again
+    return NavLog.from_unsorted(out.records, (), meta).mark_checked(options.get("limits"))
