@@ -135,11 +135,13 @@ def _beyond_chance(graph: gtsam.NonlinearFactorGraph, groups: Sequence[str], can
 
 
 def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: list[str], lm: LmSettings,
-               prob: float = 0.99, switchable: Sequence[str] = SWITCHABLE
+               prob: float = 0.99, switchable: Sequence[str] = SWITCHABLE,
+               d2s: dict[str, list[tuple[int, float, int]]] | None = None
                ) -> tuple[gtsam.NonlinearFactorGraph, list[str], gtsam.Values, dict[str, Any]]:
     """GNC over ``graph`` solved at ``values`` (module docstring); returns the graph without the
     switched-off factors, its groups, its solution and a report (per group: candidates and switched
-    off)."""
+    off). ``d2s``: some groups' :func:`measured_d2s` at ``(graph, values)`` when the caller has them (the
+    others are added to it)."""
     cand = [i for i, g in enumerate(groups) if g in switchable]
     report: dict[str, Any] = {"method": "gnc-tls", "prob": prob,
                               "candidates": {g: sum(groups[i] == g for i in cand) for g in switchable
@@ -148,7 +150,10 @@ def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: 
         report.update(beyond_bound=0, switched_off={}, ran=False)
         return graph, groups, values, report
     which = sorted({groups[i] for i in cand})
-    d2s = {g: measured_d2s(graph, values, groups, g) for g in which}  # (once for both scales)
+    d2s = d2s if d2s is not None else {}
+    for g in which:  # (once for both scales)
+        if g not in d2s:
+            d2s[g] = measured_d2s(graph, values, groups, g)
     report["scale"] = group_scales(graph, values, groups, which, d2s)
     # GNSS: each fix in its neighbours' scatter (a receiver's noise changes along a mission); a scan match
     # in its group's (a run of bad matches in a look-alike corridor must not widen its own bound)
