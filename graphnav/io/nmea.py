@@ -314,6 +314,8 @@ def _first_date_day0(lines: Iterable[bytes]) -> tuple[float | None, float | None
         kind = raw[3:6]
         if kind not in (b"GGA", b"RMC", b"ZDA", b"GNS", b"GLL") or (day0 is not None and kind != b"RMC"):
             continue
+        if day0 is not None and not _rmc_variation_text(raw):  # (pynmea2 would read none: not parsed)
+            continue
         try:
             msg = parse_sentence(_decode(raw))
             kind = msg.sentence_type
@@ -334,6 +336,13 @@ def _first_date_day0(lines: Iterable[bytes]) -> tuple[float | None, float | None
         if day0 is not None and variation is not None:
             break
     return day0, variation
+
+
+def _rmc_variation_text(raw: bytes) -> bytes:
+    """An RMC line's magnetic-variation field as pynmea2 splits it (the 10th after the type, before the
+    checksum), stripped: empty when the field is empty or absent."""
+    fields = raw.split(b"*", 1)[0].split(b",", 11)
+    return fields[10].strip() if len(fields) > 10 else b""
 
 
 def _as_date(value: date | str | None) -> date | None:

@@ -10,6 +10,7 @@ import calendar
 import math
 import re
 from datetime import date
+from functools import lru_cache
 
 import pynmea2
 from pynmea2.types.proprietary.ash import ASHRATT
@@ -184,6 +185,12 @@ def parse_time_of_day(raw: str) -> float | None:
         raise LogError(f"time {raw[:20]!r} out of range", field="timestamp")
     if s == 60:
         return h * 3600.0 + mi * 60.0 + float(raw[4:])
+    return _seconds_of_day(raw)
+
+
+@lru_cache(maxsize=8)
+def _seconds_of_day(raw: str) -> float:
+    """pynmea2's time of a checked ``hhmmss[.sss]`` in seconds (kept for the few sentences of one epoch)."""
     ts = pynmea2.nmea_utils.timestamp(raw)
     return ts.hour * 3600.0 + ts.minute * 60.0 + ts.second + ts.microsecond * 1e-6
 
@@ -221,9 +228,15 @@ def parse_date(raw: str, name: str = "datestamp") -> date | None:
     if len(raw) != 6 or not raw.isdigit():
         raise LogError(f"date {raw[:20]!r} is not ddmmyy", field=name)
     try:
-        return pynmea2.nmea_utils.datestamp(raw)
+        return _datestamp(raw)
     except ValueError:
         raise LogError(f"date {raw!r} does not exist", field=name) from None
+
+
+@lru_cache(maxsize=8)
+def _datestamp(raw: str) -> date:
+    """pynmea2's date of six digits (``strptime``; kept: a log's RMCs repeat one date for a day)."""
+    return pynmea2.nmea_utils.datestamp(raw)
 
 
 def posix_midnight(d: date) -> float:
