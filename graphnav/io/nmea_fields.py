@@ -239,7 +239,9 @@ def _datestamp(raw: str) -> date:
     return pynmea2.nmea_utils.datestamp(raw)
 
 
+@lru_cache(maxsize=8)
 def posix_midnight(d: date) -> float:
+    """POSIX time of the UTC midnight that starts day ``d`` (kept: every RMC of a day gives it)."""
     return float(calendar.timegm(d.timetuple()))
 
 

@@ -66,3 +66,14 @@ def test_a_date_that_does_not_exist_is_an_error_every_time():
     for _ in range(2):
         with pytest.raises(LogError, match="does not exist"):
             parse_date("310299")
+
+
+@given(st.dates(dt.date(1900, 1, 1), dt.date(2200, 12, 31)))
+def test_posix_midnight_is_the_calendars(d):
+    import calendar
+
+    from graphnav.io.nmea_fields import posix_midnight
+
+    for _ in range(2):
+        assert posix_midnight(d) == float(calendar.timegm(d.timetuple())) == dt.datetime(
+            d.year, d.month, d.day, tzinfo=dt.UTC).timestamp()
