@@ -100,9 +100,10 @@ def field_at(msg: pynmea2.NMEASentence, i: int) -> str:
 
 
 def raw_field(msg: pynmea2.NMEASentence, name: str) -> str:
-    """The text of field ``name`` (pynmea2's attribute name) as it came, "" when absent."""
-    names = [f[1] for f in msg.fields]
-    return str(field_at(msg, names.index(name))) if name in names else ""
+    """The text of field ``name`` (pynmea2's attribute name: its index in ``name_to_idx``, the map pynmea2's
+    own attributes read) as it came, "" when absent."""
+    i = getattr(type(msg), "name_to_idx", {}).get(name)
+    return "" if i is None else str(field_at(msg, i))
 
 
 def two_digit_year(msg: pynmea2.NMEASentence) -> bool:

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from graphnav.errors import LogError
 from graphnav.io.nmea import _rmc_variation_text
-from graphnav.io.nmea_fields import parse_date, parse_time_of_day
+from graphnav.io.nmea_fields import parse_date, parse_time_of_day, raw_field
 
 FIELD = st.text(alphabet="0123456789.EWNSAV -+\t", max_size=8)
 
@@ -77,3 +77,18 @@ def test_posix_midnight_is_the_calendars(d):
     for _ in range(2):
         assert posix_midnight(d) == float(calendar.timegm(d.timetuple())) == dt.datetime(
             d.year, d.month, d.day, tzinfo=dt.UTC).timestamp()
+
+
+@pytest.mark.parametrize("line", [
+    "$GPRMC,081836,A,3751.65,S,14507.36,E,000.0,360.0,130998,011.3,E*62",
+    "$GPVTG,054.7,T,034.4,M,005.5,N,010.2,K*48", "$IIVHW,,T,,M,04.7,N,08.7,K*59",
+    "$GPZDA,201530.00,04,07,2002,00,00*60",
+    "$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47"])
+def test_raw_field_is_the_field_pynmea2s_attribute_reads(line):
+    msg = pynmea2.parse(line)
+    names = [f[1] for f in msg.fields]
+    for i, name in enumerate(names):
+        assert raw_field(msg, name) == (str(msg.data[i]) if i < len(msg.data) else "")
+        if len(msg.fields[i]) < 3:  # an untyped field: pynmea2's attribute is the text itself
+            assert raw_field(msg, name) == (getattr(msg, name) or "")
+    assert raw_field(msg, "no_such_field") == ""
