@@ -8,7 +8,7 @@ import gtsam
 import numpy as np
 
 from graphnav.graph.chi2 import chi2_median, significant_scale
-from graphnav.graph.gnc import factor_scales, group_scales, odometry_consistency, switch_off
+from graphnav.graph.gnc import factor_scales, group_scales, measured_d2s, odometry_consistency, switch_off
 from graphnav.graph.noise import _measured
 from graphnav.graph.solver import LmSettings, levenberg_marquardt
 
@@ -120,6 +120,10 @@ def test_factor_scales_follow_a_receiver_whose_noise_changes():
     assert 5.0 < np.median(second) < 13.0
     whole = group_scales(g, values, groups, ["gnss"])["gnss"]
     assert np.median(first) < whole < np.median(second)
+    d2s = {"gnss": measured_d2s(g, values, groups, "gnss")}  # the residuals given once: the same scales
+    assert len(d2s["gnss"]) == 200 and all(dim == 2 for _, _, dim in d2s["gnss"])
+    assert factor_scales(g, values, groups, ["gnss"], d2s=d2s) == sc
+    assert group_scales(g, values, groups, ["gnss"], d2s)["gnss"] == whole
 
 
 def test_significant_scale_is_the_quantile_of_a_window_median():
