@@ -45,16 +45,20 @@ def _module_estimators(module: str) -> dict[str, type[Estimator]]:
 
 
 def _declared_names(module: str, ispkg: bool) -> list[str]:
-    """The names module ``module`` declares, from its source when its ``ESTIMATORS`` is a dict literal with
-    string keys at the start of a line; else (no source, another form) by importing it."""
+    """The names module ``module`` declares, from its source when its one mention of ``ESTIMATORS`` is a dict
+    literal with string keys at the start of a line; else (no source, another form, a later change to it) by
+    importing it."""
     path = Path(__path__[0], f"{module}.py")
     text = None if ispkg else path.read_text(encoding="utf-8") if path.is_file() else None
     if text is not None:
         if "ESTIMATORS" not in text:
             return []
-        m = _DECLARATION.search(text)
-        if m is not None:
-            node = ast.parse(text[m.start():]).body[0]  # (the module's rest: its statements from there)
+        m = _DECLARATION.search(text) if text.count("ESTIMATORS") == 1 else None
+        try:  # (the module's rest: its statements from there; a line of a string starting so is no declaration)
+            node = ast.parse(text[m.start():]).body[0] if m is not None else None
+        except SyntaxError:
+            node = None
+        if node is not None:
             value = node.value if isinstance(node, ast.Assign) and len(node.targets) == 1 else None
             if isinstance(value, ast.Dict) and all(isinstance(k, ast.Constant) and isinstance(k.value, str)
                                                    for k in value.keys):

@@ -45,3 +45,18 @@ def test_get_without_the_registry(monkeypatch):
     assert cls.name == "fixed-lag" and cls is sys.modules["graphnav.estimators.smoother"].ESTIMATORS["fixed-lag"]
     with pytest.raises(KeyError, match="unknown estimator 'isam3'; did you mean 'isam2'.*known: batch"):
         estimators.get("isam3")
+
+
+def test_a_declaration_changed_later_or_in_a_string_is_read_by_importing(monkeypatch, tmp_path):
+    """Only a module's one top-level ``ESTIMATORS = {literal}`` is read from source: a later update, or a
+    docstring line that looks like one, sends the reader to the module itself."""
+    monkeypatch.setattr(estimators, "__path__", [str(tmp_path)])
+    monkeypatch.setattr(estimators, "_module_estimators", lambda module: {"imported": object})
+    cases = {'ESTIMATORS = {"a": A, "b": B}\n': ["a", "b"],
+             'ESTIMATORS = {"a": A}\nESTIMATORS["c"] = C\n': ["imported"],
+             '"""\nESTIMATORS = {"a": A}\n"""\n': ["imported"],
+             'ESTIMATORS = {**OTHERS}\n': ["imported"],
+             'NAMES = 1\n': []}
+    for text, want in cases.items():
+        (tmp_path / "mod.py").write_text(text, encoding="utf-8")
+        assert estimators._declared_names("mod", False) == want, text
