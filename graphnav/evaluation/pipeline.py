@@ -98,8 +98,9 @@ def run_compare(opts: CompareOptions, out: OutDir,
     estimator starts (``total``: how many will run). A comparison in which no estimator ran is a
     :class:`GraphnavError` (nothing is written)."""
     from ..scan.icp_cache import MatchCache
-    from .report import render, summary_lines, to_json
-    from .report.writer import write
+    from .report import summary_lines, to_json
+    from .report.assemble import start
+    from .report.writer import write_drawing
 
     opts.check()
     log = drop_kinds(load_log(opts.log, lenient=opts.lenient, **opts.read), opts.dropped)
@@ -121,8 +122,7 @@ def run_compare(opts: CompareOptions, out: OutDir,
                         for e in comp)
         after = f" (after --drop {','.join(opts.dropped)})" if opts.dropped else ""
         raise GraphnavError(f"no estimator ran on this log{after}: {why or 'none given'}", where=str(opts.log))
-    rep = render(comp, command=opts.command, workers=workers, tiles=opts.tiles)
-    files = write(rep, out)
+    rep, files = write_drawing(start(comp, command=opts.command, workers=workers, tiles=opts.tiles), out)
     total_s = time.perf_counter() - t0
     for e in comp:
         if e.error is not None:
