@@ -9,6 +9,7 @@ against the closed-form WGS84 equations.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pymap3d
@@ -50,8 +51,18 @@ class LocalFrame:
     lon0: float
     h0: float = 0.0
 
+    @cached_property
+    def _ecef0(self) -> tuple[float, float, float]:
+        """The origin in ECEF (m), as ``pymap3d.geodetic2enu`` computes it on every call."""
+        return pymap3d.geodetic2ecef(self.lat0, self.lon0, self.h0, ell=_WGS84, deg=True)
+
     def to_local(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> tuple[NDArray, NDArray]:
         """(lat, lon) in degrees -> (x east, y north) in metres."""
+        if type(lat_deg) is float and type(lon_deg) is float:  # one fix (a reader's): geodetic2enu's steps, the
+            x1, y1, z1 = pymap3d.geodetic2ecef(lat_deg, lon_deg, self.h0, ell=_WGS84, deg=True)  # origin's kept
+            x0, y0, z0 = self._ecef0
+            e, n, _u = pymap3d.uvw2enu(x1 - x0, y1 - y0, z1 - z0, self.lat0, self.lon0, deg=True)
+            return _arr(e), _arr(n)
         lat, lon = np.broadcast_arrays(_arr(lat_deg), _arr(lon_deg))
         e, n, _u = pymap3d.geodetic2enu(lat, lon, np.full(lat.shape, self.h0), self.lat0, self.lon0, self.h0,
                                         ell=_WGS84, deg=True)

@@ -89,3 +89,17 @@ def test_arrays_and_scalars():
     xs, ys = f.to_local(43.5, 16.4)
     assert np.ndim(xs) == 0 and abs(float(xs)) < 1e-9 and abs(float(ys)) < 1e-9
     assert geodetic_to_ecef([1.0, 2.0], [3.0, 4.0]).shape == (2, 3)
+
+
+@given(st.floats(-89.0, 89.0), st.floats(-180.0, 180.0), st.floats(-0.5, 0.5), st.floats(-0.5, 0.5),
+       st.floats(-100.0, 100.0))
+def test_one_fix_is_pymap3d_geodetic2enu_to_the_bit(lat0, lon0, dlat, dlon, h0):
+    """A reader's one fix (Python floats: the origin's ECEF kept) gives pymap3d's ``geodetic2enu``
+    exactly, as the array path does."""
+    import pymap3d
+
+    f = LocalFrame(lat0, lon0, h0)
+    lat, lon = lat0 + dlat, lon0 + dlon
+    e, n, _ = pymap3d.geodetic2enu(lat, lon, h0, lat0, lon0, h0, ell=pymap3d.Ellipsoid.from_name("wgs84"))
+    for x, y in (f.to_local(lat, lon), f.to_local(np.array(lat), np.array(lon)), f.to_local(lat, lon)):
+        assert float(x) == float(e) and float(y) == float(n)

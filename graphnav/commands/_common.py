@@ -241,7 +241,7 @@ def options_for(args: argparse.Namespace, name: str) -> dict[str, Any]:
     if other:
         from .. import estimators
 
-        if other[0] not in estimators.registry():
+        if other[0] not in estimators.names():
             raise KeyError(f"-O {other[0]}.KEY=VALUE: " + estimators.unknown_name(other[0]))
         raise ValueError(f"-O {other[0]}.KEY=VALUE: this command runs {name!r}; write KEY=VALUE or "
                          f"{name}.KEY=VALUE")
@@ -259,9 +259,9 @@ def _sections(name: str) -> set[str | None]:
     from .. import estimators
     from ..config import sections
 
-    if name not in estimators.registry() or estimators.get(name).Config is None:
+    if name not in estimators.names() or estimators.get(name).Config is None:
         return set()
-    return set(sections(estimators.get(name).Config)) - set(estimators.registry())
+    return set(sections(estimators.get(name).Config)) - set(estimators.names())
 
 
 def options_by_estimator(args: argparse.Namespace) -> dict[str, dict[str, Any]]:

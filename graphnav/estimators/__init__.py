@@ -5,15 +5,21 @@ are its ``-O`` options with their help, ``add(record) -> Estimate | None`` and `
 ``online(**options)`` gives its live form. Estimator modules in this package declare
 ``ESTIMATORS = {"name": EstimatorClass}``; they are discovered here, so adding an estimator is adding a
 module. A batch run is one loop (:func:`run`); comparing estimators is one loop over :func:`names`.
+
+The names are read from the modules' source (:func:`declared`) and :func:`get` imports only the module
+that declares the estimator asked for: ``graphnav run -e isam2`` does not import the filters' numba
+kernels nor the scan matchers' SciPy (0.18 s CPU of its start-up); :func:`registry` imports them all.
 """
 
 from __future__ import annotations
 
+import ast
 import difflib
 import importlib
 import pkgutil
 import re
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Any
 
 from ..log import NavLog
@@ -25,41 +31,97 @@ __all__ = ["BatchEstimator", "Estimator", "EstimatorSpec", "OnEstimate", "RunFn"
 
 
 _REGISTRY: dict[str, type[Estimator]] | None = None
+_DECLARED: dict[str, str] | None = None
+#: a module's declaration at the start of a line: ``ESTIMATORS = {"name": Class, ...}``
+_DECLARATION = re.compile(r"^ESTIMATORS\s*=", re.MULTILINE)
+
+
+def _module_estimators(module: str) -> dict[str, type[Estimator]]:
+    """The ``ESTIMATORS`` of module ``module`` of this package (imported), each class named."""
+    found = getattr(importlib.import_module(f"{__name__}.{module}"), "ESTIMATORS", {})
+    for name, cls in found.items():
+        cls.name = name
+    return found
+
+
+def _declared_names(module: str, ispkg: bool) -> list[str]:
+    """The names module ``module`` declares, from its source when its one mention of ``ESTIMATORS`` is a dict
+    literal with string keys at the start of a line; else (no source, another form, a later change to it) by
+    importing it."""
+    path = Path(__path__[0], f"{module}.py")
+    text = None if ispkg else path.read_text(encoding="utf-8") if path.is_file() else None
+    if text is not None:
+        if "ESTIMATORS" not in text:
+            return []
+        m = _DECLARATION.search(text) if text.count("ESTIMATORS") == 1 else None
+        try:  # (the module's rest: its statements from there; a line of a string starting so is no declaration)
+            node = ast.parse(text[m.start():]).body[0] if m is not None else None
+        except SyntaxError:
+            node = None
+        if node is not None:
+            value = node.value if isinstance(node, ast.Assign) and len(node.targets) == 1 else None
+            if isinstance(value, ast.Dict) and all(isinstance(k, ast.Constant) and isinstance(k.value, str)
+                                                   for k in value.keys):
+                return [k.value for k in value.keys]
+    return list(_module_estimators(module))
+
+
+def declared() -> dict[str, str]:
+    """Estimator name -> the module of this package that declares it (:func:`_declared_names`: read from
+    the source, not imported)."""
+    global _DECLARED
+    if _DECLARED is None:
+        out: dict[str, str] = {}
+        for mod in pkgutil.iter_modules(__path__):
+            for name in _declared_names(mod.name, mod.ispkg):
+                if name in out:
+                    raise RuntimeError(f"estimator {name!r} declared twice")
+                out[name] = mod.name
+        _DECLARED = out
+    return _DECLARED
 
 
 def registry() -> dict[str, type[Estimator]]:
-    """All estimators, discovered from the modules of this package."""
+    """All estimators, discovered from the modules of this package (every one imported)."""
     global _REGISTRY
     if _REGISTRY is None:
         reg: dict[str, EstimatorSpec] = {}
         for mod in pkgutil.iter_modules(__path__):
-            m = importlib.import_module(f"{__name__}.{mod.name}")
-            for name, cls in getattr(m, "ESTIMATORS", {}).items():
+            for name, cls in _module_estimators(mod.name).items():
                 if name in reg:
                     raise RuntimeError(f"estimator {name!r} declared twice")
-                cls.name = name
                 reg[name] = cls
         _REGISTRY = reg
     return _REGISTRY
 
 
 def names() -> list[str]:
-    return sorted(registry())
+    """The estimators' names (those of :func:`registry` once it is built, else :func:`declared`'s)."""
+    return sorted(_REGISTRY if _REGISTRY is not None else declared())
 
 
 def unknown_name(name: str, known: Iterable[str] | None = None) -> str:
     """The message for an unknown estimator ``name``: the closest known names (difflib) and all of them."""
-    known = sorted(registry() if known is None else known)
+    known = sorted(names() if known is None else known)
     close = difflib.get_close_matches(name, known, n=2, cutoff=0.6)
     hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
     return f"unknown estimator {name!r}{hint} (known: {', '.join(known)})"
 
 
 def get(name: str) -> type[Estimator]:
-    reg = registry()
-    if name not in reg:
-        raise KeyError(unknown_name(name, reg))
-    return reg[name]
+    """The estimator ``name`` (a ``KeyError`` naming the known ones): from :func:`registry` once it is built,
+    else from the one module that declares it."""
+    if _REGISTRY is not None:
+        if name not in _REGISTRY:
+            raise KeyError(unknown_name(name, _REGISTRY))
+        return _REGISTRY[name]
+    module = declared().get(name)
+    if module is None:
+        raise KeyError(unknown_name(name))
+    found = _module_estimators(module)
+    if name not in found:
+        raise RuntimeError(f"estimator {name!r}: module {module!r} does not declare it in ESTIMATORS")
+    return found[name]
 
 
 #: what an estimator's ``info["anchor"]`` (where its start pose came from) names -> the record kinds read

@@ -260,15 +260,15 @@ class Measurements:
         rx, ry = r.x, r.y
         arm3 = self.arms.get(r.source) or self.arms.get("")
         arm = (0.0, 0.0) if arm3 is None else arm3[:2]
+        ant = F.antenna_position(pa, arm)  # (the keyframe's antenna: the fix's move and the gate's prediction)
         if delta is not None:  # the fix is of the antenna of X_a * delta at r.t: move it back to X_a's
-            moved = F.antenna_position(pa.compose(delta), arm) - F.antenna_position(pa, arm)
+            moved = F.antenna_position(pa.compose(delta), arm) - ant
             rx -= float(moved[0])
             ry -= float(moved[1])
         scale = self.gnss_scale.scale
         sigma = r.sigma * math.sqrt(scale)  # the stated sigma, unless the fixes refute it
         stated = self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss.robust, cfg.gnss.k, arm3)
         if prev_cov is not None and id(r) not in self.after_outage:
-            ant = F.antenna_position(pa, arm)
             d = np.array([rx - ant[0], ry - ant[1]])
             sample = (d, prev_cov[:2, :2], r.sigma)
             if self.gate is None:

@@ -71,13 +71,15 @@ def scaled(f: gtsam.NonlinearFactor, s: float) -> gtsam.NonlinearFactor:
 PLANAR_ROWS = {"icp": [2, 3, 4], "odometry": [2, 3, 4], "motion": [2, 3, 4], "loop": [2, 3, 4], "compass": [2]}
 
 
-def _measured(f: gtsam.NonlinearFactor, group: str) -> np.ndarray:
+def _measured(f: gtsam.NonlinearFactor, group: str, base: gtsam.noiseModel.Base | None = None) -> np.ndarray:
     """The rows of ``f`` that measure something (their residual is the sensor's noise): a GNSS fix's
     horizontal (its height is the sea surface's pseudo-measurement, z = 0), an embedded planar
-    measurement's x, y, yaw (:data:`PLANAR_ROWS`), else every row with nonzero precision."""
-    nm = f.noiseModel()
-    base = nm.noise() if hasattr(nm, "robust") else nm
-    mask = np.any(np.asarray(base.R()) != 0.0, axis=1)
+    measurement's x, y, yaw (:data:`PLANAR_ROWS`), else every row with nonzero precision. ``base``:
+    ``f``'s Gaussian noise model when the caller has it."""
+    if base is None:
+        nm = f.noiseModel()
+        base = nm.noise() if hasattr(nm, "robust") else nm
+    mask = (np.asarray(base.R()) != 0.0).any(axis=1)
     if isinstance(f, (gtsam.GPSFactor, gtsam.GPSFactorArm)):
         mask[2:] = False
     elif group in PLANAR_ROWS and isinstance(f, (gtsam.BetweenFactorPose3, gtsam.PriorFactorPose3)):
@@ -90,16 +92,16 @@ def _measured(f: gtsam.NonlinearFactor, group: str) -> np.ndarray:
 def measured_residual(f: gtsam.NonlinearFactor, values: gtsam.Values, group: str) -> np.ndarray:
     """``f``'s whitened residual (its Gaussian part, no robust weight) on the rows that measure
     something (:func:`_measured`)."""
+    return _measured_rows(f, values, group)[1]
+
+
+def _measured_rows(f: gtsam.NonlinearFactor, values: gtsam.Values, group: str) -> tuple[np.ndarray, np.ndarray]:
+    """``f``'s rows that measure something (:func:`_measured`) and its whitened residual on them
+    (:func:`measured_residual`)."""
     nm = f.noiseModel()
     base = nm.noise() if hasattr(nm, "robust") else nm
-    return np.asarray(base.whiten(f.unwhitenedError(values)))[_measured(f, group)]
-
-
-def _residual_rows(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, idx: Sequence[int],
-                   groups: Sequence[str]) -> np.ndarray:
-    """The measured whitened residuals of the factors ``idx`` (:func:`measured_residual`), row by row."""
-    out = [measured_residual(graph.at(i), values, groups[i]) for i in idx]
-    return np.concatenate(out) if out else np.zeros(0)
+    mask = _measured(f, group, base)
+    return mask, np.asarray(base.whiten(f.unwhitenedError(values)))[mask]
 
 
 def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: Sequence[str],
@@ -126,10 +128,11 @@ def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gr
         row_group[starts[i]:starts[i + 1]] = g
     row_group = row_group[:m_rows]
     measured = np.ones(int(starts[-1]), dtype=bool)  # rows of the groups asked about that measure something
-    wanted = set(which)
+    residuals: dict[str, list[np.ndarray]] = {g: [] for g in which}  # ... and their whitened residuals
     for i, g in enumerate(groups):
-        if g in wanted:
-            measured[starts[i]:starts[i + 1]] = _measured(graph.at(i), g)
+        if g in residuals:
+            measured[starts[i]:starts[i + 1]], e = _measured_rows(graph.at(i), values, g)
+            residuals[g].append(e)
     # zero-precision rows observe nothing; pseudo-rows (a fix's height, LOOSE) measure no sensor's noise
     active = (np.asarray(np.abs(A).sum(axis=1)).ravel() > 0) & measured[:m_rows]
     rows_of = {g: sel for g in which if (sel := np.flatnonzero((row_group == g) & active)).size}
@@ -147,7 +150,7 @@ def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gr
     for g, sel in rows_of.items():
         AZ = np.asarray(A[sel].T @ rng.choice([-1.0, 1.0], size=(sel.size, probes)))
         tr = float(np.einsum("ij,ij->", AZ, lu.solve(AZ))) / probes
-        e = _residual_rows(graph, values, [i for i, gi in enumerate(groups) if gi == g], groups)
+        e = np.concatenate(residuals[g]) if residuals[g] else np.zeros(0)
         out[g] = {"chi2": float(b[sel] @ b[sel]), "m": float(sel.size), "redundancy": float(sel.size - tr),
                   "median_e2": float(np.median(e**2)) if e.size else float("nan")}
     return out

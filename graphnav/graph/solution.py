@@ -119,14 +119,19 @@ class Closing:
         if self.water:
             graph, values, it = self._reaim_water(graph, values, info)
             iters += it
+        d2s: dict[str, list[tuple[int, float, int]]] = {}  # the fixes' measured residuals at (graph, values)
         if cfg.robust.backend == "gnc":
+            solved = graph, values
             graph, self.groups, values, info["switched_off"] = gnc.switch_off(
-                graph, values, self.groups, lm, cfg.robust.prob, cfg.robust.groups)
+                graph, values, self.groups, lm, cfg.robust.prob, cfg.robust.groups, d2s=d2s)
+            if graph is not solved[0] or values is not solved[1]:
+                d2s = {}
         dropped, scale = 0, None  # scale: the fixes' local scales of (graph, values) as they now are
         for _ in range(3 if cfg.gnss.gate is not None else 0):
             # the gate in the fixes' own scatter nearby (a receiver's stated sigma may be optimistic: Solent s2
             # states 7 m for 20 m fixes, and a gate on the stated sigma dropped 210 of 555 correct fixes)
-            scale = gnc.factor_scales(graph, values, self.groups, ["gnss"])
+            scale = gnc.factor_scales(graph, values, self.groups, ["gnss"], d2s=d2s)
+            d2s = {}
             keep = [i for i in range(graph.size()) if not (self.groups[i] == "gnss" and noise.whitened_norm(
                 graph.at(i), values, robust=False) > cfg.gnss.gate * np.sqrt(scale.get(i, 1.0)))]
             if len(keep) == graph.size():

@@ -314,6 +314,8 @@ def _first_date_day0(lines: Iterable[bytes]) -> tuple[float | None, float | None
         kind = raw[3:6]
         if kind not in (b"GGA", b"RMC", b"ZDA", b"GNS", b"GLL") or (day0 is not None and kind != b"RMC"):
             continue
+        if day0 is not None and not _rmc_variation_text(raw):  # (pynmea2 would read none: not parsed)
+            continue
         try:
             msg = parse_sentence(_decode(raw))
             kind = msg.sentence_type
@@ -334,6 +336,13 @@ def _first_date_day0(lines: Iterable[bytes]) -> tuple[float | None, float | None
         if day0 is not None and variation is not None:
             break
     return day0, variation
+
+
+def _rmc_variation_text(raw: bytes) -> bytes:
+    """An RMC line's magnetic-variation field as pynmea2 splits it (the 10th after the type, before the
+    checksum), stripped: empty when the field is empty or absent."""
+    fields = raw.split(b"*", 1)[0].split(b",", 11)
+    return fields[10].strip() if len(fields) > 10 else b""
 
 
 def _as_date(value: date | str | None) -> date | None:
@@ -496,4 +505,6 @@ def read_nmea(path: str | Path, *, lenient: bool = False, origin: tuple[float, f
     options.setdefault("keep_sog_cog", False)  # the samples are not log records: not held
     out, meta = parse_nmea(path, lenient=lenient, origin=origin, date=date, **options)
     note_rot_odometry(meta, out.records)
-    return NavLog.from_unsorted(out.records, (), meta)
+    # every record passed check_record with ``limits`` as the decoder made it (NmeaDecoder.feed; a GST's
+    # re-sigma'd fix too): the navigator need not check them again
+    return NavLog.from_unsorted(out.records, (), meta).mark_checked(options.get("limits"))

@@ -10,6 +10,7 @@ import calendar
 import math
 import re
 from datetime import date
+from functools import lru_cache
 
 import pynmea2
 from pynmea2.types.proprietary.ash import ASHRATT
@@ -99,9 +100,10 @@ def field_at(msg: pynmea2.NMEASentence, i: int) -> str:
 
 
 def raw_field(msg: pynmea2.NMEASentence, name: str) -> str:
-    """The text of field ``name`` (pynmea2's attribute name) as it came, "" when absent."""
-    names = [f[1] for f in msg.fields]
-    return str(field_at(msg, names.index(name))) if name in names else ""
+    """The text of field ``name`` (pynmea2's attribute name: its index in ``name_to_idx``, the map pynmea2's
+    own attributes read) as it came, "" when absent."""
+    i = getattr(type(msg), "name_to_idx", {}).get(name)
+    return "" if i is None else str(field_at(msg, i))
 
 
 def two_digit_year(msg: pynmea2.NMEASentence) -> bool:
@@ -184,6 +186,12 @@ def parse_time_of_day(raw: str) -> float | None:
         raise LogError(f"time {raw[:20]!r} out of range", field="timestamp")
     if s == 60:
         return h * 3600.0 + mi * 60.0 + float(raw[4:])
+    return _seconds_of_day(raw)
+
+
+@lru_cache(maxsize=8)
+def _seconds_of_day(raw: str) -> float:
+    """pynmea2's time of a checked ``hhmmss[.sss]`` in seconds (kept for the few sentences of one epoch)."""
     ts = pynmea2.nmea_utils.timestamp(raw)
     return ts.hour * 3600.0 + ts.minute * 60.0 + ts.second + ts.microsecond * 1e-6
 
@@ -221,12 +229,20 @@ def parse_date(raw: str, name: str = "datestamp") -> date | None:
     if len(raw) != 6 or not raw.isdigit():
         raise LogError(f"date {raw[:20]!r} is not ddmmyy", field=name)
     try:
-        return pynmea2.nmea_utils.datestamp(raw)
+        return _datestamp(raw)
     except ValueError:
         raise LogError(f"date {raw!r} does not exist", field=name) from None
 
 
+@lru_cache(maxsize=8)
+def _datestamp(raw: str) -> date:
+    """pynmea2's date of six digits (``strptime``; kept: a log's RMCs repeat one date for a day)."""
+    return pynmea2.nmea_utils.datestamp(raw)
+
+
+@lru_cache(maxsize=8)
 def posix_midnight(d: date) -> float:
+    """POSIX time of the UTC midnight that starts day ``d`` (kept: every RMC of a day gives it)."""
     return float(calendar.timegm(d.timetuple()))
 
 

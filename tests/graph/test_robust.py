@@ -8,7 +8,7 @@ import gtsam
 import numpy as np
 
 from graphnav.graph.chi2 import chi2_median, significant_scale
-from graphnav.graph.gnc import factor_scales, group_scales, odometry_consistency, switch_off
+from graphnav.graph.gnc import factor_scales, group_scales, measured_d2s, odometry_consistency, switch_off
 from graphnav.graph.noise import _measured
 from graphnav.graph.solver import LmSettings, levenberg_marquardt
 
@@ -120,6 +120,10 @@ def test_factor_scales_follow_a_receiver_whose_noise_changes():
     assert 5.0 < np.median(second) < 13.0
     whole = group_scales(g, values, groups, ["gnss"])["gnss"]
     assert np.median(first) < whole < np.median(second)
+    d2s = {"gnss": measured_d2s(g, values, groups, "gnss")}  # the residuals given once: the same scales
+    assert len(d2s["gnss"]) == 200 and all(dim == 2 for _, _, dim in d2s["gnss"])
+    assert factor_scales(g, values, groups, ["gnss"], d2s=d2s) == sc
+    assert group_scales(g, values, groups, ["gnss"], d2s)["gnss"] == whole
 
 
 def test_significant_scale_is_the_quantile_of_a_window_median():
@@ -170,3 +174,27 @@ def test_gnc_leaves_chance_exceedances_of_gnss_alone_and_catches_a_gross_fix():
     kept = [np.asarray(out.at(k).measured()) for k in range(out.size())
             if isinstance(out.at(k), gtsam.PoseTranslationPrior2D)]
     assert not any(np.allclose(m, [150.0, 30.0]) for m in kept)  # the gross fix is among those let go
+
+
+def test_gnc_inner_tolerance_decides_as_a_tight_one(monkeypatch):
+    """GNC's inner solves at ``GNC_INNER_TOL`` switch off the same factors as at 1e-6 (the weights end
+    binary), so the re-solved graph and its solution are the same: two wrong matches and a gross
+    GNSS fix among consistent ones, several seeds."""
+    import graphnav.graph.gnc as gnc
+
+    for seed in range(4):
+        g, groups, values, _ = _chain(80, wrong=20 + seed * 7, seed=seed)
+        g.add(gtsam.BetweenFactorPose2(60, 61, gtsam.Pose2(-1.0, 0.8, -0.6), gtsam.noiseModel.Diagonal.Sigmas(ICP)))
+        groups.append("icp")
+        g.add(gtsam.PoseTranslationPrior2D(40, np.array([60.0, -25.0]), gtsam.noiseModel.Isotropic.Sigma(2, 1.0)))
+        groups.append("gnss")
+        values, _ = levenberg_marquardt(g, values, LmSettings(1e-10, 100))
+        out = {}
+        for tol in (1e-6, gnc.GNC_INNER_TOL):
+            monkeypatch.setattr(gnc, "GNC_INNER_TOL", tol)
+            out[tol] = switch_off(g, values, list(groups), LmSettings(1e-10, 100))
+        (g1, gr1, v1, r1), (g2, gr2, v2, r2) = out.values()
+        assert r1["ran"] and r1["switched_off"] == r2["switched_off"] and r1["switched_off"].get("icp", 0) >= 2
+        assert gr1 == gr2 and g1.size() == g2.size() < g.size()
+        assert all(g1.at(i).equals(g2.at(i), 0.0) for i in range(g1.size()))
+        assert v1.equals(v2, 1e-9)

@@ -53,3 +53,31 @@ def test_a_bad_record_slipped_into_a_read_log_is_still_an_error(tmp_path, solver
     log.records[i] = Gnss(t=4.0, x=math.nan, y=0.0, sigma=1.0)
     with pytest.raises(LogError, match=f"record {i + 1} .*finite"):
         estimators.run(solver, log)
+
+
+def _nmea(path):
+    """Two epochs of GGA + RMC + HDT + VTG (checksums computed), one GST re-sigma'ing the second fix."""
+    def line(body: str) -> str:
+        cs = 0
+        for c in body:
+            cs ^= ord(c)
+        return f"${body}*{cs:02X}\n"
+
+    rows = []
+    for i in range(2):
+        tod = f"1200{i:02d}.00"
+        rows += [f"GPGGA,{tod},5430.9395,N,01833.1088,E,1,10,1.00,0.0,M,0.0,M,,",
+                 f"GPRMC,{tod},A,5430.9395,N,01833.1088,E,2.9,90.0,010170,,,A", "HEHDT,90.0,T",
+                 "GPVTG,90.0,T,,M,2.9,N,5.4,K,A"]
+    rows.append("GPGST,120001.00,1.0,0.5,0.4,0.0,0.8,0.6,1.0")
+    path.write_text("".join(line(r) for r in rows))
+    return path
+
+
+def test_an_nmea_log_is_checked_with_the_bounds_it_was_read_with(tmp_path):
+    log = load_log(_nmea(tmp_path / "a.nmea"))
+    assert len(log) > 0 and all(ok for _, ok in log.checked_records())
+    assert any(r.kind == "gnss" and r.sigma == pytest.approx(math.sqrt(0.5 * (0.8**2 + 0.6**2)))
+               for r in log.records)  # (the GST's re-sigma'd fix is the checked object)
+    loose = load_log(_nmea(tmp_path / "b.nmea"), limits=Limits(max_coord=1e12))
+    assert not any(ok for _, ok in loose.checked_records())
