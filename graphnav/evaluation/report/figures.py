@@ -132,7 +132,7 @@ class PendingFigures:
         return self._done
 
     def close(self) -> None:
-        """Stop the workers (a figure not drawn yet is not drawn): nothing is left running."""
+        """Stop the workers: the figures being drawn are finished, the others not started."""
         global _FIG_JOBS
         if self._pool is not None:
             self._pool.shutdown(cancel_futures=True)
