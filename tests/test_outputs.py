@@ -69,7 +69,11 @@ def test_trajectory_writers_are_atomic(tmp_path, monkeypatch):
     def boom(*a, **k):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(np, "savetxt", boom)
+    def half(*a, **k):  # the disk fills after the first line
+        yield "0.0 0.0\n"
+        boom()
+
+    monkeypatch.setattr("graphnav.io.tum.table_lines", half)
     with pytest.raises(OSError):
         write_tum(tr, tmp_path / "t.tum")
     monkeypatch.setattr("csv.writer", boom)

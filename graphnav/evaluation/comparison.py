@@ -142,7 +142,8 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
             options: dict[str, dict[str, Any]] | None = None,
             progress: Callable[[str], None] | None = None, workers: int = 1,
             cache: icp_cache.MatchCache | None = None, holdout: HoldoutSpec | None = None,
-            log_name: str = "", dropped: Sequence[str] = ()) -> Comparison:
+            log_name: str = "", dropped: Sequence[str] = (),
+            meanwhile: Callable[[], None] | None = None) -> Comparison:
     """Run ``names`` (default: every registered estimator) on ``log``; each with its own
     ``options[name]``. An estimator the log cannot feed is not run but kept, with ``skipped`` saying
     why (its ``unmet(log)``); a failing one is recorded with its ``error``, not raised.
@@ -165,7 +166,9 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
     its first computation's). With ``workers > 1`` every process has its own copy.
 
     ``holdout`` (:class:`~graphnav.evaluation.holdout.HoldoutSpec`) withholds GNSS windows from every
-    estimator and scores each against the withheld fixes (``summary["holdout"]``). Returns a
+    estimator and scores each against the withheld fixes (``summary["holdout"]``). ``meanwhile()``,
+    when given, is called once while the worker processes run (with one process, before the
+    estimators), e.g. to import what comes next: this process is idle then. Returns a
     :class:`Comparison` (a sequence of the entries, in the order of ``names``).
     """
     t_start = time.perf_counter()
@@ -200,7 +203,7 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
     if workers <= 0:
         workers = os.cpu_count() or 1
     with icp_cache.active(cache):
-        _run_all(out, todo, log, progress, workers)
+        _run_all(out, todo, log, progress, workers, meanwhile)
     if plan is not None:
         for e in out:
             if e.ok and e.summary is not None and e.result is not None:
@@ -241,7 +244,8 @@ def groups(todo: Sequence[tuple[int, str]]) -> list[list[tuple[int, str]]]:
 
 
 def _run_all(out: list[Entry], todo: list[tuple[int, str]], log: NavLog,
-             progress: Callable[[str], None] | None, workers: int) -> None:
+             progress: Callable[[str], None] | None, workers: int,
+             meanwhile: Callable[[], None] | None = None) -> None:
     units = groups(todo)
     if workers > 1 and len(units) > 1:
         import multiprocessing
@@ -253,6 +257,8 @@ def _run_all(out: list[Entry], todo: list[tuple[int, str]], log: NavLog,
             with ProcessPoolExecutor(max_workers=min(workers, len(units)), mp_context=ctx) as pool:
                 futures = [(u, pool.submit(_run_forked, [out[i] for i, _ in u], [est for _, est in u]))
                            for u in units]
+                if meanwhile is not None:
+                    meanwhile()
                 for u, fut in futures:
                     for i, _ in u:
                         if progress:
@@ -262,6 +268,8 @@ def _run_all(out: list[Entry], todo: list[tuple[int, str]], log: NavLog,
         finally:
             _FORKED.clear()
     else:
+        if meanwhile is not None:
+            meanwhile()
         for i, est in todo:
             if progress:
                 progress(out[i].name)

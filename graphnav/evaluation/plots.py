@@ -30,9 +30,9 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Ellipse, Patch
 from matplotlib.ticker import FixedLocator, FuncFormatter, Locator, MaxNLocator, NullLocator
-from scipy.stats import chi2
 
 from ..geometry import wrap_angle
+from ..graph.chi2 import chi2_ppf
 from ..io.outputs import atomic_path
 from ..trajectory import Trajectory
 from . import palette
@@ -48,7 +48,7 @@ from .metrics import (  # noqa: F401  (the error series live in metrics; plots r
 EVENT_STYLE = {"gnss_outage": ("#f2d64b", "", "GNSS outage"), "gnss_jump": ("#e8a0a0", "xx", "GNSS jump")}
 MAX_DT = 0.02
 CDF_FLOOR = 1e-3
-NEES_BAND = tuple(float(v) for v in chi2.ppf([0.025, 0.975], 2))  # two-sided 95 %, 2 dof: (0.0506, 7.38)
+NEES_BAND = (chi2_ppf(0.025, 2), chi2_ppf(0.975, 2))  # two-sided 95 %, 2 dof: (0.0506, 7.38)
 
 
 def colors(names: Sequence[str]) -> dict[str, Any]:

@@ -246,19 +246,29 @@ def write_wgs84(out: OutDir | str | Path, trajectories: Mapping[str, Trajectory]
     ``max_rate_hz`` (``None``: every pose). Returns the summary entry: ``{"wgs84": {"origin": {...},
     "files": [...], "tracks": [...], "max_rate_hz": ...}}``, or ``{"wgs84": None, "wgs84_reason": why}``
     when nothing was written."""
+    return write_texts(out, *wgs84_texts(trajectories, meta, stem=stem, max_rate_hz=max_rate_hz))
+
+
+def wgs84_texts(trajectories: Mapping[str, Trajectory], meta: dict, *, stem: str = "trajectory",
+                max_rate_hz: float | None = MAX_RATE_HZ) -> tuple[dict[str, Any], dict[str, str]]:
+    """What :func:`write_wgs84` writes, nothing written yet: its summary entry and ``{file name: text}``
+    (empty without a geodetic origin)."""
     frame, reason = origin_frame(meta)
     if frame is None:
-        return {"wgs84": None, "wgs84_reason": f"{reason}: no GeoJSON/GPX/KML written"}
+        return {"wgs84": None, "wgs84_reason": f"{reason}: no GeoJSON/GPX/KML written"}, {}
     tracks = [GeoTrack.from_trajectory(thinned(tr, max_rate_hz), frame, name)
               for name, tr in trajectories.items() if len(tr)]
-    files = []
-    for fmt in FORMATS:
-        name = f"{stem}.{fmt}"
-        path = out.file(name) if isinstance(out, OutDir) else Path(out) / name
-        write_text_atomic(path, render(tracks, fmt))
-        files.append(name)
-    return {"wgs84": {"origin": origin_dict(frame), "files": files, "tracks": [t.name for t in tracks],
-                      "max_rate_hz": max_rate_hz}}
+    texts = {f"{stem}.{fmt}": render(tracks, fmt) for fmt in FORMATS}
+    return {"wgs84": {"origin": origin_dict(frame), "files": list(texts), "tracks": [t.name for t in tracks],
+                      "max_rate_hz": max_rate_hz}}, texts
+
+
+def write_texts(out: OutDir | str | Path, entry: dict[str, Any], texts: Mapping[str, str]) -> dict[str, Any]:
+    """Write ``texts`` (``{file name: text}``, from :func:`wgs84_texts`) into ``out``, each atomically
+    (an :class:`OutDir` records it first); returns ``entry``."""
+    for name, text in texts.items():
+        write_text_atomic(out.file(name) if isinstance(out, OutDir) else Path(out) / name, text)
+    return entry
 
 
 def origin_dict(frame: LocalFrame) -> dict[str, float]:

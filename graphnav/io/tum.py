@@ -4,6 +4,7 @@ them; a log's truth beside the estimates (``truth.tum``)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +19,20 @@ def write_tum(traj: Trajectory, path: str | Path) -> None:
     """Write ``traj`` as TUM ``t x y z qx qy qz qw`` (z = 0, rotation about +z; the quaternion by
     :class:`scipy.spatial.transform.Rotation`, scalar last), whole or not at all."""
     arr = np.column_stack([traj.t, traj.x, traj.y, np.zeros(len(traj)), yaw_to_quat(traj.yaw)])
-    with atomic_path(path) as tmp:
-        np.savetxt(tmp, arr, fmt="%.9f", header="timestamp tx ty tz qx qy qz qw")
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii", newline="\n") as fh:
+        fh.write("# timestamp tx ty tz qx qy qz qw\n")
+        for text in table_lines(arr, "%.9f"):
+            fh.write(text)
+
+
+def table_lines(arr: NDArray[np.float64], fmt: str, rows: int = 20_000) -> Iterator[str]:
+    """The lines ``np.savetxt(f, arr, fmt)`` writes (``fmt`` for every column, one space between), by
+    blocks of ``rows`` rows formatted at once: a Python format call per block, not per row
+    (``savetxt`` spent ~1 s on a harbour compare's 410 868 poses)."""
+    line = " ".join([fmt] * arr.shape[1]) + "\n"
+    for i in range(0, len(arr), rows):
+        block = arr[i:i + rows]
+        yield (line * len(block)) % tuple(block.ravel().tolist())
 
 
 def read_tum(path: str | Path, name: str = "") -> Trajectory:

@@ -95,10 +95,12 @@ def consistent(prior: NDArray[np.float64], p_cov: NDArray[np.float64], meas: NDA
 
 @lru_cache(maxsize=64)
 def _chi2_ppf(p: float, dof: int) -> float:
-    """``scipy.stats.chi2.ppf(p, dof)``, once per (p, dof) (it costs ~0.1 ms a call, once per scan here)."""
-    from scipy.stats import chi2
+    """``scipy.stats.chi2.ppf(p, dof)``, once per (p, dof) (it costs ~0.1 ms a call, once per scan here):
+    the expression it evaluates, ``2 gammaincinv(dof / 2, p)``, without importing scipy.stats (~0.9 s of
+    CPU in the process that runs scan-to-map)."""
+    from scipy.special import gammaincinv
 
-    return float(chi2.ppf(p, dof))
+    return float(2.0 * gammaincinv(dof / 2.0, p))
 
 
 def imu_samples(log: NavLog) -> NDArray[np.float64]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 
 import numpy as np
@@ -235,6 +236,18 @@ def test_parallel_workers_give_the_same_table(log, fakes):
             assert b.summary["ate_rmse_m"] == pytest.approx(a.summary["ate_rmse_m"])
             assert np.allclose(a.result.trajectory.poses, b.result.trajectory.poses)
     assert "deliberate failure" in par[2].error
+
+
+def test_meanwhile_runs_once_while_the_workers_run(log, fakes):
+    """``meanwhile`` (compare's idle parent importing the figures' modules) runs once per comparison, before
+    any result is collected; with one process, before the first estimator."""
+    names = ["dead-reckoning", "fake-smoother"]
+    for workers in (1, 2):
+        calls: list[str] = []
+        compare(log, names, workers=workers, progress=calls.append,
+                meanwhile=functools.partial(calls.append, "meanwhile"))
+        assert calls.count("meanwhile") == 1 and set(calls) == {"meanwhile", *names}
+        assert calls.index("meanwhile") <= (1 if workers > 1 else 0)
 
 
 def test_dcog_error_ignores_a_constant_course_offset(log):

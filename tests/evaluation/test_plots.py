@@ -217,3 +217,22 @@ def test_sog_cog_small_multiples_share_one_time_axis_and_keep_the_rms(trajs):
     series = plots.movement_error_series(tj["smoother"], truth)
     rms = float(np.sqrt(np.nanmean(series["sog"] ** 2)))
     assert axes[0, 0].get_title(loc="left") == f"smoother: SOG RMS {rms:.3f} m/s"
+
+
+def test_the_report_and_the_imu_gate_take_scipy_stats_quantiles_without_importing_it():
+    """The NEES band and the IMU-consistency gate are scipy.stats' chi-square quantiles to the bit, without
+    its ~0.9 s import (in the report's process and in scan-to-map's)."""
+    code = (
+        "import sys\n"
+        "import graphnav.evaluation.plots as p, graphnav.evaluation.report.assemble\n"
+        "from graphnav.scan.imu_guess import _chi2_ppf\n"
+        "gate = [_chi2_ppf(q, d) for q in (0.99, 0.999) for d in (2, 3)]\n"
+        "loaded = 'scipy.stats' in sys.modules\n"
+        "from scipy.stats import chi2\n"
+        "print(loaded, p.NEES_BAND == tuple(float(v) for v in chi2.ppf([0.025, 0.975], 2)),\n"
+        "      gate == [float(chi2.ppf(q, d)) for q in (0.99, 0.999) for d in (2, 3)])\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "True", "True"]

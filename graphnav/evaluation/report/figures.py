@@ -80,6 +80,10 @@ def png_bytes(fig: Any, dpi: int = 110) -> bytes:
 
 _FIG_JOBS: list[Job] = []  # what forked figure workers render (set before forking)
 
+#: the figures with a panel per estimator: several times the others' CPU (drawn first in parallel)
+PANEL_FIGURES = frozenset({"trajectory_panels.png", "sog_cog.png", "error_bounds.png", "nees.png",
+                           "covariance.png"})
+
 
 def _render(i: int) -> bytes | None:
     """Draw figure ``i`` of :data:`_FIG_JOBS`: its PNG, or ``None`` when there was nothing to draw."""
@@ -88,24 +92,56 @@ def _render(i: int) -> bytes | None:
     return None if fig is None else png_bytes(fig)
 
 
-def render_figures(jobs: Sequence[Job], workers: int = 1) -> dict[str, tuple[str, bytes]]:
-    """Draw each job: ``{file name: (caption, PNG bytes)}`` in the jobs' order, without the jobs that
-    drew nothing. ``workers > 1`` draws them in that many forked processes (the figures are
-    independent; the PNGs are the same); 0: one per core."""
-    global _FIG_JOBS
-    if workers <= 0:
-        workers = os.cpu_count() or 1
-    _FIG_JOBS = list(jobs)
-    try:
-        if workers > 1 and len(jobs) > 1:
+class PendingFigures:
+    """Figures being drawn in ``workers`` forked processes (those with a panel per estimator first),
+    while the caller goes on with other work; :meth:`result` waits for them. With one worker (or one
+    figure) they are drawn in this process when :meth:`result` asks; 0 workers: one per core."""
+
+    def __init__(self, jobs: Sequence[Job], workers: int = 1) -> None:
+        global _FIG_JOBS
+        self.jobs = list(jobs)
+        self._pool: Any = None
+        self._futures: dict[int, Any] = {}
+        self._done: dict[str, tuple[str, bytes]] | None = None
+        if workers <= 0:
+            workers = os.cpu_count() or 1
+        if workers > 1 and len(self.jobs) > 1:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
 
-            with ProcessPoolExecutor(max_workers=min(workers, len(jobs)),
-                                     mp_context=multiprocessing.get_context("fork")) as pool:
-                pngs = list(pool.map(_render, range(len(jobs))))
-        else:
-            pngs = [_render(i) for i in range(len(jobs))]
-    finally:
+            _FIG_JOBS = self.jobs  # the workers fork at the first submit and inherit it
+            self._pool = ProcessPoolExecutor(max_workers=min(workers, len(self.jobs)),
+                                             mp_context=multiprocessing.get_context("fork"))
+            order = sorted(range(len(self.jobs)), key=lambda i: self.jobs[i][3] not in PANEL_FIGURES)
+            self._futures = {i: self._pool.submit(_render, i) for i in order}
+
+    def result(self) -> dict[str, tuple[str, bytes]]:
+        """``{file name: (caption, PNG bytes)}`` in the jobs' order, without the jobs that drew nothing."""
+        global _FIG_JOBS
+        if self._done is None:
+            try:
+                if self._pool is not None:
+                    pngs = [self._futures[i].result() for i in range(len(self.jobs))]
+                else:
+                    _FIG_JOBS = self.jobs
+                    pngs = [_render(i) for i in range(len(self.jobs))]
+            finally:
+                self.close()
+            self._done = {job[3]: (job[4], png) for job, png in zip(self.jobs, pngs, strict=True)
+                          if png is not None}
+        return self._done
+
+    def close(self) -> None:
+        """Stop the workers: the figures being drawn are finished, the others not started."""
+        global _FIG_JOBS
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+            self._pool = None
         _FIG_JOBS = []
-    return {job[3]: (job[4], png) for job, png in zip(jobs, pngs, strict=True) if png is not None}
+
+
+def render_figures(jobs: Sequence[Job], workers: int = 1) -> dict[str, tuple[str, bytes]]:
+    """Draw each job: ``{file name: (caption, PNG bytes)}`` in the jobs' order, without the jobs that
+    drew nothing. ``workers > 1`` draws them in that many forked processes (the figures are
+    independent; the PNGs are the same), those with a panel per estimator first; 0: one per core."""
+    return PendingFigures(jobs, workers).result()
