@@ -134,4 +134,4 @@ class OnlineFixes:
                 self.anchor = None
             solver.remove(old, add=add)
             self.indices.clear()
-        self.indices.extend(i for i, g in new if g == "gnss")
+        self.indices.extend(i for i, g in new if g == "gnss" and i >= 0)

@@ -52,7 +52,7 @@ from .fix_gate import OnlineFixes
 from .online_track import OnlineTrack, kinematics
 from .position_walk import position_walk
 from .smoother_config import SmootherConfig, SolverConfig, auto_motion
-from .solution import Closing, marginal_priors, refresh_places
+from .solution import Closing, joint_prior, marginal_priors, refresh_places
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt
 from .space import IB, PlanarSpace, V, W
 
@@ -287,9 +287,8 @@ class Navigator(Coasting):
         self.last_pose, self.last_cov = pose, cov
         vec = _vec(pose)
         prev_t, prev_p = self.track.add(s.t, vec, cov)
-        if not self.history and (self.cfg.solver == "fixed-lag" and self.cfg.optimizer.rebase_every
-                                 and k - self._base >= self.cfg.optimizer.rebase_every):
-            self._rebase(k, s.t)  # bounded: the fixed-lag smoother re-anchored
+        if k - self._base >= self._segment(loops):
+            self._rebase(k, s.t)  # bounded: the fixed-lag smoother re-anchored, or iSAM2's next segment
         self.coaster.estimated(k, s.t)
         if self.on_estimate is not None:
             self.on_estimate(s.t, vec, cov)
@@ -345,12 +344,23 @@ class Navigator(Coasting):
             if values.exists(W(k)):
                 self.builder.observe_current(np.asarray(values.atVector(W(k))))
 
+    def _segment(self, loops: Any) -> float:
+        """Keyframes between two re-anchorings of the online solver: the fixed-lag smoother's in live
+        mode (``rebase_every``); iSAM2's (``isam2_segment``) without a loop closer or with GNSS fixes
+        holding the track (a loop back to an earlier segment enters only the closing step); else never."""
+        opt = self.cfg.optimizer
+        n = opt.rebase_every if not self.history and self.cfg.solver == "fixed-lag" else \
+            opt.isam2_segment if self.cfg.solver == "isam2" and (loops is None or self.builder.counts.get("gnss")) \
+            else None
+        return n if n else math.inf
+
     def _rebase(self, k: int, t: float) -> None:
-        """A fresh fixed-lag smoother with priors carrying the current marginals of the variables
-        still in use: the newest pose, the compass-bias frame and the beacons (live mode)."""
+        """A fresh fixed-lag smoother (live mode) or iSAM2 with priors carrying the current marginals of
+        the variables still in use: the newest pose, the compass-bias frame and the beacons."""
         keys = [F.X(k), *self.builder.carried_keys(k)]
         try:
-            self.solver.rebase(*marginal_priors(self.solver, self.space, keys, t))
+            priors = joint_prior if self.solver.kind == "isam2" else marginal_priors
+            self.solver.rebase(*priors(self.solver, self.space, keys, t))
         except SolverError as exc:
             raise solve_failure(exc, t, self._rec, self.n_records) from None
         self.fixes.forget()

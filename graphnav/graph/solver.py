@@ -125,6 +125,7 @@ class Solver:
         self._info: dict[int, NDArray[np.float64]] = {}  # ... their marginal information, once read
         self._marginals: dict[int, NDArray[np.float64]] = {}  # ... its inverse, once asked for (`marginal`)
         self._stamps: dict[int, float] = {}  # fixed-lag: tracked key -> time
+        self.done = gtsam.Values()  # iSAM2 after a rebase: the estimates of the variables it no longer holds
         self.updates = 0
         self.new_indices: list[int] = []  # iSAM2 / fixed-lag: the indices of the last update's factors
         if kind == "isam2":
@@ -152,7 +153,9 @@ class Solver:
             self.initial.insert(values)
         try:
             if self.kind == "isam2":
-                self.new_indices = list(self.s.update(graph, values).getNewFactorsIndices())
+                online, held = self._held(graph, values)
+                idx = iter(self.s.update(online, values).getNewFactorsIndices())
+                self.new_indices = [next(idx) if h else -1 for h in held]
                 self._fresh = set(values.keys())
                 self._info, self._marginals = {}, {}
             elif self.kind == "fixed-lag":
@@ -174,13 +177,43 @@ class Solver:
             raise SolverError(_gtsam_message(exc)) from None
         self.updates += 1
 
+    def _held(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
+              ) -> tuple[gtsam.NonlinearFactorGraph, list[bool]]:
+        """iSAM2 after a rebase: the factors of ``graph`` on variables it holds (or ``values`` brings), and
+        per factor whether it is one of them. A factor on a variable of an earlier segment (a loop
+        closure back to it) enters only the kept graph, which the closing step solves."""
+        if not self.done.size():
+            return graph, [True] * graph.size()
+        held = [all(values.exists(key) or self.s.valueExists(key) for key in graph.at(i).keys())
+                for i in range(graph.size())]
+        if all(held):
+            return graph, held
+        online = gtsam.NonlinearFactorGraph()
+        for i, h in enumerate(held):
+            if h:
+                online.add(graph.at(i))
+        return online, held
+
     def rebase(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, stamps: Mapping[int, float]) -> None:
-        """Fixed-lag only: replace the smoother by a fresh one holding ``graph``/``values`` (priors
-        carrying the marginals of the variables still in use). GTSAM's smoothers keep an empty slot
-        for every factor ever removed (~220 bytes each); starting afresh keeps memory flat at the
-        cost of the correlations between those variables."""
+        """Replace the online smoother by a fresh one holding ``graph``/``values`` (priors carrying the
+        marginals of the variables still in use), at the cost of the correlations between those variables.
+        Fixed-lag: GTSAM's smoothers keep an empty slot for every factor ever removed (~220 bytes each);
+        starting afresh keeps memory flat. iSAM2: its update walks the whole Bayes tree (GTSAM 4.3.0);
+        the other variables keep their estimates (:attr:`done`), the kept graph is untouched."""
+        if self.kind == "isam2":
+            old = self.s.calculateBestEstimate()
+            for key in values.keys():
+                old.erase(key)
+            self.done.insert(old)
+            self.s = gtsam.ISAM2(self.params)
+            self._fresh, self._info, self._marginals = set(), {}, {}
+            try:
+                self.s.update(graph, values)
+            except RuntimeError as exc:
+                raise SolverError(_gtsam_message(exc)) from None
+            return
         if self.kind != "fixed-lag":
-            raise ValueError("only the fixed-lag smoother is rebased")
+            raise ValueError("only the fixed-lag smoother and iSAM2 are rebased")
         self.s = gtsam.IncrementalFixedLagSmoother(self.lag, self.params)
         self._fresh, self._info, self._marginals = set(), {}, {}
         self._stamps = {k: v for k, v in self._stamps.items() if values.exists(k)}
@@ -249,6 +282,8 @@ class Solver:
                     return self._newest(key, type_name)
                 except RuntimeError:  # a marginal not defined yet (e.g. an IMU bias at the start)
                     pass
+            if self.done.exists(key) and not self.s.valueExists(key):
+                return getattr(self.done, f"at{type_name}")(key)
             return getattr(self.s, f"calculateEstimate{type_name}")(key)
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
@@ -281,12 +316,18 @@ class Solver:
             raise SolverError(_gtsam_message(exc)) from None
 
     def current(self) -> gtsam.Values:
-        """Every variable's current estimate: iSAM2 ``calculateBestEstimate`` (full back-substitution),
-        fixed-lag ``calculateEstimate`` (the window), batch the initial guess."""
+        """Every variable's current estimate: iSAM2 ``calculateBestEstimate`` (full back-substitution; after a
+        rebase with the estimates it no longer holds), fixed-lag ``calculateEstimate`` (the window), batch the
+        initial guess."""
         if self.kind == "batch":
             return gtsam.Values(self.initial)
         try:
-            return self.s.calculateBestEstimate() if self.kind == "isam2" else self.s.calculateEstimate()
+            if self.kind == "fixed-lag":
+                return self.s.calculateEstimate()
+            values = self.s.calculateBestEstimate()
+            if self.done.size():
+                values.insert(self.done)
+            return values
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
 

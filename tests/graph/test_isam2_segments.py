@@ -1,0 +1,96 @@
+"""iSAM2 in segments (``isam2_segment``): a fresh iSAM2 every N keyframes, started from the joint
+marginal of the variables still in use, gives the newest state a whole-log iSAM2 gives; a factor on a
+variable of an earlier segment stays out of the online problem and in the kept graph; the smoothed
+result solves the whole graph as before."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+from _harbour import harbour_trial
+
+from graphnav import estimators
+from graphnav.graph.solution import joint_prior, marginal_priors
+from graphnav.graph.solver import Solver, isam_params
+from graphnav.graph.space import PlanarSpace
+
+
+def X(i: int) -> int:
+    return gtsam.symbol("x", i)
+
+
+L0 = gtsam.symbol("l", 0)
+ODO = gtsam.noiseModel.Diagonal.Sigmas(np.array([0.05, 0.05, 0.02]))
+FIX = gtsam.noiseModel.Isotropic.Sigma(2, 3.0)
+SIGHT = gtsam.noiseModel.Diagonal.Sigmas(np.array([0.02, 0.3]))
+
+
+def _step(k: int, rng: np.random.Generator) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+    """Keyframe ``k`` of a circle (radius ~16 m) with odometry, a fix every 5th keyframe and a sighting
+    of one beacon (unknown at first: the SLAM case, where the pose and the beacon correlate)."""
+    g, v = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    truth = gtsam.Pose2(16 * np.sin(0.06 * k), 16 * (1 - np.cos(0.06 * k)), 0.06 * k)
+    if k == 0:
+        g.add(gtsam.PriorFactorPose2(X(0), truth, gtsam.noiseModel.Diagonal.Sigmas(np.array([1.0, 1.0, 0.1]))))
+        g.add(gtsam.PriorFactorPoint2(L0, np.array([5.0, 10.0]), gtsam.noiseModel.Isotropic.Sigma(2, 20.0)))
+        v.insert(L0, np.array([5.0, 10.0]))
+    else:
+        step = gtsam.Pose2(16 * np.sin(0.06), 16 * (1 - np.cos(0.06)), 0.06)
+        g.add(gtsam.BetweenFactorPose2(X(k - 1), X(k), step.compose(gtsam.Pose2(*rng.normal(0, [0.05, 0.05, 0.02]))),
+                                       ODO))
+    if k % 5 == 0:
+        g.add(gtsam.PriorFactorPose2(X(k), truth, gtsam.noiseModel.Diagonal.Sigmas(np.array([3.0, 3.0, 1e3]))))
+    d = np.array([5.0, 10.0]) - truth.translation()
+    bearing = gtsam.Rot2.fromAngle(np.arctan2(d[1], d[0]) - truth.theta() + rng.normal(0, 0.02))
+    g.add(gtsam.BearingRangeFactor2D(X(k), L0, bearing, float(np.hypot(*d)) + rng.normal(0, 0.3), SIGHT))
+    v.insert(X(k), truth.compose(gtsam.Pose2(0.3, -0.2, 0.02)))
+    return g, v
+
+
+def _run(rebase_at: int | None, priors=joint_prior, n: int = 60) -> Solver:
+    rng = np.random.default_rng(4)
+    sol = Solver("isam2", isam_params(0.01), keep_graph=True)
+    for k in range(n):
+        sol.update(*_step(k, rng))
+        sol.estimate(X(k), "Pose2")
+        if k == rebase_at:
+            sol.rebase(*priors(sol, PlanarSpace(), [X(k), L0], 0.0))
+    sol.relinearize(3)
+    return sol
+
+
+def test_a_segment_started_from_the_joint_marginal_gives_the_whole_log_estimate():
+    whole, joint, apart = _run(None), _run(30), _run(30, marginal_priors)
+    last = [s.estimate(X(59), "Pose2") for s in (whole, joint, apart)]
+    err_joint = np.hypot(*(last[1].translation() - last[0].translation()))
+    err_apart = np.hypot(*(last[2].translation() - last[0].translation()))
+    assert err_joint < 0.02 and err_joint < 0.2 * err_apart
+    np.testing.assert_allclose(joint.marginal(X(59)), whole.marginal(X(59)), rtol=0.1, atol=0.01)
+    # every variable keeps an estimate; the earlier segment's as it left it
+    cur = joint.current()
+    assert all(cur.exists(X(k)) for k in range(60)) and cur.exists(L0)
+    assert joint.done.exists(X(10)) and not joint.s.valueExists(X(10))
+    np.testing.assert_allclose(joint.estimate(X(10), "Pose2").translation(), joint.done.atPose2(X(10)).translation())
+
+
+def test_a_factor_on_an_earlier_segment_goes_to_the_kept_graph_only():
+    sol = _run(30)
+    g = gtsam.NonlinearFactorGraph()
+    g.add(gtsam.BetweenFactorPose2(X(5), X(59), gtsam.Pose2(1.0, 0.0, 0.0), ODO))  # a loop back to segment 1
+    g.add(gtsam.PriorFactorPose2(X(59), sol.estimate(X(59), "Pose2"), ODO))
+    size = sol.graph.size()
+    sol.update(g, gtsam.Values())
+    assert sol.new_indices[0] == -1 and sol.new_indices[1] >= 0
+    assert sol.graph.size() == size + 2
+
+
+def test_isam2_segments_keep_the_smoothed_result_and_the_online_track():
+    """The embedded-style harbour trial (scans, GNSS, compass, IMU): in 12-keyframe segments the smoothed
+    track is the whole-log one (the closing step solves the same graph) and the online one stays close."""
+    log = harbour_trial(duration=30.0, seed=3)
+    whole = estimators.run("isam2", log, isam2_segment=None)
+    seg = estimators.run("isam2", log, isam2_segment=12)
+    assert len(whole.trajectory) >= 60 and seg.info.get("rebases", 0) >= 4 and "rebases" not in whole.info
+    np.testing.assert_allclose(seg.trajectory.poses, whole.trajectory.poses, atol=1e-4)
+    gap = np.hypot(*(seg.online.poses[:, :2] - whole.online.poses[:, :2]).T)
+    assert np.max(gap) < 0.1
