@@ -46,7 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import option
-from ..geometry import wrap_angle
+from ..geometry import se2_between, wrap_angle
 from ..graph.chi2 import chi2_ppf
 
 
@@ -244,3 +244,28 @@ def reinit_block(x: NDArray, P: NDArray, idx: NDArray | list[int], z: NDArray, R
     P[idx, :] = 0.0
     P[:, idx] = 0.0
     P[np.ix_(idx, idx)] = np.atleast_2d(R)
+
+
+def consistent(prior: NDArray[np.float64], p_cov: NDArray[np.float64], meas: NDArray[np.float64],
+               m_cov: NDArray[np.float64], weak: NDArray[np.float64] | None = None, p: float = 0.999) -> bool:
+    """Whether ``meas`` can be the same pose (or increment) as ``prior`` (the inputs of
+    :func:`~graphnav.scan.imu_guess.fuse_se2`; icp-dr's and scan-to-map's gate on a match): their
+    difference's Mahalanobis distance under both covariances within the chi-square bound ``p`` of the
+    directions the measurement sees (3 less the rank of ``weak``); False for a non-finite input."""
+    r = np.asarray(m_cov, dtype=float)
+    dof = 3
+    if weak is not None:
+        w = np.asarray(weak, dtype=float)
+        r = r + 1e8 * (w @ w.T)
+        dof -= int(np.linalg.matrix_rank(w, tol=1e-6))
+    if dof <= 0:
+        return True
+    xi = se2_between(np.asarray(prior, dtype=float), np.asarray(meas, dtype=float))
+    both = np.asarray(p_cov, dtype=float) + r
+    if not (np.all(np.isfinite(xi)) and np.all(np.isfinite(both))):
+        return False
+    try:
+        d2 = float(xi @ np.linalg.solve(both, xi))
+    except np.linalg.LinAlgError:
+        return False
+    return d2 <= chi2_ppf(float(p), dof)

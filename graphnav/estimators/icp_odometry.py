@@ -39,12 +39,13 @@ from ..log import NavLog, Scan, odometry_samples
 from ..result import OnEstimate, RunResult
 from ..scan import icp_cache
 from ..scan.deskew import sweep_of
-from ..scan.imu_guess import ImuGuess, consistent, fuse_se2, log_imu_guess
+from ..scan.imu_guess import ImuGuess, fuse_se2, log_imu_guess
 from ..scan.lio import imu_tangent, lio_step
 from ..scan.motion_guess import MotionGuess
 from ..scan.weighted_icp import IcpConfig, MatchResult, scan_points
 from ..trajectory import Trajectory
 from .base import BatchEstimator
+from .gating import consistent
 from .start import log_start
 
 _CONFIG_FIELDS = {f.name for f in fields(IcpConfig)}

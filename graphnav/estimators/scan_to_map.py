@@ -43,7 +43,7 @@ from ..result import OnEstimate, RunResult
 from ..scan.covariance import SAMPLING_VARIANCE, sandwich
 from ..scan.degeneracy import analyse, flatness, keep_constrained, line_information
 from ..scan.deskew import sweep_of
-from ..scan.imu_guess import ImuGuess, consistent, fuse_se2, log_imu_guess
+from ..scan.imu_guess import ImuGuess, fuse_se2, log_imu_guess
 from ..scan.lio import composed_cov, lio_step
 from ..scan.registration import (
     Params,
@@ -57,6 +57,7 @@ from ..scan.registration import (
 )
 from ..trajectory import Trajectory
 from .base import BatchEstimator
+from .gating import consistent
 from .scan_to_map3d import cloud_configs, run_scan_to_map3d, usable_clouds
 from .start import log_start
 

@@ -26,7 +26,6 @@ A 6-axis record is used as planar (``ax``, ``ay``, ``wz``): a surface vessel's r
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -67,40 +66,6 @@ def fuse_se2(prior: NDArray[np.float64], p_cov: NDArray[np.float64], meas: NDArr
     k = p_cov @ np.linalg.inv(p_cov + r)
     cov = (np.eye(3) - k) @ p_cov
     return se2_compose(prior, k @ se2_between(prior, meas)), 0.5 * (cov + cov.T)
-
-
-def consistent(prior: NDArray[np.float64], p_cov: NDArray[np.float64], meas: NDArray[np.float64],
-               m_cov: NDArray[np.float64], weak: NDArray[np.float64] | None = None, p: float = 0.999) -> bool:
-    """Whether ``meas`` can be the same pose (or increment) as ``prior`` (:func:`fuse_se2`'s inputs): their
-    difference's Mahalanobis distance under both covariances within the chi-square bound ``p`` of the
-    directions the measurement sees (3 less the rank of ``weak``); False for a non-finite input."""
-    r = np.asarray(m_cov, dtype=float)
-    dof = 3
-    if weak is not None:
-        w = np.asarray(weak, dtype=float)
-        r = r + 1e8 * (w @ w.T)
-        dof -= int(np.linalg.matrix_rank(w, tol=1e-6))
-    if dof <= 0:
-        return True
-    xi = se2_between(np.asarray(prior, dtype=float), np.asarray(meas, dtype=float))
-    both = np.asarray(p_cov, dtype=float) + r
-    if not (np.all(np.isfinite(xi)) and np.all(np.isfinite(both))):
-        return False
-    try:
-        d2 = float(xi @ np.linalg.solve(both, xi))
-    except np.linalg.LinAlgError:
-        return False
-    return d2 <= _chi2_ppf(float(p), dof)
-
-
-@lru_cache(maxsize=64)
-def _chi2_ppf(p: float, dof: int) -> float:
-    """``scipy.stats.chi2.ppf(p, dof)``, once per (p, dof) (it costs ~0.1 ms a call, once per scan here):
-    the expression it evaluates, ``2 gammaincinv(dof / 2, p)``, without importing scipy.stats (~0.9 s of
-    CPU in the process that runs scan-to-map)."""
-    from scipy.special import gammaincinv
-
-    return float(2.0 * gammaincinv(dof / 2.0, p))
 
 
 def imu_samples(log: NavLog) -> NDArray[np.float64]:

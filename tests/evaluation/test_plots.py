@@ -225,8 +225,9 @@ def test_the_report_and_the_imu_gate_take_scipy_stats_quantiles_without_importin
     code = (
         "import sys\n"
         "import graphnav.evaluation.plots as p, graphnav.evaluation.report.assemble\n"
-        "from graphnav.scan.imu_guess import _chi2_ppf\n"
-        "gate = [_chi2_ppf(q, d) for q in (0.99, 0.999) for d in (2, 3)]\n"
+        "import graphnav.estimators.icp_odometry\n"
+        "from graphnav.graph.chi2 import chi2_ppf\n"
+        "gate = [chi2_ppf(q, d) for q in (0.99, 0.999) for d in (2, 3)]\n"
         "loaded = 'scipy.stats' in sys.modules\n"
         "from scipy.stats import chi2\n"
         "print(loaded, p.NEES_BAND == tuple(float(v) for v in chi2.ppf([0.025, 0.975], 2)),\n"
