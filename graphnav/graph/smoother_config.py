@@ -291,8 +291,9 @@ class SolverConfig:
     rebase_every: int | None = option(6000,
         "live mode (no history kept): re-anchor the fixed-lag smoother every N keyframes")
     isam2_segment: int | None = option(4000,
-        "isam2 without a loop closer: the online iSAM2 starts afresh every N keyframes from the marginals of the "
-        "variables still in use (the smoothed result solves the whole graph as before). GTSAM 4.3.0 walks its whole "
+        "isam2 without a loop closer, or with one while GNSS fixes hold the track: the online iSAM2 starts afresh "
+        "every N keyframes from the joint marginal of the variables still in use (the smoothed result solves the "
+        "whole graph as before). GTSAM 4.3.0 walks its whole "
         "Bayes tree after every update (ISAM2Result::treeNnz), so an update's cost grows with the log "
         "(docs/performance.md, Session 8); None: one iSAM2 for the whole log")
     relinearize_threshold: float = option(0.05, "poses: tangent-space change that triggers relinearization")
