@@ -237,6 +237,14 @@ class Closing:
         return new, values
 
 
+def _type_of(key: int, space: PlanarSpace) -> str:
+    """The GTSAM type name of a state variable by its symbol (poses, beacons ``l``, velocities ``v``,
+    water current ``w``, IMU biases ``i``)."""
+    ch = chr(gtsam.Symbol(key).chr())
+    return space.point_type if ch == "l" else "Vector" if ch in "vw" else "ConstantBias" if ch == "i" \
+        else space.pose_type
+
+
 def marginal_priors(solver: Solver, space: PlanarSpace, keys: list[int], t: float
                     ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values, dict[int, float]]:
     """Priors carrying the current estimates and marginals of ``keys`` (poses, beacons ``l``,
@@ -246,18 +254,15 @@ def marginal_priors(solver: Solver, space: PlanarSpace, keys: list[int], t: floa
     for key in keys:
         cov = solver.marginal(key)
         model = gtsam.noiseModel.Gaussian.Covariance(cov)
-        ch = chr(gtsam.Symbol(key).chr())
-        if ch == "l":
-            p = solver.estimate(key, space.point_type)
+        kind = _type_of(key, space)
+        p = solver.estimate(key, kind)
+        if kind == space.point_type:
             g.add(space.landmark_prior_cov(key, p, cov))
-        elif ch in "vw":
-            p = solver.estimate(key, "Vector")
+        elif kind == "Vector":
             g.add(gtsam.PriorFactorVector(key, p, model))
-        elif ch == "i":
-            p = solver.estimate(key, "ConstantBias")
+        elif kind == "ConstantBias":
             g.add(gtsam.PriorFactorConstantBias(key, p, model))
         else:
-            p = solver.estimate(key, space.pose_type)
             g.add(space.prior_cov(key, p, cov))
         v.insert(key, p)
         stamps[key] = t
@@ -271,7 +276,10 @@ def joint_prior(solver: Solver, space: PlanarSpace, keys: list[int], t: float
     offsets (a ``LinearContainerFactor`` of the ``HessianFactor``). A fresh iSAM2 segment's start
     that keeps the correlations -- the pose with its velocity, beacons with the pose -- which
     separate priors drop (MRCLAM r1 in 300-keyframe segments: online NEES 3.5 -> 73 with them)."""
-    _, values, stamps = marginal_priors(solver, space, keys, t)
+    values = gtsam.Values()
+    for key in keys:
+        values.insert(key, solver.estimate(key, _type_of(key, space)))
+    stamps = dict.fromkeys(keys, t)
     jm = solver.s.jointMarginalInformation(keys)
     parts = gtsam.GaussianFactorGraph()
     for i, a in enumerate(keys):
