@@ -54,9 +54,7 @@ GNC_INNER_TOL = 1e-3
 
 def _d2(f: gtsam.NonlinearFactor, values: gtsam.Values) -> float:
     """The factor's squared Mahalanobis residual (its Gaussian part)."""
-    nm = f.noiseModel()
-    base = nm.noise() if hasattr(nm, "robust") else nm
-    return float(base.squaredMahalanobisDistance(f.unwhitenedError(values)))
+    return float(noise.gaussian(f).squaredMahalanobisDistance(f.unwhitenedError(values)))
 
 
 def _measured_d2(f: gtsam.NonlinearFactor, values: gtsam.Values, group: str) -> tuple[float, int]:
@@ -231,9 +229,7 @@ def odometry_consistency(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
         if not isinstance(f, gtsam.BetweenFactorPose2):
             return None
         k0, k1 = f.keys()
-        nm = f.noiseModel()
-        base = nm.noise() if hasattr(nm, "robust") else nm
-        R = np.asarray(base.R())
+        R = np.asarray(noise.gaussian(f).R())
         steps[int(k0)] = (f.measured(), np.linalg.inv(R.T @ R), int(k1))
     if not steps:
         return None

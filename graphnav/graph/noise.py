@@ -34,14 +34,19 @@ import scipy.sparse.linalg as spla
 from .builder import SCALABLE
 from .solver import LmSettings, levenberg_marquardt
 
-__all__ = ["SCALABLE", "estimate_scales", "group_statistics", "measured_residual", "scaled", "subgraph",
+__all__ = ["SCALABLE", "estimate_scales", "gaussian", "group_statistics", "measured_residual", "scaled", "subgraph",
            "whitened_norm"]
+
+
+def gaussian(f: gtsam.NonlinearFactor) -> gtsam.noiseModel.Base:
+    """``f``'s noise model without its robust kernel (its Gaussian part)."""
+    nm = f.noiseModel()
+    return nm.noise() if hasattr(nm, "robust") else nm
 
 
 def whitened_norm(f: gtsam.NonlinearFactor, values: gtsam.Values, *, robust: bool = True) -> float:
     """The factor's Mahalanobis residual norm (``robust=False``: of its Gaussian part)."""
-    nm = f.noiseModel()
-    base = nm.noise() if hasattr(nm, "noise") and not robust else nm
+    base = f.noiseModel() if robust else gaussian(f)
     e = f.unwhitenedError(values)
     return float(np.sqrt(base.squaredMahalanobisDistance(e)))
 
@@ -77,8 +82,7 @@ def _measured(f: gtsam.NonlinearFactor, group: str, base: gtsam.noiseModel.Base 
     measurement's x, y, yaw (:data:`PLANAR_ROWS`), else every row with nonzero precision. ``base``:
     ``f``'s Gaussian noise model when the caller has it."""
     if base is None:
-        nm = f.noiseModel()
-        base = nm.noise() if hasattr(nm, "robust") else nm
+        base = gaussian(f)
     mask = (np.asarray(base.R()) != 0.0).any(axis=1)
     if isinstance(f, (gtsam.GPSFactor, gtsam.GPSFactorArm)):
         mask[2:] = False
@@ -98,8 +102,7 @@ def measured_residual(f: gtsam.NonlinearFactor, values: gtsam.Values, group: str
 def _measured_rows(f: gtsam.NonlinearFactor, values: gtsam.Values, group: str) -> tuple[np.ndarray, np.ndarray]:
     """``f``'s rows that measure something (:func:`_measured`) and its whitened residual on them
     (:func:`measured_residual`)."""
-    nm = f.noiseModel()
-    base = nm.noise() if hasattr(nm, "robust") else nm
+    base = gaussian(f)
     mask = _measured(f, group, base)
     return mask, np.asarray(base.whiten(f.unwhitenedError(values)))[mask]
 

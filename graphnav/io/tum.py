@@ -14,13 +14,16 @@ from ..log import NavLog
 from ..trajectory import Trajectory
 from .outputs import OutDir, atomic_path
 
+#: the first line of every TUM file written here (np.savetxt's header form)
+HEADER = "# timestamp tx ty tz qx qy qz qw\n"
+
 
 def write_tum(traj: Trajectory, path: str | Path) -> None:
     """Write ``traj`` as TUM ``t x y z qx qy qz qw`` (z = 0, rotation about +z; the quaternion by
     :class:`scipy.spatial.transform.Rotation`, scalar last), whole or not at all."""
     arr = np.column_stack([traj.t, traj.x, traj.y, np.zeros(len(traj)), yaw_to_quat(traj.yaw)])
     with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii", newline="\n") as fh:
-        fh.write("# timestamp tx ty tz qx qy qz qw\n")
+        fh.write(HEADER)
         for text in table_lines(arr, "%.9f"):
             fh.write(text)
 
@@ -54,7 +57,7 @@ class TrajectoryWriter:
         self.path = Path(path)
         self._mode = "x" if exclusive else "w"
         self._fh = open(self.path, self._mode, buffering=1)
-        self._fh.write("# timestamp tx ty tz qx qy qz qw\n")
+        self._fh.write(HEADER)
         self._cov = None
         self.count = 0
 
