@@ -346,12 +346,16 @@ class Navigator(Coasting):
 
     def _segment(self, loops: Any) -> float:
         """Keyframes between two re-anchorings of the online solver: the fixed-lag smoother's in live
-        mode (``rebase_every``); iSAM2's (``isam2_segment``) without a loop closer or with GNSS fixes
-        holding the track (a loop back to an earlier segment enters only the closing step); else never."""
+        mode (``rebase_every``); iSAM2's with GNSS fixes holding the track (the smaller of ``isam2_segment`` and
+        ``isam2_segment_gnss``; a loop back to an earlier segment enters only the closing step), else without a
+        loop closer (``isam2_segment``); else never."""
         opt = self.cfg.optimizer
-        n = opt.rebase_every if not self.history and self.cfg.solver == "fixed-lag" else \
-            opt.isam2_segment if self.cfg.solver == "isam2" and (loops is None or self.builder.counts.get("gnss")) \
-            else None
+        if not self.history and self.cfg.solver == "fixed-lag":
+            n = opt.rebase_every
+        elif self.cfg.solver == "isam2" and opt.isam2_segment and self.builder.counts.get("gnss"):
+            n = min(opt.isam2_segment, opt.isam2_segment_gnss or opt.isam2_segment)
+        else:
+            n = opt.isam2_segment if self.cfg.solver == "isam2" and loops is None else None
         return n if n else math.inf
 
     def _rebase(self, k: int, t: float) -> None:
