@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.optimize import nnls
 
 from graphnav.graph.log_runs import run_isam2
 from graphnav.graph.navigator import Navigator
@@ -55,6 +54,8 @@ def test_fit_recovers_intercept_and_slope():
 def test_nnls2_is_scipy_nnls(rows, tilt):
     """The walk's two-column non-negative least squares against scipy.optimize.nnls (which it replaces): the same
     solution to rounding, including where a component is clipped at 0 (a negative slope or intercept)."""
+    from scipy.optimize import nnls  # (here: test_chi2 runs this module's boat in a process without scipy.optimize)
+
     lag = np.array([r[0] for r in rows])
     w = np.array([r[2] for r in rows])
     A = np.c_[np.ones_like(lag), lag] * w[:, None]
