@@ -44,20 +44,33 @@ def sensor_log(hours: float) -> NavLog:
     return NavLog(keep, meta={"origin": {"lat": 43.5, "lon": 16.4}})
 
 
-class _Stream:  # what log_to_nmea reads (records + meta), the records streamed from a JSON Lines file
-    def __init__(self, path: Path) -> None:
-        self.records = self._read(path)
+class _Chunk:  # what log_to_nmea reads (records + meta); it walks the records twice, so a list
+    def __init__(self, records: list) -> None:
+        self.records = records
         self.meta = {"origin": {"lat": 43.5, "lon": 16.4}}
 
-    @staticmethod
-    def _read(path: Path) -> Iterator:
-        import gzip
 
-        with (gzip.open(path, "rt") if path.suffix == ".gz" else path.open()) as fh:
-            for line in fh:
-                obj = json.loads(line)
-                if obj.get("type") in ("gnss", "heading", "odometry"):
-                    yield parse_record(obj)
+def _read(path: Path) -> Iterator:
+    import gzip
+
+    with (gzip.open(path, "rt") if path.suffix == ".gz" else path.open()) as fh:
+        for line in fh:
+            obj = json.loads(line)
+            if obj.get("type") in ("gnss", "heading", "odometry"):
+                yield parse_record(obj)
+
+
+def streamed_sentences(path: Path, chunk: int = 10000) -> Iterator[tuple[float, str]]:
+    """The records of a JSON Lines file as NMEA, read line by line and converted ``chunk`` records at a time
+    (cut between two times, so each time gets one ZDA): constant memory."""
+    buf: list = []
+    for rec in _read(path):
+        if len(buf) >= chunk and rec.t != buf[-1].t:
+            yield from log_to_nmea(_Chunk(buf), with_rmc=True)
+            buf = []
+        buf.append(rec)
+    if buf:
+        yield from log_to_nmea(_Chunk(buf), with_rmc=True)
 
 
 def rss_mb() -> float:
@@ -78,10 +91,11 @@ def main() -> int:
     args = ap.parse_args()
     w_sim = time.perf_counter()
     if args.log is not None:
-        log = _Stream(args.log)
+        sentences = streamed_sentences(args.log)
     else:
         log = sensor_log(args.hours)
         print(f"simulated {len(log.records)} records in {time.perf_counter() - w_sim:.0f} s", file=sys.stderr)
+        sentences = log_to_nmea(log, with_rmc=True)
     est = make_online(args.estimator)
     dec = NmeaDecoder(keep=False)
     rows = []
@@ -89,7 +103,7 @@ def main() -> int:
     t_first = None
     next_sample = 0.0
     w0 = time.perf_counter()
-    for t, s in log_to_nmea(log, with_rmc=True):
+    for t, s in sentences:
         if t_first is None:
             t_first = t
         if t - t_first >= next_sample:
