@@ -13,8 +13,9 @@ With ``--log FILE.jsonl[.gz]`` the records are instead streamed from that file l
 
     python benchmarks/online_memory.py --hours 4
     for k in 0 1 2 3; do  # one simulation holds at most ~7 h of this in memory: 4 x 35 laps = 25 h
-      graphnav simulate harbour --profile legacy --laps 35 --fix-hz 10 --lidar-hz 0 \
-          --t0 $(python -c "print(1.7e9 + $k * 22511)") --seed $((7 + k)) --out day$k.jsonl.gz
+      t0=$(python -c "print(1.7e9 + $k * 22511)")
+      graphnav simulate harbour --profile legacy --laps 35 --fix-hz 10 --lidar-hz 0 --t0 $t0 --seed $((7 + k)) \
+          --out day$k.jsonl.gz
     done
     cat day0.jsonl.gz day1.jsonl.gz day2.jsonl.gz day3.jsonl.gz > day.jsonl.gz
     python benchmarks/online_memory.py --log day.jsonl.gz --every 60
