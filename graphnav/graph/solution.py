@@ -297,12 +297,21 @@ def joint_prior(solver: Solver, space: PlanarSpace, keys: list[int], t: float
 
 def refresh_places(loops: Any, solver: Solver, space: PlanarSpace) -> None:
     """The loop closer's places re-estimated from ``solver`` (after a loop moved the graph): on iSAM2
-    each place's pose alone (no full back-substitution of every state), else from the current values."""
+    each place's pose alone (no full back-substitution of every state) -- the planar graph's in one read
+    (:meth:`Solver.pose2_rows`) --, and the places of earlier segments (the done values after a rebase)
+    once; else from the current values."""
     if solver.kind == "isam2":
-        loops.refresh(lambda j: _vec(space.pose2(solver.estimate(F.X(j), space.pose_type))))
+        def final(k: int) -> bool:
+            return solver.settled(F.X(k))
+
+        if space.pose_type == "Pose2":
+            loops.refresh(lambda ks: list(solver.pose2_rows([F.X(k) for k in ks])), final)
+        else:
+            loops.refresh(lambda ks: [_vec(space.pose2(solver.estimate(F.X(k), space.pose_type))) for k in ks],
+                          final)
     else:
         values = solver.current()
-        loops.refresh(lambda j: _vec(space.read(values, F.X(j))) if values.exists(F.X(j)) else None)
+        loops.refresh(lambda ks: [_vec(space.read(values, F.X(k))) if values.exists(F.X(k)) else None for k in ks])
 
 
 def _vec(p: gtsam.Pose2) -> Vec:

@@ -94,3 +94,17 @@ def test_isam2_segments_keep_the_smoothed_result_and_the_online_track():
     np.testing.assert_allclose(seg.trajectory.poses, whole.trajectory.poses, atol=1e-4)
     gap = np.hypot(*(seg.online.poses[:, :2] - whole.online.poses[:, :2]).T)
     assert np.max(gap) < 0.1
+
+
+def test_many_poses_read_in_one_call_are_the_estimates_one_by_one_bit_for_bit():
+    """``Solver.pose2_rows`` (the loop closer's refresh of its places): the poses of many keys exactly as
+    ``estimate`` answers them one at a time -- the segment's from one ``calculateEstimate``, the newest's
+    from its marginal, the earlier segment's from the done values --; ``settled``: those of the earlier
+    segment, whose estimates no longer change."""
+    sol = _run(30, n=45)
+    keys = [X(k) for k in range(45)]
+    rows = sol.pose2_rows(keys)
+    want = np.array([[p.x(), p.y(), p.theta()] for p in (sol.estimate(key, "Pose2") for key in keys)])
+    assert np.array_equal(rows, want)
+    assert [sol.settled(key) for key in keys] == [k < 30 for k in range(45)]
+    assert not sol.settled(L0)
