@@ -32,6 +32,15 @@ class Place:
     d: desc.Descriptor | None
 
 
+@dataclass
+class Deferred:
+    """A place's refreshed pose whose position is known now and whose yaw is read when the place is
+    first looked at: ``read()`` answers the whole ``(x, y, yaw)`` as it was at the refresh."""
+
+    xy: Vec
+    read: Callable[[], Vec]
+
+
 def propagate(cov_w: Vec, pose_prev: Vec, rel: gtsam.Pose2, q: Vec) -> Vec:
     """World covariance of ``pose_prev * rel`` from ``cov_w`` (pose_prev's, world x, y, yaw) and the
     relative motion's body-frame covariance ``q`` (first order)."""
@@ -145,12 +154,20 @@ class Places:
         self.key_rows: list[int] = []  # key_index row -> place index
         self.grids: OrderedDict[int, tuple[corr.LikelihoodGrid, Vec]] = OrderedDict()
         self.settled = 0  # the leading places whose estimate no longer changes (:meth:`refresh`)
+        self.deferred: dict[int, Callable[[], Vec]] = {}  # place index -> its yaw's read (:class:`Deferred`)
 
     def __len__(self) -> int:
         return len(self.all)
 
     def __getitem__(self, j: int) -> Place:
+        if self.deferred:
+            self._resolve(j)
         return self.all[j]
+
+    def _resolve(self, j: int) -> None:
+        read = self.deferred.pop(j, None)
+        if read is not None:
+            self.all[j].pose = np.array(read(), dtype=float)
 
     def valid(self, sk: float, skip_recent: float) -> int:
         """Number of places at least ``skip_recent`` metres of path back from ``sk``."""
@@ -176,10 +193,10 @@ class Places:
         if got is not None:
             self.grids.move_to_end(j)
             return got
-        base = _pose(self.all[j].pose)
+        base = _pose(self[j].pose)
         lines = []
         for m in range(max(0, j - self.submap), min(len(self.all), j + self.submap + 1)):
-            pm = self.all[m]
+            pm = self[m]
             T = base.between(_pose(pm.pose))
             c, s = math.cos(T.theta()), math.sin(T.theta())
             xy = pm.xy[np.hypot(pm.xy[:, 0], pm.xy[:, 1]) <= self.ccfg.max_range]
@@ -204,22 +221,28 @@ class Places:
         """The solved estimate of keyframe ``k`` (replaces the prediction of its place)."""
         j = self.of.get(k)
         if j is not None:
+            self.deferred.pop(j, None)
             self.all[j].pose = np.asarray(pose, dtype=float)
             self.pos_index.set(j, self.all[j].pose[:2])
             if cov_w is not None:
                 self.all[j].cov = np.asarray(cov_w, dtype=float)
 
-    def refresh(self, estimate: Callable[[list[int]], list[Vec | None]],
+    def refresh(self, estimate: Callable[[list[int]], list[Vec | Deferred | None]],
                 final: Callable[[int], bool] | None = None) -> None:
         """New estimates of the places (after a loop moved the graph): ``estimate(keyframes)`` answers
-        their poses (``None``: unchanged). ``final(k)``: whether keyframe ``k``'s estimate can no longer
-        change (an earlier iSAM2 segment's: the solver's done values); the leading places whose estimate
-        was read while final are not read again (:attr:`settled`). The submaps are rebuilt when next asked for."""
+        their poses (``None``: unchanged; :class:`Deferred`: the yaw read when first looked at). ``final(k)``:
+        whether keyframe ``k``'s estimate can no longer change (an earlier iSAM2 segment's: the solver's done
+        values); the leading places whose estimate was read while final are not read again (:attr:`settled`).
+        The submaps are rebuilt when next asked for."""
         start = self.settled
         todo = self.all[start:]
-        for p, v in zip(todo, estimate([p.k for p in todo]), strict=True):
-            if v is not None:
+        for j, (p, v) in enumerate(zip(todo, estimate([p.k for p in todo]), strict=True), start):
+            if isinstance(v, Deferred):
+                p.pose = np.array([v.xy[0], v.xy[1], math.nan])
+                self.deferred[j] = v.read
+            elif v is not None:
                 p.pose = np.array(v, dtype=float)
+                self.deferred.pop(j, None)
         if final is not None:
             while self.settled < len(self.all) and final(self.all[self.settled].k):
                 self.settled += 1

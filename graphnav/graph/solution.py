@@ -25,6 +25,7 @@ import factors as F
 
 from . import gnc, noise, odometry_scale
 from .chi2 import significant_scale
+from .loop_places import Deferred
 from .measurements import WaterRow
 from .smoother_config import SmootherConfig
 from .solver import Solver, levenberg_marquardt, marginals
@@ -297,21 +298,46 @@ def joint_prior(solver: Solver, space: PlanarSpace, keys: list[int], t: float
 
 def refresh_places(loops: Any, solver: Solver, space: PlanarSpace) -> None:
     """The loop closer's places re-estimated from ``solver`` (after a loop moved the graph): on iSAM2
-    each place's pose alone (no full back-substitution of every state) -- the planar graph's in one read
-    (:meth:`Solver.pose2_rows`) --, and the places of earlier segments (the done values after a rebase)
-    once; else from the current values."""
+    each place's pose alone (no full back-substitution of every state), many in one read
+    (:func:`place_poses`), the places of earlier segments (the done values after a rebase) once; else from
+    the current values."""
     if solver.kind == "isam2":
-        def final(k: int) -> bool:
-            return solver.settled(F.X(k))
-
-        if space.pose_type == "Pose2":
-            loops.refresh(lambda ks: list(solver.pose2_rows([F.X(k) for k in ks])), final)
-        else:
-            loops.refresh(lambda ks: [_vec(space.pose2(solver.estimate(F.X(k), space.pose_type))) for k in ks],
-                          final)
+        loops.refresh(lambda ks: place_poses(solver, space, ks), lambda k: solver.settled(F.X(k)))
     else:
         values = solver.current()
         loops.refresh(lambda ks: [_vec(space.read(values, F.X(k))) if values.exists(F.X(k)) else None for k in ks])
+
+
+def place_poses(solver: Solver, space: PlanarSpace, ks: list[int]) -> list[Vec | Deferred]:
+    """iSAM2: the planar poses ``(x, y, yaw)`` of keyframes ``ks`` bit for bit as
+    ``_vec(space.pose2(solver.estimate(X(k))))`` answers them one by one (17 us each), most from one
+    :meth:`Solver.held_estimate`: the Pose2 graph's all at once (``extractPose2``), the Pose3 graph's
+    positions at once (``extractPose3``) and its yaw when the place is first looked at (:class:`Deferred`,
+    from that estimate)."""
+    keys = [F.X(k) for k in ks]
+    out: list[Vec | Deferred] = [np.zeros(0)] * len(keys)
+    rest = []
+    for i, key in enumerate(keys):
+        if solver.read_apart(key):
+            out[i] = _vec(space.pose2(solver.estimate(key, space.pose_type)))
+        else:
+            rest.append(i)
+    if not rest:
+        return out
+    values = solver.held_estimate()
+    planar = space.pose_type == "Pose2"
+    held = (gtsam.utilities.allPose2s if planar else gtsam.utilities.allPose3s)(values).keys()
+    rows = (gtsam.utilities.extractPose2 if planar else gtsam.utilities.extractPose3)(values)
+    row = {key: r for r, key in enumerate(held)}
+    for i in rest:
+        r = row.get(keys[i])
+        if r is None:  # (not held: estimate's error)
+            out[i] = _vec(space.pose2(solver.estimate(keys[i], space.pose_type)))
+        elif planar:
+            out[i] = rows[r]
+        else:  # the translation is the last three columns
+            out[i] = Deferred(rows[r, 9:11], lambda key=keys[i]: _vec(space.read(values, key)))
+    return out
 
 
 def _vec(p: gtsam.Pose2) -> Vec:

@@ -305,33 +305,19 @@ class Solver:
         """iSAM2: whether ``key``'s estimate no longer changes (an earlier segment's, :attr:`done`)."""
         return self.kind == "isam2" and self.done.exists(key) and not self.s.valueExists(key)
 
-    def pose2_rows(self, keys: list[int]) -> NDArray[np.float64]:
-        """iSAM2: the ``(x, y, theta)`` of the ``Pose2`` variables ``keys``, bit for bit as :meth:`estimate`
-        answers them one by one, in a few calls: the smoother's from one ``calculateEstimate`` (the same
-        retraction of the same delta), the newest (:meth:`_newest`) and the done ones by ``estimate``."""
-        out = np.empty((len(keys), 3))
-        rest: list[int] = []
-        for i, key in enumerate(keys):
-            if key in self._fresh or self.settled(key):
-                p = self.estimate(key, "Pose2")
-                out[i] = p.x(), p.y(), p.theta()
-            else:
-                rest.append(i)
-        if rest:
-            try:
-                values = self.s.calculateEstimate()
-            except RuntimeError as exc:
-                raise SolverError(_gtsam_message(exc)) from None
-            row = {key: r for r, key in enumerate(gtsam.utilities.allPose2s(values).keys())}
-            xyt = gtsam.utilities.extractPose2(values)
-            for i in rest:
-                r = row.get(keys[i])
-                if r is None:
-                    p = self.estimate(keys[i], "Pose2")
-                    out[i] = p.x(), p.y(), p.theta()
-                else:
-                    out[i] = xyt[r]
-        return out
+    def read_apart(self, key: int) -> bool:
+        """iSAM2: whether :meth:`estimate` reads ``key`` otherwise than from :meth:`held_estimate` (the newest
+        variable, from its marginal; an earlier segment's, from the done values)."""
+        return key in self._fresh or self.settled(key)
+
+    def held_estimate(self) -> gtsam.Values:
+        """iSAM2: the estimates of the variables the smoother holds in one call (``calculateEstimate``: the
+        same retraction of the same delta as :meth:`estimate` of each, bit for bit), for reading many at once;
+        those that :meth:`read_apart` names are :meth:`estimate`'s to read."""
+        try:
+            return self.s.calculateEstimate()
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
 
     def marginal(self, key: int) -> NDArray[np.float64] | None:
         """Marginal covariance of ``key`` in GTSAM's tangent space (``None`` for batch)."""

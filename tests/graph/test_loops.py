@@ -365,7 +365,7 @@ def test_place_index_answers_as_the_list_index_did_with_ties_and_moved_rows():
 def test_a_refresh_reads_the_settled_places_once():
     """``Places.refresh``: places whose estimate became final (an earlier iSAM2 segment's) are read once more,
     then no longer; ``None`` leaves a place where it was; the position index answers the refreshed places."""
-    from graphnav.graph.loop_places import Place, Places
+    from graphnav.graph.loop_places import Deferred, Place, Places
     from graphnav.scan import correlative as corr
 
     places = Places(corr.CorrelativeConfig(), 5, 5)
@@ -383,3 +383,16 @@ def test_a_refresh_reads_the_settled_places_once():
     assert [p.pose[1] for p in places.all] == [0.0, 2.0, 2.0, 0.0, 3.0, 3.0, 0.0, 3.0, 3.0, 0.0]
     assert places.near(np.array([4.0, 3.0]), 2, 10) == [(0.0, 4), (1.0, 5)]
     assert places.near(np.array([3.0, 0.0]), 1, 10) == [(0.0, 3)]
+    # a deferred yaw: read when the place is first looked at, once; a newer estimate replaces it
+    reads: list[int] = []
+
+    def deferred(ks: list[int]) -> list[Deferred]:
+        return [Deferred(np.array([float(k), 5.0]), lambda k=k: reads.append(k) or np.array([float(k), 5.0, 0.5]))
+                for k in ks]
+
+    places.refresh(deferred)
+    assert places.near(np.array([7.0, 5.0]), 1, 10) == [(0.0, 7)] and reads == []
+    assert places[7].pose.tolist() == [7.0, 5.0, 0.5] and places[7].pose.tolist() == [7.0, 5.0, 0.5]
+    places.observe(8, np.array([8.0, 6.0, 0.25]), None)
+    places.submap_of(6)
+    assert reads == [7, 6, 9] and places[8].pose.tolist() == [8.0, 6.0, 0.25] and not places.deferred
