@@ -20,6 +20,7 @@ import ast
 import gc
 import importlib
 import logging
+import os
 import pkgutil
 import sys
 from pathlib import Path
@@ -123,8 +124,15 @@ def _invoked(argv: list[str]) -> str:
 GC_THRESHOLD = 10_000
 
 
+#: OpenBLAS threads of a command's process (numpy's and scipy's libraries each keep a pool): on a run's small
+#: matrices their idle workers spin between calls -- ~0.2 s CPU of the 5 Hz NMEA log's ~4 s, and its wall time no
+#: shorter (docs/performance.md, Session 9). The environment's own ``OPENBLAS_NUM_THREADS`` wins.
+BLAS_THREADS = "1"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command ``argv`` (default ``sys.argv[1:]``); returns the exit status."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)  # (read as numpy loads: before a command imports it)
     thresholds = gc.get_threshold()
     gc.set_threshold(GC_THRESHOLD, *thresholds[1:])
     try:

@@ -84,3 +84,37 @@ def test_main_loads_only_the_command_it_runs():
     names = command_names()
     assert {"beacons", "info", "run", "simulate", "live", "compare"} <= set(names)
     assert all(n in helptext for n in names)
+
+
+def test_a_command_runs_openblas_on_one_thread_unless_the_environment_says():
+    """cli.main sets OPENBLAS_NUM_THREADS=1 before a command imports numpy (its idle BLAS workers spun ~0.2 s of
+    a 4 s run): numpy's and scipy's OpenBLAS then report one thread; a value in the environment wins."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import ctypes, glob, os, sys\n"
+        "from graphnav import cli\n"
+        "early = 'numpy' in sys.modules\n"
+        "try:\n"
+        "    cli.main(['run', '--help'])\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "import numpy, scipy.sparse.linalg\n"
+        "site = os.path.dirname(os.path.dirname(numpy.__file__))\n"
+        "n = []\n"
+        "for pat, fn in (('numpy.libs/libscipy_openblas64_*.so', 'scipy_openblas_get_num_threads64_'),\n"
+        "                ('scipy.libs/libscipy_openblas-*.so', 'scipy_openblas_get_num_threads')):\n"
+        "    paths = glob.glob(os.path.join(site, pat))\n"
+        "    n.append(getattr(ctypes.CDLL(paths[0]), fn)() if paths else None)\n"
+        "print(early, os.environ['OPENBLAS_NUM_THREADS'], *n, file=sys.stderr)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    early, value, *threads = r.stderr.split("\n")[-2].split()
+    assert early == "False" and value == "1"
+    assert all(t in ("1", "None") for t in threads)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**env, "OPENBLAS_NUM_THREADS": "2"}, check=True)
+    assert r.stderr.split("\n")[-2].split()[:2] == ["False", "2"]

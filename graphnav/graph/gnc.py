@@ -28,10 +28,9 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from scipy.special import ndtri
 
 from . import noise
-from .chi2 import SCALE_WINDOW, chi2_median, chi2_ppf
+from .chi2 import SCALE_WINDOW, chi2_median, chi2_ppf, ndtri
 from .solver import LmSettings, SolverError, _gtsam_message, levenberg_marquardt
 
 #: sensor groups whose factors the data may switch off (scan matches, 3D cloud matches, GNSS fixes: a cold

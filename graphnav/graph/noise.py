@@ -123,13 +123,11 @@ def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gr
     b = np.zeros(m_rows)
     b[rows[is_b]] = vals[is_b]
     A = sp.csr_matrix((vals[~is_b], (rows[~is_b], cols[~is_b])), shape=(m_rows, n_cols))
-    # rows of each factor: factors in order, each its noise model's dimension
+    # rows of each factor: factors in order, each its noise model's dimension; each row's group as a code
     dims = [graph.at(i).dim() for i in range(graph.size())]
     starts = np.concatenate([[0], np.cumsum(dims)])
-    row_group = np.empty(int(starts[-1]), dtype=object)
-    for i, g in enumerate(groups):
-        row_group[starts[i]:starts[i + 1]] = g
-    row_group = row_group[:m_rows]
+    code_of = {g: c for c, g in enumerate(dict.fromkeys(groups))}
+    row_code = np.repeat(np.array([code_of[g] for g in groups], dtype=np.int64), dims)[:m_rows]
     measured = np.ones(int(starts[-1]), dtype=bool)  # rows of the groups asked about that measure something
     residuals: dict[str, list[np.ndarray]] = {g: [] for g in which}  # ... and their whitened residuals
     for i, g in enumerate(groups):
@@ -138,7 +136,7 @@ def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gr
             residuals[g].append(e)
     # zero-precision rows observe nothing; pseudo-rows (a fix's height, LOOSE) measure no sensor's noise
     active = (np.asarray(np.abs(A).sum(axis=1)).ravel() > 0) & measured[:m_rows]
-    rows_of = {g: sel for g in which if (sel := np.flatnonzero((row_group == g) & active)).size}
+    rows_of = {g: sel for g in which if (sel := np.flatnonzero((row_code == code_of.get(g, -1)) & active)).size}
     if not rows_of:  # none of the groups asked about has a row here: no factorisation
         return {}
     N = (A.T @ A).tocsc()

@@ -80,12 +80,31 @@ def fit_walk(rows: list[tuple[float, float, int]]) -> tuple[float, float] | None
     inverse standard deviation of its variance estimate, ``~ variance sqrt(2 / pairs)``)."""
     if len(rows) < 3:
         return None
-    from scipy.optimize import nnls  # (0.1 s to import: only the vessel model without an IMU fits a walk)
-
     lag, var, n = (np.array(c, dtype=float) for c in zip(*rows, strict=True))
     w = np.sqrt(n / 2.0) / np.maximum(var, 1e-12)
-    sol, _ = nnls(np.c_[np.ones_like(lag), lag] * w[:, None], var * w)
+    sol = nnls2(np.c_[np.ones_like(lag), lag] * w[:, None], var * w)
     return float(sol[0]), float(sol[1])
+
+
+def nnls2(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``argmin |A x - b|`` over ``x >= 0`` for two columns (``scipy.optimize.nnls``'s answer to rounding,
+    without importing ``scipy.optimize``, ~0.1 s): the least-squares solution when it is non-negative, else
+    the better of the two one-column solutions clipped at 0 (the problem is convex: its minimum on the
+    boundary is one of them)."""
+    x = np.linalg.lstsq(A, b, rcond=None)[0]
+    if (x >= 0.0).all():
+        return x
+    best, cost = np.zeros(2), float(b @ b)
+    for j in range(2):
+        a = A[:, j]
+        aa = float(a @ a)
+        if aa > 0.0:
+            c = np.zeros(2)
+            c[j] = max(float(a @ b) / aa, 0.0)
+            r = A @ c - b
+            if float(r @ r) < cost:
+                best, cost = c, float(r @ r)
+    return best
 
 
 def position_walk(log: NavLog) -> dict[str, Any] | None:

@@ -7,10 +7,12 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from graphnav.graph.log_runs import run_isam2
 from graphnav.graph.navigator import Navigator
-from graphnav.graph.position_walk import fit_walk, position_walk
+from graphnav.graph.position_walk import fit_walk, nnls2, position_walk
 from graphnav.log import Gnss, GnssVelocity, Heading, NavLog, Truth
 
 
@@ -44,6 +46,37 @@ def test_fit_recovers_intercept_and_slope():
     a, q = fit_walk(rows)
     assert a == pytest.approx(3.0, rel=1e-6) and q == pytest.approx(0.2, rel=1e-6)
     assert fit_walk(rows[:2]) is None  # too few lags
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.1, 100.0), st.floats(-50.0, 50.0), st.floats(0.01, 10.0)), min_size=3,
+                max_size=12), st.floats(-5.0, 5.0))
+def test_nnls2_is_scipy_nnls(rows, tilt):
+    """The walk's two-column non-negative least squares against scipy.optimize.nnls (which it replaces): the same
+    solution to rounding, including where a component is clipped at 0 (a negative slope or intercept)."""
+    from scipy.optimize import nnls  # (here: test_chi2 runs this module's boat in a process without scipy.optimize)
+
+    lag = np.array([r[0] for r in rows])
+    w = np.array([r[2] for r in rows])
+    A = np.c_[np.ones_like(lag), lag] * w[:, None]
+    b = (np.array([r[1] for r in rows]) + tilt * lag) * w
+    if np.linalg.matrix_rank(A) < 2 or np.linalg.cond(A) > 1e8:
+        return
+    ours, ref = nnls2(A, b), nnls(A, b)[0]
+    scale = np.linalg.norm(b) / np.linalg.norm(A, axis=0)
+    assert (ours >= 0.0).all()
+    assert np.allclose(ours, ref, rtol=1e-9, atol=1e-9 * scale)
+    r_ours, r_ref = A @ ours - b, A @ ref - b
+    assert r_ours @ r_ours <= r_ref @ r_ref + 1e-12 * (b @ b)
+
+
+def test_nnls2_known_answers():
+    A = np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    assert np.allclose(nnls2(A, np.array([2.0, 1.0, 1.0])), [1.5, 1.0])  # scipy's own examples
+    assert np.array_equal(nnls2(A, np.array([-1.0, -1.0, -1.0])), [0.0, 0.0])
+    rows = [(lag, 3.0 - 0.01 * lag, 500) for lag in (1.0, 5.0, 10.0, 30.0, 60.0)]  # a falling variance: q = 0
+    a, q = fit_walk(rows)
+    assert q == 0.0 and a > 0.0
 
 
 @pytest.mark.parametrize("seed", [0, 1])
