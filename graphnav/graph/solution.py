@@ -310,12 +310,18 @@ def refresh_places(loops: Any, solver: Solver, space: PlanarSpace) -> None:
 
 def place_poses(solver: Solver, space: PlanarSpace, ks: list[int]) -> list[Vec | Deferred]:
     """iSAM2: the planar poses ``(x, y, yaw)`` of keyframes ``ks`` bit for bit as
-    ``_vec(space.pose2(solver.estimate(X(k))))`` answers them one by one (17 us each), most from one
-    :meth:`Solver.held_estimate`: the Pose2 graph's all at once (``extractPose2``), the Pose3 graph's
-    positions at once (``extractPose3``) and its yaw when the place is first looked at (:class:`Deferred`,
-    from that estimate)."""
+    ``_vec(space.pose2(solver.estimate(X(k))))`` answers them one by one: the Pose2 graph's most from one
+    :meth:`Solver.held_estimate` (``extractPose2``); the Pose3 graph's one by one (its held estimate retracts
+    every velocity and IMU bias too: dearer), the position now and the yaw when the place is first looked at
+    (:class:`Deferred`)."""
     keys = [F.X(k) for k in ks]
-    out: list[Vec | Deferred] = [np.zeros(0)] * len(keys)
+    if space.pose_type != "Pose2":
+        out: list[Vec | Deferred] = []
+        for key in keys:
+            p = solver.estimate(key, space.pose_type)
+            out.append(Deferred(p.translation()[:2], lambda p=p: _vec(space.pose2(p))))
+        return out
+    out = [np.zeros(0)] * len(keys)
     rest = []
     for i, key in enumerate(keys):
         if solver.read_apart(key):
@@ -325,18 +331,11 @@ def place_poses(solver: Solver, space: PlanarSpace, ks: list[int]) -> list[Vec |
     if not rest:
         return out
     values = solver.held_estimate()
-    planar = space.pose_type == "Pose2"
-    held = (gtsam.utilities.allPose2s if planar else gtsam.utilities.allPose3s)(values).keys()
-    rows = (gtsam.utilities.extractPose2 if planar else gtsam.utilities.extractPose3)(values)
-    row = {key: r for r, key in enumerate(held)}
+    row = {key: r for r, key in enumerate(gtsam.utilities.allPose2s(values).keys())}
+    xyt = gtsam.utilities.extractPose2(values)
     for i in rest:
         r = row.get(keys[i])
-        if r is None:  # (not held: estimate's error)
-            out[i] = _vec(space.pose2(solver.estimate(keys[i], space.pose_type)))
-        elif planar:
-            out[i] = rows[r]
-        else:  # the translation is the last three columns
-            out[i] = Deferred(rows[r, 9:11], lambda key=keys[i]: _vec(space.read(values, key)))
+        out[i] = xyt[r] if r is not None else _vec(space.pose2(solver.estimate(keys[i], space.pose_type)))
     return out
 
 

@@ -110,8 +110,8 @@ def test_many_poses_read_in_one_call_are_the_estimates_one_by_one_bit_for_bit():
     assert not sol.settled(L0) and sol.read_apart(X(44)) and sol.read_apart(X(3)) and not sol.read_apart(X(40))
 
 
-def test_many_pose3s_read_in_one_call_are_the_estimates_one_by_one_bit_for_bit():
-    """The Pose3 graph's: positions at once, the yaw when first looked at (``Deferred``), from the estimate
+def test_pose3s_read_for_the_places_are_the_estimates_bit_for_bit():
+    """The Pose3 graph's: the position now, the yaw when first looked at (``Deferred``), from the estimate
     as it was at the read (a later update moves the poses, not what was read)."""
     rng = np.random.default_rng(6)
     sol = Solver("isam2", isam_params(0.01), keep_graph=False)
@@ -137,7 +137,7 @@ def test_many_pose3s_read_in_one_call_are_the_estimates_one_by_one_bit_for_bit()
     moved = gtsam.NonlinearFactorGraph()
     moved.add(gtsam.PriorFactorPose3(X(29), gtsam.Pose3(), noise))
     sol.update(moved, gtsam.Values())
-    assert isinstance(got[0], Deferred) and not isinstance(got[29], Deferred)  # (29: the newest, read apart)
+    assert all(isinstance(g, Deferred) for g in got)
     for g, w in zip(got, want, strict=True):
         if isinstance(g, Deferred):
             assert np.array_equal(g.xy, w[:2])
