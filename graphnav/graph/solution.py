@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gtsam
 import numpy as np
@@ -25,11 +25,13 @@ import factors as F
 
 from . import gnc, noise, odometry_scale
 from .chi2 import significant_scale
-from .loop_places import Deferred
 from .measurements import WaterRow
 from .smoother_config import SmootherConfig
 from .solver import Solver, levenberg_marquardt, marginals
 from .space import PlanarSpace
+
+if TYPE_CHECKING:
+    from .loop_places import Deferred
 
 Vec = NDArray[np.float64]
 #: rounds of re-aiming the water-speed factors at most (:meth:`Closing._reaim_water`)
@@ -314,6 +316,8 @@ def place_poses(solver: Solver, space: PlanarSpace, ks: list[int]) -> list[Vec |
     :meth:`Solver.held_estimate` (``extractPose2``); the Pose3 graph's one by one (its held estimate retracts
     every velocity and IMU bias too: dearer), the position now and the yaw when the place is first looked at
     (:class:`Deferred`)."""
+    from .loop_places import Deferred  # (here: the loop closer's module imports scipy's k-d tree and ndimage)
+
     keys = [F.X(k) for k in ks]
     if space.pose_type != "Pose2":
         out: list[Vec | Deferred] = []
