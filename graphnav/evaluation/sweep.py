@@ -342,6 +342,11 @@ def _run_dask(fn: Callable, pending: list[dict[str, Any]], scheduler: Any, worke
         for fut in as_completed(futures):
             finish(key_of[fut.key], _roundtrip(fut.result()))
             fut.release()
+    except KeyboardInterrupt:
+        # closing a cluster a Ctrl-C stopped mid-call: distributed's sync() can then fail in its own cancel
+        # callback (NameError on an unbound `future`, logged by tornado with a traceback); nothing of ours
+        logging.getLogger("tornado.application").setLevel(logging.CRITICAL)
+        raise
     finally:
         if client is not scheduler:
             client.close()

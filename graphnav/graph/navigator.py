@@ -106,6 +106,21 @@ def solve_failure(exc: SolverError, t: float, rec: Record | None, n_records: int
                          where=where)
 
 
+def segment_length(cfg: SmootherConfig, history: bool, gnss: bool, loops: bool) -> float:
+    """Keyframes between two re-anchorings of the online solver: the fixed-lag smoother's in live mode
+    (``rebase_every``, no ``history`` kept); iSAM2's while ``gnss`` fixes hold the track (the smaller of
+    ``isam2_segment`` and ``isam2_segment_gnss``; a loop back to an earlier segment enters only the closing
+    step), else without a loop closer (``isam2_segment``); else never (``inf``)."""
+    opt = cfg.optimizer
+    if not history and cfg.solver == "fixed-lag":
+        n = opt.rebase_every
+    elif cfg.solver == "isam2" and opt.isam2_segment and gnss:
+        n = min(opt.isam2_segment, opt.isam2_segment_gnss or opt.isam2_segment)
+    else:
+        n = opt.isam2_segment if cfg.solver == "isam2" and not loops else None
+    return n if n else math.inf
+
+
 def log_inputs(log: NavLog, config: SmootherConfig | None, kw: dict[str, Any]) -> dict[str, Any]:
     """The :class:`Navigator`'s arguments from ``log``: its chart, LiDAR models, whether it has scans,
     an IMU and odometry, the IMU model and initial velocity, the mounts (the log's, the option's ``kw["mounts"]``
@@ -287,7 +302,8 @@ class Navigator(Coasting):
         self.last_pose, self.last_cov = pose, cov
         vec = _vec(pose)
         prev_t, prev_p = self.track.add(s.t, vec, cov)
-        if k - self._base >= self._segment(loops):
+        if k - self._base >= segment_length(self.cfg, self.history, bool(self.builder.counts.get("gnss")),
+                                            loops is not None):
             self._rebase(k, s.t)  # bounded: the fixed-lag smoother re-anchored, or iSAM2's next segment
         self.coaster.estimated(k, s.t)
         if self.on_estimate is not None:
@@ -343,16 +359,6 @@ class Navigator(Coasting):
                                values.atConstantBias(IB(k)), None)
             if values.exists(W(k)):
                 self.builder.observe_current(np.asarray(values.atVector(W(k))))
-
-    def _segment(self, loops: Any) -> float:
-        """Keyframes between two re-anchorings of the online solver: the fixed-lag smoother's in live
-        mode (``rebase_every``); iSAM2's (``isam2_segment``) without a loop closer or with GNSS fixes
-        holding the track (a loop back to an earlier segment enters only the closing step); else never."""
-        opt = self.cfg.optimizer
-        n = opt.rebase_every if not self.history and self.cfg.solver == "fixed-lag" else \
-            opt.isam2_segment if self.cfg.solver == "isam2" and (loops is None or self.builder.counts.get("gnss")) \
-            else None
-        return n if n else math.inf
 
     def _rebase(self, k: int, t: float) -> None:
         """A fresh fixed-lag smoother (live mode) or iSAM2 with priors carrying the current marginals of

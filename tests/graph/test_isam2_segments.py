@@ -143,3 +143,15 @@ def test_pose3s_read_for_the_places_are_the_estimates_bit_for_bit():
             assert np.array_equal(g.xy, w[:2])
             g = g.read()
         assert np.array_equal(g, w)
+
+
+def test_gnss_fixes_shorten_the_segment_and_nothing_else_does():
+    """``isam2_segment_gnss``: with GNSS fixes a segment is the smaller of the two lengths; without fixes it is
+    ``isam2_segment``; ``isam2_segment`` None switches segments off everywhere."""
+    log = harbour_trial(duration=30.0, seed=3)  # 60 keyframes
+    whole = estimators.run("isam2", log, isam2_segment=None, isam2_segment_gnss=12)
+    gnss = estimators.run("isam2", log, isam2_segment=30, isam2_segment_gnss=12)
+    assert "rebases" not in whole.info and gnss.info["rebases"] == 4
+    np.testing.assert_allclose(gnss.trajectory.poses, whole.trajectory.poses, atol=1e-4)
+    no_fix = log.without(lambda r: r.kind == "gnss")
+    assert estimators.run("isam2", no_fix, isam2_segment=30, isam2_segment_gnss=12).info["rebases"] == 1
