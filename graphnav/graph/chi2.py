@@ -15,24 +15,26 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+#: ``scipy.special.gammaincinv(a, p)`` for a = dof / 2 of 1-6 degrees of freedom (0.5, 1.0, ..., 3.0), per ``p``:
+#: chi-square medians (p = 0.5) and quantiles (ppf = 2 gammaincinv), to the bit
+GAMMAINCINV: dict[float, tuple[float, ...]] = {
+    0.5: (0.227468211559786, 0.6931471805599455, 1.1829869421876689,
+          1.6783469900166612, 2.175730095547763, 2.674060313723559),
+    0.95: (1.920729410347062, 2.9957322735539895, 3.9073639516255896,
+           4.743864518390577, 5.535248846758176, 6.295793621871988),
+    0.99: (3.3174483005106072, 4.60517018598809, 5.6724333650721865,
+           6.638352067993811, 7.543136234694495, 8.405946914885464),
+    0.999: (5.413783085331366, 6.907755278982137, 8.133118098119064,
+            9.233413476451585, 10.257502826216436, 11.228872242412661),
+}
+#: ``scipy.special.gammaln`` of half-integers 0.5-3.0 and ``ndtri`` at the usual probabilities, to the bit
+GAMMALN = (0.5723649429247, 0.0, -0.12078223763524526, 0.0, 0.2846828704729192, 0.6931471805599453)
+NDTRI = {0.95: 1.6448536269514722, 0.99: 2.3263478740408408, 0.999: 3.090232306167813}
 #: ``scipy.special`` at these arguments, to the bit: ``(function, *arguments) -> value``
 KNOWN: dict[tuple[str, float] | tuple[str, float, float], float] = {
-    # gammaincinv(dof / 2, p), dof 1-6: chi-square medians (p = 0.5) and quantiles (ppf = 2 gammaincinv)
-    ("gammaincinv", 0.5, 0.5): 0.227468211559786, ("gammaincinv", 1.0, 0.5): 0.6931471805599455,
-    ("gammaincinv", 1.5, 0.5): 1.1829869421876689, ("gammaincinv", 2.0, 0.5): 1.6783469900166612,
-    ("gammaincinv", 2.5, 0.5): 2.175730095547763, ("gammaincinv", 3.0, 0.5): 2.674060313723559,
-    ("gammaincinv", 0.5, 0.95): 1.920729410347062, ("gammaincinv", 1.0, 0.95): 2.9957322735539895,
-    ("gammaincinv", 1.5, 0.95): 3.9073639516255896, ("gammaincinv", 2.0, 0.95): 4.743864518390577,
-    ("gammaincinv", 2.5, 0.95): 5.535248846758176, ("gammaincinv", 3.0, 0.95): 6.295793621871988,
-    ("gammaincinv", 0.5, 0.99): 3.3174483005106072, ("gammaincinv", 1.0, 0.99): 4.60517018598809,
-    ("gammaincinv", 1.5, 0.99): 5.6724333650721865, ("gammaincinv", 2.0, 0.99): 6.638352067993811,
-    ("gammaincinv", 2.5, 0.99): 7.543136234694495, ("gammaincinv", 3.0, 0.99): 8.405946914885464,
-    ("gammaincinv", 0.5, 0.999): 5.413783085331366, ("gammaincinv", 1.0, 0.999): 6.907755278982137,
-    ("gammaincinv", 1.5, 0.999): 8.133118098119064, ("gammaincinv", 2.0, 0.999): 9.233413476451585,
-    ("gammaincinv", 2.5, 0.999): 10.257502826216436, ("gammaincinv", 3.0, 0.999): 11.228872242412661,
-    ("gammaln", 0.5): 0.5723649429247, ("gammaln", 1.0): 0.0, ("gammaln", 1.5): -0.12078223763524526,
-    ("gammaln", 2.0): 0.0, ("gammaln", 2.5): 0.2846828704729192, ("gammaln", 3.0): 0.6931471805599453,
-    ("ndtri", 0.95): 1.6448536269514722, ("ndtri", 0.99): 2.3263478740408408, ("ndtri", 0.999): 3.090232306167813,
+    **{("gammaincinv", (i + 1) / 2, p): v for p, row in GAMMAINCINV.items() for i, v in enumerate(row)},
+    **{("gammaln", (i + 1) / 2): v for i, v in enumerate(GAMMALN)},
+    **{("ndtri", p): v for p, v in NDTRI.items()},
 }
 
 

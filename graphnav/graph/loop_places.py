@@ -32,6 +32,15 @@ class Place:
     d: desc.Descriptor | None
 
 
+@dataclass
+class Deferred:
+    """A place's refreshed pose whose position is known now and whose yaw is read when the place is
+    first looked at: ``read()`` answers the whole ``(x, y, yaw)`` as it was at the refresh."""
+
+    xy: Vec
+    read: Callable[[], Vec]
+
+
 def propagate(cov_w: Vec, pose_prev: Vec, rel: gtsam.Pose2, q: Vec) -> Vec:
     """World covariance of ``pose_prev * rel`` from ``cov_w`` (pose_prev's, world x, y, yaw) and the
     relative motion's body-frame covariance ``q`` (first order)."""
@@ -65,24 +74,47 @@ def _vec(p: gtsam.Pose2) -> Vec:
 
 class _Index:
     """Points that grow one at a time: a k-d tree over the first ``n_tree`` and a linear scan
-    over the rest, rebuilt when the rest exceeds a quarter of all (amortised O(log n))."""
+    over the rest, rebuilt when the rest exceeds a quarter of all (amortised O(log n)). The rows live
+    in one array (doubled when full): the tail scan is a slice, not a list turned into an array per
+    query (O(n) per query on the 2 h harbour: the ring keys' tail is up to a quarter of the places)."""
 
     def __init__(self) -> None:
-        self.rows: list[Vec] = []
+        self.buf = np.zeros((0, 0))
+        self.n = 0  # rows held: buf[:n]
         self.tree: cKDTree | None = None
         self.n_tree = 0
 
+    def __len__(self) -> int:
+        return self.n
+
+    @property
+    def rows(self) -> Vec:
+        return self.buf[:self.n]
+
     def add(self, v: Vec) -> None:
-        self.rows.append(np.asarray(v, dtype=float))
-        if len(self.rows) - self.n_tree > max(32, len(self.rows) // 4):
+        v = np.asarray(v, dtype=float)
+        if self.n == len(self.buf):
+            buf = np.zeros((max(64, 2 * self.n), v.size))
+            if self.n:
+                buf[:self.n] = self.buf[:self.n]
+            self.buf = buf
+        self.buf[self.n] = v
+        self.n += 1
+        if self.n - self.n_tree > max(32, self.n // 4):
             self.rebuild()
 
-    def rebuild(self) -> None:
-        self.n_tree = len(self.rows)
-        self.tree = cKDTree(np.array(self.rows)) if self.rows else None
+    def set(self, j: int, v: Vec) -> None:
+        """Row ``j`` moves (the k-d tree keeps where it was until the next rebuild)."""
+        self.buf[j] = v
 
-    def replace(self, rows: list[Vec]) -> None:
-        self.rows = [np.asarray(r, dtype=float) for r in rows]
+    def rebuild(self) -> None:
+        self.n_tree = self.n
+        # (copy_data: the tree keeps the rows as they are now, whatever ``set`` does later)
+        self.tree = cKDTree(self.buf[:self.n], copy_data=True) if self.n else None
+
+    def replace(self, start: int, rows: Vec) -> None:
+        """Rows ``start`` onwards anew (``rows``: as many), and the tree rebuilt over all."""
+        self.buf[start:self.n] = rows
         self.rebuild()
 
     def nearest(self, q: Vec, n: int, valid: int) -> list[tuple[float, int]]:
@@ -94,11 +126,14 @@ class _Index:
             d, idx = np.atleast_1d(d), np.atleast_1d(idx)
             ok = np.isfinite(d) & (idx < valid)
             out.extend(zip(d[ok].tolist(), idx[ok].tolist(), strict=True))
-        lo, hi = self.n_tree, min(len(self.rows), valid)
+        lo, hi = self.n_tree, min(self.n, valid)
         if hi > lo:
-            rest = np.array(self.rows[lo:hi])
-            d = np.linalg.norm(rest - q, axis=1)
-            out.extend((float(dd), lo + j) for j, dd in enumerate(d))
+            d = np.linalg.norm(self.buf[lo:hi] - q, axis=1)
+            j = np.arange(lo, hi)
+            if hi - lo > n > 0:  # only the tail's n nearest (and their ties) can be among the n nearest
+                keep = ~(d > np.partition(d, n - 1)[n - 1])
+                d, j = d[keep], j[keep]
+            out.extend(zip(d.tolist(), j.tolist(), strict=True))
         out.sort()
         return out[:n]
 
@@ -118,12 +153,21 @@ class Places:
         self.key_index = _Index()
         self.key_rows: list[int] = []  # key_index row -> place index
         self.grids: OrderedDict[int, tuple[corr.LikelihoodGrid, Vec]] = OrderedDict()
+        self.settled = 0  # the leading places whose estimate no longer changes (:meth:`refresh`)
+        self.deferred: dict[int, Callable[[], Vec]] = {}  # place index -> its yaw's read (:class:`Deferred`)
 
     def __len__(self) -> int:
         return len(self.all)
 
     def __getitem__(self, j: int) -> Place:
+        if self.deferred:
+            self._resolve(j)
         return self.all[j]
+
+    def _resolve(self, j: int) -> None:
+        read = self.deferred.pop(j, None)
+        if read is not None:
+            self.all[j].pose = np.array(read(), dtype=float)
 
     def valid(self, sk: float, skip_recent: float) -> int:
         """Number of places at least ``skip_recent`` metres of path back from ``sk``."""
@@ -149,10 +193,10 @@ class Places:
         if got is not None:
             self.grids.move_to_end(j)
             return got
-        base = _pose(self.all[j].pose)
+        base = _pose(self[j].pose)
         lines = []
         for m in range(max(0, j - self.submap), min(len(self.all), j + self.submap + 1)):
-            pm = self.all[m]
+            pm = self[m]
             T = base.between(_pose(pm.pose))
             c, s = math.cos(T.theta()), math.sin(T.theta())
             xy = pm.xy[np.hypot(pm.xy[:, 0], pm.xy[:, 1]) <= self.ccfg.max_range]
@@ -177,18 +221,32 @@ class Places:
         """The solved estimate of keyframe ``k`` (replaces the prediction of its place)."""
         j = self.of.get(k)
         if j is not None:
+            self.deferred.pop(j, None)
             self.all[j].pose = np.asarray(pose, dtype=float)
-            self.pos_index.rows[j] = self.all[j].pose[:2].copy()
+            self.pos_index.set(j, self.all[j].pose[:2])
             if cov_w is not None:
                 self.all[j].cov = np.asarray(cov_w, dtype=float)
 
-    def refresh(self, estimate: Callable[[int], Vec | None]) -> None:
-        """New estimates of every place; the submaps are rebuilt when next asked for."""
-        for p in self.all:
-            v = estimate(p.k)
-            if v is not None:
-                p.pose = np.asarray(v, dtype=float)
-        self.pos_index.replace([p.pose[:2] for p in self.all])
+    def refresh(self, estimate: Callable[[list[int]], list[Vec | Deferred | None]],
+                final: Callable[[int], bool] | None = None) -> None:
+        """New estimates of the places (after a loop moved the graph): ``estimate(keyframes)`` answers
+        their poses (``None``: unchanged; :class:`Deferred`: the yaw read when first looked at). ``final(k)``:
+        whether keyframe ``k``'s estimate can no longer change (an earlier iSAM2 segment's: the solver's done
+        values); the leading places whose estimate was read while final are not read again (:attr:`settled`).
+        The submaps are rebuilt when next asked for."""
+        start = self.settled
+        todo = self.all[start:]
+        for j, (p, v) in enumerate(zip(todo, estimate([p.k for p in todo]), strict=True), start):
+            if isinstance(v, Deferred):
+                p.pose = np.array([v.xy[0], v.xy[1], math.nan])
+                self.deferred[j] = v.read
+            elif v is not None:
+                p.pose = np.array(v, dtype=float)
+                self.deferred.pop(j, None)
+        if final is not None:
+            while self.settled < len(self.all) and final(self.all[self.settled].k):
+                self.settled += 1
+        self.pos_index.replace(start, np.array([p.pose[:2] for p in todo]).reshape(-1, 2))
         self.grids.clear()
 
 

@@ -192,9 +192,10 @@ class LoopCloser:
         """The solved estimate of keyframe ``k`` (replaces the prediction of its place)."""
         self.places.observe(k, pose, cov_w)
 
-    def refresh(self, estimate: Callable[[int], Vec | None]) -> None:
-        """New estimates of every place (after an accepted loop moved the graph)."""
-        self.places.refresh(estimate)
+    def refresh(self, estimate: Callable[[list[int]], list[Vec | None]],
+                final: Callable[[int], bool] | None = None) -> None:
+        """New estimates of the places (after an accepted loop moved the graph): :meth:`Places.refresh`."""
+        self.places.refresh(estimate, final)
         self.stale = False
 
     # -- stages --------------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gtsam
 import numpy as np
@@ -29,6 +29,9 @@ from .measurements import WaterRow
 from .smoother_config import SmootherConfig
 from .solver import Solver, levenberg_marquardt, marginals
 from .space import PlanarSpace
+
+if TYPE_CHECKING:
+    from .loop_places import Deferred
 
 Vec = NDArray[np.float64]
 #: rounds of re-aiming the water-speed factors at most (:meth:`Closing._reaim_water`)
@@ -297,12 +300,47 @@ def joint_prior(solver: Solver, space: PlanarSpace, keys: list[int], t: float
 
 def refresh_places(loops: Any, solver: Solver, space: PlanarSpace) -> None:
     """The loop closer's places re-estimated from ``solver`` (after a loop moved the graph): on iSAM2
-    each place's pose alone (no full back-substitution of every state), else from the current values."""
+    each place's pose alone (no full back-substitution of every state), many in one read
+    (:func:`place_poses`), the places of earlier segments (the done values after a rebase) once; else from
+    the current values."""
     if solver.kind == "isam2":
-        loops.refresh(lambda j: _vec(space.pose2(solver.estimate(F.X(j), space.pose_type))))
+        loops.refresh(lambda ks: place_poses(solver, space, ks), lambda k: solver.settled(F.X(k)))
     else:
         values = solver.current()
-        loops.refresh(lambda j: _vec(space.read(values, F.X(j))) if values.exists(F.X(j)) else None)
+        loops.refresh(lambda ks: [_vec(space.read(values, F.X(k))) if values.exists(F.X(k)) else None for k in ks])
+
+
+def place_poses(solver: Solver, space: PlanarSpace, ks: list[int]) -> list[Vec | Deferred]:
+    """iSAM2: the planar poses ``(x, y, yaw)`` of keyframes ``ks`` bit for bit as
+    ``_vec(space.pose2(solver.estimate(X(k))))`` answers them one by one: the Pose2 graph's most from one
+    :meth:`Solver.held_estimate` (``extractPose2``); the Pose3 graph's one by one (its held estimate retracts
+    every velocity and IMU bias too: dearer), the position now and the yaw when the place is first looked at
+    (:class:`Deferred`)."""
+    from .loop_places import Deferred  # (here: the loop closer's module imports scipy's k-d tree and ndimage)
+
+    keys = [F.X(k) for k in ks]
+    if space.pose_type != "Pose2":
+        out: list[Vec | Deferred] = []
+        for key in keys:
+            p = solver.estimate(key, space.pose_type)
+            out.append(Deferred(p.translation()[:2], lambda p=p: _vec(space.pose2(p))))
+        return out
+    out = [np.zeros(0)] * len(keys)
+    rest = []
+    for i, key in enumerate(keys):
+        if solver.read_apart(key):
+            out[i] = _vec(space.pose2(solver.estimate(key, space.pose_type)))
+        else:
+            rest.append(i)
+    if not rest:
+        return out
+    values = solver.held_estimate()
+    row = {key: r for r, key in enumerate(gtsam.utilities.allPose2s(values).keys())}
+    xyt = gtsam.utilities.extractPose2(values)
+    for i in rest:
+        r = row.get(keys[i])
+        out[i] = xyt[r] if r is not None else _vec(space.pose2(solver.estimate(keys[i], space.pose_type)))
+    return out
 
 
 def _vec(p: gtsam.Pose2) -> Vec:

@@ -301,6 +301,24 @@ class Solver:
             return np.asarray(theta) + delta
         return theta.retract(delta)
 
+    def settled(self, key: int) -> bool:
+        """iSAM2: whether ``key``'s estimate no longer changes (an earlier segment's, :attr:`done`)."""
+        return self.kind == "isam2" and self.done.exists(key) and not self.s.valueExists(key)
+
+    def read_apart(self, key: int) -> bool:
+        """iSAM2: whether :meth:`estimate` reads ``key`` otherwise than from :meth:`held_estimate` (the newest
+        variable, from its marginal; an earlier segment's, from the done values)."""
+        return key in self._fresh or self.settled(key)
+
+    def held_estimate(self) -> gtsam.Values:
+        """iSAM2: the estimates of the variables the smoother holds in one call (``calculateEstimate``: the
+        same retraction of the same delta as :meth:`estimate` of each, bit for bit), for reading many at once;
+        those that :meth:`read_apart` names are :meth:`estimate`'s to read."""
+        try:
+            return self.s.calculateEstimate()
+        except RuntimeError as exc:
+            raise SolverError(_gtsam_message(exc)) from None
+
     def marginal(self, key: int) -> NDArray[np.float64] | None:
         """Marginal covariance of ``key`` in GTSAM's tangent space (``None`` for batch)."""
         if self.kind == "batch":

@@ -10,9 +10,10 @@ import numpy as np
 from _harbour import harbour_trial
 
 from graphnav import estimators
-from graphnav.graph.solution import joint_prior, marginal_priors
+from graphnav.graph.loop_places import Deferred, _vec
+from graphnav.graph.solution import joint_prior, marginal_priors, place_poses
 from graphnav.graph.solver import Solver, isam_params
-from graphnav.graph.space import PlanarSpace
+from graphnav.graph.space import NavSpace, PlanarSpace
 
 
 def X(i: int) -> int:
@@ -94,6 +95,54 @@ def test_isam2_segments_keep_the_smoothed_result_and_the_online_track():
     np.testing.assert_allclose(seg.trajectory.poses, whole.trajectory.poses, atol=1e-4)
     gap = np.hypot(*(seg.online.poses[:, :2] - whole.online.poses[:, :2]).T)
     assert np.max(gap) < 0.1
+
+
+def test_many_poses_read_in_one_call_are_the_estimates_one_by_one_bit_for_bit():
+    """``place_poses`` (the loop closer's refresh of its places): the planar poses of many keys exactly as
+    ``estimate`` answers them one at a time -- the segment's from one ``held_estimate``, the newest's from
+    its marginal, the earlier segment's from the done values --; ``settled``: those of the earlier
+    segment, whose estimates no longer change."""
+    sol = _run(30, n=45)
+    got = place_poses(sol, PlanarSpace(), list(range(45)))
+    want = [_vec(sol.estimate(X(k), "Pose2")) for k in range(45)]
+    assert all(np.array_equal(g, w) for g, w in zip(got, want, strict=True))
+    assert [sol.settled(X(k)) for k in range(45)] == [k < 30 for k in range(45)]
+    assert not sol.settled(L0) and sol.read_apart(X(44)) and sol.read_apart(X(3)) and not sol.read_apart(X(40))
+
+
+def test_pose3s_read_for_the_places_are_the_estimates_bit_for_bit():
+    """The Pose3 graph's: the position now, the yaw when first looked at (``Deferred``), from the estimate
+    as it was at the read (a later update moves the poses, not what was read)."""
+    rng = np.random.default_rng(6)
+    sol = Solver("isam2", isam_params(0.01), keep_graph=False)
+    noise = gtsam.noiseModel.Isotropic.Sigma(6, 0.05)
+    step = gtsam.Pose3(gtsam.Rot3.Ypr(0.1, 0.02, -0.01), np.array([1.0, 0.2, 0.05]))
+    for k in range(30):
+        g, v = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        truth = gtsam.Pose3()
+        for _ in range(k):
+            truth = truth.compose(step)
+        if k == 0:
+            g.add(gtsam.PriorFactorPose3(X(0), truth, noise))
+        else:
+            g.add(gtsam.BetweenFactorPose3(X(k - 1), X(k), step.compose(gtsam.Pose3.Expmap(rng.normal(0, 0.02, 6))),
+                                           noise))
+        if k % 4 == 0:
+            g.add(gtsam.PriorFactorPose3(X(k), truth, gtsam.noiseModel.Isotropic.Sigma(6, 1.0)))
+        v.insert(X(k), truth.compose(gtsam.Pose3.Expmap(rng.normal(0, 0.1, 6))))
+        sol.update(g, v)
+    space = NavSpace()
+    got = place_poses(sol, space, list(range(30)))
+    want = [_vec(space.pose2(sol.estimate(X(k), "Pose3"))) for k in range(30)]
+    moved = gtsam.NonlinearFactorGraph()
+    moved.add(gtsam.PriorFactorPose3(X(29), gtsam.Pose3(), noise))
+    sol.update(moved, gtsam.Values())
+    assert all(isinstance(g, Deferred) for g in got)
+    for g, w in zip(got, want, strict=True):
+        if isinstance(g, Deferred):
+            assert np.array_equal(g.xy, w[:2])
+            g = g.read()
+        assert np.array_equal(g, w)
 
 
 def test_gnss_fixes_shorten_the_segment_and_nothing_else_does():

@@ -306,3 +306,93 @@ def test_place_index_finds_the_nearest_valid_rows_as_a_linear_scan_does():
                 got = idx.nearest(q, n, valid)
                 assert [j for _, j in got] == [j for _, j in want]
                 np.testing.assert_allclose([x for x, _ in got], [x for x, _ in want], rtol=1e-12)
+
+
+class _ListIndex:
+    """The places' index as it was (rows in a list, the tail turned into an array per query): the reference."""
+
+    def __init__(self) -> None:
+        from scipy.spatial import cKDTree
+
+        self.kd, self.rows, self.tree, self.n_tree = cKDTree, [], None, 0
+
+    def add(self, v: np.ndarray) -> None:
+        self.rows.append(np.asarray(v, dtype=float))
+        if len(self.rows) - self.n_tree > max(32, len(self.rows) // 4):
+            self.rebuild()
+
+    def rebuild(self) -> None:
+        self.n_tree = len(self.rows)
+        self.tree = self.kd(np.array(self.rows)) if self.rows else None
+
+    def nearest(self, q: np.ndarray, n: int, valid: int) -> list[tuple[float, int]]:
+        out: list[tuple[float, int]] = []
+        if self.tree is not None and self.n_tree:
+            d, idx = self.tree.query(q, k=min(n + max(0, self.n_tree - valid), self.n_tree))
+            d, idx = np.atleast_1d(d), np.atleast_1d(idx)
+            ok = np.isfinite(d) & (idx < valid)
+            out.extend(zip(d[ok].tolist(), idx[ok].tolist(), strict=True))
+        lo, hi = self.n_tree, min(len(self.rows), valid)
+        if hi > lo:
+            d = np.linalg.norm(np.array(self.rows[lo:hi]) - q, axis=1)
+            out.extend((float(dd), lo + j) for j, dd in enumerate(d))
+        out.sort()
+        return out[:n]
+
+
+def test_place_index_answers_as_the_list_index_did_with_ties_and_moved_rows():
+    """The array-backed index answers exactly as the list-backed one did: rows on a coarse grid (many equal
+    distances), some moved after they were indexed (the tree keeps where it saw them until a rebuild)."""
+    from graphnav.graph.loop_places import _Index
+
+    rng = np.random.default_rng(5)
+    new, old = _Index(), _ListIndex()
+    for i in range(400):
+        v = rng.integers(0, 6, size=2).astype(float)
+        new.add(v)
+        old.add(v)
+        if i % 3 == 0:  # the newest row moves (a place's solved pose replacing its prediction)
+            w = v + rng.integers(-1, 2, size=2)
+            new.set(i, w)
+            old.rows[i] = w
+        if i % 11 == 10:
+            q = rng.integers(0, 6, size=2).astype(float)
+            for n, valid in ((1, i + 1), (5, i + 1), (8, max(1, i // 2)), (60, i - 3), (3, max(1, i - 40))):
+                assert new.nearest(q, n, valid) == old.nearest(q, n, valid)
+    assert 0 < new.n_tree < 400 and new.n_tree == old.n_tree
+
+
+def test_a_refresh_reads_the_settled_places_once():
+    """``Places.refresh``: places whose estimate became final (an earlier iSAM2 segment's) are read once more,
+    then no longer; ``None`` leaves a place where it was; the position index answers the refreshed places."""
+    from graphnav.graph.loop_places import Deferred, Place, Places
+    from graphnav.scan import correlative as corr
+
+    places = Places(corr.CorrelativeConfig(), 5, 5)
+    for k in range(10):
+        places.add(Place(k, float(k), np.array([float(k), 0.0, 0.0]), np.eye(3), np.zeros((0, 2)), None))
+    asked: list[list[int]] = []
+
+    def estimate(ks: list[int]) -> list[np.ndarray | None]:
+        asked.append(list(ks))
+        return [np.array([float(k), 1.0 + len(asked), 0.0]) if k % 3 else None for k in ks]
+
+    places.refresh(estimate, lambda k: k < 4)
+    places.refresh(estimate, lambda k: k < 6)
+    assert asked == [list(range(10)), list(range(4, 10))] and places.settled == 6
+    assert [p.pose[1] for p in places.all] == [0.0, 2.0, 2.0, 0.0, 3.0, 3.0, 0.0, 3.0, 3.0, 0.0]
+    assert places.near(np.array([4.0, 3.0]), 2, 10) == [(0.0, 4), (1.0, 5)]
+    assert places.near(np.array([3.0, 0.0]), 1, 10) == [(0.0, 3)]
+    # a deferred yaw: read when the place is first looked at, once; a newer estimate replaces it
+    reads: list[int] = []
+
+    def deferred(ks: list[int]) -> list[Deferred]:
+        return [Deferred(np.array([float(k), 5.0]), lambda k=k: reads.append(k) or np.array([float(k), 5.0, 0.5]))
+                for k in ks]
+
+    places.refresh(deferred)
+    assert places.near(np.array([7.0, 5.0]), 1, 10) == [(0.0, 7)] and reads == []
+    assert places[7].pose.tolist() == [7.0, 5.0, 0.5] and places[7].pose.tolist() == [7.0, 5.0, 0.5]
+    places.observe(8, np.array([8.0, 6.0, 0.25]), None)
+    places.submap_of(6)
+    assert reads == [7, 6, 9] and places[8].pose.tolist() == [8.0, 6.0, 0.25] and not places.deferred
