@@ -99,7 +99,8 @@ def session(log_path: Path, seconds: float, speed: float, estimator: str, workdi
         "estimates": out["estimates"],
         "published": out["published"], "received_by_sink": received[0],
         "latency_ms_median": out["latency_ms_median"], "latency_ms_p99": out["latency_ms_p99"],
-        "latency_ms_max": out["latency_ms_max"], "wall_s": out["wall_s"],
+        "latency_ms_max": out["latency_ms_max"], "latency_ms_by_kind": out.get("latency_ms_by_kind", {}),
+        "wall_s": out["wall_s"],
         "sentences_per_s": sent["sentences_sent"] / sent["wall_s"],
         "rss_mb_first_10pct": float(np.median(r[: max(1, n // 10)])),
         "rss_mb_last_10pct": float(np.median(r[-max(1, n // 10):])),
@@ -148,6 +149,11 @@ def main() -> int:
         fmt = [f"{v:.2f}" if isinstance(v, float) else
                (" / ".join(f"{x:.1f}" for x in v) if isinstance(v, list) else str(v)) for v in vals]
         print(f"| {k} | " + " | ".join(fmt) + " |")
+    print("\nlatency by the record kind that produced the estimate (n, median / p99 / max ms):")
+    for n in names:
+        by = rows[n]["latency_ms_by_kind"]
+        print(f"  {n}: " + "; ".join(f"{kind} n={v['n']} {v['median']:.2f} / {v['p99']:.2f} / {v['max']:.2f}"
+                                     for kind, v in sorted(by.items())))
     return 0
 
 
