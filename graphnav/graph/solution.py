@@ -63,8 +63,8 @@ class Closing:
         covariances (``None`` without ``covariances``). ``front``: batch's iSAM2 front end (loops),
         whose estimate is the one LM solve's start. Facts about the solve go into ``info``."""
         cfg, solver, sp = self.cfg, self.solver, self.space
-        if cfg.solver == "fixed-lag":
-            return self._window(n)
+        if cfg.solver == "fixed-lag" or cfg.solver == "isam2" and not solver.keep:
+            return self._window(n)  # (iSAM2 without a kept graph: live mode, the keyframes it holds)
         if cfg.solver == "isam2":
             solver.relinearize(cfg.optimizer.final_updates)
             values = solver.current()
@@ -85,16 +85,18 @@ class Closing:
 
     def _window(self, n: int) -> tuple[gtsam.Values, list[Vec], list[Vec | None] | None]:
         """Fixed-lag: each pose as it left the window, the window's estimate for the rest; without a history
-        (``Navigator(history=False)``) the poses that left it are gone: the keyframes kept are ``kept``."""
+        (``Navigator(history=False)``) the poses that left it are gone: the keyframes kept are ``kept``. iSAM2
+        without a kept graph (live mode): the keyframes of its current segment."""
         cfg, solver, sp = self.cfg, self.solver, self.space
         values = solver.current()
+        held = solver.s.valueExists if cfg.solver == "isam2" else values.exists
         poses: list[Vec] = []
         covs: list[Vec | None] = []
         self.kept = []
         for k in range(n):
             fr = solver.frozen.get(F.X(k))
             if fr is None:
-                if not values.exists(F.X(k)):  # left the window without a history (live mode): not kept
+                if not held(F.X(k)):  # left the window (an earlier segment) without a history (live mode): not kept
                     continue
                 p = sp.read(values, F.X(k))
                 c = sp.world_cov(p, solver.marginal(F.X(k))) if cfg.optimizer.covariances else None
