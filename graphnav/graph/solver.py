@@ -282,7 +282,7 @@ class Solver:
                     return self._newest(key, type_name)
                 except RuntimeError:  # a marginal not defined yet (e.g. an IMU bias at the start)
                     pass
-            if self.done.exists(key) and not self.s.valueExists(key):
+            if self.settled(key):
                 return getattr(self.done, f"at{type_name}")(key)
             return getattr(self.s, f"calculateEstimate{type_name}")(key)
         except RuntimeError as exc:
