@@ -160,41 +160,33 @@ def movement(traj: Trajectory) -> dict[str, NDArray]:
     }
 
 
-#: the interval [s] over which run and compare score SOG, COG and ROT (:func:`on_grid`): the same for
+#: the interval [s] over which run and compare score SOG, COG and ROT (:func:`thinned`): about the same for
 #: every estimator, whatever its output rate
 MOVEMENT_DT_S = 1.0
 
 
-def on_grid(est: Trajectory, ref: Trajectory, dt: float, *, max_dt: float = 0.02,
-            max_gap: float = 5.0) -> tuple[Trajectory, Trajectory]:
-    """The reference and the estimate on one clock of step ``dt``: the reference's first sample at
-    or after each ``t0 + k dt``; the estimate there is its sample within ``max_dt``, else linear
-    between the two samples around it when they are at most ``max_gap`` s apart (yaw along the
-    shorter arc), else NaN. Movement parameters taken between consecutive grid points then span the
-    same intervals for every estimator: differencing a 100 Hz filter's poses over 0.01-0.1 s and a
-    smoother's keyframes over ~1 s would score the filter's jitter, not its motion."""
-    if len(ref) == 0 or dt <= 0:
-        raise ValueError(f"on_grid needs a reference and dt > 0, got {len(ref)} samples and dt {dt}")
-    n = int(np.floor((ref.t[-1] - ref.t[0]) / dt)) + 1
-    i_ref = np.unique(np.searchsorted(ref.t, ref.t[0] + dt * np.arange(n) - 1e-9))
-    i_ref = i_ref[i_ref < len(ref)]
-    r = Trajectory(ref.t[i_ref], ref.poses[i_ref])
-    poses = np.full((len(r), 3), np.nan)
-    if len(est):
-        tau = r.t
-        j = np.clip(np.searchsorted(est.t, tau), 1, max(len(est) - 1, 1))
-        a, b = j - 1, np.minimum(j, len(est) - 1)
-        span = est.t[b] - est.t[a]
-        f = np.where(span > 0, (tau - est.t[a]) / np.where(span > 0, span, 1.0), 0.0)
-        inside = (est.t[a] <= tau) & (tau <= est.t[b]) & (span <= max_gap)
-        pa, pb = est.poses[a], est.poses[b]
-        interp = pa + f[:, None] * np.column_stack([pb[:, :2] - pa[:, :2], wrap_angle(pb[:, 2] - pa[:, 2])])
-        poses[inside] = interp[inside]
-        near = np.where(np.abs(est.t[a] - tau) <= np.abs(est.t[b] - tau), a, b)
-        exact = np.abs(est.t[near] - tau) <= max_dt
-        poses[exact] = est.poses[near[exact]]
-        poses[:, 2] = wrap_angle(poses[:, 2])
-    return Trajectory(r.t, poses), r
+def thinned(est: Trajectory, ref: Trajectory, dt: float, *, max_dt: float = 0.02) -> tuple[Trajectory, Trajectory]:
+    """The time-associated pairs of :func:`paired`, thinned to about ``dt`` apart: from the first pair, each
+    next one is the later pair whose time is nearest to the previous kept time plus ``dt``. Nothing is
+    interpolated: the intervals are the estimate's own poses (and the reference's at the same times), as
+    close to ``dt`` as its output allows. Movement parameters then span comparable intervals for every
+    estimator: differencing a 100 Hz filter's poses over 0.01-0.1 s scores its jitter, and interpolating a
+    smoother's ~1 s keyframes onto a common clock scores the interpolation at every turn's onset."""
+    if dt <= 0:
+        raise ValueError(f"thinned needs dt > 0, got {dt}")
+    e, r = paired(est, ref, max_dt)
+    t = e.t
+    keep = [0] if len(t) else []
+    while keep:
+        i = keep[-1]
+        j = int(np.searchsorted(t, t[i] + dt))
+        cand = [k for k in (j - 1, j) if i < k < len(t)]
+        if not cand:
+            break
+        keep.append(min(cand, key=lambda k: abs(t[k] - t[i] - dt)))
+    k = np.asarray(keep, int)
+    cov = None if e.cov is None else e.cov[k]
+    return Trajectory(e.t[k], e.poses[k], cov), Trajectory(r.t[k], r.poses[k])
 
 
 def movement_errors(
@@ -205,15 +197,12 @@ def movement_errors(
 
     Both trajectories are first associated by time, so the parameters are taken over the same
     intervals: between consecutive associated poses (the weighted-ICP paper's scan to scan), or with
-    ``dt`` between the points of :func:`on_grid` (one interval for every estimator). COG is scored
+    ``dt`` between the pairs of :func:`thinned` (about ``dt`` apart for every estimator). COG is scored
     only where the reference moves faster than ``min_speed``; with ``windows`` (``[(t0, t1), ...]``)
     only the intervals whose midpoint lies inside one. Statistics of signed errors: ``mean``,
     ``std``, ``max`` (of |e|), ``rmse``.
     """
-    if dt is not None:
-        e, r = on_grid(est, ref, dt, max_dt=max_dt)
-    else:
-        e, r = paired(est, ref, max_dt)
+    e, r = thinned(est, ref, dt, max_dt=max_dt) if dt is not None else paired(est, ref, max_dt)
     a, b = movement(e), movement(r)
     if windows is not None:
         inside = np.zeros(len(b["t"]), bool)
@@ -295,8 +284,8 @@ def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0
     """Signed errors (estimate minus reference) versus interval mid-time: SOG [m/s], COG [deg] and
     the weighted-ICP paper's ΔCOG [deg] (change of COG between consecutive intervals, Figs. 14-15),
     COG and ΔCOG only while the reference moves faster than ``min_speed``; intervals as in
-    :func:`movement_errors` (``dt``: on :func:`on_grid`'s clock)."""
-    e, r = on_grid(est, ref, dt, max_dt=max_dt) if dt is not None else paired(est, ref, max_dt)
+    :func:`movement_errors` (``dt``: the pairs of :func:`thinned`)."""
+    e, r = thinned(est, ref, dt, max_dt=max_dt) if dt is not None else paired(est, ref, max_dt)
     a, b = movement(e), movement(r)
     moving = b["sog"] > min_speed
     both = moving[1:] & moving[:-1]

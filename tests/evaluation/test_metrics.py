@@ -197,41 +197,24 @@ def test_errors_by_event_carry_the_movement_parameters_inside_the_windows():
     assert o["cog_rmse_deg"] == pytest.approx(0.0) and o["online_sog_rmse_mps"] is None
 
 
-def test_on_grid_interpolates_the_estimate_at_the_reference_clock():
-    """A circle at 2 m/s, 0.1 rad/s: the reference at 10 Hz, the estimate at 0.7 s steps. On a 1 s grid
-    the reference keeps every tenth sample, the estimate is exact at its own samples and the chord
-    between them elsewhere (linear in x, y; yaw along the shorter arc, across +-pi too)."""
-    from graphnav.evaluation.metrics import on_grid
+def test_thinned_keeps_the_own_poses_nearest_to_steps_of_dt():
+    """Known answer: estimate poses at 0, 0.8, 1.6, ... s (a smoother's keyframes) and at 0.1 s steps (a
+    filter), the truth at 0.1 s: thinned to 1 s, the keyframes stay 0.8 s apart (0.8 is nearer 1 than 1.6),
+    the filter's poses are exactly 1 s apart; estimate and reference at the same times, nothing invented."""
+    from graphnav.evaluation.metrics import thinned
 
-    def circle(t):
-        th = 0.1 * t + 3.0  # crosses +pi at t ~ 1.4 s
-        return np.column_stack([20 * np.sin(th), 20 - 20 * np.cos(th), np.angle(np.exp(1j * th))])
-
-    tr = np.round(np.arange(0.0, 10.01, 0.1), 10)
-    te = np.round(np.arange(0.0, 10.01, 0.7), 10)
-    ref, est = Trajectory(tr, circle(tr)), Trajectory(te, circle(te))
-    e, r = on_grid(est, ref, 1.0)
-    assert np.allclose(r.t, np.arange(0.0, 10.01, 1.0)) and np.allclose(r.poses, circle(r.t))
-    assert np.array_equal(e.t, r.t)
-    for k, t in enumerate(r.t):
-        j = np.searchsorted(te, t - 1e-9)
-        if j == len(te):  # after the estimate's last sample
-            assert np.isnan(e.poses[k]).all()
-            continue
-        if abs(te[j] - t) < 1e-9:
-            assert np.allclose(e.poses[k], circle(np.array([t]))[0])
-            continue
-        f = (t - te[j - 1]) / (te[j] - te[j - 1])
-        p0, p1 = circle(te[j - 1:j + 1])
-        want = p0[:2] + f * (p1[:2] - p0[:2])
-        assert np.allclose(e.poses[k, :2], want)
-        assert e.poses[k, 2] == pytest.approx(np.angle(np.exp(1j * (0.1 * (te[j - 1] + f * 0.7) + 3.0))))
-    # beyond the estimate's samples, or across a gap longer than max_gap: NaN, never an invented pose
-    short = Trajectory(te[:5], circle(te[:5]))
-    e2, _ = on_grid(short, ref, 1.0, max_gap=0.5)
-    assert np.isfinite(e2.poses[0]).all() and np.isnan(e2.poses[1:]).all()
-    e3, _ = on_grid(Trajectory(te[:1], circle(te[:1])), ref, 1.0)
-    assert np.isfinite(e3.poses[0]).all() and np.isnan(e3.poses[1:]).all()
+    tr = np.round(np.arange(0.0, 20.0, 0.1), 10)
+    ref = Trajectory(tr, np.column_stack([tr, np.zeros_like(tr), np.zeros_like(tr)]))
+    kf = np.round(np.arange(0.0, 20.0, 0.8), 10)
+    e, r = thinned(Trajectory(kf, np.column_stack([kf, kf, kf])), ref, 1.0)
+    assert np.allclose(e.t, kf) and np.allclose(r.t, kf) and np.allclose(e.poses[:, 1], kf)
+    e, r = thinned(Trajectory(tr, ref.poses), ref, 1.0)
+    assert np.allclose(np.diff(e.t)[:-1], 1.0) and np.allclose(e.t, r.t) and e.t[0] == 0.0  # then 19 -> 19.9
+    gap = np.concatenate([tr[tr < 5], tr[tr > 12]])  # a 7 s hole: the next pose after it, no pose inside
+    e, _ = thinned(Trajectory(gap, np.column_stack([gap, 0 * gap, 0 * gap])), ref, 1.0)
+    assert not ((e.t > 5) & (e.t < 12)).any() and np.isclose(e.t, 12.0).any()
+    with pytest.raises(ValueError, match="dt > 0"):
+        thinned(ref, ref, 0.0)
 
 
 def test_movement_scored_on_one_clock_whatever_the_output_rate():
