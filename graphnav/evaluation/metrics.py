@@ -189,6 +189,20 @@ def thinned(est: Trajectory, ref: Trajectory, dt: float, *, max_dt: float = 0.02
     return Trajectory(e.t[k], e.poses[k], cov), Trajectory(r.t[k], r.poses[k])
 
 
+def _movements(est: Trajectory, ref: Trajectory, dt: float | None, max_dt: float) -> tuple[dict, dict]:
+    """:func:`movement` of the estimate and the reference over the same intervals (:func:`movement_errors`);
+    with ``dt``, an interval longer than ``2 dt`` (across a hole in the estimate) is not scored (NaN)."""
+    if dt is None:
+        e, r = paired(est, ref, max_dt)
+        return movement(e), movement(r)
+    e, r = thinned(est, ref, dt, max_dt=max_dt)
+    a, b = movement(e), movement(r)
+    long = np.diff(e.t) > 2 * dt
+    for k in ("sog", "cog", "rot"):
+        a[k][long] = np.nan
+    return a, b
+
+
 def movement_errors(
     est: Trajectory, ref: Trajectory, *, min_speed: float = 0.2, max_dt: float = 0.02,
     windows: list[tuple[float, float]] | None = None, dt: float | None = None,
@@ -202,8 +216,7 @@ def movement_errors(
     only the intervals whose midpoint lies inside one. Statistics of signed errors: ``mean``,
     ``std``, ``max`` (of |e|), ``rmse``.
     """
-    e, r = thinned(est, ref, dt, max_dt=max_dt) if dt is not None else paired(est, ref, max_dt)
-    a, b = movement(e), movement(r)
+    a, b = _movements(est, ref, dt, max_dt)
     if windows is not None:
         inside = np.zeros(len(b["t"]), bool)
         for t0, t1 in windows:
@@ -285,8 +298,7 @@ def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0
     the weighted-ICP paper's ΔCOG [deg] (change of COG between consecutive intervals, Figs. 14-15),
     COG and ΔCOG only while the reference moves faster than ``min_speed``; intervals as in
     :func:`movement_errors` (``dt``: the pairs of :func:`thinned`)."""
-    e, r = thinned(est, ref, dt, max_dt=max_dt) if dt is not None else paired(est, ref, max_dt)
-    a, b = movement(e), movement(r)
+    a, b = _movements(est, ref, dt, max_dt)
     moving = b["sog"] > min_speed
     both = moving[1:] & moving[:-1]
     dcog = np.degrees(wrap_angle(np.diff(a["cog"]) - np.diff(b["cog"])))

@@ -212,7 +212,10 @@ def test_thinned_keeps_the_own_poses_nearest_to_steps_of_dt():
     assert np.allclose(np.diff(e.t)[:-1], 1.0) and np.allclose(e.t, r.t) and e.t[0] == 0.0  # then 19 -> 19.9
     gap = np.concatenate([tr[tr < 5], tr[tr > 12]])  # a 7 s hole: the next pose after it, no pose inside
     e, _ = thinned(Trajectory(gap, np.column_stack([gap, 0 * gap, 0 * gap])), ref, 1.0)
-    assert not ((e.t > 5) & (e.t < 12)).any() and np.isclose(e.t, 12.0).any()
+    assert not ((e.t > 5) & (e.t < 12)).any() and np.isclose(e.t, 12.1).any()
+    holed = Trajectory(gap, np.column_stack([gap, 0 * gap, 0 * gap]))
+    m, m0 = movement_errors(holed, ref, dt=1.0)["sog"], movement_errors(ref, ref, dt=1.0)["sog"]
+    assert m["n"] == m0["n"] - 7 and m["rmse"] == 0.0  # 20 intervals; 14 with the hole, 4.9 -> 12.1 not scored
     with pytest.raises(ValueError, match="dt > 0"):
         thinned(ref, ref, 0.0)
 
