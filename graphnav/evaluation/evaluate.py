@@ -8,7 +8,17 @@ import numpy as np
 
 from ..log import NavLog
 from ..result import RunResult
-from .metrics import ate, event_windows, gnss_residuals, heading_error, movement_errors, nees_stats, rpe, window_errors
+from .metrics import (
+    MOVEMENT_DT_S,
+    ate,
+    event_windows,
+    gnss_residuals,
+    heading_error,
+    movement_errors,
+    nees_stats,
+    rpe,
+    window_errors,
+)
 
 
 def _finite(x: float) -> float | None:
@@ -41,7 +51,7 @@ def errors_by_event(result: RunResult, log: NavLog, *, max_dt: float = 0.02) -> 
         d.update({"online_n": o["n"] if o else None, "online_rmse_m": o["rmse"] if o else None,
                   "online_max_m": o["max"] if o else None})
         for prefix, tr in (("", result.trajectory), ("online_", result.online)):
-            m = movement_errors(tr, ref, max_dt=max_dt, windows=wins) if tr is not None else None
+            m = movement_errors(tr, ref, max_dt=max_dt, windows=wins, dt=MOVEMENT_DT_S) if tr is not None else None
             for key, name in (("sog", "sog_rmse_mps"), ("cog", "cog_rmse_deg"), ("rot", "rot_rmse_degps")):
                 d[prefix + name] = _finite(m[key]["rmse"]) if m is not None else None
         out[kind] = d
@@ -97,7 +107,7 @@ def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
         out.update({"rpe_rmse_m": r1["trans"]["rmse"], "rpe_rot_rmse_deg": r1["rot"]["rmse"],
                     f"rpe{rpe_delta}_rmse_m": rn["trans"]["rmse"]})
         out["heading_rmse_deg"] = heading_error(traj, ref, max_dt=max_dt)["rmse"]
-        mv = movement_errors(traj, ref, max_dt=max_dt)
+        mv = movement_errors(traj, ref, max_dt=max_dt, dt=MOVEMENT_DT_S)
         out.update({"sog_rmse_mps": mv["sog"]["rmse"], "cog_rmse_deg": mv["cog"]["rmse"],
                     "rot_rmse_degps": mv["rot"]["rmse"]})
         ns = nees_stats(traj, ref, max_dt=max_dt)

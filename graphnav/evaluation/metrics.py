@@ -160,20 +160,63 @@ def movement(traj: Trajectory) -> dict[str, NDArray]:
     }
 
 
+#: the interval [s] over which run and compare score SOG, COG and ROT (:func:`thinned`): about the same for
+#: every estimator, whatever its output rate
+MOVEMENT_DT_S = 1.0
+
+
+def thinned(est: Trajectory, ref: Trajectory, dt: float, *, max_dt: float = 0.02) -> tuple[Trajectory, Trajectory]:
+    """The time-associated pairs of :func:`paired`, thinned to about ``dt`` apart: from the first pair, each
+    next one is the later pair whose time is nearest to the previous kept time plus ``dt``. Nothing is
+    interpolated: the intervals are the estimate's own poses (and the reference's at the same times), as
+    close to ``dt`` as its output allows. Movement parameters then span comparable intervals for every
+    estimator: differencing a 100 Hz filter's poses over 0.01-0.1 s scores its jitter, and interpolating a
+    smoother's ~1 s keyframes onto a common clock scores the interpolation at every turn's onset."""
+    if dt <= 0:
+        raise ValueError(f"thinned needs dt > 0, got {dt}")
+    e, r = paired(est, ref, max_dt)
+    t = e.t
+    keep = [0] if len(t) else []
+    while keep:
+        i = keep[-1]
+        j = int(np.searchsorted(t, t[i] + dt))
+        cand = [k for k in (j - 1, j) if i < k < len(t)]
+        if not cand:
+            break
+        keep.append(min(cand, key=lambda k: abs(t[k] - t[i] - dt)))
+    k = np.asarray(keep, int)
+    cov = None if e.cov is None else e.cov[k]
+    return Trajectory(e.t[k], e.poses[k], cov), Trajectory(r.t[k], r.poses[k])
+
+
+def _movements(est: Trajectory, ref: Trajectory, dt: float | None, max_dt: float) -> tuple[dict, dict]:
+    """:func:`movement` of the estimate and the reference over the same intervals (:func:`movement_errors`);
+    with ``dt``, an interval longer than ``2 dt`` (across a hole in the estimate) is not scored (NaN)."""
+    if dt is None:
+        e, r = paired(est, ref, max_dt)
+        return movement(e), movement(r)
+    e, r = thinned(est, ref, dt, max_dt=max_dt)
+    a, b = movement(e), movement(r)
+    long = np.diff(e.t) > 2 * dt
+    for k in ("sog", "cog", "rot"):
+        a[k][long] = np.nan
+    return a, b
+
+
 def movement_errors(
     est: Trajectory, ref: Trajectory, *, min_speed: float = 0.2, max_dt: float = 0.02,
-    windows: list[tuple[float, float]] | None = None,
+    windows: list[tuple[float, float]] | None = None, dt: float | None = None,
 ) -> dict[str, dict[str, float]]:
     """Signed errors of SOG [m/s], COG [deg], ROT [deg/s] and heading [deg], estimate minus reference.
 
     Both trajectories are first associated by time, so the parameters are taken over the same
-    intervals. COG is scored only where the reference moves faster than ``min_speed``; with
-    ``windows`` (``[(t0, t1), ...]``) only the intervals whose midpoint lies inside one.
-    Statistics of signed errors: ``mean``, ``std``, ``max`` (of |e|), ``rmse``.
+    intervals: between consecutive associated poses (the weighted-ICP paper's scan to scan), or with
+    ``dt`` between the pairs of :func:`thinned` (about ``dt`` apart for every estimator). COG is scored
+    only where the reference moves faster than ``min_speed``; with ``windows`` (``[(t0, t1), ...]``)
+    only the intervals whose midpoint lies inside one. Statistics of signed errors: ``mean``,
+    ``std``, ``max`` (of |e|), ``rmse``.
     """
-    ie, ir = associate(est, ref, max_dt)
-    a = movement(Trajectory(est.t[ie], est.poses[ie]))
-    b = movement(Trajectory(ref.t[ir], ref.poses[ir]))
+    a, b = _movements(est, ref, dt, max_dt)
     if windows is not None:
         inside = np.zeros(len(b["t"]), bool)
         for t0, t1 in windows:
@@ -250,17 +293,20 @@ def heading_errors(est: Trajectory, ref: Trajectory, max_dt: float = 0.02) -> tu
 
 
 def movement_error_series(est: Trajectory, ref: Trajectory, min_speed: float = 0.2,
-                          max_dt: float = 0.02) -> dict[str, NDArray]:
+                          max_dt: float = 0.02, dt: float | None = None) -> dict[str, NDArray]:
     """Signed errors (estimate minus reference) versus interval mid-time: SOG [m/s], COG [deg] and
     the weighted-ICP paper's ΔCOG [deg] (change of COG between consecutive intervals, Figs. 14-15),
-    COG and ΔCOG only while the reference moves faster than ``min_speed``."""
-    e, r = paired(est, ref, max_dt)
-    a, b = movement(e), movement(r)
+    COG and ΔCOG only while the reference moves faster than ``min_speed``; intervals as in
+    :func:`movement_errors` (``dt``: the pairs of :func:`thinned`)."""
+    a, b = _movements(est, ref, dt, max_dt)
     moving = b["sog"] > min_speed
     both = moving[1:] & moving[:-1]
     dcog = np.degrees(wrap_angle(np.diff(a["cog"]) - np.diff(b["cog"])))
+    cog = np.degrees(wrap_angle(a["cog"] - b["cog"]))
+    moving &= np.isfinite(cog)
+    both &= np.isfinite(dcog)
     return {"t": a["t"], "sog": a["sog"] - b["sog"],
-            "t_cog": a["t"][moving], "cog": np.degrees(wrap_angle(a["cog"] - b["cog"]))[moving],
+            "t_cog": a["t"][moving], "cog": cog[moving],
             "t_dcog": a["t"][1:][both], "dcog": dcog[both]}
 
 

@@ -37,6 +37,7 @@ from ..io.outputs import atomic_path
 from ..trajectory import Trajectory
 from . import palette
 from .metrics import (  # noqa: F401  (the error series live in metrics; plots re-exports them)
+    MOVEMENT_DT_S,
     heading_errors,
     movement_error_series,
     paired,
@@ -590,7 +591,7 @@ def plot_sog_cog(trajs: dict[str, Trajectory] | Trajectory, truth: Trajectory, e
     if fig is None:
         fig = _panel_figure(13, 1.55 * n + 1.2, n, 3, left=0.75, right=0.2, top=0.65, bottom=0.75,
                             hspace=0.32, wspace=0.6)
-    series = {name: movement_error_series(tr, truth) for name, tr in trajs.items()}
+    series = {name: movement_error_series(tr, truth, dt=MOVEMENT_DT_S) for name, tr in trajs.items()}
     axes = _shared_grid(fig, n, 3)
     col = colors(list(trajs))
     cols = [("sog", "t", "m/s", "SOG", "{:.3f}"), ("cog", "t_cog", "deg", "COG", "{:.2f}"),

@@ -195,3 +195,46 @@ def test_errors_by_event_carry_the_movement_parameters_inside_the_windows():
     o = errors_by_event(RunResult(est, None, np.zeros(0)), log)["gnss_outage"]
     assert o["sog_rmse_mps"] == pytest.approx(0.5) and o["rot_rmse_degps"] == pytest.approx(0.0)
     assert o["cog_rmse_deg"] == pytest.approx(0.0) and o["online_sog_rmse_mps"] is None
+
+
+def test_thinned_keeps_the_own_poses_nearest_to_steps_of_dt():
+    """Known answer: estimate poses at 0, 0.8, 1.6, ... s (a smoother's keyframes) and at 0.1 s steps (a
+    filter), the truth at 0.1 s: thinned to 1 s, the keyframes stay 0.8 s apart (0.8 is nearer 1 than 1.6),
+    the filter's poses are exactly 1 s apart; estimate and reference at the same times, nothing invented."""
+    from graphnav.evaluation.metrics import thinned
+
+    tr = np.round(np.arange(0.0, 20.0, 0.1), 10)
+    ref = Trajectory(tr, np.column_stack([tr, np.zeros_like(tr), np.zeros_like(tr)]))
+    kf = np.round(np.arange(0.0, 20.0, 0.8), 10)
+    e, r = thinned(Trajectory(kf, np.column_stack([kf, kf, kf])), ref, 1.0)
+    assert np.allclose(e.t, kf) and np.allclose(r.t, kf) and np.allclose(e.poses[:, 1], kf)
+    e, r = thinned(Trajectory(tr, ref.poses), ref, 1.0)
+    assert np.allclose(np.diff(e.t)[:-1], 1.0) and np.allclose(e.t, r.t) and e.t[0] == 0.0  # then 19 -> 19.9
+    gap = np.concatenate([tr[tr < 5], tr[tr > 12]])  # a 7 s hole: the next pose after it, no pose inside
+    e, _ = thinned(Trajectory(gap, np.column_stack([gap, 0 * gap, 0 * gap])), ref, 1.0)
+    assert not ((e.t > 5) & (e.t < 12)).any() and np.isclose(e.t, 12.1).any()
+    holed = Trajectory(gap, np.column_stack([gap, 0 * gap, 0 * gap]))
+    m, m0 = movement_errors(holed, ref, dt=1.0)["sog"], movement_errors(ref, ref, dt=1.0)["sog"]
+    assert m["n"] == m0["n"] - 7 and m["rmse"] == 0.0  # 20 intervals; 14 with the hole, 4.9 -> 12.1 not scored
+    with pytest.raises(ValueError, match="dt > 0"):
+        thinned(ref, ref, 0.0)
+
+
+def test_movement_scored_on_one_clock_whatever_the_output_rate():
+    """Two estimates of the same straight 1 m/s run, each with 2 cm of white position jitter: one at 100 Hz
+    (a filter's every record), one at 1 Hz (a smoother's keyframes). Scan to scan, the 100 Hz one's SOG
+    error is its jitter over 0.01 s (~2.8 m/s); on one 1 s clock both are ~0.028 m/s, as their
+    positions deserve."""
+    rng = np.random.default_rng(0)
+    tr = np.round(np.arange(0.0, 200.0, 0.01), 10)
+    ref = Trajectory(tr, np.column_stack([tr, np.zeros_like(tr), np.zeros_like(tr)]))
+
+    def jittered(t):
+        return Trajectory(t, np.column_stack([t + rng.normal(0, 0.02, t.size), rng.normal(0, 0.02, t.size),
+                                              np.zeros_like(t)]))
+
+    fast, slow = jittered(tr), jittered(np.arange(0.0, 200.0, 1.0))
+    assert movement_errors(fast, ref)["sog"]["rmse"] > 1.5
+    s_fast = movement_errors(fast, ref, dt=1.0)["sog"]["rmse"]
+    s_slow = movement_errors(slow, ref, dt=1.0)["sog"]["rmse"]
+    assert 0.02 < s_fast < 0.04 and 0.02 < s_slow < 0.04

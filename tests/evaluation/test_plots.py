@@ -214,7 +214,7 @@ def test_sog_cog_small_multiples_share_one_time_axis_and_keep_the_rms(trajs):
     for j in range(3):
         assert len({a.get_ylim() for a in axes[:, j]}) == 1
     assert not any(lab.get_visible() for a in axes[:-1].ravel() for lab in a.get_xticklabels())
-    series = plots.movement_error_series(tj["smoother"], truth)
+    series = plots.movement_error_series(tj["smoother"], truth, dt=plots.MOVEMENT_DT_S)
     rms = float(np.sqrt(np.nanmean(series["sog"] ** 2)))
     assert axes[0, 0].get_title(loc="left") == f"smoother: SOG RMS {rms:.3f} m/s"
 

@@ -45,8 +45,11 @@ NO_TRUTH_COLUMNS: list[tuple[str, str, str]] = [
     ("gnss_nis_mean", "GNSS NIS mean", "{:.2f}"),
 ]
 TRUTH_NOTE = ("Ranked by ATE RMSE. ATE is unaligned (in the log's frame), over poses time-associated with "
-              "the truth; RPE over 1 and 10 associated poses; SOG/COG/ROT errors between consecutive "
-              "associated poses (COG only while the truth moves faster than 0.2 m/s). For smoothers ATE is "
+              "the truth; RPE over 1 and 10 associated poses (an estimator's own output spacing: a filter's "
+              "every record, a smoother's keyframes); SOG/COG/ROT errors between the estimate's own poses about "
+              "1 s apart, the truth's over the same intervals, so a 100 Hz filter and a smoother's keyframes "
+              "are scored on comparable intervals (COG only while the truth moves faster than 0.2 m/s). "
+              "For smoothers ATE is "
               "the smoothed trajectory and *online ATE* the estimate available at each time. *step* is "
               "solver/filter time per step excluding scan matching; *scan match* is per registration.")
 NO_TRUTH_NOTE = ("The log has no truth: no accuracy figure can be computed. What can be judged: *GNSS residual*, "
