@@ -62,8 +62,8 @@ def test_a_vessel_run_imports_neither_scipy_special_nor_scipy_optimize():
 
 
 def test_the_graph_modules_import_no_sparse_solver_nor_ndimage():
-    """scipy.sparse.linalg (~0.05 s to import) is imported by the noise estimation and the odometry-scale step when
-    they factorise, scipy.ndimage (~0.05 s) by the correlative matcher's grid when it builds one, not by the modules a
+    """scipy.sparse.linalg (0.01 s to import) is imported by the noise estimation and the odometry-scale step when
+    they factorise, scipy.ndimage (0.04 s) by the correlative matcher's grid when it builds one, not by the modules a
     run imports (the harbour's isam2 run does neither)."""
     code = (
         "import sys\n"
