@@ -38,6 +38,8 @@ from .order_stats import median
 GRAVITY = 9.80665  # [m/s^2] standard gravity (6-axis records)
 #: the record pieces covering an interval (:meth:`ImuChain._pieces`): record indices, each piece's start and end [s]
 Pieces = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
+#: the records an interval's pieces read (:meth:`ImuChain._window`): the first one's index, the rows as an array
+Window = tuple[int, NDArray[np.float64]]
 
 
 @dataclass
@@ -119,6 +121,8 @@ class ImuChain:
         self.six: bool | None = None
         self._period: tuple[tuple[int, float] | None, float] = (None, 0.0)  # (len(t), t[-1]) -> period()
         self.params: gtsam.PreintegrationParams | None = None
+        #: (the parameters, their accelerometer and gyro densities' diagonals, integration density) they were read from
+        self._densities: tuple[Any, ...] = (None,)
         self.body_P_sensor: gtsam.Pose3 | None = None  # the IMU's mount (graphnav.graph.mounts), when not at the origin
         walk = cfg.vessel_position_walk
         #: the log's estimate of it (graphnav.graph.position_walk), when made and used
@@ -225,13 +229,28 @@ class ImuChain:
         acc, omega, dt = self._arrays(self._pieces(ta, tb))
         return [(acc[k], omega[k], float(dt[k])) for k in range(len(dt))]
 
-    def _arrays(self, pieces: Pieces) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """:meth:`samples` of the ``pieces`` (:meth:`_pieces`) as arrays: ``acc``, ``omega`` (n, 3), ``dt`` (n,)."""
+    def _arrays(self, pieces: Pieces, window: Window | None = None
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`samples` of the ``pieces`` (:meth:`_pieces`) as arrays: ``acc``, ``omega`` (n, 3), ``dt`` (n,);
+        ``window``: their :meth:`_window`, converted once for this and :meth:`_hold`."""
         idx, lo, hi = pieces
         if not len(idx):
             return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
-        rows = np.asarray(self.rows[int(idx[0]):int(idx[-1]) + 1], dtype=float)[idx - idx[0]]
+        if window is None:
+            rows = np.asarray(self.rows[int(idx[0]):int(idx[-1]) + 1], dtype=float)[idx - idx[0]]
+        else:
+            rows = window[1][idx - window[0]]
         return rows[:, :3], rows[:, 3:], hi - lo
+
+    def _window(self, pieces: Pieces) -> Window | None:
+        """The records :meth:`_arrays` and :meth:`_hold` read for ``pieces`` (those of the pieces and their
+        neighbours) as one array: ``(first index, rows)``, the same floats either converts alone (``None``: no
+        pieces)."""
+        idx = pieces[0]
+        if not len(idx):
+            return None
+        b0 = max(int(idx[0]) - 1, 0)
+        return b0, np.asarray(self.rows[b0:min(int(idx[-1]) + 2, len(self.t))], dtype=float)
 
     def _pieces(self, ta: float, tb: float) -> Pieces:
         """Record indices with the ``lo``, ``hi`` of their pieces covering ``[ta, tb]``: record ``i`` over
@@ -272,8 +291,9 @@ class ImuChain:
         of ``(d - tau) v_a (tau / d - 1/2) f`` over the share's length ``d = f T``), summed over the axes."""
         return self._hold(self._pieces(ta, tb))
 
-    def _hold(self, pieces: Pieces) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
-        """:meth:`hold_variance` of the ``pieces`` (:meth:`_pieces`)."""
+    def _hold(self, pieces: Pieces, window: Window | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                                          float]:
+        """:meth:`hold_variance` of the ``pieces`` (:meth:`_pieces`; ``window``: their :meth:`_window`)."""
         idx, lo, hi = pieces
         first = idx > 0  # the first record's interval is unknown
         idx, lo, hi = idx[first], lo[first], hi[first]
@@ -282,7 +302,7 @@ class ImuChain:
         n = len(self.t)
         k0, k1 = int(idx[0]) - 1, min(int(idx[-1]) + 2, n)  # the records the pieces and their neighbours use
         t = np.asarray(self.t[k0:k1], dtype=float)
-        rows = np.asarray(self.rows[k0:k1], dtype=float)
+        rows = np.asarray(self.rows[k0:k1], dtype=float) if window is None else window[1][k0 - window[0]:k1 - window[0]]
         j = idx - k0
         T = t[j] - t[j - 1]
         ok = T > 0.0
@@ -330,8 +350,9 @@ class ImuChain:
                 pim.integrateMeasurement(np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope()), tb - ta)
             return pim
         pieces = self._pieces(ta, tb)
-        return F.preintegrate_arrays(self._held_params(pieces, tb - ta), bias, *self._arrays(pieces), self.cfg.substeps,
-                                     planar=not self.six)
+        window = self._window(pieces)
+        return F.preintegrate_arrays(self._held_params(pieces, tb - ta, window), bias, *self._arrays(pieces, window),
+                                     self.cfg.substeps, planar=not self.six)
 
     def _rot_preintegrate(self, bias: gtsam.imuBias.ConstantBias, yaw: tuple[NDArray[np.float64], NDArray[np.float64],
                           float], base: gtsam.PreintegrationParams) -> gtsam.PreintegratedImuMeasurements:
@@ -351,16 +372,19 @@ class ImuChain:
             pim.integrateMeasurement(acc, np.array([b[0], b[1], wk]), float(dk))
         return pim
 
-    def _held_params(self, pieces: Pieces, T: float) -> gtsam.PreintegrationParams:
-        """The parameters for an interval of ``T`` seconds made of ``pieces``: the shared ones, or with
-        the densities raised by :meth:`hold_variance` where that is not negligible (1 % of the interval's
-        white-noise variance on some axis)."""
+    def _held_params(self, pieces: Pieces, T: float, window: Window | None = None) -> gtsam.PreintegrationParams:
+        """The parameters for an interval of ``T`` seconds made of ``pieces`` (``window``: their :meth:`_window`):
+        the shared ones, or with the densities raised by :meth:`hold_variance` where that is not negligible (1 % of
+        the interval's white-noise variance on some axis)."""
         assert self.params is not None
         if T <= 0.0:
             return self.params
-        va, vg, vp = self._hold(pieces)
-        acc, gyro = np.diag(self.params.getAccelerometerCovariance()), np.diag(self.params.getGyroscopeCovariance())
-        ip = float(self.params.getIntegrationCovariance()[0, 0])
+        va, vg, vp = self._hold(pieces, window)
+        if self._densities[0] is not self.params:  # (read once per parameters: GTSAM copies each matrix out)
+            self._densities = (self.params, np.diag(self.params.getAccelerometerCovariance()),
+                               np.diag(self.params.getGyroscopeCovariance()),
+                               float(self.params.getIntegrationCovariance()[0, 0]))
+        _, acc, gyro, ip = self._densities
         if not (np.any(va > 0.01 * acc * T) or np.any(vg > 0.01 * gyro * T) or vp > 0.01 * ip * T):
             return self.params
         return self._make_params(acc + va / T, gyro + vg / T, ip + vp / T)
