@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from graphnav.graph.imu_chain import ImuChain, ImuConfig
+from graphnav.graph.imu_chain import ImuChain, ImuConfig, _hold, _window
 from graphnav.graph.keyframes import Keyframes
 from graphnav.graph.smoother_config import KeyframeConfig
 from graphnav.log import Gnss, Imu
@@ -176,11 +176,11 @@ def test_one_conversion_of_the_records_reads_as_each_did_alone(seed: int, n: int
     for tk, r in zip(t, rng.normal(size=(n, 6)), strict=True):
         chain.add(Imu(float(tk), *r) if six else Imu(float(tk), r[0], r[1], r[5]))
     pieces = chain._pieces(ta, ta + span)
-    window = chain._window(pieces)
+    window = _window(chain.rows, pieces)
     for a, b in zip(chain._arrays(pieces), chain._arrays(pieces, window), strict=True):
         assert a.tobytes() == b.tobytes()
-    va, vg, vp = chain._hold(pieces)
-    wa, wg, wp = chain._hold(pieces, window)
+    va, vg, vp = _hold(chain.t, chain.rows, pieces)
+    wa, wg, wp = _hold(chain.t, chain.rows, pieces, window)
     assert va.tobytes() == wa.tobytes() and vg.tobytes() == wg.tobytes() and vp == wp
 
 
