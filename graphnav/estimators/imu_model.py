@@ -88,3 +88,13 @@ def resolve_flag(value: Any, auto: bool, name: str) -> bool:
     if isinstance(value, str) and value.lower() in ("true", "false"):
         return value.lower() == "true"
     raise ValueError(f"{name} must be true, false or 'auto', not {value!r}")
+
+
+def compass_bias_model() -> tuple[float, float]:
+    """The compass bias's prior sigma [rad] and random walk [rad/sqrt(s)]: the graph's
+    (:class:`graphnav.graph.smoother_config.CompassConfig` ``bias_sigma_deg``, ``bias_drift_deg``), the same
+    sensor model as the smoother's."""
+    from ..graph.smoother_config import CompassConfig
+
+    c = CompassConfig()
+    return math.radians(c.bias_sigma_deg), math.radians(c.bias_drift_deg)
