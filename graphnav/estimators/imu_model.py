@@ -9,8 +9,8 @@
   IMU has a residual bias after calibration (the logs that describe their IMU state it in
   ``meta["imu"]``: ``bias_true``, ``bias_residual``, ``acc_bias_rw``, ...), and without an odometer
   the IMU is the only motion sensor, so the textbook filter estimates it. The choice does not
-  depend on other record kinds (dropping odometry does not change the filter). ``bias=false`` is
-  the fuzzy-UKF paper's 5-state conventional UKF.
+  depend on other record kinds (dropping odometry does not change the filter). ``bias=false`` (with
+  ``compass_bias=false``) is the fuzzy-UKF paper's 5-state conventional UKF.
 * Water-current states (``current="auto"``): when the log has ``water_speed`` records.
 """
 

@@ -599,8 +599,8 @@ def inputs(log: NavLog, options: dict) -> set[str]:
 class UkfConfig(UkfOptions):
     """The ``ukf`` estimator's options."""
 
-    bias: bool | str = option("auto", "IMU bias states: auto (unless meta['imu'] says bias_free), true, false (the "
-                              "paper's 5-state UKF)")
+    bias: bool | str = option("auto", "IMU bias states: auto (unless meta['imu'] says bias_free), true, false (with "
+                              "compass_bias=false: the paper's 5-state UKF)")
 
 
 class Ukf(BatchEstimator):
