@@ -36,7 +36,7 @@ from ..log import Gnss, GnssVelocity, Heading, Imu, NavLog, Odometry, PosePrior,
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .gating import GATING_DEFAULTS, GateOptions
-from .imu_model import compass_bias_model
+from .imu_model import compass_bias_model, resolve_flag
 from .ins_ekf import InsEkf
 from .pose_ekf import PoseEkf
 
@@ -139,16 +139,14 @@ def vessel_model(given: dict[str, Any]) -> dict[str, float]:
     out["vessel_position_walk"] = max(float(out["vessel_position_walk"] or 0.0), c.integration_sigma)
     return out
 
+
 def compass_bias_on(flag: Any, motion: str, current: bool) -> bool:
     """Whether the filter carries the compass-bias state: ``flag`` true/false, or ``"auto"``: with the IMU
     motion (the heading turns the integrated acceleration, so GNSS position/velocity see a heading error
     and tell it from the compass's bias) and with the vessel motion when it has the current states (the
     speed through water along the bow against GNSS is its only tie between heading and track: without it
     the bias cannot be told from the heading and would only widen the heading's covariance)."""
-    from .imu_model import resolve_flag
-
     return resolve_flag(flag, motion == "imu" or (motion == "vessel" and current), "compass_bias")
-
 
 
 MatchFn = Callable[..., Any]  # graphnav.scan.weighted_icp.match_scans(scan, prev, init=...) -> MatchResult
@@ -383,14 +381,16 @@ def auto_motion(log: NavLog, least: int = 2) -> str:
     return "icp" if len(log.of("scan")) >= least or not log.of("gnss") else "vessel"
 
 
-def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
+def imu_options(log: NavLog, given: dict[str, Any], motion: str | None = None) -> dict[str, Any]:
     """The IMU motion's options for ``log`` (:data:`IMU_DEFAULTS`): the noise densities and bias
     random walks of the log's IMU model (:func:`graphnav.estimators.imu_model.imu_noise`, the
     graph's), bias states when the IMU has a bias and current states when the log has water speed
-    (``"auto"``), the initial velocity from ``meta["initial_velocity"]`` or the first GNSS velocity;
+    (``"auto"``), the compass-bias state when the log has a compass and GNSS and ``motion`` (default: the IMU's
+    if the log has one, else the vessel model's) ties the heading to the track (:func:`compass_bias_on`), the
+    initial velocity from ``meta["initial_velocity"]`` or the first GNSS velocity;
     ``given`` (options of the same names) wins."""
     from ..log import odometry_is_rot
-    from .imu_model import imu_noise, resolve_flag, wants_bias
+    from .imu_model import imu_noise, wants_bias
 
     m = imu_noise(log)
     given = dict(given)
@@ -405,8 +405,8 @@ def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
     out["current"] = resolve_flag(given.pop("current", "auto"), bool(log.of("water_speed")), "current")
     # the compass bias: observable with a compass and GNSS (position or velocity) to hold the heading against
     out["compass_bias"] = resolve_flag(given.pop("compass_bias", "auto"), bool(log.of("heading")) and bool(
-        log.of("gnss") or log.of("gnss_velocity")) and compass_bias_on("auto", "imu" if log.of("imu") else "vessel",
-                                                                        out["current"]), "compass_bias")
+        log.of("gnss") or log.of("gnss_velocity")) and compass_bias_on(
+        "auto", motion or ("imu" if log.of("imu") else "vessel"), out["current"]), "compass_bias")
     v0 = log.meta.get("initial_velocity") if isinstance(log.meta, dict) else None
     gv = log.of("gnss_velocity")
     t0 = log.t0
@@ -441,7 +441,7 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
     if motion == "auto":
         motion = auto_motion(log)
     imu_given = {k: gating.pop(k) for k in list(gating) if k in IMU_DEFAULTS or k == "bias" or k == "current"}
-    imu = imu_options(log, imu_given) if motion in ("imu", "vessel") else None
+    imu = imu_options(log, imu_given, motion) if motion in ("imu", "vessel") else None
     if imu_given.get("compass_bias", "auto") == "auto":  # (auto: no compass-bias state without InsEkf's motions)
         imu_given.pop("compass_bias", None)
     if imu_given and motion not in ("imu", "vessel"):
