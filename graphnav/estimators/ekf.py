@@ -36,6 +36,7 @@ from ..log import Gnss, GnssVelocity, Heading, Imu, NavLog, Odometry, PosePrior,
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .gating import GATING_DEFAULTS, GateOptions
+from .imu_model import compass_bias_model, resolve_flag
 from .ins_ekf import InsEkf
 from .pose_ekf import PoseEkf
 
@@ -89,6 +90,11 @@ def initial_state(records: Iterable[Record], speed: bool) -> tuple[NDArray, NDAr
     return np.array(x, dtype=float), P, anchor
 
 
+def compass_yaw(anchor: str, P0: NDArray) -> bool:
+    """Whether :func:`initial_state`'s yaw is a compass reading: the ``"gnss"`` anchor with a heading (sigma < pi)."""
+    return anchor == "gnss" and float(P0[2, 2]) < math.pi ** 2
+
+
 def _sig(v: float, default: float) -> float:
     return default if not math.isfinite(v) else v
 
@@ -106,6 +112,9 @@ IMU_DEFAULTS: dict[str, Any] = {
     "vessel_rot": None,  # motion="vessel": odometry records are a rate of turn, the heading's rate (None: from meta)
     # the water-speed record's sideways sigma hypot(leeway, leeway_rel |v|); None: the graph's (WaterConfig)
     "water_leeway": None, "water_leeway_rel": None,
+    # the compass-bias state (InsEkf): "auto" resolved by imu_options from the log; the stepper takes "auto" as on
+    # for the IMU motion and for the vessel motion with the current states (compass_bias_on)
+    "compass_bias": "auto",
 }
 VESSEL_KEYS = ("vessel_accel", "vessel_yaw_rate_deg", "vessel_steerage_speed", "vessel_position_walk")
 
@@ -130,6 +139,16 @@ def vessel_model(given: dict[str, Any]) -> dict[str, float]:
     out["vessel_position_walk"] = max(float(out["vessel_position_walk"] or 0.0), c.integration_sigma)
     return out
 
+
+def compass_bias_on(flag: Any, motion: str, current: bool) -> bool:
+    """Whether the filter carries the compass-bias state: ``flag`` true/false, or ``"auto"``: with the IMU
+    motion (the heading turns the integrated acceleration, so GNSS position/velocity see a heading error
+    and tell it from the compass's bias) and with the vessel motion when it has the current states (the
+    speed through water along the bow against GNSS is its only tie between heading and track: without it
+    the bias cannot be told from the heading and would only widen the heading's covariance)."""
+    return resolve_flag(flag, motion == "imu" or (motion == "vessel" and current), "compass_bias")
+
+
 MatchFn = Callable[..., Any]  # graphnav.scan.weighted_icp.match_scans(scan, prev, init=...) -> MatchResult
 
 
@@ -142,13 +161,16 @@ class EkfStepper:
     (``motion="icp"``: consecutive scans matched by ``match``, default
     :func:`graphnav.scan.weighted_icp.match_scans`), then applies the gated GNSS/heading (and with the IMU,
     GNSS velocity and water speed) update. ``imu``: the IMU motion's options (:data:`IMU_DEFAULTS`).
-    ``keep`` bounds the timing buffers (``None``: keep all)."""
+    ``keep`` bounds the timing buffers (``None``: keep all). ``compass_yaw``: the initial yaw is a
+    compass reading (:func:`initial_state`'s ``"gnss"`` anchor), so with the compass-bias state it starts
+    as that reading less the bias: its variance plus the bias prior's, correlated -1 with the bias."""
 
     def __init__(self, x0: NDArray[np.float64], P0: NDArray[np.float64], *, motion: str = "odometry",
                  gate: float | None = 0.999, sigma_v: float = 0.5,
                  sigma_w: float = math.radians(0.5), sigma_acc: float = 0.5, use_gnss: bool = True,
                  use_heading: bool = True, match: MatchFn | None = None,
-                 keep: int | None = None, imu: dict[str, Any] | None = None, **gating: Any) -> None:
+                 keep: int | None = None, imu: dict[str, Any] | None = None, compass_yaw: bool = False,
+                 **gating: Any) -> None:
         if motion not in ("odometry", "icp", "imu", "vessel"):
             raise ValueError(f"motion must be 'odometry', 'icp', 'imu' or 'vessel', not {motion!r}")
         if motion == "icp" and match is None:
@@ -177,17 +199,22 @@ class EkfStepper:
                 bias = bool(io["bias"])
                 b0, brw = rot_bias(ImuConfig())
                 sb, rw = (0.0, b0), (0.0, brw)  # (no accelerometer: its bias states stay 0)
+            cb = compass_bias_on(io["compass_bias"], motion, cur)
+            (kb0, kbrw) = compass_bias_model() if cb else (0.0, 0.0)
             vx, vy, sv = io["v0"]
-            x = [*np.asarray(x0, float)[:3], vx, vy] + [0.0] * (3 * bias) + [0.0] * (2 * cur)
+            x = [*np.asarray(x0, float)[:3], vx, vy] + [0.0] * (3 * bias) + [0.0] * (2 * cur) + [0.0] * cb
             d = [sv ** 2] * 2 + [sb[0] ** 2] * (2 * bias) + [sb[1] ** 2] * bias \
-                + [io["sigma_current0"] ** 2] * (2 * cur)
+                + [io["sigma_current0"] ** 2] * (2 * cur) + [kb0 ** 2] * cb
             P = np.zeros((len(x), len(x)))
             P[:3, :3] = np.asarray(P0, float)[:3, :3]
             P[3:, 3:] = np.diag(d)
+            if cb and compass_yaw:  # yaw = reading - b
+                P[2, 2] += kb0 ** 2
+                P[2, -1] = P[-1, 2] = -kb0 ** 2
             self.f: PoseEkf = InsEkf(np.array(x), P, bias=bias, current=cur, acc_density=io["acc_density"],
                                      gyro_density=io["gyro_density"], acc_bias_rw=rw[0],
-                                     gyro_bias_rw=rw[1], current_rw=io["q_current"],
-                                     gate=gate, **gating)
+                                     gyro_bias_rw=rw[1], current_rw=io["q_current"], compass_bias=cb,
+                                     compass_bias_rw=kbrw, gate=gate, **gating)
         else:
             self.f = PoseEkf(x0, P0, gate=gate, **gating)
         self.motion = motion
@@ -354,14 +381,16 @@ def auto_motion(log: NavLog, least: int = 2) -> str:
     return "icp" if len(log.of("scan")) >= least or not log.of("gnss") else "vessel"
 
 
-def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
+def imu_options(log: NavLog, given: dict[str, Any], motion: str | None = None) -> dict[str, Any]:
     """The IMU motion's options for ``log`` (:data:`IMU_DEFAULTS`): the noise densities and bias
     random walks of the log's IMU model (:func:`graphnav.estimators.imu_model.imu_noise`, the
     graph's), bias states when the IMU has a bias and current states when the log has water speed
-    (``"auto"``), the initial velocity from ``meta["initial_velocity"]`` or the first GNSS velocity;
+    (``"auto"``), the compass-bias state when the log has a compass and GNSS and ``motion`` (default: the IMU's
+    if the log has one, else the vessel model's) ties the heading to the track (:func:`compass_bias_on`), the
+    initial velocity from ``meta["initial_velocity"]`` or the first GNSS velocity;
     ``given`` (options of the same names) wins."""
     from ..log import odometry_is_rot
-    from .imu_model import imu_noise, resolve_flag, wants_bias
+    from .imu_model import imu_noise, wants_bias
 
     m = imu_noise(log)
     given = dict(given)
@@ -374,6 +403,10 @@ def imu_options(log: NavLog, given: dict[str, Any]) -> dict[str, Any]:
     out["bias"] = (resolve_flag(given.pop("bias", "auto"), wants_bias(log)[0], "bias") if log.of("imu")
                    else rot and resolve_flag(given.pop("bias", "auto"), True, "bias"))  # the ROT's bias
     out["current"] = resolve_flag(given.pop("current", "auto"), bool(log.of("water_speed")), "current")
+    # the compass bias: observable with a compass and GNSS (position or velocity) to hold the heading against
+    out["compass_bias"] = resolve_flag(given.pop("compass_bias", "auto"), bool(log.of("heading")) and bool(
+        log.of("gnss") or log.of("gnss_velocity")) and compass_bias_on(
+        "auto", motion or ("imu" if log.of("imu") else "vessel"), out["current"]), "compass_bias")
     v0 = log.meta.get("initial_velocity") if isinstance(log.meta, dict) else None
     gv = log.of("gnss_velocity")
     t0 = log.t0
@@ -408,13 +441,15 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
     if motion == "auto":
         motion = auto_motion(log)
     imu_given = {k: gating.pop(k) for k in list(gating) if k in IMU_DEFAULTS or k == "bias" or k == "current"}
-    imu = imu_options(log, imu_given) if motion in ("imu", "vessel") else None
+    imu = imu_options(log, imu_given, motion) if motion in ("imu", "vessel") else None
+    if imu_given.get("compass_bias", "auto") == "auto":  # (auto: no compass-bias state without InsEkf's motions)
+        imu_given.pop("compass_bias", None)
     if imu_given and motion not in ("imu", "vessel"):
         raise ValueError(f"ekf option(s) {sorted(imu_given)} need motion='imu' or 'vessel'")
     x0, P0, anchor = initial_state(log.records, speed)
     st = EkfStepper(x0, P0, motion=motion, gate=gate, sigma_v=sigma_v,
                     sigma_w=sigma_w, sigma_acc=sigma_acc, use_gnss=use_gnss, use_heading=use_heading,
-                    imu=imu, **gating)
+                    imu=imu, compass_yaw=compass_yaw(anchor, P0), **gating)
     recs = [r for r in log.records if st.uses(r)]
     if motion == "imu":  # at equal times the IMU record (the motion up to t) before the measurements at t
         recs.sort(key=lambda r: (r.t, not isinstance(r, Imu)))
@@ -447,6 +482,11 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
         if imu["current"]:
             ic = 5 + 3 * imu["bias"]
             info["current_final"] = f.x[ic:ic + 2].tolist()
+        ik = getattr(f, "ik", None)
+        info["compass_bias_state"] = ik is not None
+        if ik is not None:
+            info["compass_bias_final_deg"] = math.degrees(float(f.x[ik]))
+            info["compass_bias_sigma_deg"] = math.degrees(math.sqrt(float(f.P[ik, ik])))
     return RunResult(traj, traj, np.array(st.step_ms), np.array(st.icp_ms), info=info)
 
 
@@ -500,6 +540,10 @@ class ImuMotionOptions:
                                         unit="rad/s/sqrt(s)")
     bias: bool | str = option("auto", "bias states: auto (unless meta['imu'] says bias_free), true, false")
     current: bool | str = option("auto", "water-current states: auto (when the log has water_speed), true, false")
+    compass_bias: bool | str = option(
+        "auto", "a compass-bias state (the compass reads yaw + b; the graph's prior [compass] bias_sigma_deg and "
+        "random walk bias_drift_deg): auto (a compass and GNSS position or velocity, with the IMU motion, or the "
+        "vessel motion with the current states: what ties the heading to the track), true, false")
     sigma_bias_acc: float = option(0.01, "prior on the residual accelerometer bias", unit="m/s^2")
     sigma_bias_gyro_deg: float = option(0.1, "prior on the residual gyro bias", unit="deg/s")
     sigma_current0: float = option(0.5, "prior 1-sigma of the water current", unit="m/s")

@@ -40,6 +40,7 @@ from .ekf import (
     _inputs,
     _unmet,
     auto_motion,
+    compass_yaw,
     initial_state,
     run_ekf,
     vessel_model,
@@ -142,7 +143,8 @@ class EkfOnline:
             if gv is not None and gv.t - recs[0].t <= 1.0:  # as run_ekf's rule
                 sv = gv.sigma if math.isfinite(gv.sigma) else IMU_DEFAULTS["sigma_gnss_velocity"]
                 options = {**options, "imu": {**options.get("imu", {}), "v0": (gv.vx, gv.vy, 3.0 * sv)}}
-        self.stepper = st = EkfStepper(x0, P0, motion=self.motion, **options)
+        self.stepper = st = EkfStepper(x0, P0, motion=self.motion, compass_yaw=compass_yaw(self.anchor, P0),
+                                       **options)
         for r in recs:
             if st.step(r) and isinstance(r, Gnss) and st.use_gnss:  # as in add: an unused fix is none
                 self.last_fix_t = r.t

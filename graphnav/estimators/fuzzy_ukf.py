@@ -199,7 +199,7 @@ class FuzzyUkfConfig(FuzzyUkfBiasConfig):
                                      "significant the predicted covariance is inflated to cover it (null: off; "
                                      "default null when the filter has bias states)")
     bias: bool | str = option("auto", "IMU bias states: auto (unless meta['imu'] says bias_free; then as "
-                              "fuzzy-ukf-bias), true, false (the paper's 5-state filter)")
+                              "fuzzy-ukf-bias), true, false (with compass_bias=false: the paper's 5-state filter)")
 
 
 class FuzzyUkf(Ukf):

@@ -9,8 +9,8 @@
   IMU has a residual bias after calibration (the logs that describe their IMU state it in
   ``meta["imu"]``: ``bias_true``, ``bias_residual``, ``acc_bias_rw``, ...), and without an odometer
   the IMU is the only motion sensor, so the textbook filter estimates it. The choice does not
-  depend on other record kinds (dropping odometry does not change the filter). ``bias=false`` is
-  the fuzzy-UKF paper's 5-state conventional UKF.
+  depend on other record kinds (dropping odometry does not change the filter). ``bias=false`` (with
+  ``compass_bias=false``) is the fuzzy-UKF paper's 5-state conventional UKF.
 * Water-current states (``current="auto"``): when the log has ``water_speed`` records.
 """
 
@@ -88,3 +88,13 @@ def resolve_flag(value: Any, auto: bool, name: str) -> bool:
     if isinstance(value, str) and value.lower() in ("true", "false"):
         return value.lower() == "true"
     raise ValueError(f"{name} must be true, false or 'auto', not {value!r}")
+
+
+def compass_bias_model() -> tuple[float, float]:
+    """The compass bias's prior sigma [rad] and random walk [rad/sqrt(s)]: the graph's
+    (:class:`graphnav.graph.smoother_config.CompassConfig` ``bias_sigma_deg``, ``bias_drift_deg``), the same
+    sensor model as the smoother's."""
+    from ..graph.smoother_config import CompassConfig
+
+    c = CompassConfig()
+    return math.radians(c.bias_sigma_deg), math.radians(c.bias_drift_deg)

@@ -1,7 +1,9 @@
 """The ``ekf``'s IMU motion (``motion="imu"``): a loosely coupled planar INS/GNSS EKF.
 
 State ``[x, y, yaw, v_x, v_y]`` (navigation-frame velocity), optionally ``+ [b_ax, b_ay, b_g]``
-(IMU biases, random walks) and ``+ [c_x, c_y]`` (the water current, a random walk). The same
+(IMU biases, random walks), ``+ [c_x, c_y]`` (the water current, a random walk) and ``+ [b_c]`` (the
+compass bias [rad], last: the compass reads ``yaw + b_c``; a random walk, the graph's compass-bias model,
+:class:`graphnav.graph.smoother_config.CompassConfig`, ``bias_drift_deg``). The same
 model as the UKFs (:mod:`graphnav.estimators.ukf`), linearised: with ``a = R(yaw) (f - b_a)``::
 
     p += T v + T^2/2 a;  v += T a;  yaw += T (w_z - b_g)
@@ -42,15 +44,17 @@ class InsEkf(PoseEkf):
 
     def __init__(self, x0: NDArray[np.float64], P0: NDArray[np.float64], *, bias: bool, current: bool,
                  acc_density: float, gyro_density: float, acc_bias_rw: float = 0.0, gyro_bias_rw: float = 0.0,
-                 current_rw: float = 0.0, **kw) -> None:
+                 current_rw: float = 0.0, compass_bias: bool = False, compass_bias_rw: float = 0.0, **kw) -> None:
         super().__init__(x0, P0, **kw)
-        n = 5 + 3 * bias + 2 * current
+        n = 5 + 3 * bias + 2 * current + compass_bias
         if self.x.shape != (n,) or self.P.shape != (n, n):
             raise ValueError(f"state must have {n} entries")
         self.ib = 5 if bias else None
         self.ic = 5 + 3 * bias if current else None
+        self.ik = n - 1 if compass_bias else None  # the compass bias [rad], the last state
         self.qa, self.qg = acc_density ** 2, gyro_density ** 2
         self.qba, self.qbg, self.qc = acc_bias_rw ** 2, gyro_bias_rw ** 2, current_rw ** 2
+        self.qk = compass_bias_rw ** 2  # [rad^2/s]
 
     @property
     def has_speed(self) -> bool:
@@ -87,6 +91,8 @@ class InsEkf(PoseEkf):
             Q[ib + 2, ib + 2] = self.qbg * T
         if self.ic is not None:
             Q[self.ic, self.ic] = Q[self.ic + 1, self.ic + 1] = self.qc * T
+        if self.ik is not None:
+            Q[self.ik, self.ik] = self.qk * T
         x[0] += T * x[3] + h * anx
         x[1] += T * x[4] + h * any_
         x[3] += T * anx
@@ -119,11 +125,24 @@ class InsEkf(PoseEkf):
             Q[self.ib + 2, self.ib + 2] = self.qbg * T
         if self.ic is not None:
             Q[self.ic, self.ic] = Q[self.ic + 1, self.ic + 1] = self.qc * T
+        if self.ik is not None:
+            Q[self.ik, self.ik] = self.qk * T
         x[0] += T * x[3]
         x[1] += T * x[4]
         if rot is not None:
             x[2] = wrap_angle(x[2] + rot[0] - (T * x[self.ib + 2] if self.ib is not None else 0.0))
         self.P = F @ self.P @ F.T + Q
+
+    def update_heading(self, yaw: float, sigma: float, t: float | None = None) -> bool:
+        """Compass heading: ``yaw + b_c`` with the compass-bias state, else ``yaw`` (:class:`PoseEkf`); a
+        re-initialisation restarts the yaw at the reading less the bias (the bias kept)."""
+        ik = self.ik
+        if ik is None:
+            return super().update_heading(yaw, sigma, t)
+        H = np.zeros((1, len(self.x)))
+        H[0, 2] = H[0, ik] = 1.0
+        nu = np.array([wrap_angle(yaw - self.x[2] - self.x[ik])])
+        return self._update("heading", nu, H, np.array([[sigma ** 2]]), t, angle=True, reinit_idx=[2])
 
     def speed_through_water(self) -> float:
         """``|v - c|`` [m/s] (``|v|`` without the current states)."""

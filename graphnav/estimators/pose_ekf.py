@@ -76,10 +76,12 @@ class PoseEkf:
 
     # ------------------------------------------------------------------ corrections
     def _update(self, sensor: str, nu: NDArray, H: NDArray, R: NDArray, t: float | None = None,
-                angle: bool = False, reinit: bool = True) -> bool:
+                angle: bool = False, reinit: bool = True, reinit_idx: list[int] | None = None) -> bool:
         """Gated Joseph update; ``t`` the measurement time [s] for the gate's time rules (default:
         the number of updates so far). False if the measurement was rejected. ``reinit=False`` (a
-        measurement that is no state component): a re-initialisation verdict is a plain update."""
+        measurement that is no state component): a re-initialisation verdict is a plain update.
+        ``reinit_idx``: the components a re-initialisation restarts (default: every one H touches;
+        a biased compass restarts the yaw at the reading less the bias, the bias kept)."""
         self.n_updates += 1
         HPH = H @ self.P @ H.T
         S = HPH + R
@@ -87,7 +89,7 @@ class PoseEkf:
         if verdict == "reject":
             return False
         if verdict == "reinit" and reinit:  # sustained evidence: the measured components restart at the measurement
-            idx = np.flatnonzero(H.any(axis=0))
+            idx = np.flatnonzero(H.any(axis=0)) if reinit_idx is None else np.asarray(reinit_idx)
             z = self.x[idx] + nu
             if angle:
                 z = wrap_angle(z)

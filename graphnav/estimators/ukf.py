@@ -1,8 +1,11 @@
 """The conventional UKF of Liu, Liu & Bucknall (IEEE Access 2019), and a bias-augmented variant.
 
 State (eq. 11) ``x = [p_x, p_y, v_x, v_y, theta]`` (``ukf-bias`` appends the accelerometer and gyro
-biases ``[b_ax, b_ay, b_g]``). Inputs: the body-frame IMU acceleration rotated into the navigation
-frame by the heading (eq. 4) and the gyro yaw rate; dynamics eq. 1-3 / 12 with the sample time T::
+biases ``[b_ax, b_ay, b_g]``; the water current ``[c_x, c_y]`` follows with ``current``, and the compass
+bias ``b_c`` comes last with ``compass_bias``: the compass reads ``theta + b_c``, b_c a random walk, the
+graph's compass model, :class:`graphnav.graph.smoother_config.CompassConfig`). Inputs: the body-frame
+IMU acceleration rotated into the navigation frame by the heading (eq. 4) and the gyro yaw rate; dynamics
+eq. 1-3 / 12 with the sample time T::
 
     a_n = R(theta) (a_i - b_a);  p += T v + T^2/2 a_n;  v += T a_n;  theta += T (omega - b_g)
 
@@ -40,7 +43,7 @@ from ..trajectory import Trajectory
 from . import _ukf_fast
 from .base import BatchEstimator
 from .gating import GATING_DEFAULTS, GateOptions, InnovationGate, reinit_block
-from .imu_model import imu_noise, resolve_flag, wants_bias
+from .imu_model import compass_bias_model, imu_noise, resolve_flag, wants_bias
 
 # Table 2: the filters' a-priori noise (1-sigma)
 TABLE2 = {
@@ -81,22 +84,27 @@ def wrapped_mean(X: NDArray, wm: NDArray, angle_idx: int) -> NDArray:
 
 class UnscentedNav:
     """The appendix UKF for the USV model; ``n_bias = 3`` adds accelerometer/gyro bias states,
-    ``current=True`` the water current ``[c_x, c_y]`` (a random walk) after them."""
+    ``current=True`` the water current ``[c_x, c_y]`` (a random walk) after them, ``compass_bias=True`` the
+    compass bias last (the compass channel measures ``theta + b_c``; ``q_compass_bias`` its random walk
+    [rad/sqrt(s)])."""
 
     TH = 4  # index of theta
 
     def __init__(self, x0: NDArray, P0: NDArray, *, q_acc: float, q_gyro: float,
                  q_bias_acc: float = 0.0, q_bias_gyro: float = 0.0, current: bool = False, q_current: float = 0.0,
+                 compass_bias: bool = False, q_compass_bias: float = 0.0,
                  alpha: float = 0.5, beta: float = 2.0, kappa: float = 0.0) -> None:
         self.x = np.array(x0, dtype=float)
         self.P = np.array(P0, dtype=float)
         self.n = n = self.x.shape[0]
-        nb = n - 5 - 2 * bool(current)
+        nb = n - 5 - 2 * bool(current) - bool(compass_bias)
         if nb not in (0, 3):
-            raise ValueError("state must have 5 or 8 entries (+2 with the current)")
+            raise ValueError("state must have 5 or 8 entries (+2 with the current, +1 with the compass bias)")
         self.bias = nb == 3
         self.ib = 5 if self.bias else None  # first bias index
         self.ic = 5 + nb if current else None  # first current index
+        self.ik = n - 1 if compass_bias else None  # the compass bias
+        self.q_compass = float(q_compass_bias)
         self.wm, self.wc, self.lam = merwe_weights(n, alpha, beta, kappa)
         self.q_acc, self.q_gyro = q_acc, q_gyro
         self.q_bias = np.array([q_bias_acc, q_bias_acc, q_bias_gyro]) ** 2
@@ -118,6 +126,8 @@ class UnscentedNav:
                 Q[5:8, 5:8] = np.diag(self.q_bias * T)
             if self.ic is not None:
                 Q[self.ic, self.ic] = Q[self.ic + 1, self.ic + 1] = self.q_current ** 2 * T
+            if self.ik is not None:
+                Q[self.ik, self.ik] = self.q_compass ** 2 * T
             self._Q_T = (T, Q)
         return self._Q_T[1]
 
@@ -153,14 +163,37 @@ class UnscentedNav:
         x, P = self.x.copy(), self.P.copy()
         _ukf_fast.predict_span(x, P, self.lam, self.wm, self.wc, self.q_acc, self.q_gyro, self.q_bias,
                                self.q_current, self.ib if self.ib is not None else -1,
-                               self.ic if self.ic is not None else -1, tab["ax"], tab["ay"], tab["wz"], tab["t"],
-                               k0, k1, poses, cov, states)
+                               self.ic if self.ic is not None else -1, self.ik if self.ik is not None else -1,
+                               self.q_compass, tab["ax"], tab["ay"], tab["wz"], tab["t"], k0, k1, poses, cov, states)
         self.x, self.P = x, P
         self.P_pred = P
 
+    def _H(self, idx: NDArray) -> NDArray | None:
+        """H of the rows ``idx`` when the compass is one of them and reads ``theta + b_c``; else None (H picks)."""
+        if self.ik is None or idx[-1] != 4:
+            return None
+        H = np.zeros((len(idx), self.n))
+        H[np.arange(len(idx)), idx] = 1.0
+        H[-1, self.ik] = 1.0
+        return H
+
+    def channel_var(self) -> NDArray:
+        """``diag(H P^- H^T)`` of the GNSS x, GNSS y and compass channels."""
+        d = self.P[_STATE, _STATE]
+        if self.ik is not None:
+            d = d.copy()
+            d[2] += 2.0 * self.P[4, self.ik] + self.P[self.ik, self.ik]
+        return d
+
     def innovation(self, idx: NDArray, z: NDArray, ix: tuple | None = None) -> tuple[NDArray, NDArray]:
         """``eps = z - H x^-`` (eq. 14, heading wrapped) and ``H P^- H^T`` for the rows ``idx`` of eq. 13
-        (``ix`` = ``np.ix_(idx, idx)``, precomputed by callers in a loop)."""
+        (``ix`` = ``np.ix_(idx, idx)``, precomputed by callers in a loop; with the compass bias the compass
+        row of H also picks ``b_c``)."""
+        H = self._H(idx)
+        if H is not None:
+            eps = z - H @ self.x
+            eps[-1] = wrap_angle(eps[-1])
+            return eps, H @ self.P @ H.T
         eps = z - self.x[idx]
         if idx[-1] == 4:
             eps[-1] = wrap_angle(eps[-1])
@@ -169,7 +202,8 @@ class UnscentedNav:
     def update(self, idx: NDArray, eps: NDArray, HPH: NDArray, R: NDArray) -> None:
         """Step 2 of the appendix: ``K = P^- H^T (H P^- H^T + R)^-1``, ``x += K eps``, ``P = (I-KH) P^-``."""
         S = HPH + R
-        PHt = self.P[:, idx]
+        H = self._H(idx)
+        PHt = self.P[:, idx] if H is None else self.P @ H.T
         K = PHt @ np.linalg.inv(S)
         self.x = self.x + K @ eps
         self.x[4] = wrap_angle(self.x[4])
@@ -277,11 +311,13 @@ def channel_variances(tab: dict[str, NDArray], opts: dict[str, Any]) -> NDArray:
 
 
 def initial_state(log: NavLog, tab: dict[str, NDArray], n_bias: int,
-                  opts: dict[str, Any], current: bool = False) -> tuple[NDArray, NDArray]:
+                  opts: dict[str, Any], current: bool = False, compass_bias: float | None = None
+                  ) -> tuple[NDArray, NDArray]:
     """x0/P0 from the pose prior (else the first GNSS fix and compass heading, with their sigmas);
     velocity from ``meta["initial_velocity"]`` when the log knows it (the paper's known initial state),
     else the GNSS velocity at the first step when there is one, else zero (2 m/s); the current (if
-    estimated) zero with ``sigma_current0``."""
+    estimated) zero with ``sigma_current0``; the compass bias (``compass_bias``: its prior sigma [rad])
+    zero, and a heading taken from the compass is that reading less the bias (correlated -1)."""
     prior = log.pose_prior()
     z, r = tab["z"], channel_variances(tab, opts)
     i0 = np.flatnonzero(~np.isnan(z[:, 0]))
@@ -308,7 +344,13 @@ def initial_state(log: NavLog, tab: dict[str, NDArray], n_bias: int,
     if current:
         x += [0.0, 0.0]
         d += [opts["sigma_current0"] ** 2] * 2
-    return np.array(x), np.diag(d)
+    if compass_bias is None:
+        return np.array(x), np.diag(d)
+    P = np.diag([*d, compass_bias ** 2])
+    if prior is None and len(h0):  # theta = reading - b_c
+        P[4, 4] += compass_bias ** 2
+        P[4, -1] = P[-1, 4] = -compass_bias ** 2
+    return np.array([*x, 0.0]), P
 
 
 @dataclass
@@ -339,6 +381,10 @@ class UkfOptions(GateOptions):
     current: bool | str = option("auto", "water-current states: auto (when the log has water_speed), true, false")
     sigma_current0: float = option(0.5, "prior 1-sigma of the water current", unit="m/s")
     q_current: float = option(0.005, "water-current random walk", unit="m/s/sqrt(s)")
+    compass_bias: bool | str = option(
+        "auto", "a compass-bias state (the compass reads theta + b; the graph's prior [compass] bias_sigma_deg and "
+        "random walk bias_drift_deg): auto (when the log has compass and GNSS position or velocity, which hold "
+        "the heading through the IMU's integrated acceleration), true, false")
 
 
 DEFAULTS: dict[str, Any] = {f.name: f.default for f in fields(UkfOptions)}
@@ -369,11 +415,14 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
     bias = resolve_flag(bias, auto_bias, "bias")
     tab = measurement_table(log)
     current = resolve_flag(opts["current"], bool(np.any(~np.isnan(tab["z"][:, 5]))), "current")
-    x0, P0 = initial_state(log, tab, 3 if bias else 0, opts, current)
+    seen = ~np.isnan(tab["z"])
+    cb = resolve_flag(opts["compass_bias"], bool(seen[:, 2].any() and seen[:, [0, 1, 3, 4]].any()), "compass_bias")
+    kb0, kbrw = compass_bias_model()
+    x0, P0 = initial_state(log, tab, 3 if bias else 0, opts, current, kb0 if cb else None)
     qn = _noise(log, opts)
     f = UnscentedNav(x0, P0, q_acc=qn["q_acc"], q_gyro=qn["q_gyro"],
                      q_bias_acc=qn["q_bias_acc"], q_bias_gyro=qn["q_bias_gyro"],
-                     current=current, q_current=float(opts["q_current"]),
+                     current=current, q_current=float(opts["q_current"]), compass_bias=cb, q_compass_bias=kbrw,
                      alpha=opts["alpha"], beta=opts["beta"], kappa=opts["kappa"])
     gater = InnovationGate(**{k: opts[k] for k in GATING_DEFAULTS})
     step = _Updates(f, gater, tab, channel_variances(tab, opts), adapter, current)
@@ -421,6 +470,11 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
     if current:
         info["current_final"] = f.x[f.ic:f.ic + 2].tolist()
         info["current"] = states[:, f.ic:f.ic + 2]
+    info["compass_bias_state"] = cb
+    if f.ik is not None:
+        info["compass_bias_final_deg"] = math.degrees(float(f.x[f.ik]))
+        info["compass_bias_sigma_deg"] = math.degrees(math.sqrt(float(f.P[f.ik, f.ik])))
+        info["compass_bias"] = states[:, f.ik]
     return RunResult(traj, traj, step_ms, info=info)
 
 
@@ -445,7 +499,7 @@ class _Updates:
         r0k = self.rk[k, :3]
         if self.inflation is not None and m.any():
             lam = np.ones(3)
-            lam[m] = self.inflation(np.flatnonzero(m), f.P[_STATE, _STATE][m])
+            lam[m] = self.inflation(np.flatnonzero(m), f.channel_var()[m])
             if np.any(lam > 1.0):
                 f.P = inflate(f.P, lam)
         if m.any() and gater.gate is not None:
@@ -503,10 +557,10 @@ def _gated(f: UnscentedNav, gater: InnovationGate, t: float, z: NDArray, m: NDAr
         verdict = gater.test(sensor, t, eps, HPH, R, angle=angle)
         if verdict != "accept":
             m[ch] = False
-        if verdict == "reinit":
+        if verdict == "reinit":  # (a biased compass: theta restarts at the reading less the bias, kept)
             zz = z[ch].astype(float)
             if angle:
-                zz = wrap_angle(zz)
+                zz = wrap_angle(zz - (f.x[f.ik] if f.ik is not None else 0.0))
             reinit_block(f.x, f.P, idx, zz, R * gater.scale(sensor))
     return m
 
@@ -545,8 +599,8 @@ def inputs(log: NavLog, options: dict) -> set[str]:
 class UkfConfig(UkfOptions):
     """The ``ukf`` estimator's options."""
 
-    bias: bool | str = option("auto", "IMU bias states: auto (unless meta['imu'] says bias_free), true, false (the "
-                              "paper's 5-state UKF)")
+    bias: bool | str = option("auto", "IMU bias states: auto (unless meta['imu'] says bias_free), true, false (with "
+                              "compass_bias=false: the paper's 5-state UKF)")
 
 
 class Ukf(BatchEstimator):

@@ -121,7 +121,9 @@ def test_filters_never_follow_a_sustained_1km_jump_on_solent(name, scenario):
     t, e = errors(res, log)
     _, e0 = errors(clean, log)
     w = (t >= 150.0) & (t < 400.0)
-    assert e[w].max() < e0[w].max() + 10.0, (e0[w].max(), e[w].max())
+    # 60 s of coasting through the rejected jump costs fuzzy-ukf 2-11 m over its clean run on scenario 2
+    # (seeds 0-2, with or without the compass-bias state; 11.3 m at seed 1 without it): a followed jump is 1 km
+    assert e[w].max() < e0[w].max() + 15.0, (e0[w].max(), e[w].max())
     assert res.info["rejected"] >= 55
 
 
