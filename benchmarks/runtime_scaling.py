@@ -40,13 +40,19 @@ def simulate(duration: float, out: Path, code: Path, seed: int) -> dict:
         return json.loads(meta.read_text())
     cmd = [PYTHON, "-m", "graphnav", "simulate", "harbour", "--duration", f"{duration:g}", "--seed", str(seed),
            "--out", str(out), "--overwrite", "--json"]
-    res = subprocess.run(cmd, check=True, capture_output=True, text=True, env=_env(code))
+    res = subprocess.run(cmd, check=True, capture_output=True, text=True, env=_env(code), cwd=_in(code))
     meta.write_text(res.stdout)
     return json.loads(res.stdout)
 
 
 def _env(code: Path) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": str(code)}
+
+
+def _in(code: Path) -> str:
+    """The directory each process runs in: ``code`` itself. ``python -m graphnav`` puts its working directory
+    first on ``sys.path``, ahead of ``PYTHONPATH``: started inside another checkout it ran that one's code."""
+    return str(Path(code).resolve())
 
 
 def run(log: Path, estimator: str, options: list[str], code: Path) -> dict:
@@ -56,7 +62,7 @@ def run(log: Path, estimator: str, options: list[str], code: Path) -> dict:
         cmd += ["-O", o]
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         w0 = time.perf_counter()
-        p = subprocess.Popen(cmd, stdout=out, stderr=err, env=_env(code))
+        p = subprocess.Popen(cmd, stdout=out, stderr=err, env=_env(code), cwd=_in(code))
         _, status, ru = os.wait4(p.pid, 0)
         wall = time.perf_counter() - w0
         p.returncode = os.waitstatus_to_exitcode(status)
@@ -85,6 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-warm", dest="warm", action="store_false", help="no untimed first run")
     ap.add_argument("--json", action="store_true", help="one JSON object on stdout")
     args = ap.parse_args(argv)
+    args.dir, args.code = args.dir.resolve(), args.code.resolve()  # (the processes run in --code)
     args.dir.mkdir(parents=True, exist_ok=True)
     logs = []
     for d in sorted(args.durations):

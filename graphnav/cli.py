@@ -55,17 +55,21 @@ def command_help(name: str) -> str | None:
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser. ``command``: register only that command for real (the others are named
-    placeholders, not imported); ``None``: import and register every command."""
+    placeholders, not imported, their help read from their source only when no command is named: then the
+    top-level help lists them; a named command never shows it, and parsing 13 sources took 0.04 s CPU of every
+    run); ``None``: import and register every command."""
+    names = command_names()
+    listed = command not in names  # the placeholders' help can be shown (``graphnav --help``, a bad name)
     parser = argparse.ArgumentParser(
         prog="graphnav", description="Factor-graph navigation for unmanned surface vessels."
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging (stderr)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in command_names():
+    for name in names:
         if command is None or name == command:
             importlib.import_module(f"{commands.__name__}.{name.replace('-', '_')}").register(sub)
         else:
-            sub.add_parser(name, help=command_help(name))
+            sub.add_parser(name, help=command_help(name) if listed else None)
     for leaf in leaf_parsers(parser):
         if leaf is not parser and (command is None or leaf.prog.split()[1:2] == [command]):
             _add_common_flags(leaf)

@@ -2,6 +2,7 @@ import json
 import subprocess
 import sys
 
+import pytest
 from _logfactory import every_record_log
 
 from graphnav.io import save_log
@@ -84,6 +85,26 @@ def test_main_loads_only_the_command_it_runs():
     names = command_names()
     assert {"beacons", "info", "run", "simulate", "live", "compare"} <= set(names)
     assert all(n in helptext for n in names)
+
+
+def test_a_named_command_reads_no_other_commands_source(monkeypatch):
+    """The placeholders' help (each command's source parsed, 0.04 s CPU) is read only when it can be shown: with no
+    command named (``graphnav --help``) or a name that is none (the error lists the commands)."""
+    import argparse
+
+    from graphnav import cli
+
+    want = {n: cli.command_help(n) for n in cli.command_names()}
+
+    def helps(parser):
+        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        return {c.dest: c.help for c in sub._choices_actions}
+
+    assert helps(cli.build_parser("")) == want
+    assert helps(cli.build_parser("nope")) == want
+    monkeypatch.setattr(cli, "command_help", lambda name: pytest.fail(f"read {name}'s source"))
+    got = helps(cli.build_parser("info"))
+    assert set(got) == set(want) and all(got[n] is None for n in got if n != "info")
 
 
 def test_a_command_runs_openblas_on_one_thread_unless_the_environment_says():

@@ -51,8 +51,9 @@ def test_every_help_is_plain_text_and_every_flag_has_help(parser):
                 assert all(c.help for c in a._choices_actions), p.prog
             elif a.dest != "help":
                 assert a.help and a.help.strip(), (p.prog, a.option_strings or a.dest)
-    lazy = build_parser("run").format_help()  # the commands listed without importing them
-    assert not MARKUP.search(lazy)
+    for named in ("run", ""):
+        lazy = build_parser(named).format_help()  # the commands listed without importing them
+        assert not MARKUP.search(lazy)
 
 
 def test_every_command_takes_config_and_quiet(parser):

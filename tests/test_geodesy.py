@@ -103,3 +103,25 @@ def test_one_fix_is_pymap3d_geodetic2enu_to_the_bit(lat0, lon0, dlat, dlon, h0):
     e, n, _ = pymap3d.geodetic2enu(lat, lon, h0, lat0, lon0, h0, ell=pymap3d.Ellipsoid.from_name("wgs84"))
     for x, y in (f.to_local(lat, lon), f.to_local(np.array(lat), np.array(lon)), f.to_local(lat, lon)):
         assert float(x) == float(e) and float(y) == float(n)
+
+
+def test_pymap3d_is_imported_at_the_first_conversion():
+    """Importing graphnav.geodesy (every reader does) costs no pymap3d import (0.02 s, dateutil with it): a run on a
+    local-frame log converts nothing; the first conversion imports it and converts as ever."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import sys\n"
+            "from graphnav import geodesy\n"
+            "import graphnav.io, graphnav.graph.log_runs\n"
+            "before = 'pymap3d' in sys.modules\n"
+            "x, y = geodesy.LocalFrame(50.0, -1.0).to_local(50.001, -1.0)\n"
+            "print(before, 'pymap3d' in sys.modules, round(float(y), 3))\n")
+    repo = Path(__file__).resolve().parents[1]
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=repo, check=True,
+                       env={**os.environ, "PYTHONPATH": str(repo)})
+    before, after, north = r.stdout.split()
+    assert (before, after) == ("False", "True")
+    assert abs(float(north) - 111.229) < 2e-3  # 0.001 deg of latitude at 50 deg: M pi / 180 / 1000 = 111.229 m

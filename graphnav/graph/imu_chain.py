@@ -38,6 +38,10 @@ from .order_stats import median
 GRAVITY = 9.80665  # [m/s^2] standard gravity (6-axis records)
 #: the record pieces covering an interval (:meth:`ImuChain._pieces`): record indices, each piece's start and end [s]
 Pieces = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
+#: the records an interval's pieces read (:func:`_window`): the first one's index, the rows as an array
+Window = tuple[int, NDArray[np.float64]]
+#: :meth:`ImuChain.hold_variance`: the variance per accelerometer axis, per gyro axis, of the position
+Hold = tuple[NDArray[np.float64], NDArray[np.float64], float]
 
 
 @dataclass
@@ -119,6 +123,7 @@ class ImuChain:
         self.six: bool | None = None
         self._period: tuple[tuple[int, float] | None, float] = (None, 0.0)  # (len(t), t[-1]) -> period()
         self.params: gtsam.PreintegrationParams | None = None
+        self._densities: tuple[Any, ...] = (None,)  # (:func:`_densities` of the parameters in use)
         self.body_P_sensor: gtsam.Pose3 | None = None  # the IMU's mount (graphnav.graph.mounts), when not at the origin
         walk = cfg.vessel_position_walk
         #: the log's estimate of it (graphnav.graph.position_walk), when made and used
@@ -225,12 +230,15 @@ class ImuChain:
         acc, omega, dt = self._arrays(self._pieces(ta, tb))
         return [(acc[k], omega[k], float(dt[k])) for k in range(len(dt))]
 
-    def _arrays(self, pieces: Pieces) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """:meth:`samples` of the ``pieces`` (:meth:`_pieces`) as arrays: ``acc``, ``omega`` (n, 3), ``dt`` (n,)."""
+    def _arrays(self, pieces: Pieces, window: Window | None = None
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`samples` of the ``pieces`` (:meth:`_pieces`) as arrays: ``acc``, ``omega`` (n, 3), ``dt`` (n,);
+        ``window``: their :func:`_window`, converted once for this and :func:`_hold`."""
         idx, lo, hi = pieces
         if not len(idx):
             return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
-        rows = np.asarray(self.rows[int(idx[0]):int(idx[-1]) + 1], dtype=float)[idx - idx[0]]
+        b0, rows = window or (int(idx[0]), np.asarray(self.rows[int(idx[0]):int(idx[-1]) + 1], dtype=float))
+        rows = rows[idx - b0]
         return rows[:, :3], rows[:, 3:], hi - lo
 
     def _pieces(self, ta: float, tb: float) -> Pieces:
@@ -270,35 +278,7 @@ class ImuChain:
         The third value [m^2] is the position's: even over whole records the double integral depends on
         how the specific force is spread within each, ``v_a T^2 f^3 / 12`` for a share ``f`` (the integral
         of ``(d - tau) v_a (tau / d - 1/2) f`` over the share's length ``d = f T``), summed over the axes."""
-        return self._hold(self._pieces(ta, tb))
-
-    def _hold(self, pieces: Pieces) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
-        """:meth:`hold_variance` of the ``pieces`` (:meth:`_pieces`)."""
-        idx, lo, hi = pieces
-        first = idx > 0  # the first record's interval is unknown
-        idx, lo, hi = idx[first], lo[first], hi[first]
-        if not len(idx):
-            return np.zeros(3), np.zeros(3), 0.0
-        n = len(self.t)
-        k0, k1 = int(idx[0]) - 1, min(int(idx[-1]) + 2, n)  # the records the pieces and their neighbours use
-        t = np.asarray(self.t[k0:k1], dtype=float)
-        rows = np.asarray(self.rows[k0:k1], dtype=float)
-        j = idx - k0
-        T = t[j] - t[j - 1]
-        ok = T > 0.0
-        j, lo, hi, T, ti = j[ok], lo[ok], hi[ok], T[ok], t[j[ok]]
-        v = np.abs(rows[j] - rows[j - 1])
-        has_next = j + 1 < len(t)
-        v[has_next] = np.maximum(v[has_next], np.abs(rows[j[has_next] + 1] - rows[j[has_next]]))
-        f_all = np.minimum((hi - lo) / T, 1.0)
-        vp = float(np.sum((v[:, :3] * (T * T * f_all**3 / 12.0)[:, None]) ** 2))
-        beyond = hi > ti + 1e-12  # held beyond the newest record: extrapolated ...
-        d = np.where(beyond, hi - np.maximum(lo, ti), 0.0)
-        f = np.where(beyond, np.clip((ti - lo) / T, 0.0, 1.0), (hi - lo) / T)  # ... and its share before that
-        share = np.where(f >= 1.0 - 1e-9, 0.0, T * f * (1.0 - f) / 2.0)
-        e2 = v**2 * ((d * d / (2.0 * T)) ** 2 + share**2)[:, None]
-        va, vg = e2[:, :3].sum(axis=0), e2[:, 3:].sum(axis=0)
-        return va, vg, vp
+        return _hold(self.t, self.rows, self._pieces(ta, tb))
 
     def rotation(self, ta: float, tb: float) -> float:
         """An upper bound of the rotation over ``[ta, tb]`` [rad]: the integrated gyro rate's norm (each
@@ -330,8 +310,9 @@ class ImuChain:
                 pim.integrateMeasurement(np.asarray(bias.accelerometer()), np.asarray(bias.gyroscope()), tb - ta)
             return pim
         pieces = self._pieces(ta, tb)
-        return F.preintegrate_arrays(self._held_params(pieces, tb - ta), bias, *self._arrays(pieces), self.cfg.substeps,
-                                     planar=not self.six)
+        window = _window(self.rows, pieces)
+        return F.preintegrate_arrays(self._held_params(pieces, tb - ta, window), bias, *self._arrays(pieces, window),
+                                     self.cfg.substeps, planar=not self.six)
 
     def _rot_preintegrate(self, bias: gtsam.imuBias.ConstantBias, yaw: tuple[NDArray[np.float64], NDArray[np.float64],
                           float], base: gtsam.PreintegrationParams) -> gtsam.PreintegratedImuMeasurements:
@@ -351,16 +332,17 @@ class ImuChain:
             pim.integrateMeasurement(acc, np.array([b[0], b[1], wk]), float(dk))
         return pim
 
-    def _held_params(self, pieces: Pieces, T: float) -> gtsam.PreintegrationParams:
-        """The parameters for an interval of ``T`` seconds made of ``pieces``: the shared ones, or with
-        the densities raised by :meth:`hold_variance` where that is not negligible (1 % of the interval's
-        white-noise variance on some axis)."""
+    def _held_params(self, pieces: Pieces, T: float, window: Window | None = None) -> gtsam.PreintegrationParams:
+        """The parameters for an interval of ``T`` seconds made of ``pieces`` (``window``: their :func:`_window`):
+        the shared ones, or with the densities raised by :meth:`hold_variance` where that is not negligible (1 % of
+        the interval's white-noise variance on some axis)."""
         assert self.params is not None
         if T <= 0.0:
             return self.params
-        va, vg, vp = self._hold(pieces)
-        acc, gyro = np.diag(self.params.getAccelerometerCovariance()), np.diag(self.params.getGyroscopeCovariance())
-        ip = float(self.params.getIntegrationCovariance()[0, 0])
+        va, vg, vp = _hold(self.t, self.rows, pieces, window)
+        if self._densities[0] is not self.params:  # (read once per parameters: GTSAM copies each matrix out)
+            self._densities = _densities(self.params)
+        _, acc, gyro, ip = self._densities
         if not (np.any(va > 0.01 * acc * T) or np.any(vg > 0.01 * gyro * T) or vp > 0.01 * ip * T):
             return self.params
         return self._make_params(acc + va / T, gyro + vg / T, ip + vp / T)
@@ -402,6 +384,53 @@ class ImuChain:
     def bias_between(self, k0: int, k1: int, dt: float) -> gtsam.NonlinearFactor:
         c = self.cfg
         return F.bias_between(k0, k1, c.bias_rw_acc, math.radians(c.bias_rw_gyro_deg), dt)
+
+
+def _hold(t_all: list[float], rows_all: list[tuple[float, ...]], pieces: Pieces, window: Window | None = None) -> Hold:
+    """:meth:`ImuChain.hold_variance` of the records ``t_all``, ``rows_all`` over ``pieces`` (:meth:`ImuChain._pieces`;
+    ``window``: their :func:`_window`)."""
+    idx, lo, hi = pieces
+    first = idx > 0  # the first record's interval is unknown
+    idx, lo, hi = idx[first], lo[first], hi[first]
+    if not len(idx):
+        return np.zeros(3), np.zeros(3), 0.0
+    n = len(t_all)
+    k0, k1 = int(idx[0]) - 1, min(int(idx[-1]) + 2, n)  # the records the pieces and their neighbours use
+    t = np.asarray(t_all[k0:k1], dtype=float)
+    rows = np.asarray(rows_all[k0:k1], dtype=float) if window is None else window[1][k0 - window[0]:k1 - window[0]]
+    j = idx - k0
+    T = t[j] - t[j - 1]
+    ok = T > 0.0
+    j, lo, hi, T, ti = j[ok], lo[ok], hi[ok], T[ok], t[j[ok]]
+    v = np.abs(rows[j] - rows[j - 1])
+    has_next = j + 1 < len(t)
+    v[has_next] = np.maximum(v[has_next], np.abs(rows[j[has_next] + 1] - rows[j[has_next]]))
+    f_all = np.minimum((hi - lo) / T, 1.0)
+    vp = float(np.sum((v[:, :3] * (T * T * f_all**3 / 12.0)[:, None]) ** 2))
+    beyond = hi > ti + 1e-12  # held beyond the newest record: extrapolated ...
+    d = np.where(beyond, hi - np.maximum(lo, ti), 0.0)
+    f = np.where(beyond, np.clip((ti - lo) / T, 0.0, 1.0), (hi - lo) / T)  # ... and its share before that
+    share = np.where(f >= 1.0 - 1e-9, 0.0, T * f * (1.0 - f) / 2.0)
+    e2 = v**2 * ((d * d / (2.0 * T)) ** 2 + share**2)[:, None]
+    va, vg = e2[:, :3].sum(axis=0), e2[:, 3:].sum(axis=0)
+    return va, vg, vp
+
+
+def _window(rows: list[tuple[float, ...]], pieces: Pieces) -> Window | None:
+    """The records :meth:`ImuChain._arrays` and :func:`_hold` read for ``pieces`` (those of the pieces and
+    their neighbours) as one array: ``(first index, rows)``, the same floats either converts alone (``None``: no
+    pieces)."""
+    idx = pieces[0]
+    if not len(idx):
+        return None
+    b0 = max(int(idx[0]) - 1, 0)
+    return b0, np.asarray(rows[b0:min(int(idx[-1]) + 2, len(rows))], dtype=float)
+
+
+def _densities(params: gtsam.PreintegrationParams) -> tuple[Any, NDArray[np.float64], NDArray[np.float64], float]:
+    """``(params, the accelerometer's and the gyro's density diagonals, the integration density)``."""
+    return (params, np.diag(params.getAccelerometerCovariance()), np.diag(params.getGyroscopeCovariance()),
+            float(params.getIntegrationCovariance()[0, 0]))
 
 
 class RotChain(ImuChain):
@@ -461,7 +490,7 @@ class RotChain(ImuChain):
         idx, lo, hi = pieces
         dt = hi - lo
         sig = np.asarray(self.sigma[int(idx[0]):int(idx[-1]) + 1], dtype=float)[idx - idx[0]]
-        var = float(np.sum(sig**2 * dt)) * self.period() + float(self._hold(pieces)[1][2])
+        var = float(np.sum(sig**2 * dt)) * self.period() + float(_hold(self.t, self.rows, pieces)[1][2])
         _, omega, _ = self._arrays(pieces)
         return omega[:, 2].copy(), dt, var
 

@@ -29,7 +29,6 @@ from typing import Any
 import gtsam
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .builder import SCALABLE
 from .solver import LmSettings, levenberg_marquardt
@@ -139,6 +138,8 @@ def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gr
     rows_of = {g: sel for g in which if (sel := np.flatnonzero((row_code == code_of.get(g, -1)) & active)).size}
     if not rows_of:  # none of the groups asked about has a row here: no factorisation
         return {}
+    import scipy.sparse.linalg as spla  # (here: a run that scales no group never imports it, 0.01 s)
+
     N = (A.T @ A).tocsc()
     # N is symmetric positive definite: a symmetric ordering (minimum degree on N) and no pivoting. With
     # partial pivoting that ordering was lost and the factors filled 5x (psaros33 900 s: 1.75 s a factorisation);

@@ -31,7 +31,6 @@ from typing import Any
 import gtsam
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from .solver import LmSettings, levenberg_marquardt
@@ -95,6 +94,8 @@ def gauss_newton_step(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, o
                       space: Any, s: Vec, free: Sequence[int]) -> tuple[Vec, Vec]:
     """The profiled Gauss-Newton step of the scales ``free`` (0: ``s_v``, 1: ``s_w``) and their
     covariance ``S^-1`` (module docstring); ``odo``: factor index -> its interval."""
+    import scipy.sparse.linalg as spla  # (here: a run that estimates no odometry scale never imports it)
+
     A, b, starts = _system(graph, values)
     J = np.zeros((A.shape[0], len(free)))
     for i, iv in odo.items():

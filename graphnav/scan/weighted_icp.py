@@ -245,6 +245,8 @@ def match_points(
     tgt_xy = np.asarray(tgt_xy, dtype=float).reshape(-1, 2)
     src_sigma = _per_point(src_sigma, len(src_xy), "src_sigma")
     tgt_sigma = _per_point(tgt_sigma, len(tgt_xy), "tgt_sigma")
+    if not _KERNELS[2]:
+        _load(f, src_xy, tgt_xy, cfg)
     if not f.bounded(src_xy, tgt_xy, MAX_STATED_RANGE):
         src_xy, src_sigma = _finite(src_xy, src_sigma)
         tgt_xy, tgt_sigma = _finite(tgt_xy, tgt_sigma)
@@ -293,13 +295,23 @@ def _kernels(backend: str = "auto") -> Any:
         from . import _icp_fast
         from ._jit import HAVE_NUMBA
 
-        _KERNELS.extend([_icp_fast, HAVE_NUMBA])
+        _KERNELS.extend([_icp_fast, HAVE_NUMBA, False])
     if backend == "numba" and not _KERNELS[1]:
         require("numba", 'ICP backend "numba"')
     return _KERNELS[0]
 
 
-_KERNELS: list[Any] = []  # [the kernel module, numba importable], after the first call
+_KERNELS: list[Any] = []  # [the kernel module, numba importable, _load done], after the first call
+
+
+def _load(f: Any, src_xy: NDArray, tgt_xy: NDArray, cfg: IcpConfig) -> None:
+    """The first match: the two kernels it calls loaded from numba's cache for the arguments a match passes them
+    (:func:`graphnav.scan._jit.load_cached`: without numba's target-context refresh, 0.1 s CPU a process)."""
+    from ._jit import load_cached
+
+    _KERNELS[2] = True
+    load_cached(f.bounded, (src_xy, tgt_xy, MAX_STATED_RANGE))
+    load_cached(f.match_xy, (src_xy, tgt_xy, _NO_SIGMA, _NO_SIGMA, _params(cfg), (0.0, 0.0, 0.0), _NO_TRI))
 
 
 def _params(cfg: IcpConfig) -> Any:

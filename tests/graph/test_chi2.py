@@ -59,3 +59,19 @@ def test_a_vessel_run_imports_neither_scipy_special_nor_scipy_optimize():
                        env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split()[-3:] == ["False", "False", "True"]
+
+
+def test_the_graph_modules_import_no_sparse_solver_nor_ndimage():
+    """scipy.sparse.linalg (0.01 s to import) is imported by the noise estimation and the odometry-scale step when
+    they factorise, scipy.ndimage (0.04 s) by the correlative matcher's grid when it builds one, not by the modules a
+    run imports (the harbour's isam2 run does neither)."""
+    code = (
+        "import sys\n"
+        "import graphnav.graph.log_runs, graphnav.graph.solution, graphnav.graph.noise, graphnav.graph.odometry_scale\n"
+        "import graphnav.graph.loops, graphnav.scan.correlative\n"
+        "print('scipy.sparse.linalg' in sys.modules, 'scipy.ndimage' in sys.modules)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO,
+                       env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split()[-2:] == ["False", "False"]

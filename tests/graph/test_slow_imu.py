@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from graphnav.graph.imu_chain import ImuChain, ImuConfig
+from graphnav.graph.imu_chain import ImuChain, ImuConfig, _hold, _window
 from graphnav.graph.keyframes import Keyframes
 from graphnav.graph.smoother_config import KeyframeConfig
 from graphnav.log import Gnss, Imu
@@ -161,3 +161,39 @@ def test_the_pieces_are_the_records_walked_one_at_a_time(gaps: list[float], ta: 
     acc, omega, dt = chain._arrays((idx, lo, hi))
     np.testing.assert_allclose(dt, [r[2] - r[1] for r in ref], atol=1e-12)
     np.testing.assert_allclose(omega[:, 2], [chain.rows[r[0]][5] for r in ref])
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(2, 40), ta=st.floats(-0.5, 3.0), span=st.floats(0.0, 4.0),
+       six=st.booleans())
+def test_one_conversion_of_the_records_reads_as_each_did_alone(seed: int, n: int, ta: float, span: float, six: bool):
+    """preintegrate converts the records an interval reads once (``_window``) for the samples and the hold variance:
+    the same floats, bit for bit, as each converting its own, at any interval (inside, across the start, held
+    beyond the newest record, empty), uneven records, planar or six-axis."""
+    rng = np.random.default_rng(seed)
+    chain = ImuChain(ImuConfig())
+    t = np.cumsum(rng.uniform(0.005, 0.3, n))
+    for tk, r in zip(t, rng.normal(size=(n, 6)), strict=True):
+        chain.add(Imu(float(tk), *r) if six else Imu(float(tk), r[0], r[1], r[5]))
+    pieces = chain._pieces(ta, ta + span)
+    window = _window(chain.rows, pieces)
+    for a, b in zip(chain._arrays(pieces), chain._arrays(pieces, window), strict=True):
+        assert a.tobytes() == b.tobytes()
+    va, vg, vp = _hold(chain.t, chain.rows, pieces)
+    wa, wg, wp = _hold(chain.t, chain.rows, pieces, window)
+    assert va.tobytes() == wa.tobytes() and vg.tobytes() == wg.tobytes() and vp == wp
+
+
+def test_the_densities_are_read_from_the_parameters_in_use():
+    """_held_params reads the noise densities once per parameters object, and again when the chain gets others."""
+    chain = _ramp_chain(0.5, n=6)
+    chain.preintegrate(gtsam.imuBias.ConstantBias(), 1.0, 4.0)  # (makes the shared parameters)
+    first = chain._densities
+    assert first[0] is chain.params
+    loud = gtsam.PreintegrationParams.MakeSharedU(0.0)
+    for name in ("Accelerometer", "Gyroscope", "Integration"):
+        getattr(loud, f"set{name}Covariance")(np.eye(3) * 7.0)
+    chain.params = loud
+    pieces = chain._pieces(1.5, 3.5)
+    assert chain._held_params(pieces, 2.0) is loud  # 7 per unit time: the shares' variance is negligible beside it
+    assert chain._densities[0] is loud and chain._densities[3] == 7.0 and list(chain._densities[1]) == [7.0] * 3
