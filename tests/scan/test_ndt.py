@@ -207,10 +207,15 @@ def test_2d_gradient_and_hessian_equal_finite_differences(grids):
 @given(st.integers(0, 10_000), st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3),
        st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3))
 def test_3d_ndt_recovers_transforms_within_the_basin(seed, t, rpy_deg):
-    """Random rigid transforms (|t_i| <= 0.5 m: half a voxel; |angles| <= 3 deg: 0.8 m at the far
-    walls) recover to 3 cm, 0.3 deg. (With 5 deg on every axis at once, 1 in 30 corners did not.)"""
+    """Random rigid transforms (|t| <= 0.5 m: half a voxel; |angles| <= 3 deg: 0.8 m at the far
+    walls) recover to 3 cm, 0.3 deg. The translation is drawn per axis and brought inside the half-voxel
+    ball: the cube's corners (|t| up to 0.87 m) leave the basin (39 of 240 corner cases of 0.5 m on every
+    axis failed, 0 of 468 at 0.5 m in 26 directions). (With 5 deg on every axis at once, 1 in 30 corners
+    did not.)"""
     rng = np.random.default_rng(seed)
-    T = rigid(t, rpy_deg)
+    t = np.asarray(t, float)
+    t = t * min(1.0, 0.5 / max(float(np.linalg.norm(t)), 1e-12))
+    T = rigid(list(t), rpy_deg)
     src, tgt = pair(rng, T, 5000)
     r = ndt.ndt3d(src, tgt)
     dt, dr = pose_error(r.T, T)
