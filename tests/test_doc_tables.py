@@ -22,7 +22,8 @@ def tables():
 
 OBJ = {"estimators": {
     "isam2": {"ate_rmse_m": 0.1166, "ate_aligned_rmse_m": 0.0712, "online_ate_rmse_m": 0.1753,
-              "heading_rmse_deg": 0.143, "nees_mean": 0.96, "rpe_rmse_m": 0.007, "rpe_1s_rmse_m": 0.009, "runtime_s": 41.5, "kind": "smoother",
+              "heading_rmse_deg": 0.143, "nees_mean": 0.96, "rpe_rmse_m": 0.007,
+              "rpe_1s_rmse_m": 0.009, "runtime_s": 41.5, "kind": "smoother",
               "gnss_residual_rms_m": 1.3,
               "holdout": {"rmse_m": 1.27, "max_m": 2.06, "mean_m": 3.77, "nis_mean": 0.19}},
     "water-dr": {"ate_rmse_m": 3.0924, "runtime_s": 0.1, "kind": "odometry", "gnss_residual_rms_m": 0.0,
