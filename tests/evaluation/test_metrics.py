@@ -257,4 +257,4 @@ def test_rpe_over_one_second_scores_every_output_rate_on_the_same_span():
     # (within 1 %: the last span, 99 -> 99.99 s, has no jump; a few 1 Hz poses meet the truth 0.01 s off)
     assert rpe_over(fast, ref, 1.0)["trans"]["rmse"] == pytest.approx(0.05, rel=0.01)
     assert rpe_over(slow, ref, 1.0)["trans"]["rmse"] == pytest.approx(0.05, rel=0.01)
-    assert rpe(slow, ref, delta=1, all_pairs=True)["trans"]["rmse"] == pytest.approx(0.05, rel=1e-6)
+    assert rpe(slow, ref, delta=1, all_pairs=True)["trans"]["rmse"] == pytest.approx(0.05, rel=0.01)
