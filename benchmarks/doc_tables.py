@@ -50,7 +50,8 @@ def demo_table(obj: dict[str, Any]) -> str:
     cols = [("ate_rmse_m", "ATE RMSE [m]", "{:.3f}"), ("ate_aligned_rmse_m", "aligned ATE [m]", "{:.3f}"),
             ("online_ate_rmse_m", "online ATE [m]", "{:.3f}"),
             ("heading_rmse_deg", "heading RMSE [deg]", "{:.3f}"), ("nees_mean", "NEES mean", "{:.2f}"),
-            ("rpe_rmse_m", "RPE 1 [m]", "{:.3f}"), ("runtime_s", "runtime [s]", "{:.1f}")]
+            ("rpe_rmse_m", "RPE 1 [m]", "{:.3f}"), ("rpe_1s_rmse_m", "RPE 1 s [m]", "{:.3f}"),
+            ("runtime_s", "runtime [s]", "{:.1f}")]
     est = obj["estimators"]
     ran = sorted((n for n, e in est.items() if isinstance(e.get("ate_rmse_m"), float)),
                  key=lambda n: est[n]["ate_rmse_m"])

@@ -17,6 +17,7 @@ from .metrics import (
     movement_errors,
     nees_stats,
     rpe,
+    rpe_over,
     window_errors,
 )
 
@@ -105,7 +106,8 @@ def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
         r1 = rpe(traj, ref, delta=1, all_pairs=True, max_dt=max_dt)
         rn = rpe(traj, ref, delta=rpe_delta, all_pairs=True, max_dt=max_dt)
         out.update({"rpe_rmse_m": r1["trans"]["rmse"], "rpe_rot_rmse_deg": r1["rot"]["rmse"],
-                    f"rpe{rpe_delta}_rmse_m": rn["trans"]["rmse"]})
+                    f"rpe{rpe_delta}_rmse_m": rn["trans"]["rmse"],
+                    "rpe_1s_rmse_m": _finite(rpe_over(traj, ref, MOVEMENT_DT_S, max_dt=max_dt)["trans"]["rmse"])})
         out["heading_rmse_deg"] = heading_error(traj, ref, max_dt=max_dt)["rmse"]
         mv = movement_errors(traj, ref, max_dt=max_dt, dt=MOVEMENT_DT_S)
         out.update({"sog_rmse_mps": mv["sog"]["rmse"], "cog_rmse_deg": mv["cog"]["rmse"],

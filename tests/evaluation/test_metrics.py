@@ -238,3 +238,23 @@ def test_movement_scored_on_one_clock_whatever_the_output_rate():
     s_fast = movement_errors(fast, ref, dt=1.0)["sog"]["rmse"]
     s_slow = movement_errors(slow, ref, dt=1.0)["sog"]["rmse"]
     assert 0.02 < s_fast < 0.04 and 0.02 < s_slow < 0.04
+
+
+def test_rpe_over_one_second_scores_every_output_rate_on_the_same_span():
+    """A straight 1 m/s run; a 100 Hz estimate whose position is put back by 5 cm at every 1 Hz fix (a
+    filter's correction) and is exact in between, and a 1 Hz estimate 5 cm off at each pose alternately.
+    Over one pose the 100 Hz one's RPE is the jump once in 100 pairs (0.005 m RMS); over ~1 s every pair
+    holds one jump: 0.05 m, as for the 1 Hz one, which one pose and ~1 s agree on."""
+    from graphnav.evaluation.metrics import rpe_over
+
+    tr = np.round(np.arange(0.0, 100.0, 0.01), 10)
+    ref = Trajectory(tr, np.column_stack([tr, np.zeros_like(tr), np.zeros_like(tr)]))
+    saw = np.where(np.floor(tr).astype(int) % 2 == 0, 0.05, 0.0)  # 5 cm off in even seconds
+    fast = Trajectory(tr, np.column_stack([tr + saw, np.zeros_like(tr), np.zeros_like(tr)]))
+    ts = np.arange(0.0, 100.0, 1.0)
+    slow = Trajectory(ts, np.column_stack([ts + np.where(ts % 2 == 0, 0.05, 0.0), 0 * ts, 0 * ts]))
+    assert rpe(fast, ref, delta=1, all_pairs=True)["trans"]["rmse"] == pytest.approx(0.005, rel=0.02)
+    # (within 1 %: the last span, 99 -> 99.99 s, has no jump; a few 1 Hz poses meet the truth 0.01 s off)
+    assert rpe_over(fast, ref, 1.0)["trans"]["rmse"] == pytest.approx(0.05, rel=0.01)
+    assert rpe_over(slow, ref, 1.0)["trans"]["rmse"] == pytest.approx(0.05, rel=0.01)
+    assert rpe(slow, ref, delta=1, all_pairs=True)["trans"]["rmse"] == pytest.approx(0.05, rel=0.01)

@@ -29,6 +29,7 @@ COLUMNS: list[tuple[str, str, str]] = [
     ("nees_in95", "NEES in 95 % band", "{:.0%}"),
     ("rpe_rmse_m", "RPE 1 [m]", "{:.3f}"),
     ("rpe10_rmse_m", "RPE 10 [m]", "{:.3f}"),
+    ("rpe_1s_rmse_m", "RPE 1 s [m]", "{:.3f}"),
     ("sog_rmse_mps", "SOG RMSE [m/s]", "{:.3f}"),
     ("cog_rmse_deg", "COG RMSE [deg]", "{:.2f}"),
     ("rot_rmse_degps", "ROT RMSE [deg/s]", "{:.2f}"),
@@ -46,7 +47,8 @@ NO_TRUTH_COLUMNS: list[tuple[str, str, str]] = [
 ]
 TRUTH_NOTE = ("Ranked by ATE RMSE. ATE is unaligned (in the log's frame), over poses time-associated with "
               "the truth; RPE over 1 and 10 associated poses (an estimator's own output spacing: a filter's "
-              "every record, a smoother's keyframes); SOG/COG/ROT errors between the estimate's own poses about "
+              "every record, a smoother's keyframes) and over about 1 s (*RPE 1 s*, the same span for "
+              "every estimator); SOG/COG/ROT errors between the estimate's own poses about "
               "1 s apart, the truth's over the same intervals, so a 100 Hz filter and a smoother's keyframes "
               "are scored on comparable intervals (COG only while the truth moves faster than 0.2 m/s). "
               "For smoothers ATE is "
