@@ -45,33 +45,28 @@ def test_unknown_arguments_go_to_scipy():
     assert significant_scale(dim, prob, n) == pytest.approx(expected, rel=1e-12)
 
 
-def test_a_vessel_run_imports_neither_scipy_special_nor_scipy_optimize():
-    """The 5 Hz NMEA log's path (the vessel graph, its position walk, GNC, the noise estimation): the values
-    of KNOWN and the walk's own fit, no scipy.special (~0.05 s) or scipy.optimize (~0.1 s) import."""
-    code = (
-        "import sys\n"
-        "from graphnav.graph.log_runs import run_isam2\n"
-        "from tests.graph.test_position_walk import wandering_boat\n"
-        "res = run_isam2(wandering_boat(0.2, n=240))\n"
-        "print('scipy.special' in sys.modules, 'scipy.optimize' in sys.modules, 'scipy.sparse' in sys.modules)\n"
-    )
+def _imported(code: str, names: list[str]) -> list[bool]:
+    """Whether each module of ``names`` is in ``sys.modules`` after ``code`` runs in a fresh interpreter."""
+    code = f"import sys\n{code}print(*[n in sys.modules for n in {names!r}])\n"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO,
                        env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split()[-3:] == ["False", "False", "True"]
+    return [w == "True" for w in r.stdout.split()[-len(names):]]
+
+
+def test_a_vessel_run_imports_neither_scipy_special_nor_scipy_optimize():
+    """The 5 Hz NMEA log's path (the vessel graph, its position walk, GNC, the noise estimation): the values
+    of KNOWN and the walk's own fit, no scipy.special (~0.05 s) or scipy.optimize (~0.1 s) import."""
+    code = ("from graphnav.graph.log_runs import run_isam2\n"
+            "from tests.graph.test_position_walk import wandering_boat\n"
+            "res = run_isam2(wandering_boat(0.2, n=240))\n")
+    assert _imported(code, ["scipy.special", "scipy.optimize", "scipy.sparse"]) == [False, False, True]
 
 
 def test_the_graph_modules_import_no_sparse_solver_nor_ndimage():
     """scipy.sparse.linalg (0.01 s to import) is imported by the noise estimation and the odometry-scale step when
     they factorise, scipy.ndimage (0.04 s) by the correlative matcher's grid when it builds one, not by the modules a
     run imports (the harbour's isam2 run does neither)."""
-    code = (
-        "import sys\n"
-        "import graphnav.graph.log_runs, graphnav.graph.solution, graphnav.graph.noise, graphnav.graph.odometry_scale\n"
-        "import graphnav.graph.loops, graphnav.scan.correlative\n"
-        "print('scipy.sparse.linalg' in sys.modules, 'scipy.ndimage' in sys.modules)\n"
-    )
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO,
-                       env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
-    assert r.returncode == 0, r.stderr
-    assert r.stdout.split()[-2:] == ["False", "False"]
+    code = ("import graphnav.graph.log_runs, graphnav.graph.solution, graphnav.graph.noise\n"
+            "import graphnav.graph.odometry_scale, graphnav.graph.loops, graphnav.scan.correlative\n")
+    assert _imported(code, ["scipy.sparse.linalg", "scipy.ndimage"]) == [False, False]
