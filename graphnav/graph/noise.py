@@ -159,6 +159,9 @@ def group_statistics(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gr
 
 
 MEDIAN_CHI2_1 = 0.454936423119572  # median of a chi-square variable with one degree of freedom
+#: the re-solves between two estimates stop at this relative decrease of the cost (the last solve, after the
+#: final estimate, at the caller's tolerance): a median of squared residuals does not see the rest of a crawl
+VCE_SOLVE_TOL = 1e-5
 
 
 def estimate_scales(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: Sequence[str],
@@ -177,7 +180,7 @@ def estimate_scales(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, gro
         return graph, values, {}
     total = {g: 1.0 for g in which}
     report: dict[str, Any] = {}
-    lm_vce = replace(lm, tol=max(lm.tol, 1e-8)) if lm else LmSettings(1e-8, 100)
+    lm_vce = replace(lm, tol=max(lm.tol, VCE_SOLVE_TOL)) if lm else LmSettings(VCE_SOLVE_TOL, 100)
     for _ in range(max(iterations, 0)):
         stats = group_statistics(graph, values, groups, which)
         step = {}
