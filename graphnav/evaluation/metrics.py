@@ -194,23 +194,29 @@ def rpe_over(est: Trajectory, ref: Trajectory, dt: float, *, max_dt: float = 0.0
     ``dt`` seconds apart, whatever its output rate (:func:`rpe` counts poses: one filter step of 0.01-0.1 s
     against one smoother keyframe of ~1 s); an interval over ``2 dt`` (a hole) is not scored.
     Returns ``{"trans": stats [m], "rot": stats [deg]}``."""
-    e, r = thinned(est, ref, dt, max_dt=max_dt)
-    i = np.flatnonzero(np.diff(e.t) <= 2 * dt)
+    e, r, spans = _spans(est, ref, dt, max_dt)
+    i = np.flatnonzero(spans)
     err = se2_between(se2_between(r.poses[i], r.poses[i + 1]), se2_between(e.poses[i], e.poses[i + 1]))
     return {"trans": _stats(np.hypot(err[:, 0], err[:, 1])), "rot": _stats(np.degrees(np.abs(wrap_angle(err[:, 2]))))}
 
 
+def _spans(est: Trajectory, ref: Trajectory, dt: float, max_dt: float) -> tuple[Trajectory, Trajectory, NDArray]:
+    """The pairs of :func:`thinned` and, per interval between consecutive ones, whether it is scored: not when
+    longer than ``2 dt`` (across a hole in the estimate)."""
+    e, r = thinned(est, ref, dt, max_dt=max_dt)
+    return e, r, np.diff(e.t) <= 2 * dt
+
+
 def _movements(est: Trajectory, ref: Trajectory, dt: float | None, max_dt: float) -> tuple[dict, dict]:
     """:func:`movement` of the estimate and the reference over the same intervals (:func:`movement_errors`);
-    with ``dt``, an interval longer than ``2 dt`` (across a hole in the estimate) is not scored (NaN)."""
+    with ``dt``, the intervals of :func:`_spans`, an unscored one NaN."""
     if dt is None:
         e, r = paired(est, ref, max_dt)
         return movement(e), movement(r)
-    e, r = thinned(est, ref, dt, max_dt=max_dt)
+    e, r, spans = _spans(est, ref, dt, max_dt)
     a, b = movement(e), movement(r)
-    long = np.diff(e.t) > 2 * dt
     for k in ("sog", "cog", "rot"):
-        a[k][long] = np.nan
+        a[k][~spans] = np.nan
     return a, b
 
 
