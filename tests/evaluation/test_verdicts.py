@@ -59,3 +59,14 @@ def test_data_lines_name_gaps_and_jumps():
     assert lines[0] == "GNSS: 2 gaps longer than 5 s, 90 s in all (longest: 10.0–40.0 s, 50.0–110.0 s)."
     assert lines[1].startswith("GNSS jumps: 1 steps") and "80.0 m at 6.0 s" in lines[1]
     assert data_lines(Comparison([], NavLog([]))) == ["No gaps in time and no GNSS jumps found."]
+
+
+def test_an_estimator_reset_on_every_fix_says_its_movement_figures_carry_the_jumps():
+    poses = np.column_stack([np.arange(50.0), np.zeros(50), np.zeros(50)])
+    log = NavLog([Truth(float(k), float(k), 0.0, 0.0) for k in range(50)])
+    wdr = _entry("water-dr", poses, summary={"inputs": ["heading", "water_speed", "gnss"], "ate_rmse_m": 4.8,
+                                           "sog_rmse_mps": 4.75}, info={"gnss_resets": 617})
+    calm = _entry("other", poses, summary={"ate_rmse_m": 1.0, "sog_rmse_mps": 0.1}, info={"gnss_resets": 0})
+    v = verdicts(Comparison([wdr, calm], log))
+    assert "put back on every GNSS fix (617 resets)" in v[0] and "SOG (4.75 m/s RMSE), COG and ROT" in v[0]
+    assert "resets" not in v[1]

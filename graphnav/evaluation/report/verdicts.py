@@ -89,6 +89,11 @@ def verdict(e: Entry, comp: Comparison, same: dict[str, tuple[str, float]]) -> s
                    f"pose's ({anchor.replace('_', ' ')}), mostly the heading"
                    + (f" ({off:.2f} deg off the truth's at its first pose)" if off is not None else "")
                    + ", which odometry never corrects.")
+    resets = _num((e.result.info if e.result is not None else {}).get("gnss_resets"))
+    sog = _num(s.get("sog_rmse_mps"))
+    if resets and sog is not None:
+        out.append(f"It is put back on every GNSS fix ({resets:.0f} resets): each reset is a jump in its track, "
+                   f"which its SOG ({sog:.2f} m/s RMSE), COG and ROT figures carry.")
     if ate is not None and dr is not None and ate > dr[1] and used is not None and "gnss" in used:
         out.append(f"Worse than **{dr[0]}** ({dr[1]:.3g} m) although it uses GNSS.")
     nees = _num(s.get("nees_mean"))
