@@ -36,7 +36,7 @@ from ..log import Gnss, GnssVelocity, Heading, Imu, NavLog, Odometry, PosePrior,
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .gating import GATING_DEFAULTS, GateOptions
-from .imu_model import compass_bias_model, resolve_flag
+from .imu_model import compass_bias_model, resolve_flag, yaw_from_compass
 from .ins_ekf import InsEkf
 from .pose_ekf import PoseEkf
 
@@ -208,9 +208,8 @@ class EkfStepper:
             P = np.zeros((len(x), len(x)))
             P[:3, :3] = np.asarray(P0, float)[:3, :3]
             P[3:, 3:] = np.diag(d)
-            if cb and compass_yaw:  # yaw = reading - b
-                P[2, 2] += kb0 ** 2
-                P[2, -1] = P[-1, 2] = -kb0 ** 2
+            if cb and compass_yaw:
+                yaw_from_compass(P, 2, kb0)
             self.f: PoseEkf = InsEkf(np.array(x), P, bias=bias, current=cur, acc_density=io["acc_density"],
                                      gyro_density=io["gyro_density"], acc_bias_rw=rw[0],
                                      gyro_bias_rw=rw[1], current_rw=io["q_current"], compass_bias=cb,

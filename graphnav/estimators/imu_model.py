@@ -98,3 +98,11 @@ def compass_bias_model() -> tuple[float, float]:
 
     c = CompassConfig()
     return math.radians(c.bias_sigma_deg), math.radians(c.bias_drift_deg)
+
+
+def yaw_from_compass(P: np.ndarray, iyaw: int, sigma: float) -> None:
+    """``P`` (in place) for a start whose yaw (row ``iyaw``) is a compass reading and whose last state is the
+    compass bias of prior ``sigma``: yaw = reading - b, so the yaw's variance gains the bias's and the two
+    are correlated -1."""
+    P[iyaw, iyaw] += sigma ** 2
+    P[iyaw, -1] = P[-1, iyaw] = -sigma ** 2

@@ -43,7 +43,7 @@ from ..trajectory import Trajectory
 from . import _ukf_fast
 from .base import BatchEstimator
 from .gating import GATING_DEFAULTS, GateOptions, InnovationGate, reinit_block
-from .imu_model import compass_bias_model, imu_noise, resolve_flag, wants_bias
+from .imu_model import compass_bias_model, imu_noise, resolve_flag, wants_bias, yaw_from_compass
 
 # Table 2: the filters' a-priori noise (1-sigma)
 TABLE2 = {
@@ -347,9 +347,8 @@ def initial_state(log: NavLog, tab: dict[str, NDArray], n_bias: int,
     if compass_bias is None:
         return np.array(x), np.diag(d)
     P = np.diag([*d, compass_bias ** 2])
-    if prior is None and len(h0):  # theta = reading - b_c
-        P[4, 4] += compass_bias ** 2
-        P[4, -1] = P[-1, 4] = -compass_bias ** 2
+    if prior is None and len(h0):
+        yaw_from_compass(P, 4, compass_bias)
     return np.array([*x, 0.0]), P
 
 
