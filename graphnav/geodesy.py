@@ -9,7 +9,7 @@ against the closed-form WGS84 equations.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 from typing import Any
 
 import numpy as np
@@ -20,17 +20,13 @@ WGS84_F = 1.0 / 298.257223563
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 
 
+@cache
 def _pm() -> tuple[Any, Any]:
     """pymap3d and its WGS84 ellipsoid, imported at the first conversion: importing it takes 0.02 s (it pulls in
     dateutil), and a run on a log in a local frame converts nothing."""
-    if not _PM:
-        import pymap3d
+    import pymap3d
 
-        _PM.extend([pymap3d, pymap3d.Ellipsoid.from_name("wgs84")])
-    return _PM[0], _PM[1]
-
-
-_PM: list[Any] = []  # [pymap3d, its WGS84 ellipsoid] after the first conversion
+    return pymap3d, pymap3d.Ellipsoid.from_name("wgs84")
 
 
 def _arr(v: ArrayLike) -> NDArray[np.float64]:
