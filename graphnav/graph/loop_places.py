@@ -128,7 +128,8 @@ class _Index:
             out.extend(zip(d[ok].tolist(), idx[ok].tolist(), strict=True))
         lo, hi = self.n_tree, min(self.n, valid)
         if hi > lo:
-            d = np.linalg.norm(self.buf[lo:hi] - q, axis=1)
+            x = self.buf[lo:hi] - q
+            d = np.sqrt(np.add.reduce(x * x, axis=1))  # (np.linalg.norm's own arithmetic along an axis)
             j = np.arange(lo, hi)
             if hi - lo > n > 0:  # only the tail's n nearest (and their ties) can be among the n nearest
                 keep = ~(d > np.partition(d, n - 1)[n - 1])
