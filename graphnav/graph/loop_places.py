@@ -13,10 +13,10 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from ..scan import correlative as corr
 from ..scan import descriptor as desc
+from ..scan._kdtree import cKDTree
 
 Vec = NDArray[np.float64]
 GRIDS_KEPT = 32  # submaps' likelihood grids kept (least recently used dropped)
