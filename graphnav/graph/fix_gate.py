@@ -113,9 +113,9 @@ def gate_info(gate: FixGate | None) -> dict[str, int]:
 class OnlineFixes:
     """The navigator's side of a re-acquisition (iSAM2 and fixed-lag): the factor indices of the fixes the gate
     accepted since it last re-acquired or restarted after an outage (at most ``max_rejects``, the most a run can
-    outnumber) and of the anchor's prior. When a step re-acquired, those fixes leave iSAM2's online problem and an anchor taken
-    from the first fix is released (:meth:`~graphnav.graph.anchor.Anchor.released`): the estimate rests on
-    the fixes that outnumbered them (the closing step still judges them all)."""
+    outnumber) and of the anchor's prior. When a step re-acquired, those fixes leave iSAM2's online problem and
+    an anchor taken from the first fix is released (:meth:`~graphnav.graph.anchor.Anchor.released`): the
+    estimate rests on the fixes that outnumbered them (the closing step still judges them all)."""
 
     def __init__(self, max_rejects: int) -> None:
         self.indices: deque[int] = deque(maxlen=max(1, int(max_rejects)))
