@@ -290,6 +290,7 @@ class Measurements:
                     del self.rejected[-n:]
         elif self.gate is not None:
             self.gate.passed()
+            s.restarted = True
         self.after_outage.discard(id(r))
         if scale == 1.0:
             s.add(stated, "gnss")
