@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..evaluation.datacheck import gaps, gnss_jumps
+from ..evaluation.datacheck import gaps, gnss_jumps, speed_log_scale
 from ..io import load_log
 from ._common import add_json_flag, add_log_args, emit, log_options
 
@@ -38,6 +38,8 @@ def run(args: argparse.Namespace) -> int:
         out["sources"] = sources
     out["gaps"] = gaps(log)
     out["gnss_jumps"] = gnss_jumps(log)
+    if (sl := speed_log_scale(log)) is not None:
+        out["speed_log"] = sl
     human = "\n".join(
         [f"{args.log}: {len(log)} records, t = {log.t0} .. {log.t1} s, truth: {log.has_truth}"]
         + [f"  {k:14s} {v}" + (f"  (by source: {out['sources'][k]})" if k in out.get("sources", {}) else "")
@@ -48,6 +50,19 @@ def run(args: argparse.Namespace) -> int:
         + [f"  GNSS jumps: {j['count']} (faster than {j['speed_bound_mps']:.3g} m/s + 5 sigma)" for j in
            [out["gnss_jumps"]] if j["count"]]
         + [f"    {d['t0']:.1f} -> {d['t1']:.1f} s: {d['distance_m']:.1f} m" for d in out["gnss_jumps"]["largest"]]
+        + [speed_log_line(out.get("speed_log"))]
     )
-    emit(args, out, human)
+    emit(args, out, human.rstrip("\n"))
     return 0
+
+
+def speed_log_line(sl: dict | None) -> str:
+    """The human line of :func:`~graphnav.evaluation.datacheck.speed_log_scale` ('' without one)."""
+    if sl is None:
+        return ""
+    if sl["scale"] is None:
+        return "  speed log: no window with the heading varied enough to tell its scale from a current"
+    n = len(sl["windows"])
+    spread = f", {sl['scale_spread']:.3f} between windows" if sl["scale_spread"] is not None else ""
+    return (f"  speed log: x{sl['scale']:.3f} against the GNSS velocity ({n} window{'s' if n != 1 else ''}{spread}; "
+            f"above 1: it under-reads), bow vs track through the water {sl['angle_deg']:+.1f} deg")

@@ -1,5 +1,6 @@
-"""What can be judged in a log without looking at an estimate: gaps in time and jumps in the GNSS
-fixes. ``graphnav info`` lists them; the comparison report shows them (most useful without truth)."""
+"""What can be judged in a log without looking at an estimate: gaps in time, jumps in the GNSS
+fixes, and the speed log's calibration against the GNSS velocity. ``graphnav info`` lists them; the
+comparison report shows them (most useful without truth)."""
 
 from __future__ import annotations
 
@@ -65,6 +66,76 @@ def gnss_jumps(log: NavLog) -> dict[str, Any]:
             "largest": [{"t0": float(t[i]), "t1": float(t[i + 1]), "distance_m": float(d[i])} for i in big]}
 
 
+#: The speed log's calibration (:func:`speed_log_scale`): a water-speed reading, a compass heading and a GNSS
+#: velocity at most PAIR_S apart make one sample; the samples of each LOG_WINDOW_S, at least LOG_MIN_PAIRS of
+#: them through the water faster than LOG_MIN_SPEED, fit one scale, offset and current.
+PAIR_S = 1.0
+LOG_WINDOW_S = 600.0
+LOG_MIN_PAIRS = 60
+LOG_MIN_SPEED = 0.5  # [m/s]
+#: a window counts when its scale's standard error is below this: its heading varied enough to tell the
+#: scale along the bow from a current (on a straight leg the two are one unknown)
+LOG_MAX_SE = 0.03
+
+
+def _nearest(t: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each of ``t``: the index of the nearest time in the sorted ``ref`` and whether it is within PAIR_S."""
+    i = np.clip(np.searchsorted(ref, t), 1, len(ref) - 1)
+    i = np.where(np.abs(ref[i - 1] - t) <= np.abs(ref[i] - t), i - 1, i)
+    return i, np.abs(ref[i] - t) <= PAIR_S
+
+
+def speed_log_scale(log: NavLog) -> dict[str, Any] | None:
+    """The speed log against the GNSS velocity: in each window of :data:`LOG_WINDOW_S`, the least squares of
+    ``v_gnss = s v_log R(delta) (cos h, sin h) + c`` over its samples (module constants): the log's scale ``s``
+    (above 1: it under-reads), an angle ``delta`` between the compass's bow and the track through the water
+    (compass deviation, mean leeway) and a constant current ``c``, linear in ``(s cos delta, s sin delta, c)``.
+    ``None`` without water speed, heading and GNSS velocity; else the windows that tell the scale from the
+    current (:data:`LOG_MAX_SE`) as ``[t0, s, se, delta_deg, cx, cy, n]``, their inverse-variance mean scale
+    and angle, and the spread of the scale between them (the honest uncertainty: a log's error is not white)."""
+    if min(len(log.of("water_speed")), len(log.of("heading")), len(log.of("gnss_velocity"))) < LOG_MIN_PAIRS:
+        return None
+    g, h, w = log.columns("gnss_velocity"), log.columns("heading"), log.columns("water_speed")
+    t = np.asarray(g["t"], float)
+    ht, wt = np.asarray(h["t"], float), np.asarray(w["t"], float)
+    ih, okh = _nearest(t, ht)
+    iw, okw = _nearest(t, wt)
+    yaw, v = np.asarray(h["yaw"], float)[ih], np.asarray(w["v"], float)[iw]
+    vx, vy = np.asarray(g["vx"], float), np.asarray(g["vy"], float)
+    ok = okh & okw & (v > LOG_MIN_SPEED) & np.isfinite(yaw) & np.isfinite(vx) & np.isfinite(vy)
+    windows = []
+    for a in np.arange(t[0], t[-1], LOG_WINDOW_S):
+        m = ok & (t >= a) & (t < a + LOG_WINDOW_S)
+        n = int(m.sum())
+        if n < LOG_MIN_PAIRS:
+            continue
+        bx, by = v[m] * np.cos(yaw[m]), v[m] * np.sin(yaw[m])
+        A = np.zeros((2 * n, 4))  # unknowns (s cos delta, s sin delta, cx, cy)
+        A[0::2, 0], A[0::2, 1], A[0::2, 2] = bx, -by, 1.0
+        A[1::2, 0], A[1::2, 1], A[1::2, 3] = by, bx, 1.0
+        b = np.empty(2 * n)
+        b[0::2], b[1::2] = vx[m], vy[m]
+        x, *_ = np.linalg.lstsq(A, b, rcond=None)
+        r = A @ x - b
+        try:
+            cov = float(r @ r) / (2 * n - 4) * np.linalg.inv(A.T @ A)
+        except np.linalg.LinAlgError:
+            continue
+        scale = float(np.hypot(x[0], x[1]))
+        u = x[:2] / max(scale, 1e-12)  # the scale's standard error: its gradient along (cos delta, sin delta)
+        se = float(np.sqrt(max(u @ cov[:2, :2] @ u, 0.0)))
+        if se < LOG_MAX_SE:
+            windows.append([float(a), scale, se, float(np.degrees(np.arctan2(x[1], x[0]))), float(x[2]),
+                            float(x[3]), n])
+    if not windows:
+        return {"windows": [], "scale": None, "scale_se": None, "scale_spread": None, "angle_deg": None}
+    arr = np.array([row[1:4] for row in windows])
+    wgt = 1.0 / arr[:, 1] ** 2
+    return {"windows": windows, "scale": float(wgt @ arr[:, 0] / wgt.sum()), "scale_se": float(wgt.sum() ** -0.5),
+            "scale_spread": float(np.std(arr[:, 0])) if len(windows) > 1 else None,
+            "angle_deg": float(wgt @ arr[:, 2] / wgt.sum())}
+
+
 def data_checks(log: NavLog) -> dict[str, Any]:
-    """``{"gaps": gaps(log), "gnss_jumps": gnss_jumps(log)}``."""
-    return {"gaps": gaps(log), "gnss_jumps": gnss_jumps(log)}
+    """``{"gaps": gaps(log), "gnss_jumps": gnss_jumps(log), "speed_log": speed_log_scale(log)}``."""
+    return {"gaps": gaps(log), "gnss_jumps": gnss_jumps(log), "speed_log": speed_log_scale(log)}

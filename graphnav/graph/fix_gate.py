@@ -11,6 +11,12 @@ A fix whose innovation ``d`` (the fix minus the predicted antenna position, cova
    ones (a receiver before its almanac) is left after one fix more than it had; a jump after minutes
    of tracking (multipath, a datum switch) is refused by the evidence behind the estimate.
 
+The first fix after an outage (a gap of ``gate_outage``) is taken without the test and restarts the count:
+across the gap the estimate rests on the motion model, not on the fixes before it (the filters' gate: a
+filter that accepted nothing for ``confirm_s`` is not tracking). A coast that drifted farther than its
+covariance says (a current, leeway) is then left after two fixes that agree, instead of one fix in
+``max_rejects``.
+
 On a re-acquisition (2.) the run's rejected fixes are taken back (``taken_back``), the fixes are taken
 ungated until one passes the test again, and the navigator takes the fixes the old estimate rested on
 out of iSAM2's (or the fixed-lag window's) online problem (:class:`OnlineFixes`; the closing step still
@@ -47,8 +53,11 @@ class FixGate:
         self._held: Any = None  # the newest rejection's sample while it is a run of one
 
     def passed(self) -> None:
-        """A fix taken without the test (the first after an outage): the estimate rests on it too."""
+        """A fix taken without the test (the first, or the first after an outage): the estimate rests on it and
+        on the motion model alone, so the count of fixes behind it starts again (module docstring)."""
         self.lone = None
+        self.reacquiring = False
+        self.tracked = 0
         self._accept()
 
     def accept(self, d: NDArray[np.float64], S: NDArray[np.float64], var: float, sample: Any = None) -> bool:
@@ -103,10 +112,10 @@ def gate_info(gate: FixGate | None) -> dict[str, int]:
 
 class OnlineFixes:
     """The navigator's side of a re-acquisition (iSAM2 and fixed-lag): the factor indices of the fixes the gate
-    accepted since it last re-acquired (at most ``max_rejects``, the most a run can outnumber) and of the
-    anchor's prior. When a step re-acquired, those fixes leave iSAM2's online problem and an anchor taken
-    from the first fix is released (:meth:`~graphnav.graph.anchor.Anchor.released`): the estimate rests on
-    the fixes that outnumbered them (the closing step still judges them all)."""
+    accepted since it last re-acquired or restarted after an outage (at most ``max_rejects``, the most a run can
+    outnumber) and of the anchor's prior. When a step re-acquired, those fixes leave iSAM2's online problem and
+    an anchor taken from the first fix is released (:meth:`~graphnav.graph.anchor.Anchor.released`): the
+    estimate rests on the fixes that outnumbered them (the closing step still judges them all)."""
 
     def __init__(self, max_rejects: int) -> None:
         self.indices: deque[int] = deque(maxlen=max(1, int(max_rejects)))
@@ -124,6 +133,9 @@ class OnlineFixes:
         new = list(zip(solver.new_indices, s.groups, strict=True))
         if s.k == 0 and s.new_keyframe:
             self.anchor = next((i for i, g in new if g == "anchor"), None)
+        elif s.restarted:  # the fixes before an outage are not what a run after it contradicts
+            self.indices.clear()
+            self.anchor = None
         if s.reacquired and self.indices:
             old, add = list(self.indices), None
             released = builder.anchor.released(builder.space) if self.anchor is not None else None

@@ -263,8 +263,7 @@ class Measurements:
         ant = F.antenna_position(pa, arm)  # (the keyframe's antenna: the fix's move and the gate's prediction)
         if delta is not None:  # the fix is of the antenna of X_a * delta at r.t: move it back to X_a's
             moved = F.antenna_position(pa.compose(delta), arm) - ant
-            rx -= float(moved[0])
-            ry -= float(moved[1])
+            rx, ry = rx - float(moved[0]), ry - float(moved[1])
         scale = self.gnss_scale.scale
         sigma = r.sigma * math.sqrt(scale)  # the stated sigma, unless the fixes refute it
         stated = self.space.gnss(xa, rx, ry, r.sigma, cfg.gnss.robust, cfg.gnss.k, arm3)
@@ -290,6 +289,7 @@ class Measurements:
                     del self.rejected[-n:]
         elif self.gate is not None:
             self.gate.passed()
+            s.restarted = True
         self.after_outage.discard(id(r))
         if scale == 1.0:
             s.add(stated, "gnss")

@@ -90,7 +90,14 @@ def nnls2(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]
     """``argmin |A x - b|`` over ``x >= 0`` for two columns (``scipy.optimize.nnls``'s answer to rounding,
     without importing ``scipy.optimize``, ~0.1 s): the least-squares solution when it is non-negative, else
     the better of the two one-column solutions clipped at 0 (the problem is convex: its minimum on the
-    boundary is one of them)."""
+    boundary is one of them). ``b`` is scaled to a unit maximum first (the costs compared are squares)."""
+    s = float(np.abs(b).max()) if b.size else 0.0
+    if s == 0.0 or not np.isfinite(s):
+        return np.zeros(2) if s == 0.0 else np.linalg.lstsq(A, b, rcond=None)[0]
+    return _nnls2(A, b / s) * s
+
+
+def _nnls2(A: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     x = np.linalg.lstsq(A, b, rcond=None)[0]
     if (x >= 0.0).all():
         return x

@@ -28,6 +28,8 @@ class Step:
     closing: dict[int, gtsam.NonlinearFactor] = field(default_factory=dict)
     #: the GNSS gate re-acquired on this step's fixes (graph.fix_gate): the solver relinearises until it settles
     reacquired: bool = False
+    #: the GNSS gate took a fix after an outage untested and counts the fixes behind the estimate afresh
+    restarted: bool = False
 
     def add(self, factor: gtsam.NonlinearFactor, group: str, closing: gtsam.NonlinearFactor | None = None) -> None:
         if closing is not None:

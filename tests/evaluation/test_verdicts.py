@@ -70,3 +70,12 @@ def test_an_estimator_reset_on_every_fix_says_its_movement_figures_carry_the_jum
     v = verdicts(Comparison([wdr, calm], log))
     assert "put back on every GNSS fix (617 resets)" in v[0] and "SOG (4.75 m/s RMSE), COG and ROT" in v[0]
     assert "resets" not in v[1]
+
+
+def test_data_lines_name_a_speed_log_that_under_reads():
+    windows = [[600.0 * i, 1.06 + 0.01 * (i % 2), 0.01, 0.0, 0.0, 0.0, 300] for i in range(4)]
+    comp = Comparison([], NavLog([]), checks={"speed_log": {"windows": windows, "scale": 1.065, "scale_se": 0.005,
+                                                             "scale_spread": 0.005, "angle_deg": 0.0}})
+    assert any("under-reads by 6 %" in line for line in data_lines(comp))
+    comp.checks["speed_log"]["scale"] = 1.01  # within 2 %: not worth a sentence
+    assert data_lines(comp) == ["No gaps in time and no GNSS jumps found."]

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from graphnav import estimators
 from graphnav.graph.fix_gate import FixGate
-from graphnav.log import Gnss, NavLog
+from graphnav.log import Gnss, Heading, NavLog, WaterSpeed
 
 S = np.eye(2) * 2.0  # the innovation covariance: sigma^2 = 1 m^2 plus the prediction's 1 m^2
 VAR = 1.0
@@ -136,3 +136,40 @@ def test_a_rebased_fixed_lag_smoother_is_not_handed_the_old_ones_indices():
     nav = Navigator.for_log(bent, solver="fixed-lag", rebase_every=1, history=False)
     out = [e for r in bent.records if (e := nav.add(r)) is not None]
     assert nav.info()["rebases"] > 5 and nav.info()["gnss_reacquired"] == 1 and out[-1].t >= 29.0
+
+
+def test_after_an_outage_a_run_of_two_outnumbers_the_one_fix_behind_the_estimate():
+    """The first fix after an outage is taken untested (``passed``) and restarts the count: however long the
+    gate tracked before, two agreeing rejections after it are a re-acquisition (the estimate rests on the
+    coast and one fix, not on the fixes before the gap)."""
+    g = FixGate(4.0, 15)
+    _feed(g, [(0.0, 0.0)] * 300)
+    g.passed()
+    assert g.tracked == 1
+    assert _feed(g, [(30.0, 0.0), (30.5, 0.2)]) == [False, True]
+    assert g.reacquired == 1 and g.taken_back == 1 and g.reacquiring
+
+
+def _drifted_outage() -> tuple[NavLog, float]:
+    """A boat at 1.5 m/s along x for 240 s: 1 Hz fixes (2 m) with GNSS velocity, a compass (1 deg) and a speed
+    log (1.5 m/s through the water, 0.05 m/s) every second. During a 60 s GNSS outage (120-180 s) a current the
+    speed log cannot see sets it 0.5 m/s north: the fixes after the outage are 30 m from the coast, which the
+    vessel graph's covariance calls impossible."""
+    log = straight_line(np.array([1.5, 0.0]), 2.0, (120.0, 180.0), heading=False, velocity_sigma=0.05, n=241, seed=3)
+    recs = [Gnss(r.t, r.x, r.y + 30.0, r.sigma) if isinstance(r, Gnss) and r.t >= 180 else r for r in log.records]
+    recs += [Heading(float(t), 0.0, np.radians(1.0)) for t in range(241)]
+    recs += [WaterSpeed(float(t), 1.5, 0.05) for t in range(241)]
+    return NavLog(sorted(recs, key=lambda r: r.t)), 180.0
+
+
+@pytest.mark.parametrize("solver", ["isam2", "fixed-lag"])
+def test_a_coast_that_drifted_off_is_left_after_two_fixes(solver):
+    """The drifted outage above: online, the gate re-acquires on the second fix after the outage and the
+    estimate is on the fixes 20 s later (it rejected 54-58 fixes, one taken in fifteen by ``gate_max_rejects``,
+    and was still 22 m off at 200 s)."""
+    log, t1 = _drifted_outage()
+    r = estimators.run(solver, log)
+    assert r.info["gnss_reacquired"] == 1 and r.info["gnss_rejected"] <= 1
+    on = r.online
+    after = on.t >= t1 + 20
+    assert np.hypot(on.poses[after, 0] - 1.5 * on.t[after], on.poses[after, 1] - 30.0).max() < 2.0

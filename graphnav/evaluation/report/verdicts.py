@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..comparison import Comparison, Entry
+from ..datacheck import LOG_WINDOW_S
 
 #: a mean NEES (2 dof) outside this band gets a sentence saying what it means
 NEES_BAND = (0.3, 5.0)
@@ -193,4 +194,12 @@ def data_lines(comp: Comparison) -> list[str]:
         listed = ", ".join(f"{d['distance_m']:.1f} m at {d['t1']:.1f} s" for d in j["largest"][:5])
         out.append(f"GNSS jumps: {j['count']} steps between consecutive fixes faster than "
                    f"{j['speed_bound_mps']:.3g} m/s plus 5σ of the fixes ({listed}).")
+    sl = comp.checks.get("speed_log") or {}
+    spread = (sl.get("scale_spread") or 0.0) / math.sqrt(max(len(sl.get("windows") or []), 1))
+    if sl.get("scale") is not None and abs(sl["scale"] - 1.0) > max(0.02, 3.0 * spread):  # 2 %, beyond its spread
+        way = "under" if sl["scale"] > 1.0 else "over"
+        out.append(f"Speed log: it {way}-reads by {abs(sl['scale'] - 1.0) * 100:.0f} % against the GNSS velocity "
+                   f"(scale {sl['scale']:.3f} over {len(sl['windows'])} windows of {LOG_WINDOW_S:.0f} s); every "
+                   "estimator takes its readings at face value, so a dead reckoning on it drifts by that fraction "
+                   "of the distance sailed through a GNSS gap.")
     return out or ["No gaps in time and no GNSS jumps found."]
