@@ -94,10 +94,14 @@ def preintegrate_arrays(
         ux, uy = acc[:, 0] - ba[0], acc[:, 1] - ba[1]
         acc = np.column_stack([c * ux - s * uy + ba[0], s * ux + c * uy + ba[1], np.zeros(len(h))])
     acc, omega = np.ascontiguousarray(acc), np.ascontiguousarray(omega)
-    for k in range(len(h)):
-        a, w, hk = acc[k], omega[k], float(h[k])
+    integrate = pim.integrateMeasurement
+    if n == 1:  # (rows as views, the steps as floats: ~20 % of the loop's cost was indexing)
+        for a, w, hk in zip(acc, omega, h.tolist(), strict=True):
+            integrate(a, w, hk)
+        return pim
+    for a, w, hk in zip(acc, omega, h.tolist(), strict=True):
         for _ in range(n):
-            pim.integrateMeasurement(a, w, hk)
+            integrate(a, w, hk)
     return pim
 
 

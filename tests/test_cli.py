@@ -139,3 +139,29 @@ def test_a_command_runs_openblas_on_one_thread_unless_the_environment_says():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        env={**env, "OPENBLAS_NUM_THREADS": "2"}, check=True)
     assert r.stderr.split("\n")[-2].split()[:2] == ["False", "2"]
+
+
+def test_a_run_with_json_makes_no_tqdm_bar(tmp_path):
+    """``--json`` (no progress bar): :class:`NoBar` answers for tqdm, which is not imported; the output is the
+    run's JSON either way."""
+    from _logfactory import every_record_log
+
+    from graphnav.commands._common import NoBar, progress_bar
+
+    path = tmp_path / "log.npz"
+    save_log(every_record_log(), path)
+    code = ("import sys\nfrom graphnav import cli\n"
+            f"rc = cli.main(['run', {str(path)!r}, '-e', 'dead-reckoning', '--json'])\n"
+            "print('tqdm' in sys.modules, file=sys.stderr)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert r.stderr.strip().splitlines()[-1] == "False" and json.loads(r.stdout)["estimator"] == "dead-reckoning"
+
+    class Args:
+        json = True
+
+    bar = progress_bar(Args(), total=12.5, unit="s")
+    assert isinstance(bar, NoBar) and bar.disable and bar.total == 12.5 and bar.n == 0
+    with bar as b:
+        b.update(2.5)
+        b.set_postfix_str("x")
+    assert bar.n == 2.5

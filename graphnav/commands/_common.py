@@ -303,11 +303,38 @@ def progress_enabled(args: argparse.Namespace) -> bool:
     return not (getattr(args, "json", False) or getattr(args, "quiet", False) or getattr(args, "no_progress", False))
 
 
+class NoBar:
+    """What a disabled tqdm bar answers (``--json``, ``--quiet``), without importing tqdm (and the
+    ``multiprocessing`` lock its constructor makes): ~0.03 s of a command's start-up."""
+
+    disable = True
+
+    def __init__(self, total: float | None = None, **_: Any) -> None:
+        self.total, self.n = total, 0
+
+    def update(self, n: float = 1) -> None:
+        self.n += n
+
+    def set_postfix_str(self, *_: Any, **__: Any) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> NoBar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 def progress_bar(args: argparse.Namespace, **kwargs: Any) -> Any:
-    """A tqdm bar on stderr, disabled by :func:`progress_enabled`."""
+    """A tqdm bar on stderr, or a :class:`NoBar` where :func:`progress_enabled` says none."""
+    if not progress_enabled(args):
+        return NoBar(**kwargs)
     from tqdm import tqdm
 
-    return tqdm(file=sys.stderr, disable=not progress_enabled(args), dynamic_ncols=True, **kwargs)
+    return tqdm(file=sys.stderr, disable=False, dynamic_ncols=True, **kwargs)
 
 
 def _config_value(action: argparse.Action, value: Any, where: str) -> Any:

@@ -343,7 +343,7 @@ class ImuChain:
         if self._densities[0] is not self.params:  # (read once per parameters: GTSAM copies each matrix out)
             self._densities = _densities(self.params)
         _, acc, gyro, ip = self._densities
-        if not (np.any(va > 0.01 * acc * T) or np.any(vg > 0.01 * gyro * T) or vp > 0.01 * ip * T):
+        if not ((va > 0.01 * acc * T).any() or (vg > 0.01 * gyro * T).any() or vp > 0.01 * ip * T):
             return self.params
         return self._make_params(acc + va / T, gyro + vg / T, ip + vp / T)
 
@@ -391,7 +391,8 @@ def _hold(t_all: list[float], rows_all: list[tuple[float, ...]], pieces: Pieces,
     ``window``: their :func:`_window`)."""
     idx, lo, hi = pieces
     first = idx > 0  # the first record's interval is unknown
-    idx, lo, hi = idx[first], lo[first], hi[first]
+    if not first.all():  # (a mask that keeps every row is skipped here and below: the same arrays)
+        idx, lo, hi = idx[first], lo[first], hi[first]
     if not len(idx):
         return np.zeros(3), np.zeros(3), 0.0
     n = len(t_all)
@@ -401,17 +402,28 @@ def _hold(t_all: list[float], rows_all: list[tuple[float, ...]], pieces: Pieces,
     j = idx - k0
     T = t[j] - t[j - 1]
     ok = T > 0.0
-    j, lo, hi, T, ti = j[ok], lo[ok], hi[ok], T[ok], t[j[ok]]
-    v = np.abs(rows[j] - rows[j - 1])
+    if not ok.all():
+        j, lo, hi, T = j[ok], lo[ok], hi[ok], T[ok]
+    ti = t[j]
+    step = np.abs(np.diff(rows, axis=0))  # |rows[i + 1] - rows[i]|
+    v = step[j - 1]
     has_next = j + 1 < len(t)
-    v[has_next] = np.maximum(v[has_next], np.abs(rows[j[has_next] + 1] - rows[j[has_next]]))
-    f_all = np.minimum((hi - lo) / T, 1.0)
+    if has_next.all():
+        v = np.maximum(v, step[j])
+    else:
+        v[has_next] = np.maximum(v[has_next], step[j[has_next]])
+    share_of = (hi - lo) / T
+    f_all = np.minimum(share_of, 1.0)
     vp = float(np.sum((v[:, :3] * (T * T * f_all**3 / 12.0)[:, None]) ** 2))
     beyond = hi > ti + 1e-12  # held beyond the newest record: extrapolated ...
-    d = np.where(beyond, hi - np.maximum(lo, ti), 0.0)
-    f = np.where(beyond, np.clip((ti - lo) / T, 0.0, 1.0), (hi - lo) / T)  # ... and its share before that
-    share = np.where(f >= 1.0 - 1e-9, 0.0, T * f * (1.0 - f) / 2.0)
-    e2 = v**2 * ((d * d / (2.0 * T)) ** 2 + share**2)[:, None]
+    if beyond.any():
+        d = np.where(beyond, hi - np.maximum(lo, ti), 0.0)
+        f = np.where(beyond, np.clip((ti - lo) / T, 0.0, 1.0), share_of)  # ... and its share before that
+        share = np.where(f >= 1.0 - 1e-9, 0.0, T * f * (1.0 - f) / 2.0)
+        e2 = v**2 * ((d * d / (2.0 * T)) ** 2 + share**2)[:, None]
+    else:  # (d = 0: the same sums)
+        share = np.where(share_of >= 1.0 - 1e-9, 0.0, T * share_of * (1.0 - share_of) / 2.0)
+        e2 = v**2 * (share**2)[:, None]
     va, vg = e2[:, :3].sum(axis=0), e2[:, 3:].sum(axis=0)
     return va, vg, vp
 

@@ -197,7 +197,7 @@ class Keyframes:
         moved ``keyframe_distance`` (at the newest interval's ``speed``) or turned ``keyframe_angle_deg``
         (the gyro) since the newest keyframe, or ``keyframe_max_dt`` has passed."""
         cfg = self.cfg
-        scan_dt = self._scan_period(t)
+        self._scan_gap(t)
         if self.n_scans % cfg.scan_stride:
             return False
         use = cfg.motion if cfg.motion is not None else bool(imu)
@@ -208,6 +208,7 @@ class Keyframes:
                or imu.rotation(self.t[-1], t) >= math.radians(cfg.angle_deg))
         if not due:
             return False
+        scan_dt = self._scan_period()
         # an IMU slower than the LiDAR: the keyframe waits (at most one IMU period) for the scan nearest a
         # record's time
         if scan_dt is None or dt >= cfg.max_dt + self._imu_period(imu) - EPS:
@@ -230,11 +231,14 @@ class Keyframes:
         tn = imu.t[-1]
         return abs(t - (tn + round((t - tn) / period) * period)) <= 0.5 * spacing + EPS
 
-    def _scan_period(self, t: float) -> float | None:
-        """The median interval of the last scans (the newest at ``t``), ``None`` before two."""
+    def _scan_gap(self, t: float) -> None:
+        """A scan at ``t``: the interval since the previous one (:meth:`_scan_period`)."""
         if self._last_scan_t is not None and t > self._last_scan_t:
             self._scan_gaps.append(t - self._last_scan_t)
         self._last_scan_t = t
+
+    def _scan_period(self) -> float | None:
+        """The median interval of the last scans, ``None`` before two (asked only where a keyframe is due)."""
         return median(self._scan_gaps) if self._scan_gaps else None
 
     def add(self, t: float, scan: Record | None) -> None:

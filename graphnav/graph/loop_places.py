@@ -13,10 +13,10 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from ..scan import correlative as corr
 from ..scan import descriptor as desc
+from ..scan._kdtree import cKDTree
 
 Vec = NDArray[np.float64]
 GRIDS_KEPT = 32  # submaps' likelihood grids kept (least recently used dropped)
@@ -128,7 +128,8 @@ class _Index:
             out.extend(zip(d[ok].tolist(), idx[ok].tolist(), strict=True))
         lo, hi = self.n_tree, min(self.n, valid)
         if hi > lo:
-            d = np.linalg.norm(self.buf[lo:hi] - q, axis=1)
+            x = self.buf[lo:hi] - q
+            d = np.sqrt(np.add.reduce(x * x, axis=1))  # (np.linalg.norm's own arithmetic along an axis)
             j = np.arange(lo, hi)
             if hi - lo > n > 0:  # only the tail's n nearest (and their ties) can be among the n nearest
                 keep = ~(d > np.partition(d, n - 1)[n - 1])

@@ -184,10 +184,10 @@ class Solver:
         closure back to it) enters only the kept graph, which the closing step solves."""
         if not self.done.size():
             return graph, [True] * graph.size()
-        held = [all(values.exists(key) or self.s.valueExists(key) for key in graph.at(i).keys())
-                for i in range(graph.size())]
-        if all(held):
-            return graph, held
+        exists, held_key = values.exists, self.s.valueExists
+        if all(exists(key) or held_key(key) for key in graph.keyVector()):  # (each key once: the common case)
+            return graph, [True] * graph.size()
+        held = [all(exists(key) or held_key(key) for key in graph.at(i).keys()) for i in range(graph.size())]
         online = gtsam.NonlinearFactorGraph()
         for i, h in enumerate(held):
             if h:

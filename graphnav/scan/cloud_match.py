@@ -32,10 +32,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from ..config import FRACTION, KNN, THREADS, OptionError, Range, check_fields
 from ..log import Cloud
+from ._kdtree import cKDTree
 from .native_stderr import NativeWarnings
 from .register3d import gicp_terms, sandwich_covariance
 

@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from ..geometry import se2_between, se2_compose
+from ._kdtree import cKDTree
 
 
 @dataclass

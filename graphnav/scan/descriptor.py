@@ -65,8 +65,9 @@ def describe(xy: NDArray[np.float64], cfg: DescriptorConfig | None = None) -> De
     r, a = r[ok], np.arctan2(xy[ok, 1], xy[ok, 0])
     ri = np.minimum((r / cfg.max_range * cfg.rings).astype(int), cfg.rings - 1)
     si = np.floor((a + math.pi) / (2 * math.pi) * cfg.sectors).astype(int) % cfg.sectors
-    grid = np.zeros((cfg.rings, cfg.sectors))
-    np.add.at(grid, (ri, si), 1.0)
+    # the returns per cell (counts: exactly the sums of 1.0 that np.add.at made)
+    grid = np.bincount(ri * cfg.sectors + si, minlength=cfg.rings * cfg.sectors).reshape(
+        cfg.rings, cfg.sectors).astype(float)
     grid /= ok.sum()
     filled = grid.sum(0) > 0
     smooth = grid.copy()  # a return near a ring border counts half in the next ring
@@ -100,7 +101,7 @@ def distance(q: Descriptor, c: Descriptor, min_overlap: float = 0.25) -> tuple[f
     n = q.grid.shape[1]
     (qn, qh), (cn, ch) = q.columns, c.columns
     cos = qh.T @ ch  # cos[j, l]: query column j against candidate column l
-    both = np.outer(qn > 0, cn > 0)
+    both = (qn > 0)[:, None] & (cn > 0)  # (np.outer of the two masks)
     flat = _diagonals(n)  # row s: (j, j + s) for every j -- the query rotated by +s sectors
     sums = cos.ravel()[flat].sum(1)
     counts = both.ravel()[flat].sum(1)

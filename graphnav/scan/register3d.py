@@ -46,10 +46,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from ..config import FRACTION, KNN, POSITIVE, THREADS, OptionError, Range, check_fields
 from ..errors import LogError, require
+from ._kdtree import cKDTree
 from .native_stderr import NativeWarnings
 from .ndt import NdtParams, build_voxels3, ndt3d, skew, warm_up
 

@@ -32,12 +32,12 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from ..config import FRACTION, KNN, POSITIVE, THREADS, Range, check_fields
 from ..errors import require
 from ..geometry import wrap_angle
 from ..log import DEFAULT_MAX_RANGE
+from ._kdtree import cKDTree
 from .lidar import polar_to_points
 
 METHODS = (

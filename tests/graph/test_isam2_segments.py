@@ -85,6 +85,19 @@ def test_a_factor_on_an_earlier_segment_goes_to_the_kept_graph_only():
     assert sol.graph.size() == size + 2
 
 
+def test_after_a_rebase_factors_on_held_variables_all_go_online():
+    sol = _run(30)
+    g = gtsam.NonlinearFactorGraph()
+    g.add(gtsam.PriorFactorPose2(X(59), sol.estimate(X(59), "Pose2"), ODO))
+    g.add(gtsam.BetweenFactorPose2(X(59), X(60), gtsam.Pose2(1.0, 0.0, 0.0), ODO))  # (X(60): new)
+    v = gtsam.Values()
+    v.insert(X(60), sol.estimate(X(59), "Pose2").compose(gtsam.Pose2(1.0, 0.0, 0.0)))
+    held = sol.s.getFactorsUnsafe().size()
+    sol.update(g, v)
+    assert len(sol.new_indices) == 2 and min(sol.new_indices) >= held
+    assert sol.s.valueExists(X(60))
+
+
 def test_isam2_segments_keep_the_smoothed_result_and_the_online_track():
     """The embedded-style harbour trial (scans, GNSS, compass, IMU): in 12-keyframe segments the smoothed
     track is the whole-log one (the closing step solves the same graph) and the online one stays close."""

@@ -396,3 +396,19 @@ def test_a_refresh_reads_the_settled_places_once():
     places.observe(8, np.array([8.0, 6.0, 0.25]), None)
     places.submap_of(6)
     assert reads == [7, 6, 9] and places[8].pose.tolist() == [8.0, 6.0, 0.25] and not places.deferred
+
+
+def test_place_index_answers_as_the_list_index_did_on_ring_keys():
+    """20-dimensional rows (the ring keys' index): the same distances to the bit as ``np.linalg.norm``'s."""
+    from graphnav.graph.loop_places import _Index
+
+    rng = np.random.default_rng(8)
+    new, old = _Index(), _ListIndex()
+    for i in range(300):
+        v = rng.random(20) * 0.1
+        new.add(v)
+        old.add(v)
+        if i % 7 == 6:
+            q = rng.random(20) * 0.1
+            for n, valid in ((1, i + 1), (10, i + 1), (10, max(1, i - 30))):
+                assert new.nearest(q, n, valid) == old.nearest(q, n, valid)

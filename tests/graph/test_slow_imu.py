@@ -197,3 +197,52 @@ def test_the_densities_are_read_from_the_parameters_in_use():
     pieces = chain._pieces(1.5, 3.5)
     assert chain._held_params(pieces, 2.0) is loud  # 7 per unit time: the shares' variance is negligible beside it
     assert chain._densities[0] is loud and chain._densities[3] == 7.0 and list(chain._densities[1]) == [7.0] * 3
+
+
+def _hold_reference(t_all, rows_all, pieces):  # noqa: ANN001, ANN202
+    """The hold variance as first written (every mask applied), the reference of the one with shortcuts."""
+    idx, lo, hi = pieces
+    first = idx > 0
+    idx, lo, hi = idx[first], lo[first], hi[first]
+    if not len(idx):
+        return np.zeros(3), np.zeros(3), 0.0
+    k0, k1 = int(idx[0]) - 1, min(int(idx[-1]) + 2, len(t_all))
+    t = np.asarray(t_all[k0:k1], dtype=float)
+    rows = np.asarray(rows_all[k0:k1], dtype=float)
+    j = idx - k0
+    T = t[j] - t[j - 1]
+    ok = T > 0.0
+    j, lo, hi, T, ti = j[ok], lo[ok], hi[ok], T[ok], t[j[ok]]
+    v = np.abs(rows[j] - rows[j - 1])
+    has_next = j + 1 < len(t)
+    v[has_next] = np.maximum(v[has_next], np.abs(rows[j[has_next] + 1] - rows[j[has_next]]))
+    f_all = np.minimum((hi - lo) / T, 1.0)
+    vp = float(np.sum((v[:, :3] * (T * T * f_all**3 / 12.0)[:, None]) ** 2))
+    beyond = hi > ti + 1e-12
+    d = np.where(beyond, hi - np.maximum(lo, ti), 0.0)
+    f = np.where(beyond, np.clip((ti - lo) / T, 0.0, 1.0), (hi - lo) / T)
+    share = np.where(f >= 1.0 - 1e-9, 0.0, T * f * (1.0 - f) / 2.0)
+    e2 = v**2 * ((d * d / (2.0 * T)) ** 2 + share**2)[:, None]
+    return e2[:, :3].sum(axis=0), e2[:, 3:].sum(axis=0), vp
+
+
+@settings(max_examples=300, deadline=None)
+@given(gaps=st.lists(st.sampled_from([0.0, 0.01, 0.01, 0.01, 0.013, 0.5]), min_size=1, max_size=60),
+       seed=st.integers(0, 2**31), a=st.floats(-0.1, 1.0), b=st.floats(0.0, 1.2), six=st.booleans())
+def test_the_hold_variance_is_the_reference_arithmetic_to_the_bit(gaps, seed, a, b, six):  # noqa: ANN001
+    """Every interval -- before the first record, over records at one time, shares at both ends, held beyond
+    the newest -- gives the reference's three values to the bit, with the window or without."""
+    rng = np.random.default_rng(seed)
+    chain = ImuChain(ImuConfig())
+    t = 0.05
+    for g in gaps:
+        t += g
+        r = rng.normal(size=6)
+        chain.add(Imu(t, r[0], r[1], r[5], *((r[2], r[3], r[4]) if six else ())))
+    ta = 0.05 + a * (t - 0.05)
+    tb = ta + b * (t - 0.05) + 1e-3
+    pieces = chain._pieces(ta, tb)
+    want = _hold_reference(chain.t, chain.rows, pieces)
+    for got in (_hold(chain.t, chain.rows, pieces), _hold(chain.t, chain.rows, pieces, _window(chain.rows, pieces))):
+        assert got[0].tobytes() == want[0].tobytes() and got[1].tobytes() == want[1].tobytes()
+        assert got[2] == want[2] or (math.isnan(got[2]) and math.isnan(want[2]))

@@ -162,3 +162,40 @@ def test_correlative_finds_any_pose_in_the_window(dx, dy, dyaw, x, y, yaw):
     assert r.ok
     assert np.hypot(*(r.pose[:2] - rel[:2])) < C.CorrelativeConfig().resolution * math.sqrt(2)
     assert abs(math.remainder(r.pose[2] - rel[2], 2 * math.pi)) < math.radians(1.5)
+
+
+def test_descriptor_and_distance_are_the_reference_arithmetic_to_the_bit():
+    """``describe``'s cell counts and ``distance``'s overlap mask, against their first forms (``np.add.at`` of
+    1.0 per return, ``np.outer`` of the filled columns), on scans with empty sectors."""
+    rng = np.random.default_rng(3)
+    cfg = D.DescriptorConfig()
+    descs = []
+    for trial in range(20):
+        n = int(rng.integers(cfg.min_points, 600))
+        a = rng.uniform(-math.pi, math.pi * (0.3 if trial % 2 else 1.0), n)
+        r = rng.uniform(0.5, cfg.max_range * 1.1, n)
+        xy = np.column_stack([r * np.cos(a), r * np.sin(a)])
+        got = D.describe(xy, cfg)
+        rr = np.hypot(xy[:, 0], xy[:, 1])
+        ok = np.isfinite(rr) & (rr < cfg.max_range) & (rr > 0.0)
+        ri = np.minimum((rr[ok] / cfg.max_range * cfg.rings).astype(int), cfg.rings - 1)
+        ang = np.arctan2(xy[ok, 1], xy[ok, 0])
+        si = np.floor((ang + math.pi) / (2 * math.pi) * cfg.sectors).astype(int) % cfg.sectors
+        grid = np.zeros((cfg.rings, cfg.sectors))
+        np.add.at(grid, (ri, si), 1.0)
+        grid /= ok.sum()
+        smooth = grid.copy()
+        smooth[1:] += 0.5 * grid[:-1]
+        smooth[:-1] += 0.5 * grid[1:]
+        assert got is not None and got.grid.tobytes() == smooth.tobytes()
+        assert got.key.tobytes() == smooth.sum(1).tobytes()
+        descs.append(got)
+    flat = D._diagonals(cfg.sectors)
+    for q, c in zip(descs[1:], descs[:-1], strict=True):
+        (qn, qh), (cn, ch) = q.columns, c.columns
+        sums = (qh.T @ ch).ravel()[flat].sum(1)
+        counts = np.outer(qn > 0, cn > 0).ravel()[flat].sum(1)
+        d = np.where(counts >= max(0.25 * cfg.sectors, 1), 1.0 - sums / np.maximum(counts, 1), 1.0)
+        s = int(np.argmin(d))
+        yaw = s * 2 * math.pi / cfg.sectors
+        assert D.distance(q, c, 0.25) == (float(d[s]), math.atan2(math.sin(yaw), math.cos(yaw)))
