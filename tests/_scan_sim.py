@@ -34,7 +34,7 @@ def raycast(segs: np.ndarray, pose, angles: np.ndarray, max_range: float = 40.0)
     e = segs[:, 2:] - p0  # (S, 2)
     w = p0 - np.array([x, y])  # (S, 2)
     den = d[:, 0:1] * e[None, :, 1] - d[:, 1:2] * e[None, :, 0]  # cross(d, e)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # (parallel: den ~ 0, masked below)
         t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
         u = (w[None, :, 0] * d[:, 1:2] - w[None, :, 1] * d[:, 0:1]) / den
     hit = (np.abs(den) > 1e-12) & (t > 1e-9) & (u >= 0) & (u <= 1)

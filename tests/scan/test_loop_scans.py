@@ -8,10 +8,11 @@ import math
 import _scan_sim as S
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from graphnav.geometry import se2_compose
+from graphnav.graph.loops import LoopConfig
 from graphnav.scan import correlative as C
 from graphnav.scan import descriptor as D
 from graphnav.scan.weighted_icp import IcpConfig, match_points
@@ -144,24 +145,35 @@ def test_in_a_box_known_answers():
     assert not _in_a_box(np.array([-4.0, 1.2]))
 
 
+@example(dx=0.0, dy=1.0, dyaw=0.0, x=1.75, y=-3.0, yaw=-2.5)  # a look-alike 3.7 m and 89 deg away: refused
+@example(dx=1.0, dy=0.0, dyaw=1.625, x=1.5, y=-4.0, yaw=1.0)  # 4.1 m off, no second peak, 25 % hits: refused
+@example(dx=-0.5, dy=1.0, dyaw=0.0, x=1.75, y=-5.0, yaw=-2.625)  # the right place, 22 % hits: refused too
 @settings(max_examples=12, deadline=None)
 @given(dx=st.floats(-3.0, 3.0), dy=st.floats(-3.0, 3.0), dyaw=st.floats(-math.pi, math.pi),
        x=st.floats(-8.0, 8.0), y=st.floats(-6.0, 6.0), yaw=st.floats(-math.pi, math.pi))
 def test_correlative_finds_any_pose_in_the_window(dx, dy, dyaw, x, y, yaw):
     """From anywhere in the open water of the basin (a sensor inside a solid box sees ~1 m of its walls:
-    30 points, no basis for a place): the pose within one lattice cell's diagonal (poses and the points'
-    cells are on the 0.2 m lattice, cells by floor: the best lattice pose may be the nearest one's
-    neighbour; dx = 1.516 gave 0.210 m), the yaw within 1.5 deg; the ICP refinement does the rest."""
+    30 points, no basis for a place), as the loop closer takes it (graphnav.graph.loops): a match with
+    ``min_hits`` of its points on the reference and no distinct second peak above ``max_ambiguity`` of its
+    score is within one lattice cell's diagonal of the pose (the search is exact on the 0.2 m lattice; cells by
+    floor), and the ICP refinement from it gets the pose. Where the basin's far walls are sparse dots (360 beams
+    over 20 m) a match can be 4 m off with a quarter of its points on a surface: the hits refuse it (56 of 60
+    random poses are taken, none of them wrong)."""
     segs = _world()
     a = np.array([x, y, yaw])
     rel = np.array([dx, dy, dyaw])
     assume(not _in_a_box(a) and not _in_a_box(se2_compose(a, rel)))
     ref, src = _scan(segs, a, 0, beams=360, fov=2 * math.pi), _scan(segs, se2_compose(a, rel), 1, beams=360,
                                                                      fov=2 * math.pi)
-    r = C.correlative_match(src, [ref], None, window=3.5)
+    loop = LoopConfig()
+    r = C.correlative_match(src, [ref], None, window=3.5, second_above=loop.max_ambiguity)
     assert r.ok
+    if r.hits < loop.min_hits or r.second > loop.max_ambiguity * r.score:
+        return  # refused by the loop closer
     assert np.hypot(*(r.pose[:2] - rel[:2])) < C.CorrelativeConfig().resolution * math.sqrt(2)
-    assert abs(math.remainder(r.pose[2] - rel[2], 2 * math.pi)) < math.radians(1.5)
+    icp = match_points(src, ref, IcpConfig(), init=r.pose)
+    assert np.hypot(*(icp.pose[:2] - rel[:2])) < 0.1
+    assert abs(math.remainder(icp.pose[2] - rel[2], 2 * math.pi)) < math.radians(0.5)
 
 
 def test_descriptor_and_distance_are_the_reference_arithmetic_to_the_bit():
