@@ -120,6 +120,7 @@ class OnlineFixes:
     def __init__(self, max_rejects: int) -> None:
         self.indices: deque[int] = deque(maxlen=max(1, int(max_rejects)))
         self.anchor: int | None = None
+        self.held = self.lost = 0  # fixed-lag: fixes taken back into its window, and those it no longer held
 
     def forget(self) -> None:
         """The solver started afresh (a fixed-lag rebase): the indices no longer name its factors."""
@@ -136,14 +137,22 @@ class OnlineFixes:
         elif s.restarted:  # the fixes before an outage are not what a run after it contradicts
             self.indices.clear()
             self.anchor = None
-        if s.reacquired and self.indices:
-            old, add = list(self.indices), None
+        if s.reacquired and (self.indices or s.taken_back):
+            old, add = list(self.indices), gtsam.NonlinearFactorGraph()
             released = builder.anchor.released(builder.space) if self.anchor is not None else None
             if released is not None:
-                add = gtsam.NonlinearFactorGraph()
                 add.add(released)
                 old.append(self.anchor)
                 self.anchor = None
-            solver.remove(old, add=add)
+            for f in s.taken_back:  # (fixed-lag: the run's fixes, where the window holds their keyframes)
+                add.add(f)
+            back = solver.remove(old, add=add)[add.size() - len(s.taken_back):]
+            self.held += sum(i >= 0 for i in back)
+            self.lost += sum(i < 0 for i in back)
             self.indices.clear()
+            self.indices.extend(i for i in back if i >= 0)
         self.indices.extend(i for i, g in new if g == "gnss" and i >= 0)
+
+    def info(self) -> dict[str, int]:
+        """The run summary's counts of the fixes taken back into a fixed-lag window (none: nothing)."""
+        return {"gnss_taken_back_held": self.held, "gnss_taken_back_lost": self.lost} if self.held + self.lost else {}

@@ -283,10 +283,8 @@ class Measurements:
             if self.gate is not None and self.gate.taken_back:  # a re-acquisition: the run's fixes count again
                 n, self.gate.taken_back = self.gate.taken_back, 0
                 s.reacquired = True
-                if cfg.solver != "fixed-lag":  # (the fixed-lag window may have dropped their keyframes)
-                    for f in self.rejected[-n:]:
-                        s.add(f, "gnss")
-                    del self.rejected[-n:]
+                back, self.rejected[-n:] = self.rejected[-n:], []
+                s.take_back(back, window=cfg.solver == "fixed-lag")
         elif self.gate is not None:
             self.gate.passed()
             s.restarted = True

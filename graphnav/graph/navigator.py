@@ -432,7 +432,7 @@ class Navigator(Coasting):
         if info.get("loop_edges"):  # the accepted loops as (older, newer) keyframe times, for plots
             info["loop_edge_times"] = [[float(t[i]), float(t[k])] for i, k in info["loop_edges"]]
         info.update(b.report(values))  # compass bias, beacons, IMU bias, water current
-        info.update({**self.extra, **self._coast_info()})
+        info.update({**self.extra, **self._coast_info(), **self.fixes.info()})
         if self.solver.online:
             info["step_cpu_ms_median"] = float(np.median(self.track.step_cpu)) if self.track.step_cpu else None
             step_ms = np.array(self.track.step_ms)

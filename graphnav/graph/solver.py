@@ -225,33 +225,38 @@ class Solver:
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
 
-    def remove(self, indices: list[int], settle: int = 3, add: gtsam.NonlinearFactorGraph | None = None) -> bool:
+    def remove(self, indices: list[int], settle: int = 3, add: gtsam.NonlinearFactorGraph | None = None) -> list[int]:
         """iSAM2 and fixed-lag: take the factors of ``indices`` (:attr:`new_indices` of earlier updates) out of
         the online problem (``add``: put these in instead), then relinearise ``settle`` times (iSAM2: regardless
-        of the skip; the robust kernels' weights of what remains re-evaluated); ``False`` (nothing done) for
-        batch. Fixed-lag: the factors the window has marginalised out stay in their marginals (only those
-        still held are removed), and ``add`` only goes in while its variables are in the window. The kept
-        graph of the closing step is untouched."""
+        of the skip; the robust kernels' weights of what remains re-evaluated); the new indices of ``add``'s
+        factors (-1: not added), ``[]`` for batch. Fixed-lag: the factors the window has marginalised out stay in
+        their marginals (only those still held are removed), and a factor of ``add`` only goes in while its
+        variables are in the window. The kept graph of the closing step is untouched."""
         if self.kind == "batch":
-            return False
+            return []
         add = add if add is not None else gtsam.NonlinearFactorGraph()
         try:
             if self.kind == "fixed-lag":  # (a rebase starts afresh: its caller forgets the indices)
                 held, theta = self.s.getFactors(), self.s.getLinearizationPoint()
                 indices = [i for i in indices if held.exists(i)]
-                if not all(theta.exists(key) for key in add.keyVector()):
-                    add = gtsam.NonlinearFactorGraph()
-                self.s.update(add, gtsam.Values(), gtsam.FixedLagSmootherKeyTimestampMap(), indices)
+                ok = [all(theta.exists(key) for key in add.at(i).keys()) for i in range(add.size())]
+                sub = gtsam.NonlinearFactorGraph()
+                for i in (i for i, k in enumerate(ok) if k):
+                    sub.add(add.at(i))
+                self.s.update(sub, gtsam.Values(), gtsam.FixedLagSmootherKeyTimestampMap(), indices)
+                got = iter(list(self.s.getISAM2Result().getNewFactorsIndices()))
                 for _ in range(settle):
                     self.s.update()
             else:
-                self.s.update(add, gtsam.Values(), list(indices), force_relinearize=True)
+                ok = [True] * add.size()
+                got = iter(list(self.s.update(add, gtsam.Values(), list(indices), force_relinearize=True)
+                                .getNewFactorsIndices()))
                 for _ in range(settle):
                     self.s.update(gtsam.NonlinearFactorGraph(), gtsam.Values(), force_relinearize=True)
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
         self._info, self._marginals = {}, {}
-        return True
+        return [next(got) if k else -1 for k in ok]
 
     def relinearize(self, n: int) -> None:
         """``n`` extra ``update()`` calls without new factors (iSAM2 / fixed-lag relinearisation)."""

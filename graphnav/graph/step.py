@@ -30,12 +30,24 @@ class Step:
     reacquired: bool = False
     #: the GNSS gate took a fix after an outage untested and counts the fixes behind the estimate afresh
     restarted: bool = False
+    #: fixed-lag: a re-acquisition's rejected fixes taken back, which the navigator adds where its window still
+    #: holds their keyframes (:class:`~graphnav.graph.fix_gate.OnlineFixes`)
+    taken_back: list[gtsam.NonlinearFactor] = field(default_factory=list)
 
     def add(self, factor: gtsam.NonlinearFactor, group: str, closing: gtsam.NonlinearFactor | None = None) -> None:
         if closing is not None:
             self.closing[self.graph.size()] = closing
         self.graph.add(factor)
         self.groups.append(group)
+
+    def take_back(self, fixes: list[gtsam.NonlinearFactor], window: bool) -> None:
+        """A re-acquisition's rejected fixes count again: in this step, or (``window``: the fixed-lag smoother, which
+        may have dropped their keyframes) in :attr:`taken_back`."""
+        if window:
+            self.taken_back.extend(fixes)
+        else:
+            for f in fixes:
+                self.add(f, "gnss")
 
     def kept(self) -> gtsam.NonlinearFactorGraph:
         """The factors as the closing step solves them (:attr:`closing` substituted)."""
