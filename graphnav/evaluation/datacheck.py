@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ..graph.keyframes import nearest
 from ..log import NavLog
 
 #: A gap is a step between consecutive records longer than this many times the median step (and
@@ -78,13 +79,6 @@ LOG_MIN_SPEED = 0.5  # [m/s]
 LOG_MAX_SE = 0.03
 
 
-def _nearest(t: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For each of ``t``: the index of the nearest time in the sorted ``ref`` and whether it is within PAIR_S."""
-    i = np.clip(np.searchsorted(ref, t), 1, len(ref) - 1)
-    i = np.where(np.abs(ref[i - 1] - t) <= np.abs(ref[i] - t), i - 1, i)
-    return i, np.abs(ref[i] - t) <= PAIR_S
-
-
 def speed_log_scale(log: NavLog) -> dict[str, Any] | None:
     """The speed log against the GNSS velocity: in each window of :data:`LOG_WINDOW_S`, the least squares of
     ``v_gnss = s v_log R(delta) (cos h, sin h) + c`` over its samples (module constants): the log's scale ``s``
@@ -98,8 +92,8 @@ def speed_log_scale(log: NavLog) -> dict[str, Any] | None:
     g, h, w = log.columns("gnss_velocity"), log.columns("heading"), log.columns("water_speed")
     t = np.asarray(g["t"], float)
     ht, wt = np.asarray(h["t"], float), np.asarray(w["t"], float)
-    ih, okh = _nearest(t, ht)
-    iw, okw = _nearest(t, wt)
+    ih, iw = nearest(ht, t), nearest(wt, t)
+    okh, okw = np.abs(ht[ih] - t) <= PAIR_S, np.abs(wt[iw] - t) <= PAIR_S
     yaw, v = np.asarray(h["yaw"], float)[ih], np.asarray(w["v"], float)[iw]
     vx, vy = np.asarray(g["vx"], float), np.asarray(g["vy"], float)
     ok = okh & okw & (v > LOG_MIN_SPEED) & np.isfinite(yaw) & np.isfinite(vx) & np.isfinite(vy)
