@@ -91,6 +91,18 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, init: gtsam.Values,
         raise SolverError(_gtsam_message(exc)) from None
 
 
+def held_part(graph: gtsam.NonlinearFactorGraph, exists: Callable[[int], bool]
+              ) -> tuple[gtsam.NonlinearFactorGraph, list[bool]]:
+    """The factors of ``graph`` whose every variable ``exists`` (a solver holds it), and per factor whether it is
+    one of them."""
+    held = [all(exists(key) for key in graph.at(i).keys()) for i in range(graph.size())]
+    part = gtsam.NonlinearFactorGraph()
+    for i, h in enumerate(held):
+        if h:
+            part.add(graph.at(i))
+    return part, held
+
+
 def _gtsam_message(exc: BaseException) -> str:
     """GTSAM's message on one line (its indeterminate-system text spans a paragraph)."""
     text = " ".join(str(exc).split())
@@ -187,12 +199,7 @@ class Solver:
         exists, held_key = values.exists, self.s.valueExists
         if all(exists(key) or held_key(key) for key in graph.keyVector()):  # (each key once: the common case)
             return graph, [True] * graph.size()
-        held = [all(exists(key) or held_key(key) for key in graph.at(i).keys()) for i in range(graph.size())]
-        online = gtsam.NonlinearFactorGraph()
-        for i, h in enumerate(held):
-            if h:
-                online.add(graph.at(i))
-        return online, held
+        return held_part(graph, lambda key: exists(key) or held_key(key))
 
     def rebase(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, stamps: Mapping[int, float]) -> None:
         """Replace the online smoother by a fresh one holding ``graph``/``values`` (priors carrying the
@@ -239,10 +246,7 @@ class Solver:
             if self.kind == "fixed-lag":  # (a rebase starts afresh: its caller forgets the indices)
                 held, theta = self.s.getFactors(), self.s.getLinearizationPoint()
                 indices = [i for i in indices if held.exists(i)]
-                ok = [all(theta.exists(key) for key in add.at(i).keys()) for i in range(add.size())]
-                sub = gtsam.NonlinearFactorGraph()
-                for i in (i for i, k in enumerate(ok) if k):
-                    sub.add(add.at(i))
+                sub, ok = held_part(add, theta.exists)
                 self.s.update(sub, gtsam.Values(), gtsam.FixedLagSmootherKeyTimestampMap(), indices)
                 got = iter(list(self.s.getISAM2Result().getNewFactorsIndices()))
                 for _ in range(settle):
