@@ -25,10 +25,10 @@ import factors as F
 
 from . import gnc, noise, odometry_scale
 from .chi2 import significant_scale
-from .measurements import WaterRow
 from .smoother_config import SmootherConfig
 from .solver import Solver, levenberg_marquardt, marginals
 from .space import PlanarSpace
+from .water import WaterRow
 
 if TYPE_CHECKING:
     from .loop_places import Deferred
@@ -173,7 +173,7 @@ class Closing:
         """The water-speed factors re-aimed along the solution's bows and LM re-run, until no keyframe's
         yaw differs from the one its factors were made with by more than the pose relinearisation
         threshold (the rule by which iSAM2 finds a linearisation point stale). A water-speed factor
-        (:class:`~graphnav.graph.measurements.WaterRow`) is linear in the velocities and takes the bow's
+        (:class:`~graphnav.graph.water.WaterRow`) is linear in the velocities and takes the bow's
         direction from an estimate: the builder's, made as the record came -- iSAM2's online yaw, but
         batch's chained initial guess, which drifts between its incremental solves (psaros33, 1800 s from
         3400 s: half of batch's final error was these factors, and its withheld fixes 7.4 m off against
@@ -246,7 +246,7 @@ def _type_of(key: int, space: PlanarSpace) -> str:
     """The GTSAM type name of a state variable by its symbol (poses, beacons ``l``, velocities ``v``,
     water current ``w``, IMU biases ``i``)."""
     ch = chr(gtsam.Symbol(key).chr())
-    return space.point_type if ch == "l" else "Vector" if ch in "vw" else "ConstantBias" if ch == "i" \
+    return space.point_type if ch == "l" else "Vector" if ch in "vwk" else "ConstantBias" if ch == "i" \
         else space.pose_type
 
 
