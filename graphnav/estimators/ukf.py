@@ -493,23 +493,30 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
                             "r_used": step.r_used, "velocity": states[:, 2:4], **gater.info(),
                             "bias_states": bias, "bias_reason": bias_why if bias == auto_bias else "option",
                             "current_states": current, "process_noise": dict(qn)}
-    if bias:
+    _state_info(info, f, states, opts)
+    return RunResult(traj, traj, step_ms, info=info)
+
+
+def _state_info(info: dict[str, Any], f: UnscentedNav, states: NDArray, opts: dict[str, Any]) -> None:
+    """:func:`run_nav_filter`'s ``info`` (in place) on the augmented states: the final biases, current, speed-log
+    scale (with its sigma; its walk in ``process_noise``) and compass bias, the last three also per step
+    (``states``: the state at each step)."""
+    if f.bias:
         info["bias_final"] = f.x[5:8].tolist()
-    if current:
+    if f.ic is not None:
         info["current_final"] = f.x[f.ic:f.ic + 2].tolist()
         info["current"] = states[:, f.ic:f.ic + 2]
-    info["log_scale_state"] = ls
+    info["log_scale_state"] = f.il is not None
     if f.il is not None:
         info["process_noise"]["q_log_scale"] = float(opts["q_log_scale"])
         info["log_scale_final"] = float(f.x[f.il])
         info["log_scale_sigma"] = math.sqrt(float(f.P[f.il, f.il]))
         info["log_scale"] = states[:, f.il]
-    info["compass_bias_state"] = cb
+    info["compass_bias_state"] = f.ik is not None
     if f.ik is not None:
         info["compass_bias_final_deg"] = math.degrees(float(f.x[f.ik]))
         info["compass_bias_sigma_deg"] = math.degrees(math.sqrt(float(f.P[f.ik, f.ik])))
         info["compass_bias"] = states[:, f.ik]
-    return RunResult(traj, traj, step_ms, info=info)
 
 
 class _Updates:
