@@ -122,7 +122,8 @@ def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
         out["errors_by_event"] = errors_by_event(result, log, max_dt=max_dt)
     out.update(gnss_scores(traj, log))
     for k in ("anchor", "loop_closures", "loop_candidates", "switched_off", "odometry_consistency", "odometry_scale",
-              "noise_scale", "covariance_noise", "coasted_estimates", "gnss_rejected", "gnss_reacquired"):
+              "noise_scale", "covariance_noise", "coasted_estimates", "gnss_rejected", "gnss_reacquired",
+              "log_scale_final", "log_scale_sigma"):
         if k in result.info:
             out[k] = result.info[k]
     return out
