@@ -27,10 +27,11 @@ def _wrap(a: float) -> float:
 
 @njit(cache=True)
 def process_noise(n: int, T: float, q_acc: float, q_gyro: float, q_bias: NDArray, q_current: float,
-                  ib: int, ic: int, ik: int = -1, q_compass: float = 0.0) -> NDArray:
+                  ib: int, ic: int, ik: int = -1, q_compass: float = 0.0, il: int = -1, q_log: float = 0.0) -> NDArray:
     """``Q(T)`` of :meth:`~graphnav.estimators.ukf.UnscentedNav._Q`: white acceleration on ``(p, v)`` per axis,
-    the gyro's noise on the heading, random walks of the biases (``ib >= 0``), the current (``ic >= 0``) and
-    the compass bias (``ik >= 0``, density ``q_compass`` [rad/sqrt(s)])."""
+    the gyro's noise on the heading, random walks of the biases (``ib >= 0``), the current (``ic >= 0``),
+    the compass bias (``ik >= 0``, density ``q_compass`` [rad/sqrt(s)]) and the speed log's scale (``il >= 0``,
+    ``q_log`` [1/sqrt(s)])."""
     Q = np.zeros((n, n))
     qa = q_acc * q_acc
     for i in range(2):
@@ -47,18 +48,20 @@ def process_noise(n: int, T: float, q_acc: float, q_gyro: float, q_bias: NDArray
         Q[ic + 1, ic + 1] = q_current * q_current * T
     if ik >= 0:
         Q[ik, ik] = q_compass * q_compass * T
+    if il >= 0:
+        Q[il, il] = q_log * q_log * T
     return Q
 
 
 @njit(cache=True)
 def predict_span(x: NDArray, P: NDArray, lam: float, wm: NDArray, wc: NDArray, q_acc: float, q_gyro: float,
-                 q_bias: NDArray, q_current: float, ib: int, ic: int, ik: int, q_compass: float, ax: NDArray,
-                 ay: NDArray, wz: NDArray, t: NDArray, k0: int, k1: int, poses: NDArray, cov: NDArray,
-                 states: NDArray) -> None:
+                 q_bias: NDArray, q_current: float, ib: int, ic: int, ik: int, q_compass: float, il: int,
+                 q_log: float, ax: NDArray, ay: NDArray, wz: NDArray, t: NDArray, k0: int, k1: int, poses: NDArray,
+                 cov: NDArray, states: NDArray) -> None:
     """Predict ``x``, ``P`` (in place) through the steps ``k0 .. k1-1`` (step ``k``: the IMU sample ``k`` over
     ``t[k] - t[k-1]``, ``k0 >= 1``), writing each step's ``(x, y, theta)``, its covariance and the state to
     ``poses[k]``, ``cov[k]``, ``states[k]``. ``ik``, ``q_compass``: the compass-bias state (-1: none) and its
-    random walk (it moves with its noise only)."""
+    random walk (it moves with its noise only); ``il``, ``q_log``: the speed log's scale state (-1: none), likewise."""
     n = x.shape[0]
     m2 = 2 * n + 1
     X = np.empty((m2, n))
@@ -67,7 +70,7 @@ def predict_span(x: NDArray, P: NDArray, lam: float, wm: NDArray, wc: NDArray, q
     for k in range(k0, k1):
         T = t[k] - t[k - 1]
         if T != T_last:
-            Q = process_noise(n, T, q_acc, q_gyro, q_bias, q_current, ib, ic, ik, q_compass)
+            Q = process_noise(n, T, q_acc, q_gyro, q_bias, q_current, ib, ic, ik, q_compass, il, q_log)
             T_last = T
         L = np.linalg.cholesky((n + lam) * P)
         for j in range(n):

@@ -115,6 +115,10 @@ IMU_DEFAULTS: dict[str, Any] = {
     # the compass-bias state (InsEkf): "auto" resolved by imu_options from the log; the stepper takes "auto" as on
     # for the IMU motion and for the vessel motion with the current states (compass_bias_on)
     "compass_bias": "auto",
+    # the speed log's scale state k (after the current states): "auto" resolved by imu_options from the log (water
+    # speed and the current states); the stepper takes "auto" as on with the current states. Prior N(1,
+    # sigma_log_scale^2), random walk q_log_scale [1/sqrt(s)]: the graph's scale state
+    "log_scale": "auto", "sigma_log_scale": 0.1, "q_log_scale": 5e-4,
 }
 VESSEL_KEYS = ("vessel_accel", "vessel_yaw_rate_deg", "vessel_steerage_speed", "vessel_position_walk")
 
@@ -201,10 +205,14 @@ class EkfStepper:
                 sb, rw = (0.0, b0), (0.0, brw)  # (no accelerometer: its bias states stay 0)
             cb = compass_bias_on(io["compass_bias"], motion, cur)
             (kb0, kbrw) = compass_bias_model() if cb else (0.0, 0.0)
+            ls = resolve_flag(io["log_scale"], cur, "log_scale")
+            if ls and not cur:
+                raise ValueError("ekf option log_scale needs the current states (current=true)")
             vx, vy, sv = io["v0"]
-            x = [*np.asarray(x0, float)[:3], vx, vy] + [0.0] * (3 * bias) + [0.0] * (2 * cur) + [0.0] * cb
+            x = [*np.asarray(x0, float)[:3], vx, vy] + [0.0] * (3 * bias) + [0.0] * (2 * cur) + [1.0] * ls \
+                + [0.0] * cb
             d = [sv ** 2] * 2 + [sb[0] ** 2] * (2 * bias) + [sb[1] ** 2] * bias \
-                + [io["sigma_current0"] ** 2] * (2 * cur) + [kb0 ** 2] * cb
+                + [io["sigma_current0"] ** 2] * (2 * cur) + [io["sigma_log_scale"] ** 2] * ls + [kb0 ** 2] * cb
             P = np.zeros((len(x), len(x)))
             P[:3, :3] = np.asarray(P0, float)[:3, :3]
             P[3:, 3:] = np.diag(d)
@@ -213,7 +221,8 @@ class EkfStepper:
             self.f: PoseEkf = InsEkf(np.array(x), P, bias=bias, current=cur, acc_density=io["acc_density"],
                                      gyro_density=io["gyro_density"], acc_bias_rw=rw[0],
                                      gyro_bias_rw=rw[1], current_rw=io["q_current"], compass_bias=cb,
-                                     compass_bias_rw=kbrw, gate=gate, **gating)
+                                     compass_bias_rw=kbrw, log_scale=ls, log_scale_rw=io["q_log_scale"], gate=gate,
+                                     **gating)
         else:
             self.f = PoseEkf(x0, P0, gate=gate, **gating)
         self.motion = motion
@@ -384,7 +393,8 @@ def imu_options(log: NavLog, given: dict[str, Any], motion: str | None = None) -
     """The IMU motion's options for ``log`` (:data:`IMU_DEFAULTS`): the noise densities and bias
     random walks of the log's IMU model (:func:`graphnav.estimators.imu_model.imu_noise`, the
     graph's), bias states when the IMU has a bias and current states when the log has water speed
-    (``"auto"``), the compass-bias state when the log has a compass and GNSS and ``motion`` (default: the IMU's
+    (``"auto"``), the speed log's scale state with the current states when the log has water speed, the
+    compass-bias state when the log has a compass and GNSS and ``motion`` (default: the IMU's
     if the log has one, else the vessel model's) ties the heading to the track (:func:`compass_bias_on`), the
     initial velocity from ``meta["initial_velocity"]`` or the first GNSS velocity;
     ``given`` (options of the same names) wins."""
@@ -402,6 +412,8 @@ def imu_options(log: NavLog, given: dict[str, Any], motion: str | None = None) -
     out["bias"] = (resolve_flag(given.pop("bias", "auto"), wants_bias(log)[0], "bias") if log.of("imu")
                    else rot and resolve_flag(given.pop("bias", "auto"), True, "bias"))  # the ROT's bias
     out["current"] = resolve_flag(given.pop("current", "auto"), bool(log.of("water_speed")), "current")
+    out["log_scale"] = resolve_flag(given.pop("log_scale", "auto"), out["current"] and bool(log.of("water_speed")),
+                                    "log_scale")
     # the compass bias: observable with a compass and GNSS (position or velocity) to hold the heading against
     out["compass_bias"] = resolve_flag(given.pop("compass_bias", "auto"), bool(log.of("heading")) and bool(
         log.of("gnss") or log.of("gnss_velocity")) and compass_bias_on(
@@ -441,8 +453,9 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
         motion = auto_motion(log)
     imu_given = {k: gating.pop(k) for k in list(gating) if k in IMU_DEFAULTS or k == "bias" or k == "current"}
     imu = imu_options(log, imu_given, motion) if motion in ("imu", "vessel") else None
-    if imu_given.get("compass_bias", "auto") == "auto":  # (auto: no compass-bias state without InsEkf's motions)
-        imu_given.pop("compass_bias", None)
+    for k in ("compass_bias", "log_scale"):  # (auto: no such state without InsEkf's motions)
+        if imu_given.get(k, "auto") == "auto":
+            imu_given.pop(k, None)
     if imu_given and motion not in ("imu", "vessel"):
         raise ValueError(f"ekf option(s) {sorted(imu_given)} need motion='imu' or 'vessel'")
     x0, P0, anchor = initial_state(log.records, speed)
@@ -481,6 +494,12 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
         if imu["current"]:
             ic = 5 + 3 * imu["bias"]
             info["current_final"] = f.x[ic:ic + 2].tolist()
+        il = getattr(f, "il", None)
+        if il is not None:
+            info["process_noise"]["q_log_scale"] = imu["q_log_scale"]
+            info["log_scale_final"] = float(f.x[il])
+            info["log_scale_sigma"] = math.sqrt(float(f.P[il, il]))
+        info["log_scale_state"] = il is not None
         ik = getattr(f, "ik", None)
         info["compass_bias_state"] = ik is not None
         if ik is not None:
@@ -547,6 +566,11 @@ class ImuMotionOptions:
     sigma_bias_gyro_deg: float = option(0.1, "prior on the residual gyro bias", unit="deg/s")
     sigma_current0: float = option(0.5, "prior 1-sigma of the water current", unit="m/s")
     q_current: float = option(0.005, "water-current random walk", unit="m/s/sqrt(s)")
+    log_scale: bool | str = option(
+        "auto", "the speed log's scale state k (the speed through water along the bow is k x the reading; the "
+        "graph's): auto (with the current states, when the log has water_speed), true, false")
+    sigma_log_scale: float = option(0.1, "prior 1-sigma of the speed log's scale (around 1: a log within 10 %)")
+    q_log_scale: float = option(5e-4, "the speed log's scale: random walk", unit="1/sqrt(s)")
     v0: list[float] | None = option(None, "initial velocity [vx, vy, sigma] (null: meta initial_velocity, else the "
                                     "first GNSS velocity)")
     sigma_gnss_velocity: float = option(0.1, "GNSS velocity sigma when the record gives none", unit="m/s")

@@ -1,11 +1,13 @@
 """The conventional UKF of Liu, Liu & Bucknall (IEEE Access 2019), and a bias-augmented variant.
 
 State (eq. 11) ``x = [p_x, p_y, v_x, v_y, theta]`` (``ukf-bias`` appends the accelerometer and gyro
-biases ``[b_ax, b_ay, b_g]``; the water current ``[c_x, c_y]`` follows with ``current``, and the compass
-bias ``b_c`` comes last with ``compass_bias``: the compass reads ``theta + b_c``, b_c a random walk, the
-graph's compass model, :class:`graphnav.graph.smoother_config.CompassConfig`). Inputs: the body-frame
-IMU acceleration rotated into the navigation frame by the heading (eq. 4) and the gyro yaw rate; dynamics
-eq. 1-3 / 12 with the sample time T::
+biases ``[b_ax, b_ay, b_g]``; the water current ``[c_x, c_y]`` follows with ``current``, then the speed
+log's scale ``k`` with ``log_scale`` (the speed through water along the bow is ``k`` x the reading; prior
+N(1, ``sigma_log_scale^2``), random walk ``q_log_scale``: the graph's scale state; it needs the current
+states), and the compass bias ``b_c`` comes last with ``compass_bias``: the compass reads ``theta + b_c``,
+b_c a random walk, the graph's compass model, :class:`graphnav.graph.smoother_config.CompassConfig`).
+Inputs: the body-frame IMU acceleration rotated into the navigation frame by the heading (eq. 4) and the
+gyro yaw rate; dynamics eq. 1-3 / 12 with the sample time T::
 
     a_n = R(theta) (a_i - b_a);  p += T v + T^2/2 a_n;  v += T a_n;  theta += T (omega - b_g)
 
@@ -84,27 +86,33 @@ def wrapped_mean(X: NDArray, wm: NDArray, angle_idx: int) -> NDArray:
 
 class UnscentedNav:
     """The appendix UKF for the USV model; ``n_bias = 3`` adds accelerometer/gyro bias states,
-    ``current=True`` the water current ``[c_x, c_y]`` (a random walk) after them, ``compass_bias=True`` the
-    compass bias last (the compass channel measures ``theta + b_c``; ``q_compass_bias`` its random walk
-    [rad/sqrt(s)])."""
+    ``current=True`` the water current ``[c_x, c_y]`` (a random walk) after them, ``log_scale=True`` the
+    speed log's scale ``k`` after the current (``q_log_scale`` its random walk [1/sqrt(s)]),
+    ``compass_bias=True`` the compass bias last (the compass channel measures ``theta + b_c``;
+    ``q_compass_bias`` its random walk [rad/sqrt(s)])."""
 
     TH = 4  # index of theta
 
     def __init__(self, x0: NDArray, P0: NDArray, *, q_acc: float, q_gyro: float,
                  q_bias_acc: float = 0.0, q_bias_gyro: float = 0.0, current: bool = False, q_current: float = 0.0,
-                 compass_bias: bool = False, q_compass_bias: float = 0.0,
-                 alpha: float = 0.5, beta: float = 2.0, kappa: float = 0.0) -> None:
+                 compass_bias: bool = False, q_compass_bias: float = 0.0, log_scale: bool = False,
+                 q_log_scale: float = 0.0, alpha: float = 0.5, beta: float = 2.0, kappa: float = 0.0) -> None:
         self.x = np.array(x0, dtype=float)
         self.P = np.array(P0, dtype=float)
         self.n = n = self.x.shape[0]
-        nb = n - 5 - 2 * bool(current) - bool(compass_bias)
+        if log_scale and not current:
+            raise ValueError("the speed log's scale state needs the current states")
+        nb = n - 5 - 2 * bool(current) - bool(log_scale) - bool(compass_bias)
         if nb not in (0, 3):
-            raise ValueError("state must have 5 or 8 entries (+2 with the current, +1 with the compass bias)")
+            raise ValueError("state must have 5 or 8 entries (+2 with the current, +1 with the log's scale, +1 with "
+                             "the compass bias)")
         self.bias = nb == 3
         self.ib = 5 if self.bias else None  # first bias index
         self.ic = 5 + nb if current else None  # first current index
+        self.il = 7 + nb if log_scale else None  # the speed log's scale, after the current
         self.ik = n - 1 if compass_bias else None  # the compass bias
         self.q_compass = float(q_compass_bias)
+        self.q_log = float(q_log_scale)
         self.wm, self.wc, self.lam = merwe_weights(n, alpha, beta, kappa)
         self.q_acc, self.q_gyro = q_acc, q_gyro
         self.q_bias = np.array([q_bias_acc, q_bias_acc, q_bias_gyro]) ** 2
@@ -126,6 +134,8 @@ class UnscentedNav:
                 Q[5:8, 5:8] = np.diag(self.q_bias * T)
             if self.ic is not None:
                 Q[self.ic, self.ic] = Q[self.ic + 1, self.ic + 1] = self.q_current ** 2 * T
+            if self.il is not None:
+                Q[self.il, self.il] = self.q_log ** 2 * T
             if self.ik is not None:
                 Q[self.ik, self.ik] = self.q_compass ** 2 * T
             self._Q_T = (T, Q)
@@ -164,7 +174,8 @@ class UnscentedNav:
         _ukf_fast.predict_span(x, P, self.lam, self.wm, self.wc, self.q_acc, self.q_gyro, self.q_bias,
                                self.q_current, self.ib if self.ib is not None else -1,
                                self.ic if self.ic is not None else -1, self.ik if self.ik is not None else -1,
-                               self.q_compass, tab["ax"], tab["ay"], tab["wz"], tab["t"], k0, k1, poses, cov, states)
+                               self.q_compass, self.il if self.il is not None else -1, self.q_log,
+                               tab["ax"], tab["ay"], tab["wz"], tab["t"], k0, k1, poses, cov, states)
         self.x, self.P = x, P
         self.P_pred = P
 
@@ -213,12 +224,15 @@ class UnscentedNav:
     def water_speed_innovation(self, v: float) -> tuple[NDArray, NDArray, NDArray]:
         """Unscented transform of the speed through water along the bow,
         ``h(x) = (v_x - c_x) cos(theta) + (v_y - c_y) sin(theta)`` (current states required):
-        ``(eps (1,), P_zz without R (1, 1), P_xz (n, 1))``."""
+        ``(eps (1,), P_zz without R (1, 1), P_xz (n, 1))``. With the scale state the log reads ``h(x) / k``
+        (the EKF's model, :mod:`graphnav.estimators.ins_ekf`, which says why not ``h(x) = k v``)."""
         if self.ic is None:
             raise ValueError("a water-speed update needs the current states")
         X = sigma_points(self.x, self.P, self.lam)
         th = X[:, 4]
         Z = (X[:, 2] - X[:, self.ic]) * np.cos(th) + (X[:, 3] - X[:, self.ic + 1]) * np.sin(th)
+        if self.il is not None:
+            Z = Z / X[:, self.il]
         zm = float(self.wm @ Z)
         dz = Z - zm
         D = X - self.x
@@ -226,6 +240,7 @@ class UnscentedNav:
         pzz = float(self.wc @ (dz * dz))
         pxz = (D.T * self.wc) @ dz
         return np.array([v - zm]), np.array([[pzz]]), pxz[:, None]
+
 
     def update_nonlinear(self, eps: NDArray, Pzz: NDArray, Pxz: NDArray, R: NDArray) -> None:
         """The unscented Kalman update ``K = P_xz (P_zz + R)^-1``, ``P -= K S K^T``."""
@@ -311,13 +326,14 @@ def channel_variances(tab: dict[str, NDArray], opts: dict[str, Any]) -> NDArray:
 
 
 def initial_state(log: NavLog, tab: dict[str, NDArray], n_bias: int,
-                  opts: dict[str, Any], current: bool = False, compass_bias: float | None = None
-                  ) -> tuple[NDArray, NDArray]:
+                  opts: dict[str, Any], current: bool = False, compass_bias: float | None = None,
+                  log_scale: bool = False) -> tuple[NDArray, NDArray]:
     """x0/P0 from the pose prior (else the first GNSS fix and compass heading, with their sigmas);
     velocity from ``meta["initial_velocity"]`` when the log knows it (the paper's known initial state),
     else the GNSS velocity at the first step when there is one, else zero (2 m/s); the current (if
-    estimated) zero with ``sigma_current0``; the compass bias (``compass_bias``: its prior sigma [rad])
-    zero, and a heading taken from the compass is that reading less the bias (correlated -1)."""
+    estimated) zero with ``sigma_current0``; the log's scale (``log_scale``) 1 with ``sigma_log_scale``; the
+    compass bias (``compass_bias``: its prior sigma [rad]) zero, and a heading taken from the compass is that
+    reading less the bias (correlated -1)."""
     prior = log.pose_prior()
     z, r = tab["z"], channel_variances(tab, opts)
     i0 = np.flatnonzero(~np.isnan(z[:, 0]))
@@ -344,6 +360,9 @@ def initial_state(log: NavLog, tab: dict[str, NDArray], n_bias: int,
     if current:
         x += [0.0, 0.0]
         d += [opts["sigma_current0"] ** 2] * 2
+    if log_scale:
+        x += [1.0]
+        d += [opts["sigma_log_scale"] ** 2]
     if compass_bias is None:
         return np.array(x), np.diag(d)
     P = np.diag([*d, compass_bias ** 2])
@@ -380,6 +399,11 @@ class UkfOptions(GateOptions):
     current: bool | str = option("auto", "water-current states: auto (when the log has water_speed), true, false")
     sigma_current0: float = option(0.5, "prior 1-sigma of the water current", unit="m/s")
     q_current: float = option(0.005, "water-current random walk", unit="m/s/sqrt(s)")
+    log_scale: bool | str = option(
+        "auto", "the speed log's scale state k (the speed through water along the bow is k x the reading; the "
+        "graph's): auto (with the current states, when the log has water_speed), true, false")
+    sigma_log_scale: float = option(0.1, "prior 1-sigma of the speed log's scale (around 1: a log within 10 %)")
+    q_log_scale: float = option(5e-4, "the speed log's scale: random walk", unit="1/sqrt(s)")
     compass_bias: bool | str = option(
         "auto", "a compass-bias state (the compass reads theta + b; the graph's prior [compass] bias_sigma_deg and "
         "random walk bias_drift_deg): auto (when the log has compass and GNSS position or velocity, which hold "
@@ -413,15 +437,20 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
     auto_bias, bias_why = wants_bias(log)
     bias = resolve_flag(bias, auto_bias, "bias")
     tab = measurement_table(log)
-    current = resolve_flag(opts["current"], bool(np.any(~np.isnan(tab["z"][:, 5]))), "current")
+    water = bool(np.any(~np.isnan(tab["z"][:, 5])))
+    current = resolve_flag(opts["current"], water, "current")
+    ls = resolve_flag(opts["log_scale"], current and water, "log_scale")
+    if ls and not current:
+        raise ValueError(f"{name} option log_scale needs the current states (current=true)")
     seen = ~np.isnan(tab["z"])
     cb = resolve_flag(opts["compass_bias"], bool(seen[:, 2].any() and seen[:, [0, 1, 3, 4]].any()), "compass_bias")
     kb0, kbrw = compass_bias_model()
-    x0, P0 = initial_state(log, tab, 3 if bias else 0, opts, current, kb0 if cb else None)
+    x0, P0 = initial_state(log, tab, 3 if bias else 0, opts, current, kb0 if cb else None, ls)
     qn = _noise(log, opts)
     f = UnscentedNav(x0, P0, q_acc=qn["q_acc"], q_gyro=qn["q_gyro"],
                      q_bias_acc=qn["q_bias_acc"], q_bias_gyro=qn["q_bias_gyro"],
                      current=current, q_current=float(opts["q_current"]), compass_bias=cb, q_compass_bias=kbrw,
+                     log_scale=ls, q_log_scale=float(opts["q_log_scale"]),
                      alpha=opts["alpha"], beta=opts["beta"], kappa=opts["kappa"])
     gater = InnovationGate(**{k: opts[k] for k in GATING_DEFAULTS})
     step = _Updates(f, gater, tab, channel_variances(tab, opts), adapter, current)
@@ -464,17 +493,30 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
                             "r_used": step.r_used, "velocity": states[:, 2:4], **gater.info(),
                             "bias_states": bias, "bias_reason": bias_why if bias == auto_bias else "option",
                             "current_states": current, "process_noise": dict(qn)}
-    if bias:
+    _state_info(info, f, states, opts)
+    return RunResult(traj, traj, step_ms, info=info)
+
+
+def _state_info(info: dict[str, Any], f: UnscentedNav, states: NDArray, opts: dict[str, Any]) -> None:
+    """:func:`run_nav_filter`'s ``info`` (in place) on the augmented states: the final biases, current, speed-log
+    scale (with its sigma; its walk in ``process_noise``) and compass bias, the last three also per step
+    (``states``: the state at each step)."""
+    if f.bias:
         info["bias_final"] = f.x[5:8].tolist()
-    if current:
+    if f.ic is not None:
         info["current_final"] = f.x[f.ic:f.ic + 2].tolist()
         info["current"] = states[:, f.ic:f.ic + 2]
-    info["compass_bias_state"] = cb
+    info["log_scale_state"] = f.il is not None
+    if f.il is not None:
+        info["process_noise"]["q_log_scale"] = float(opts["q_log_scale"])
+        info["log_scale_final"] = float(f.x[f.il])
+        info["log_scale_sigma"] = math.sqrt(float(f.P[f.il, f.il]))
+        info["log_scale"] = states[:, f.il]
+    info["compass_bias_state"] = f.ik is not None
     if f.ik is not None:
         info["compass_bias_final_deg"] = math.degrees(float(f.x[f.ik]))
         info["compass_bias_sigma_deg"] = math.degrees(math.sqrt(float(f.P[f.ik, f.ik])))
         info["compass_bias"] = states[:, f.ik]
-    return RunResult(traj, traj, step_ms, info=info)
 
 
 class _Updates:

@@ -208,21 +208,22 @@ def test_inflate_scales_the_blocks_and_keeps_p_positive_definite():
     np.testing.assert_array_equal(inflate(P, np.ones(3)), P)
 
 
-@pytest.mark.parametrize("bias,current", [(False, False), (True, False), (True, True), (False, True)])
-def test_the_compiled_span_predicts_as_the_numpy_step_does(bias, current):
+@pytest.mark.parametrize("bias,current,scale", [(False, False, False), (True, False, False), (True, True, False),
+                                               (False, True, False), (True, True, True), (False, True, True)])
+def test_the_compiled_span_predicts_as_the_numpy_step_does(bias, current, scale):
     """:meth:`UnscentedNav.predict_span` (one compiled call over many IMU samples) against :meth:`predict`
     sample by sample: the same states, covariances and per-step outputs, across the +-pi seam, with
-    uneven sample times (Q recomputed), bias and current states."""
+    uneven sample times (Q recomputed), bias, current and speed-log scale states."""
     from graphnav.estimators import _ukf_fast
     if not _ukf_fast.COMPILED:
         pytest.skip("numba is not installed: the filter keeps its numpy step")
     rng = np.random.default_rng(3)
-    n = 5 + 3 * bias + 2 * current
+    n = 5 + 3 * bias + 2 * current + scale
     x0 = np.concatenate([[10.0, -4.0, 0.8, -0.3, math.pi - 0.02], rng.normal(0, 0.01, n - 5)])
     A = rng.normal(0, 0.1, (n, n))
     P0 = A @ A.T + np.diag(np.full(n, 0.01))
     kw = dict(q_acc=0.05, q_gyro=0.01, q_bias_acc=1e-3 if bias else 0.0, q_bias_gyro=1e-4 if bias else 0.0,
-              current=current, q_current=0.005 if current else 0.0)
+              current=current, q_current=0.005 if current else 0.0, log_scale=scale, q_log_scale=0.01 if scale else 0.0)
     m = 40
     t = np.cumsum(np.r_[0.0, np.where(np.arange(m) % 7 == 3, 0.02, 0.01)])
     tab = {"t": t, "ax": rng.normal(0, 0.3, m + 1), "ay": rng.normal(0, 0.3, m + 1), "wz": rng.normal(0.5, 0.2, m + 1)}
