@@ -170,12 +170,13 @@ class Water:
 
     def report(self, values: gtsam.Values, t: NDArray[np.float64]) -> dict[str, Any]:
         """The current [m/s] (east, north) in a solution (keyframe times ``t``): at the end, its mean and its
-        series (at most ~1000 samples); the speed log's scale at the end and its series."""
+        series (at most ~1000 samples); the speed log's scale at the end and each variable's (from its
+        first reading's time)."""
         out: dict[str, Any] = {}
         ks = [(key, t0) for key, t0 in self.scales if values.exists(key)]
         if ks:
-            out["speed_log_scale"] = {"scale": float(values.atVector(ks[-1][0])[0]),
-                                      "series": [[t0, float(values.atVector(key)[0])] for key, t0 in ks]}
+            out["log_scale_final"] = float(values.atVector(ks[-1][0])[0])  # (the filters' key)
+            out["log_scale_series"] = [[t0, float(values.atVector(key)[0])] for key, t0 in ks]
         if self.current is None:
             return out
         js = [j for j in range(self.current[0], self.current[1] + 1) if values.exists(W(j))]

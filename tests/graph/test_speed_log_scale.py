@@ -52,12 +52,12 @@ def test_the_scale_and_the_current_are_recovered_in_isam2_batch_and_fixed_lag():
     truth = np.array(CURRENT)
     for run in (run_isam2, run_batch, run_fixed_lag):
         info = run(log, **FAST).info
-        assert abs(info["speed_log_scale"]["scale"] - 1 / READS) < 0.01, (run.__name__, info["speed_log_scale"])
+        assert abs(info["log_scale_final"] - 1 / READS) < 0.01, (run.__name__, info["log_scale_final"])
         s = np.array(info["water_current"]["series"])  # (fixed-lag's: its window; after the first 50 s)
         err = np.abs(s[s[:, 0] > 50.0, 1:] - truth)
         assert len(err) and err.max() < 0.05, (run.__name__, err.max())
     info = run_isam2(log, water_scale_sigma=None, **FAST).info
-    assert "speed_log_scale" not in info
+    assert "log_scale_final" not in info
     s = np.array(info["water_current"]["series"])
     assert np.abs(s[s[:, 0] > 50.0, 1:] - truth).max() > 0.1
 
