@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
 from graphnav.graph.space import K, V, W
-from graphnav.graph.water import WaterRow
+from graphnav.graph.water import SURFACE_V, WaterRow
 from graphnav.log import NavLog, WaterSpeed
 from tests.graph.test_imu_graph import FAST, turn_log
 
@@ -29,19 +29,52 @@ def logged(n: int = 400, outage: tuple[float, float] | None = None) -> NavLog:
     return NavLog.from_unsorted(recs, meta=log.meta)
 
 
+def exact_error(values: gtsam.Values, v: float, yaw: float, sv: float, lee: float) -> float:
+    """The measurement model ``z = (V - W) / k + noise`` (graph.water) as GTSAM's error, ``|e|^2 / 2``."""
+    vel, cur, k = (np.asarray(values.atVector(key)) for key in (V(3), W(3), K(0)))
+    c, sn = math.cos(yaw), math.sin(yaw)
+    e = (vel - cur) / k[0] - v * np.array([c, sn, 0.0])
+    along, across = c * e[0] + sn * e[1], -sn * e[0] + c * e[1]
+    return 0.5 * ((along / sv) ** 2 + (across / lee) ** 2 + (e[2] / SURFACE_V) ** 2)
+
+
 @settings(max_examples=40, deadline=None)
-@given(st.floats(-math.pi, math.pi), st.floats(0.0, 5.0), st.floats(0.5, 1.5),
+@given(st.floats(-math.pi, math.pi), st.floats(0.0, 5.0), st.floats(0.5, 1.5), st.floats(0.0, 5.0),
        st.lists(st.floats(-3.0, 3.0), min_size=6, max_size=6))
-def test_the_linear_factor_is_the_between_factor_at_the_scaled_reading(yaw, v, k, vw):
-    """``V - W = k v bow`` as a ``LinearContainerFactor`` has the error of ``BetweenFactorVector(W, V, k v bow)``
-    at any values (the factor is linear: exact away from its linearisation point)."""
+def test_the_linear_factor_is_the_reading_model_linearised_about_its_scale(yaw, v, k0, m, vw):
+    """At ``k = k0`` the factor's error is the model's (any ``m``); where ``V - W = k0 m`` along the bow its
+    slope in ``k`` is the model's too (central differences)."""
     values = gtsam.Values()
     values.insert(V(3), np.array(vw[:3]))
     values.insert(W(3), np.array(vw[3:]))
-    values.insert(K(0), np.array([k]))
-    scaled = WaterRow(3, v, 0.05, 0.2, 0.0, K(0)).factor(yaw)
-    plain = WaterRow(3, k * v, 0.05, 0.2, 0.0).factor(yaw)
-    assert math.isclose(scaled.error(values), plain.error(values), rel_tol=1e-9, abs_tol=1e-9)
+    values.insert(K(0), np.array([k0]))
+    row = WaterRow(0.0, 3, v, 0.05, 0.2, yaw, K(0), m, k0)
+    assert math.isclose(row.factor().error(values), exact_error(values, v, yaw, 0.05, 0.2), rel_tol=1e-9,
+                        abs_tol=1e-9)
+    along = m  # V - W along the bow, k0 m: the factor's m is the model's reading there
+    values.update(V(3), np.array(vw[3:]) + k0 * m * np.array([math.cos(yaw), math.sin(yaw), 0.0]))
+    tangent = WaterRow(0.0, 3, v, 0.05, 0.2, yaw, K(0), along, k0).factor()
+    h = 1e-6
+    slopes = []
+    for f in (tangent.error, lambda x: exact_error(x, v, yaw, 0.05, 0.2)):
+        ends = []
+        for d in (h, -h):
+            x = gtsam.Values(values)
+            x.update(K(0), np.array([k0 + d]))
+            ends.append(f(x))
+        slopes.append((ends[0] - ends[1]) / (2 * h))
+    assert math.isclose(slopes[0], slopes[1], rel_tol=1e-4, abs_tol=1e-3), slopes
+
+
+def test_a_straight_leg_leaves_the_scale_to_its_prior():
+    """900 s at one speed on one heading, readings with 0.05 m/s of noise: the scale and the current along
+    the track are one unknown, so the scale stays where its prior and the current's put it (1.008 with
+    noiseless readings); a linearisation whose k column carried the readings' noise moved it to 0.10-1.22."""
+    rng = np.random.default_rng(1)
+    log = turn_log(v=TRUE_V, w_deg=0.0, n=900, gnss_sigma=1.0, gnss_noise=1.0, seed=11, current=CURRENT, imu_rate=10)
+    recs = list(log.records) + [WaterSpeed(float(t), TRUE_V * READS + rng.normal(0, 0.05), 0.05) for t in range(1, 901)]
+    info = run_isam2(NavLog.from_unsorted(recs, meta=log.meta), **FAST).info
+    assert abs(info["log_scale_final"] - 1.008) < 0.04, info["log_scale_final"]
 
 
 def test_the_scale_and_the_current_are_recovered_in_isam2_batch_and_fixed_lag():
