@@ -63,7 +63,7 @@ __all__ = ["GROUPS", "SCALABLE", "GraphBuilder", "Matcher", "NavPrev", "Step", "
 
 #: sensor groups of the factors (the noise estimation scales ``SCALABLE`` ones)
 GROUPS = ("anchor", "odometry", "motion", "icp", "loop", "gnss", "compass", "bias", "beacon", "chart", "pose_prior",
-          "cloud", "imu", "imu_bias", "gnss_velocity", "water_speed", "current", "attitude",
+          "cloud", "imu", "imu_bias", "gnss_velocity", "water_speed", "current", "log_scale", "attitude",
           "level")
 SCALABLE = ("odometry", "motion", "icp", "gnss", "compass", "beacon", "cloud")
 MEASUREMENTS = ("gnss", "heading", "beacon", "pose_prior", "gnss_velocity", "water_speed", "attitude")
@@ -154,17 +154,15 @@ class GraphBuilder:
 
     def carried_keys(self, k: int) -> list[int]:
         """The variables besides the pose ``X(k)`` a re-anchored fixed-lag smoother keeps at keyframe ``k``."""
-        keys = self.meas.carried_keys(k) + ([V(k), IB(k)] if self.nav else [])
-        w = self.meas.current_key(k)
-        return keys + ([w] if w is not None else [])
+        return self.meas.carried_keys(k) + ([V(k), IB(k)] if self.nav else [])
 
-    def current_key(self, k: int) -> int | None:
-        """The water current's variable at keyframe ``k`` when it is the newest (else ``None``)."""
-        return self.meas.current_key(k)
+    def water_keys(self, k: int) -> list[int]:
+        """The newest water current (when keyframe ``k``'s) and speed-log scale variables."""
+        return self.meas.water.keys(k)
 
-    def observe_current(self, w: NDArray[np.float64]) -> None:
-        """The solver's newest estimate of the water current (the next keyframes' initial value)."""
-        self.meas.current_guess = w
+    def observe_water(self, key: int, value: NDArray[np.float64]) -> None:
+        """The solver's newest estimate of a :meth:`water_keys` variable (the next ones' initial value)."""
+        self.meas.water.observe(key, value)
 
     def recent_odometry(self, t: float) -> tuple[float, float] | None:
         """The newest odometry sample's speed and yaw rate when recent at ``t``."""
@@ -177,7 +175,7 @@ class GraphBuilder:
         if self.nav and values.exists(IB(n - 1)):
             bias = values.atConstantBias(IB(n - 1))
             out["imu_bias_final"] = [*np.asarray(bias.accelerometer()).tolist(), *np.asarray(bias.gyroscope()).tolist()]
-        return {**out, **self.meas.current_report(values, np.array(self.keyframes.t))}
+        return {**out, **self.meas.water.report(values, np.array(self.keyframes.t))}
 
     # -- records in ------------------------------------------------------------------------------
     def push(self, rec: Record | KnownBeacon) -> None:

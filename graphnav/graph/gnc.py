@@ -189,6 +189,7 @@ def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: 
     base.setAbsoluteErrorTol(max(lm.tol, GNC_INNER_TOL))
     params = gtsam.GncLMParams(base)
     params.setLossType(gtsam.GncLossType.TLS)
+    params.setAllowNonNoiseModelFactors(True)  # the linear water-speed factors (graph.water): known inliers
     cset = set(cand)
     params.setKnownInliers([i for i in range(graph.size()) if i not in cset])
     try:

@@ -1,6 +1,6 @@
 """The measurement factors of the navigation graph: GNSS (gated online, compensated to its keyframe),
 GNSS velocity, compass (through an estimated bias frame), beacons (charted and unknown), water speed
-with the water current's state, and later ``pose_prior`` records -- each in the graph's state space
+(:mod:`graphnav.graph.water`), and later ``pose_prior`` records -- each in the graph's state space
 (:mod:`graphnav.graph.space`), each tagged with its sensor group.
 """
 
@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import gtsam
@@ -25,35 +24,11 @@ from .fix_gate import FixGate
 from .mounts import Mount
 from .order_stats import median
 from .smoother_config import SmootherConfig
-from .space import PlanarSpace, V, W
+from .space import PlanarSpace
 from .step import Step
+from .water import Water
 
-SURFACE_V = 0.1  # [m/s] the vertical of a water-speed factor (no vertical water velocity)
 MEDIAN_CHI2_2 = float(chi2_median(np.array([2.0]))[0])  # |d|^2 / sigma^2 of a 2-D fix: its median
-
-
-@dataclass(frozen=True)
-class WaterRow:
-    """A speed-through-water reading on keyframe ``a``: speed ``v`` along the bow [m/s], its sigma ``sv``
-    and the sigma across the bow ``lee`` (leeway). Its factor (:meth:`factor`) is linear in the
-    velocities, so the bow's direction is taken from an estimate of the keyframe's yaw: the builder's
-    estimate when the record arrives (``yaw``), the solution's in the closing step
-    (:meth:`graphnav.graph.solution.Closing.batch`)."""
-
-    a: int
-    v: float
-    sv: float
-    lee: float
-    yaw: float  # [rad] the bow's direction the builder's factor was made with
-
-    def factor(self, yaw: float) -> gtsam.BetweenFactorVector:
-        """``V(a) - W(a) = v (cos yaw, sin yaw, 0)``, covariance ``diag(sv, lee, SURFACE_V)^2`` along
-        and across the bow ``yaw``."""
-        c, sn = math.cos(yaw), math.sin(yaw)
-        R = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
-        cov = R @ np.diag([self.sv**2, self.lee**2, SURFACE_V**2]) @ R.T
-        return gtsam.BetweenFactorVector(W(self.a), V(self.a), np.array([self.v * c, self.v * sn, 0.0]),
-                                         gtsam.noiseModel.Gaussian.Covariance(cov))
 
 
 class GnssScale:
@@ -90,7 +65,7 @@ class GnssScale:
 
 class Measurements:
     """The measurement factors and their state: the charted beacons and the beacons met so far, the
-    compass-bias frame, the online GNSS gate's counters, the water current's variables.
+    compass-bias frame, the online GNSS gate's counters, the water-speed states (``water``).
 
     ``charted``, ``defaulted`` and ``counts`` are the builder's (shared); ``kf_t`` its keyframe times;
     ``mounts``: the sensors' mounts (the GNSS antennas' lever arms, the speed log's yaw).
@@ -114,33 +89,30 @@ class Measurements:
         #: the factors of the fixes the online gate rejected: the closing batch step reconsiders them
         #: (a cold start's first fixes can be the wrong ones, and the gate then rejects every good fix)
         self.rejected: list[gtsam.NonlinearFactor] = []
-        #: the water-speed readings, in the order of their factors (the closing step re-aims them: WaterRow)
-        self.water: list[WaterRow] = []
-        self.current: tuple[int, int] | None = None  # the water current W(j): (first, newest) keyframe
-        self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
         #: the Pose3 graph: a keyframe key's (roll, pitch) estimate when its factors are made (the builder's)
         self.tilt_of: Callable[[int], tuple[float, float] | None] | None = None
         self.arms: dict[str, tuple[float, float, float]] = {}  # GNSS lever arms (body frame, m) by source ("": all)
-        self.log_yaw = 0.0  # [rad] the speed log's mounting yaw (its axis from the bow)
+        log_yaw = 0.0  # [rad] the speed log's mounting yaw (its axis from the bow)
         for name, g in (mounts or {}).items():  # the GNSS antennas: the sensor's, and each source's
             if name == "gnss" or name.startswith("gnss@"):
                 self.arms[name.partition("@")[2]] = (g.x, g.y, g.z)
         if mounts and "water_speed" in mounts:
-            self.log_yaw = mounts["water_speed"].yaw
-            if abs(math.cos(self.log_yaw)) < 0.5:
+            log_yaw = mounts["water_speed"].yaw
+            if abs(math.cos(log_yaw)) < 0.5:
                 raise OptionError("mounts.water_speed.yaw", "mounts.water_speed.yaw: a speed log more than 60 deg "
-                                  f"off the bow measures no speed along it, got {self.log_yaw:g} rad")
+                                  f"off the bow measures no speed along it, got {log_yaw:g} rad")
+        #: speed through water, the current and the log's scale (graph.water)
+        self.water = Water(cfg, kf_t, defaulted, counts, log_yaw)
 
     def step(self, s: Step, k: int, due: list[tuple[int, Record]], pose_k: gtsam.Pose2,
              gate_cov: NDArray[np.float64] | None, prev: gtsam.Pose2 | None,
              offset: Callable[[int, float, int], gtsam.Pose2 | None]) -> None:
         """Keyframe ``k``'s measurement factors (:meth:`add`), the water current's variables up to it,
-        and the time stamps of the variables still in use (compass-bias frame, beacons)."""
+        and the time stamps of the variables still in use (compass-bias frame, beacons, the log's scale)."""
         if self.bias_key is not None:
             s.stamps[self.bias_key] = s.t
         self.add(s, k, due, pose_k, gate_cov, prev, offset)
-        if self.current is not None:
-            self.current_step(s, k)
+        self.water.step(s, k)
         for i in self.beacon_ids.values():
             s.stamps[F.L(i)] = s.t
 
@@ -154,14 +126,10 @@ class Measurements:
 
     def carried_keys(self, k: int) -> list[int]:
         """The variables a re-anchored fixed-lag smoother keeps besides keyframe ``k``'s state: the
-        compass-bias frame, the beacons, the water current at ``k``."""
+        compass-bias frame, the beacons, the water current at ``k`` and the speed log's scale."""
         keys = [self.bias_key] if self.bias_key is not None else []
         keys += [F.L(i) for i in self.beacon_ids.values()]
-        return keys
-
-    def current_key(self, k: int) -> int | None:
-        """The water current's variable at keyframe ``k`` when it is the newest one."""
-        return W(k) if self.current is not None and self.current[1] == k else None
+        return keys + self.water.keys(k)
 
     def report(self, values: gtsam.Values) -> dict[str, Any]:
         """The measurement states in a solution: the compass bias [deg], the beacons' first and final
@@ -174,21 +142,6 @@ class Measurements:
         out["beacon_estimates"] = {bid: sp.landmark_xy(values, F.L(i)).tolist()
                                    for bid, i in self.beacon_ids.items() if values.exists(F.L(i))}
         return out
-
-    def current_report(self, values: gtsam.Values, t: NDArray[np.float64]) -> dict[str, Any]:
-        """The water current [m/s] (east, north) in a solution (keyframe times ``t``): at the end, its
-        mean and its series (at most ~1000 samples)."""
-        if self.current is None:
-            return {}
-        js = [j for j in range(self.current[0], self.current[1] + 1) if values.exists(W(j))]
-        ws = np.array([np.asarray(values.atVector(W(j)))[:2] for j in js]).reshape(-1, 2)
-        if not len(js):
-            return {}
-        every = max(1, len(js) // 1000)  # the series: at most ~1000 samples
-        return {"water_current": {"vx": float(ws[-1, 0]), "vy": float(ws[-1, 1]),
-                                  "mean_vx": float(ws[:, 0].mean()), "mean_vy": float(ws[:, 1].mean()),
-                                  "series": [[float(t[j]), float(w[0]), float(w[1])]
-                                             for j, w in list(zip(js, ws, strict=True))[::every]]}}
 
     def add(self, s: Step, k: int, due: list[tuple[int, Record]], pose_k: gtsam.Pose2,
             prev_cov: NDArray[np.float64] | None, prev: gtsam.Pose2 | None,
@@ -227,7 +180,7 @@ class Measurements:
                 if not self.nav:  # the planar graph has no velocity variable
                     self.counts["ignored"] += 1
                     continue
-                self.water_speed(s, a, at(a), r)
+                self.water.reading(s, a, at(a).theta(), r)
             elif isinstance(r, GnssVelocity):
                 if not self.nav:  # the planar graph has no velocity variable
                     self.counts["ignored"] += 1
@@ -325,35 +278,6 @@ class Measurements:
         s.add(self.space.beacon(xa, F.L(self.beacon_ids[r.id]), rng_, brg, sr, sb, cfg.beacon.robust, cfg.beacon.k,
                                 tilt), "beacon")
 
-    def water_speed(self, s: Step, a: int, pa: gtsam.Pose2, r: WaterSpeed) -> None:
-        """Speed through water ``v`` along the bow at keyframe ``a``: ``V(a) - W(a) = v (cos yaw, sin yaw)``
-        (velocity over ground minus the water current), a native ``BetweenFactorVector(W(a), V(a))``
-        whose direction is the current heading estimate; along the bow the log's sigma, across it
-        the leeway ``hypot(water_leeway, water_leeway_rel |v|)`` (sideslip and the heading's error).
-        A log mounted at ``log_yaw`` from the bow reads ``v cos(log_yaw)`` of a flow along the bow: its
-        reading is divided by that; its lever arm (``omega x r`` in a turn) is not modelled."""
-        cfg = self.cfg
-        if self.current is None:  # the first water speed starts the current: W(a) with its prior
-            self.current = (a, a)
-            s.values.insert(W(a), np.zeros(3))
-            s.stamps[W(a)] = self.kf_t[a]
-            sc = cfg.water.current_sigma
-            s.add(gtsam.PriorFactorVector(W(a), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(
-                np.array([sc, sc, 1e-3]))), "current")
-        if a < self.current[0]:
-            self.counts["ignored"] += 1
-            return
-        sv = r.sigma_v if math.isfinite(r.sigma_v) else cfg.water.speed_sigma
-        if not math.isfinite(r.sigma_v):
-            self.defaulted.add("water_speed")
-        v = r.v
-        if self.log_yaw:
-            v, sv = v / math.cos(self.log_yaw), sv / abs(math.cos(self.log_yaw))
-        lee = cfg.water.leeway_sigma(v)
-        row = WaterRow(a, v, sv, lee, pa.theta())
-        self.water.append(row)
-        s.add(row.factor(row.yaw), "water_speed")
-
     def _bias_segment(self, s: Step) -> None:
         """A new compass-bias variable once the newest one has taken ``compass.bias_segment_s`` of readings,
         tied to it by the random walk ``compass.bias_drift_deg`` (:class:`CompassConfig`)."""
@@ -372,17 +296,3 @@ class Measurements:
         s.add(self.space.bias_between(self.bias_key, new, sigma), "bias")
         self.bias_key, self.bias_t0 = new, s.t
         self.bias_segments += 1
-
-    def current_step(self, s: Step, k: int) -> None:
-        """The water current's variables up to keyframe ``k``: a random walk ``current_rw`` between
-        consecutive keyframes (a tidal current turns over hours)."""
-        assert self.current is not None
-        first, last = self.current
-        for j in range(last + 1, k + 1):
-            dt = max(self.kf_t[j] - self.kf_t[j - 1], 1e-9)
-            sig = self.cfg.water.current_rw * math.sqrt(dt)
-            s.values.insert(W(j), self.current_guess)
-            s.stamps[W(j)] = self.kf_t[j]
-            s.add(gtsam.BetweenFactorVector(W(j - 1), W(j), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(
-                np.array([sig, sig, 1e-3]))), "current")
-        self.current = (first, max(last, k))

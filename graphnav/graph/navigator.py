@@ -54,7 +54,7 @@ from .position_walk import position_walk
 from .smoother_config import SmootherConfig, SolverConfig, auto_motion
 from .solution import Closing, joint_prior, marginal_priors, refresh_places
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt
-from .space import IB, PlanarSpace, V, W
+from .space import IB, PlanarSpace, V
 
 BATCH_INIT_FIRST = 32  # batch_init="incremental": the first solve at this many keyframes
 
@@ -327,9 +327,8 @@ class Navigator(Coasting):
                 bias = solver.estimate(IB(k), "ConstantBias")
                 vel_cov = solver.marginal(V(k)) if self.builder.wants_velocity_cov else None
                 self.last_state = (p, vel, bias, vel_cov)
-                w = self.builder.current_key(k)
-                if w is not None:
-                    self.builder.observe_current(np.asarray(solver.estimate(w, "Vector")))
+                for key in self.builder.water_keys(k):
+                    self.builder.observe_water(key, np.asarray(solver.estimate(key, "Vector")))
         except SolverError as exc:
             raise solve_failure(exc, t, self._rec, self.n_records) from None
         if loops is not None:
@@ -357,8 +356,9 @@ class Navigator(Coasting):
         if self.nav:
             self.last_state = (values.atPose3(F.X(k)), np.asarray(values.atVector(V(k))),
                                values.atConstantBias(IB(k)), None)
-            if values.exists(W(k)):
-                self.builder.observe_current(np.asarray(values.atVector(W(k))))
+            for key in self.builder.water_keys(k):
+                if values.exists(key):
+                    self.builder.observe_water(key, np.asarray(values.atVector(key)))
 
     def _rebase(self, k: int, t: float) -> None:
         """A fresh fixed-lag smoother (live mode) or iSAM2 with priors carrying the current marginals of
@@ -413,7 +413,7 @@ class Navigator(Coasting):
             return RunResult(empty, self.online(), np.zeros(0), np.array(self.track.icp_ms), info)
         c0, p0 = time.perf_counter(), time.process_time()
         closing = Closing(cfg, self.solver, self.space, self.groups, b.rejected_fixes, b.defaulted,
-                          b.motion.intervals, b.meas.water)
+                          b.motion.intervals, b.meas.water.rows)
         try:
             values, poses, covs = closing.solve(n, self.front, info)
         except SolverError as exc:

@@ -274,6 +274,22 @@ class WaterConfig:
         "prior 1-sigma of the water current (per axis) at its first keyframe", unit="m/s", flat="current_sigma")
     current_rw: float = option(0.002, "its random walk: 0.1 m/s in ~40 min (tides turn over hours)",
         unit="m/s/sqrt(s)", flat="current_rw")
+    scale_sigma: float | None = option(0.1,
+        "prior 1-sigma of the speed log's scale (true speed through water per unit of reading; a log's "
+        "calibration within 10 %): estimated with the current (graph.water). None: readings taken as true")
+    scale_rw: float = option(5e-4, "the scale's random walk between its variables (a calibration holds "
+        "over a voyage: 0.03 in an hour)", unit="1/sqrt(s)")
+    scale_segment_s: float | None = option(60.0,
+        "one scale variable per this many seconds of readings, consecutive ones tied by scale_rw (as "
+        "compass.bias_segment_s); None: one for the whole log", unit="s")
+
+    def __post_init__(self) -> None:
+        if self.scale_sigma is not None and not (math.isfinite(self.scale_sigma) and self.scale_sigma > 0):
+            raise ValueError(f"water.scale_sigma must be > 0 or None, got {self.scale_sigma}")
+        if not (math.isfinite(self.scale_rw) and self.scale_rw > 0):
+            raise ValueError(f"water.scale_rw must be > 0, got {self.scale_rw}")
+        if self.scale_segment_s is not None and not (math.isfinite(self.scale_segment_s) and self.scale_segment_s > 0):
+            raise ValueError(f"water.scale_segment_s must be > 0 or None, got {self.scale_segment_s}")
 
     def leeway_sigma(self, v: float) -> float:
         """[m/s] a water-speed reading's sigma across the bow at speed ``v``: ``hypot(leeway, leeway_rel |v|)``."""

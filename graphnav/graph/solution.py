@@ -25,15 +25,17 @@ import factors as F
 
 from . import gnc, noise, odometry_scale
 from .chi2 import significant_scale
-from .measurements import WaterRow
 from .smoother_config import SmootherConfig
 from .solver import Solver, levenberg_marquardt, marginals
 from .space import PlanarSpace
+from .water import WaterRow, neighbours
 
 if TYPE_CHECKING:
     from .loop_places import Deferred
 
 Vec = NDArray[np.float64]
+#: a water-speed factor's scale linearisation point is settled within this (:meth:`Closing._reaim_water`)
+SCALE_SETTLED = 1e-3
 #: rounds of re-aiming the water-speed factors at most (:meth:`Closing._reaim_water`)
 MAX_REAIM = 5
 
@@ -173,30 +175,37 @@ class Closing:
         """The water-speed factors re-aimed along the solution's bows and LM re-run, until no keyframe's
         yaw differs from the one its factors were made with by more than the pose relinearisation
         threshold (the rule by which iSAM2 finds a linearisation point stale). A water-speed factor
-        (:class:`~graphnav.graph.measurements.WaterRow`) is linear in the velocities and takes the bow's
+        (:class:`~graphnav.graph.water.WaterRow`) is linear in the velocities and takes the bow's
         direction from an estimate: the builder's, made as the record came -- iSAM2's online yaw, but
         batch's chained initial guess, which drifts between its incremental solves (psaros33, 1800 s from
         3400 s: half of batch's final error was these factors, and its withheld fixes 7.4 m off against
-        isam2's 2.0 m). Re-aimed, batch and isam2 solve one problem, whatever the guess."""
+        isam2's 2.0 m). Re-aimed, batch and isam2 solve one problem, whatever the guess. With the speed log's
+        scale a state the factors are linearised about an estimate's speed through water and scale too
+        (:mod:`graphnav.graph.water`): re-made about the solution's until those settle as well."""
         rows, at = self.water, [i for i, g in enumerate(self.groups) if g == "water_speed"]
         if len(at) != len(rows):
             raise RuntimeError(f"{len(at)} water-speed factors in the graph, {len(rows)} readings")
         tol = self.cfg.optimizer.relinearize_threshold
-        yaws = np.array([r.yaw for r in rows])
         rounds = iters = 0
+        ms = neighbours(rows)
+        scaled = any(r.scale is not None for r in rows)
         while True:
             now = np.array([self.space.read(values, F.X(r.a)).theta() for r in rows])
-            moved = float(np.max(np.abs(np.angle(np.exp(1j * (now - yaws)))), initial=0.0))
-            if moved <= tol or rounds == MAX_REAIM:
-                break
+            moved = float(np.max(np.abs(np.angle(np.exp(1j * (now - [r.yaw for r in rows])))), initial=0.0))
+            made = [r.about(float(y), values, m) for r, y, m in zip(rows, now, ms, strict=True)]
+            dk = max((d for _, d in made), default=0.0)
+            if moved <= tol and dk <= SCALE_SETTLED and (rounds or not scaled) or rounds == MAX_REAIM:
+                break  # (with a scale, once at least: the readings either side of each)
+            rows = [r for r, _ in made]
             new = gtsam.NonlinearFactorGraph(graph)
-            for i, r, y in zip(at, rows, now, strict=True):
-                new.replace(i, r.factor(float(y)))
-            graph, yaws = new, now
+            for i, r in zip(at, rows, strict=True):
+                new.replace(i, r.factor())
+            graph = new
             values, it = levenberg_marquardt(graph, values, self.solver.lm)
             rounds, iters = rounds + 1, iters + it
+        self.water = rows
         info["water_reaimed"] = {"rounds": rounds, "max_yaw_change_deg": math.degrees(moved),
-                                 "converged": moved <= tol}
+                                 "max_scale_change": dk, "converged": moved <= tol and dk <= SCALE_SETTLED}
         return graph, values, iters
 
     def _covariance_graph(self, pre: gtsam.NonlinearFactorGraph, post: gtsam.NonlinearFactorGraph,
@@ -246,7 +255,7 @@ def _type_of(key: int, space: PlanarSpace) -> str:
     """The GTSAM type name of a state variable by its symbol (poses, beacons ``l``, velocities ``v``,
     water current ``w``, IMU biases ``i``)."""
     ch = chr(gtsam.Symbol(key).chr())
-    return space.point_type if ch == "l" else "Vector" if ch in "vw" else "ConstantBias" if ch == "i" \
+    return space.point_type if ch == "l" else "Vector" if ch in "vwk" else "ConstantBias" if ch == "i" \
         else space.pose_type
 
 

@@ -41,6 +41,11 @@ def W(k: int) -> int:
     return gtsam.symbol("w", k)
 
 
+def K(i: int) -> int:
+    """Key of the speed log's scale (true speed through water per unit of reading), its ``i``-th segment."""
+    return gtsam.symbol("k", i)
+
+
 #: [rad, rad, m] roll, pitch, z sigmas of an embedded planar relative pose: no information
 #: (the IMU and the sea surface decide them)
 LOOSE = (0.5, 0.5, 10.0)
@@ -160,7 +165,7 @@ class NavSpace(PlanarSpace):
 
     def thresholds(self, pose: float, landmark: float, bias_yaw: float, velocity: float = 0.05,
                    imu_bias: tuple[float, float] = (1e-2, 1e-3)) -> dict[str, list[float]]:
-        return {"x": [pose] * 6, "v": [velocity] * 3, "w": [velocity] * 3,
+        return {"x": [pose] * 6, "v": [velocity] * 3, "w": [velocity] * 3, "k": [1e-3],  # (k: factors linear)
                 "i": [imu_bias[0]] * 3 + [imu_bias[1]] * 3, "l": [landmark] * 3,
                 "b": [1.0, 1.0, bias_yaw, 1.0, 1.0, 1.0]}
 

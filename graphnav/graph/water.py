@@ -1,0 +1,246 @@
+"""Speed through water, the water current and the speed log's scale in the Pose3 graph.
+
+A speed log measures the hull's speed through the water along its axis; over ground the boat moves at
+that plus the water current. With ``k`` the log's scale (the true speed per unit of reading: a paddle
+wheel under-reads as it fouls, an uncalibrated log is 5-30 % off -- ``graphnav info``'s ``speed_log``
+check, :func:`graphnav.evaluation.datacheck.speed_log_scale`), a reading ``v`` at keyframe ``a`` is
+
+    ``z = v (cos yaw, sin yaw, 0) = (V(a) - W(a)) / k + noise``,
+
+``V`` the velocity over ground, ``W`` the current, ``yaw`` the bow's direction; along the bow the log's
+sigma, across it the leeway. Linearised about a scale ``k0`` and a reading ``m`` (a vector along the bow),
+times ``k0``:
+
+    ``V - W - m k + k0 (m - z) = 0``, covariance ``k0^2 diag(sv, lee, SURFACE_V)^2`` along the bow:
+
+linear in ``(V, W, k)``, a native ``JacobianFactor`` in a ``LinearContainerFactor``, exact at ``k = k0``.
+Its ``k`` column is ``m``, and ``m`` must carry none of the readings' noise. On a straight leg at one
+speed the scale and the current along the track are one unknown; a noisy ``k`` column tells them apart
+by chance, information from nothing. On 900 s of a straight leg with readings of 0.05 m/s noise
+(tests/graph/test_speed_log_scale.py), against 1.008 the priors alone give: ``m = z`` (``V - W = k z``,
+the reading a regressor) shrinks ``k`` to 0.10 while the current takes the boat's speed; ``m`` from the
+solution's ``V - W`` gives 0.82, the mean of the other readings within 5 or 30 s 1.22 or 1.17, within
+:data:`NEIGHBOURS_S` 1.025. So ``m`` is that mean (the earlier readings as a record comes; both sides in
+the closing step, :class:`graphnav.graph.solution.Closing`, which re-makes the factors about the
+solution's bows and scale until they settle), along the bow: the turns, which tell the scale from the
+current, turn ``m`` with the bow. At the settled ``k0`` the linearisation's error ``(k - k0)(m -
+m_true)`` vanishes. Without a scale state the reading is taken as true:
+``BetweenFactorVector(W, V, z)``, exact.
+
+The current is a random walk per keyframe; the scale one variable per ``water.scale_segment_s`` of
+readings, consecutive ones tied by the random walk ``water.scale_rw`` (a log's calibration holds over a
+voyage: the segments keep one variable out of every clique). On a straight leg at one speed the scale
+and the current along the track are one unknown: the prior ``water.scale_sigma`` holds the scale there,
+the turns tell them apart.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, replace
+from typing import Any
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+from factors.imu import V
+
+from ..log import WaterSpeed
+from .smoother_config import SmootherConfig
+from .space import K, W
+from .step import Step
+
+SURFACE_V = 0.1  # [m/s] the vertical of a water-speed factor (no vertical water velocity)
+NEIGHBOURS_S = 300.0  # [s] a reading's linearisation point: the mean of the others within this (module docstring)
+
+
+@dataclass(frozen=True)
+class WaterRow:
+    """A speed-through-water reading at ``t`` on keyframe ``a``: speed ``v`` along the bow [m/s], its sigma
+    ``sv`` and the sigma across the bow ``lee`` (leeway); ``scale``: the key of the log's scale variable
+    (``None``: the reading is taken as true). Its factor (:meth:`factor`) is linearised about the bow
+    ``yaw``, the reading ``m`` (along it; ``None``: ``v``) and the scale ``k0`` (the module docstring)."""
+
+    t: float
+    a: int
+    v: float
+    sv: float
+    lee: float
+    yaw: float  # [rad] the bow's direction the factor is made with
+    scale: int | None = None
+    m: float | None = None
+    k0: float = 1.0
+
+    def factor(self) -> gtsam.NonlinearFactor:
+        """The reading's factor about the row's bow (and, with a scale, ``m`` and ``k0``)."""
+        c, sn = math.cos(self.yaw), math.sin(self.yaw)
+        rot = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+        bow = np.array([c, sn, 0.0])
+        z = self.v * bow
+        if self.scale is None:
+            cov = rot @ np.diag([self.sv**2, self.lee**2, SURFACE_V**2]) @ rot.T
+            return gtsam.BetweenFactorVector(W(self.a), V(self.a), z, gtsam.noiseModel.Gaussian.Covariance(cov))
+        m = (self.v if self.m is None else self.m) * bow
+        # whitening of k0 times the reading's noise: root' root = (k0^2 cov)^-1
+        root = np.diag([1.0 / self.sv, 1.0 / self.lee, 1.0 / SURFACE_V]) @ rot.T / self.k0
+        lin = gtsam.JacobianFactor(V(self.a), root, W(self.a), -root, self.scale, -(root @ m).reshape(3, 1),
+                                   self.k0 * root @ (z - m), gtsam.noiseModel.Unit.Create(3))
+        at = gtsam.Values()  # about zero: A x - b is the linearised residual at any (V, W, k)
+        at.insert(V(self.a), np.zeros(3))
+        at.insert(W(self.a), np.zeros(3))
+        at.insert(self.scale, np.zeros(1))
+        return gtsam.LinearContainerFactor(lin, at)
+
+    def about(self, yaw: float, values: gtsam.Values, m: float | None) -> tuple[WaterRow, float]:
+        """The row about a solution's bow ``yaw``, its scale in ``values`` and the reading ``m``; with the
+        change of the scale."""
+        if self.scale is None:
+            return replace(self, yaw=yaw), 0.0
+        k0 = clamp_scale(float(values.atVector(self.scale)[0]))
+        return replace(self, yaw=yaw, m=m, k0=k0), abs(k0 - self.k0)
+
+
+def neighbours(rows: list[WaterRow]) -> list[float | None]:
+    """Per row the mean of the other rows' readings within :data:`NEIGHBOURS_S` either side (``None``: none)."""
+    order = np.argsort([r.t for r in rows], kind="stable")
+    t, v = np.array([rows[i].t for i in order]), np.array([rows[i].v for i in order])
+    c = np.concatenate([[0.0], np.cumsum(v)])
+    lo, hi = np.searchsorted(t, t - NEIGHBOURS_S), np.searchsorted(t, t + NEIGHBOURS_S, side="right")
+    n, total = hi - lo - 1, c[hi] - c[lo] - v
+    out: list[float | None] = [None] * len(rows)
+    for j, i in enumerate(order):
+        out[i] = float(total[j] / n[j]) if n[j] > 0 else None
+    return out
+
+
+def clamp_scale(k: float) -> float:
+    """A scale estimate as a linearisation point: within [0.2, 5] (a log reading 5x off is broken)."""
+    return min(max(k, 0.2), 5.0)
+
+
+class Water:
+    """The water-speed readings and the states they bring: the current ``W(j)`` from the first reading's
+    keyframe on, the log's scale ``K(i)`` (:mod:`graphnav.graph.water`). ``kf_t``: the builder's keyframe
+    times; ``log_yaw``: the speed log's mounting yaw [rad]."""
+
+    def __init__(self, cfg: SmootherConfig, kf_t: list[float], defaulted: set[str], counts: dict[str, int],
+                 log_yaw: float = 0.0) -> None:
+        self.cfg, self.kf_t, self.defaulted, self.counts, self.log_yaw = cfg, kf_t, defaulted, counts, log_yaw
+        #: the readings, in the order of their factors (the closing step re-aims them)
+        self.rows: list[WaterRow] = []
+        self.current: tuple[int, int] | None = None  # the current's W(j): (first, newest) keyframe
+        self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
+        self.scale_key: int | None = None  # the newest scale variable
+        self.scale_t0: float | None = None  # when it took its first reading
+        self.scale_guess = np.ones(1)
+        self.scales: list[tuple[int, float]] = []  # (key, first reading's time) of each scale variable
+        self.recent: deque[tuple[float, float]] = deque()  # the readings (t, v) of the last NEIGHBOURS_S
+        self.recent_sum = 0.0
+
+    def reading(self, s: Step, a: int, yaw: float, r: WaterSpeed) -> None:
+        """Speed through water ``r.v`` along the bow at keyframe ``a`` (``yaw``: its estimate). A log mounted
+        at ``log_yaw`` from the bow reads ``v cos(log_yaw)`` of a flow along the bow: its reading is divided
+        by that; its lever arm (``omega x r`` in a turn) is not modelled."""
+        cfg = self.cfg.water
+        if self.current is None:  # the first water speed starts the current: W(a) with its prior
+            self.current = (a, a)
+            s.values.insert(W(a), np.zeros(3))
+            s.stamps[W(a)] = self.kf_t[a]
+            sc = cfg.current_sigma
+            s.add(gtsam.PriorFactorVector(W(a), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(
+                np.array([sc, sc, 1e-3]))), "current")
+        if a < self.current[0]:
+            self.counts["ignored"] += 1
+            return
+        sv = r.sigma_v if math.isfinite(r.sigma_v) else cfg.speed_sigma
+        if not math.isfinite(r.sigma_v):
+            self.defaulted.add("water_speed")
+        v = r.v
+        if self.log_yaw:
+            v, sv = v / math.cos(self.log_yaw), sv / abs(math.cos(self.log_yaw))
+        while self.recent and r.t - self.recent[0][0] > NEIGHBOURS_S:
+            self.recent_sum -= self.recent.popleft()[1]
+        m = self.recent_sum / len(self.recent) if self.recent else None
+        self.recent.append((r.t, v))
+        self.recent_sum += v
+        row = WaterRow(r.t, a, v, sv, cfg.leeway_sigma(v), yaw, self._scale(s), m,
+                       clamp_scale(float(self.scale_guess[0])))
+        self.rows.append(row)
+        s.add(row.factor(), "water_speed")
+
+    def _scale(self, s: Step) -> int | None:
+        """The scale variable a reading at ``s.t`` takes: the first with its prior, a new one once the
+        newest has taken ``scale_segment_s`` of readings (tied to it by the random walk ``scale_rw``)."""
+        cfg = self.cfg.water
+        if cfg.scale_sigma is None:
+            return None
+        seg = cfg.scale_segment_s
+        if self.scale_key is not None and (seg is None or s.t - self.scales[-1][1] < seg):
+            return self.scale_key
+        new = K(len(self.scales))
+        s.values.insert(new, self.scale_guess)
+        s.stamps[new] = s.t
+        if self.scale_key is None:
+            s.add(gtsam.PriorFactorVector(new, np.ones(1), gtsam.noiseModel.Isotropic.Sigma(1, cfg.scale_sigma)),
+                  "log_scale")
+        else:
+            sig = cfg.scale_rw * math.sqrt(max(s.t - self.scales[-1][1], 1e-9))
+            s.add(gtsam.BetweenFactorVector(self.scale_key, new, np.zeros(1),
+                                            gtsam.noiseModel.Isotropic.Sigma(1, sig)), "log_scale")
+        self.scale_key = new
+        self.scales.append((new, s.t))
+        return new
+
+    def step(self, s: Step, k: int) -> None:
+        """The current's variables up to keyframe ``k`` -- a random walk ``current_rw`` between consecutive
+        keyframes (a tidal current turns over hours) -- and the newest scale variable kept in use."""
+        if self.scale_key is not None:
+            s.stamps[self.scale_key] = s.t
+        if self.current is None:
+            return
+        first, last = self.current
+        for j in range(last + 1, k + 1):
+            dt = max(self.kf_t[j] - self.kf_t[j - 1], 1e-9)
+            sig = self.cfg.water.current_rw * math.sqrt(dt)
+            s.values.insert(W(j), self.current_guess)
+            s.stamps[W(j)] = self.kf_t[j]
+            s.add(gtsam.BetweenFactorVector(W(j - 1), W(j), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(
+                np.array([sig, sig, 1e-3]))), "current")
+        self.current = (first, max(last, k))
+
+    def keys(self, k: int) -> list[int]:
+        """The newest current (when it is keyframe ``k``'s) and scale variables: what a re-anchored
+        smoother carries and what the navigator reads back as the next variables' guesses."""
+        keys = [W(k)] if self.current is not None and self.current[1] == k else []
+        return keys + ([self.scale_key] if self.scale_key is not None else [])
+
+    def observe(self, key: int, value: NDArray[np.float64]) -> None:
+        """The solver's newest estimate of one of :meth:`keys` (the next variables' initial value)."""
+        if key == self.scale_key:
+            self.scale_guess = value
+        else:
+            self.current_guess = value
+
+    def report(self, values: gtsam.Values, t: NDArray[np.float64]) -> dict[str, Any]:
+        """The current [m/s] (east, north) in a solution (keyframe times ``t``): at the end, its mean and its
+        series (at most ~1000 samples); the speed log's scale at the end and each variable's (from its
+        first reading's time)."""
+        out: dict[str, Any] = {}
+        ks = [(key, t0) for key, t0 in self.scales if values.exists(key)]
+        if ks:
+            out["log_scale_final"] = float(values.atVector(ks[-1][0])[0])  # (the filters' key)
+            out["log_scale_series"] = [[t0, float(values.atVector(key)[0])] for key, t0 in ks]
+        if self.current is None:
+            return out
+        js = [j for j in range(self.current[0], self.current[1] + 1) if values.exists(W(j))]
+        ws = np.array([np.asarray(values.atVector(W(j)))[:2] for j in js]).reshape(-1, 2)
+        if not len(js):
+            return out
+        every = max(1, len(js) // 1000)  # the series: at most ~1000 samples
+        out["water_current"] = {"vx": float(ws[-1, 0]), "vy": float(ws[-1, 1]),
+                                "mean_vx": float(ws[:, 0].mean()), "mean_vy": float(ws[:, 1].mean()),
+                                "series": [[float(t[j]), float(w[0]), float(w[1])]
+                                           for j, w in list(zip(js, ws, strict=True))[::every]]}
+        return out
