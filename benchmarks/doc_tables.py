@@ -75,8 +75,9 @@ def holdout_table(obj: dict[str, Any]) -> str:
              f"scored ({h['withheld']['gnss']} fixes withheld); the fixes' own sigma (median, per axis) "
              f"{_f(h['fix_sigma_m'], '{:.2f}')} m.", "",
              "| rank | estimator | kind | end error RMSE [m] | end error max [m] | online end RMSE [m] "
-             "| all withheld mean [m] | NIS mean | GNSS residual RMS [m] | runtime [s] |",
-             "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "| without silent windows: end / online [m] | all withheld mean [m] | NIS mean | GNSS residual RMS [m] "
+             "| runtime [s] |",
+             "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     order = h["ranking"] + [n for n in est if n not in h["ranking"]]
     for i, n in enumerate(order, 1):
         e = est[n]
@@ -85,6 +86,8 @@ def holdout_table(obj: dict[str, Any]) -> str:
         note = f" ({e.get('error') or e.get('skipped')})" if not s else ""
         lines.append(f"| {rank} | {n}{note} | {e.get('kind', '')} | {_f(s.get('rmse_m'), '{:.2f}')} | "
                      f"{_f(s.get('max_m'), '{:.2f}')} | {_f(s.get('online_rmse_m'), '{:.2f}')} | "
+                     f"{_f(s.get('rmse_informative_m'), '{:.2f}')} / "
+                     f"{_f(s.get('online_rmse_informative_m'), '{:.2f}')} | "
                      f"{_f(s.get('mean_m'), '{:.2f}')} | "
                      f"{_f(s.get('nis_mean'), '{:.2f}')} | {_f(e.get('gnss_residual_rms_m'), '{:.2f}')} | "
                      f"{_f(e.get('runtime_s'), '{:.1f}')} |")

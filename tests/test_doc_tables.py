@@ -25,7 +25,8 @@ OBJ = {"estimators": {
               "heading_rmse_deg": 0.143, "nees_mean": 0.96, "rpe_rmse_m": 0.007,
               "rpe_1s_rmse_m": 0.009, "runtime_s": 41.5, "kind": "smoother",
               "gnss_residual_rms_m": 1.3,
-              "holdout": {"rmse_m": 1.27, "max_m": 2.06, "mean_m": 3.77, "nis_mean": 0.19}},
+              "holdout": {"rmse_m": 1.27, "max_m": 2.06, "mean_m": 3.77, "nis_mean": 0.19,
+                          "rmse_informative_m": 1.11, "online_rmse_m": 9.5, "online_rmse_informative_m": 4.25}},
     "water-dr": {"ate_rmse_m": 3.0924, "runtime_s": 0.1, "kind": "odometry", "gnss_residual_rms_m": 0.0,
                  "holdout": {"rmse_m": 12.11, "max_m": 13.66, "mean_m": 6.34, "nis_mean": 1.19}},
     "ukf": {"ate_rmse_m": None, "skipped": "needs imu records", "kind": "filter"}},
@@ -40,7 +41,7 @@ def test_tables_are_rendered_from_the_json(tables):
     assert demo[4].startswith("| – | ukf (not run: needs imu records) | filter | – |")
     ho = tables.holdout_table(OBJ)
     assert "2 of 2 windows of 60 s every 300 s scored (120 fixes withheld)" in ho and "4.50 m" in ho
-    assert "| 1 | isam2 | smoother | 1.27 | 2.06 | – | 3.77 | 0.19 | 1.30 | 41.5 |" in ho
+    assert "| 1 | isam2 | smoother | 1.27 | 2.06 | 9.50 | 1.11 / 4.25 | 3.77 | 0.19 | 1.30 | 41.5 |" in ho
     assert "| – | ukf (needs imu records) | filter | – |" in ho
 
 
