@@ -133,7 +133,6 @@ class Water:
         self.current: tuple[int, int] | None = None  # the current's W(j): (first, newest) keyframe
         self.current_guess = np.zeros(3)  # the newest estimate of it (the navigator keeps it up to date)
         self.scale_key: int | None = None  # the newest scale variable
-        self.scale_t0: float | None = None  # when it took its first reading
         self.scale_guess = np.ones(1)
         self.scales: list[tuple[int, float]] = []  # (key, first reading's time) of each scale variable
         self.recent: deque[tuple[float, float]] = deque()  # the readings (t, v) of the last NEIGHBOURS_S
