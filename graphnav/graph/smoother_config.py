@@ -56,6 +56,14 @@ ROBUST_BACKEND = ("gnc", "off")
 ROBUST_GROUPS = ("icp", "loop", "cloud", "gnss")  # the sensor groups the back end may switch off
 
 
+def _positive(name: str, val: float | None, *, none: bool = False) -> None:
+    """``val`` must be finite and > 0 (``none``: or None); else a ValueError naming ``name``."""
+    if none and val is None:
+        return
+    if val is None or not (math.isfinite(val) and val > 0):
+        raise ValueError(f"{name} must be > 0{' or None' if none else ''}, got {val}")
+
+
 def _choice(name: str, val: Any, allowed: tuple[str, ...]) -> None:
     if val not in allowed:
         raise ValueError(f"{name} must be one of {', '.join(allowed)}; got {val!r}")
@@ -236,10 +244,8 @@ class CompassConfig:
         "drifts)", unit="deg/sqrt(s)")
 
     def __post_init__(self) -> None:
-        if self.bias_segment_s is not None and not (math.isfinite(self.bias_segment_s) and self.bias_segment_s > 0):
-            raise ValueError(f"compass.bias_segment_s must be > 0 or None, got {self.bias_segment_s}")
-        if not (math.isfinite(self.bias_drift_deg) and self.bias_drift_deg > 0):
-            raise ValueError(f"compass.bias_drift_deg must be > 0, got {self.bias_drift_deg}")
+        _positive("compass.bias_segment_s", self.bias_segment_s, none=True)
+        _positive("compass.bias_drift_deg", self.bias_drift_deg)
     sigma_scale: float = option(1.0, "x every compass sigma")
     attitude_sigma_deg: float = option(
         1.0, "an attitude record's roll/pitch 1-sigma when it states none (a MEMS AHRS datasheet's dynamic "
@@ -284,12 +290,9 @@ class WaterConfig:
         "compass.bias_segment_s); None: one for the whole log", unit="s")
 
     def __post_init__(self) -> None:
-        if self.scale_sigma is not None and not (math.isfinite(self.scale_sigma) and self.scale_sigma > 0):
-            raise ValueError(f"water.scale_sigma must be > 0 or None, got {self.scale_sigma}")
-        if not (math.isfinite(self.scale_rw) and self.scale_rw > 0):
-            raise ValueError(f"water.scale_rw must be > 0, got {self.scale_rw}")
-        if self.scale_segment_s is not None and not (math.isfinite(self.scale_segment_s) and self.scale_segment_s > 0):
-            raise ValueError(f"water.scale_segment_s must be > 0 or None, got {self.scale_segment_s}")
+        _positive("water.scale_sigma", self.scale_sigma, none=True)
+        _positive("water.scale_rw", self.scale_rw)
+        _positive("water.scale_segment_s", self.scale_segment_s, none=True)
 
     def leeway_sigma(self, v: float) -> float:
         """[m/s] a water-speed reading's sigma across the bow at speed ``v``: ``hypot(leeway, leeway_rel |v|)``."""

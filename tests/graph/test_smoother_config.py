@@ -86,3 +86,16 @@ def test_a_flat_attribute_names_its_section():
         SmootherConfig().gnss_gate  # noqa: B018
     with pytest.raises(AttributeError, match="'nope'$"):
         SmootherConfig().nope  # noqa: B018
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"water_scale_sigma": 0}, "water.scale_sigma must be > 0 or None, got 0"),
+    ({"water_scale_rw": float("nan")}, "water.scale_rw must be > 0, got nan"),
+    ({"water_scale_segment_s": -60.0}, "water.scale_segment_s must be > 0 or None"),
+    ({"compass_bias_drift_deg": -1}, "compass.bias_drift_deg must be > 0, got -1"),
+])
+def test_a_scale_or_drift_that_is_not_positive_is_refused_by_name(options, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        SmootherConfig.from_options(options)
+    off = SmootherConfig.from_options({"water_scale_sigma": None, "water_scale_segment_s": None})
+    assert off.water.scale_sigma is None and off.water.scale_segment_s is None
