@@ -187,8 +187,7 @@ def _single(args: argparse.Namespace, options: dict, dropped: list[str], out: Ou
         summary["holdout"] = {**plan.describe(), **plan.score(result.trajectory, smoothed=smoothed)}
         summary["holdout_rmse_m"] = summary["holdout"]["rmse_m"]
         if result.online is not None and result.online is not result.trajectory:
-            on = plan.score(result.online)
-            summary["holdout"].update(online_rmse_m=on["rmse_m"], online_rmse_informative_m=on["rmse_informative_m"])
+            summary["holdout"].update(plan.score_online(result.online))
     if out is not None:  # each file atomically (temporary file + rename)
         write_tum(result.trajectory, out.file("trajectory.tum"))
         write_trajectory_csv(result.trajectory, out.file("trajectory.csv"))

@@ -210,9 +210,7 @@ def compare(log: NavLog, names: Sequence[str] | None = None, *,
                 e.summary["holdout"] = plan.score(e.result.trajectory, smoothed=e.kind == "smoother")
                 e.summary["holdout_rmse_m"] = e.summary["holdout"]["rmse_m"]
                 if e.result.online is not None and e.result.online is not e.result.trajectory:
-                    on = plan.score(e.result.online)
-                    e.summary["holdout"].update(online_rmse_m=on["rmse_m"],
-                                                online_rmse_informative_m=on["rmse_informative_m"])
+                    e.summary["holdout"].update(plan.score_online(e.result.online))
     hits = sum((e.summary or {}).get("icp_cache_hits", 0) for e in out) if cache is not None else None
     return Comparison(out, log, log_name=log_name or str(whole.meta.get("name", "log")), whole_log=whole,
                       holdout=plan, dropped=list(dropped), checks=data_checks(whole), workers=workers,

@@ -112,6 +112,12 @@ class Holdout:
                 "nis_mean": float(np.mean(nis)) if nis is not None and nis.size else None,
                 "scored": int(ends.size)}
 
+    def score_online(self, traj: Trajectory) -> dict[str, Any]:
+        """A smoother's online track scored as it was then (:meth:`score`): ``online_rmse_m`` and, without the
+        silent windows, ``online_rmse_informative_m``."""
+        on = self.score(traj)
+        return {"online_rmse_m": on["rmse_m"], "online_rmse_informative_m": on["rmse_informative_m"]}
+
     def describe(self) -> dict[str, Any]:
         """The plan as JSON: windows, how many fixes were withheld, and the sigma of the scored fixes."""
         s = self.fixes["sigma"][self.ends] if self.ends else np.zeros(0)

@@ -253,7 +253,7 @@ class Closing:
 
 def _type_of(key: int, space: PlanarSpace) -> str:
     """The GTSAM type name of a state variable by its symbol (poses, beacons ``l``, velocities ``v``,
-    water current ``w``, IMU biases ``i``)."""
+    water current ``w``, the speed log's scale ``k``, IMU biases ``i``)."""
     ch = chr(gtsam.Symbol(key).chr())
     return space.point_type if ch == "l" else "Vector" if ch in "vwk" else "ConstantBias" if ch == "i" \
         else space.pose_type

@@ -74,6 +74,8 @@ def test_a_window_with_no_other_record_is_marked_silent_and_left_out_of_the_info
     assert s["end_errors_m"] == pytest.approx([1.0, 2.0 * 20 - 1.0, 1.0])  # 199 s scored by the estimate at 179 s
     assert s["rmse_informative_m"] == pytest.approx(1.0)
     assert s["rmse_m"] == pytest.approx(np.sqrt((1 + 39**2 + 1) / 3))
+    # a smoother's online track, read the same way: both figures under the online_ names
+    assert plan.score_online(est) == pytest.approx({"online_rmse_m": s["rmse_m"], "online_rmse_informative_m": 1.0})
     assert withhold(_straight(), HoldoutSpec(100, 20)).silent == [False, False, False]
 
 
