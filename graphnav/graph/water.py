@@ -8,12 +8,17 @@ check, :func:`graphnav.evaluation.datacheck.speed_log_scale`), a reading ``v`` a
     ``z = v (cos yaw, sin yaw, 0) = (V(a) - W(a)) / k + noise``,
 
 ``V`` the velocity over ground, ``W`` the current, ``yaw`` the bow's direction; along the bow the log's
-sigma, across it the leeway. Linearised about a scale ``k0`` and a reading ``m`` (a vector along the bow),
-times ``k0``:
+sigma, across it the leeway. Linearised about a scale ``k0``, a reading ``m`` (a vector along the bow) and
+the bow ``yaw0`` (``dyaw`` the keyframe's turn from it, ``perp`` the bow turned 90 deg left), times ``k0``:
 
-    ``V - W - m k + k0 (m - z) = 0``, covariance ``k0^2 diag(sv, lee, SURFACE_V)^2`` along the bow:
+    ``V - W - m k - k0 v perp dyaw + k0 (m - z) = 0``, covariance ``k0^2 diag(sv, lee, SURFACE_V)^2`` along the bow:
 
-linear in ``(V, W, k)``, a native ``JacobianFactor`` in a ``LinearContainerFactor``, exact at ``k = k0``.
+linear in ``(V, W, k)`` and the pose's yaw, a native ``JacobianFactor`` in a ``LinearContainerFactor`` (the pose
+about a level ``yaw0``: under a heel ``phi`` and a trim ``theta`` its yaw column errs by ~``phi theta / 2``),
+exact at ``k = k0``, ``yaw = yaw0``. The yaw column is what lets the readings turn the heading: without it
+(the bow a constant of the factor, the estimate's as the record came) they said nothing on the heading, and
+online the compass bias wandered where the bows it had made put it (a synthetic boat turning 3 deg/s with
+a 0.5 deg compass: 4-10 deg RMS online; with the column 0.6 deg, ``tests/graph/test_water_speed_online.py``).
 Its ``k`` column is ``m``, and ``m`` must carry none of the readings' noise. On a straight leg at one
 speed the scale and the current along the track are one unknown; a noisy ``k`` column tells them apart
 by chance, information from nothing. On 900 s of a straight leg with readings of 0.05 m/s noise
@@ -24,8 +29,7 @@ solution's ``V - W`` gives 0.82, the mean of the other readings within 5 or 30 s
 the closing step, :class:`graphnav.graph.solution.Closing`, which re-makes the factors about the
 solution's bows and scale until they settle), along the bow: the turns, which tell the scale from the
 current, turn ``m`` with the bow. At the settled ``k0`` the linearisation's error ``(k - k0)(m -
-m_true)`` vanishes. Without a scale state the reading is taken as true:
-``BetweenFactorVector(W, V, z)``, exact.
+m_true)`` vanishes. Without a scale state the reading is taken as true (``k = 1``, no ``k`` column).
 
 The current is a random walk per keyframe; the scale one variable per ``water.scale_segment_s`` of
 readings, consecutive ones tied by the random walk ``water.scale_rw`` (a log's calibration holds over a

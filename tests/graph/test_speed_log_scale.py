@@ -10,8 +10,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
 from factors import X
+from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
 from graphnav.graph.space import K, V, W
 from graphnav.graph.water import SURFACE_V, WaterRow
 from graphnav.log import NavLog, WaterSpeed
