@@ -18,6 +18,7 @@ from graphnav.estimators.ekf import run_ekf
 from graphnav.estimators.ins_ekf import InsEkf
 from graphnav.estimators.log_zeros import ZeroReadings
 from graphnav.estimators.ukf import UnscentedNav
+from graphnav.evaluation.evaluate import summarize
 from graphnav.log import Gnss, GnssVelocity, Heading, Imu, NavLog, Truth, WaterSpeed
 
 FLOW = (0.3, 0.0)  # [m/s] the current
@@ -160,7 +161,8 @@ def test_the_censored_update_has_the_stall_in_both_sigmas_and_no_scale_or_headin
 
 
 def test_the_stall_option_is_the_ekf_and_the_ukfs_and_validated():
-    """``stall_speed`` is an option of each filter (stated in the report), and a bad one is refused."""
+    """``stall_speed`` is an option of each filter (stated in the report, which ``--json`` carries), and a bad one
+    is refused."""
     log = turn_log(seed=1, seconds=20.0, current=CURRENT, velocity=True, water=True)
     recs = [WaterSpeed(r.t, 0.0, r.sigma_v) if isinstance(r, WaterSpeed) and r.t < 3.0 else r for r in log.records]
     log = NavLog.from_unsorted(recs, meta=log.meta)
@@ -171,6 +173,8 @@ def test_the_stall_option_is_the_ekf_and_the_ukfs_and_validated():
             "stall_m_s": 0.4, "censored": 3, "unused": 0}, name
         with pytest.raises(ValueError, match="stall_speed"):
             estimators.run(name, log, stall_speed=-0.1)
+    res = estimators.run("ekf", log)  # the --json summary carries the report (the graph's too)
+    assert summarize("ekf", res, log, runtime_s=0.0)["water_speed_censored"] == res.info["water_speed_censored"]
 
 
 #: the last pose and its covariance's trace on main at 8ef337d (2026-12-07), before the censored zeros, with the
