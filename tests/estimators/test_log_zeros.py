@@ -15,6 +15,7 @@ from test_imu_filters import CURRENT, turn_log
 
 from graphnav import estimators
 from graphnav.estimators.ekf import run_ekf
+from graphnav.estimators.ekf_online import EkfOnline
 from graphnav.estimators.ins_ekf import InsEkf
 from graphnav.estimators.log_zeros import ZeroReadings
 from graphnav.estimators.ukf import UnscentedNav
@@ -175,6 +176,11 @@ def test_the_stall_option_is_the_ekf_and_the_ukfs_and_validated():
             estimators.run(name, log, stall_speed=-0.1)
     res = estimators.run("ekf", log)  # the --json summary carries the report (the graph's too)
     assert summarize("ekf", res, log, runtime_s=0.0)["water_speed_censored"] == res.info["water_speed_censored"]
+    live = EkfOnline(motion="imu", current=True, stall_speed=0.4)  # the live filter's info too
+    for r in log.records:
+        if r.kind != "truth":
+            live.add(r)
+    assert live.info()["water_speed_censored"] == {"stall_m_s": 0.4, "censored": 3, "unused": 0}
 
 
 #: the last pose and its covariance's trace on main at 8ef337d (2026-12-07), before the censored zeros, with the
