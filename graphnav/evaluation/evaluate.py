@@ -123,7 +123,8 @@ def summarize(name: str, result: RunResult, log: NavLog, *, runtime_s: float,
     out.update(gnss_scores(traj, log))
     for k in ("anchor", "loop_closures", "loop_candidates", "switched_off", "odometry_consistency", "odometry_scale",
               "noise_scale", "covariance_noise", "coasted_estimates", "gnss_rejected", "gnss_reacquired",
-              "water_current", "current_final", "log_scale_final", "log_scale_sigma", "log_scale_series"):
+              "water_current", "current_final", "log_scale_final", "log_scale_sigma", "log_scale_series",
+              "water_speed_censored", "water_reaimed_online"):
         if k in result.info:
             out[k] = result.info[k]
     return out

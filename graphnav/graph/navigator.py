@@ -55,6 +55,7 @@ from .smoother_config import SmootherConfig, SolverConfig, auto_motion
 from .solution import Closing, joint_prior, marginal_priors, refresh_places
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt
 from .space import IB, PlanarSpace, V
+from .water_aim import WaterAim
 
 BATCH_INIT_FIRST = 32  # batch_init="incremental": the first solve at this many keyframes
 
@@ -192,6 +193,9 @@ class Navigator(Coasting):
                              lm=LmSettings(cfg.optimizer.lm_tol, cfg.optimizer.lm_max_iterations,
                                            cfg.optimizer.lm_abs_tol), keep_graph=history)
         self.groups: list[str] = []  # sensor group of every factor in solver.graph
+        opt = cfg.optimizer  # the water-speed factors re-aimed online (graph.water_aim) as iSAM2 relinearises
+        self.aim = WaterAim(opt.relinearize_threshold, opt.relinearize_skip or (5 if self.nav else 1)) \
+            if cfg.water.reaim_online else None
         self.on_estimate = on_estimate
         self.history = history
         self.track = OnlineTrack(history)  # the online estimates and step times
@@ -270,6 +274,8 @@ class Navigator(Coasting):
                                tracked=(F.X(s.k),) if s.new_keyframe else (), kept=s.kept())
             self.solver.relinearize(self.cfg.optimizer.isam_extra_updates)
             self.fixes.step(self.solver, self.builder, s)
+            if self.aim is not None:
+                self.aim.step(self.solver, self.space, self.builder.meas.water, s)
         except SolverError as exc:
             raise solve_failure(exc, s.t, self._rec, self.n_records) from None
         if self.solver.keep:
@@ -370,6 +376,8 @@ class Navigator(Coasting):
         except SolverError as exc:
             raise solve_failure(exc, t, self._rec, self.n_records) from None
         self.fixes.forget()
+        if self.aim is not None:
+            self.aim.forget()
         self._base = k
         self.extra["rebases"] = self.extra.get("rebases", 0) + 1
 
@@ -433,6 +441,8 @@ class Navigator(Coasting):
             info["loop_edge_times"] = [[float(t[i]), float(t[k])] for i, k in info["loop_edges"]]
         info.update(b.report(values))  # compass bias, beacons, IMU bias, water current
         info.update({**self.extra, **self._coast_info(), **self.fixes.info()})
+        if self.aim is not None and self.aim.swapped:
+            info["water_reaimed_online"] = self.aim.swapped
         if self.solver.online:
             info["step_cpu_ms_median"] = float(np.median(self.track.step_cpu)) if self.track.step_cpu else None
             step_ms = np.array(self.track.step_ms)

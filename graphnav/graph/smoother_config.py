@@ -288,11 +288,17 @@ class WaterConfig:
     scale_segment_s: float | None = option(60.0,
         "one scale variable per this many seconds of readings, consecutive ones tied by scale_rw (as "
         "compass.bias_segment_s); None: one for the whole log", unit="s")
+    stall_speed: float | None = option(None, "below this the speed log reads zero (a paddle wheel stalls; a zero "
+        "reading is censored: graph.water); None: the smallest non-zero reading so far", unit="m/s")
+    reaim_online: bool = option(True, "iSAM2 and fixed-lag: a water-speed factor whose keyframe's yaw estimate "
+        "moved beyond relinearize_threshold from the bow it was made with is re-made about the estimate "
+        "(graph.water_aim); false: kept as made until the closing step")
 
     def __post_init__(self) -> None:
         _positive("water.scale_sigma", self.scale_sigma, none=True)
         _positive("water.scale_rw", self.scale_rw)
         _positive("water.scale_segment_s", self.scale_segment_s, none=True)
+        _positive("water.stall_speed", self.stall_speed, none=True)
 
     def leeway_sigma(self, v: float) -> float:
         """[m/s] a water-speed reading's sigma across the bow at speed ``v``: ``hypot(leeway, leeway_rel |v|)``."""

@@ -232,13 +232,15 @@ class Solver:
         except RuntimeError as exc:
             raise SolverError(_gtsam_message(exc)) from None
 
-    def remove(self, indices: list[int], settle: int = 3, add: gtsam.NonlinearFactorGraph | None = None) -> list[int]:
+    def remove(self, indices: list[int], settle: int = 3, add: gtsam.NonlinearFactorGraph | None = None,
+               relinearize: bool = True) -> list[int]:
         """iSAM2 and fixed-lag: take the factors of ``indices`` (:attr:`new_indices` of earlier updates) out of
         the online problem (``add``: put these in instead), then relinearise ``settle`` times (iSAM2: regardless
         of the skip; the robust kernels' weights of what remains re-evaluated); the new indices of ``add``'s
         factors (-1: not added), ``[]`` for batch. Fixed-lag: the factors the window has marginalised out stay in
         their marginals (only those still held are removed), and a factor of ``add`` only goes in while its
-        variables are in the window. The kept graph of the closing step is untouched."""
+        variables are in the window. ``relinearize=False`` (iSAM2): the swap alone, no relinearisation of
+        everything. The kept graph of the closing step is untouched."""
         if self.kind == "batch":
             return []
         add = add if add is not None else gtsam.NonlinearFactorGraph()
@@ -253,7 +255,7 @@ class Solver:
                     self.s.update()
             else:
                 ok = [True] * add.size()
-                got = iter(list(self.s.update(add, gtsam.Values(), list(indices), force_relinearize=True)
+                got = iter(list(self.s.update(add, gtsam.Values(), list(indices), force_relinearize=relinearize)
                                 .getNewFactorsIndices()))
                 for _ in range(settle):
                     self.s.update(gtsam.NonlinearFactorGraph(), gtsam.Values(), force_relinearize=True)
@@ -309,6 +311,13 @@ class Solver:
         if type_name in ("Vector", "Point2", "Point3", "Double"):
             return np.asarray(theta) + delta
         return theta.retract(delta)
+
+    def holds(self, key: int) -> bool:
+        """iSAM2 and fixed-lag: whether the online problem holds ``key`` (not an earlier segment's, not
+        marginalised out of the window)."""
+        if self.kind == "batch":
+            return False
+        return bool((self.s if self.kind == "isam2" else self.s.getISAM2()).valueExists(key))
 
     def settled(self, key: int) -> bool:
         """iSAM2: whether ``key``'s estimate no longer changes (an earlier segment's, :attr:`done`)."""

@@ -8,12 +8,17 @@ check, :func:`graphnav.evaluation.datacheck.speed_log_scale`), a reading ``v`` a
     ``z = v (cos yaw, sin yaw, 0) = (V(a) - W(a)) / k + noise``,
 
 ``V`` the velocity over ground, ``W`` the current, ``yaw`` the bow's direction; along the bow the log's
-sigma, across it the leeway. Linearised about a scale ``k0`` and a reading ``m`` (a vector along the bow),
-times ``k0``:
+sigma, across it the leeway. Linearised about a scale ``k0``, a reading ``m`` (a vector along the bow) and
+the bow ``yaw0`` (``dyaw`` the keyframe's turn from it, ``perp`` the bow turned 90 deg left), times ``k0``:
 
-    ``V - W - m k + k0 (m - z) = 0``, covariance ``k0^2 diag(sv, lee, SURFACE_V)^2`` along the bow:
+    ``V - W - m k - k0 v perp dyaw + k0 (m - z) = 0``, covariance ``k0^2 diag(sv, lee, SURFACE_V)^2`` along the bow:
 
-linear in ``(V, W, k)``, a native ``JacobianFactor`` in a ``LinearContainerFactor``, exact at ``k = k0``.
+linear in ``(V, W, k)`` and the pose's yaw, a native ``JacobianFactor`` in a ``LinearContainerFactor`` (the pose
+about a level ``yaw0``: under a heel ``phi`` and a trim ``theta`` its yaw column errs by ~``phi theta / 2``),
+exact at ``k = k0``, ``yaw = yaw0``. The yaw column is what lets the readings turn the heading: without it
+(the bow a constant of the factor, the estimate's as the record came) they said nothing on the heading, and
+online the compass bias wandered where the bows it had made put it (a synthetic boat turning 3 deg/s with
+a 0.5 deg compass: 4-10 deg RMS online; with the column 0.6 deg, ``tests/graph/test_water_speed_online.py``).
 Its ``k`` column is ``m``, and ``m`` must carry none of the readings' noise. On a straight leg at one
 speed the scale and the current along the track are one unknown; a noisy ``k`` column tells them apart
 by chance, information from nothing. On 900 s of a straight leg with readings of 0.05 m/s noise
@@ -24,14 +29,24 @@ solution's ``V - W`` gives 0.82, the mean of the other readings within 5 or 30 s
 the closing step, :class:`graphnav.graph.solution.Closing`, which re-makes the factors about the
 solution's bows and scale until they settle), along the bow: the turns, which tell the scale from the
 current, turn ``m`` with the bow. At the settled ``k0`` the linearisation's error ``(k - k0)(m -
-m_true)`` vanishes. Without a scale state the reading is taken as true:
-``BetweenFactorVector(W, V, z)``, exact.
+m_true)`` vanishes. Without a scale state the reading is taken as true (``k = 1``, no ``k`` column).
 
 The current is a random walk per keyframe; the scale one variable per ``water.scale_segment_s`` of
 readings, consecutive ones tied by the random walk ``water.scale_rw`` (a log's calibration holds over a
 voyage: the segments keep one variable out of every clique). On a straight leg at one speed the scale
 and the current along the track are one unknown: the prior ``water.scale_sigma`` holds the scale there,
 the turns tell them apart.
+
+**A zero reading is censored.** A paddle wheel stops turning below its stall speed and the log reads zero:
+psaros33's never reads between 0 and 1.0 kn (0.51 m/s; 22-40 % of its readings are zero, drifting in a
+current or moored in one included). Taken as ``V - W = 0`` to the log's sigma, those readings tied the
+current to the boat's velocity at a berth and whenever it drifted, and the current and the compass bias
+then took the difference once it sailed (psaros33-0004's online track 20-60 m off its withheld fixes). So
+a zero reading says only that the water passes the hull slower than the stall ``s`` (:class:`Stall`: the
+option ``water.stall_speed``, else the smallest non-zero reading so far; before one, a zero says nothing
+and is not used): ``V - W = 0`` with ``s / sqrt(3)`` (a uniform on ``(-s, s)``) added to both sigmas,
+without the scale (a reading of nothing has no scale), and out of the other readings' means ``m``. A log
+that reads fine speeds (plaka: 0.005 m/s) is the plain factor again.
 """
 
 from __future__ import annotations
@@ -45,6 +60,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from factors import X
 from factors.imu import V
 
 from ..log import WaterSpeed
@@ -72,26 +88,43 @@ class WaterRow:
     scale: int | None = None
     m: float | None = None
     k0: float = 1.0
+    censored: bool = False  # a zero reading: below the log's stall speed (module docstring)
 
     def factor(self) -> gtsam.NonlinearFactor:
-        """The reading's factor about the row's bow (and, with a scale, ``m`` and ``k0``)."""
+        """The reading's factor about the row's bow (and, with a scale, ``m`` and ``k0``): linear in ``(V, W,
+        k)`` and in the keyframe's yaw, whose column ``-k0 v perp`` (the model's derivative at the reading, across
+        the bow) lets the readings turn the heading (module docstring)."""
         c, sn = math.cos(self.yaw), math.sin(self.yaw)
         rot = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
         bow = np.array([c, sn, 0.0])
         z = self.v * bow
-        if self.scale is None:
+        if self.censored:  # no direction, no scale: V - W = 0 within the stall
             cov = rot @ np.diag([self.sv**2, self.lee**2, SURFACE_V**2]) @ rot.T
             return gtsam.BetweenFactorVector(W(self.a), V(self.a), z, gtsam.noiseModel.Gaussian.Covariance(cov))
+        k0 = self.k0 if self.scale is not None else 1.0
         m = (self.v if self.m is None else self.m) * bow
-        # whitening of k0 times the reading's noise: root' root = (k0^2 cov)^-1
-        root = np.diag([1.0 / self.sv, 1.0 / self.lee, 1.0 / SURFACE_V]) @ rot.T / self.k0
-        lin = gtsam.JacobianFactor(V(self.a), root, W(self.a), -root, self.scale, -(root @ m).reshape(3, 1),
-                                   self.k0 * root @ (z - m), gtsam.noiseModel.Unit.Create(3))
-        at = gtsam.Values()  # about zero: A x - b is the linearised residual at any (V, W, k)
+        # rows along the bow, across it, vertical, whitened by k0 times the reading's sigmas
+        root = np.diag([1.0 / self.sv, 1.0 / self.lee, 1.0 / SURFACE_V]) @ rot.T / k0
+        b = (k0 * root @ (z - m) if self.scale is not None else root @ z).reshape(3, 1)
+        yaw_col = np.zeros((1, 6))  # the Pose3 tangent's rotation about z: the yaw (level linearisation point)
+        yaw_col[0, 2] = -self.v / self.lee  # the across row of -root k0 v perp (root carries 1 / k0)
+        parts = gtsam.GaussianFactorGraph()
+        rows = [0, 2]  # along and vertical: (V, W[, k]); the k column is m, along the bow
+        if self.scale is not None:
+            parts.add(gtsam.JacobianFactor(V(self.a), root[rows], W(self.a), -root[rows], self.scale,
+                                           -(root[rows] @ m).reshape(2, 1), b[rows], gtsam.noiseModel.Unit.Create(2)))
+        else:
+            parts.add(gtsam.JacobianFactor(V(self.a), root[rows], W(self.a), -root[rows], b[rows],
+                                           gtsam.noiseModel.Unit.Create(2)))
+        parts.add(gtsam.JacobianFactor(V(self.a), root[[1]], W(self.a), -root[[1]], X(self.a), yaw_col, b[[1]],
+                                       gtsam.noiseModel.Unit.Create(1)))
+        at = gtsam.Values()  # (V, W, k) about zero: A x - b is the linearised residual at any of them
         at.insert(V(self.a), np.zeros(3))
         at.insert(W(self.a), np.zeros(3))
-        at.insert(self.scale, np.zeros(1))
-        return gtsam.LinearContainerFactor(lin, at)
+        at.insert(X(self.a), gtsam.Pose3(gtsam.Rot3.Yaw(self.yaw), gtsam.Point3(0.0, 0.0, 0.0)))
+        if self.scale is not None:
+            at.insert(self.scale, np.zeros(1))
+        return gtsam.LinearContainerFactor(gtsam.JacobianFactor(parts), at)
 
     def about(self, yaw: float, values: gtsam.Values, m: float | None) -> tuple[WaterRow, float]:
         """The row about a solution's bow ``yaw``, its scale in ``values`` and the reading ``m``; with the
@@ -106,13 +139,32 @@ def neighbours(rows: list[WaterRow]) -> list[float | None]:
     """Per row the mean of the other rows' readings within :data:`NEIGHBOURS_S` either side (``None``: none)."""
     order = np.argsort([r.t for r in rows], kind="stable")
     t, v = np.array([rows[i].t for i in order]), np.array([rows[i].v for i in order])
-    c = np.concatenate([[0.0], np.cumsum(v)])
+    used = np.array([not rows[i].censored for i in order], dtype=float)  # (a censored reading is no speed)
+    c, cn = np.concatenate([[0.0], np.cumsum(v * used)]), np.concatenate([[0.0], np.cumsum(used)])
     lo, hi = np.searchsorted(t, t - NEIGHBOURS_S), np.searchsorted(t, t + NEIGHBOURS_S, side="right")
-    n, total = hi - lo - 1, c[hi] - c[lo] - v
+    n, total = cn[hi] - cn[lo] - used, c[hi] - c[lo] - v * used
     out: list[float | None] = [None] * len(rows)
     for j, i in enumerate(order):
         out[i] = float(total[j] / n[j]) if n[j] > 0 else None
     return out
+
+
+class Stall:
+    """A speed log's stall speed [m/s]: ``given`` (the option ``water.stall_speed``), else the smallest non-zero
+    reading so far (``None`` before one)."""
+
+    def __init__(self, given: float | None) -> None:
+        self.given, self.seen = given, math.inf
+
+    def see(self, v: float) -> None:
+        if v != 0.0:
+            self.seen = min(self.seen, abs(v))
+
+    @property
+    def speed(self) -> float | None:
+        if self.given is not None:
+            return self.given
+        return self.seen if math.isfinite(self.seen) else None
 
 
 def clamp_scale(k: float) -> float:
@@ -137,6 +189,8 @@ class Water:
         self.scales: list[tuple[int, float]] = []  # (key, first reading's time) of each scale variable
         self.recent: deque[tuple[float, float]] = deque()  # the readings (t, v) of the last NEIGHBOURS_S
         self.recent_sum = 0.0
+        self.stall = Stall(cfg.water.stall_speed)
+        self.censored = self.unused = 0  # zero readings: below the stall speed, before one was known
 
     def reading(self, s: Step, a: int, yaw: float, r: WaterSpeed) -> None:
         """Speed through water ``r.v`` along the bow at keyframe ``a`` (``yaw``: its estimate). A log mounted
@@ -159,6 +213,10 @@ class Water:
         v = r.v
         if self.log_yaw:
             v, sv = v / math.cos(self.log_yaw), sv / abs(math.cos(self.log_yaw))
+        self.stall.see(v)
+        if v == 0.0:
+            self._censored(s, a, sv, yaw, r.t)
+            return
         while self.recent and r.t - self.recent[0][0] > NEIGHBOURS_S:
             self.recent_sum -= self.recent.popleft()[1]
         m = self.recent_sum / len(self.recent) if self.recent else None
@@ -166,6 +224,19 @@ class Water:
         self.recent_sum += v
         row = WaterRow(r.t, a, v, sv, cfg.leeway_sigma(v), yaw, self._scale(s), m,
                        clamp_scale(float(self.scale_guess[0])))
+        self.rows.append(row)
+        s.add(row.factor(), "water_speed")
+
+    def _censored(self, s: Step, a: int, sv: float, yaw: float, t: float) -> None:
+        """A zero reading at keyframe ``a``: ``V - W = 0`` within the stall speed (module docstring)."""
+        stall = self.stall.speed
+        if stall is None:
+            self.unused += 1
+            return
+        self.censored += 1
+        u = stall / math.sqrt(3.0)
+        row = WaterRow(t, a, 0.0, math.hypot(sv, u), math.hypot(self.cfg.water.leeway_sigma(0.0), u), yaw,
+                       censored=True)
         self.rows.append(row)
         s.add(row.factor(), "water_speed")
 
@@ -227,6 +298,9 @@ class Water:
         series (at most ~1000 samples); the speed log's scale at the end and each variable's (from its
         first reading's time)."""
         out: dict[str, Any] = {}
+        if self.censored or self.unused:
+            out["water_speed_censored"] = {"stall_m_s": self.stall.speed, "censored": self.censored,
+                                           "unused": self.unused}
         ks = [(key, t0) for key, t0 in self.scales if values.exists(key)]
         if ks:
             out["log_scale_final"] = float(values.atVector(ks[-1][0])[0])  # (the filters' key)

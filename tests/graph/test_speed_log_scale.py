@@ -10,6 +10,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from factors import X
 from graphnav.graph.log_runs import run_batch, run_fixed_lag, run_isam2
 from graphnav.graph.space import K, V, W
 from graphnav.graph.water import SURFACE_V, WaterRow
@@ -29,9 +30,11 @@ def logged(n: int = 400, outage: tuple[float, float] | None = None) -> NavLog:
     return NavLog.from_unsorted(recs, meta=log.meta)
 
 
-def exact_error(values: gtsam.Values, v: float, yaw: float, sv: float, lee: float) -> float:
-    """The measurement model ``z = (V - W) / k + noise`` (graph.water) as GTSAM's error, ``|e|^2 / 2``."""
+def exact_error(values: gtsam.Values, v: float, yaw: float | None, sv: float, lee: float) -> float:
+    """The measurement model ``z = (V - W) / k + noise`` (graph.water) as GTSAM's error, ``|e|^2 / 2``; the bow
+    ``yaw`` (``None``: the pose's in ``values``)."""
     vel, cur, k = (np.asarray(values.atVector(key)) for key in (V(3), W(3), K(0)))
+    yaw = values.atPose3(X(3)).rotation().yaw() if yaw is None else yaw
     c, sn = math.cos(yaw), math.sin(yaw)
     e = (vel - cur) / k[0] - v * np.array([c, sn, 0.0])
     along, across = c * e[0] + sn * e[1], -sn * e[0] + c * e[1]
@@ -48,6 +51,7 @@ def test_the_linear_factor_is_the_reading_model_linearised_about_its_scale(yaw, 
     values.insert(V(3), np.array(vw[:3]))
     values.insert(W(3), np.array(vw[3:]))
     values.insert(K(0), np.array([k0]))
+    values.insert(X(3), level(yaw))
     row = WaterRow(0.0, 3, v, 0.05, 0.2, yaw, K(0), m, k0)
     assert math.isclose(row.factor().error(values), exact_error(values, v, yaw, 0.05, 0.2), rel_tol=1e-9,
                         abs_tol=1e-9)
@@ -64,6 +68,34 @@ def test_the_linear_factor_is_the_reading_model_linearised_about_its_scale(yaw, 
             ends.append(f(x))
         slopes.append((ends[0] - ends[1]) / (2 * h))
     assert math.isclose(slopes[0], slopes[1], rel_tol=1e-4, abs_tol=1e-3), slopes
+
+
+def level(yaw: float, roll: float = 0.0, pitch: float = 0.0) -> gtsam.Pose3:
+    return gtsam.Pose3(gtsam.Rot3.Ypr(yaw, pitch, roll), gtsam.Point3(1.0, 2.0, 0.0))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-math.pi, math.pi), st.floats(0.5, 5.0), st.floats(0.5, 1.5), st.booleans(),
+       st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3))
+def test_the_factor_turns_the_heading_as_the_model_does(yaw, v, k0, scaled, cur):
+    """About a reading the model meets (``V - W = k0 v bow``), a turn ``h`` of the keyframe's (level) pose costs
+    what the model says to second order: the factor's yaw column is the model's derivative across the bow
+    (without it the readings could not tell the heading, and a compass bias went unobserved online)."""
+    values = gtsam.Values()
+    bow = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    values.insert(W(3), np.array(cur))
+    values.insert(V(3), np.array(cur) + k0 * v * bow)
+    values.insert(K(0), np.array([k0]))
+    row = WaterRow(0.0, 3, v, 0.05, 0.2, yaw, K(0) if scaled else None, v, k0 if scaled else 1.0)
+    if not scaled:
+        values.update(V(3), np.array(cur) + v * bow)
+        values.update(K(0), np.array([1.0]))
+    values.insert(X(3), level(yaw))
+    assert row.factor().error(values) < 1e-12
+    for h in (2e-3, -3e-3):
+        values.update(X(3), level(yaw + h))
+        got, want = row.factor().error(values), exact_error(values, v, None, 0.05, 0.2)
+        assert want > 0 and math.isclose(got, want, rel_tol=0.02), (h, got, want)
 
 
 def test_a_straight_leg_leaves_the_scale_to_its_prior():
