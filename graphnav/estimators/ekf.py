@@ -38,6 +38,7 @@ from ..trajectory import Trajectory
 from .gating import GATING_DEFAULTS, GateOptions
 from .imu_model import compass_bias_model, resolve_flag, yaw_from_compass
 from .ins_ekf import InsEkf
+from .log_zeros import ZeroReadings
 from .pose_ekf import PoseEkf
 
 if TYPE_CHECKING:
@@ -119,6 +120,9 @@ IMU_DEFAULTS: dict[str, Any] = {
     # speed and the current states); the stepper takes "auto" as on with the current states. Prior N(1,
     # sigma_log_scale^2), random walk q_log_scale [1/sqrt(s)]: the graph's scale state
     "log_scale": "auto", "sigma_log_scale": 0.1, "q_log_scale": 5e-4,
+    # a zero water-speed reading (a stalled log) is censored below this [m/s]; None: the smallest non-zero reading
+    # so far (graphnav.estimators.log_zeros, the graph's water.stall_speed)
+    "stall_speed": None,
 }
 VESSEL_KEYS = ("vessel_accel", "vessel_yaw_rate_deg", "vessel_steerage_speed", "vessel_position_walk")
 
@@ -190,6 +194,7 @@ class EkfStepper:
         self.imu_opts = io = {**IMU_DEFAULTS, **(imu or {})}
         self.vessel = vessel_model(io) if motion == "vessel" else None
         self.water = _water(io)
+        self.zeros = ZeroReadings(io["stall_speed"])  # the speed log's zero readings (log_zeros)
         #: motion="vessel" with a rate of turn: its records (the graph's vessel model's gyro z), the heading's rate
         self.rot: RotChain | None = None
         if motion in ("imu", "vessel"):
@@ -288,10 +293,20 @@ class EkfStepper:
         elif isinstance(r, GnssVelocity) and io["use_velocity"]:
             f.update_velocity((r.vx, r.vy), _sig(r.sigma, io["sigma_gnss_velocity"]), r.t)  # type: ignore
         elif isinstance(r, WaterSpeed) and io["current"]:
-            f.update_water_speed(r.v, _sig(r.sigma_v, io["sigma_water_speed"]), r.t,  # type: ignore
-                                 leeway=self.water.leeway_sigma(r.v))
+            self._water_speed(f, r)
         self.step_ms.append((time.perf_counter() - t0) * 1e3)
         return True
+
+    def _water_speed(self, f: PoseEkf, r: WaterSpeed) -> None:
+        """The speed through water ``r``: the water model's update, a zero reading censored below the log's stall
+        speed (:mod:`graphnav.estimators.log_zeros`; not used before one is known)."""
+        assert isinstance(f, InsEkf)
+        sigma = _sig(r.sigma_v, self.imu_opts["sigma_water_speed"])
+        how = self.zeros.see(r.v)
+        if how == "plain":
+            f.update_water_speed(r.v, sigma, r.t, leeway=self.water.leeway_sigma(r.v))
+        elif how == "censored":
+            f.update_water_zero(*self.zeros.sigmas(sigma, self.water.leeway_sigma(0.0)), r.t)
 
     def _predict(self, f: PoseEkf, T: float, m: Imu | None) -> None:
         """Filter ``f`` moved ``T`` seconds by the motion model: the unicycle with the held control, the IMU
@@ -500,6 +515,7 @@ def run_ekf(log: NavLog, *, on_estimate: OnEstimate | None = None, motion: str =
             info["log_scale_final"] = float(f.x[il])
             info["log_scale_sigma"] = math.sqrt(float(f.P[il, il]))
         info["log_scale_state"] = il is not None
+        info.update(st.zeros.info())
         ik = getattr(f, "ik", None)
         info["compass_bias_state"] = ik is not None
         if ik is not None:
@@ -575,6 +591,10 @@ class ImuMotionOptions:
                                     "first GNSS velocity)")
     sigma_gnss_velocity: float = option(0.1, "GNSS velocity sigma when the record gives none", unit="m/s")
     sigma_water_speed: float = option(0.1, "water-speed sigma when the record gives none", unit="m/s")
+    stall_speed: float | None = option(None, "a zero water-speed reading (a stalled paddle wheel) says only that the "
+                                       "speed through water is below this: censored, with this / sqrt(3) added to "
+                                       "both sigmas, no scale (null: the smallest non-zero reading so far; before "
+                                       "one a zero is not used; the graph's [water] stall_speed)", unit="m/s")
     use_velocity: bool = option(True, "false: GNSS velocities are not used")
     use_odometry: bool = option(True, "false: odometry speeds are not used as SOG updates")
     water_leeway: float | None = option(None, "water speed across the bow: sigma hypot(this, water_leeway_rel |v|) "

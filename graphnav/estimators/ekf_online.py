@@ -288,7 +288,7 @@ class EkfOnline:
                                "step_ms_p99": float(np.percentile(s, 99)) if s.size else None,
                                **self.coaster.info()}
         if st is not None:
-            out.update(st.f.counts, icp_failed=st.icp_failed)
+            out.update(st.f.counts, icp_failed=st.icp_failed, **st.zeros.info())
             if st.vessel is not None:
                 out["position_walk_live"] = self.walker.last if self.walker is not None else None
         return out

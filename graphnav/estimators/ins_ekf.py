@@ -23,7 +23,8 @@ the speed). The state-side form ``(v - c) . e_yaw - k s = 0`` is linear in ``k``
 reading a regressor: with the current as the intercept, a filter (R fixed at each step) regresses the speed
 along the bow on the reading, and on a straight leg at a steady speed, where the reading varies by its noise
 only, ``k`` is attenuated toward 0 (errors in variables): on the simulated harbour (420 s, k = 1) it fell to
-0.13 in the EKF and 0.12 in the UKF, the current taking the speed; ``1/k`` holds 1.
+0.13 in the EKF and 0.12 in the UKF, the current taking the speed; ``1/k`` holds 1. A zero reading (a stalled
+log) is censored (:meth:`InsEkf.update_water_zero`, :mod:`graphnav.estimators.log_zeros`).
 
 Without an IMU (``motion="vessel"``, :meth:`InsEkf.predict_vessel`) the same state moves as the graph's
 vessel model (:class:`graphnav.graph.imu_chain.ImuConfig`, ``vessel_*``): the velocity a random walk
@@ -208,3 +209,18 @@ class InsEkf(PoseEkf):
             along /= k
         nu = np.array([v - along, -(-ux * s + uy * c)])
         return self._update("water_speed", nu, H, np.diag([sigma ** 2, leeway ** 2]), t, reinit=False)
+
+    def update_water_zero(self, sigma: float, across: float, t: float | None = None) -> bool:
+        """A zero reading of a stalled log (:mod:`graphnav.estimators.log_zeros`): the velocity through the water
+        ``R(yaw)^T (v - c) = (0, 0)``, ``sigma`` along the bow and ``across`` it (each with the stall's spread),
+        linear in ``(v, c)``: the scale state's column zero (a reading of nothing has no scale), the heading's too
+        (the bow only orients the sigmas)."""
+        if self.ic is None:
+            raise ValueError("a water-speed update needs the current states")
+        ic, x = self.ic, self.x
+        c, s = math.cos(x[2]), math.sin(x[2])
+        H = np.zeros((2, len(x)))
+        H[0, 3], H[0, 4], H[1, 3], H[1, 4] = c, s, -s, c
+        H[:, ic:ic + 2] = -H[:, 3:5]
+        nu = -H @ x
+        return self._update("water_speed_zero", nu, H, np.diag([sigma ** 2, across ** 2]), t, reinit=False)

@@ -46,6 +46,7 @@ from . import _ukf_fast
 from .base import BatchEstimator
 from .gating import GATING_DEFAULTS, GateOptions, InnovationGate, reinit_block
 from .imu_model import compass_bias_model, imu_noise, resolve_flag, wants_bias, yaw_from_compass
+from .log_zeros import ZeroReadings
 
 # Table 2: the filters' a-priori noise (1-sigma)
 TABLE2 = {
@@ -241,6 +242,20 @@ class UnscentedNav:
         pxz = (D.T * self.wc) @ dz
         return np.array([v - zm]), np.array([[pzz]]), pxz[:, None]
 
+    def water_zero_innovation(self) -> tuple[NDArray, NDArray, NDArray]:
+        """A zero reading of a stalled log (:mod:`graphnav.estimators.log_zeros`): the velocity through the water
+        ``R(theta)^T (v - c) = (0, 0)`` along and across the bow, linear in ``(v, c)`` about the estimated bow
+        (the scale's and the heading's columns zero, as the EKF's ``InsEkf.update_water_zero``): ``(eps (2,),
+        H P H^T (2, 2), P H^T (n, 2))`` for :meth:`update_nonlinear`."""
+        if self.ic is None:
+            raise ValueError("a water-speed update needs the current states")
+        c, s = math.cos(self.x[4]), math.sin(self.x[4])
+        H = np.zeros((2, self.n))
+        H[0, 2], H[0, 3], H[1, 2], H[1, 3] = c, s, -s, c
+        H[:, self.ic:self.ic + 2] = -H[:, 2:4]
+        PHt = self.P @ H.T
+        return -H @ self.x, H @ PHt, PHt
+
 
     def update_nonlinear(self, eps: NDArray, Pzz: NDArray, Pxz: NDArray, R: NDArray) -> None:
         """The unscented Kalman update ``K = P_xz (P_zz + R)^-1``, ``P -= K S K^T``."""
@@ -382,6 +397,10 @@ class UkfOptions(GateOptions):
     r_com_deg: float | None = option(None, "compass sigma (null: the records'; Table 2: 0.5)", unit="deg")
     sigma_gnss_velocity: float = option(0.1, "GNSS velocity sigma when the record gives none", unit="m/s")
     sigma_water_speed: float = option(0.1, "water-speed sigma when the record gives none", unit="m/s")
+    stall_speed: float | None = option(None, "a zero water-speed reading (a stalled paddle wheel) says only that the "
+                                       "speed through water is below this: censored, with this / sqrt(3) added to "
+                                       "both sigmas, no scale (null: the smallest non-zero reading so far; before "
+                                       "one a zero is not used; the graph's [water] stall_speed)", unit="m/s")
     q_acc: float | None = option(None, "IMU acceleration noise per sample (null: meta['imu'] acc_std, else Table "
                                  "2's 0.0039)", unit="m/s^2")
     q_gyro_deg: float | None = option(None, "IMU yaw-rate noise per sample (null: meta['imu'] gyro_std, else "
@@ -453,7 +472,7 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
                      log_scale=ls, q_log_scale=float(opts["q_log_scale"]),
                      alpha=opts["alpha"], beta=opts["beta"], kappa=opts["kappa"])
     gater = InnovationGate(**{k: opts[k] for k in GATING_DEFAULTS})
-    step = _Updates(f, gater, tab, channel_variances(tab, opts), adapter, current)
+    step = _Updates(f, gater, tab, channel_variances(tab, opts), adapter, current, opts["stall_speed"])
     t = tab["t"]
     n = len(t)
     poses = np.empty((n, 3))
@@ -492,7 +511,7 @@ def run_nav_filter(log: NavLog, name: str, *, bias: bool | str = False, adapter:
     info: dict[str, Any] = {"options": {k: opts[k] for k in sorted(opts)}, "state_final": f.x.tolist(),
                             "r_used": step.r_used, "velocity": states[:, 2:4], **gater.info(),
                             "bias_states": bias, "bias_reason": bias_why if bias == auto_bias else "option",
-                            "current_states": current, "process_noise": dict(qn)}
+                            "current_states": current, "process_noise": dict(qn), **step.zeros.info()}
     _state_info(info, f, states, opts)
     return RunResult(traj, traj, step_ms, info=info)
 
@@ -524,8 +543,12 @@ class _Updates:
     (inflated by an adaptive filter's factor, gated, with an adapter's R), then the velocities."""
 
     def __init__(self, f: UnscentedNav, gater: InnovationGate, tab: dict[str, NDArray], rk: NDArray,
-                 adapter: Adapter | None, current: bool) -> None:
+                 adapter: Adapter | None, current: bool, stall_speed: float | None = None) -> None:
+        from ..graph.smoother_config import WaterConfig
+
         self.f, self.gater, self.adapter, self.current = f, gater, adapter, current
+        self.zeros = ZeroReadings(stall_speed)  # the speed log's zero readings (log_zeros)
+        self.leeway0 = WaterConfig().leeway_sigma(0.0)  # [m/s] across the bow at rest: the graph's
         self.t, self.z, self.rk = tab["t"], tab["z"], rk
         self.has = ~np.isnan(self.z)
         self.r_gate = getattr(adapter, "r_current", None)  # an adaptive R: gate with the one it holds now
@@ -555,13 +578,30 @@ class _Updates:
             R = self.adapter(k, ch, eps, HPH, r0k[ch]) if self.adapter is not None else r0k[ch]
             self.r_used[k, ch] = R
             f.update(idx, eps, HPH, np.diag(R))
-        _velocity_updates(f, gater, t, z[k], self.rk[k], self.has[k], self.current)
+        _velocity_updates(f, gater, t, z[k], self.rk[k], self.has[k])
+        if self.current and self.has[k, 5]:
+            self.water_speed(t, float(z[k, 5]), float(self.rk[k, 5]))
+
+    def water_speed(self, t: float, v: float, r: float) -> None:
+        """The speed through water ``v`` (variance ``r``): (v - c) along the bow, unscented; a zero reading censored
+        below the log's stall speed (:mod:`graphnav.estimators.log_zeros`; not used before one is known)."""
+        f, how = self.f, self.zeros.see(v)
+        if how == "plain":
+            eps, Pzz, Pxz = f.water_speed_innovation(v)
+            R = np.array([[r]])
+        elif how == "censored":
+            eps, Pzz, Pxz = f.water_zero_innovation()
+            R = np.diag(np.square(self.zeros.sigmas(math.sqrt(r), self.leeway0)))
+        else:
+            return
+        if self.gater.test("water_speed" if how == "plain" else "water_speed_zero", t, eps, Pzz, R) != "reject":
+            f.update_nonlinear(eps, Pzz, Pxz, R)
 
 
-def _velocity_updates(f: UnscentedNav, gater: InnovationGate, t: float, zk: NDArray, rkk: NDArray, hk: NDArray,
-                      current: bool) -> None:
-    """The updates after the pose's at one time: GNSS velocity over ground (H picks v_x, v_y), and with
-    the current states the speed through water ((v - c) along the bow, unscented)."""
+def _velocity_updates(f: UnscentedNav, gater: InnovationGate, t: float, zk: NDArray, rkk: NDArray,
+                      hk: NDArray) -> None:
+    """The GNSS velocity over ground after the pose's updates at one time (H picks v_x, v_y); the speed through
+    water follows (:meth:`_Updates.water_speed`)."""
     if hk[3] and hk[4]:
         vidx = _VELOCITY
         eps, HPH = f.innovation(vidx, zk[3:5])
@@ -571,11 +611,6 @@ def _velocity_updates(f: UnscentedNav, gater: InnovationGate, t: float, zk: NDAr
             f.update(vidx, eps, HPH, R)
         elif verdict == "reinit":
             reinit_block(f.x, f.P, vidx, zk[3:5].astype(float), R * gater.scale("gnss_velocity"))
-    if current and hk[5]:
-        eps, Pzz, Pxz = f.water_speed_innovation(float(zk[5]))
-        R = np.array([[rkk[5]]])
-        if gater.test("water_speed", t, eps, Pzz, R) != "reject":
-            f.update_nonlinear(eps, Pzz, Pxz, R)
 
 
 _VELOCITY = np.array([2, 3])  # v_x, v_y: the state entries of the GNSS velocity channels
