@@ -32,13 +32,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import option
+from ..graph.speed_log import ZeroReadings
 from ..log import Gnss, GnssVelocity, Heading, Imu, NavLog, Odometry, PosePrior, Record, Scan, Truth, WaterSpeed
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
 from .gating import GATING_DEFAULTS, GateOptions
 from .imu_model import compass_bias_model, resolve_flag, yaw_from_compass
 from .ins_ekf import InsEkf
-from .log_zeros import ZeroReadings
 from .pose_ekf import PoseEkf
 
 if TYPE_CHECKING:
@@ -121,7 +121,7 @@ IMU_DEFAULTS: dict[str, Any] = {
     # sigma_log_scale^2), random walk q_log_scale [1/sqrt(s)]: the graph's scale state
     "log_scale": "auto", "sigma_log_scale": 0.1, "q_log_scale": 5e-4,
     # a zero water-speed reading (a stalled log) is censored below this [m/s]; None: the smallest non-zero reading
-    # so far (graphnav.estimators.log_zeros, the graph's water.stall_speed)
+    # so far (graphnav.graph.speed_log, the graph's water.stall_speed)
     "stall_speed": None,
 }
 VESSEL_KEYS = ("vessel_accel", "vessel_yaw_rate_deg", "vessel_steerage_speed", "vessel_position_walk")
@@ -194,7 +194,7 @@ class EkfStepper:
         self.imu_opts = io = {**IMU_DEFAULTS, **(imu or {})}
         self.vessel = vessel_model(io) if motion == "vessel" else None
         self.water = _water(io)
-        self.zeros = ZeroReadings(io["stall_speed"])  # the speed log's zero readings (log_zeros)
+        self.zeros = ZeroReadings(io["stall_speed"])  # the speed log's zero readings (graph.speed_log)
         #: motion="vessel" with a rate of turn: its records (the graph's vessel model's gyro z), the heading's rate
         self.rot: RotChain | None = None
         if motion in ("imu", "vessel"):
@@ -299,7 +299,7 @@ class EkfStepper:
 
     def _water_speed(self, f: PoseEkf, r: WaterSpeed) -> None:
         """The speed through water ``r``: the water model's update, a zero reading censored below the log's stall
-        speed (:mod:`graphnav.estimators.log_zeros`; not used before one is known)."""
+        speed (:mod:`graphnav.graph.speed_log`; not used before one is known)."""
         assert isinstance(f, InsEkf)
         sigma = _sig(r.sigma_v, self.imu_opts["sigma_water_speed"])
         how = self.zeros.see(r.v)

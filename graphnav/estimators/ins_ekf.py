@@ -24,7 +24,7 @@ reading a regressor: with the current as the intercept, a filter (R fixed at eac
 along the bow on the reading, and on a straight leg at a steady speed, where the reading varies by its noise
 only, ``k`` is attenuated toward 0 (errors in variables): on the simulated harbour (420 s, k = 1) it fell to
 0.13 in the EKF and 0.12 in the UKF, the current taking the speed; ``1/k`` holds 1. A zero reading (a stalled
-log) is censored (:meth:`InsEkf.update_water_zero`, :mod:`graphnav.estimators.log_zeros`).
+log) is censored (:meth:`InsEkf.update_water_zero`, :mod:`graphnav.graph.speed_log`).
 
 Without an IMU (``motion="vessel"``, :meth:`InsEkf.predict_vessel`) the same state moves as the graph's
 vessel model (:class:`graphnav.graph.imu_chain.ImuConfig`, ``vessel_*``): the velocity a random walk
@@ -211,7 +211,7 @@ class InsEkf(PoseEkf):
         return self._update("water_speed", nu, H, np.diag([sigma ** 2, leeway ** 2]), t, reinit=False)
 
     def update_water_zero(self, sigma: float, across: float, t: float | None = None) -> bool:
-        """A zero reading of a stalled log (:mod:`graphnav.estimators.log_zeros`): the velocity through the water
+        """A zero reading of a stalled log (:mod:`graphnav.graph.speed_log`): the velocity through the water
         ``R(yaw)^T (v - c) = (0, 0)``, ``sigma`` along the bow and ``across`` it (each with the stall's spread),
         linear in ``(v, c)``: the scale state's column zero (a reading of nothing has no scale), the heading's too
         (the bow only orients the sigmas)."""

@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 
 from ..config import option
 from ..geometry import wrap_angle
+from ..graph.speed_log import ZeroReadings
 from ..log import NavLog
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
@@ -46,7 +47,6 @@ from . import _ukf_fast
 from .base import BatchEstimator
 from .gating import GATING_DEFAULTS, GateOptions, InnovationGate, reinit_block
 from .imu_model import compass_bias_model, imu_noise, resolve_flag, wants_bias, yaw_from_compass
-from .log_zeros import ZeroReadings
 
 # Table 2: the filters' a-priori noise (1-sigma)
 TABLE2 = {
@@ -243,7 +243,7 @@ class UnscentedNav:
         return np.array([v - zm]), np.array([[pzz]]), pxz[:, None]
 
     def water_zero_innovation(self) -> tuple[NDArray, NDArray, NDArray]:
-        """A zero reading of a stalled log (:mod:`graphnav.estimators.log_zeros`): the velocity through the water
+        """A zero reading of a stalled log (:mod:`graphnav.graph.speed_log`): the velocity through the water
         ``R(theta)^T (v - c) = (0, 0)`` along and across the bow, linear in ``(v, c)`` about the estimated bow
         (the scale's and the heading's columns zero, as the EKF's ``InsEkf.update_water_zero``): ``(eps (2,),
         H P H^T (2, 2), P H^T (n, 2))`` for :meth:`update_nonlinear`."""
@@ -547,7 +547,7 @@ class _Updates:
         from ..graph.smoother_config import WaterConfig
 
         self.f, self.gater, self.adapter, self.current = f, gater, adapter, current
-        self.zeros = ZeroReadings(stall_speed)  # the speed log's zero readings (log_zeros)
+        self.zeros = ZeroReadings(stall_speed)  # the speed log's zero readings (graph.speed_log)
         self.leeway0 = WaterConfig().leeway_sigma(0.0)  # [m/s] across the bow at rest: the graph's
         self.t, self.z, self.rk = tab["t"], tab["z"], rk
         self.has = ~np.isnan(self.z)
@@ -584,7 +584,7 @@ class _Updates:
 
     def water_speed(self, t: float, v: float, r: float) -> None:
         """The speed through water ``v`` (variance ``r``): (v - c) along the bow, unscented; a zero reading censored
-        below the log's stall speed (:mod:`graphnav.estimators.log_zeros`; not used before one is known)."""
+        below the log's stall speed (:mod:`graphnav.graph.speed_log`; not used before one is known)."""
         f, how = self.f, self.zeros.see(v)
         if how == "plain":
             eps, Pzz, Pxz = f.water_speed_innovation(v)

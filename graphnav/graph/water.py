@@ -42,11 +42,11 @@ psaros33's never reads between 0 and 1.0 kn (0.51 m/s; 22-40 % of its readings a
 current or moored in one included). Taken as ``V - W = 0`` to the log's sigma, those readings tied the
 current to the boat's velocity at a berth and whenever it drifted, and the current and the compass bias
 then took the difference once it sailed (psaros33-0004's online track 20-60 m off its withheld fixes). So
-a zero reading says only that the water passes the hull slower than the stall ``s`` (:class:`Stall`: the
-option ``water.stall_speed``, else the smallest non-zero reading so far; before one, a zero says nothing
-and is not used): ``V - W = 0`` with ``s / sqrt(3)`` (a uniform on ``(-s, s)``) added to both sigmas,
-without the scale (a reading of nothing has no scale), and out of the other readings' means ``m``. A log
-that reads fine speeds (plaka: 0.005 m/s) is the plain factor again.
+a zero reading says only that the water passes the hull slower than the stall ``s`` (the option
+``water.stall_speed``, else the smallest non-zero reading so far; before one, a zero says nothing and is not
+used: :mod:`graphnav.graph.speed_log`, the filters' rule too): ``V - W = 0`` with ``s / sqrt(3)`` (a uniform
+on ``(-s, s)``) added to both sigmas, without the scale (a reading of nothing has no scale), and out of the
+other readings' means ``m``. A log that reads fine speeds (plaka: 0.005 m/s) is the plain factor again.
 """
 
 from __future__ import annotations
@@ -66,6 +66,7 @@ from factors.imu import V
 from ..log import WaterSpeed
 from .smoother_config import SmootherConfig
 from .space import K, W
+from .speed_log import ZeroReadings
 from .step import Step
 
 SURFACE_V = 0.1  # [m/s] the vertical of a water-speed factor (no vertical water velocity)
@@ -149,24 +150,6 @@ def neighbours(rows: list[WaterRow]) -> list[float | None]:
     return out
 
 
-class Stall:
-    """A speed log's stall speed [m/s]: ``given`` (the option ``water.stall_speed``), else the smallest non-zero
-    reading so far (``None`` before one)."""
-
-    def __init__(self, given: float | None) -> None:
-        self.given, self.seen = given, math.inf
-
-    def see(self, v: float) -> None:
-        if v != 0.0:
-            self.seen = min(self.seen, abs(v))
-
-    @property
-    def speed(self) -> float | None:
-        if self.given is not None:
-            return self.given
-        return self.seen if math.isfinite(self.seen) else None
-
-
 def clamp_scale(k: float) -> float:
     """A scale estimate as a linearisation point: within [0.2, 5] (a log reading 5x off is broken)."""
     return min(max(k, 0.2), 5.0)
@@ -189,8 +172,7 @@ class Water:
         self.scales: list[tuple[int, float]] = []  # (key, first reading's time) of each scale variable
         self.recent: deque[tuple[float, float]] = deque()  # the readings (t, v) of the last NEIGHBOURS_S
         self.recent_sum = 0.0
-        self.stall = Stall(cfg.water.stall_speed)
-        self.censored = self.unused = 0  # zero readings: below the stall speed, before one was known
+        self.zeros = ZeroReadings(cfg.water.stall_speed)  # a stalled log's zero readings (graph.speed_log)
 
     def reading(self, s: Step, a: int, yaw: float, r: WaterSpeed) -> None:
         """Speed through water ``r.v`` along the bow at keyframe ``a`` (``yaw``: its estimate). A log mounted
@@ -213,9 +195,10 @@ class Water:
         v = r.v
         if self.log_yaw:
             v, sv = v / math.cos(self.log_yaw), sv / abs(math.cos(self.log_yaw))
-        self.stall.see(v)
-        if v == 0.0:
-            self._censored(s, a, sv, yaw, r.t)
+        how = self.zeros.see(v)
+        if how != "plain":
+            if how == "censored":
+                self._censored(s, a, sv, yaw, r.t)
             return
         while self.recent and r.t - self.recent[0][0] > NEIGHBOURS_S:
             self.recent_sum -= self.recent.popleft()[1]
@@ -229,14 +212,8 @@ class Water:
 
     def _censored(self, s: Step, a: int, sv: float, yaw: float, t: float) -> None:
         """A zero reading at keyframe ``a``: ``V - W = 0`` within the stall speed (module docstring)."""
-        stall = self.stall.speed
-        if stall is None:
-            self.unused += 1
-            return
-        self.censored += 1
-        u = stall / math.sqrt(3.0)
-        row = WaterRow(t, a, 0.0, math.hypot(sv, u), math.hypot(self.cfg.water.leeway_sigma(0.0), u), yaw,
-                       censored=True)
+        along, across = self.zeros.sigmas(sv, self.cfg.water.leeway_sigma(0.0))
+        row = WaterRow(t, a, 0.0, along, across, yaw, censored=True)
         self.rows.append(row)
         s.add(row.factor(), "water_speed")
 
@@ -298,9 +275,7 @@ class Water:
         series (at most ~1000 samples); the speed log's scale at the end and each variable's (from its
         first reading's time)."""
         out: dict[str, Any] = {}
-        if self.censored or self.unused:
-            out["water_speed_censored"] = {"stall_m_s": self.stall.speed, "censored": self.censored,
-                                           "unused": self.unused}
+        out.update(self.zeros.info())
         ks = [(key, t0) for key, t0 in self.scales if values.exists(key)]
         if ks:
             out["log_scale_final"] = float(values.atVector(ks[-1][0])[0])  # (the filters' key)

@@ -1,4 +1,4 @@
-"""The filters' zero readings of a stalled speed log (:mod:`graphnav.estimators.log_zeros`, the graph's rule,
+"""The filters' zero readings of a stalled speed log (:mod:`graphnav.graph.speed_log`, the graph's rule,
 :mod:`graphnav.graph.water`): a zero says only that the speed through water is below the stall ``s``, taken as
 ``R(yaw)^T (v - c) = 0`` with ``s / sqrt(3)`` added to both sigmas, without the scale state; not used before the
 first non-zero reading. Known answers on a boat that sails, is held slow in a current (the log reads zero), and
@@ -17,9 +17,9 @@ from graphnav import estimators
 from graphnav.estimators.ekf import run_ekf
 from graphnav.estimators.ekf_online import EkfOnline
 from graphnav.estimators.ins_ekf import InsEkf
-from graphnav.estimators.log_zeros import ZeroReadings
 from graphnav.estimators.ukf import UnscentedNav
 from graphnav.evaluation.evaluate import summarize
+from graphnav.graph.speed_log import ZeroReadings
 from graphnav.log import Gnss, GnssVelocity, Heading, Imu, NavLog, Truth, WaterSpeed
 
 FLOW = (0.3, 0.0)  # [m/s] the current

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from graphnav.graph.log_runs import run_isam2
-from graphnav.graph.water import Stall
+from graphnav.graph.speed_log import Stall
 from graphnav.log import Gnss, GnssVelocity, Heading, NavLog, Truth, WaterSpeed
 from tests.estimators.test_ekf_vessel import crabbing_boat
 

@@ -1,15 +1,15 @@
-"""The filters' zero readings of a stalled speed log, censored as the graph censors them (:mod:`graphnav.graph.water`).
+"""A stalled speed log's zero readings, censored: one rule for the graph (:mod:`graphnav.graph.water`) and the filters.
 
 A paddle wheel stops turning below its stall speed ``s`` and the log reads exactly zero (psaros33 never reads
 between 0 and 1.0 kn; 22-40 % of its readings are zero, drifting or moored in a current included). A zero
-reading says only that the water passes the hull slower than ``s``: the filters take it as the velocity
-through the water ``R(yaw)^T (v - c) = (0, 0)`` (along and across the bow) with ``s / sqrt(3)`` (a uniform on
-``(-s, s)``) added in quadrature to both sigmas, the along-bow one the record's and the across-bow one the
-leeway at rest, and without the speed log's scale state (a reading of nothing has no scale: its Jacobian column
-is zero) or the heading (the bow only orients the sigmas, as the graph's factor made about the estimated bow).
-``s`` is the option ``stall_speed``, else the smallest non-zero reading so far (:class:`graphnav.graph.water.Stall`);
-before one, a zero reading says nothing and is not used. A log that reads fine speeds (plaka: 0.005 m/s) gets
-nearly the plain measurement back. docs/ekf.md, *Zero readings of a stalled log*.
+reading says only that the water passes the hull slower than ``s``: it is taken as the velocity through the
+water ``R(yaw)^T (V - W) = (0, 0)`` (along and across the bow) with ``s / sqrt(3)`` (a uniform on ``(-s, s)``)
+added in quadrature to both sigmas, the along-bow one the record's and the across-bow one the leeway at rest,
+and without the speed log's scale (a reading of nothing has no scale) or the heading (the bow only orients the
+sigmas). ``s`` is the option ``stall_speed`` (the graph's ``water.stall_speed``), else the smallest non-zero
+reading so far (:class:`Stall`); before one, a zero reading says nothing and is not used. A log that reads fine
+speeds (plaka: 0.005 m/s) gets nearly the plain measurement back. docs/smoother.md *Speed through water online*,
+docs/ekf.md *Zero readings of a stalled log*. No gtsam here: the filters import it.
 """
 
 from __future__ import annotations
@@ -18,15 +18,31 @@ import math
 from typing import Any
 
 
+class Stall:
+    """A speed log's stall speed [m/s]: ``given`` (the option), else the smallest non-zero reading so far (``None``
+    before one)."""
+
+    def __init__(self, given: float | None) -> None:
+        self.given, self.seen = given, math.inf
+
+    def see(self, v: float) -> None:
+        if v != 0.0:
+            self.seen = min(self.seen, abs(v))
+
+    @property
+    def speed(self) -> float | None:
+        if self.given is not None:
+            return self.given
+        return self.seen if math.isfinite(self.seen) else None
+
+
 class ZeroReadings:
-    """A speed log's readings as a filter takes them (module docstring): :meth:`see` each reading in time order;
-    ``stall_speed`` the option (``None``: the smallest non-zero reading so far)."""
+    """A speed log's readings as the graph and the filters take them (module docstring): :meth:`see` each reading
+    in time order; ``stall_speed`` the option (``None``: the smallest non-zero reading so far)."""
 
     def __init__(self, stall_speed: float | None) -> None:
         if stall_speed is not None and not (math.isfinite(stall_speed) and stall_speed > 0.0):
             raise ValueError(f"stall_speed must be positive and finite or null, not {stall_speed!r}")
-        from ..graph.water import Stall  # (here: importing the filters does not import gtsam)
-
         self.stall = Stall(None if stall_speed is None else float(stall_speed))
         self.censored = self.unused = 0
 
@@ -56,7 +72,7 @@ class ZeroReadings:
         return math.hypot(sigma, u), math.hypot(leeway, u)
 
     def info(self) -> dict[str, Any]:
-        """The run info's ``water_speed_censored`` (the graph's key) when the log had a zero reading, else empty."""
+        """The run info's ``water_speed_censored`` when the log had a zero reading, else empty."""
         if not (self.censored or self.unused):
             return {}
         return {"water_speed_censored": {"stall_m_s": self.stall.speed, "censored": self.censored,
