@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry import wrap_angle
+from ..graph.speed_log import through_water_rows
 from .pose_ekf import PoseEkf
 
 
@@ -217,10 +218,6 @@ class InsEkf(PoseEkf):
         (the bow only orients the sigmas)."""
         if self.ic is None:
             raise ValueError("a water-speed update needs the current states")
-        ic, x = self.ic, self.x
-        c, s = math.cos(x[2]), math.sin(x[2])
-        H = np.zeros((2, len(x)))
-        H[0, 3], H[0, 4], H[1, 3], H[1, 4] = c, s, -s, c
-        H[:, ic:ic + 2] = -H[:, 3:5]
-        nu = -H @ x
+        H = through_water_rows(len(self.x), float(self.x[2]), 3, self.ic)
+        nu = -H @ self.x
         return self._update("water_speed_zero", nu, H, np.diag([sigma ** 2, across ** 2]), t, reinit=False)

@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from ..config import option
 from ..geometry import wrap_angle
-from ..graph.speed_log import ZeroReadings
+from ..graph.speed_log import ZeroReadings, through_water_rows
 from ..log import NavLog
 from ..result import OnEstimate, RunResult
 from ..trajectory import Trajectory
@@ -249,10 +249,7 @@ class UnscentedNav:
         H P H^T (2, 2), P H^T (n, 2))`` for :meth:`update_nonlinear`."""
         if self.ic is None:
             raise ValueError("a water-speed update needs the current states")
-        c, s = math.cos(self.x[4]), math.sin(self.x[4])
-        H = np.zeros((2, self.n))
-        H[0, 2], H[0, 3], H[1, 2], H[1, 3] = c, s, -s, c
-        H[:, self.ic:self.ic + 2] = -H[:, 2:4]
+        H = through_water_rows(self.n, float(self.x[4]), 2, self.ic)
         PHt = self.P @ H.T
         return -H @ self.x, H @ PHt, PHt
 

@@ -17,6 +17,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 
 class Stall:
     """A speed log's stall speed [m/s]: ``given`` (the option), else the smallest non-zero reading so far (``None``
@@ -77,3 +80,14 @@ class ZeroReadings:
             return {}
         return {"water_speed_censored": {"stall_m_s": self.stall.speed, "censored": self.censored,
                                          "unused": self.unused}}
+
+
+def through_water_rows(n: int, yaw: float, iv: int, ic: int) -> NDArray[np.float64]:
+    """The ``2 x n`` Jacobian of the velocity through the water along and across the bow, ``R(yaw)^T (v - c)``, in a
+    filter's ``n`` states with the velocity at ``iv:iv+2`` and the current at ``ic:ic+2``: a censored reading's
+    measurement (linear in ``v`` and ``c``; the heading only orients it)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    H = np.zeros((2, n))
+    H[0, iv], H[0, iv + 1], H[1, iv], H[1, iv + 1] = c, s, -s, c
+    H[:, ic:ic + 2] = -H[:, iv:iv + 2]
+    return H

@@ -64,8 +64,10 @@ class WaterAim:
             if r.a not in yaws:
                 yaws[r.a] = space.pose2(solver.estimate(X(r.a), space.pose_type)).theta()
         k0 = clamp_scale(float(water.scale_guess[0]))
-        stale = [(r, i) for r, i in held if abs(math.remainder(yaws[r.a] - r.yaw, math.tau)) > self.tol]
-        keep = [(r, i) for r, i in held if abs(math.remainder(yaws[r.a] - r.yaw, math.tau)) <= self.tol]
+        stale: list[tuple[WaterRow, int]] = []
+        keep: list[tuple[WaterRow, int]] = []
+        for r, i in held:
+            (stale if abs(math.remainder(yaws[r.a] - r.yaw, math.tau)) > self.tol else keep).append((r, i))
         if not stale:
             self.live = keep
             return
