@@ -191,7 +191,8 @@ class Navigator(Coasting):
         self.fixes = OnlineFixes(cfg.gnss.gate_max_rejects)  # the gate's re-acquisitions online (graph.fix_gate)
         self.solver = Solver(cfg.solver, graph_params(cfg.optimizer, self.space), lag=cfg.optimizer.lag,
                              lm=LmSettings(cfg.optimizer.lm_tol, cfg.optimizer.lm_max_iterations,
-                                           cfg.optimizer.lm_abs_tol), keep_graph=history)
+                                           cfg.optimizer.lm_abs_tol, cfg.optimizer.lm_stall_tol),
+                             keep_graph=history)
         self.groups: list[str] = []  # sensor group of every factor in solver.graph
         opt = cfg.optimizer  # the water-speed factors re-aimed online (graph.water_aim) as iSAM2 relinearises
         self.aim = WaterAim(opt.relinearize_threshold, opt.relinearize_skip or (5 if self.nav else 1)) \

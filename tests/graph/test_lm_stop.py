@@ -1,5 +1,6 @@
-"""The LM stopping rule (``LmSettings.abs_tol``, the ``lm_abs_tol`` option): an iteration that lowers the
-cost by less than ``abs_tol`` ends the solve, at a cost statistically equal to the converged one."""
+"""The LM stopping rules (``LmSettings``): an iteration that lowers the cost by less than ``abs_tol`` (the
+``lm_abs_tol`` option) ends the solve, at a cost statistically equal to the converged one; so do
+``stall_iterations`` iterations that together lower it by less than ``stall_tol`` (``lm_stall_tol``)."""
 
 from __future__ import annotations
 
@@ -37,3 +38,30 @@ def test_abs_tol_stops_early_at_a_statistically_equal_cost():
     assert it_one == 1 < it_full and it_early <= it_full
     assert g.error(v) > g.error(one) > g.error(full)  # one step is not converged ...
     assert 0.0 <= g.error(early) - g.error(full) < 0.01  # ... the rule's stop is (chi^2 within 0.02)
+
+
+def test_stall_rule_off_where_it_does_not_bind_is_gtsam_optimize():
+    """The iterated solve is GTSAM's ``optimize()`` wherever the stall rule does not bind: the same number of
+    iterations and the same cost (its own stopping rule re-stated)."""
+    g, v = _ring()
+    for abs_tol in (0.0, 1e-3):
+        ref, it_ref = levenberg_marquardt(g, v, LmSettings(1e-14, 200, abs_tol))
+        loop, it_loop = levenberg_marquardt(g, v, LmSettings(1e-14, 200, abs_tol, stall_tol=1e-300))
+        assert it_loop == it_ref > 3
+        assert g.error(loop) == g.error(ref)
+
+
+def test_stall_rule_truncates_lm_after_its_window():
+    """A window of iterations that lowers the cost by less than ``stall_tol`` ends the solve there: the values
+    are plain LM's after that many iterations, and a rule that cannot bind before convergence changes nothing."""
+    g, v = _ring()
+    full, it_full = levenberg_marquardt(g, v, LmSettings(1e-14, 200, 0.0))
+    for window in (2, 3):
+        cut, it_cut = levenberg_marquardt(g, v, LmSettings(1e-14, 200, 0.0, stall_tol=1e12, stall_iterations=window))
+        assert it_cut == window < it_full
+        same, _ = levenberg_marquardt(g, v, LmSettings(1e-14, window, 0.0))
+        assert g.error(cut) == g.error(same) > g.error(full)
+    # the ring's LM lowers the cost by far more than 1e-9 over any 3 iterations until it has converged
+    late, it_late = levenberg_marquardt(g, v, LmSettings(1e-14, 200, 0.0, stall_tol=1e-9, stall_iterations=3))
+    assert it_late <= it_full and abs(g.error(late) - g.error(full)) < 1e-8
+

@@ -70,8 +70,8 @@ def test_batch_solves_the_graph_isam2_closes():
     # one front end: batch's loop decisions come from the same iSAM2 estimates as the isam2 run's,
     # so both solve the same graph and reach the same optimum (each solved to the end: lm_abs_tol 0)
     log, truth = _loop_log(seed=1)
-    on = _run(log, use_icp=False, lm_abs_tol=0.0)
-    ba = _run(log, use_icp=False, solver="batch", lm_abs_tol=0.0)
+    on = _run(log, use_icp=False, lm_abs_tol=0.0, lm_stall_tol=0.0)
+    ba = _run(log, use_icp=False, solver="batch", lm_abs_tol=0.0, lm_stall_tol=0.0)
     assert ba.info["loop_edges"] == on.info["loop_edges"] and len(on.info["loop_edges"]) >= 5
     np.testing.assert_allclose(ba.trajectory.poses, on.trajectory.poses, atol=1e-4)
 

@@ -47,6 +47,7 @@ def square_runs(square):
         "final_updates": 10,
         "lm_tol": 1e-14,
         "lm_abs_tol": 0.0,  # solved to the end: the two must reach the same optimum
+        "lm_stall_tol": 0.0,
     }
     return run_batch(square, **opts), run_isam2(square, **opts)
 
@@ -299,7 +300,8 @@ def test_batch_incremental_initialisation_is_causal_better_and_reaches_the_same_
     t_cut = log.records[len(log.records) // 2].t
     navs, snap = {}, None
     for how in ("incremental", "chained"):
-        nav = Navigator.for_log(log, solver="batch", batch_init=how, covariances=False, lm_abs_tol=0.0)
+        nav = Navigator.for_log(log, solver="batch", batch_init=how, covariances=False, lm_abs_tol=0.0,
+                                lm_stall_tol=0.0)
         for r in log:
             if how == "incremental" and snap is None and r.t > t_cut:
                 snap = gtsam.Values(nav.solver.initial)
@@ -314,7 +316,7 @@ def test_batch_incremental_initialisation_is_causal_better_and_reaches_the_same_
         solves, nxt = solves + 1, max(nxt + 1, math.ceil(nxt * inc.cfg.optimizer.batch_init_growth))
     assert solves >= 3 and inc_r.info["batch_init_solves"] == solves and "batch_init_solves" not in ch_r.info
     # causal: a run on the log cut at t_cut has the very guess the full run had at that time
-    cut = Navigator.for_log(log, solver="batch", covariances=False, lm_abs_tol=0.0)
+    cut = Navigator.for_log(log, solver="batch", covariances=False, lm_abs_tol=0.0, lm_stall_tol=0.0)
     for r in log:
         if r.t > t_cut:
             break
