@@ -93,6 +93,12 @@ def graph_params(cfg: SolverConfig, space: PlanarSpace | None = None) -> gtsam.I
                        optimizer=cfg.isam_optimizer)
 
 
+def lm_settings(cfg: SolverConfig) -> LmSettings:
+    """Every Levenberg-Marquardt solve's stopping rules and damping, from the ``optimizer`` options."""
+    return LmSettings(cfg.lm_tol, cfg.lm_max_iterations, cfg.lm_abs_tol, cfg.lm_stall_tol,
+                      adaptive=cfg.lm_damping == "nielsen")
+
+
 def wildfire_threshold(cfg: SolverConfig, space: PlanarSpace) -> float:
     """iSAM2's wildfire threshold: the option, else 0.01 on the Pose3 graph and GTSAM's 0.001 on the Pose2 graph."""
     if cfg.wildfire_threshold is not None:
@@ -190,9 +196,7 @@ class Navigator(Coasting):
         self.last_state: NavPrev | None = None  # the Pose3 graph: the newest keyframe's full state
         self.fixes = OnlineFixes(cfg.gnss.gate_max_rejects)  # the gate's re-acquisitions online (graph.fix_gate)
         self.solver = Solver(cfg.solver, graph_params(cfg.optimizer, self.space), lag=cfg.optimizer.lag,
-                             lm=LmSettings(cfg.optimizer.lm_tol, cfg.optimizer.lm_max_iterations,
-                                           cfg.optimizer.lm_abs_tol, cfg.optimizer.lm_stall_tol),
-                             keep_graph=history)
+                             lm=lm_settings(cfg.optimizer), keep_graph=history)
         self.groups: list[str] = []  # sensor group of every factor in solver.graph
         opt = cfg.optimizer  # the water-speed factors re-aimed online (graph.water_aim) as iSAM2 relinearises
         self.aim = WaterAim(opt.relinearize_threshold, opt.relinearize_skip or (5 if self.nav else 1)) \

@@ -78,6 +78,9 @@ class LmSettings:
     #: solve (0: off): a crawl along a barely observed direction (:func:`levenberg_marquardt`)
     stall_tol: float = 0.0
     stall_iterations: int = 10
+    #: the damping's update: ``True`` Nielsen's from each step's gain ratio (GTSAM's ``useFixedLambdaFactor``
+    #: false), ``False`` GTSAM's default (x10 on a failed try, /10 on a success)
+    adaptive: bool = False
 
 
 def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, init: gtsam.Values,
@@ -95,6 +98,7 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, init: gtsam.Values,
     params.setRelativeErrorTol(lm.tol)
     abs_tol = max(lm.tol, lm.abs_tol)
     params.setAbsoluteErrorTol(abs_tol)
+    params.setUseFixedLambdaFactor(not lm.adaptive)
     try:
         opt = gtsam.LevenbergMarquardtOptimizer(graph, init, params)
         if lm.stall_tol <= 0.0:
