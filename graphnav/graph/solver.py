@@ -91,7 +91,7 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, init: gtsam.Values,
     crawls where the Gauss-Newton step fails and its damping stays on, along a direction the data barely
     determine: psaros33-20140627-0006's 924 s without a heading (GNSS only) cost 841 iterations after the
     30th for 1.9 of 3540 (the yaws there, free within tens of degrees, moved, positions by 5 mm RMS;
-    docs/smoother.md *The closing step's stop*). Returns the values and the iterations."""
+    docs/smoother.md *The closing step's stall rule*). Returns the values and the iterations."""
     lm = lm or LmSettings()
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(lm.max_iterations)
@@ -101,8 +101,6 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, init: gtsam.Values,
     params.setUseFixedLambdaFactor(not lm.adaptive)
     try:
         opt = gtsam.LevenbergMarquardtOptimizer(graph, init, params)
-        if lm.stall_tol <= 0.0:
-            return opt.optimize(), int(opt.iterations())
         costs = [opt.error()]
         while opt.iterations() < lm.max_iterations and costs[-1] > 0.0:
             opt.iterate()

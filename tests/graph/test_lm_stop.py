@@ -8,6 +8,7 @@ import math
 
 import gtsam
 import numpy as np
+import pytest
 
 from graphnav.graph.solver import LmSettings, levenberg_marquardt
 
@@ -40,14 +41,28 @@ def test_abs_tol_stops_early_at_a_statistically_equal_cost():
     assert 0.0 <= g.error(early) - g.error(full) < 0.01  # ... the rule's stop is (chi^2 within 0.02)
 
 
-def test_stall_rule_off_where_it_does_not_bind_is_gtsam_optimize():
-    """The iterated solve is GTSAM's ``optimize()`` wherever the stall rule does not bind: the same number of
-    iterations and the same cost (its own stopping rule re-stated)."""
+def _gtsam_optimize(g: gtsam.NonlinearFactorGraph, v: gtsam.Values, tol: float, abs_tol: float, adaptive: bool
+                    ) -> tuple[gtsam.Values, int]:
+    p = gtsam.LevenbergMarquardtParams()
+    p.setMaxIterations(200)
+    p.setRelativeErrorTol(tol)
+    p.setAbsoluteErrorTol(abs_tol)
+    p.setUseFixedLambdaFactor(not adaptive)
+    opt = gtsam.LevenbergMarquardtOptimizer(g, v, p)
+    return opt.optimize(), int(opt.iterations())
+
+
+@pytest.mark.parametrize("adaptive", [False, True])
+@pytest.mark.parametrize("stall_tol", [0.0, 1e-300])
+def test_where_the_stall_rule_does_not_bind_the_solve_is_gtsam_optimize(stall_tol: float, adaptive: bool):
+    """The solve iterates GTSAM's LM itself; where the stall rule is off or does not bind it is ``optimize()``: the
+    same number of iterations and the same cost (GTSAM's own stopping rule re-stated)."""
     g, v = _ring()
-    for abs_tol in (0.0, 1e-3):
-        ref, it_ref = levenberg_marquardt(g, v, LmSettings(1e-14, 200, abs_tol))
-        loop, it_loop = levenberg_marquardt(g, v, LmSettings(1e-14, 200, abs_tol, stall_tol=1e-300))
-        assert it_loop == it_ref > 3
+    for tol, abs_tol in ((1e-14, 0.0), (1e-14, 1e-3), (1e-5, 1e-5)):
+        ref, it_ref = _gtsam_optimize(g, v, tol, max(tol, abs_tol), adaptive)
+        loop, it_loop = levenberg_marquardt(g, v, LmSettings(tol, 200, abs_tol, stall_tol=stall_tol,
+                                                             adaptive=adaptive))
+        assert it_loop == it_ref >= 3
         assert g.error(loop) == g.error(ref)
 
 
