@@ -187,6 +187,7 @@ def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: 
     base.setMaxIterations(lm.max_iterations)
     base.setRelativeErrorTol(max(lm.tol, GNC_INNER_TOL))
     base.setAbsoluteErrorTol(max(lm.tol, GNC_INNER_TOL))
+    base.setUseFixedLambdaFactor(not lm.adaptive)  # the damping every LM solve uses (``lm_damping``)
     params = gtsam.GncLMParams(base)
     params.setLossType(gtsam.GncLossType.TLS)
     params.setAllowNonNoiseModelFactors(True)  # the linear water-speed factors (graph.water): known inliers
