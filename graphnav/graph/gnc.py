@@ -135,6 +135,16 @@ def _beyond_chance(graph: gtsam.NonlinearFactorGraph, groups: Sequence[str], can
     return bool(gross) or len(suspects) > chance or any(groups[i] not in CHANCE_GROUPS for i in suspects)
 
 
+def _inner_lm(lm: LmSettings) -> gtsam.LevenbergMarquardtParams:
+    """GNC's inner LM: the caller's iteration cap and damping (``lm_damping``), stopping at ``GNC_INNER_TOL``."""
+    base = gtsam.LevenbergMarquardtParams()
+    base.setMaxIterations(lm.max_iterations)
+    base.setRelativeErrorTol(max(lm.tol, GNC_INNER_TOL))
+    base.setAbsoluteErrorTol(max(lm.tol, GNC_INNER_TOL))
+    base.setUseFixedLambdaFactor(not lm.adaptive)
+    return base
+
+
 def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: list[str], lm: LmSettings,
                prob: float = 0.99, switchable: Sequence[str] = SWITCHABLE,
                d2s: dict[str, list[tuple[int, float, int]]] | None = None
@@ -183,11 +193,7 @@ def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: 
         report["ran"] = False  # on the Pose2 graph) cannot be cloned
         report["skipped"] = "a factor GTSAM cannot clone (CustomFactor)"
         return graph, groups, values, report
-    base = gtsam.LevenbergMarquardtParams()
-    base.setMaxIterations(lm.max_iterations)
-    base.setRelativeErrorTol(max(lm.tol, GNC_INNER_TOL))
-    base.setAbsoluteErrorTol(max(lm.tol, GNC_INNER_TOL))
-    params = gtsam.GncLMParams(base)
+    params = gtsam.GncLMParams(_inner_lm(lm))
     params.setLossType(gtsam.GncLossType.TLS)
     params.setAllowNonNoiseModelFactors(True)  # the linear water-speed factors (graph.water): known inliers
     cset = set(cand)
