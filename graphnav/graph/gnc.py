@@ -31,7 +31,7 @@ import numpy as np
 
 from . import noise
 from .chi2 import SCALE_WINDOW, chi2_median, chi2_ppf, ndtri
-from .solver import LmSettings, SolverError, _gtsam_message, levenberg_marquardt
+from .solver import LmSettings, SolverError, _gtsam_message, levenberg_marquardt, lm_params
 
 #: sensor groups whose factors the data may switch off (scan matches, 3D cloud matches, GNSS fixes: a cold
 #: start's jumps, multipath; the configuration's ``robust_groups``, which may add "loop")
@@ -135,16 +135,6 @@ def _beyond_chance(graph: gtsam.NonlinearFactorGraph, groups: Sequence[str], can
     return bool(gross) or len(suspects) > chance or any(groups[i] not in CHANCE_GROUPS for i in suspects)
 
 
-def _inner_lm(lm: LmSettings) -> gtsam.LevenbergMarquardtParams:
-    """GNC's inner LM: the caller's iteration cap and damping (``lm_damping``), stopping at ``GNC_INNER_TOL``."""
-    base = gtsam.LevenbergMarquardtParams()
-    base.setMaxIterations(lm.max_iterations)
-    base.setRelativeErrorTol(max(lm.tol, GNC_INNER_TOL))
-    base.setAbsoluteErrorTol(max(lm.tol, GNC_INNER_TOL))
-    base.setUseFixedLambdaFactor(not lm.adaptive)
-    return base
-
-
 def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: list[str], lm: LmSettings,
                prob: float = 0.99, switchable: Sequence[str] = SWITCHABLE,
                d2s: dict[str, list[tuple[int, float, int]]] | None = None
@@ -193,7 +183,8 @@ def switch_off(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, groups: 
         report["ran"] = False  # on the Pose2 graph) cannot be cloned
         report["skipped"] = "a factor GTSAM cannot clone (CustomFactor)"
         return graph, groups, values, report
-    params = gtsam.GncLMParams(_inner_lm(lm))
+    inner = max(lm.tol, GNC_INNER_TOL)  # GNC's inner LM: the caller's cap and damping, a looser stop
+    params = gtsam.GncLMParams(lm_params(lm, inner, inner))
     params.setLossType(gtsam.GncLossType.TLS)
     params.setAllowNonNoiseModelFactors(True)  # the linear water-speed factors (graph.water): known inliers
     cset = set(cand)

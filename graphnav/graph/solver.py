@@ -83,6 +83,17 @@ class LmSettings:
     adaptive: bool = False
 
 
+def lm_params(lm: LmSettings, tol: float, abs_tol: float) -> gtsam.LevenbergMarquardtParams:
+    """GTSAM's LM parameters of ``lm`` (iteration cap, damping update) with relative / absolute decrease
+    tolerances ``tol`` / ``abs_tol``: every LM graphnav runs, its own solves and GNC's inner one."""
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(lm.max_iterations)
+    params.setRelativeErrorTol(tol)
+    params.setAbsoluteErrorTol(abs_tol)
+    params.setUseFixedLambdaFactor(not lm.adaptive)
+    return params
+
+
 def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, init: gtsam.Values,
                         lm: LmSettings | None = None) -> tuple[gtsam.Values, int]:
     """``LevenbergMarquardtOptimizer(graph, init)`` iterated to GTSAM's own stopping rule (``optimize()``'s:
@@ -93,12 +104,8 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, init: gtsam.Values,
     30th for 1.9 of 3540 (the yaws there, free within tens of degrees, moved, positions by 5 mm RMS;
     docs/smoother.md *The closing step's stall rule*). Returns the values and the iterations."""
     lm = lm or LmSettings()
-    params = gtsam.LevenbergMarquardtParams()
-    params.setMaxIterations(lm.max_iterations)
-    params.setRelativeErrorTol(lm.tol)
     abs_tol = max(lm.tol, lm.abs_tol)
-    params.setAbsoluteErrorTol(abs_tol)
-    params.setUseFixedLambdaFactor(not lm.adaptive)
+    params = lm_params(lm, lm.tol, abs_tol)
     try:
         opt = gtsam.LevenbergMarquardtOptimizer(graph, init, params)
         costs = [opt.error()]
