@@ -26,8 +26,8 @@ coord = st.floats(-50.0, 50.0)
        st.floats(0.5, 5.0))
 def test_a_motion_and_a_fix_meet_at_their_weighted_mean(x0, y0, th0, dx, dy, s_motion, s_fix):
     """Known answer: X0 held at (x0, y0, th0); X1's motion from it says (1, 0, 0), a prior on X1 (a fix with a
-    compass's heading, 1 mrad) says (fx, fy, th0), up to a few sigma from the motion. Both measure X1 directly, so its position is their
-    inverse-variance mean, whatever the guess (here 30 m and 0.5 rad off)."""
+    compass's heading, 1 mrad) says (fx, fy, th0), a few sigma from the motion. Both measure X1 directly, so
+    its position is their inverse-variance mean, whatever the guess (here 30 m and 0.5 rad off)."""
     p0 = gtsam.Pose2(x0, y0, th0)
     pred = p0.compose(gtsam.Pose2(1.0, 0.0, 0.0))
     fx, fy = pred.x() + dx, pred.y() + dy
