@@ -49,10 +49,11 @@ from ..trajectory import Trajectory
 from .builder import GraphBuilder, Matcher, NavPrev, Step
 from .coast import Coaster, Coasting
 from .fix_gate import OnlineFixes
+from .newest_guess import solve_newest
 from .online_track import OnlineTrack, kinematics
 from .position_walk import position_walk
 from .smoother_config import SmootherConfig, SolverConfig, auto_motion
-from .solution import Closing, joint_prior, marginal_priors, refresh_places
+from .solution import Closing, joint_prior, marginal_priors, refresh_places, type_of
 from .solver import LmSettings, Solver, SolverError, isam_params, levenberg_marquardt
 from .space import IB, PlanarSpace, V
 from .water_aim import WaterAim
@@ -298,8 +299,10 @@ class Navigator(Coasting):
         if s.icp_ms is not None:
             self.track.icp_ms.append(s.icp_ms)
         c0, p0 = time.perf_counter(), time.process_time()
-        self._update(s)
         loops = self.builder.loops
+        if k > 0 and not self.solver.online and loops is None and self.cfg.optimizer.batch_init == "incremental":
+            s.values = solve_newest(s.kept(), s.values, self.solver.initial, lambda key: type_of(key, self.space))
+        self._update(s)
         if not self.solver.online:
             if loops is not None:  # the front end's estimate is the next keyframe's guess
                 self._front_step(s, k, loops)

@@ -391,8 +391,9 @@ class SolverConfig:
         "coast_stopped). None: no limit -- the predictions' covariance grows with the motion model's process noise "
         "and is published with them (GGA HDOP, Signal K uncertainty), flagged as dead reckoning", unit="s")
     batch_init: str = option("incremental",
-        "batch's initial guess: \"incremental\" (LM on the graph so far each time it has grown by batch_init_growth, "
-        "later poses chained from that solution) or \"chained\" (dead reckoning)")
+        "batch's initial guess: \"incremental\" (LM on the graph so far each time it has grown by batch_init_growth; "
+        "between those solves each new keyframe's state solved against its own factors with the earlier ones held, "
+        "graphnav.graph.newest_guess) or \"chained\" (dead reckoning)")
     batch_init_growth: float = option(1.5, "... the graph is re-solved at 32, 48, 72, ... keyframes")
 
     def __post_init__(self) -> None:

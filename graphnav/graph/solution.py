@@ -251,7 +251,7 @@ class Closing:
         return new, values
 
 
-def _type_of(key: int, space: PlanarSpace) -> str:
+def type_of(key: int, space: PlanarSpace) -> str:
     """The GTSAM type name of a state variable by its symbol (poses, beacons ``l``, velocities ``v``,
     water current ``w``, the speed log's scale ``k``, IMU biases ``i``)."""
     ch = chr(gtsam.Symbol(key).chr())
@@ -268,7 +268,7 @@ def marginal_priors(solver: Solver, space: PlanarSpace, keys: list[int], t: floa
     for key in keys:
         cov = solver.marginal(key)
         model = gtsam.noiseModel.Gaussian.Covariance(cov)
-        kind = _type_of(key, space)
+        kind = type_of(key, space)
         p = solver.estimate(key, kind)
         if kind == space.point_type:
             g.add(space.landmark_prior_cov(key, p, cov))
@@ -292,7 +292,7 @@ def joint_prior(solver: Solver, space: PlanarSpace, keys: list[int], t: float
     separate priors drop (MRCLAM r1 in 300-keyframe segments: online NEES 3.5 -> 73 with them)."""
     values = gtsam.Values()
     for key in keys:
-        values.insert(key, solver.estimate(key, _type_of(key, space)))
+        values.insert(key, solver.estimate(key, type_of(key, space)))
     stamps = dict.fromkeys(keys, t)
     jm = solver.s.jointMarginalInformation(keys)
     parts = gtsam.GaussianFactorGraph()
