@@ -51,7 +51,7 @@ CHANCE_GROUPS = ("gnss",)
 GNC_INNER_TOL = 1e-3
 #: how GNC's ``mu`` grows from its convex start (GTSAM's ``GncScheduler``): "linear", ``mu x 1.4`` a step (Yang et
 #: al. 2020); "superlinear", ``sqrt(mu) x 1.4`` while ``mu < 1``, then ``x 1.4``. TLS's surrogate is nearly convex
-#: for ``mu << 1``, where the linear schedule spends most of its steps (with ``mu`` from 6e-3: 14 of 20 steps
+#: for ``mu << 1``, where the linear schedule spends most of its steps (with ``mu`` from 4e-3: 16 of 20 steps
 #: below 1); the decisions are made near and above 1. psaros33-0006's hold-out closing step: the same 8 fixes
 #: switched off in 10 steps, the weights binary, against 20 stopped by the cost test (31 against 51 s CPU)
 SCHEDULES = {"linear": gtsam.GncScheduler.Linear, "superlinear": gtsam.GncScheduler.SuperLinear}
