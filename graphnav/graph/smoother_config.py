@@ -54,6 +54,7 @@ LM_DAMPING = ("nielsen", "fixed")
 NOISE_ESTIMATION = ("off", "defaulted", "all")
 BATCH_INIT = ("incremental", "chained")
 ROBUST_BACKEND = ("gnc", "off")
+GNC_SCHEDULE = ("superlinear", "linear")
 ROBUST_GROUPS = ("icp", "loop", "cloud", "gnss")  # the sensor groups the back end may switch off
 
 
@@ -419,6 +420,10 @@ class RobustConfig:
         "gnc", "batch / isam2's closing step: scan-match and GNSS factors the data switch off (graduated "
         "non-convexity, truncated least squares) when any lies beyond its chi-square bound; \"off\"")
     prob: float = option(0.99, "that bound's probability (and the odometry consistency check's)")
+    gnc_schedule: str = option(
+        "superlinear", "how GNC's mu grows from its convex start (GTSAM's GncScheduler): \"superlinear\" "
+        "(sqrt(mu) x 1.4 a step while mu < 1, then x 1.4) or \"linear\" (x 1.4 a step, the GNC paper's); the same "
+        "decisions in half the steps (graphnav.graph.gnc.SCHEDULES)")
     groups: list[str] = option(
         help="the groups GNC may switch off (every other factor is a known inlier). \"loop\" too: the loop "
         "closer's own pairwise check and Cauchy kernel did as well or better (CARMEN acapulco 0.366 m without, "
@@ -434,6 +439,7 @@ class RobustConfig:
     def __post_init__(self) -> None:
         _choice("noise_estimation", self.noise_estimation, NOISE_ESTIMATION)
         _choice("robust_backend", self.backend, ROBUST_BACKEND)
+        _choice("robust_gnc_schedule", self.gnc_schedule, GNC_SCHEDULE)
         if not isinstance(self.groups, list | tuple) or any(
                 not isinstance(g, str) or g not in ROBUST_GROUPS for g in self.groups):
             raise ValueError(f"robust_groups must be a list of {', '.join(ROBUST_GROUPS)}; got {self.groups!r}")

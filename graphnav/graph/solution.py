@@ -130,7 +130,8 @@ class Closing:
         if cfg.robust.backend == "gnc":
             solved = graph, values
             graph, self.groups, values, info["switched_off"] = gnc.switch_off(
-                graph, values, self.groups, lm, cfg.robust.prob, cfg.robust.groups, d2s=d2s)
+                graph, values, self.groups, lm, cfg.robust.prob, cfg.robust.groups, d2s=d2s,
+                schedule=cfg.robust.gnc_schedule)
             if graph is not solved[0] or values is not solved[1]:
                 d2s = {}
         dropped, scale = 0, None  # scale: the fixes' local scales of (graph, values) as they now are

@@ -39,7 +39,7 @@ def test_flat_names_are_aliases_of_one_path_each():
         assert table[flat] == path, flat
     paths = {p for p in table.values()}
     flats = [n for n in table if "." not in n]
-    assert len(flats) == len(paths) == 112  # one flat name per option, none lost, none shared
+    assert len(flats) == len(paths) == 113  # one flat name per option, none lost, none shared
     assert table["deskew"] == "scan.deskew"  # added after the sections
     assert table["coast_max_s"] == "optimizer.coast_max_s"  # ... and with the coasting's time limit
     for name, sec in sections(SmootherConfig).items():  # every section field has its path
