@@ -177,6 +177,28 @@ def test_gnc_leaves_chance_exceedances_of_gnss_alone_and_catches_a_gross_fix():
     assert not any(np.allclose(m, [150.0, 30.0]) for m in kept)  # the gross fix is among those let go
 
 
+def _outlier_chain(seed: int):
+    """An 80-keyframe chain with two wrong matches and a gross GNSS fix among consistent factors, solved."""
+    g, groups, values, _ = _chain(80, wrong=20 + seed * 7, seed=seed)
+    g.add(gtsam.BetweenFactorPose2(60, 61, gtsam.Pose2(-1.0, 0.8, -0.6), gtsam.noiseModel.Diagonal.Sigmas(ICP)))
+    groups.append("icp")
+    g.add(gtsam.PoseTranslationPrior2D(40, np.array([60.0, -25.0]), gtsam.noiseModel.Isotropic.Sigma(2, 1.0)))
+    groups.append("gnss")
+    values, _ = levenberg_marquardt(g, values, LmSettings(1e-10, 100))
+    return g, groups, values
+
+
+def _decided_alike(g, a, b):
+    """Two ``switch_off`` results: the same factors switched off (the two wrong matches among them), the same
+    re-solved graph and solution."""
+    (g1, gr1, v1, r1), (g2, gr2, v2, r2) = a, b
+    assert r1["ran"] and r1["switched_off"] == r2["switched_off"] and r1["switched_off"].get("icp", 0) >= 2
+    assert gr1 == gr2 and g1.size() == g2.size() < g.size()
+    assert all(g1.at(i).equals(g2.at(i), 0.0) for i in range(g1.size()))
+    assert v1.equals(v2, 1e-9)
+    return r1
+
+
 def test_gnc_inner_tolerance_decides_as_a_tight_one(monkeypatch):
     """GNC's inner solves at ``GNC_INNER_TOL`` switch off the same factors as at 1e-6 (the weights end
     binary), so the re-solved graph and its solution are the same: two wrong matches and a gross
@@ -184,21 +206,12 @@ def test_gnc_inner_tolerance_decides_as_a_tight_one(monkeypatch):
     import graphnav.graph.gnc as gnc
 
     for seed in range(4):
-        g, groups, values, _ = _chain(80, wrong=20 + seed * 7, seed=seed)
-        g.add(gtsam.BetweenFactorPose2(60, 61, gtsam.Pose2(-1.0, 0.8, -0.6), gtsam.noiseModel.Diagonal.Sigmas(ICP)))
-        groups.append("icp")
-        g.add(gtsam.PoseTranslationPrior2D(40, np.array([60.0, -25.0]), gtsam.noiseModel.Isotropic.Sigma(2, 1.0)))
-        groups.append("gnss")
-        values, _ = levenberg_marquardt(g, values, LmSettings(1e-10, 100))
+        g, groups, values = _outlier_chain(seed)
         out = {}
         for tol in (1e-6, gnc.GNC_INNER_TOL):
             monkeypatch.setattr(gnc, "GNC_INNER_TOL", tol)
             out[tol] = switch_off(g, values, list(groups), LmSettings(1e-10, 100))
-        (g1, gr1, v1, r1), (g2, gr2, v2, r2) = out.values()
-        assert r1["ran"] and r1["switched_off"] == r2["switched_off"] and r1["switched_off"].get("icp", 0) >= 2
-        assert gr1 == gr2 and g1.size() == g2.size() < g.size()
-        assert all(g1.at(i).equals(g2.at(i), 0.0) for i in range(g1.size()))
-        assert v1.equals(v2, 1e-9)
+        _decided_alike(g, *out.values())
 
 
 def test_gnc_schedules_decide_alike():
@@ -206,18 +219,9 @@ def test_gnc_schedules_decide_alike():
     (and the same as the known wrong ones): two wrong matches and a gross GNSS fix among consistent ones,
     several seeds; the re-solved graphs and solutions are equal."""
     for seed in range(4):
-        g, groups, values, _ = _chain(80, wrong=20 + seed * 7, seed=seed)
-        g.add(gtsam.BetweenFactorPose2(60, 61, gtsam.Pose2(-1.0, 0.8, -0.6), gtsam.noiseModel.Diagonal.Sigmas(ICP)))
-        groups.append("icp")
-        g.add(gtsam.PoseTranslationPrior2D(40, np.array([60.0, -25.0]), gtsam.noiseModel.Isotropic.Sigma(2, 1.0)))
-        groups.append("gnss")
-        values, _ = levenberg_marquardt(g, values, LmSettings(1e-10, 100))
-        (g1, gr1, v1, r1), (g2, gr2, v2, r2) = (
-            switch_off(g, values, list(groups), LmSettings(1e-10, 100), schedule=s) for s in ("linear", "superlinear"))
-        assert r1["ran"] and r1["switched_off"] == r2["switched_off"]
-        assert r1["switched_off"].get("icp", 0) >= 2 and r1["switched_off"].get("gnss", 0) == 1
-        assert gr1 == gr2 and g1.size() == g2.size() < g.size()
-        assert all(g1.at(i).equals(g2.at(i), 0.0) for i in range(g1.size()))
-        assert v1.equals(v2, 1e-9)
+        g, groups, values = _outlier_chain(seed)
+        r = _decided_alike(g, *(switch_off(g, values, list(groups), LmSettings(1e-10, 100), schedule=s)
+                                for s in ("linear", "superlinear")))
+        assert r["switched_off"].get("gnss", 0) == 1
     with pytest.raises(KeyError):
         switch_off(g, values, list(groups), LmSettings(1e-10, 100), schedule="quadratic")
