@@ -98,7 +98,8 @@ def main() -> None:
             state = r.info.get("state", r.info.get("motion"))
             row["runs"].append({"estimator": name, "options": opts, "state": state,
                                 "ate_m": ate(r.trajectory, ref)["rmse"],
-                                "online_ate_m": ate(r.online, ref)["rmse"], "nees_mean": nees,
+                                "online_ate_m": None if r.online is None else ate(r.online, ref)["rmse"],
+                                "nees_mean": nees,
                                 "nees_with_reference_rounding": nees_ref,
                                 "gnss_rejected": r.info.get("gnss_rejected"),
                                 "switched_off": r.info.get("switched_off", {}).get("switched_off")})
@@ -111,7 +112,8 @@ def main() -> None:
         parts = [f"seed {row['seed']}: fixes interpolated {row['fixes_interpolated_m']:.2f} m"]
         for run in row["runs"]:
             parts.append(f"{run['estimator']} {run['options'] or ''} ({run['state']}): {run['ate_m']:.2f} m "
-                         f"({run['ate_m'] / row['fixes_interpolated_m']:.2f}x), online {run['online_ate_m']:.2f}, "
+                         f"({run['ate_m'] / row['fixes_interpolated_m']:.2f}x), online "
+                         f"{'-' if run['online_ate_m'] is None else format(run['online_ate_m'], '.2f')}, "
                          f"NEES {run['nees_mean']:.2f} ({run['nees_with_reference_rounding']:.2f} with the "
                          f"reference's rounding), rejected {run['gnss_rejected']}")
         print(" | ".join(parts))
