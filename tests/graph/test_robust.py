@@ -9,8 +9,16 @@ import numpy as np
 import pytest
 
 from graphnav.graph.chi2 import chi2_median, significant_scale
-from graphnav.graph.gnc import factor_scales, group_scales, measured_d2s, odometry_consistency, switch_off
+from graphnav.graph.gnc import (
+    SCHEDULES,
+    factor_scales,
+    group_scales,
+    measured_d2s,
+    odometry_consistency,
+    switch_off,
+)
 from graphnav.graph.noise import _measured
+from graphnav.graph.smoother_config import GNC_SCHEDULE
 from graphnav.graph.solver import LmSettings, levenberg_marquardt
 
 ODO = np.array([0.05, 0.05, np.radians(1.0)])  # odometry sigmas per step
@@ -225,3 +233,4 @@ def test_gnc_schedules_decide_alike():
         assert r["switched_off"].get("gnss", 0) == 1
     with pytest.raises(KeyError):
         switch_off(g, values, list(groups), LmSettings(1e-10, 100), schedule="quadratic")
+    assert set(SCHEDULES) == set(GNC_SCHEDULE)  # every name the option accepts is a schedule GNC knows
